@@ -1,0 +1,25 @@
+// `dem fit RUN_DIR`: fit every deviatoric curve of a run and write parameter tables.
+#pragma once
+#include <string>
+
+namespace CLI { class App; }
+
+namespace demfit {
+
+struct FitCommandOptions {
+  std::string run_dir;               ///< a `dem run` results folder (or any folder with deviatoric/*.csv)
+  double window_min = 0.0;           ///< eps_d window of the fits
+  double window_max = 1e9;
+  std::string loss = "none";         ///< none | huber | cauchy
+  double gap_tolerance = 0.02;       ///< "same path" when the D2/D3 fits differ by less than this
+  bool no_plots = false;             ///< skip the matplotlib plots
+  bool force = false;                ///< overwrite an existing RUN_DIR/fit
+};
+
+void add_fit_options(CLI::App& app, FitCommandOptions& o);
+
+/// Writes RUN_DIR/fit/{parameters,shared_path,nu_laws,isotropic}.{csv,json,md,tex} and plots.
+/// Returns the process exit code (0 ok, 1 error); prints warnings on stderr.
+int run_fit_command(const FitCommandOptions& o);
+
+}  // namespace demfit

@@ -1,0 +1,101 @@
+// Least-squares fits of the saturating anisotropy-evolution law (Imole et al. 2013,
+// Kumar et al. 2014):  dx/d eps_d = beta (x_max - x)  =>  x(e) = x_max - (x_max - x0) exp(-beta e)
+// with Ceres (automatic differentiation) and, as an independent cross-check, GSL.
+#pragma once
+#include <cmath>
+#include <string>
+#include <vector>
+
+namespace demfit {
+
+/// The model as a small templated functor usable by Ceres' autodiff.
+/// Parameters p = {x0, x_max, beta}; residual = y - x(e).
+struct SaturatingResidual {
+  SaturatingResidual(double e, double y) : e_(e), y_(y) {}
+  template <class T>
+  bool operator()(const T* p, T* residual) const {
+    using std::exp;
+    residual[0] = T(y_) - (p[1] - (p[1] - p[0]) * exp(-p[2] * T(e_)));
+    return true;
+  }
+  double e_, y_;
+};
+
+/// Evaluates the law at strain e.
+double saturating(double x0, double x_max, double beta, double e);
+
+enum class Loss { None, Huber, Cauchy };
+
+struct FitOptions {
+  double window_min = -1e300;     ///< fit only points with e >= window_min
+  double window_max = 1e300;      ///< and e <= window_max
+  Loss loss = Loss::None;         ///< robust loss (changes the optimum; errors then approximate)
+  double loss_scale = 0.0;        ///< residual scale of the robust loss; 0: 3 x MAD estimate
+  bool nonnegative_asymptote = true;   ///< x_max >= 0 (physical for s_dev, F_dev)
+  double beta_min = 1e-6;         ///< lower bound of the rate (beta > 0)
+  double beta_max = 1e4;          ///< upper bound of the rate
+  int min_points = 6;             ///< fewer points is an error
+  double max_relative_error = 0.5;  ///< a parameter with SE/|value| above this gets a warning
+};
+
+/// Result of one fit. Standard errors are from the Jacobian at the optimum scaled by the
+/// residual variance s^2 = RSS/(n - 3) (Ceres' covariance assumes unit variance).
+struct FitResult {
+  bool ok = false;                ///< the optimiser converged and the covariance is available
+  double x0 = 0, x_max = 0, beta = 0;
+  double se_x0 = 0, se_x_max = 0, se_beta = 0;   ///< standard errors (NaN where unavailable)
+  double corr[3][3] = {};         ///< correlation matrix of (x0, x_max, beta)
+  double initial_slope = 0;       ///< beta (x_max - x0): dx/de at e = 0 (G/p for s_dev)
+  double se_initial_slope = 0;
+  double eps_95 = 0;              ///< ln(20)/beta: strain at which 95% of x_max - x0 is reached
+  double rmse = 0, r_squared = 0, cost = 0;
+  int n = 0;                      ///< points used
+  double e_last = 0;              ///< largest strain among the points used
+  std::vector<std::string> warnings;   ///< reasons to distrust a number (see fit_saturating)
+};
+
+/// Fits x(e) to (e, y). Throws std::invalid_argument for unusable input (sizes differ,
+/// non-finite values, fewer than min_points in the window, a flat curve). Adds warnings when
+/// the data do not determine a parameter: no saturation reached (eps_95 beyond the data),
+/// relative standard error above max_relative_error, a parameter on its bound (no standard
+/// error quoted), non-monotone data, a failed covariance.
+FitResult fit_saturating(const std::vector<double>& e, const std::vector<double>& y,
+                         const FitOptions& options = {});
+
+/// The same least-squares problem solved with GSL's trust-region Levenberg-Marquardt
+/// (gsl_multifit_nlinear), unconstrained, from the given start. Returns {x0, x_max, beta}
+/// and the residual sum of squares in *rss. Throws std::runtime_error if GSL fails.
+std::vector<double> fit_saturating_gsl(const std::vector<double>& e, const std::vector<double>& y,
+                                       const std::vector<double>& start, double* rss = nullptr);
+
+/// Do two curves (e.g. D2 and D3 from one volume fraction) follow the same law?
+struct SharedPathTest {
+  FitResult shared;               ///< one law for both curves (3 parameters)
+  FitResult first, second;        ///< separate laws (3 + 3 parameters)
+  double f_statistic = 0;         ///< ((RSS_shared - RSS_sep)/3) / (RSS_sep/(n - 6))
+  double p_value = 1;             ///< upper tail of F(3, n - 6); assumes independent residuals
+  double max_gap = 0;             ///< max |x_first(e) - x_second(e)| over the common range
+  bool same_path = false;         ///< the paper's claim accepted: p >= 0.01 or max_gap < tolerance
+};
+SharedPathTest test_shared_path(const std::vector<double>& e1, const std::vector<double>& y1,
+                                const std::vector<double>& e2, const std::vector<double>& y2,
+                                double gap_tolerance, const FitOptions& options = {});
+
+/// Generic small nonlinear fit y = f(x; p) for the nu-dependence laws. `model` names one of:
+///   "linear"     p0 + p1 (nu - nu_ref)
+///   "power"      p0 + p1 (nu/p2 - 1)^p3          (C(nu) of Goncu et al.; p2 = nu_c)
+///   "pressure"   p0 (nu/p1) (-e)(1 - p2 e), e = ln(p1/nu)   (p*(nu) isotropic law, p1 = nu_c)
+struct CurveFit {
+  std::string model;
+  std::vector<double> params, errors;
+  double rmse = 0, r_squared = 0;
+  int n = 0;
+  bool ok = false;
+  std::vector<std::string> warnings;
+};
+CurveFit fit_law(const std::string& model, const std::vector<double>& x, const std::vector<double>& y,
+                 const std::vector<double>& start, const std::vector<double>& sigma = {},
+                 double nu_ref = 0.0);
+double eval_law(const std::string& model, const std::vector<double>& p, double x, double nu_ref = 0.0);
+
+}  // namespace demfit

@@ -1,0 +1,26 @@
+// Small CSV table: read the runner's curves ('#' comment lines, one header line) and write
+// result tables as CSV, JSON, Markdown and LaTeX.
+#pragma once
+#include <string>
+#include <vector>
+
+namespace demfit {
+
+struct Table {
+  std::vector<std::string> header;
+  std::vector<std::vector<std::string>> rows;
+  std::vector<std::vector<double>> numeric;   ///< per column, filled by read_table
+  Table() = default;
+  explicit Table(std::vector<std::string> h) : header(std::move(h)) {}
+  void add_row(std::vector<std::string> r) { rows.push_back(std::move(r)); }
+  /// Column by name as numbers. Throws std::runtime_error naming the missing column.
+  const std::vector<double>& column(const std::string& name) const;
+  std::string source;
+};
+
+/// Reads a CSV file. Throws std::runtime_error if unreadable or ragged.
+Table read_table(const std::string& path);
+/// Writes stem.csv, stem.json, stem.md, stem.tex atomically.
+void write_table_all(const Table& t, const std::string& stem, const std::string& caption);
+
+}  // namespace demfit

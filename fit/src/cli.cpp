@@ -1,0 +1,200 @@
+#include "demfit/cli.hpp"
+
+#include <CLI/CLI.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <regex>
+#include <sstream>
+
+#include "demfit/fit.hpp"
+#include "demfit/table.hpp"
+
+namespace fs = std::filesystem;
+
+namespace demfit {
+
+void add_fit_options(CLI::App& app, FitCommandOptions& o) {
+  app.add_option("run_dir", o.run_dir, "results folder of `dem run`")->required()->check(CLI::ExistingDirectory);
+  app.add_option("--eps-min", o.window_min, "fit window: smallest eps_d");
+  app.add_option("--eps-max", o.window_max, "fit window: largest eps_d");
+  app.add_option("--loss", o.loss, "robust loss: none | huber | cauchy")->check(CLI::IsMember({"none", "huber", "cauchy"}));
+  app.add_option("--gap-tolerance", o.gap_tolerance, "D2/D3 'same path' tolerance on the fitted curves");
+  app.add_flag("--no-plots", o.no_plots, "skip plots");
+  app.add_flag("--force", o.force, "overwrite RUN_DIR/fit");
+}
+
+namespace {
+
+std::string num(double v, int prec = 6) {
+  if (!std::isfinite(v)) return "nan";
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*g", prec, v);
+  return b;
+}
+
+}  // namespace
+
+int run_fit_command(const FitCommandOptions& o) {
+  const fs::path run(o.run_dir);
+  const fs::path dev = run / "deviatoric";
+  const fs::path out = run / "fit";
+  if (!fs::is_directory(dev)) {
+    std::cerr << "dem fit: " << dev << " does not exist: give a folder written by `dem run`\n";
+    return 1;
+  }
+  if (fs::exists(out / "parameters.csv") && !o.force) {
+    std::cerr << "dem fit: " << out << " already holds fit results: pass --force to overwrite\n";
+    return 1;
+  }
+  fs::create_directories(out);
+  FitOptions fo;
+  fo.window_min = o.window_min;
+  fo.window_max = o.window_max;
+  fo.loss = o.loss == "huber" ? Loss::Huber : o.loss == "cauchy" ? Loss::Cauchy : Loss::None;
+
+  // Curves named MODE_phiX.XXX.csv
+  const std::regex name_re(R"(([A-Za-z0-9_]+)_phi([0-9.]+)\.csv)");
+  struct Curve { std::string mode; double phi; Table t; };
+  std::vector<Curve> curves;
+  for (auto& f : fs::directory_iterator(dev)) {
+    std::smatch m;
+    const std::string fname = f.path().filename().string();
+    if (!std::regex_match(fname, m, name_re)) continue;
+    curves.push_back({m[1], std::stod(m[2]), read_table(f.path().string())});
+  }
+  if (curves.empty()) {
+    std::cerr << "dem fit: no MODE_phiX.XXX.csv curves in " << dev << " (is the run finished?)\n";
+    return 1;
+  }
+  std::sort(curves.begin(), curves.end(), [](auto& a, auto& b) { return a.mode != b.mode ? a.mode < b.mode : a.phi < b.phi; });
+
+  Table params({"mode", "nu", "quantity", "x0", "se_x0", "x_max", "se_x_max", "beta", "se_beta",
+                "corr_xmax_beta", "initial_slope", "se_initial_slope", "eps_95", "r_squared", "rmse", "n",
+                "eps_last", "warnings"});
+  std::map<std::pair<std::string, std::string>, std::vector<std::pair<double, FitResult>>> by_mode_q;
+  int warnings = 0;
+  for (auto& c : curves) {
+    const auto& e = c.t.column("eps_d");
+    for (const char* q : {"s_dev", "F_dev"}) {
+      try {
+        FitResult r = fit_saturating(e, c.t.column(q), fo);
+        std::string w;
+        for (auto& s : r.warnings) {
+          w += (w.empty() ? "" : "; ") + s;
+          std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << s << "\n";
+          ++warnings;
+        }
+        params.add_row({c.mode, num(c.phi, 4), q, num(r.x0), num(r.se_x0), num(r.x_max), num(r.se_x_max),
+                        num(r.beta), num(r.se_beta), num(r.corr[1][2], 3), num(r.initial_slope),
+                        num(r.se_initial_slope), num(r.eps_95), num(r.r_squared, 5), num(r.rmse), std::to_string(r.n),
+                        num(r.e_last, 4), w});
+        by_mode_q[{c.mode, q}].emplace_back(c.phi, r);
+      } catch (const std::exception& ex) {
+        std::cerr << "dem fit: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << ex.what() << "\n";
+        params.add_row({c.mode, num(c.phi, 4), q, "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan",
+                        "nan", "nan", "nan", "0", "nan", std::string("not fitted: ") + ex.what()});
+        ++warnings;
+      }
+    }
+  }
+  write_table_all(params, (out / "parameters").string(), "Fitted saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d)");
+
+  // D2 vs D3 from the same volume fraction.
+  Table shared({"nu", "quantity", "mode_a", "mode_b", "f_statistic", "p_value", "max_gap", "same_path",
+                "x_max_shared", "beta_shared"});
+  for (auto& a : curves)
+    for (auto& b : curves)
+      if (a.mode == "D2" && b.mode == "D3" && std::fabs(a.phi - b.phi) < 1e-9)
+        for (const char* q : {"s_dev", "F_dev"}) {
+          try {
+            SharedPathTest t = test_shared_path(a.t.column("eps_d"), a.t.column(q), b.t.column("eps_d"), b.t.column(q),
+                                                o.gap_tolerance, fo);
+            shared.add_row({num(a.phi, 4), q, "D2", "D3", num(t.f_statistic, 4), num(t.p_value, 3), num(t.max_gap, 4),
+                            t.same_path ? "yes" : "no", num(t.shared.x_max), num(t.shared.beta)});
+          } catch (const std::exception& ex) {
+            std::cerr << "dem fit: shared-path test nu=" << num(a.phi, 4) << " " << q << ": " << ex.what() << "\n";
+          }
+        }
+  if (!shared.rows.empty())
+    write_table_all(shared, (out / "shared_path").string(),
+                    "D2 vs D3: F-test of one shared law against two (residuals assumed independent, so p is optimistic) and the largest gap between the fitted curves");
+
+  // Parameters against the volume fraction: linear law around the mean nu, weighted by the SEs.
+  Table laws({"mode", "quantity", "parameter", "law", "a", "se_a", "b", "se_b", "nu_ref", "r_squared", "n", "warnings"});
+  for (auto& [key, list] : by_mode_q) {
+    if (list.size() < 3) continue;
+    double nu_ref = 0;
+    for (auto& pr : list) nu_ref += pr.first;
+    nu_ref /= list.size();
+    for (const char* pname : {"x_max", "beta", "x0"}) {
+      std::vector<double> x, y, s;
+      for (auto& [phi, r] : list) {
+        const double v = std::string(pname) == "x_max" ? r.x_max : std::string(pname) == "beta" ? r.beta : r.x0;
+        const double se = std::string(pname) == "x_max" ? r.se_x_max : std::string(pname) == "beta" ? r.se_beta : r.se_x0;
+        if (!std::isfinite(v)) continue;
+        x.push_back(phi); y.push_back(v); s.push_back(std::isfinite(se) && se > 0 ? se : 0.0);
+      }
+      if (x.size() < 3) continue;
+      bool all_se = std::all_of(s.begin(), s.end(), [](double v) { return v > 0; });
+      try {
+        CurveFit cf = fit_law("linear", x, y, {y[0], 0.0}, all_se ? s : std::vector<double>{}, nu_ref);
+        std::string w;
+        for (auto& ws : cf.warnings) w += (w.empty() ? "" : "; ") + ws;
+        laws.add_row({key.first, key.second, pname, "a + b (nu - nu_ref)", num(cf.params[0]), num(cf.errors[0]),
+                      num(cf.params[1]), num(cf.errors[1]), num(nu_ref, 4), num(cf.r_squared, 4), std::to_string(cf.n), w});
+      } catch (const std::exception& ex) {
+        std::cerr << "dem fit: nu law " << key.first << " " << key.second << " " << pname << ": " << ex.what() << "\n";
+      }
+    }
+  }
+  if (!laws.rows.empty())
+    write_table_all(laws, (out / "nu_laws").string(), "Fitted parameters as linear functions of the volume fraction nu");
+
+  // Isotropic branch from the unloading leg of the cycle.
+  const fs::path unload = run / "prep" / "cycle_unloading.csv";
+  if (fs::exists(unload)) {
+    Table t = read_table(unload.string());
+    const auto& nu = t.column("nu");
+    const auto& pstar = t.column("p_star");
+    const auto& cnr = t.column("C_nonrattler");
+    const auto& c = t.column("C");
+    std::vector<double> x, yp, yc, caux;
+    for (std::size_t i = 0; i < nu.size(); ++i)
+      if (pstar[i] > 1e-7 && cnr[i] > 0) { x.push_back(nu[i]); yp.push_back(pstar[i]); yc.push_back(cnr[i]); caux.push_back(c[i]); }
+    Table iso({"law", "formula", "p0", "se_p0", "p1", "se_p1", "p2", "se_p2", "p3", "se_p3", "r_squared", "n"});
+    if (x.size() >= 6) {
+      const double numin = *std::min_element(x.begin(), x.end());
+      try {
+        CurveFit cf = fit_law("power", x, yc, {6.0, 5.0, numin * 0.98, 0.5});
+        iso.add_row({"C_nonrattler(nu)", "p0 + p1 (nu/p2 - 1)^p3 (p2 = nu_c)", num(cf.params[0]), num(cf.errors[0]),
+                     num(cf.params[1]), num(cf.errors[1]), num(cf.params[2]), num(cf.errors[2]), num(cf.params[3]),
+                     num(cf.errors[3]), num(cf.r_squared, 5), std::to_string(cf.n)});
+        std::vector<double> aux(x.size(), 0.0);
+        aux.insert(aux.end(), caux.begin(), caux.end());
+        CurveFit pf = fit_law("pressure", x, yp, {0.05, numin * 0.98, 0.0}, aux);
+        iso.add_row({"p_star(nu)", "p0 (nu C / p1)(-eps)(1 - p2 eps), eps = ln(p1/nu)", num(pf.params[0]), num(pf.errors[0]),
+                     num(pf.params[1]), num(pf.errors[1]), num(pf.params[2]), num(pf.errors[2]), "", "",
+                     num(pf.r_squared, 5), std::to_string(pf.n)});
+      } catch (const std::exception& ex) {
+        std::cerr << "dem fit: isotropic laws: " << ex.what() << "\n";
+      }
+      if (!iso.rows.empty())
+        write_table_all(iso, (out / "isotropic").string(), "Isotropic (unloading) branch: coordination and pressure laws");
+    }
+  }
+  std::cerr << "dem fit: " << params.rows.size() << " fits written to " << out.string() << " (" << warnings << " warnings)\n";
+  if (!o.no_plots) {
+    const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.plots \"" +
+                            run.string() + "\" --fits";
+    if (std::system(cmd.c_str()) != 0) std::cerr << "dem fit: plotting failed (tables are written)\n";
+  }
+  return 0;
+}
+
+}  // namespace demfit

@@ -1,0 +1,132 @@
+#include "demfit/table.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+namespace demfit {
+
+namespace {
+std::vector<std::string> split(const std::string& line) {
+  std::vector<std::string> out;
+  std::string cur;
+  std::istringstream ls(line);
+  while (std::getline(ls, cur, ',')) out.push_back(cur);
+  if (!line.empty() && line.back() == ',') out.push_back("");
+  return out;
+}
+void write_atomic(const std::string& path, const std::string& s) {
+  const std::string tmp = path + ".part";
+  {
+    std::ofstream o(tmp, std::ios::trunc);
+    if (!o) throw std::runtime_error("cannot write " + tmp);
+    o << s;
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + tmp);
+}
+std::string json_str(const std::string& s) {
+  std::string o = "\"";
+  for (char c : s) { if (c == '"' || c == '\\') o += '\\'; o += c; }
+  return o + "\"";
+}
+bool is_number(const std::string& s) {
+  if (s.empty()) return false;
+  char* end = nullptr;
+  std::strtod(s.c_str(), &end);
+  return end && *end == 0 && s != "nan";
+}
+std::string tex_escape(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    if (c == '_' || c == '%' || c == '&' || c == '#') o += '\\';
+    o += c;
+  }
+  return o;
+}
+}  // namespace
+
+const std::vector<double>& Table::column(const std::string& name) const {
+  for (std::size_t k = 0; k < header.size(); ++k)
+    if (header[k] == name) return numeric[k];
+  throw std::runtime_error(source + ": no column '" + name + "'");
+}
+
+Table read_table(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot read " + path);
+  Table t;
+  t.source = path;
+  std::string line;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty() || line[0] == '#') continue;
+    auto cells = split(line);
+    if (t.header.empty()) { t.header = cells; t.numeric.assign(cells.size(), {}); continue; }
+    if (cells.size() != t.header.size())
+      throw std::runtime_error(path + ":" + std::to_string(lineno) + ": " + std::to_string(cells.size()) +
+                               " cells, header has " + std::to_string(t.header.size()));
+    for (std::size_t k = 0; k < cells.size(); ++k) {
+      char* end = nullptr;
+      const double v = std::strtod(cells[k].c_str(), &end);
+      t.numeric[k].push_back(end != cells[k].c_str() ? v : std::nan(""));
+    }
+    t.rows.push_back(std::move(cells));
+  }
+  if (t.header.empty()) throw std::runtime_error(path + ": no header line");
+  return t;
+}
+
+void write_table_all(const Table& t, const std::string& stem, const std::string& caption) {
+  std::ostringstream csv, js, md, tex;
+  for (std::size_t k = 0; k < t.header.size(); ++k) csv << (k ? "," : "") << t.header[k];
+  csv << "\n";
+  for (auto& r : t.rows) {
+    for (std::size_t k = 0; k < r.size(); ++k) {
+      std::string cell = r[k];
+      if (cell.find(',') != std::string::npos || cell.find('"') != std::string::npos) {
+        std::string q = "\"";
+        for (char c : cell) { if (c == '"') q += '"'; q += c; }
+        cell = q + "\"";
+      }
+      csv << (k ? "," : "") << cell;
+    }
+    csv << "\n";
+  }
+  js << "{\n  \"caption\": " << json_str(caption) << ",\n  \"rows\": [";
+  for (std::size_t i = 0; i < t.rows.size(); ++i) {
+    js << (i ? ",\n    {" : "\n    {");
+    for (std::size_t k = 0; k < t.header.size(); ++k)
+      js << (k ? ", " : "") << json_str(t.header[k]) << ": "
+         << (is_number(t.rows[i][k]) ? t.rows[i][k] : (t.rows[i][k] == "nan" ? "null" : json_str(t.rows[i][k])));
+    js << "}";
+  }
+  js << "\n  ]\n}\n";
+  md << "<!-- " << caption << " -->\n|";
+  for (auto& h : t.header) md << " " << h << " |";
+  md << "\n|";
+  for (std::size_t k = 0; k < t.header.size(); ++k) md << "---|";
+  md << "\n";
+  for (auto& r : t.rows) {
+    md << "|";
+    for (auto& c : r) md << " " << c << " |";
+    md << "\n";
+  }
+  tex << "% " << caption << "\n\\begin{tabular}{" << std::string(t.header.size(), 'l') << "}\n\\hline\n";
+  for (std::size_t k = 0; k < t.header.size(); ++k) tex << (k ? " & " : "") << tex_escape(t.header[k]);
+  tex << " \\\\\n\\hline\n";
+  for (auto& r : t.rows) {
+    for (std::size_t k = 0; k < r.size(); ++k) tex << (k ? " & " : "") << tex_escape(r[k]);
+    tex << " \\\\\n";
+  }
+  tex << "\\hline\n\\end{tabular}\n";
+  write_atomic(stem + ".csv", csv.str());
+  write_atomic(stem + ".json", js.str());
+  write_atomic(stem + ".md", md.str());
+  write_atomic(stem + ".tex", tex.str());
+}
+
+}  // namespace demfit

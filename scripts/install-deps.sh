@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Installs every Debian package the toolkit needs (run as root, or with sudo available).
+# Usage: scripts/install-deps.sh [--no-yade]
+#   --no-yade   skip YADE (about 1 GiB with its dependencies); the YADE cross-check tests are then skipped.
+set -euo pipefail
+want_yade=1
+for a in "$@"; do
+  case "$a" in
+    --no-yade) want_yade=0 ;;
+    *) echo "install-deps.sh: unknown option '$a' (known: --no-yade)" >&2; exit 2 ;;
+  esac
+done
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then
+  if command -v sudo >/dev/null; then SUDO="sudo"; else
+    echo "install-deps.sh: needs root (or sudo) to run apt-get" >&2; exit 1; fi
+fi
+pkgs=(build-essential cmake pkg-config
+      libeigen3-dev libceres-dev libgoogle-glog-dev libgsl-dev
+      libtomlplusplus-dev libcli11-dev
+      python3 python3-pytest python3-numpy python3-matplotlib)
+[ "$want_yade" = 1 ] && pkgs+=(yade)
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps.sh: all packages already installed" >&2
+  exit 0
+fi
+echo "install-deps.sh: installing ${missing[*]}" >&2
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"

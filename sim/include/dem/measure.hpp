@@ -1,0 +1,51 @@
+// Macroscopic measurements of a state: stress, fabric, coordination, energies, strains.
+// Definitions follow Imole et al. (KONA 2013) and Goncu et al. (2010); see docs/definitions.md.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "dem/model.hpp"
+#include "dem/neighbor_list.hpp"
+#include "dem/state.hpp"
+
+namespace dem {
+
+struct Measurement {
+  std::int64_t step = 0;
+  double time = 0;                ///< [s]
+  Vec3 strain;                    ///< true box strains ln(L/L0), extension positive
+  double eps_v = 0;               ///< (eps_xx + eps_yy + eps_zz) / 3
+  double eps_d = 0;               ///< deviatoric magnitude of the strain diagonal
+  double nu = 0;                  ///< volume fraction
+  Sym3 stress;                    ///< [Pa], compression positive, contact + kinetic parts
+  Sym3 stress_kinetic;            ///< the kinetic part alone [Pa]
+  double p = 0;                   ///< tr(stress)/3 [Pa]
+  double p_star = 0;              ///< 2 <r> p / k
+  double sigma_dev = 0;           ///< deviatoric magnitude of the stress diagonal [Pa]
+  double s_dev = 0;               ///< sigma_dev / p
+  Sym3 fabric;                    ///< (1/V) sum_p V_p sum_c n n
+  double F_dev = 0;               ///< deviatoric magnitude of the fabric diagonal
+  double C = 0;                   ///< 2 * contacts / N
+  double C_nonrattler = 0;        ///< 2 * contacts among non-rattlers / N_non-rattlers
+  double rattler_fraction = 0;    ///< rattlers / N (fewer than 4 contacts, removed recursively)
+  double E_kin = 0;               ///< [J], fluctuation velocities
+  double E_pot = 0;               ///< [J], elastic energy of contacts
+  double overlap_max_rel = 0;     ///< max delta / min(r_i, r_j)
+  double overlap_mean_rel = 0;    ///< mean delta / min(r_i, r_j) over contacts
+  double inertial_number = 0;     ///< |eps_dot|_max * 2<r> * sqrt(rho / p)   (0 when p <= 0)
+  long contacts = 0;
+};
+
+/// Measures a state. `list` must be current for the state (it is after every Engine step).
+/// `strain_rate` [1/s] enters the inertial number only.
+Measurement measure(const Model& model, const State& state, const NeighborList& list,
+                    const Vec3& strain_rate);
+
+/// Column names of the curve CSV, in order; units are in the names (_Pa, _J, _s) or the
+/// quantity is dimensionless. Shared with yade_ref/ and the fitter.
+const std::vector<std::string>& curve_columns();
+
+/// One CSV row (no newline) in the order of curve_columns(); `stage` is appended last.
+std::string curve_row(const Measurement& m);
+
+}  // namespace dem

@@ -1,0 +1,102 @@
+// The immutable description of a simulation: physics parameters, protocol and outputs.
+// Loaded from a TOML scene file (see scene.hpp), validated once, then only read.
+// All quantities are SI: metres, kilograms, seconds, newtons, pascals.
+#pragma once
+#include <array>
+#include <string>
+#include <vector>
+
+#include "dem/vec3.hpp"
+
+namespace dem {
+
+/// Which time integrator advances the particles.
+enum class Integrator {
+  VelocityVerlet,     ///< kick-drift-kick, forces at the half-step velocity (default)
+  SymplecticEuler,    ///< v += a dt; x += v dt  (what YADE's NewtonIntegrator does)
+};
+
+/// Linear spring-dashpot normal contact, f_n = k*delta + gamma*d(delta)/dt  [N], repulsive positive.
+struct ContactLaw {
+  double stiffness = 1e8;       ///< k [N/m = kg/s^2], > 0
+  double damping = 1.0;         ///< gamma [kg/s], >= 0; constant, not mass-scaled
+  /// If false (default) the force is clamped at zero when the dashpot outweighs the spring
+  /// on separation (no sticking; physical for dry grains). If true the force may turn
+  /// attractive, as in YADE's Law2_ScGeom_ViscElPhys_Basic.
+  bool allow_attractive = false;
+};
+
+/// A deformation applied to the periodic box: a constant diagonal true-strain rate
+/// (box lengths follow L_k(t) = L_k(0) exp(rate_k t)).
+struct DeformationMode {
+  std::string name;             ///< e.g. "D2", "D3", "iso", "uniaxial_z"
+  Vec3 rate_shape{0, 0, 0};     ///< dimensionless direction, multiplied by the mode rate [1/s]
+};
+
+/// The protocol: preparation (compress, relax, cycle) then deviatoric modes from checkpoints.
+struct Protocol {
+  double initial_phi = 0.3;          ///< random placement volume fraction, (0, 0.45]
+  double target_phi = 0.64;          ///< phi_t, end of first compression, below jamming
+  double compress_rate = 0;          ///< isotropic true volumetric-strain rate per axis [1/s]
+  double relax_ke_ratio = 1e-8;      ///< relaxation ends when E_kin < ratio * max(E_pot, E_floor)
+  double relax_max_time = 0;         ///< [s] relaxation ends at this time at the latest
+  double cycle_phi_max = 0.82;       ///< top of the compression/decompression cycle
+  double cycle_rate = 0;             ///< isotropic strain rate during the cycle [1/s]
+  std::vector<double> checkpoints_unloading;   ///< phi values for checkpoints on unloading
+  std::vector<double> checkpoints_loading;     ///< phi values on loading (optional)
+  std::vector<DeformationMode> modes;          ///< run from every unloading checkpoint
+  double deviatoric_rate = 0;        ///< mode rate [1/s] (multiplies rate_shape)
+  double eps_d_max = 0.4;            ///< deviatoric runs stop at this eps_d (or |eps| for others)
+};
+
+/// Output cadence and formats.
+struct OutputOptions {
+  double sample_strain = 2e-3;       ///< a curve row every this much strain change (eps_d or eps_v)
+  long relax_sample_steps = 2000;    ///< a row every this many steps while relaxing
+  int vtk_per_stage = 0;             ///< VTK snapshots per stage (0: only at stage ends if vtk on)
+  bool vtk = true;                   ///< write VTK snapshots (.vtu + .pvd)
+  double progress_seconds = 2.0;     ///< wall seconds between progress lines on stderr
+};
+
+/// Everything that describes a run. Immutable once validated.
+struct Model {
+  // particles
+  int count = 9261;                  ///< N, >= 2
+  double radius_min = 0.5e-3;        ///< [m]
+  double radius_max = 1.5e-3;        ///< [m]
+  double density = 2000;             ///< [kg/m^3]
+  unsigned long long seed = 1;       ///< seeds placement and initial velocities
+  std::string packing_file;          ///< start from this YADE-format packing instead of placing
+
+  ContactLaw contact;
+  double background_damping = 0.1;   ///< gamma_b [kg/s] on the fluctuation velocity, >= 0
+
+  // integration
+  Integrator integrator = Integrator::VelocityVerlet;
+  double dt_over_tc = 1.0 / 50.0;    ///< dt as a fraction of t_c of the two smallest particles
+  double skin_over_rmin = 0.4;       ///< Verlet skin / radius_min
+  int threads = 0;                   ///< OpenMP threads; 0: all available
+  double max_overlap_fraction = 0.2; ///< stop if an overlap exceeds this fraction of the smaller radius
+  long check_every_steps = 200;      ///< sanity-check cadence
+
+  Protocol protocol;
+  OutputOptions output;
+
+  // Derived quantities (filled by finalize()).
+  double t_contact = 0;              ///< t_c of two radius_min spheres [s]
+  double restitution = 0;            ///< e of two radius_min spheres
+  double dt = 0;                     ///< time step [s]
+
+  /// Computes t_c, e, dt from the parameters. Call after changing any parameter.
+  void finalize();
+};
+
+/// Contact duration [s] and restitution of a pair with reduced mass m_r [kg].
+/// Throws std::invalid_argument when the pair is overdamped (gamma^2/(4 m_r^2) >= k/m_r).
+struct PairCollision { double t_contact; double restitution; };
+PairCollision pair_collision(double stiffness, double damping, double reduced_mass);
+
+/// Mass [kg] of a sphere of radius r [m] and density rho [kg/m^3].
+double sphere_mass(double radius, double density);
+
+}  // namespace dem

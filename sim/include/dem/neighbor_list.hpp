@@ -1,0 +1,47 @@
+// Verlet neighbour list built with linked cells, aware of the box deformation.
+//
+// The list holds every pair (i < j) whose centre distance was below r_i + r_j + skin at the
+// last build, with the periodic image of j stored per pair (so the force loop needs no
+// minimum-image branches). Between builds positions are not wrapped; the image shifts scale
+// with the box, so they stay valid.
+//
+// Rebuild criterion (conservative, exact bound): let u_max be the largest fluctuation
+// displacement since the build, measured in the frame of the box at build time, and
+// lambda_min the smallest stretch L/L_build of the box. No unlisted pair can touch while
+//     2 u_max + 2 r_max (1/lambda_min - 1)_+  <  skin.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "dem/state.hpp"
+
+namespace dem {
+
+struct NeighborList {
+  std::vector<std::int32_t> first;     ///< CSR offsets, size N+1
+  std::vector<std::int32_t> partner;   ///< j of each pair (j > i)
+  std::vector<std::uint8_t> image;     ///< periodic image of j: (sx+1)*9+(sy+1)*3+(sz+1)
+  double skin = 0;                     ///< [m]
+  double radius_max = 0;               ///< [m], for the rebuild criterion
+  std::int64_t builds = 0;             ///< number of rebuilds so far (statistics only)
+
+  std::size_t pair_count() const { return partner.size(); }
+};
+
+/// Offsets of the 27 periodic images for the current box [m].
+void image_offsets(const Box& box, Vec3 offsets[27]);
+
+/// Rebuilds the list: wraps positions into the box, optionally sorts particles by cell
+/// (permuting every per-particle array of the state, for memory locality), stores the
+/// build reference in the state. Throws std::runtime_error if the box is shorter than
+/// twice the list cutoff 2*r_max + skin along any axis (too few particles for the box).
+void rebuild_neighbor_list(State& state, NeighborList& list, double skin, bool sort_by_cell);
+
+/// Rebuilds the list from the state's stored build reference without moving or sorting
+/// particles (used when continuing from a checkpoint, to get exactly the same list).
+void restore_neighbor_list(const State& state, NeighborList& list, double skin);
+
+/// True when the list may miss a contact (criterion in the file comment).
+bool neighbor_list_stale(const State& state, const NeighborList& list);
+
+}  // namespace dem

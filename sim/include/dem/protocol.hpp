@@ -1,0 +1,54 @@
+// The protocol runner: preparation (placement, compression, relaxation, cycle with
+// checkpoints) and deviatoric modes from the checkpoints, writing the run folder.
+//
+// Run folder layout (DIR = --out):
+//   DIR/manifest.json                 scene, version, command, per-stage status
+//   DIR/scene.toml                    the resolved scene (every key with its value)
+//   DIR/prep/{compress,relax,cycle_loading,cycle_unloading}.csv
+//   DIR/checkpoints/unloading_phi0.700.{ckpt,txt}   (txt: YADE text packing)
+//   DIR/deviatoric/D2_phi0.700.csv ...
+//   DIR/vtk/<stage>_NNNN.vtu and DIR/vtk/<stage>.pvd
+#pragma once
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "dem/model.hpp"
+#include "dem/state.hpp"
+
+namespace dem {
+
+struct RunOptions {
+  std::string out_dir;                 ///< results folder (created)
+  std::string stages = "all";          ///< "all", "prep" or "deviatoric"
+  bool force = false;                  ///< allow overwriting finished results
+  std::string scene_toml;              ///< resolved scene text (stored with results)
+  std::string command_line;            ///< for the manifest
+  bool quiet = false;                  ///< no progress lines
+};
+
+/// Runs the scene. Throws std::runtime_error (existing results, I/O) or BlowUp (after writing
+/// the last good state to DIR/failed_<stage>.ckpt).
+void run_protocol(const Model& model, const RunOptions& options);
+
+/// How a stage ends.
+enum class StopKind { VolumeFractionUp, VolumeFractionDown, DeviatoricStrain, Relaxed };
+
+struct StageSpec {
+  std::string name;                  ///< file stem of its CSV
+  Vec3 rate{0, 0, 0};                ///< box true-strain rate [1/s]
+  StopKind stop = StopKind::Relaxed;
+  double target = 0;                 ///< phi, or strain (eps_d; |eps_v| for isotropic shapes)
+  std::vector<double> checkpoint_phis;   ///< volume fractions at which on_checkpoint is called
+};
+
+/// Runs one stage on (model, state), writing its curve CSV to csv_path (atomically; a crash
+/// leaves only csv_path.part). Strains are measured from the stage start. For every phi in
+/// spec.checkpoint_phis crossed, the step is shortened to land on it exactly and
+/// on_checkpoint(phi, state) is called. Returns the number of steps taken.
+std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
+                       const std::string& csv_path, const std::string& vtk_dir,
+                       const std::function<void(double, const State&)>& on_checkpoint,
+                       bool quiet);
+
+}  // namespace dem

@@ -1,0 +1,171 @@
+// dem: command-line front end. Subcommands: run, info, bench, fit, compare, plot.
+#include <CLI/CLI.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <unistd.h>
+
+#include "dem/engine.hpp"
+#include "dem/io.hpp"
+#include "dem/measure.hpp"
+#include "dem/protocol.hpp"
+#include "dem/scene.hpp"
+#include "demfit/cli.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string join_args(int argc, char** argv) {
+  std::string s;
+  for (int i = 0; i < argc; ++i) s += (i ? " " : "") + std::string(argv[i]);
+  return s;
+}
+
+// Python helpers live in <repo>/demkit; find them next to the executable's source tree.
+int exec_python(const std::string& module, const std::vector<std::string>& args) {
+  const char* py = std::getenv("DEM_PYTHON");
+  std::string python = py ? py : "/usr/bin/python3";
+  std::vector<std::string> argv_s = {python, "-m", module};
+  argv_s.insert(argv_s.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (auto& a : argv_s) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  const std::string root = DEM_SOURCE_DIR;
+  const char* old = std::getenv("PYTHONPATH");
+  setenv("PYTHONPATH", (root + (old ? ":" + std::string(old) : "")).c_str(), 1);
+  execv(python.c_str(), argv.data());
+  std::cerr << "dem: cannot start " << python << " (set DEM_PYTHON to a python3 with numpy and matplotlib)\n";
+  return 1;
+}
+
+void print_info(const dem::Model& m) {
+  const auto& p = m.protocol;
+  std::printf("particles          N = %d, r in [%g, %g] m, rho = %g kg/m^3\n", m.count, m.radius_min,
+              m.radius_max, m.density);
+  std::printf("contact            k = %g N/m, gamma = %g kg/s, gamma_b = %g kg/s, %s\n",
+              m.contact.stiffness, m.contact.damping, m.background_damping,
+              m.contact.allow_attractive ? "attractive allowed" : "clamped at zero");
+  std::printf("smallest pair      t_c = %.6g s, e = %.6g\n", m.t_contact, m.restitution);
+  std::printf("time step          dt = %.6g s (t_c / %.4g), %s\n", m.dt, 1.0 / m.dt_over_tc,
+              m.integrator == dem::Integrator::VelocityVerlet ? "velocity Verlet" : "symplectic Euler");
+  std::printf("rates              compress %.4g /s, cycle %.4g /s, deviatoric %.4g /s\n", p.compress_rate,
+              p.cycle_rate, p.deviatoric_rate);
+  for (auto& mode : p.modes) {
+    const double devs = dem::deviatoric_magnitude(mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z);
+    const double per_step = (devs > 0 ? devs : std::fabs(mode.rate_shape.x + mode.rate_shape.y + mode.rate_shape.z) / 3) *
+                            p.deviatoric_rate * m.dt;
+    std::printf("mode %-13s  rate shape (%g, %g, %g): %.3g steps to eps_d = %g\n", mode.name.c_str(),
+                mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z, p.eps_d_max / per_step, p.eps_d_max);
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"dem: DEM runner, fitter and YADE cross-check for frictionless polydisperse spheres"};
+  app.require_subcommand(1);
+  std::vector<std::string> overrides;
+
+  // run
+  auto* run = app.add_subcommand("run", "run a scene: preparation, checkpoints, deviatoric modes");
+  std::string scene, out, stages = "all";
+  bool force = false, quiet = false;
+  int threads = -1;
+  run->add_option("scene", scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
+  run->add_option("--out", out, "results folder")->required();
+  run->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
+  run->add_option("--stages", stages, "all | prep | deviatoric (deviatoric reuses DIR/checkpoints)");
+  run->add_option("--threads", threads, "OpenMP threads (overrides integration.threads)");
+  run->add_flag("--force", force, "overwrite finished results in --out");
+  run->add_flag("--quiet", quiet, "no progress lines on stderr");
+
+  // info
+  auto* info = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates)");
+  std::string info_scene;
+  info->add_option("scene", info_scene, "scene TOML file")->required()->check(CLI::ExistingFile);
+  info->add_option("--set", overrides, "override a scene key");
+
+  // bench
+  auto* bench = app.add_subcommand("bench", "particle-steps per second on a packing under D2");
+  std::string bench_packing = std::string(DEM_SOURCE_DIR) + "/data/packings/n9261_phi0.70.txt";
+  long bench_steps = 20000;
+  int bench_threads = 1;
+  double bench_rate_tc = 5e-6;
+  bench->add_option("--packing", bench_packing, "YADE-format packing")->check(CLI::ExistingFile);
+  bench->add_option("--steps", bench_steps, "steps to time");
+  bench->add_option("--threads", bench_threads, "OpenMP threads");
+  bench->add_option("--rate-tc", bench_rate_tc, "D2 strain rate times t_c");
+  bench->add_option("--set", overrides, "override a scene key");
+
+  // fit, compare, plot
+  demfit::FitCommandOptions fit_opts;
+  auto* fit = app.add_subcommand("fit", "fit the anisotropy-evolution model to a run's curves");
+  demfit::add_fit_options(*fit, fit_opts);
+  auto* compare = app.add_subcommand("compare", "compare two curve CSVs (e.g. ours vs YADE)");
+  compare->allow_extras();
+  auto* plot = app.add_subcommand("plot", "plot a run folder's curves (PNG/SVG)");
+  plot->allow_extras();
+
+  CLI11_PARSE(app, argc, argv);
+
+  try {
+    if (*run) {
+      if (threads >= 0) overrides.push_back("integration.threads=" + std::to_string(threads));
+      std::string resolved;
+      dem::Model model = dem::load_scene_file(scene, overrides, &resolved);
+      dem::RunOptions o;
+      o.out_dir = out;
+      o.stages = stages;
+      o.force = force;
+      o.quiet = quiet;
+      o.scene_toml = resolved;
+      o.command_line = join_args(argc, argv);
+      if (!quiet) print_info(model);
+      dem::run_protocol(model, o);
+      return 0;
+    }
+    if (*info) {
+      print_info(dem::load_scene_file(info_scene, overrides));
+      return 0;
+    }
+    if (*bench) {
+      overrides.push_back("integration.threads=" + std::to_string(bench_threads));
+      dem::Model model = dem::load_scene("", overrides, nullptr, "bench");
+      dem::State state = dem::read_packing(bench_packing, model.density);
+      const dem::Vec3 rate = dem::Vec3{1, 0, -1} * (bench_rate_tc / model.t_contact);
+      dem::Engine engine(model, state);
+      for (int i = 0; i < 200; ++i) engine.step(rate);   // warm-up
+      const long builds0 = engine.neighbor_list().builds;
+      const auto t0 = std::chrono::steady_clock::now();
+      for (long i = 0; i < bench_steps; ++i) engine.step(rate);
+      const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const dem::Measurement m = dem::measure(model, state, engine.neighbor_list(), rate);
+      const double ps = static_cast<double>(bench_steps) * state.count() / wall;
+      std::printf("packing %s\nN = %d, phi = %.4f, C = %.3f, threads = %d, steps = %ld\n", bench_packing.c_str(),
+                  state.count(), m.nu, m.C, engine.threads(), bench_steps);
+      std::printf("wall %.3f s, %.3f M particle-steps/s, %.2f listed pairs per particle, %ld list rebuilds\n",
+                  wall, ps / 1e6, static_cast<double>(engine.neighbor_list().pair_count()) / state.count(),
+                  engine.neighbor_list().builds - builds0);
+      std::printf("particle_steps_per_s=%.6g\n", ps);
+      return 0;
+    }
+    if (*fit) return demfit::run_fit_command(fit_opts);
+    if (*compare) return exec_python("demkit.compare", compare->remaining());
+    if (*plot) return exec_python("demkit.plots", plot->remaining());
+  } catch (const dem::SceneError& e) {
+    std::cerr << "dem: scene error: " << e.what() << "\n";
+    return 2;
+  } catch (const dem::BlowUp& e) {
+    std::cerr << "dem: simulation blew up: " << e.what()
+              << "\n     the last good state was saved as failed_<stage>.ckpt in the results folder\n";
+    return 3;
+  } catch (const std::exception& e) {
+    std::cerr << "dem: error: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

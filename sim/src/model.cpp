@@ -1,0 +1,61 @@
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "dem/model.hpp"
+#include "dem/state.hpp"
+
+namespace dem {
+
+double sphere_mass(double radius, double density) {
+  return 4.0 / 3.0 * M_PI * radius * radius * radius * density;
+}
+
+PairCollision pair_collision(double k, double gamma, double m_r) {
+  const double w0sq = k / m_r;
+  const double eta = gamma / (2.0 * m_r);
+  if (eta * eta >= w0sq)
+    throw std::invalid_argument("contact is overdamped for the smallest pair (gamma^2 >= 4 k m_r): "
+                                "lower contact.damping_kg_s or raise contact.stiffness_N_m");
+  const double tc = M_PI / std::sqrt(w0sq - eta * eta);
+  return {tc, std::exp(-eta * tc)};
+}
+
+void Model::finalize() {
+  const double m = sphere_mass(radius_min, density);
+  const PairCollision c = pair_collision(contact.stiffness, contact.damping, 0.5 * m);
+  t_contact = c.t_contact;
+  restitution = c.restitution;
+  dt = dt_over_tc * t_contact;
+}
+
+Vec3 Box::true_strain() const {
+  return {std::log(length.x / length0.x), std::log(length.y / length0.y),
+          std::log(length.z / length0.z)};
+}
+
+double State::particle_volume() const {
+  double v = 0;
+  for (double r : radius) v += r * r * r;
+  return 4.0 / 3.0 * M_PI * v;
+}
+
+double State::kinetic_energy() const {
+  double e = 0;
+  for (std::size_t i = 0; i < velocity.size(); ++i) e += 0.5 * mass[i] * dot(velocity[i], velocity[i]);
+  return e;
+}
+
+void State::resize(int n) {
+  position.assign(n, Vec3{});
+  velocity.assign(n, Vec3{});
+  force.assign(n, Vec3{});
+  radius.assign(n, 0.0);
+  mass.assign(n, 0.0);
+  id.resize(n);
+  for (int i = 0; i < n; ++i) id[i] = i;
+  position_at_build.clear();
+  list_valid = false;
+}
+
+}  // namespace dem

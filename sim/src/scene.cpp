@@ -1,0 +1,329 @@
+#include "dem/scene.hpp"
+
+#include <toml++/toml.h>
+
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+namespace dem {
+
+namespace {
+
+// Reads typed keys from a table and remembers which keys were consumed.
+class KeyReader {
+ public:
+  KeyReader(toml::table& root, std::string origin) : root_(root), origin_(std::move(origin)) {}
+
+  template <class T>
+  void get(const std::string& section, const std::string& key, T& out) {
+    known_[section].insert(key);
+    toml::table* sec = section_table(section);
+    toml::node* node = sec ? sec->get(key) : nullptr;
+    const std::string name = section + "." + key;
+    if (!node) { set_default(section, key, out); return; }
+    if constexpr (std::is_same_v<T, bool>) {
+      if (auto v = node->value_exact<bool>()) out = *v; else type_error(name, "true or false");
+    } else if constexpr (std::is_same_v<T, std::string>) {
+      if (auto v = node->value_exact<std::string>()) out = *v; else type_error(name, "a string");
+    } else if constexpr (std::is_integral_v<T>) {
+      if (auto v = node->value_exact<int64_t>()) out = static_cast<T>(*v);
+      else type_error(name, "an integer");
+    } else if constexpr (std::is_same_v<T, double>) {
+      if (auto v = node->value<double>()) out = *v; else type_error(name, "a number");
+    } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+      auto* arr = node->as_array();
+      if (!arr) type_error(name, "an array of numbers");
+      out.clear();
+      for (auto& e : *arr) {
+        auto v = e.value<double>();
+        if (!v) type_error(name, "an array of numbers");
+        out.push_back(*v);
+      }
+    } else if constexpr (std::is_same_v<T, std::vector<std::string>>) {
+      auto* arr = node->as_array();
+      if (!arr) type_error(name, "an array of strings");
+      out.clear();
+      for (auto& e : *arr) {
+        auto v = e.value<std::string>();
+        if (!v) type_error(name, "an array of strings");
+        out.push_back(*v);
+      }
+    }
+  }
+
+  // Sections whose keys are free (user-defined modes).
+  void allow_any(const std::string& section) { free_sections_.insert(section); known_[section]; }
+
+  void reject_unknown() {
+    for (auto&& [k, v] : root_) {
+      const std::string sec(k.str());
+      if (!known_.count(sec))
+        throw SceneError(origin_ + ": unknown section [" + sec + "]; known sections: " + list_sections());
+      if (free_sections_.count(sec)) continue;
+      auto* t = v.as_table();
+      if (!t) throw SceneError(origin_ + ": '" + sec + "' must be a section [" + sec + "]");
+      for (auto&& [kk, vv] : *t) {
+        const std::string key(kk.str());
+        if (!known_[sec].count(key)) {
+          std::string keys;
+          for (auto& kn : known_[sec]) keys += (keys.empty() ? "" : ", ") + kn;
+          throw SceneError(origin_ + ": unknown key '" + sec + "." + key + "'; known keys of [" +
+                           sec + "]: " + keys);
+        }
+      }
+    }
+  }
+
+ private:
+  toml::table* section_table(const std::string& section) {
+    toml::node* n = root_.get(section);
+    return n ? n->as_table() : nullptr;
+  }
+  template <class T>
+  void set_default(const std::string& section, const std::string& key, const T& value) {
+    // Record defaults so the resolved scene lists every key.
+    if (!root_.get(section)) root_.insert(section, toml::table{});
+    toml::table& t = *root_.get(section)->as_table();
+    if constexpr (std::is_same_v<T, std::vector<double>> || std::is_same_v<T, std::vector<std::string>>) {
+      toml::array a;
+      for (auto& e : value) a.push_back(e);
+      t.insert(key, a);
+    } else if constexpr (std::is_same_v<T, unsigned long long>) {
+      t.insert(key, static_cast<int64_t>(value));
+    } else if constexpr (std::is_integral_v<T> && !std::is_same_v<T, bool>) {
+      t.insert(key, static_cast<int64_t>(value));
+    } else {
+      t.insert(key, value);
+    }
+  }
+  [[noreturn]] void type_error(const std::string& name, const std::string& what) {
+    throw SceneError(origin_ + ": key '" + name + "' must be " + what);
+  }
+  std::string list_sections() const {
+    std::string s;
+    for (auto& [k, v] : known_) s += (s.empty() ? "" : ", ") + k;
+    return s;
+  }
+
+  toml::table& root_;
+  std::string origin_;
+  std::map<std::string, std::set<std::string>> known_;
+  std::set<std::string> free_sections_;
+};
+
+void apply_override(toml::table& root, const std::string& ov) {
+  const auto eq = ov.find('=');
+  if (eq == std::string::npos || eq == 0)
+    throw SceneError("override '" + ov + "' must look like section.key=value");
+  const std::string key = ov.substr(0, eq);
+  std::string value = ov.substr(eq + 1);
+  if (key.find('.') == std::string::npos)
+    throw SceneError("override '" + ov + "': name the section, e.g. contact.damping_kg_s=0");
+  toml::table parsed;
+  try {
+    parsed = toml::parse(key + " = " + value);
+  } catch (const toml::parse_error&) {
+    try {
+      parsed = toml::parse(key + " = \"" + value + "\"");
+    } catch (const toml::parse_error& e) {
+      throw SceneError("override '" + ov + "' is not valid: " + std::string(e.description()));
+    }
+  }
+  // Merge: replace the leaf, create sections as needed.
+  const std::string section = key.substr(0, key.find('.'));
+  const std::string leaf = key.substr(key.find('.') + 1);
+  if (!root.get(section)) root.insert(section, toml::table{});
+  toml::table* sec = root.get(section)->as_table();
+  if (!sec) throw SceneError("override '" + ov + "': '" + section + "' is not a section");
+  toml::node* val = parsed.get(section)->as_table()->get(leaf);
+  if (!val) throw SceneError("override '" + ov + "': nested keys are not supported");
+  sec->insert_or_assign(leaf, *val);
+}
+
+}  // namespace
+
+bool builtin_mode(const std::string& name, DeformationMode* mode) {
+  static const std::map<std::string, Vec3> modes = {
+      {"D2", {1, 0, -1}},          {"D3", {0.5, 0.5, -1}},      {"iso_compress", {-1, -1, -1}},
+      {"iso_expand", {1, 1, 1}},   {"uniaxial_x", {-1, 0, 0}},  {"uniaxial_y", {0, -1, 0}},
+      {"uniaxial_z", {0, 0, -1}}};
+  auto it = modes.find(name);
+  if (it == modes.end()) return false;
+  if (mode) { mode->name = name; mode->rate_shape = it->second; }
+  return true;
+}
+
+Model load_scene(const std::string& text, const std::vector<std::string>& overrides,
+                 std::string* resolved, const std::string& origin) {
+  toml::table root;
+  try {
+    root = toml::parse(text, origin);
+  } catch (const toml::parse_error& e) {
+    std::ostringstream m;
+    m << origin << ":" << e.source().begin.line << ": TOML syntax error: " << e.description();
+    throw SceneError(m.str());
+  }
+  for (auto& ov : overrides) apply_override(root, ov);
+
+  Model m;
+  KeyReader r(root, origin);
+  r.get("particles", "count", m.count);
+  r.get("particles", "radius_min_m", m.radius_min);
+  r.get("particles", "radius_max_m", m.radius_max);
+  r.get("particles", "density_kg_m3", m.density);
+  r.get("particles", "seed", m.seed);
+  r.get("particles", "packing_file", m.packing_file);
+  r.get("contact", "stiffness_N_m", m.contact.stiffness);
+  r.get("contact", "damping_kg_s", m.contact.damping);
+  r.get("contact", "allow_attractive", m.contact.allow_attractive);
+  r.get("contact", "background_damping_kg_s", m.background_damping);
+  std::string integrator = "velocity_verlet";
+  r.get("integration", "integrator", integrator);
+  if (integrator == "velocity_verlet") m.integrator = Integrator::VelocityVerlet;
+  else if (integrator == "symplectic_euler") m.integrator = Integrator::SymplecticEuler;
+  else throw SceneError(origin + ": integration.integrator = '" + integrator +
+                        "' is unknown; use \"velocity_verlet\" or \"symplectic_euler\"");
+  r.get("integration", "dt_over_tc", m.dt_over_tc);
+  r.get("integration", "skin_over_rmin", m.skin_over_rmin);
+  r.get("integration", "threads", m.threads);
+  r.get("integration", "max_overlap_fraction", m.max_overlap_fraction);
+  r.get("integration", "check_every_steps", m.check_every_steps);
+
+  Protocol& p = m.protocol;
+  double compress_tc = 1e-4, cycle_tc = 2e-5, dev_tc = 5e-6, relax_max_tc = 2e5;
+  p.checkpoints_unloading = {0.80, 0.75, 0.70, 0.68};
+  std::vector<std::string> modes = {"D2", "D3"};
+  r.get("protocol", "initial_phi", p.initial_phi);
+  r.get("protocol", "target_phi", p.target_phi);
+  r.get("protocol", "compress_rate_tc", compress_tc);
+  r.get("protocol", "relax_ke_ratio", p.relax_ke_ratio);
+  r.get("protocol", "relax_max_time_tc", relax_max_tc);
+  r.get("protocol", "cycle_phi_max", p.cycle_phi_max);
+  r.get("protocol", "cycle_rate_tc", cycle_tc);
+  r.get("protocol", "checkpoints_unloading", p.checkpoints_unloading);
+  r.get("protocol", "checkpoints_loading", p.checkpoints_loading);
+  r.get("protocol", "modes", modes);
+  r.get("protocol", "deviatoric_rate_tc", dev_tc);
+  r.get("protocol", "eps_d_max", p.eps_d_max);
+
+  r.get("output", "sample_strain", m.output.sample_strain);
+  r.get("output", "relax_sample_steps", m.output.relax_sample_steps);
+  r.get("output", "vtk", m.output.vtk);
+  r.get("output", "vtk_per_stage", m.output.vtk_per_stage);
+  r.get("output", "progress_seconds", m.output.progress_seconds);
+
+  // User-defined modes: [modes] name = [rx, ry, rz]
+  r.allow_any("modes");
+  std::map<std::string, Vec3> custom;
+  if (auto* t = root.get("modes") ? root.get("modes")->as_table() : nullptr) {
+    for (auto&& [k, v] : *t) {
+      auto* a = v.as_array();
+      if (!a || a->size() != 3 || !(*a)[0].value<double>() || !(*a)[1].value<double>() ||
+          !(*a)[2].value<double>())
+        throw SceneError(origin + ": modes." + std::string(k.str()) +
+                         " must be [rate_x, rate_y, rate_z] (diagonal strain-rate shape)");
+      custom[std::string(k.str())] = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(),
+                                          *(*a)[2].value<double>());
+    }
+  } else {
+    root.insert("modes", toml::table{});
+  }
+  r.reject_unknown();
+
+  for (auto& name : modes) {
+    DeformationMode dm;
+    if (custom.count(name)) { dm.name = name; dm.rate_shape = custom[name]; }
+    else if (!builtin_mode(name, &dm))
+      throw SceneError(origin + ": protocol.modes names '" + name + "', which is neither built in "
+                       "(D2, D3, iso_compress, iso_expand, uniaxial_x/y/z) nor defined in [modes]");
+    p.modes.push_back(dm);
+  }
+
+  // Rates are given as rate * t_c; t_c needs the contact parameters, so validate those first.
+  validate(m);
+  m.finalize();
+  p.compress_rate = compress_tc / m.t_contact;
+  p.cycle_rate = cycle_tc / m.t_contact;
+  p.deviatoric_rate = dev_tc / m.t_contact;
+  p.relax_max_time = relax_max_tc * m.t_contact;
+  auto positive = [&](double v, const char* key) {
+    if (!(v > 0) || !std::isfinite(v))
+      throw SceneError(origin + ": protocol." + key + " must be a positive number");
+  };
+  positive(compress_tc, "compress_rate_tc");
+  positive(cycle_tc, "cycle_rate_tc");
+  positive(dev_tc, "deviatoric_rate_tc");
+  positive(relax_max_tc, "relax_max_time_tc");
+  for (double rate_tc : {compress_tc, cycle_tc, dev_tc})
+    if (rate_tc > 1e-2)
+      throw SceneError(origin + ": a strain rate of " + std::to_string(rate_tc) +
+                       "/t_c deforms the box by 1% per contact time: far from quasi-static; "
+                       "use rates below 1e-3 (typical: 1e-6 to 1e-4)");
+  if (resolved) {
+    std::ostringstream o;
+    o << root;
+    *resolved = o.str();
+  }
+  return m;
+}
+
+Model load_scene_file(const std::string& path, const std::vector<std::string>& overrides,
+                      std::string* resolved) {
+  std::ifstream in(path);
+  if (!in) throw SceneError("cannot read scene file '" + path + "'");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return load_scene(ss.str(), overrides, resolved, path);
+}
+
+void validate(const Model& m) {
+  auto fail = [](const std::string& msg) { throw SceneError(msg); };
+  if (m.count < 2) fail("particles.count must be at least 2");
+  if (!(m.radius_min > 0)) fail("particles.radius_min_m must be positive");
+  if (!(m.radius_max >= m.radius_min))
+    fail("particles.radius_max_m must be at least particles.radius_min_m");
+  if (!(m.density > 0)) fail("particles.density_kg_m3 must be positive");
+  if (!(m.contact.stiffness > 0)) fail("contact.stiffness_N_m must be positive");
+  if (!(m.contact.damping >= 0)) fail("contact.damping_kg_s must be zero or positive");
+  if (!(m.background_damping >= 0)) fail("contact.background_damping_kg_s must be zero or positive");
+  // Linear spring: both integrators are stable for omega_0 dt < 2, i.e. dt/t_c < 2/pi.
+  const double dt_limit = 2.0 / M_PI;
+  if (!(m.dt_over_tc > 0)) fail("integration.dt_over_tc must be positive");
+  if (m.dt_over_tc >= dt_limit)
+    fail("integration.dt_over_tc = " + std::to_string(m.dt_over_tc) + " is beyond the stability "
+         "limit 2/pi = 0.637 of the integrator for a single contact (omega_0 dt < 2); "
+         "dense packings need far less: use 0.02 (t_c/50)");
+  if (!(m.skin_over_rmin > 0 && m.skin_over_rmin <= 4)) fail("integration.skin_over_rmin must be in (0, 4]");
+  if (m.threads < 0) fail("integration.threads must be >= 0 (0 = all cores)");
+  if (!(m.max_overlap_fraction > 0 && m.max_overlap_fraction < 1))
+    fail("integration.max_overlap_fraction must be in (0, 1)");
+  if (m.check_every_steps < 1) fail("integration.check_every_steps must be >= 1");
+  const Protocol& p = m.protocol;
+  if (!(p.initial_phi > 0 && p.initial_phi <= 0.45))
+    fail("protocol.initial_phi must be in (0, 0.45]: random placement cannot go denser");
+  // Soft spheres can be pushed past jamming, but at phi near 1 overlaps are of the order of
+  // the radius and the linear contact law is meaningless.
+  const double phi_limit = 0.9;
+  for (double phi : {p.target_phi, p.cycle_phi_max})
+    if (!(phi > 0 && phi < phi_limit))
+      fail("volume fraction " + std::to_string(phi) + " in [protocol] is beyond what these soft "
+           "spheres can pack without overlaps of the order of their radius; keep phi below 0.9");
+  if (!(p.target_phi > p.initial_phi)) fail("protocol.target_phi must exceed protocol.initial_phi");
+  if (!(p.cycle_phi_max >= p.target_phi)) fail("protocol.cycle_phi_max must be >= protocol.target_phi");
+  for (double phi : p.checkpoints_unloading)
+    if (phi < p.target_phi || phi > p.cycle_phi_max)
+      fail("protocol.checkpoints_unloading value " + std::to_string(phi) +
+           " lies outside [target_phi, cycle_phi_max]");
+  for (double phi : p.checkpoints_loading)
+    if (phi < p.target_phi || phi > p.cycle_phi_max)
+      fail("protocol.checkpoints_loading value " + std::to_string(phi) +
+           " lies outside [target_phi, cycle_phi_max]");
+  if (!(p.relax_ke_ratio > 0)) fail("protocol.relax_ke_ratio must be positive");
+  if (!(p.eps_d_max > 0 && p.eps_d_max <= 2)) fail("protocol.eps_d_max must be in (0, 2]");
+  if (!(m.output.sample_strain > 0)) fail("output.sample_strain must be positive");
+  if (m.output.relax_sample_steps < 1) fail("output.relax_sample_steps must be >= 1");
+}
+
+}  // namespace dem
