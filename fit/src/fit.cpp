@@ -113,6 +113,11 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
   problem.SetParameterLowerBound(p.data(), 2, o.beta_min);
   problem.SetParameterUpperBound(p.data(), 2, o.beta_max);
   if (o.nonnegative_asymptote) problem.SetParameterLowerBound(p.data(), 1, 0.0);
+  if (o.fix_x0) {
+    p[0] = o.x0_value;
+    problem.SetManifold(p.data(), new ceres::SubsetManifold(3, {0}));
+  }
+  const int n_free = o.fix_x0 ? 2 : 3;
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
   so.max_num_iterations = 500;
@@ -147,14 +152,14 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
   ceres::Covariance cov(co);
   std::vector<std::pair<const double*, const double*>> blocks = {{p.data(), p.data()}};
   double c[9];
-  if (r.n > 3 && cov.Compute(blocks, &problem) && cov.GetCovarianceBlock(p.data(), p.data(), c)) {
-    const double s2 = rss / (r.n - 3);
+  if (r.n > n_free && cov.Compute(blocks, &problem) && cov.GetCovarianceBlock(p.data(), p.data(), c)) {
+    const double s2 = rss / (r.n - n_free);
     for (double& v : c) v *= s2;
     const double se[3] = {std::sqrt(std::max(c[0], 0.0)), std::sqrt(std::max(c[4], 0.0)),
                           std::sqrt(std::max(c[8], 0.0))};
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b) r.corr[a][b] = (se[a] > 0 && se[b] > 0) ? c[3 * a + b] / (se[a] * se[b]) : kNaN;
-    r.se_x0 = se[0];
+    r.se_x0 = o.fix_x0 ? kNaN : se[0];
     r.se_x_max = xmax_on_bound ? kNaN : se[1];
     r.se_beta = beta_on_bound ? kNaN : se[2];
     // Delta method for beta (x_max - x0): gradient (-beta, beta, x_max - x0).
@@ -183,18 +188,26 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
     if (std::isfinite(ses[a]) && rel(ses[a], vals[a]) > o.max_relative_error && std::fabs(vals[a]) > 1e-12)
       r.warnings.push_back(std::string(names[a]) + " is poorly determined (standard error " +
                            fmt(100 * rel(ses[a], vals[a])) + "% of its value)");
-  // Non-monotone: a drop after the peak much larger than the fit residual.
-  {
+  // Non-monotone: a reversal after the extreme much larger than the point-to-point noise
+  // (estimated from second differences: var(y[i+1] - 2y[i] + y[i-1]) = 6 sigma^2 for white noise).
+  if (y.size() >= 5) {
     const bool rising = r.x_max >= r.x0;
+    double sum2 = 0;
+    for (std::size_t i = 1; i + 1 < y.size(); ++i) {
+      const double d2 = y[i + 1] - 2 * y[i] + y[i - 1];
+      sum2 += d2 * d2;
+    }
+    const double noise = std::sqrt(sum2 / (y.size() - 2) / 6.0);
     double extreme = y[0], worst = 0;
     for (double v : y) {
       extreme = rising ? std::max(extreme, v) : std::min(extreme, v);
       worst = std::max(worst, rising ? extreme - v : v - extreme);
     }
     const double range = *std::max_element(y.begin(), y.end()) - *std::min_element(y.begin(), y.end());
-    if (worst > 5 * r.rmse && worst > 0.2 * range)
-      r.warnings.push_back("data are not monotone (a reversal of " + fmt(worst) +
-                           " after the extreme, 5x the fit RMSE): the saturating law does not describe this curve");
+    if (worst > 5 * noise && worst > 0.2 * range)
+      r.warnings.push_back("data are not monotone (a reversal of " + fmt(worst) + " after the extreme, " +
+                           fmt(worst / std::max(noise, 1e-300)) +
+                           " x the point-to-point noise): the saturating law does not describe this curve");
   }
   return r;
 }

@@ -47,9 +47,13 @@ void Engine::drift() {
 
 void Engine::deform_box(const Vec3& rate) {
   if (rate.x == 0 && rate.y == 0 && rate.z == 0) return;
-  const Vec3 factor{std::exp(rate.x * model_.dt), std::exp(rate.y * model_.dt),
-                    std::exp(rate.z * model_.dt)};
-  state_.box.length = hadamard(state_.box.length, factor);
+  Box& b = state_.box;
+  if (b.reference.x == 0) { b.reference = b.length; b.log_strain = Vec3(0, 0, 0); }
+  b.log_strain += rate * model_.dt;
+  const Vec3 next{b.reference.x * std::exp(b.log_strain.x), b.reference.y * std::exp(b.log_strain.y),
+                  b.reference.z * std::exp(b.log_strain.z)};
+  const Vec3 factor{next.x / b.length.x, next.y / b.length.y, next.z / b.length.z};
+  b.length = next;
   for (auto& x : state_.position) x = hadamard(x, factor);
 }
 

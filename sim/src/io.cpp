@@ -164,7 +164,7 @@ State random_packing(const Model& m, double phi) {
 
 // ---- checkpoints ----
 namespace {
-const char kMagic[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '1'};
+const char kMagic[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '2'};
 
 struct Writer {
   std::string buf;
@@ -196,7 +196,7 @@ void write_checkpoint(const std::string& path, const Checkpoint& c) {
   w.str(c.label);
   const State& s = c.state;
   w.vec(s.position); w.vec(s.velocity); w.vec(s.force); w.vec(s.radius); w.vec(s.mass); w.vec(s.id);
-  w.pod(s.box.length); w.pod(s.box.length0); w.pod(s.time); w.pod(s.step);
+  w.pod(s.box.length); w.pod(s.box.length0); w.pod(s.box.reference); w.pod(s.box.log_strain); w.pod(s.time); w.pod(s.step);
   w.vec(s.position_at_build); w.pod(s.length_at_build); w.pod<std::uint8_t>(s.list_valid);
   w.buf.append("END!", 4);
   write_file_atomic(path, w.buf);
@@ -207,7 +207,7 @@ Checkpoint read_checkpoint(const std::string& path) {
   if (!in) throw std::runtime_error("cannot read checkpoint '" + path + "'");
   std::string buf((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (buf.size() < 12 || std::memcmp(buf.data(), kMagic, 8) != 0)
-    throw std::runtime_error(path + ": not a dem checkpoint (wrong magic; version 1 expected)");
+    throw std::runtime_error(path + ": not a dem checkpoint (wrong magic; version 2 expected)");
   Reader r{buf, 8, path};
   Checkpoint c;
   c.scene_toml = r.str();
@@ -215,7 +215,7 @@ Checkpoint read_checkpoint(const std::string& path) {
   State& s = c.state;
   s.position = r.vec<Vec3>(); s.velocity = r.vec<Vec3>(); s.force = r.vec<Vec3>();
   s.radius = r.vec<double>(); s.mass = r.vec<double>(); s.id = r.vec<std::int32_t>();
-  s.box.length = r.pod<Vec3>(); s.box.length0 = r.pod<Vec3>(); s.time = r.pod<double>();
+  s.box.length = r.pod<Vec3>(); s.box.length0 = r.pod<Vec3>(); s.box.reference = r.pod<Vec3>(); s.box.log_strain = r.pod<Vec3>(); s.time = r.pod<double>();
   s.step = r.pod<std::int64_t>();
   s.position_at_build = r.vec<Vec3>(); s.length_at_build = r.pod<Vec3>();
   s.list_valid = r.pod<std::uint8_t>() != 0;

@@ -243,7 +243,11 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
 
   // Rates are given as rate * t_c; t_c needs the contact parameters, so validate those first.
   validate(m);
-  m.finalize();
+  try {
+    m.finalize();
+  } catch (const std::invalid_argument& e) {
+    throw SceneError(origin + ": " + e.what());
+  }
   p.compress_rate = compress_tc / m.t_contact;
   p.cycle_rate = cycle_tc / m.t_contact;
   p.deviatoric_rate = dev_tc / m.t_contact;

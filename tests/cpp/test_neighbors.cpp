@@ -1,1 +1,102 @@
+// The cell/Verlet path against the all-pairs oracle.
 #include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "dem/engine.hpp"
+#include "dem/forces.hpp"
+#include "dem/measure.hpp"
+#include "test_support.hpp"
+
+using dem::Vec3;
+
+namespace {
+double max_force(const dem::State& s) {
+  double f = 0;
+  for (auto& v : s.force) f = std::max(f, norm(v));
+  return f;
+}
+int contacts_all_pairs(const dem::State& s) {
+  int c = 0;
+  const Vec3 L = s.box.length;
+  for (int i = 0; i < s.count(); ++i)
+    for (int j = i + 1; j < s.count(); ++j) {
+      Vec3 d = s.position[j] - s.position[i];
+      for (int k = 0; k < 3; ++k) d[k] -= L[k] * std::round(d[k] / L[k]);
+      c += norm(d) < s.radius[i] + s.radius[j];
+    }
+  return c;
+}
+}  // namespace
+
+TEST(NeighborList, ForcesEqualAllPairsOracleOnShearedConfigurations) {
+  for (unsigned seed : {1u, 2u, 3u}) {
+    for (const char* mode : {"D2", "D3", "uniaxial_z"}) {
+      dem::Model m = dem_test::model_with({"integration.threads=1"});
+      dem::State s = dem_test::random_state(400, 0.38, 2.0, seed);
+      dem::DeformationMode dm;
+      ASSERT_TRUE(dem::builtin_mode(mode, &dm));
+      const Vec3 rate = dm.rate_shape * (2e-3 / m.t_contact);   // fast: the box deforms by 10%
+      dem::Engine e(m, s);
+      for (int k = 0; k < 2500; ++k) e.step(rate);
+      // Same positions and velocities for both paths (the engine's stored forces belong to
+      // the half-step velocity).
+      dem::ForceScratch scratch;
+      dem::compute_forces(m, s, e.neighbor_list(), rate, 1, scratch);
+      dem::State oracle = s;
+      dem::compute_forces_all_pairs(m, oracle, rate);
+      const double scale = max_force(oracle);
+      ASSERT_GT(scale, 0);
+      double worst = 0;
+      for (int i = 0; i < s.count(); ++i) worst = std::max(worst, norm(s.force[i] - oracle.force[i]));
+      EXPECT_LT(worst / scale, 1e-12) << mode << " seed " << seed;
+      EXPECT_GT(e.neighbor_list().builds, 2);
+      EXPECT_GT(std::fabs(std::log(s.box.length.z / s.box.length0.z)), 0.05);
+    }
+  }
+}
+
+TEST(NeighborList, NeverMissesAContactUnderFastDeformation) {
+  dem::Model m = dem_test::model_with({"integration.skin_over_rmin=0.1"});
+  dem::State s = dem_test::random_state(300, 0.38, 5.0, 9);
+  const Vec3 rate = Vec3(1, 0, -1) * (5e-3 / m.t_contact);
+  dem::Engine e(m, s);
+  for (int k = 0; k < 3000; ++k) {
+    e.step(rate);
+    if (k % 100 == 0) {
+      const auto meas = dem::measure(m, s, e.neighbor_list(), rate);
+      ASSERT_EQ(meas.contacts, contacts_all_pairs(s)) << "step " << k;
+    }
+  }
+}
+
+TEST(NeighborList, TwoThreadsMatchOneThreadToRoundOff) {
+  dem::State s1 = dem_test::random_state(500, 0.38, 1.0, 4);
+  dem::State s2 = s1;
+  dem::Model m1 = dem_test::model_with({"integration.threads=1"});
+  dem::Model m2 = dem_test::model_with({"integration.threads=2"});
+  const Vec3 rate = Vec3(1, 0, -1) * (1e-4 / m1.t_contact);
+  dem::Engine e1(m1, s1), e2(m2, s2);
+  double worst = 0, scale = 0;
+  for (int k = 0; k < 50; ++k) {
+    e1.step(rate);
+    e2.step(rate);
+  }
+  for (int i = 0; i < s1.count(); ++i) {
+    worst = std::max(worst, norm(s1.force[i] - s2.force[i]));
+    scale = std::max(scale, norm(s1.force[i]));
+  }
+  EXPECT_LT(worst / scale, 1e-9);
+}
+
+TEST(NeighborList, TooSmallBoxIsRefusedWithAClearMessage) {
+  dem::Model m = dem_test::model_with();
+  dem::State s = dem_test::make_state(Vec3(4e-3, 4e-3, 4e-3), {Vec3(1e-3, 1e-3, 1e-3), Vec3(3e-3, 3e-3, 3e-3)},
+                                      {1.5e-3, 1.5e-3});
+  try {
+    dem::Engine e(m, s);
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& err) {
+    EXPECT_NE(std::string(err.what()).find("shorter than twice the neighbour cutoff"), std::string::npos);
+  }
+}

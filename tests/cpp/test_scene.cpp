@@ -1,1 +1,116 @@
+// Bad input gets a clear error naming the key or line and the fix.
 #include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "dem/io.hpp"
+#include "dem/scene.hpp"
+
+namespace {
+std::string error_of(const std::string& text, const std::vector<std::string>& ov = {}) {
+  try {
+    dem::load_scene(text, ov, nullptr, "t.toml");
+  } catch (const dem::SceneError& e) {
+    return e.what();
+  }
+  return "";
+}
+bool has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+std::string write_temp(const std::string& name, const std::string& content) {
+  const std::string p = (std::filesystem::temp_directory_path() / name).string();
+  std::ofstream(p) << content;
+  return p;
+}
+std::string packing_error(const std::string& content) {
+  const std::string p = write_temp("dem_bad_packing.txt", content);
+  try {
+    dem::read_packing(p, 2000);
+  } catch (const std::runtime_error& e) {
+    std::remove(p.c_str());
+    return e.what();
+  }
+  std::remove(p.c_str());
+  return "";
+}
+}  // namespace
+
+TEST(Scene, DefaultsReproduceThePaper) {
+  const dem::Model m = dem::load_scene("");
+  EXPECT_EQ(m.count, 9261);
+  EXPECT_NEAR(m.t_contact, 0.22787e-6, 1e-11);
+  EXPECT_NEAR(m.dt, m.t_contact / 50, 1e-20);
+  EXPECT_EQ(m.protocol.modes.size(), 2u);
+}
+
+TEST(Scene, UnknownKeyIsNamedWithTheKnownOnes) {
+  const auto e = error_of("[contact]\nstifness_N_m = 1e8\n");
+  EXPECT_TRUE(has(e, "contact.stifness_N_m")) << e;
+  EXPECT_TRUE(has(e, "stiffness_N_m")) << e;
+  EXPECT_TRUE(has(error_of("[contakt]\n"), "unknown section [contakt]"));
+}
+
+TEST(Scene, WrongTypesAndImpossibleValues) {
+  EXPECT_TRUE(has(error_of("[particles]\ncount = \"many\"\n"), "particles.count' must be an integer"));
+  EXPECT_TRUE(has(error_of("[particles]\nradius_min_m = -1e-3\n"), "radius_min_m must be positive"));
+  EXPECT_TRUE(has(error_of("[particles]\nradius_max_m = 0.1e-3\n"), "radius_max_m must be at least"));
+  EXPECT_TRUE(has(error_of("[protocol]\ncycle_phi_max = 0.95\n"), "beyond what these soft"));
+  EXPECT_TRUE(has(error_of("[protocol]\ninitial_phi = 0.6\n"), "initial_phi must be in"));
+  EXPECT_TRUE(has(error_of("[protocol]\ncheckpoints_unloading = [0.5]\n"), "outside [target_phi, cycle_phi_max]"));
+  EXPECT_TRUE(has(error_of("[protocol]\nmodes = [\"D7\"]\n"), "'D7'"));
+  EXPECT_TRUE(has(error_of("[protocol]\ndeviatoric_rate_tc = 0.5\n"), "far from quasi-static"));
+  EXPECT_TRUE(has(error_of("[integration]\nintegrator = \"rk4\"\n"), "velocity_verlet"));
+  EXPECT_TRUE(has(error_of("[contact]\nk = \n"), "TOML syntax error"));
+}
+
+TEST(Scene, TimeStepBeyondStabilityLimitIsRefused) {
+  const auto e = error_of("[integration]\ndt_over_tc = 0.7\n");
+  EXPECT_TRUE(has(e, "stability limit")) << e;
+  EXPECT_TRUE(has(e, "0.637")) << e;
+  EXPECT_EQ(error_of("[integration]\ndt_over_tc = 0.5\n"), "");
+}
+
+TEST(Scene, OverridesReachEveryKeyAndTheResolvedSceneReloads) {
+  std::string resolved;
+  const dem::Model m = dem::load_scene("[particles]\ncount = 100\n",
+                                       {"particles.count=500", "contact.damping_kg_s=0", "integration.integrator=symplectic_euler",
+                                        "protocol.modes=[\"D3\"]", "protocol.checkpoints_unloading=[0.7]"},
+                                       &resolved);
+  EXPECT_EQ(m.count, 500);
+  EXPECT_EQ(m.contact.damping, 0.0);
+  EXPECT_EQ(m.integrator, dem::Integrator::SymplecticEuler);
+  ASSERT_EQ(m.protocol.modes.size(), 1u);
+  EXPECT_EQ(m.protocol.modes[0].name, "D3");
+  const dem::Model again = dem::load_scene(resolved);
+  EXPECT_EQ(again.count, 500);
+  EXPECT_EQ(again.dt, m.dt);
+  EXPECT_EQ(again.protocol.deviatoric_rate, m.protocol.deviatoric_rate);
+  EXPECT_TRUE(has(error_of("", {"count=5"}), "name the section"));
+  EXPECT_TRUE(has(error_of("", {"particles.cuont=5"}), "particles.cuont"));
+}
+
+TEST(Scene, CustomModesAreDiagonalRateTensors) {
+  const dem::Model m = dem::load_scene("[modes]\nshear_xy = [1.0, -1.0, 0.0]\n[protocol]\nmodes = [\"shear_xy\", \"D2\"]\n");
+  ASSERT_EQ(m.protocol.modes.size(), 2u);
+  EXPECT_EQ(m.protocol.modes[0].rate_shape.y, -1.0);
+  EXPECT_TRUE(has(error_of("[modes]\nbad = [1.0, 2.0]\n"), "modes.bad must be"));
+}
+
+TEST(Packing, BadFilesNameTheProblem) {
+  EXPECT_TRUE(has(packing_error("1 2 3 0.001\n"), "no '##PERIODIC::"));
+  EXPECT_TRUE(has(packing_error("##PERIODIC:: 0.01 0.01\n"), "expected '##PERIODIC:: Lx Ly Lz'"));
+  EXPECT_TRUE(has(packing_error("##PERIODIC:: 0.01 0.01 0.01\n0.001 0.002 0.003\n"), ":2: expected 'x y z r'"));
+  EXPECT_TRUE(has(packing_error("##PERIODIC:: 0.01 0.01 0.01\n0.001 0.002 0.003 -0.001\n0.005 0.005 0.005 0.001\n"),
+                  "radius must be positive"));
+  EXPECT_TRUE(has(packing_error("##PERIODIC:: 0.01 0.01 0.01\n0.001 0.002 0.03 0.001\n0.005 0.005 0.005 0.001\n"),
+                  "outside the periodic cell"));
+  EXPECT_EQ(packing_error("##PERIODIC:: 0.01 0.01 0.01\n0.001 0.002 0.003 0.001\n0.005 0.005 0.005 0.001\n"), "");
+}
+
+TEST(Packing, SharedBenchmarkPackingHasTheAdvertisedVolumeFraction) {
+  const dem::State s = dem::read_packing(std::string(DEM_SOURCE_DIR) + "/data/packings/n9261_phi0.70.txt", 2000);
+  EXPECT_EQ(s.count(), 9261);
+  EXPECT_NEAR(s.volume_fraction(), 0.700, 5e-4);
+}

@@ -35,6 +35,8 @@ struct FitOptions {
   double beta_min = 1e-6;         ///< lower bound of the rate (beta > 0)
   double beta_max = 1e4;          ///< upper bound of the rate
   int min_points = 6;             ///< fewer points is an error
+  bool fix_x0 = false;            ///< hold x0 at x0_value (e.g. a curve known to start at 0)
+  double x0_value = 0.0;
   double max_relative_error = 0.5;  ///< a parameter with SE/|value| above this gets a warning
 };
 

@@ -10,8 +10,11 @@ namespace dem {
 
 /// Orthorhombic periodic box [0, L_x) x [0, L_y) x [0, L_z), deformed by a diagonal strain rate.
 struct Box {
-  Vec3 length{1, 1, 1};      ///< current edge lengths [m]
+  Vec3 length{1, 1, 1};      ///< current edge lengths [m] = reference (.) exp(log_strain)
   Vec3 length0{1, 1, 1};     ///< edge lengths when strains were last zeroed [m]
+  Vec3 reference{0, 0, 0};   ///< lengths at log_strain = 0 [m] (0: not yet set)
+  Vec3 log_strain{0, 0, 0};  ///< accumulated true strain since `reference`. Lengths are
+                             ///< computed from it, so D2/D3 conserve volume to one rounding.
   double volume() const { return length.x * length.y * length.z; }
   /// True (logarithmic) strain of each axis since length0; positive = extension.
   Vec3 true_strain() const;

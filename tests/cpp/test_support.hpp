@@ -1,0 +1,25 @@
+// Helpers for the C++ tests: models and hand-built states.
+#pragma once
+#include <random>
+#include <string>
+#include <vector>
+
+#include "dem/model.hpp"
+#include "dem/scene.hpp"
+#include "dem/state.hpp"
+
+namespace dem_test {
+
+/// The default model with scene overrides ("section.key=value").
+dem::Model model_with(const std::vector<std::string>& overrides = {});
+
+/// A state of given box and spheres (positions [m], radii [m]); masses from the density.
+dem::State make_state(const dem::Vec3& box, const std::vector<dem::Vec3>& x, const std::vector<double>& r,
+                      double density = 2000.0);
+
+/// N spheres with radii uniform in [rmin, rmax], randomly placed in a cubic box at volume
+/// fraction phi (<= 0.38) with small overlaps (a few % of the radii), random velocities of
+/// scale v [m/s].
+dem::State random_state(int n, double phi, double v, unsigned seed, double rmin = 0.5e-3, double rmax = 1.5e-3);
+
+}  // namespace dem_test
