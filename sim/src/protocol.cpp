@@ -86,7 +86,10 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
                        const std::function<void(double, const State&)>& on_checkpoint,
                        bool quiet) {
   using clock = std::chrono::steady_clock;
-  state.box.length0 = state.box.length;   // strains from the stage start
+  // Strains from the stage start; lengths re-based so that opposite rates cancel exactly.
+  state.box.length0 = state.box.length;
+  state.box.reference = state.box.length;
+  state.box.log_strain = Vec3{0, 0, 0};
   Engine engine(model, state);
   const double dt = model.dt;
   const double vol_rate = spec.rate.x + spec.rate.y + spec.rate.z;

@@ -76,7 +76,7 @@ struct Model {
   double dt_over_tc = 1.0 / 50.0;    ///< dt as a fraction of t_c of the two smallest particles
   double skin_over_rmin = 0.4;       ///< Verlet skin / radius_min
   int threads = 0;                   ///< OpenMP threads; 0: all available
-  double max_overlap_fraction = 0.2; ///< stop if an overlap exceeds this fraction of the smaller radius
+  double max_overlap_fraction = 0.5; ///< stop if an overlap exceeds this fraction of the smaller radius (blow-up)
   long check_every_steps = 200;      ///< sanity-check cadence
 
   Protocol protocol;

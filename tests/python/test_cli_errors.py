@@ -1,0 +1,55 @@
+"""Bad input: clear message, non-zero exit, nothing lost."""
+import os
+
+from conftest import run_dem, ROOT
+
+PACKING = os.path.join(ROOT, "data", "packings", "n9261_phi0.70.txt")
+
+
+def test_unknown_key_names_the_key(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text("[contact]\nstifness_N_m = 1e8\n")
+    p = run_dem("run", scene, "--out", tmp_path / "o")
+    assert p.returncode == 2
+    assert "contact.stifness_N_m" in p.stderr and "stiffness_N_m" in p.stderr
+    assert not (tmp_path / "o").exists(), "nothing may be written for a bad scene"
+
+
+def test_bad_override_and_unstable_time_step(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text("")
+    p = run_dem("run", scene, "--out", tmp_path / "o", "--set", "integration.dt_over_tc=0.8")
+    assert p.returncode == 2 and "stability limit" in p.stderr
+    p = run_dem("info", scene, "--set", "particles.radius_min_m=-1")
+    assert p.returncode == 2 and "radius_min_m must be positive" in p.stderr
+
+
+def test_finished_results_are_not_overwritten(small_run):
+    before = (small_run["dir"] / "deviatoric" / "D2_phi0.720.csv").read_bytes()
+    p = run_dem("run", small_run["scene"], "--out", small_run["dir"], "--quiet")
+    assert p.returncode != 0 and "--force" in p.stderr
+    assert (small_run["dir"] / "deviatoric" / "D2_phi0.720.csv").read_bytes() == before
+    p = run_dem("fit", small_run["dir"])
+    assert p.returncode != 0 and "--force" in p.stderr
+
+
+def test_blow_up_is_detected_and_the_last_good_state_kept(tmp_path):
+    # A dense packing with a time step near the single-contact limit: in a packing the
+    # effective stiffness is several contacts', so the integration diverges.
+    scene = tmp_path / "s.toml"
+    scene.write_text(f'[particles]\npacking_file = "{PACKING}"\n[integration]\ndt_over_tc = 0.6\n'
+                     "check_every_steps = 20\n[protocol]\ntarget_phi = 0.65\ncheckpoints_unloading = [0.7]\n")
+    p = run_dem("run", scene, "--out", tmp_path / "o", "--quiet", timeout=300)
+    assert p.returncode == 3, p.stderr[-2000:]
+    assert "blew up" in p.stderr and "dt_over_tc" in p.stderr
+    assert (tmp_path / "o" / "failed_relax.ckpt").exists()
+    assert not (tmp_path / "o" / "prep" / "relax.csv").exists(), "a failed stage must not look complete"
+
+
+def test_packing_outside_the_cell_is_refused(tmp_path):
+    pack = tmp_path / "p.txt"
+    pack.write_text("##PERIODIC:: 0.01 0.01 0.01\n0.001 0.002 0.02 0.001\n0.005 0.005 0.005 0.001\n")
+    scene = tmp_path / "s.toml"
+    scene.write_text(f'[particles]\npacking_file = "{pack}"\n')
+    p = run_dem("run", scene, "--out", tmp_path / "o", "--quiet")
+    assert p.returncode == 1 and "outside the periodic cell" in p.stderr
