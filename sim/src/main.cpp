@@ -8,6 +8,7 @@
 #include <iostream>
 #include <unistd.h>
 
+#include "dem/collision.hpp"
 #include "dem/engine.hpp"
 #include "dem/io.hpp"
 #include "dem/measure.hpp"
@@ -101,6 +102,29 @@ int main(int argc, char** argv) {
   bench->add_option("--rate-tc", bench_rate_tc, "D2 strain rate times t_c");
   bench->add_option("--set", overrides, "override a scene key");
 
+  // mode: one deformation stage from a packing at rest (the unit of the YADE cross-check)
+  auto* mode_cmd = app.add_subcommand("mode", "one deformation mode from a packing at rest, one CSV");
+  std::string mode_scene, mode_packing, mode_name = "D2", mode_out;
+  double mode_rate_tc = -1, mode_eps = -1;
+  bool mode_force = false, mode_quiet = false;
+  mode_cmd->add_option("--scene", mode_scene, "scene TOML for the physics (default: built-in defaults)")->check(CLI::ExistingFile);
+  mode_cmd->add_option("--packing", mode_packing, "YADE-format packing (our checkpoints/*.txt)")->required()->check(CLI::ExistingFile);
+  mode_cmd->add_option("--mode", mode_name, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, or a [modes] name");
+  mode_cmd->add_option("--rate-tc", mode_rate_tc, "mode rate times t_c (default: protocol.deviatoric_rate_tc)");
+  mode_cmd->add_option("--eps-max", mode_eps, "stop at this eps_d (default: protocol.eps_d_max)");
+  mode_cmd->add_option("--out", mode_out, "output CSV")->required();
+  mode_cmd->add_option("--set", overrides, "override a scene key");
+  mode_cmd->add_flag("--force", mode_force, "overwrite an existing output CSV");
+  mode_cmd->add_flag("--quiet", mode_quiet, "no progress lines");
+
+  // collide: two-sphere collision against the closed form
+  auto* collide = app.add_subcommand("collide", "two-sphere head-on collision: contact time and restitution (JSON)");
+  double col_r1 = 0.5e-3, col_r2 = 0.5e-3, col_v0 = 0.1;
+  collide->add_option("--r1", col_r1, "radius of sphere 1 [m]");
+  collide->add_option("--r2", col_r2, "radius of sphere 2 [m]");
+  collide->add_option("--v0", col_v0, "approach speed [m/s]");
+  collide->add_option("--set", overrides, "override a scene key (e.g. integration.dt_over_tc=0.0005)");
+
   // fit, compare, plot
   demfit::FitCommandOptions fit_opts;
   auto* fit = app.add_subcommand("fit", "fit the anisotropy-evolution model to a run's curves");
@@ -151,6 +175,40 @@ int main(int argc, char** argv) {
                   wall, ps / 1e6, static_cast<double>(engine.neighbor_list().pair_count()) / state.count(),
                   engine.neighbor_list().builds - builds0);
       std::printf("particle_steps_per_s=%.6g\n", ps);
+      return 0;
+    }
+    if (*mode_cmd) {
+      if (mode_rate_tc > 0) overrides.push_back("protocol.deviatoric_rate_tc=" + std::to_string(mode_rate_tc));
+      if (mode_eps > 0) overrides.push_back("protocol.eps_d_max=" + std::to_string(mode_eps));
+      overrides.push_back("protocol.modes=[\"" + mode_name + "\"]");
+      std::string resolved;
+      dem::Model model = mode_scene.empty() ? dem::load_scene("", overrides, &resolved, "defaults")
+                                            : dem::load_scene_file(mode_scene, overrides, &resolved);
+      if (fs::exists(mode_out) && !mode_force)
+        throw std::runtime_error(mode_out + " exists: pass --force to overwrite it");
+      dem::State state = dem::read_packing(mode_packing, model.density);
+      const auto& m = model.protocol.modes.front();
+      dem::StageSpec spec{m.name, m.rate_shape * model.protocol.deviatoric_rate, dem::StopKind::DeviatoricStrain,
+                          model.protocol.eps_d_max, {}};
+      if (!mode_quiet) print_info(model);
+      const auto t0 = std::chrono::steady_clock::now();
+      const auto steps = dem::run_stage(model, state, spec, mode_out, "", nullptr, mode_quiet);
+      const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      std::fprintf(stderr, "dem mode: %lld steps of %d particles in %.2f s: %.3f M particle-steps/s -> %s\n",
+                   static_cast<long long>(steps), state.count(), wall, steps * double(state.count()) / wall / 1e6,
+                   mode_out.c_str());
+      return 0;
+    }
+    if (*collide) {
+      overrides.insert(overrides.begin(), "contact.background_damping_kg_s=0");
+      const dem::Model model = dem::load_scene("", overrides, nullptr, "collide");
+      const dem::CollisionResult r = dem::simulate_collision(model, col_r1, col_r2, col_v0);
+      const double m1 = dem::sphere_mass(col_r1, model.density), m2 = dem::sphere_mass(col_r2, model.density);
+      const dem::PairCollision a = dem::pair_collision(model.contact.stiffness, model.contact.damping, m1 * m2 / (m1 + m2));
+      std::printf("{\"t_contact_s\": %.12g, \"restitution\": %.12g, \"t_contact_analytic_s\": %.12g, "
+                  "\"restitution_analytic\": %.12g, \"dt_s\": %.12g, \"allow_attractive\": %s}\n",
+                  r.contact_time, r.restitution, a.t_contact, a.restitution, model.dt,
+                  model.contact.allow_attractive ? "true" : "false");
       return 0;
     }
     if (*fit) return demfit::run_fit_command(fit_opts);

@@ -3,49 +3,15 @@
 
 #include <cmath>
 
-#include "dem/engine.hpp"
+#include "dem/collision.hpp"
 #include "test_support.hpp"
 
 using dem::Vec3;
 
 namespace {
-
-struct CollisionOutcome { double contact_time, restitution; };
-
-// Head-on collision along x of spheres r1, r2 approaching at speed v0; contact time from the
-// interpolated zero crossings of the overlap, restitution from the separation speed.
-CollisionOutcome collide(const dem::Model& m, double r1, double r2, double v0, bool across_boundary) {
-  const double L = 20e-3, gap = 2e-7;   // [m]: contact within ~2e-6 s at 0.1 m/s
-  double x1 = across_boundary ? L - r1 - gap / 2 : 5e-3;
-  double x2 = across_boundary ? r2 + gap / 2 : x1 + r1 + r2 + gap;
-  dem::State s = dem_test::make_state(Vec3(L, L, L), {Vec3(x1, 10e-3, 10e-3), Vec3(x2, 10e-3, 10e-3)}, {r1, r2});
-  s.velocity[0] = Vec3(0.5 * v0, 0, 0);
-  s.velocity[1] = Vec3(-0.5 * v0, 0, 0);
-  dem::Engine e(m, s);
-  auto overlap = [&]() {
-    double d = s.position[1].x - s.position[0].x;
-    d -= L * std::round(d / L);
-    return s.radius[0] + s.radius[1] - std::fabs(d);
-  };
-  auto rel_speed = [&]() {
-    const int a = s.id[0] == 0 ? 0 : 1, b = 1 - a;   // list rebuilds may reorder particles
-    return s.velocity[b].x - s.velocity[a].x;
-  };
-  double t_in = -1, t_out = -1, prev = overlap(), prev_t = s.time;
-  for (int k = 0; k < 1000000 && t_out < 0; ++k) {
-    e.step(Vec3(0, 0, 0));
-    const double now = overlap();
-    if (prev <= 0 && now > 0) t_in = prev_t + (s.time - prev_t) * (-prev) / (now - prev);
-    if (prev > 0 && now <= 0 && t_in >= 0) t_out = prev_t + (s.time - prev_t) * prev / (prev - now);
-    prev = now;
-    prev_t = s.time;
-  }
-  // Separation speed: free flight after contact, no background damping.
-  for (int k = 0; k < 10; ++k) e.step(Vec3(0, 0, 0));
-  const double v_out = std::fabs(rel_speed());
-  return {t_out - t_in, v_out / v0};
+dem::CollisionResult collide(const dem::Model& m, double r1, double r2, double v0, bool across) {
+  return dem::simulate_collision(m, r1, r2, v0, across);
 }
-
 }  // namespace
 
 TEST(TwoSphereCollision, SmallestPairMatchesPaperNumbers) {

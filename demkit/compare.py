@@ -1,0 +1,120 @@
+"""Compare two curve CSVs (ours vs YADE, or two runs of one code): `dem compare A.csv B.csv`.
+
+Both curves are put on a common eps_d grid (the overlap of their ranges, linear interpolation)
+and the largest and RMS differences of p, s_dev, F_dev and C are reported:
+  p      relative to the mean p of A over the grid
+  s_dev  absolute, and relative to A's plateau (mean over the second half of the grid)
+  F_dev  likewise
+  C      absolute
+Exit code 0 when every difference is within its tolerance, 4 otherwise, 1 on bad input.
+Default tolerances (see docs/yade.md for how they were calibrated): p 3 % (max), s_dev and
+F_dev 15 % of the plateau (RMS), C 0.15 (RMS).
+"""
+import argparse
+import json
+import sys
+
+import numpy as np
+
+from demkit.curves import read_curve, require, CurveError
+
+QUANTITIES = ("p_Pa", "s_dev", "F_dev", "C")
+
+
+def compare(a, b, npoints=200):
+    """Return a dict of differences between curve dicts a and b (see module doc)."""
+    require(a, ("eps_d",) + QUANTITIES, "first curve")
+    require(b, ("eps_d",) + QUANTITIES, "second curve")
+    lo = max(a["eps_d"].min(), b["eps_d"].min())
+    hi = min(a["eps_d"].max(), b["eps_d"].max())
+    if not hi > lo:
+        raise CurveError("the two curves do not overlap in eps_d")
+    grid = np.linspace(lo, hi, npoints)
+    res = {"eps_d_range": [float(lo), float(hi)], "points": npoints}
+    for q in QUANTITIES:
+        ya = np.interp(grid, a["eps_d"], a[q])
+        yb = np.interp(grid, b["eps_d"], b[q])
+        d = yb - ya
+        entry = {"max_abs": float(np.max(np.abs(d))), "rms_abs": float(np.sqrt(np.mean(d * d)))}
+        if q == "p_Pa":
+            scale = float(np.mean(np.abs(ya)))
+            entry.update(max_rel=entry["max_abs"] / scale, rms_rel=entry["rms_abs"] / scale, scale=scale)
+        elif q in ("s_dev", "F_dev"):
+            plateau = float(np.mean(ya[grid >= 0.5 * (lo + hi)]))
+            entry.update(plateau_a=plateau, plateau_b=float(np.mean(yb[grid >= 0.5 * (lo + hi)])),
+                         max_rel=entry["max_abs"] / plateau, rms_rel=entry["rms_abs"] / plateau)
+        res[q] = entry
+    return res, grid
+
+
+def verdict(res, tol):
+    checks = {
+        "p_Pa": ("max_rel", tol["p"]),
+        "s_dev": ("rms_rel", tol["s_dev"]),
+        "F_dev": ("rms_rel", tol["F_dev"]),
+        "C": ("rms_abs", tol["C"]),
+    }
+    out = {}
+    for q, (key, limit) in checks.items():
+        out[q] = {"measure": key, "value": res[q][key], "tolerance": limit, "ok": res[q][key] <= limit}
+    return out
+
+
+def overlay(a, b, labels, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(2, 2, figsize=(9, 6), sharex=True)
+    for ax, q in zip(axes.flat, QUANTITIES):
+        ax.plot(a["eps_d"], a[q], "-", label=labels[0])
+        ax.plot(b["eps_d"], b[q], "--", label=labels[1])
+        ax.set_ylabel(q)
+        ax.grid(alpha=0.3)
+    for ax in axes[1]:
+        ax.set_xlabel(r"$\varepsilon_d$")
+    axes[0, 0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    if path.endswith(".png"):
+        fig.savefig(path[:-4] + ".svg")
+    plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="dem compare", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("first")
+    ap.add_argument("second")
+    ap.add_argument("--labels", default="ours,yade")
+    ap.add_argument("--plot", help="write an overlay plot (PNG, and SVG beside it)")
+    ap.add_argument("--json", help="write the differences as JSON")
+    ap.add_argument("--tol-p", type=float, default=0.03)
+    ap.add_argument("--tol-s-dev", type=float, default=0.15)
+    ap.add_argument("--tol-f-dev", type=float, default=0.15)
+    ap.add_argument("--tol-c", type=float, default=0.15)
+    a = ap.parse_args(argv)
+    try:
+        ca, cb = read_curve(a.first), read_curve(b_path := a.second)
+        res, _ = compare(ca, cb)
+    except CurveError as e:
+        print(f"dem compare: {e}", file=sys.stderr)
+        return 1
+    tol = {"p": a.tol_p, "s_dev": a.tol_s_dev, "F_dev": a.tol_f_dev, "C": a.tol_c}
+    v = verdict(res, tol)
+    res["verdict"] = v
+    print(f"compare {a.first} vs {b_path} over eps_d in [{res['eps_d_range'][0]:.4f}, {res['eps_d_range'][1]:.4f}]")
+    print(f"{'quantity':8s} {'max |d|':>12s} {'rms |d|':>12s} {'checked':>10s} {'value':>10s} {'tolerance':>10s}  ok")
+    for q in QUANTITIES:
+        r = res[q]
+        print(f"{q:8s} {r['max_abs']:12.4g} {r['rms_abs']:12.4g} {v[q]['measure']:>10s} {v[q]['value']:10.4g} "
+              f"{v[q]['tolerance']:10.4g}  {'yes' if v[q]['ok'] else 'NO'}")
+    if a.plot:
+        overlay(ca, cb, a.labels.split(","), a.plot)
+    if a.json:
+        with open(a.json, "w") as fh:
+            json.dump(res, fh, indent=2)
+    return 0 if all(x["ok"] for x in v.values()) else 4
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,236 @@
+# YADE reference run of one deformation mode from a packing, writing the same CSV columns as
+# our runner (`dem mode`). Run headless:
+#
+#   yade -n -x -j1 yade_ref/run_mode.py --packing P.txt --mode D2 --rate-tc 4e-5 --eps-max 0.3 --out yade.csv
+#
+# Physics set to match ours (see docs/yade.md for every choice):
+#  - ViscElMat with kn = 2k, cn = 2*gamma per material: two equal materials combine in series
+#    into a pair kn = k, cn = gamma (checked at start, the script stops if not);
+#  - no friction, ks = cs = 0, rotations blocked (normal forces on spheres give no torque);
+#  - NewtonIntegrator(damping=0): leapfrog = our symplectic_euler integrator;
+#  - YADE's linear viscoelastic law lets the force turn attractive: compare with our
+#    contact.allow_attractive = true;
+#  - background damping -gamma_b v' (v' = vel - velGrad.pos, the fluctuation velocity) by a
+#    PyRunner every step when --gamma-b > 0 (slow in Python; default 0 in both codes);
+#  - the cell is driven by O.cell.velGrad = diag(rate) (YADE integrates the cell linearly per
+#    step: L <- L (1 + rate dt), so its true strain per step is ln(1 + rate dt); relative
+#    difference ~rate*dt/2 ~ 1e-7 of the strain).
+import argparse
+import math
+import sys
+import time
+
+from yade import O, Vector3, Matrix3, ViscElMat, ForceResetter, InsertionSortCollider, Bo1_Sphere_Aabb, \
+    InteractionLoop, Ig2_Sphere_Sphere_ScGeom, Ip2_ViscElMat_ViscElMat_ViscElPhys, \
+    Law2_ScGeom_ViscElPhys_Basic, NewtonIntegrator, PyRunner, utils
+
+MODES = {"D2": (1.0, 0.0, -1.0), "D3": (0.5, 0.5, -1.0), "iso_compress": (-1.0, -1.0, -1.0),
+         "iso_expand": (1.0, 1.0, 1.0), "uniaxial_x": (-1.0, 0.0, 0.0), "uniaxial_y": (0.0, -1.0, 0.0),
+         "uniaxial_z": (0.0, 0.0, -1.0)}
+COLUMNS = ["step", "time_s", "eps_xx", "eps_yy", "eps_zz", "eps_v", "eps_d", "nu", "p_Pa", "p_star",
+           "sigma_xx_Pa", "sigma_yy_Pa", "sigma_zz_Pa", "sigma_xy_Pa", "sigma_xz_Pa", "sigma_yz_Pa",
+           "sigma_dev_Pa", "s_dev", "F_xx", "F_yy", "F_zz", "F_xy", "F_xz", "F_yz", "F_dev", "C",
+           "C_nonrattler", "rattler_fraction", "E_kin_J", "overlap_max_rel", "overlap_mean_rel",
+           "E_pot_J", "p_kin_Pa", "inertial_number", "contacts", "stage"]
+
+
+def dev(a, b, c):
+    return math.sqrt(((a - b) ** 2 + (b - c) ** 2 + (c - a) ** 2) / 2.0)
+
+
+def parse():
+    ap = argparse.ArgumentParser(prog="run_mode.py")
+    ap.add_argument("--packing", required=True)
+    ap.add_argument("--mode", default="D2", choices=sorted(MODES))
+    ap.add_argument("--rate-tc", type=float, default=5e-6, help="rate times t_c of the smallest pair")
+    ap.add_argument("--eps-max", type=float, default=0.4)
+    ap.add_argument("--sample-strain", type=float, default=0.002)
+    ap.add_argument("--k", type=float, default=1e8, help="pair stiffness [N/m]")
+    ap.add_argument("--gamma", type=float, default=1.0, help="pair damping [kg/s]")
+    ap.add_argument("--gamma-b", type=float, default=0.0, help="background damping [kg/s] (Python loop, slow)")
+    ap.add_argument("--density", type=float, default=2000.0)
+    ap.add_argument("--dt-over-tc", type=float, default=0.02)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (timing runs)")
+    return ap.parse_args(sys.argv[1:])
+
+
+def read_packing(path):
+    cell, spheres = None, []
+    with open(path) as fh:
+        for n, line in enumerate(fh, 1):
+            s = line.strip()
+            if not s:
+                continue
+            if s.startswith("##PERIODIC::"):
+                cell = [float(v) for v in s.split()[1:4]]
+                continue
+            if s.startswith("#"):
+                continue
+            v = s.split()
+            if len(v) < 4:
+                sys.exit(f"run_mode.py: {path}:{n}: expected 'x y z r'")
+            spheres.append(tuple(float(t) for t in v[:4]))
+    if cell is None:
+        sys.exit(f"run_mode.py: {path}: no '##PERIODIC:: Lx Ly Lz' line")
+    return cell, spheres
+
+
+def main():
+    a = parse()
+    cell, spheres = read_packing(a.packing)
+    rmin = min(s[3] for s in spheres)
+    m_small = 4.0 / 3.0 * math.pi * rmin ** 3 * a.density
+    mr = m_small / 2
+    w0sq, eta = a.k / mr, a.gamma / (2 * mr)
+    tc = math.pi / math.sqrt(w0sq - eta * eta)
+    dt = a.dt_over_tc * tc
+    rate = a.rate_tc / tc
+    shape = MODES[a.mode]
+    dev_shape = dev(*shape)
+    per_step = (dev_shape if dev_shape > 0 else abs(sum(shape)) / 3) * rate * dt
+    n_steps = int(math.ceil(a.eps_max / per_step - 1e-9))
+    if a.max_steps:
+        n_steps = min(n_steps, a.max_steps)
+
+    O.reset()
+    O.periodic = True
+    O.cell.setBox(*cell)
+    mat = O.materials.append(ViscElMat(kn=2 * a.k, cn=2 * a.gamma, ks=0, cs=0, frictionAngle=0, density=a.density))
+    for x, y, z, r in spheres:
+        b = utils.sphere((x, y, z), r, material=mat)
+        b.state.blockedDOFs = "XYZ"
+        O.bodies.append(b)
+    engines = [ForceResetter(), InsertionSortCollider([Bo1_Sphere_Aabb()]),
+               InteractionLoop([Ig2_Sphere_Sphere_ScGeom()], [Ip2_ViscElMat_ViscElMat_ViscElPhys()],
+                               [Law2_ScGeom_ViscElPhys_Basic()])]
+    if a.gamma_b > 0:
+        engines.append(PyRunner(iterPeriod=1, command="background_damping()"))
+    engines.append(NewtonIntegrator(damping=0))
+    O.engines = engines
+    O.dt = dt
+    O.cell.velGrad = Matrix3(shape[0] * rate, 0, 0, 0, shape[1] * rate, 0, 0, 0, shape[2] * rate)
+    size0 = Vector3(O.cell.size)
+    vol_particles = sum(4.0 / 3.0 * math.pi * s[3] ** 3 for s in spheres)
+    mean_r = sum(s[3] for s in spheres) / len(spheres)
+
+    def fluct(b):
+        return b.state.vel - O.cell.velGrad * b.state.pos
+
+    def background_damping():
+        for b in O.bodies:
+            O.forces.addF(b.id, -a.gamma_b * fluct(b))
+
+    def measure():
+        L = O.cell.size
+        V = L[0] * L[1] * L[2]
+        eps = [math.log(L[k] / size0[k]) for k in range(3)]
+        sig = [[0.0] * 3 for _ in range(3)]
+        fab = [[0.0] * 3 for _ in range(3)]
+        deg = [0] * len(O.bodies)
+        pairs = []
+        epot = 0.0
+        omax = osum = 0.0
+        H = O.cell.hSize
+        for i in O.interactions:
+            if not i.isReal:
+                continue
+            pen = i.geom.penetrationDepth
+            if pen <= 0:
+                continue
+            b1, b2 = O.bodies[i.id1], O.bodies[i.id2]
+            branch = b2.state.pos + H * Vector3(i.cellDist) - b1.state.pos
+            f = i.phys.normalForce             # force on id2, along the normal for repulsion
+            n = i.geom.normal
+            v1 = 4.0 / 3.0 * math.pi * b1.shape.radius ** 3
+            v2 = 4.0 / 3.0 * math.pi * b2.shape.radius ** 3
+            for p in range(3):
+                for q in range(3):
+                    sig[p][q] += 0.5 * (branch[p] * f[q] + branch[q] * f[p])
+                    fab[p][q] += (v1 + v2) * n[p] * n[q]
+            epot += 0.5 * a.k * pen * pen
+            rel = pen / min(b1.shape.radius, b2.shape.radius)
+            omax = max(omax, rel)
+            osum += rel
+            deg[i.id1] += 1
+            deg[i.id2] += 1
+            pairs.append((i.id1, i.id2))
+        kin = [[0.0] * 3 for _ in range(3)]
+        ekin = 0.0
+        for b in O.bodies:
+            v = fluct(b)
+            for p in range(3):
+                for q in range(3):
+                    kin[p][q] += b.state.mass * v[p] * v[q]
+            ekin += 0.5 * b.state.mass * v.dot(v)
+        S = [[(sig[p][q] + kin[p][q]) / V for q in range(3)] for p in range(3)]
+        F = [[fab[p][q] / V for q in range(3)] for p in range(3)]
+        n = len(O.bodies)
+        # rattlers: fewer than 4 contacts, removed recursively
+        adj = [[] for _ in range(n)]
+        for i1, i2 in pairs:
+            adj[i1].append(i2)
+            adj[i2].append(i1)
+        d = list(deg)
+        ratt = [x < 4 for x in d]
+        stack = [k for k in range(n) if ratt[k]]
+        while stack:
+            k = stack.pop()
+            for j in adj[k]:
+                if not ratt[j]:
+                    d[j] -= 1
+                    if d[j] < 4:
+                        ratt[j] = True
+                        stack.append(j)
+        nr = sum(ratt)
+        cnr = sum(1 for i1, i2 in pairs if not ratt[i1] and not ratt[i2])
+        p = (S[0][0] + S[1][1] + S[2][2]) / 3
+        sdev = dev(S[0][0], S[1][1], S[2][2])
+        rmax_rate = max(abs(x) for x in shape) * rate
+        row = [O.iter, O.time, eps[0], eps[1], eps[2], sum(eps) / 3, dev(*eps), vol_particles / V, p,
+               2 * mean_r * p / a.k, S[0][0], S[1][1], S[2][2], S[0][1], S[0][2], S[1][2], sdev,
+               sdev / p if p > 0 else 0.0, F[0][0], F[1][1], F[2][2], F[0][1], F[0][2], F[1][2],
+               dev(F[0][0], F[1][1], F[2][2]), 2 * len(pairs) / n, 2 * cnr / (n - nr) if nr < n else 0.0,
+               nr / n, ekin, omax, osum / len(pairs) if pairs else 0.0, epot,
+               (kin[0][0] + kin[1][1] + kin[2][2]) / 3 / V,
+               rmax_rate * 2 * mean_r * math.sqrt(a.density / p) if p > 0 else 0.0, len(pairs)]
+        return ["%.10g" % v if isinstance(v, float) else str(v) for v in row] + [a.mode]
+
+    globals()["background_damping"] = background_damping
+    out = open(a.out + ".part", "w")
+    out.write(f"# yade curve: stage={a.mode} (YADE reference, yade_ref/run_mode.py)\n")
+    out.write("# units and definitions as in our runner (docs/definitions.md); strains ln(L/L0) of O.cell.size\n")
+    out.write(f"# t_c={tc:.8g} s, dt={dt:.8g} s, k={a.k} N/m, gamma={a.gamma} kg/s, gamma_b={a.gamma_b} kg/s\n")
+    out.write(",".join(COLUMNS) + "\n")
+    steps_per_sample = max(1, int(round(a.sample_strain / per_step)))
+    # One step with dt = 0 creates the interactions of the initial packing without moving it
+    # (O.iter becomes 1), so the first row measures the packing as loaded.
+    O.dt = 0.0
+    O.run(1, True)
+    O.dt = dt
+    out.write(",".join(measure()) + "\n")
+    done = 0
+    wall = 0.0
+    while done < n_steps:
+        chunk = min(steps_per_sample, n_steps - done)
+        t0 = time.time()
+        O.run(chunk, True)
+        wall += time.time() - t0
+        done += chunk
+        out.write(",".join(measure()) + "\n")
+        out.flush()
+    out.close()
+    import os
+    os.replace(a.out + ".part", a.out)
+    n = len(O.bodies)
+    sys.stderr.write(f"run_mode.py: {done} steps of {n} particles in {wall:.2f} s (stepping only): "
+                     f"{done * n / max(wall, 1e-9) / 1e6:.3f} M particle-steps/s -> {a.out}\n")
+    # Sanity: pair parameters as intended.
+    for i in O.interactions:
+        if i.isReal:
+            if abs(i.phys.kn - a.k) > 1e-6 * a.k or abs(i.phys.cn - a.gamma) > 1e-6 * max(a.gamma, 1e-30):
+                sys.exit(f"run_mode.py: pair kn={i.phys.kn}, cn={i.phys.cn} differ from k={a.k}, gamma={a.gamma}")
+            break
+
+
+main()
