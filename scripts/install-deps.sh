@@ -1,13 +1,16 @@
 #!/usr/bin/env bash
 # Installs every Debian package the toolkit needs (run as root, or with sudo available).
-# Usage: scripts/install-deps.sh [--no-yade]
+# Usage: scripts/install-deps.sh [--no-yade] [--bench]
 #   --no-yade   skip YADE (about 1 GiB with its dependencies); the YADE cross-check tests are then skipped.
+#   --bench     also LAMMPS and LIGGGHTS (for bench/run_benchmarks.py; not needed by the tests)
 set -euo pipefail
 want_yade=1
+want_bench=0
 for a in "$@"; do
   case "$a" in
     --no-yade) want_yade=0 ;;
-    *) echo "install-deps.sh: unknown option '$a' (known: --no-yade)" >&2; exit 2 ;;
+    --bench) want_bench=1 ;;
+    *) echo "install-deps.sh: unknown option '$a' (known: --no-yade, --bench)" >&2; exit 2 ;;
   esac
 done
 SUDO=""
@@ -17,9 +20,10 @@ if [ "$(id -u)" -ne 0 ]; then
 fi
 pkgs=(build-essential cmake pkg-config
       libeigen3-dev libceres-dev libgoogle-glog-dev libgsl-dev
-      libtomlplusplus-dev libcli11-dev
+      libtomlplusplus-dev libcli11-dev libgtest-dev
       python3 python3-pytest python3-numpy python3-matplotlib)
 [ "$want_yade" = 1 ] && pkgs+=(yade)
+[ "$want_bench" = 1 ] && pkgs+=(lammps liggghts openmpi-bin time)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -46,7 +46,10 @@ def test_live_small_d2_run_agrees_with_yade(small_run, tmp_path):
     run_yade("run_mode.py", "--packing", packing, "--mode", "D2", "--rate-tc", 4e-5, "--eps-max", 0.06,
              "--sample-strain", 0.002, "--out", yade)
     a, b = read_curve(ours), read_curve(yade)
-    assert abs(a["p_Pa"][0] / b["p_Pa"][0] - 1) < 1e-6      # same packing, same stress definition
+    # Same packing, same definitions: the elastic energy agrees to round-off; p to 1e-5 (the
+    # dashpot part of the first row sees each code's start-up velocity field, ~1e-4 of p).
+    assert abs(a["E_pot_J"][0] / b["E_pot_J"][0] - 1) < 1e-9
+    assert abs(a["p_Pa"][0] / b["p_Pa"][0] - 1) < 1e-5
     assert abs(a["F_dev"][0] - b["F_dev"][0]) < 1e-9 and a["C"][0] == b["C"][0]
     res, _ = compare(a, b)
     # 400 spheres: calibrated spread of one code against itself (dt changed by 0.1 %) is ~1 %
@@ -71,7 +74,8 @@ def test_current_runner_against_stored_yade_reference(mode, phi, tmp_path):
             "--set", "contact.background_damping_kg_s=0", "--set", "output.sample_strain=0.0025",
             "--out", ours, check=True)
     a, b = read_curve(ours), read_curve(os.path.join(REF, f"yade_{mode}_phi{phi}.csv"))
-    assert abs(a["p_Pa"][0] / b["p_Pa"][0] - 1) < 1e-6
+    assert abs(a["E_pot_J"][0] / b["E_pot_J"][0] - 1) < 1e-9
+    assert abs(a["p_Pa"][0] / b["p_Pa"][0] - 1) < 1e-5
     res, _ = compare(a, b)
     assert res["p_Pa"]["max_rel"] < 0.01, res["p_Pa"]
     assert res["s_dev"]["rms_abs"] < 0.01, res["s_dev"]

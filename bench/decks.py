@@ -1,0 +1,86 @@
+"""Input decks for LAMMPS and LIGGGHTS generated from a packing and our scene's physics, so the
+benchmark runs the same scene everywhere (see docs/benchmarks.md for what still differs)."""
+import math
+
+
+def read_packing(path):
+    cell, spheres = None, []
+    with open(path) as fh:
+        for line in fh:
+            s = line.strip()
+            if s.startswith("##PERIODIC::"):
+                cell = [float(v) for v in s.split()[1:4]]
+            elif s and not s.startswith("#"):
+                spheres.append([float(v) for v in s.split()[:4]])
+    if cell is None:
+        raise ValueError(f"{path}: no '##PERIODIC::' line")
+    return cell, spheres
+
+
+def tc_smallest(spheres, k=1e8, gamma=1.0, density=2000.0):
+    rmin = min(s[3] for s in spheres)
+    mr = 4 / 3 * math.pi * rmin ** 3 * density / 2
+    return math.pi / math.sqrt(k / mr - (gamma / (2 * mr)) ** 2)
+
+
+def write_lammps_data(path, cell, spheres, density, style):
+    """style 'sphere' (LAMMPS: id type diameter density x y z) or 'granular' (LIGGGHTS, same columns)."""
+    with open(path, "w") as fh:
+        fh.write(f"packing for {style}\n\n{len(spheres)} atoms\n1 atom types\n\n")
+        fh.write(f"0 {cell[0]!r} xlo xhi\n0 {cell[1]!r} ylo yhi\n0 {cell[2]!r} zlo zhi\n\nAtoms\n\n")
+        for i, (x, y, z, r) in enumerate(spheres, 1):
+            fh.write(f"{i} 1 {2 * r!r} {density!r} {x!r} {y!r} {z!r}\n")
+
+
+def lammps_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4):
+    # pair granular: hooke normal force k*delta with absolute velocity damping (damping velocity:
+    # eta_n = gamma), no tangential force; fix viscous: -gamma_b v on every atom; fix deform
+    # trate: true strain rate (D2), remap x: positions follow the box, velocities stay peculiar.
+    return f"""units si
+atom_style sphere
+atom_modify map array
+boundary p p p
+newton off
+comm_modify vel yes
+read_data {data}
+pair_style granular
+pair_coeff * * hooke {k} {gamma} tangential linear_nohistory 0 0 damping velocity
+neighbor {skin} bin
+neigh_modify delay 0 every 1 check yes
+timestep {dt!r}
+fix integ all nve/sphere
+fix visc all viscous {gamma_b}
+fix def all deform 1 x trate {rate!r} z trate {-rate!r} remap x
+thermo 1000
+run {steps}
+"""
+
+
+def liggghts_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4):
+    # gran model hooke/stiffness: kn, gamman given directly; absolute_damping on: gamman is
+    # the damping coefficient itself (not times the effective mass); limitForce on: no
+    # attraction (our default); tangential no_history with kt = gammat = 0.
+    return f"""atom_style granular
+atom_modify map array
+boundary p p p
+newton off
+communicate single vel yes
+units si
+read_data {data}
+neighbor {skin} bin
+neigh_modify delay 0
+hard_particles yes
+fix m1 all property/global kn peratomtypepair 1 {k}
+fix m2 all property/global kt peratomtypepair 1 0.0
+fix m3 all property/global gamman_abs peratomtypepair 1 {gamma}
+fix m4 all property/global gammat_abs peratomtypepair 1 0.0
+fix m5 all property/global coefficientFriction peratomtypepair 1 0.0
+pair_style gran model hooke/stiffness tangential no_history absolute_damping on limitForce on
+pair_coeff * *
+timestep {dt!r}
+fix integ all nve/sphere
+fix visc all viscous {gamma_b}
+fix def all deform 1 x trate {rate!r} z trate {-rate!r} remap x
+thermo 1000
+run {steps}
+"""

@@ -1,0 +1,168 @@
+#!/usr/bin/env python3
+"""Speed benchmarks: the same packing under D2 in our runner, YADE, LAMMPS and LIGGGHTS,
+side by side in one run, plus our cost against N. Not a test: numbers depend on the machine.
+
+    /usr/bin/python3 bench/run_benchmarks.py [--quick] [--out docs/benchmarks.md]
+
+Writes a Markdown table (default docs/benchmarks.md) and bench/results.json. Codes that are
+not installed are reported as such (scripts/install-deps.sh --bench installs LAMMPS and LIGGGHTS).
+"""
+import argparse
+import json
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, HERE)
+import decks  # noqa: E402
+
+DEM = os.path.join(ROOT, "build", "dem")
+PACKING = os.path.join(ROOT, "data", "packings", "n9261_phi0.70.txt")
+RATE_TC = 5e-6
+
+
+def timed(cmd, cwd=None, env=None):
+    """Run cmd; return (stdout+stderr, wall seconds, peak RSS in MiB of that child)."""
+    t0 = time.time()
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=cwd, env=env)
+    out, _ = p.communicate()
+    wall = time.time() - t0
+    # peak RSS via /proc is gone after exit; use wait4 through a wrapper instead
+    return out, wall, p.returncode
+
+
+def with_rss(cmd, **kw):
+    """Like timed, but measures the peak RSS with GNU time."""
+    if shutil.which("time") or os.path.exists("/usr/bin/time"):
+        out, wall, rc = timed(["/usr/bin/time", "-f", "PEAK_RSS_KB=%M"] + cmd, **kw)
+        m = re.findall(r"PEAK_RSS_KB=(\d+)", out)
+        return out, wall, rc, (int(m[-1]) / 1024 if m else float("nan"))
+    out, wall, rc = timed(cmd, **kw)
+    return out, wall, rc, float("nan")
+
+
+def bench_ours(packing, threads, steps):
+    out, _, rc, rss = with_rss([DEM, "bench", "--packing", packing, "--threads", str(threads), "--steps", str(steps),
+                                "--rate-tc", str(RATE_TC)])
+    m = re.search(r"particle_steps_per_s=([0-9.eE+]+)", out)
+    if rc or not m:
+        return {"error": out[-500:]}
+    return {"particle_steps_per_s": float(m.group(1)), "peak_rss_mib": rss}
+
+
+def loop_time(out):
+    m = re.search(r"Loop time of ([0-9.eE+]+) on (\d+) procs for (\d+) steps with (\d+) atoms", out)
+    return (float(m.group(1)), int(m.group(3)), int(m.group(4))) if m else None
+
+
+def bench_lammps(exe, deck_fn, packing, ranks, steps, workdir, style):
+    if not shutil.which(exe):
+        return {"error": f"{exe} not installed"}
+    cell, spheres = decks.read_packing(packing)
+    tc = decks.tc_smallest(spheres)
+    data = os.path.join(workdir, f"{exe}.data")
+    decks.write_lammps_data(data, cell, spheres, 2000.0, style)
+    deck = os.path.join(workdir, f"in.{exe}")
+    with open(deck, "w") as fh:
+        fh.write(deck_fn(data, steps, RATE_TC / tc, tc / 50))
+    cmd = [exe, "-in", deck, "-log", "none"]
+    if ranks > 1:
+        cmd = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-np", str(ranks)] + cmd
+    out, _, rc, rss = with_rss(cmd, cwd=workdir)
+    lt = loop_time(out)
+    if rc or not lt:
+        return {"error": out[-500:]}
+    return {"particle_steps_per_s": lt[1] * lt[2] / lt[0], "peak_rss_mib": rss}
+
+
+def bench_yade(packing, steps, workdir):
+    if not shutil.which("yade"):
+        return {"error": "yade not installed"}
+    out, _, rc, rss = with_rss(["yade", "-n", "-x", "-j1", os.path.join(ROOT, "yade_ref", "run_mode.py"),
+                                "--packing", packing, "--mode", "D2", "--rate-tc", str(RATE_TC),
+                                "--max-steps", str(steps), "--sample-strain", "1", "--out",
+                                os.path.join(workdir, "yade.csv")], cwd=workdir)
+    m = re.search(r"([0-9.]+) M particle-steps/s", out)
+    if rc or not m:
+        return {"error": out[-500:]}
+    return {"particle_steps_per_s": float(m.group(1)) * 1e6, "peak_rss_mib": rss}
+
+
+def make_packing(n, workdir):
+    """A packing of n spheres at phi = 0.70 made by our runner (fast compression, short relaxation)."""
+    scene = os.path.join(workdir, f"make_{n}.toml")
+    with open(scene, "w") as fh:
+        fh.write(f"[particles]\ncount = {n}\nseed = 5\n[protocol]\ntarget_phi = 0.70\ncompress_rate_tc = 2e-4\n"
+                 "relax_max_time_tc = 500\ncycle_phi_max = 0.70\ncheckpoints_unloading = [0.70]\n"
+                 "[output]\nvtk = false\n")
+    out = os.path.join(workdir, f"run_{n}")
+    subprocess.run([DEM, "run", scene, "--out", out, "--stages", "prep", "--quiet", "--force"], check=True)
+    return os.path.join(out, "checkpoints", "unloading_phi0.700.txt")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="fewer steps, no N = 1e5 packing")
+    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "benchmarks.md"))
+    a = ap.parse_args()
+    if not os.path.exists(DEM):
+        sys.exit("run scripts/setup.sh first (build/dem missing)")
+    s_ours, s_other, s_yade = (4000, 500, 200) if a.quick else (20000, 3000, 1000)
+    work = tempfile.mkdtemp(prefix="dem_bench_")
+    res = {"machine": {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+                       "date": time.strftime("%Y-%m-%d")}, "packing": os.path.relpath(PACKING, ROOT),
+           "mode": f"D2 at rate*t_c = {RATE_TC}", "codes": {}}
+    C = res["codes"]
+    print("benchmark: same packing, D2, one code after the other", file=sys.stderr)
+    for th in (1, 2):
+        C[f"ours, {th} thread(s)"] = bench_ours(PACKING, th, s_ours)
+    C["YADE 2023.02a, 1 thread"] = bench_yade(PACKING, s_yade, work)
+    for r in (1, 2):
+        C[f"LAMMPS pair granular, {r} MPI rank(s)"] = bench_lammps("lmp", decks.lammps_deck, PACKING, r, s_other, work, "sphere")
+    C["LIGGGHTS hooke/stiffness, 1 MPI rank"] = bench_lammps("liggghts", decks.liggghts_deck, PACKING, 1, s_other, work, "granular")
+    base = C["ours, 1 thread(s)"].get("particle_steps_per_s")
+    for k, v in C.items():
+        if "particle_steps_per_s" in v and base:
+            v["ours_1thread_over_this"] = base / v["particle_steps_per_s"]
+    # cost against N (ours)
+    scaling = {}
+    sizes = (1000, 9261) if a.quick else (1000, 9261, 100000)
+    for n in sizes:
+        pk = PACKING if n == 9261 else make_packing(n, work)
+        steps = max(200, int(s_ours * 9261 / n))
+        scaling[n] = {th: bench_ours(pk, th, steps) for th in (1, 2)}
+    res["scaling"] = scaling
+    with open(os.path.join(HERE, "results.json"), "w") as fh:
+        json.dump(res, fh, indent=2)
+    lines = ["# Benchmarks", "",
+             f"Generated by `/usr/bin/python3 bench/run_benchmarks.py{' --quick' if a.quick else ''}` on "
+             f"{res['machine']['date']}, {res['machine']['cores']} cores ({res['machine']['cpu']}).",
+             f"Packing `{res['packing']}` (N = 9261, φ = 0.70), {res['mode']}, timings of the stepping loop only.", "",
+             "| code | particle-steps/s | peak RSS [MiB] | ours (1 thread) / this |", "|---|---|---|---|"]
+    for k, v in C.items():
+        if "error" in v:
+            lines.append(f"| {k} | not run: {v['error'].strip().splitlines()[-1][:80] if v['error'].strip() else '?'} | | |")
+        else:
+            lines.append(f"| {k} | {v['particle_steps_per_s'] / 1e6:.2f} M | {v['peak_rss_mib']:.0f} | "
+                         f"{v.get('ours_1thread_over_this', float('nan')):.2f} |")
+    lines += ["", "## Our cost against N (D2 on a φ = 0.70 packing made by our runner; N = 9261 is the shared packing)", "",
+              "| N | 1 thread | 2 threads | parallel efficiency |", "|---|---|---|---|"]
+    for n, r in scaling.items():
+        p1, p2 = r[1].get("particle_steps_per_s"), r[2].get("particle_steps_per_s")
+        if p1 and p2:
+            lines.append(f"| {n} | {p1 / 1e6:.2f} M | {p2 / 1e6:.2f} M | {p2 / (2 * p1):.0%} |")
+    with open(a.out, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
