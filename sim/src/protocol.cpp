@@ -73,6 +73,9 @@ double energy_floor(const Model& m, const State& s) {
   return s.count() * 0.5 * m.contact.stiffness * d * d;
 }
 
+// Above this inertial number the deviatoric response depends visibly on the strain rate.
+constexpr double kQuasiStaticInertial = 1e-3;
+
 std::string fmt_phi(double phi) {
   char b[32];
   std::snprintf(b, sizeof b, "phi%.3f", phi);
@@ -166,6 +169,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   const std::int64_t step0 = state.step;
   auto wall0 = clock::now(), last_progress = wall0;
   double prev_sample_ekin = last_m.E_kin;
+  double max_inertial = 0;
   bool done = false;
 
   try {
@@ -219,6 +223,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
                        std::to_string(state.step) + ": the time step (dt_over_tc = " +
                        std::to_string(model.dt_over_tc) + ") or the strain rate is too large");
         prev_sample_ekin = last_m.E_kin;
+        max_inertial = std::max(max_inertial, last_m.inertial_number);
         write_row(last_m);
         csv.flush();
         last_sample_x = progress_value();
@@ -255,6 +260,10 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   snapshot();
   csv.close();
   fs::rename(csv_path + ".part", csv_path);
+  if (spec.stop == StopKind::DeviatoricStrain && max_inertial > kQuasiStaticInertial)
+    std::cerr << "dem: warning: stage " << spec.name << " reached an inertial number of " << max_inertial
+              << " (> " << kQuasiStaticInertial << "): not quasi-static; the curves depend on the rate. "
+              << "Lower protocol.deviatoric_rate_tc (see docs/stability.md)\n";
   return steps;
 }
 
@@ -301,6 +310,9 @@ void run_protocol(const Model& model, const RunOptions& opt) {
   if (fs::exists(dir / "manifest.json") && !opt.force && want_prep)
     throw std::runtime_error("results already exist in " + dir.string() +
                              " (manifest.json): choose another --out, or pass --force to overwrite");
+  if (opt.force && fs::is_directory(dir))   // stale failure states of an earlier attempt
+    for (auto& f : fs::directory_iterator(dir))
+      if (f.path().filename().string().rfind("failed_", 0) == 0) fs::remove(f.path());
   fs::create_directories(dir / "prep");
   fs::create_directories(dir / "checkpoints");
   fs::create_directories(dir / "deviatoric");
@@ -323,7 +335,10 @@ void run_protocol(const Model& model, const RunOptions& opt) {
 
   if (want_prep) {
     State state;
-    if (!model.packing_file.empty()) {
+    if (!model.packing_file.empty() && fs::path(model.packing_file).extension() == ".ckpt") {
+      note("continuing from checkpoint " + model.packing_file);
+      state = read_checkpoint(model.packing_file).state;
+    } else if (!model.packing_file.empty()) {
       note("reading packing " + model.packing_file);
       state = read_packing(model.packing_file, model.density);
     } else {
