@@ -1,0 +1,136 @@
+#!/usr/bin/env python3
+"""Accuracy against cost for one D2 run from one packing (N = 9261, phi = 0.74 from the
+unloading branch): vary dt/t_c, the strain rate, the Verlet skin and the integrator; measure
+the error of s_dev, F_dev and p against a converged reference and the wall time.
+
+    /usr/bin/python3 bench/accuracy_cost.py [--eps 0.06]        (about 6 minutes, 1 thread)
+
+Writes docs/accuracy_cost.md, docs/accuracy_cost.png/.svg and bench/accuracy_cost.json.
+Error: RMS over eps_d of |x - x_ref| for s_dev and F_dev; RMS relative error for p.
+References: dt/t_c = 0.005 at the default rate (for dt, skin and integrator), and the slowest
+rate (1e-5/t_c) for the rate series. DEM is chaotic: below some dt the error is the
+trajectory-divergence floor, not the integration error; the chart shows where.
+"""
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, ROOT)
+from demkit.curves import read_curve  # noqa: E402
+
+DEM = os.path.join(ROOT, "build", "dem")
+PACKING = os.path.join(ROOT, "data", "yade", "packing_phi0.740.txt")
+DEFAULT = {"dt": 0.02, "rate": 1e-4, "skin": 0.4, "integrator": "velocity_verlet"}
+
+
+def run(cfg, eps, tmp):
+    out = os.path.join(tmp, "c.csv")
+    t0 = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime
+    p = subprocess.run([DEM, "mode", "--packing", PACKING, "--mode", "D2", "--rate-tc", str(cfg["rate"]),
+                        "--eps-max", str(eps), "--quiet", "--force", "--out", out,
+                        "--set", f"integration.dt_over_tc={cfg['dt']}", "--set", f"integration.integrator={cfg['integrator']}",
+                        "--set", f"integration.skin_over_rmin={cfg['skin']}", "--set", "integration.threads=1",
+                        "--set", f"output.sample_strain={eps / 60:.6g}"], capture_output=True, text=True)
+    wall = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime - t0   # CPU time: robust to a busy machine
+    if p.returncode:
+        return None, wall
+    return read_curve(out), wall
+
+
+def error(c, ref):
+    g = np.linspace(0, min(c["eps_d"].max(), ref["eps_d"].max()), 100)
+    e = {}
+    for q in ("s_dev", "F_dev"):
+        d = np.interp(g, c["eps_d"], c[q]) - np.interp(g, ref["eps_d"], ref[q])
+        e[q] = float(np.sqrt(np.mean(d * d)))
+    pr = np.interp(g, ref["eps_d"], ref["p_Pa"])
+    d = (np.interp(g, c["eps_d"], c["p_Pa"]) - pr) / pr
+    e["p_rel"] = float(np.sqrt(np.mean(d * d)))
+    return e
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--eps", type=float, default=0.06)
+    a = ap.parse_args()
+    if not os.path.exists(PACKING):
+        sys.exit(f"{PACKING} missing: run yade_ref/make_reference.sh (or its prep step) first")
+    tmp = tempfile.mkdtemp()
+    series = {
+        "dt (velocity Verlet)": [dict(DEFAULT, dt=d) for d in (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4)],
+        "dt (symplectic Euler)": [dict(DEFAULT, dt=d, integrator="symplectic_euler") for d in (0.01, 0.02, 0.05, 0.1, 0.2, 0.4)],
+        "rate": [dict(DEFAULT, rate=r) for r in (1e-5, 3e-5, 1e-4, 3e-4, 1e-3)],
+        "skin": [dict(DEFAULT, skin=s) for s in (0.1, 0.2, 0.4, 0.8)],
+    }
+    results = {}
+    ref_dt, _ = run(dict(DEFAULT, dt=0.005), a.eps, tmp)
+    ref_rate = None
+    for name, cfgs in series.items():
+        results[name] = []
+        for cfg in cfgs:
+            c, wall = run(cfg, a.eps, tmp)
+            if name == "rate" and cfg["rate"] == 1e-5:
+                ref_rate = c
+            ref = ref_rate if name == "rate" else ref_dt
+            err = error(c, ref) if c is not None and ref is not None else None
+            results[name].append({"config": cfg, "wall_s": wall, "error": err,
+                                  "max_inertial_number": float(c["inertial_number"].max()) if c is not None else None})
+            print(name, cfg, f"{wall:.1f}s", err, file=sys.stderr)
+    with open(os.path.join(HERE, "accuracy_cost.json"), "w") as fh:
+        json.dump(results, fh, indent=2)
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4))
+    pts = []
+    for name, rs in results.items():
+        ok = [r for r in rs if r["error"] and r["error"]["s_dev"] > 0]
+        for ax, q in zip(axes, ("s_dev", "F_dev", "p_rel")):
+            ax.loglog([r["wall_s"] for r in ok], [max(r["error"][q], 1e-7) for r in ok], "o-", label=name)
+        pts += [(r["wall_s"], r["error"]["s_dev"], name, r["config"]) for r in ok]
+    # Pareto front on s_dev error
+    front, best = [], float("inf")
+    for w, e, n, cfg in sorted(pts):
+        if e < best:
+            front.append((w, e))
+            best = e
+    axes[0].loglog(*zip(*front), "k--", lw=1, label="Pareto front")
+    d = [r for r in results["dt (velocity Verlet)"] if r["config"]["dt"] == 0.02][0]
+    for ax, q in zip(axes, ("s_dev", "F_dev", "p_rel")):
+        ax.loglog([d["wall_s"]], [max(d["error"][q], 1e-7)], "r*", ms=14, label="default scene settings")
+        ax.set_xlabel("CPU time [s] (1 thread)")
+        ax.set_ylabel({"s_dev": "RMS error of s_dev", "F_dev": "RMS error of F_dev", "p_rel": "RMS relative error of p"}[q])
+        ax.grid(alpha=0.3, which="both")
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"accuracy against cost: D2 to eps_d = {a.eps}, N = 9261, phi = 0.74", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(os.path.join(ROOT, "docs", "accuracy_cost.png"), dpi=120)
+    fig.savefig(os.path.join(ROOT, "docs", "accuracy_cost.svg"))
+    lines = ["# Accuracy against cost", "", f"Generated by `/usr/bin/python3 bench/accuracy_cost.py --eps {a.eps}`.",
+             "", "![accuracy against cost](accuracy_cost.png)", "",
+             "| series | dt/t_c | rate·t_c | skin/r_min | integrator | CPU [s] | err s_dev | err F_dev | rel err p | max I |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, rs in results.items():
+        for r in rs:
+            c, e = r["config"], r["error"]
+            es = ("blew up", "", "") if e is None else (f"{e['s_dev']:.2e}", f"{e['F_dev']:.2e}", f"{e['p_rel']:.2e}")
+            mi = "" if r["max_inertial_number"] is None else f"{r['max_inertial_number']:.1e}"
+            lines.append(f"| {name} | {c['dt']} | {c['rate']} | {c['skin']} | {c['integrator']} | {r['wall_s']:.1f} | "
+                         f"{es[0]} | {es[1]} | {es[2]} | {mi} |")
+    with open(os.path.join(ROOT, "docs", "accuracy_cost.md"), "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
