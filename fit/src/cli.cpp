@@ -76,7 +76,7 @@ int run_fit_command(const FitCommandOptions& o) {
 
   Table params({"mode", "nu", "quantity", "x0", "se_x0", "x_max", "se_x_max", "beta", "se_beta",
                 "corr_xmax_beta", "initial_slope", "se_initial_slope", "eps_95", "r_squared", "rmse", "n",
-                "eps_last", "warnings"});
+                "eps_last", "gsl_max_rel_diff", "warnings"});
   std::map<std::pair<std::string, std::string>, std::vector<std::pair<double, FitResult>>> by_mode_q;
   int warnings = 0;
   for (auto& c : curves) {
@@ -84,6 +84,18 @@ int run_fit_command(const FitCommandOptions& o) {
     for (const char* q : {"s_dev", "F_dev"}) {
       try {
         FitResult r = fit_saturating(e, c.t.column(q), fo);
+        // Second, independent solver from the same start: the relative gap of the optima.
+        double gsl_gap = std::nan("");
+        try {
+          std::vector<double> ew, yw;
+          for (std::size_t i = 0; i < e.size(); ++i)
+            if (e[i] >= fo.window_min && e[i] <= fo.window_max) { ew.push_back(e[i]); yw.push_back(c.t.column(q)[i]); }
+          const auto g = fit_saturating_gsl(ew, yw, {r.x0, r.x_max, r.beta * 1.3});
+          const double scale = std::max(std::fabs(r.x_max), std::fabs(r.x0));
+          gsl_gap = std::max({std::fabs(g[0] - r.x0) / scale, std::fabs(g[1] - r.x_max) / scale,
+                              std::fabs(g[2] - r.beta) / r.beta});
+        } catch (const std::exception&) {
+        }
         std::string w;
         for (auto& s : r.warnings) {
           w += (w.empty() ? "" : "; ") + s;
@@ -93,12 +105,12 @@ int run_fit_command(const FitCommandOptions& o) {
         params.add_row({c.mode, num(c.phi, 4), q, num(r.x0), num(r.se_x0), num(r.x_max), num(r.se_x_max),
                         num(r.beta), num(r.se_beta), num(r.corr[1][2], 3), num(r.initial_slope),
                         num(r.se_initial_slope), num(r.eps_95), num(r.r_squared, 5), num(r.rmse), std::to_string(r.n),
-                        num(r.e_last, 4), w});
+                        num(r.e_last, 4), num(gsl_gap, 2), w});
         by_mode_q[{c.mode, q}].emplace_back(c.phi, r);
       } catch (const std::exception& ex) {
         std::cerr << "dem fit: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << ex.what() << "\n";
         params.add_row({c.mode, num(c.phi, 4), q, "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan",
-                        "nan", "nan", "nan", "0", "nan", std::string("not fitted: ") + ex.what()});
+                        "nan", "nan", "nan", "0", "nan", "nan", std::string("not fitted: ") + ex.what()});
         ++warnings;
       }
     }

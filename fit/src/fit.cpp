@@ -181,13 +181,15 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
     r.warnings.push_back("curve stops before saturation: 95% of the approach is reached only at eps_d = " +
                          fmt(r.eps_95) + " but the data end at " + fmt(r.e_last) +
                          "; x_max and beta are extrapolations (run to larger eps_d)");
-  auto rel = [](double se, double v) { return std::fabs(se / v); };
+  // x0 and x_max are judged against the amplitude |x_max - x0| (a value near zero can be
+  // well determined), beta against itself.
+  const double amplitude = std::fabs(r.x_max - r.x0);
   const char* names[3] = {"x0", "x_max", "beta"};
-  const double vals[3] = {r.x0, r.x_max, r.beta}, ses[3] = {r.se_x0, r.se_x_max, r.se_beta};
+  const double scales[3] = {amplitude, amplitude, r.beta}, ses[3] = {r.se_x0, r.se_x_max, r.se_beta};
   for (int a = 0; a < 3; ++a)
-    if (std::isfinite(ses[a]) && rel(ses[a], vals[a]) > o.max_relative_error && std::fabs(vals[a]) > 1e-12)
+    if (std::isfinite(ses[a]) && scales[a] > 0 && ses[a] / scales[a] > o.max_relative_error)
       r.warnings.push_back(std::string(names[a]) + " is poorly determined (standard error " +
-                           fmt(100 * rel(ses[a], vals[a])) + "% of its value)");
+                           fmt(100 * ses[a] / scales[a]) + "% of " + (a < 2 ? "the amplitude |x_max - x0|" : "its value") + ")");
   // Non-monotone: a reversal after the extreme much larger than the point-to-point noise
   // (estimated from second differences: var(y[i+1] - 2y[i] + y[i-1]) = 6 sigma^2 for white noise).
   if (y.size() >= 5) {

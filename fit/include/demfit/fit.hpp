@@ -37,7 +37,7 @@ struct FitOptions {
   int min_points = 6;             ///< fewer points is an error
   bool fix_x0 = false;            ///< hold x0 at x0_value (e.g. a curve known to start at 0)
   double x0_value = 0.0;
-  double max_relative_error = 0.5;  ///< a parameter with SE/|value| above this gets a warning
+  double max_relative_error = 0.5;  ///< warn when SE exceeds this fraction of |x_max - x0| (x0, x_max) or of beta
 };
 
 /// Result of one fit. Standard errors are from the Jacobian at the optimum scaled by the
