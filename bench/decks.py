@@ -32,6 +32,17 @@ def write_lammps_data(path, cell, spheres, density, style):
             fh.write(f"{i} 1 {2 * r!r} {density!r} {x!r} {y!r} {z!r}\n")
 
 
+def _motion(dt, rate, gamma_b, steps):
+    """The part both codes share: velocity Verlet, drag on the peculiar velocity, D2 box."""
+    return f"""timestep {dt!r}
+fix integ all nve/sphere
+fix visc all viscous {gamma_b}
+fix def all deform 1 x trate {rate!r} z trate {-rate!r} remap x
+thermo 1000
+run {steps}
+"""
+
+
 def lammps_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4):
     # pair granular: hooke normal force k*delta with absolute velocity damping (damping velocity:
     # eta_n = gamma), no tangential force; fix viscous: -gamma_b v on every atom; fix deform
@@ -47,13 +58,7 @@ pair_style granular
 pair_coeff * * hooke {k} {gamma} tangential linear_nohistory 0 0 damping velocity
 neighbor {skin} bin
 neigh_modify delay 0 every 1 check yes
-timestep {dt!r}
-fix integ all nve/sphere
-fix visc all viscous {gamma_b}
-fix def all deform 1 x trate {rate!r} z trate {-rate!r} remap x
-thermo 1000
-run {steps}
-"""
+""" + _motion(dt, rate, gamma_b, steps)
 
 
 def liggghts_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4):
@@ -77,10 +82,4 @@ fix m4 all property/global gammat_abs peratomtypepair 1 0.0
 fix m5 all property/global coefficientFriction peratomtypepair 1 0.0
 pair_style gran model hooke/stiffness tangential no_history absolute_damping on limitForce on
 pair_coeff * *
-timestep {dt!r}
-fix integ all nve/sphere
-fix visc all viscous {gamma_b}
-fix def all deform 1 x trate {rate!r} z trate {-rate!r} remap x
-thermo 1000
-run {steps}
-"""
+""" + _motion(dt, rate, gamma_b, steps)
