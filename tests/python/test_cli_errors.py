@@ -53,3 +53,15 @@ def test_packing_outside_the_cell_is_refused(tmp_path):
     scene.write_text(f'[particles]\npacking_file = "{pack}"\n')
     p = run_dem("run", scene, "--out", tmp_path / "o", "--quiet")
     assert p.returncode == 1 and "outside the periodic cell" in p.stderr
+
+
+def test_fast_shear_is_flagged_as_not_quasi_static(small_run, tmp_path):
+    # Crossing the quasi-static boundary: at rate*t_c = 1e-3 the inertial number of the
+    # nu = 0.69 packing exceeds 1e-3 and the runner says so; at 1e-5 it stays silent.
+    packing = small_run["dir"] / "checkpoints" / "unloading_phi0.690.txt"
+    fast = run_dem("mode", "--packing", packing, "--mode", "D2", "--rate-tc", 1e-3, "--eps-max", 0.01,
+                   "--quiet", "--out", tmp_path / "fast.csv", check=True)
+    assert "not quasi-static" in fast.stderr and "deviatoric_rate_tc" in fast.stderr
+    slow = run_dem("mode", "--packing", packing, "--mode", "D2", "--rate-tc", 1e-5, "--eps-max", 0.01,
+                   "--quiet", "--out", tmp_path / "slow.csv", check=True)
+    assert "not quasi-static" not in slow.stderr
