@@ -26,6 +26,8 @@ void add_fit_options(CLI::App& app, FitCommandOptions& o) {
   app.add_option("--loss", o.loss, "robust loss: none | huber | cauchy")->check(CLI::IsMember({"none", "huber", "cauchy"}));
   app.add_option("--gap-tolerance", o.gap_tolerance, "D2/D3 'same path' tolerance on the fitted curves");
   app.add_flag("--no-plots", o.no_plots, "skip plots");
+  app.add_flag("--independent-errors", o.independent_errors,
+               "treat curve points as independent (no inflation of standard errors for correlated residuals)");
   app.add_flag("--force", o.force, "overwrite RUN_DIR/fit");
 }
 
@@ -57,6 +59,7 @@ int run_fit_command(const FitCommandOptions& o) {
   fo.window_min = o.window_min;
   fo.window_max = o.window_max;
   fo.loss = o.loss == "huber" ? Loss::Huber : o.loss == "cauchy" ? Loss::Cauchy : Loss::None;
+  fo.correct_autocorrelation = !o.independent_errors;
 
   // Curves named MODE_phiX.XXX.csv
   const std::regex name_re(R"(([A-Za-z0-9_]+)_phi([0-9.]+)\.csv)");
@@ -76,7 +79,7 @@ int run_fit_command(const FitCommandOptions& o) {
 
   Table params({"mode", "nu", "quantity", "x0", "se_x0", "x_max", "se_x_max", "beta", "se_beta",
                 "corr_xmax_beta", "initial_slope", "se_initial_slope", "eps_95", "r_squared", "rmse", "n",
-                "eps_last", "gsl_max_rel_diff", "warnings"});
+                "eps_last", "gsl_max_rel_diff", "residual_autocorr", "se_inflation", "warnings"});
   std::map<std::pair<std::string, std::string>, std::vector<std::pair<double, FitResult>>> by_mode_q;
   int warnings = 0;
   for (auto& c : curves) {
@@ -105,12 +108,12 @@ int run_fit_command(const FitCommandOptions& o) {
         params.add_row({c.mode, num(c.phi, 4), q, num(r.x0), num(r.se_x0), num(r.x_max), num(r.se_x_max),
                         num(r.beta), num(r.se_beta), num(r.corr[1][2], 3), num(r.initial_slope),
                         num(r.se_initial_slope), num(r.eps_95), num(r.r_squared, 5), num(r.rmse), std::to_string(r.n),
-                        num(r.e_last, 4), num(gsl_gap, 2), w});
+                        num(r.e_last, 4), num(gsl_gap, 2), num(r.residual_autocorrelation, 3), num(r.se_inflation, 3), w});
         by_mode_q[{c.mode, q}].emplace_back(c.phi, r);
       } catch (const std::exception& ex) {
         std::cerr << "dem fit: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << ex.what() << "\n";
         params.add_row({c.mode, num(c.phi, 4), q, "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan",
-                        "nan", "nan", "nan", "0", "nan", "nan", std::string("not fitted: ") + ex.what()});
+                        "nan", "nan", "nan", "0", "nan", "nan", "nan", "nan", std::string("not fitted: ") + ex.what()});
         ++warnings;
       }
     }

@@ -137,6 +137,15 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
     tss += (y[i] - mean) * (y[i] - mean);
   }
   r.cost = 0.5 * rss;
+  {
+    std::vector<double> res(e.size());
+    for (std::size_t i = 0; i < e.size(); ++i) res[i] = y[i] - saturating(r.x0, r.x_max, r.beta, e[i]);
+    double num = 0;
+    for (std::size_t i = 1; i < res.size(); ++i) num += res[i] * res[i - 1];
+    r.residual_autocorrelation = rss > 0 ? num / rss : 0.0;
+    const double rho = std::min(r.residual_autocorrelation, 0.95);
+    if (o.correct_autocorrelation && rho > 0) r.se_inflation = std::sqrt((1 + rho) / (1 - rho));
+  }
   r.rmse = std::sqrt(rss / r.n);
   r.r_squared = tss > 0 ? 1.0 - rss / tss : 0.0;
   r.eps_95 = std::log(20.0) / r.beta;
@@ -153,7 +162,7 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
   std::vector<std::pair<const double*, const double*>> blocks = {{p.data(), p.data()}};
   double c[9];
   if (r.n > n_free && cov.Compute(blocks, &problem) && cov.GetCovarianceBlock(p.data(), p.data(), c)) {
-    const double s2 = rss / (r.n - n_free);
+    const double s2 = rss / (r.n - n_free) * r.se_inflation * r.se_inflation;
     for (double& v : c) v *= s2;
     const double se[3] = {std::sqrt(std::max(c[0], 0.0)), std::sqrt(std::max(c[4], 0.0)),
                           std::sqrt(std::max(c[8], 0.0))};
@@ -173,6 +182,10 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
     r.warnings.push_back("covariance could not be computed (the Jacobian is rank deficient): "
                          "the data do not determine all three parameters");
   }
+  if (r.residual_autocorrelation > 0.5)
+    r.warnings.push_back("residuals are strongly correlated (lag-1 autocorrelation " + fmt(r.residual_autocorrelation) +
+                         (o.correct_autocorrelation ? "): standard errors inflated by " + fmt(r.se_inflation)
+                                                    : "): standard errors assume independent points and are too small"));
   if (beta_on_bound)
     r.warnings.push_back("rate beta sits on its bound " + fmt(r.beta) + ": no standard error quoted; "
                          "the curve shows no saturation in this window");

@@ -137,3 +137,25 @@ TEST(Fit, PowerLawOfTheVolumeFraction) {
   EXPECT_NEAR(f.params[2], 0.66, 1e-6);
   EXPECT_NEAR(f.params[3], 0.6, 1e-4);
 }
+
+TEST(Fit, CorrelatedResidualsInflateTheStandardErrors) {
+  // AR(1) noise with rho = 0.8 on top of the law: the plain SEs are too small; the corrected
+  // ones are larger by about sqrt((1+rho)/(1-rho)) = 3 and a warning names the correlation.
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> gauss(0.0, 0.003);
+  std::vector<double> e, y;
+  double ar = 0;
+  for (int i = 0; i <= 150; ++i) {
+    ar = 0.8 * ar + gauss(rng);
+    e.push_back(0.002 * i);
+    y.push_back(demfit::saturating(0.0, 0.15, 15.0, e.back()) + ar);
+  }
+  demfit::FitOptions plain, corrected;
+  corrected.correct_autocorrelation = true;
+  const auto a = demfit::fit_saturating(e, y, plain), b = demfit::fit_saturating(e, y, corrected);
+  EXPECT_GT(a.residual_autocorrelation, 0.6);
+  EXPECT_NEAR(b.se_x_max / a.se_x_max, b.se_inflation, 1e-9);
+  EXPECT_GT(b.se_inflation, 2.0);
+  EXPECT_TRUE(has_warning(b, "strongly correlated"));
+  EXPECT_DOUBLE_EQ(a.x_max, b.x_max);   // the optimum itself does not change
+}

@@ -13,6 +13,7 @@ struct FitCommandOptions {
   std::string loss = "none";         ///< none | huber | cauchy
   double gap_tolerance = 0.02;       ///< "same path" when the D2/D3 fits differ by less than this
   bool no_plots = false;             ///< skip the matplotlib plots
+  bool independent_errors = false;   ///< no standard-error inflation for correlated residuals
   bool force = false;                ///< overwrite an existing RUN_DIR/fit
 };
 

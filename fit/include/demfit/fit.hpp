@@ -35,6 +35,10 @@ struct FitOptions {
   double beta_min = 1e-6;         ///< lower bound of the rate (beta > 0)
   double beta_max = 1e4;          ///< upper bound of the rate
   int min_points = 6;             ///< fewer points is an error
+  /// Inflate the standard errors for serially correlated residuals (DEM curves fluctuate on
+  /// strain scales longer than the sampling): factor sqrt((1 + rho)/(1 - rho)) with rho the
+  /// lag-1 autocorrelation of the residuals (AR(1) effective sample size), when rho > 0.
+  bool correct_autocorrelation = false;
   bool fix_x0 = false;            ///< hold x0 at x0_value (e.g. a curve known to start at 0)
   double x0_value = 0.0;
   double max_relative_error = 0.5;  ///< warn when SE exceeds this fraction of |x_max - x0| (x0, x_max) or of beta
@@ -51,6 +55,8 @@ struct FitResult {
   double se_initial_slope = 0;
   double eps_95 = 0;              ///< ln(20)/beta: strain at which 95% of x_max - x0 is reached
   double rmse = 0, r_squared = 0, cost = 0;
+  double residual_autocorrelation = 0;   ///< lag-1 autocorrelation of the residuals
+  double se_inflation = 1;        ///< factor applied to the standard errors (1: none)
   int n = 0;                      ///< points used
   double e_last = 0;              ///< largest strain among the points used
   std::vector<std::string> warnings;   ///< reasons to distrust a number (see fit_saturating)
