@@ -101,7 +101,7 @@ def make_packing(n, workdir):
     with open(scene, "w") as fh:
         fh.write(f"[particles]\ncount = {n}\nseed = 5\n[protocol]\ntarget_phi = 0.70\ncompress_rate_tc = 2e-4\n"
                  "relax_max_time_tc = 500\ncycle_phi_max = 0.70\ncheckpoints_unloading = [0.70]\n"
-                 "[output]\nvtk = false\n")
+                 "[integration]\ndt_over_tc = 0.1\n[output]\nvtk = false\n")
     out = os.path.join(workdir, f"run_{n}")
     subprocess.run([DEM, "run", scene, "--out", out, "--stages", "prep", "--quiet", "--force"], check=True)
     return os.path.join(out, "checkpoints", "unloading_phi0.700.txt")

@@ -83,3 +83,19 @@ def test_fit_tables_in_all_formats_and_parameters_in_range(small_run):
     assert len(data["rows"]) == 12
     assert glob.glob(str(small_run["dir"] / "plots" / "fit_D2_phi0.720.png"))
     assert glob.glob(str(small_run["dir"] / "plots" / "deviatoric_s_dev.svg"))
+
+
+def test_deviatoric_stage_alone_reuses_the_checkpoints(small_run, tmp_path):
+    # `--stages deviatoric` on a folder holding only checkpoints runs the modes from them.
+    import shutil
+    from conftest import run_dem
+    out = tmp_path / "again"
+    shutil.copytree(small_run["dir"] / "checkpoints", out / "checkpoints")
+    run_dem("run", small_run["scene"], "--out", out, "--stages", "deviatoric", "--quiet",
+            "--set", "protocol.eps_d_max=0.02", "--set", 'protocol.modes=["D3"]', check=True)
+    made = sorted(p.name for p in (out / "deviatoric").iterdir())
+    assert made == ["D3_phi0.690.csv", "D3_phi0.720.csv", "D3_phi0.780.csv"]
+    c = read_curve(out / "deviatoric" / "D3_phi0.720.csv")
+    first = read_curve(small_run["dir"] / "deviatoric" / "D3_phi0.720.csv")
+    assert abs(c["eps_d"][-1] - 0.02) < 1e-12
+    assert c["p_Pa"][0] == first["p_Pa"][0]          # same checkpoint, same first row
