@@ -4,5 +4,5 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cmake --build build -j"$(nproc)" >/dev/null
-(cd build && ctest --output-on-failure -j2)
+(cd build && ctest --output-on-failure)
 /usr/bin/python3 -m pytest -q tests/python "$@"

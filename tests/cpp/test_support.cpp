@@ -7,7 +7,11 @@
 namespace dem_test {
 
 dem::Model model_with(const std::vector<std::string>& overrides) {
-  return dem::load_scene("", overrides, nullptr, "test");
+  // One thread unless a test asks for more: ctest may run tests side by side, and OpenMP
+  // threads spinning at barriers on an oversubscribed machine slow everything down.
+  std::vector<std::string> all = {"integration.threads=1"};
+  all.insert(all.end(), overrides.begin(), overrides.end());
+  return dem::load_scene("", all, nullptr, "test");
 }
 
 dem::State make_state(const dem::Vec3& box, const std::vector<dem::Vec3>& x, const std::vector<double>& r,

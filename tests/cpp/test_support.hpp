@@ -10,7 +10,7 @@
 
 namespace dem_test {
 
-/// The default model with scene overrides ("section.key=value").
+/// The default model (one thread) with scene overrides ("section.key=value").
 dem::Model model_with(const std::vector<std::string>& overrides = {});
 
 /// A state of given box and spheres (positions [m], radii [m]); masses from the density.
