@@ -138,7 +138,7 @@ int run_fit_command(const FitCommandOptions& o) {
         }
   if (!shared.rows.empty())
     write_table_all(shared, (out / "shared_path").string(),
-                    "D2 vs D3: F-test of one shared law against two (residuals assumed independent, so p is optimistic) and the largest gap between the fitted curves");
+                    "D2 vs D3: F-test of one shared law against two (corrected for correlated residuals unless --independent-errors) and the largest gap between the fitted curves; same_path: p >= 0.01 or gap <= --gap-tolerance");
 
   // Parameters against the volume fraction: linear law around the mean nu, weighted by the SEs.
   Table laws({"mode", "quantity", "parameter", "law", "a", "se_a", "b", "se_b", "nu_ref", "r_squared", "n", "warnings"});

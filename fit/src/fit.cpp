@@ -289,6 +289,10 @@ SharedPathTest test_shared_path(const std::vector<double>& e1, const std::vector
   const int n = t.first.n + t.second.n;
   if (n > 6 && rss_sep > 0) {
     t.f_statistic = std::max(0.0, (rss_sh - rss_sep) / 3.0 / (rss_sep / (n - 6)));
+    // Correlated residuals: the residual variance per independent point is larger by the
+    // same factor that inflates the standard errors (1 unless correct_autocorrelation).
+    const double infl = std::max(t.first.se_inflation, t.second.se_inflation);
+    t.f_statistic /= infl * infl;
     t.p_value = gsl_cdf_fdist_Q(t.f_statistic, 3, n - 6);
   }
   const double lo = std::max(t.first.e_last * 0, 0.0), hi = std::min(t.first.e_last, t.second.e_last);

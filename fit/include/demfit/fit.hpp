@@ -80,8 +80,9 @@ std::vector<double> fit_saturating_gsl(const std::vector<double>& e, const std::
 struct SharedPathTest {
   FitResult shared;               ///< one law for both curves (3 parameters)
   FitResult first, second;        ///< separate laws (3 + 3 parameters)
-  double f_statistic = 0;         ///< ((RSS_shared - RSS_sep)/3) / (RSS_sep/(n - 6))
-  double p_value = 1;             ///< upper tail of F(3, n - 6); assumes independent residuals
+  double f_statistic = 0;         ///< ((RSS_shared - RSS_sep)/3) / (RSS_sep/(n - 6)), divided by the
+                                  ///< squared SE inflation when correct_autocorrelation is on
+  double p_value = 1;             ///< upper tail of F(3, n - 6)
   double max_gap = 0;             ///< max |x_first(e) - x_second(e)| over the common range
   bool same_path = false;         ///< the paper's claim accepted: p >= 0.01 or max_gap < tolerance
 };
