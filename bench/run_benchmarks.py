@@ -158,6 +158,10 @@ def main():
         p1, p2 = r[1].get("particle_steps_per_s"), r[2].get("particle_steps_per_s")
         if p1 and p2:
             lines.append(f"| {n} | {p1 / 1e6:.2f} M | {p2 / 1e6:.2f} M | {p2 / (2 * p1):.0%} |")
+    notes = os.path.join(HERE, "benchmarks_notes.md")
+    if os.path.exists(notes):
+        with open(notes) as fh:
+            lines += ["", fh.read()]
     with open(a.out, "w") as fh:
         fh.write("\n".join(lines) + "\n")
     print("\n".join(lines))
