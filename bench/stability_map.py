@@ -71,7 +71,7 @@ def main():
     ax.set_yticklabels([f"{p.split(' ')[0]} {i.replace('_', ' ')}" for p in PACKINGS for i in ("velocity_verlet", "symplectic_euler")],
                        fontsize=8)
     ax.axvline(2 / 3.14159265, color="k", lw=0.8, ls="--")
-    ax.text(2 / 3.14159265, 3.3, " single-contact limit 2/π", fontsize=7)
+    ax.text(2 / 3.14159265 - 0.005, 3.3, "single-contact limit 2/π ", fontsize=7, ha="right")
     ax.set_xlabel("dt / t_c (t_c of the two smallest spheres)")
     ax.set_title("stability: o stable, x unstable (D2, no damping, N = 9261)", fontsize=9)
     fig.tight_layout()

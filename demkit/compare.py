@@ -7,8 +7,8 @@ and the largest and RMS differences of p, s_dev, F_dev and C are reported:
   F_dev  likewise
   C      absolute
 Exit code 0 when every difference is within its tolerance, 4 otherwise, 1 on bad input.
-Default tolerances (see docs/yade.md for how they were calibrated): p 3 % (max), s_dev and
-F_dev 15 % of the plateau (RMS), C 0.15 (RMS).
+Default tolerances (see docs/yade.md for how they were calibrated): p 3 % (max), s_dev 15 %
+and F_dev 25 % of the plateau (RMS), C 0.15 (RMS).
 """
 import argparse
 import json
@@ -90,7 +90,7 @@ def main(argv=None):
     ap.add_argument("--json", help="write the differences as JSON")
     ap.add_argument("--tol-p", type=float, default=0.03)
     ap.add_argument("--tol-s-dev", type=float, default=0.15)
-    ap.add_argument("--tol-f-dev", type=float, default=0.15)
+    ap.add_argument("--tol-f-dev", type=float, default=0.25)
     ap.add_argument("--tol-c", type=float, default=0.15)
     a = ap.parse_args(argv)
     try:

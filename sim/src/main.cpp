@@ -43,7 +43,16 @@ int exec_python(const std::string& module, const std::vector<std::string>& args)
   return 1;
 }
 
+// Integration is stable for a single contact up to dt/t_c = 2/pi (refused above), but dense
+// packings went unstable at 0.48-0.54 (docs/stability.md): warn before that.
+void warn_time_step(const dem::Model& m) {
+  if (m.dt_over_tc > 0.45)
+    std::fprintf(stderr, "dem: warning: integration.dt_over_tc = %g is near the stability limit of dense packings "
+                         "(0.48-0.54 measured, docs/stability.md); expect a blow-up, or use 0.1\n", m.dt_over_tc);
+}
+
 void print_info(const dem::Model& m) {
+  warn_time_step(m);
   const auto& p = m.protocol;
   std::printf("particles          N = %d, r in [%g, %g] m, rho = %g kg/m^3\n", m.count, m.radius_min,
               m.radius_max, m.density);
@@ -149,6 +158,7 @@ int main(int argc, char** argv) {
       o.scene_toml = resolved;
       o.command_line = join_args(argc, argv);
       if (!quiet) print_info(model);
+      else warn_time_step(model);
       dem::run_protocol(model, o);
       return 0;
     }
@@ -191,6 +201,7 @@ int main(int argc, char** argv) {
       dem::StageSpec spec{m.name, m.rate_shape * model.protocol.deviatoric_rate, dem::StopKind::DeviatoricStrain,
                           model.protocol.eps_d_max, {}};
       if (!mode_quiet) print_info(model);
+      else warn_time_step(model);
       const auto t0 = std::chrono::steady_clock::now();
       const auto steps = dem::run_stage(model, state, spec, mode_out, "", nullptr, mode_quiet);
       const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -42,6 +42,7 @@ def test_blow_up_is_detected_and_the_last_good_state_kept(tmp_path):
     p = run_dem("run", scene, "--out", tmp_path / "o", "--quiet", timeout=300)
     assert p.returncode == 3, p.stderr[-2000:]
     assert "blew up" in p.stderr and "dt_over_tc" in p.stderr
+    assert "near the stability limit" in p.stderr      # warned before it ran
     assert (tmp_path / "o" / "failed_relax.ckpt").exists()
     assert not (tmp_path / "o" / "prep" / "relax.csv").exists(), "a failed stage must not look complete"
 
