@@ -29,13 +29,11 @@ RATE_TC = 5e-6
 
 
 def timed(cmd, cwd=None, env=None):
-    """Run cmd; return (stdout+stderr, wall seconds, peak RSS in MiB of that child)."""
+    """Run cmd; return (stdout+stderr, wall seconds, exit code)."""
     t0 = time.time()
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=cwd, env=env)
     out, _ = p.communicate()
-    wall = time.time() - t0
-    # peak RSS via /proc is gone after exit; use wait4 through a wrapper instead
-    return out, wall, p.returncode
+    return out, time.time() - t0, p.returncode
 
 
 def with_rss(cmd, **kw):
