@@ -32,8 +32,12 @@ PACKING = os.path.join(ROOT, "data", "yade", "packing_phi0.740.txt")
 DEFAULT = {"dt": 0.02, "rate": 1e-4, "skin": 0.4, "integrator": "velocity_verlet"}
 
 
-def run(cfg, eps, tmp):
-    out = os.path.join(tmp, "c.csv")
+REFERENCE_CSV = os.path.join(HERE, "accuracy_reference_D2_phi0.740.csv")
+YADE_CURVE = os.path.join(ROOT, "data", "yade", "yade_D2_phi0.740.csv")
+
+
+def run(cfg, eps, tmp, keep=None):
+    out = keep or os.path.join(tmp, "c.csv")
     t0 = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime
     p = subprocess.run([DEM, "mode", "--packing", PACKING, "--mode", "D2", "--rate-tc", str(cfg["rate"]),
                         "--eps-max", str(eps), "--quiet", "--force", "--out", out,
@@ -58,6 +62,23 @@ def error(c, ref):
     return e
 
 
+def yade_point(eps):
+    """YADE on the same axes: its stored curve of the same packing and physics (data/yade, made
+    with gamma_b = 0 and the leapfrog) against our reference, and its cost from the throughput
+    measured by bench/run_benchmarks.py (one core, quiet machine)."""
+    res_json = os.path.join(HERE, "results.json")
+    if not (os.path.exists(YADE_CURVE) and os.path.exists(REFERENCE_CSV) and os.path.exists(res_json)):
+        return None
+    with open(res_json) as fh:
+        codes = json.load(fh)["codes"]
+    thr = [v.get("particle_steps_per_s") for k, v in codes.items() if k.startswith("YADE")]
+    if not thr or not thr[0]:
+        return None
+    y, ref = read_curve(YADE_CURVE), read_curve(REFERENCE_CSV)
+    steps = eps / (3 ** 0.5 * 1e-4 * 0.02)
+    return {"error": error(y, ref), "cpu_s": steps * 9261 / thr[0], "throughput": thr[0]}
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--eps", type=float, default=0.06)
@@ -77,7 +98,7 @@ def main():
         "skin": [dict(DEFAULT, skin=s) for s in (0.1, 0.2, 0.4, 0.8)],
     }
     results = {}
-    ref_dt, _ = run(dict(DEFAULT, dt=0.005), a.eps, tmp)
+    ref_dt, _ = run(dict(DEFAULT, dt=0.005), a.eps, tmp, keep=REFERENCE_CSV)
     ref_rate = None
     for name, cfgs in series.items():
         results[name] = []
@@ -113,6 +134,10 @@ def report(results, eps):
             front.append((w, e))
             best = e
     axes[0].loglog(*zip(*front), "k--", lw=1, label="Pareto front (base rate)")
+    yade = yade_point(eps)
+    if yade:
+        for ax, q in zip(axes, ("s_dev", "F_dev", "p_rel")):
+            ax.loglog([yade["cpu_s"]], [yade["error"][q]], "ks", ms=9, label="YADE (dt = t_c/50, rate 1e-4)")
     d = [r for r in results["dt (velocity Verlet)"] if r["config"]["dt"] == 0.02][0]
     for ax, q in zip(axes, ("s_dev", "F_dev", "p_rel")):
         ax.loglog([d["wall_s"]], [max(d["error"][q], 1e-7)], "r*", ms=14,
@@ -137,6 +162,10 @@ def report(results, eps):
             mi = "" if r["max_inertial_number"] is None else f"{r['max_inertial_number']:.1e}"
             lines.append(f"| {name} | {c['dt']} | {c['rate']} | {c['skin']} | {c['integrator']} | {r['wall_s']:.1f} | "
                          f"{es[0]} | {es[1]} | {es[2]} | {mi} |")
+    if yade:
+        e = yade["error"]
+        lines.append(f"| YADE 2023.02a (stored reference curve) | 0.02 | 0.0001 | | leapfrog | {yade['cpu_s']:.0f} (from "
+                     f"{yade['throughput'] / 1e6:.2f} M particle-steps/s) | {e['s_dev']:.2e} | {e['F_dev']:.2e} | {e['p_rel']:.2e} | |")
     notes_path = os.path.join(HERE, "accuracy_cost_notes.md")
     if os.path.exists(notes_path):
         with open(notes_path) as fh:
