@@ -138,7 +138,6 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   std::ofstream csv(csv_path + ".part", std::ios::trunc);
   if (!csv) throw std::runtime_error("cannot write " + csv_path + ".part");
   csv << csv_preamble(model, spec.name) << csv_header() << ",stage\n";
-  csv.precision(10);
 
   Measurement last_m = measure(model, state, engine.neighbor_list(), spec.rate);
   auto write_row = [&](const Measurement& m) { csv << curve_row(m) << "," << spec.name << "\n"; };
