@@ -32,21 +32,7 @@ Engine::Engine(const Model& model, State& state, bool forces_are_current)
   if (!forces_are_current || state.force.size() != state.position.size()) evaluate_forces();
 }
 
-void Engine::kick(double fraction) {
-  if (fraction == 0.0) return;
-  const double h = fraction * model_.dt;
-  const int n = state_.count();
-  for (int i = 0; i < n; ++i) state_.velocity[i] += state_.force[i] * (h / state_.mass[i]);
-}
-
-void Engine::drift() {
-  const double dt = model_.dt;
-  const int n = state_.count();
-  for (int i = 0; i < n; ++i) state_.position[i] += state_.velocity[i] * dt;
-}
-
-void Engine::deform_box(const Vec3& rate) {
-  if (rate.x == 0 && rate.y == 0 && rate.z == 0) return;
+Vec3 Engine::deform_box(const Vec3& rate) {
   Box& b = state_.box;
   if (b.reference.x == 0) { b.reference = b.length; b.log_strain = Vec3(0, 0, 0); }
   b.log_strain += rate * model_.dt;
@@ -54,11 +40,42 @@ void Engine::deform_box(const Vec3& rate) {
                   b.reference.z * std::exp(b.log_strain.z)};
   const Vec3 factor{next.x / b.length.x, next.y / b.length.y, next.z / b.length.z};
   b.length = next;
-  for (auto& x : state_.position) x = hadamard(x, factor);
+  return factor;
 }
 
-void Engine::update_neighbors() {
-  if (neighbor_list_stale(state_, list_)) rebuild_neighbor_list(state_, list_, skin_, true);
+double Engine::advance_particles(int begin, int end, const Vec3& factor, bool affine,
+                                 const StalenessTest& test) {
+  const double h = kick_before_ * model_.dt, dt = model_.dt;
+  Vec3* x = state_.position.data();
+  Vec3* v = state_.velocity.data();
+  Vec3* f = state_.force.data();
+  const double* m = state_.mass.data();
+  double worst = 0;
+  for (int i = begin; i < end; ++i) {
+    v[i] += f[i] * (h / m[i]);                     // 1. kick
+    x[i] += v[i] * dt;                             // 2. drift
+    if (affine) x[i] = hadamard(x[i], factor);     // 3. affine motion
+    f[i] = Vec3{0, 0, 0};                          //    (forces are summed afresh in 5)
+    if (test.limit2 >= 0) worst = std::max(worst, displacement2_since_build(state_, test, i));
+  }
+  return worst;
+}
+
+void Engine::rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2) {
+  if (test.limit2 < 0 || max_displacement2 >= test.limit2)
+    rebuild_neighbor_list(state_, list_, skin_, true);
+}
+
+void Engine::finish_forces_and_kick(int begin, int end) {
+  const double gb = model_.background_damping;
+  const double h = kick_after_ * model_.dt;
+  Vec3* v = state_.velocity.data();
+  Vec3* f = state_.force.data();
+  const double* m = state_.mass.data();
+  for (int i = begin; i < end; ++i) {
+    if (gb != 0.0) f[i] -= v[i] * gb;              // 5. background damping
+    if (h != 0.0) v[i] += f[i] * (h / m[i]);       // 6. kick
+  }
 }
 
 void Engine::evaluate_forces() {
@@ -66,16 +83,60 @@ void Engine::evaluate_forces() {
 }
 
 void Engine::step(const Vec3& strain_rate) {
-  kick(kick_before_);
-  drift();
   rate_ = strain_rate;
-  deform_box(strain_rate);
-  update_neighbors();
-  evaluate_forces();
-  kick(kick_after_);
+  const bool affine = !(strain_rate.x == 0 && strain_rate.y == 0 && strain_rate.z == 0);
+  const Vec3 factor = affine ? deform_box(strain_rate) : Vec3{1, 1, 1};
+  const StalenessTest test = staleness_test(state_, list_);   // box of this step, list of the last
+  if (threads_ <= 1) step_serial(factor, affine, test);
+  else step_threaded(factor, affine, test);
   state_.time += model_.dt;
   ++state_.step;
   if (model_.check_every_steps > 0 && state_.step % model_.check_every_steps == 0) check_sanity();
+}
+
+void Engine::step_serial(const Vec3& factor, bool affine, const StalenessTest& test) {
+  const int n = state_.count();
+  const double worst = advance_particles(0, n, factor, affine, test);
+  rebuild_neighbors_if_stale(test, worst);
+  partition_pairs(list_, 1, scratch_);
+  accumulate_pair_forces(model_, state_, list_, rate_, 0, scratch_, state_.force.data());
+  finish_forces_and_kick(0, n);
+}
+
+void Engine::step_threaded(const Vec3& factor, bool affine, const StalenessTest& test) {
+  partition_pairs(list_, threads_, scratch_);
+  worst_displacement2_.assign(threads_, 0.0);
+#pragma omp parallel num_threads(threads_)
+  {
+#ifdef _OPENMP
+    const int t = omp_get_thread_num(), nt = omp_get_num_threads();
+#else
+    const int t = 0, nt = 1;
+#endif
+    // 1-3 on the blocks of the current list (any split would do: particles are independent).
+    double worst = 0;
+    for (int b = t; b < scratch_.blocks(); b += nt)
+      worst = std::max(worst, advance_particles(scratch_.bounds[b], scratch_.bounds[b + 1],
+                                                factor, affine, test));
+    worst_displacement2_[t] = worst;
+#pragma omp barrier
+#pragma omp single
+    {
+      double all = 0;
+      for (double w : worst_displacement2_) all = std::max(all, w);
+      rebuild_neighbors_if_stale(test, all);
+      partition_pairs(list_, threads_, scratch_);
+    }
+    // 5: own pairs, then (after every block has queued its spills) the spills, then 6.
+    Vec3* f = state_.force.data();
+    for (int b = t; b < scratch_.blocks(); b += nt)
+      accumulate_pair_forces(model_, state_, list_, rate_, b, scratch_, f);
+#pragma omp barrier
+    for (int b = t; b < scratch_.blocks(); b += nt) {
+      apply_spilled_forces(b, scratch_, f);
+      finish_forces_and_kick(scratch_.bounds[b], scratch_.bounds[b + 1]);
+    }
+  }
 }
 
 void Engine::check_sanity() const {

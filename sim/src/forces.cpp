@@ -10,28 +10,27 @@ namespace dem {
 
 namespace {
 
-// One pair: adds the contact force to f[i] (and minus it to f[j]) if the spheres overlap.
+// One pair: the contact force on j [N] (minus it on i); false if the spheres do not touch.
 template <class Law>
-inline void pair_force(const Law& law, const Vec3& xi, const Vec3& xj_image, const Vec3& vi,
-                       const Vec3& vj, double ri, double rj, const Vec3& rate, Vec3& fi,
-                       Vec3& fj) {
+inline bool contact_force(const Law& law, const Vec3& xi, const Vec3& xj_image, const Vec3& vi,
+                          const Vec3& vj, double ri, double rj, const Vec3& rate, Vec3& f_on_j) {
   const Vec3 d = xj_image - xi;
   const double r2 = dot(d, d);
   const double reach = ri + rj;
-  if (r2 >= reach * reach) return;
+  if (r2 >= reach * reach) return false;
   const double r = std::sqrt(r2);
   const double inv_r = 1.0 / r;
   const Vec3 n = d * inv_r;                          // unit normal from i to j
   const Vec3 v_rel = (vj - vi) + hadamard(rate, d);  // fluctuation + affine relative velocity
   const double fn = law(reach - r, -dot(v_rel, n));
-  const Vec3 f = n * fn;
-  fj += f;
-  fi -= f;
+  f_on_j = n * fn;
+  return true;
 }
 
+// Pairs of particles [begin, end): forces on j >= end go to `spill`.
 template <class Law>
 void pair_loop(const Law& law, const State& s, const NeighborList& list, const Vec3& rate,
-               int begin, int end, Vec3* f) {
+               int begin, int end, Vec3* f, std::vector<SpilledForce>& spill) {
   Vec3 off[27];
   image_offsets(s.box, off);
   const Vec3* x = s.position.data();
@@ -46,7 +45,10 @@ void pair_loop(const Law& law, const State& s, const NeighborList& list, const V
     const double ri = rad[i];
     for (int p = first[i]; p < first[i + 1]; ++p) {
       const int j = partner[p];
-      pair_force(law, xi, x[j] + off[image[p]], vi, v[j], ri, rad[j], rate, fi, f[j]);
+      Vec3 fj;
+      if (!contact_force(law, xi, x[j] + off[image[p]], vi, v[j], ri, rad[j], rate, fj)) continue;
+      if (j < end) f[j] += fj; else spill.push_back({j, fj});
+      fi -= fj;
     }
     f[i] += fi;
   }
@@ -60,44 +62,55 @@ void add_background_damping(const Model& m, State& s) {
 
 }  // namespace
 
+void partition_pairs(const NeighborList& list, int blocks, ForceScratch& scratch) {
+  blocks = std::max(1, blocks);
+  if (scratch.list_builds == list.builds && scratch.blocks() == blocks) return;
+  const int n = static_cast<int>(list.first.size()) - 1;
+  const long total = list.first[n];
+  scratch.bounds.assign(blocks + 1, n);
+  scratch.bounds[0] = 0;
+  for (int b = 1; b < blocks; ++b) {
+    const long target = total * b / blocks;
+    scratch.bounds[b] = static_cast<int>(
+        std::lower_bound(list.first.begin(), list.first.end() - 1, target) - list.first.begin());
+  }
+  scratch.spill.resize(blocks);
+  scratch.list_builds = list.builds;
+}
+
+void accumulate_pair_forces(const Model& model, const State& state, const NeighborList& list,
+                            const Vec3& rate, int b, ForceScratch& scratch, Vec3* force) {
+  const LinearSpringDashpot law(model.contact);
+  scratch.spill[b].clear();
+  pair_loop(law, state, list, rate, scratch.bounds[b], scratch.bounds[b + 1], force, scratch.spill[b]);
+}
+
+void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force) {
+  const int begin = scratch.bounds[b], end = scratch.bounds[b + 1];
+  for (int from = 0; from < b; ++from)
+    for (const SpilledForce& s : scratch.spill[from])
+      if (s.j >= begin && s.j < end) force[s.j] += s.f;
+}
+
 void compute_forces(const Model& model, State& s, const NeighborList& list,
                     const Vec3& rate, int threads, ForceScratch& scratch) {
-  const int n = s.count();
-  const LinearSpringDashpot law(model.contact);
-  s.force.assign(n, Vec3{0, 0, 0});
-  if (threads <= 1) {
-    pair_loop(law, s, list, rate, 0, n, s.force.data());
+  s.force.assign(s.count(), Vec3{0, 0, 0});
+  partition_pairs(list, threads, scratch);
+  const int blocks = scratch.blocks();
+  Vec3* f = s.force.data();
+  if (blocks == 1) {
+    accumulate_pair_forces(model, s, list, rate, 0, scratch, f);
   } else {
-    scratch.per_thread.resize(threads);
-#pragma omp parallel num_threads(threads)
+#pragma omp parallel num_threads(blocks)
     {
 #ifdef _OPENMP
-      const int t = omp_get_thread_num();
-      const int nt = omp_get_num_threads();
+      const int t = omp_get_thread_num(), nt = omp_get_num_threads();
 #else
       const int t = 0, nt = 1;
 #endif
-      auto& buf = scratch.per_thread[t];
-      buf.assign(n, Vec3{0, 0, 0});
-      // Static blocks balanced by pair count.
-      const long total = list.first[n];
-      int begin = 0, end = n;
-      {
-        const long lo = total * t / nt, hi = total * (t + 1) / nt;
-        begin = static_cast<int>(std::lower_bound(list.first.begin(), list.first.end() - 1, lo) -
-                                 list.first.begin());
-        end = static_cast<int>(std::lower_bound(list.first.begin(), list.first.end() - 1, hi) -
-                               list.first.begin());
-        if (t == nt - 1) end = n;
-      }
-      pair_loop(law, s, list, rate, begin, end, buf.data());
+      for (int b = t; b < blocks; b += nt) accumulate_pair_forces(model, s, list, rate, b, scratch, f);
 #pragma omp barrier
-#pragma omp for schedule(static)
-      for (int i = 0; i < n; ++i) {
-        Vec3 sum{0, 0, 0};
-        for (int q = 0; q < nt; ++q) sum += scratch.per_thread[q][i];
-        s.force[i] = sum;
-      }
+      for (int b = t; b < blocks; b += nt) apply_spilled_forces(b, scratch, f);
     }
   }
   add_background_damping(model, s);
@@ -112,8 +125,12 @@ void compute_forces_all_pairs(const Model& model, State& s, const Vec3& rate) {
     for (int j = i + 1; j < n; ++j) {
       Vec3 d = s.position[j] - s.position[i];
       for (int k = 0; k < 3; ++k) d[k] -= L[k] * std::round(d[k] / L[k]);
-      pair_force(law, s.position[i], s.position[i] + d, s.velocity[i], s.velocity[j],
-                 s.radius[i], s.radius[j], rate, s.force[i], s.force[j]);
+      Vec3 fj;
+      if (!contact_force(law, s.position[i], s.position[i] + d, s.velocity[i], s.velocity[j],
+                         s.radius[i], s.radius[j], rate, fj))
+        continue;
+      s.force[j] += fj;
+      s.force[i] -= fj;
     }
   add_background_damping(model, s);
 }

@@ -162,20 +162,24 @@ void restore_neighbor_list(const State& state, NeighborList& list, double skin) 
   build_pairs(state.position_at_build, state.radius, state.length_at_build, list);
 }
 
-bool neighbor_list_stale(const State& s, const NeighborList& list) {
-  if (!s.list_valid || list.first.size() != s.position.size() + 1) return true;
-  const Vec3 back{s.length_at_build.x / s.box.length.x, s.length_at_build.y / s.box.length.y,
-                  s.length_at_build.z / s.box.length.z};
-  const double lambda_min = 1.0 / std::max({back.x, back.y, back.z});
+StalenessTest staleness_test(const State& s, const NeighborList& list) {
+  StalenessTest t;
+  if (!s.list_valid || list.first.size() != s.position.size() + 1) return t;
+  t.frame = Vec3{s.length_at_build.x / s.box.length.x, s.length_at_build.y / s.box.length.y,
+                 s.length_at_build.z / s.box.length.z};
+  const double lambda_min = 1.0 / std::max({t.frame.x, t.frame.y, t.frame.z});
   const double squeeze = std::max(0.0, 2.0 * list.radius_max * (1.0 / lambda_min - 1.0));
   const double budget = list.skin - squeeze;
-  if (budget <= 0) return true;
-  const double limit2 = 0.25 * budget * budget;   // u_max < budget / 2
-  const int n = s.count();
-  for (int i = 0; i < n; ++i) {
-    const Vec3 u = hadamard(s.position[i], back) - s.position_at_build[i];
-    if (dot(u, u) >= limit2) return true;
-  }
+  if (budget <= 0) return t;
+  t.limit2 = 0.25 * budget * budget;   // u_max < budget / 2
+  return t;
+}
+
+bool neighbor_list_stale(const State& s, const NeighborList& list) {
+  const StalenessTest t = staleness_test(s, list);
+  if (t.limit2 < 0) return true;
+  for (int i = 0; i < s.count(); ++i)
+    if (displacement2_since_build(s, t, i) >= t.limit2) return true;
   return false;
 }
 

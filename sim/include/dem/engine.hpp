@@ -2,6 +2,7 @@
 #pragma once
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "dem/forces.hpp"
 #include "dem/model.hpp"
@@ -30,9 +31,13 @@ class Engine {
   ///  2. drift      x += dt*v                (fluctuation motion)
   ///  3. deform     L *= exp(rate*dt), x *= exp(rate*dt)   (affine motion of box and particles)
   ///  4. neighbours rebuild the Verlet list if it may miss a contact
-  ///  5. forces     contact law over the list, background damping
+  ///  5. forces     contact law over the list, then background damping
   ///  6. kick       v += b*dt*F/m            (b = 1/2 Verlet, 0 symplectic Euler)
-  ///  7. time, step counters
+  ///  7. time, step counters; sanity checks every model.check_every_steps steps
+  /// Stages 1-3 (with the displacement test of 4) run as one pass over the particles and
+  /// 5-6 as another, to read each particle's data from memory once per pass; the arithmetic
+  /// is exactly that of the list. With threads > 1 each thread runs the passes on its own
+  /// block of particles (ForceScratch), with one barrier before and one after the pair loop.
   void step(const Vec3& strain_rate);
 
   /// Runs the sanity checks now; throws BlowUp on failure. Called by step() every
@@ -44,16 +49,21 @@ class Engine {
   int threads() const { return threads_; }
 
  private:
-  void kick(double fraction);
-  void drift();
-  void deform_box(const Vec3& rate);
-  void update_neighbors();
-  void evaluate_forces();
+  // Stages, on particle ranges [begin, end) so that the threaded step runs them per block.
+  Vec3 deform_box(const Vec3& rate);   // 3 (box): returns the factor the particles follow
+  double advance_particles(int begin, int end, const Vec3& factor, bool affine,
+                           const StalenessTest& test);   // 1-3, zeroes F; returns max |u|^2
+  void rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2);  // 4
+  void finish_forces_and_kick(int begin, int end);       // 5 (damping) and 6
+  void evaluate_forces();                                // 5 on its own (construction)
+  void step_serial(const Vec3& factor, bool affine, const StalenessTest& test);
+  void step_threaded(const Vec3& factor, bool affine, const StalenessTest& test);
 
   const Model& model_;
   State& state_;
   NeighborList list_;
   ForceScratch scratch_;
+  std::vector<double> worst_displacement2_;   // per thread
   Vec3 rate_{0, 0, 0};
   int threads_ = 1;
   double skin_ = 0;

@@ -1,6 +1,7 @@
 // Contact and background-damping forces: one pair loop over the Verlet list (fast path) and
 // a naive all-pairs loop (the oracle the fast path is tested against).
 #pragma once
+#include <cstdint>
 #include <vector>
 
 #include "dem/contact_law.hpp"
@@ -9,20 +10,46 @@
 
 namespace dem {
 
-/// Per-thread force buffers for the parallel half-list loop.
-struct ForceScratch {
-  std::vector<std::vector<Vec3>> per_thread;
+/// A pair force owed to a particle of another thread's block: f is added to force[j] after
+/// every block has run its pairs.
+struct SpilledForce {
+  std::int32_t j;
+  Vec3 f;   ///< [N]
 };
+
+/// Work split of the parallel half-list loop. Block b owns particles [bounds[b], bounds[b+1])
+/// (contiguous, balanced by listed pairs). Its pairs add forces directly to its own
+/// particles; a force on a particle of a later block (neighbour across the block boundary or
+/// across the periodic boundary) is queued in spill[b] and added by that block's owner after
+/// a barrier, in block order. No per-thread copy of the force array is needed.
+struct ForceScratch {
+  std::vector<int> bounds;                        ///< size blocks + 1
+  std::vector<std::vector<SpilledForce>> spill;   ///< per block
+  std::int64_t list_builds = -1;                  ///< list.builds the split was made for
+  int blocks() const { return static_cast<int>(bounds.size()) - 1; }
+};
+
+/// Splits the particles into `blocks` contiguous ranges with about equal listed pairs
+/// (no-op if the split already belongs to this list build and block count).
+void partition_pairs(const NeighborList& list, int blocks, ForceScratch& scratch);
+
+/// Adds the contact forces of the pairs of block b to force (which must hold the values to
+/// add to, normally zero), queueing forces on later blocks in scratch.spill[b].
+/// Safe to call concurrently for different blocks.
+void accumulate_pair_forces(const Model& model, const State& state, const NeighborList& list,
+                            const Vec3& strain_rate, int b, ForceScratch& scratch, Vec3* force);
+
+/// Adds to force[] the queued forces aimed at block b, from blocks 0..b-1 in order.
+void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force);
 
 /// Computes state.force for the current positions and fluctuation velocities:
 ///  - every listed pair in contact: normal force from the contact law, equal and opposite;
 ///    the overlap rate uses the full relative velocity, fluctuation plus affine flow
 ///    strain_rate (.) branch vector  [1/s . m];
-///  - background damping -gamma_b * v on every particle [N].
-/// Pairs are summed in list order. With threads > 1 each thread accumulates its static
-/// block of particles into its own buffer and the buffers are added in thread order, so a
-/// run is deterministic for a given thread count, and differs between thread counts only
-/// by round-off of the summation order.
+///  - background damping -gamma_b * v on every particle [N], added after the pair forces.
+/// Pairs are summed in list order. With threads > 1 the particles are split into one block
+/// per thread (ForceScratch); the result is deterministic for a given thread count and
+/// differs between thread counts only by round-off of the summation order.
 void compute_forces(const Model& model, State& state, const NeighborList& list,
                     const Vec3& strain_rate, int threads, ForceScratch& scratch);
 

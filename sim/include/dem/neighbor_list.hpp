@@ -41,6 +41,21 @@ void rebuild_neighbor_list(State& state, NeighborList& list, double skin, bool s
 /// particles (used when continuing from a checkpoint, to get exactly the same list).
 void restore_neighbor_list(const State& state, NeighborList& list, double skin);
 
+/// The rebuild criterion in a form a fused particle pass can evaluate: the list is stale
+/// when limit2 < 0, or when some particle has |x (.) frame - x_at_build|^2 >= limit2
+/// (frame = L_at_build / L per axis [-], limit2 [m^2]).
+struct StalenessTest {
+  Vec3 frame{1, 1, 1};
+  double limit2 = -1;
+};
+StalenessTest staleness_test(const State& state, const NeighborList& list);
+
+/// Squared displacement of particle i since the build, in the build frame [m^2].
+inline double displacement2_since_build(const State& s, const StalenessTest& t, int i) {
+  const Vec3 u = hadamard(s.position[i], t.frame) - s.position_at_build[i];
+  return dot(u, u);
+}
+
 /// True when the list may miss a contact (criterion in the file comment).
 bool neighbor_list_stale(const State& state, const NeighborList& list);
 
