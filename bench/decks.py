@@ -83,3 +83,17 @@ fix m5 all property/global coefficientFriction peratomtypepair 1 0.0
 pair_style gran model hooke/stiffness tangential no_history absolute_damping on limitForce on
 pair_coeff * *
 """ + _motion(dt, rate, gamma_b, steps)
+
+
+def replicate_packing(src, k, dst):
+    """Writes the packing `src` repeated k x k x k times (N -> k^3 N, box edges -> k L): the same
+    state per particle (same contacts, same forces), so a timing against N isolates the cost of N."""
+    cell, spheres = read_packing(src)
+    with open(dst, "w") as fh:
+        fh.write("##PERIODIC:: " + " ".join(repr(k * c) for c in cell) + "\n")
+        for a in range(k):
+            for b in range(k):
+                for c in range(k):
+                    for x, y, z, r in spheres:
+                        fh.write(f"{x + a * cell[0]!r} {y + b * cell[1]!r} {z + c * cell[2]!r} {r!r}\n")
+    return dst

@@ -70,23 +70,54 @@ TEST(NeighborList, NeverMissesAContactUnderFastDeformation) {
   }
 }
 
-TEST(NeighborList, TwoThreadsMatchOneThreadToRoundOff) {
-  dem::State s1 = dem_test::random_state(500, 0.38, 1.0, 4);
-  dem::State s2 = s1;
+TEST(NeighborList, BlockSplitPairLoopEqualsAllPairsOracle) {
+  // The threaded loop splits particles into blocks and queues forces on later blocks
+  // ("spills"); every block count must give the oracle's forces.
+  dem::Model m = dem_test::model_with({"integration.threads=1"});
+  dem::State s = dem_test::random_state(600, 0.40, 2.0, 11);
+  dem::DeformationMode dm;
+  ASSERT_TRUE(dem::builtin_mode("D2", &dm));
+  const Vec3 rate = dm.rate_shape * (1e-3 / m.t_contact);
+  dem::Engine e(m, s);
+  for (int k = 0; k < 500; ++k) e.step(rate);
+  dem::State oracle = s;
+  dem::compute_forces_all_pairs(m, oracle, rate);
+  const double scale = max_force(oracle);
+  for (int blocks : {2, 3, 5}) {
+    dem::State t = s;
+    dem::ForceScratch scratch;
+    dem::compute_forces(m, t, e.neighbor_list(), rate, blocks, scratch);
+    ASSERT_EQ(scratch.blocks(), blocks);
+    std::size_t spilled = 0;
+    for (auto& q : scratch.spill) spilled += q.size();
+    EXPECT_GT(spilled, 0u) << "the test must cross block boundaries";
+    EXPECT_TRUE(scratch.spill.back().empty()) << "the last block has no later block to spill to";
+    double worst = 0;
+    for (int i = 0; i < t.count(); ++i) worst = std::max(worst, norm(t.force[i] - oracle.force[i]));
+    EXPECT_LT(worst / scale, 1e-12) << blocks << " blocks";
+  }
+}
+
+TEST(NeighborList, ThreadedStepsMatchOneThreadToRoundOff) {
+  const dem::State start = dem_test::random_state(500, 0.38, 1.0, 4);
+  dem::State s1 = start;
   dem::Model m1 = dem_test::model_with({"integration.threads=1"});
-  dem::Model m2 = dem_test::model_with({"integration.threads=2"});
-  const Vec3 rate = Vec3(1, 0, -1) * (1e-4 / m1.t_contact);
-  dem::Engine e1(m1, s1), e2(m2, s2);
-  double worst = 0, scale = 0;
-  for (int k = 0; k < 50; ++k) {
-    e1.step(rate);
-    e2.step(rate);
+  const Vec3 rate = Vec3(1, 0, -1) * (1e-3 / m1.t_contact);
+  dem::Engine e1(m1, s1);
+  for (int k = 0; k < 200; ++k) e1.step(rate);
+  ASSERT_GT(e1.neighbor_list().builds, 2) << "the test must cross list rebuilds";
+  double scale = 0;
+  for (auto& f : s1.force) scale = std::max(scale, norm(f));
+  for (int threads : {2, 3, 4}) {
+    dem::State s2 = start;
+    dem::Model m2 = dem_test::model_with({"integration.threads=" + std::to_string(threads)});
+    dem::Engine e2(m2, s2);
+    for (int k = 0; k < 200; ++k) e2.step(rate);
+    ASSERT_EQ(s2.id, s1.id);
+    double worst = 0;
+    for (int i = 0; i < s1.count(); ++i) worst = std::max(worst, norm(s1.force[i] - s2.force[i]));
+    EXPECT_LT(worst / scale, 1e-9) << threads << " threads";
   }
-  for (int i = 0; i < s1.count(); ++i) {
-    worst = std::max(worst, norm(s1.force[i] - s2.force[i]));
-    scale = std::max(scale, norm(s1.force[i]));
-  }
-  EXPECT_LT(worst / scale, 1e-9);
 }
 
 TEST(NeighborList, TooSmallBoxIsRefusedWithAClearMessage) {
