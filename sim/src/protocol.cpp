@@ -324,13 +324,28 @@ void run_protocol(const Model& model, const RunOptions& opt) {
   auto note = [&](const std::string& what) {
     if (!opt.quiet) std::cerr << "dem: " << what << "\n";
   };
+  auto record = [&](const std::string& sub, const std::string& name) {
+    const std::string file = (fs::path(sub) / (name + ".csv")).string();
+    for (const auto& st : man.stages)
+      if (st.second == file) return;
+    man.stages.emplace_back(name, file);
+  };
   auto stage_csv = [&](const std::string& sub, const std::string& name) {
     const fs::path f = dir / sub / (name + ".csv");
     if (fs::exists(f) && !opt.force)
       throw std::runtime_error(f.string() + " exists: pass --force to overwrite finished results");
-    man.stages.emplace_back(name, (fs::path(sub) / (name + ".csv")).string());
+    record(sub, name);
     return f.string();
   };
+  if (!want_prep) {   // keep the outputs of earlier invocations in the manifest
+    for (const char* sub : {"prep", "deviatoric"}) {
+      std::vector<std::string> names;
+      for (auto& f : fs::directory_iterator(dir / sub))
+        if (f.path().extension() == ".csv") names.push_back(f.path().stem().string());
+      std::sort(names.begin(), names.end());
+      for (const auto& name : names) record(sub, name);
+    }
+  }
 
   if (want_prep) {
     State state;
@@ -398,9 +413,13 @@ void run_protocol(const Model& model, const RunOptions& opt) {
       if (!fs::exists(ck))
         throw std::runtime_error("checkpoint " + ck.string() + " is missing: run --stages prep first");
       for (const auto& mode : p.modes) {
+        const std::string name = mode.name + "_" + fmt_phi(phi);
+        if (!want_prep && !opt.force && fs::exists(dir / "deviatoric" / (name + ".csv"))) {
+          note("deviatoric " + name + ": finished earlier, kept (--force recomputes it)");
+          continue;
+        }
         Checkpoint c = read_checkpoint(ck.string());
         State state = std::move(c.state);
-        const std::string name = mode.name + "_" + fmt_phi(phi);
         note("deviatoric " + name + " from " + ck.filename().string());
         StageSpec s{name, mode.rate_shape * p.deviatoric_rate, StopKind::DeviatoricStrain, p.eps_d_max, {}};
         run_stage(model, state, s, stage_csv("deviatoric", name), vtk_dir, nullptr, opt.quiet);

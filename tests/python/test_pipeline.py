@@ -99,3 +99,13 @@ def test_deviatoric_stage_alone_reuses_the_checkpoints(small_run, tmp_path):
     first = read_curve(small_run["dir"] / "deviatoric" / "D3_phi0.720.csv")
     assert abs(c["eps_d"][-1] - 0.02) < 1e-12
     assert c["p_Pa"][0] == first["p_Pa"][0]          # same checkpoint, same first row
+    # A second invocation with one more mode keeps the finished curves and adds the new ones,
+    # and the manifest lists the outputs of both invocations.
+    before = (out / "deviatoric" / "D3_phi0.720.csv").read_bytes()
+    p = run_dem("run", small_run["scene"], "--out", out, "--stages", "deviatoric",
+                "--set", "protocol.eps_d_max=0.02", "--set", 'protocol.modes=["D2","D3"]', check=True)
+    assert "D3_phi0.720: finished earlier, kept" in p.stderr
+    assert (out / "deviatoric" / "D3_phi0.720.csv").read_bytes() == before
+    files = sorted(o["file"] for o in json.loads((out / "manifest.json").read_text())["outputs"])
+    assert files == sorted(f"deviatoric/{m}_phi{phi}.csv" for m in ("D2", "D3")
+                           for phi in ("0.690", "0.720", "0.780"))
