@@ -3,13 +3,17 @@
 unloading branch): vary dt/t_c, the strain rate, the Verlet skin and the integrator; measure
 the error of s_dev, F_dev and p against a converged reference and the wall time.
 
-    /usr/bin/python3 bench/accuracy_cost.py [--eps 0.06]        (about 6 minutes, 1 thread)
+    /usr/bin/python3 bench/accuracy_cost.py [--eps 0.06]        (about 30 minutes, 1 thread)
+    /usr/bin/python3 bench/accuracy_cost.py --only-n            (just the N series, merged into the JSON)
 
 Writes docs/accuracy_cost.md, docs/accuracy_cost.png/.svg and bench/accuracy_cost.json.
 Error: RMS over eps_d of |x - x_ref| for s_dev and F_dev; RMS relative error for p.
 References: dt/t_c = 0.005 at the default rate (for dt, skin and integrator), and the slowest
 rate (1e-5/t_c) for the rate series. DEM is chaotic: below some dt the error is the
 trajectory-divergence floor, not the integration error; the chart shows where.
+N series: packings of N = 1000 ... 100 000 made by our runner (fast protocol, several seeds
+each, phi = 0.74 on the unloading branch), the same D2 run from each; the error of one run is
+the seed-to-seed standard deviation of its curve (RMS over eps_d), the cost its CPU time.
 """
 import argparse
 import json
@@ -36,10 +40,58 @@ REFERENCE_CSV = os.path.join(HERE, "accuracy_reference_D2_phi0.740.csv")
 YADE_CURVE = os.path.join(ROOT, "data", "yade", "yade_D2_phi0.740.csv")
 
 
-def run(cfg, eps, tmp, keep=None):
+N_SEEDS = {1000: 6, 3000: 6, 9261: 6, 30000: 4, 100000: 3}
+N_PREP_SCENE = """[particles]
+count = {n}
+seed = {seed}
+[protocol]
+target_phi = 0.64
+compress_rate_tc = 2e-4
+cycle_rate_tc = 1e-4
+cycle_phi_max = 0.82
+checkpoints_unloading = [0.74]
+[integration]
+dt_over_tc = 0.1
+threads = 1
+[output]
+vtk = false
+"""
+
+
+def n_series(eps, tmp):
+    """Seed-to-seed spread of the D2 curves against N (and its CPU cost)."""
+    out = []
+    for n, seeds in N_SEEDS.items():
+        curves, cpu = [], []
+        for seed in range(1, seeds + 1):
+            scene = os.path.join(tmp, "prep.toml")
+            with open(scene, "w") as fh:
+                fh.write(N_PREP_SCENE.format(n=n, seed=seed))
+            rdir = os.path.join(tmp, f"n{n}_s{seed}")
+            subprocess.run([DEM, "run", scene, "--out", rdir, "--stages", "prep", "--quiet", "--force"], check=True)
+            c, wall = run(DEFAULT, eps, tmp, packing=os.path.join(rdir, "checkpoints", "unloading_phi0.740.txt"))
+            if c is not None:
+                curves.append(c)
+                cpu.append(wall)
+            print("N", n, "seed", seed, f"{wall:.1f}s", file=sys.stderr)
+        g = np.linspace(0, min(c["eps_d"].max() for c in curves), 100)
+        res = {"N": n, "seeds": len(curves), "wall_s": float(np.mean(cpu)), "spread": {}, "mean": {}}
+        for q in ("s_dev", "F_dev", "p_Pa"):
+            ys = np.array([np.interp(g, c["eps_d"], c[q]) for c in curves])
+            sd = ys.std(axis=0, ddof=1)
+            if q == "p_Pa":
+                sd = sd / ys.mean(axis=0)
+            res["spread"]["p_rel" if q == "p_Pa" else q] = float(np.sqrt(np.mean(sd * sd)))
+            res["mean"][q] = ys.mean(axis=0).tolist()
+        res["eps_grid"] = g.tolist()
+        out.append(res)
+    return out
+
+
+def run(cfg, eps, tmp, keep=None, packing=PACKING):
     out = keep or os.path.join(tmp, "c.csv")
     t0 = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime
-    p = subprocess.run([DEM, "mode", "--packing", PACKING, "--mode", "D2", "--rate-tc", str(cfg["rate"]),
+    p = subprocess.run([DEM, "mode", "--packing", packing, "--mode", "D2", "--rate-tc", str(cfg["rate"]),
                         "--eps-max", str(eps), "--quiet", "--force", "--out", out,
                         "--set", f"integration.dt_over_tc={cfg['dt']}", "--set", f"integration.integrator={cfg['integrator']}",
                         "--set", f"integration.skin_over_rmin={cfg['skin']}", "--set", "integration.threads=1",
@@ -83,10 +135,17 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--eps", type=float, default=0.06)
     ap.add_argument("--replot", action="store_true", help="redraw from bench/accuracy_cost.json without running")
+    ap.add_argument("--only-n", action="store_true", help="run only the N series and merge it into the JSON")
     a = ap.parse_args()
-    if a.replot:
-        with open(os.path.join(HERE, "accuracy_cost.json")) as fh:
-            report(json.load(fh), a.eps)
+    jpath = os.path.join(HERE, "accuracy_cost.json")
+    if a.replot or a.only_n:
+        with open(jpath) as fh:
+            results = json.load(fh)
+        if a.only_n:
+            results["N (spread over seeds)"] = n_series(a.eps, tempfile.mkdtemp())
+            with open(jpath, "w") as fh:
+                json.dump(results, fh, indent=2)
+        report(results, a.eps)
         return
     if not os.path.exists(PACKING):
         sys.exit(f"{PACKING} missing: run yade_ref/make_reference.sh (or its prep step) first")
@@ -111,7 +170,8 @@ def main():
             results[name].append({"config": cfg, "wall_s": wall, "error": err,
                                   "max_inertial_number": float(c["inertial_number"].max()) if c is not None else None})
             print(name, cfg, f"{wall:.1f}s", err, file=sys.stderr)
-    with open(os.path.join(HERE, "accuracy_cost.json"), "w") as fh:
+    results["N (spread over seeds)"] = n_series(a.eps, tmp)
+    with open(jpath, "w") as fh:
         json.dump(results, fh, indent=2)
     report(results, a.eps)
 
@@ -122,7 +182,10 @@ def report(results, eps):
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 3, figsize=(13, 4))
     pts = []
+    nser = results.get("N (spread over seeds)")
     for name, rs in results.items():
+        if name.startswith("N "):
+            continue
         ok = [r for r in rs if r["error"] and r["error"]["s_dev"] > 0]
         for ax, q in zip(axes, ("s_dev", "F_dev", "p_rel")):
             ax.loglog([r["wall_s"] for r in ok], [max(r["error"][q], 1e-7) for r in ok], "o-", label=name)
@@ -138,6 +201,13 @@ def report(results, eps):
     if yade:
         for ax, q in zip(axes, ("s_dev", "F_dev", "p_rel")):
             ax.loglog([yade["cpu_s"]], [yade["error"][q]], "ks", ms=9, label="YADE (dt = t_c/50, rate 1e-4)")
+    if nser:
+        for ax, q in zip(axes, ("s_dev", "F_dev", "p_rel")):
+            ax.loglog([r["wall_s"] for r in nser], [r["spread"][q] for r in nser], "D-", color="tab:purple",
+                      label="N = 1000 … 10⁵: spread over seeds")
+            for r in nser:
+                ax.annotate(f"{r['N']:g}", (r["wall_s"], r["spread"][q]), fontsize=7, xytext=(3, 3),
+                            textcoords="offset points", color="tab:purple")
     d = [r for r in results["dt (velocity Verlet)"] if r["config"]["dt"] == 0.02][0]
     for ax, q in zip(axes, ("s_dev", "F_dev", "p_rel")):
         ax.loglog([d["wall_s"]], [max(d["error"][q], 1e-7)], "r*", ms=14,
@@ -156,6 +226,8 @@ def report(results, eps):
              "| series | dt/t_c | rate·t_c | skin/r_min | integrator | CPU [s] | err s_dev | err F_dev | rel err p | max I |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for name, rs in results.items():
+        if name.startswith("N "):
+            continue
         for r in rs:
             c, e = r["config"], r["error"]
             es = ("blew up", "", "") if e is None else (f"{e['s_dev']:.2e}", f"{e['F_dev']:.2e}", f"{e['p_rel']:.2e}")
@@ -166,6 +238,18 @@ def report(results, eps):
         e = yade["error"]
         lines.append(f"| YADE 2023.02a (stored reference curve) | 0.02 | 0.0001 | | leapfrog | {yade['cpu_s']:.0f} (from "
                      f"{yade['throughput'] / 1e6:.2f} M particle-steps/s) | {e['s_dev']:.2e} | {e['F_dev']:.2e} | {e['p_rel']:.2e} | |")
+    if nser:
+        lines += ["", "## N: the spread over seeds", "",
+                  "Packings made by our runner (fast protocol: compression at 2e-4/t_c, cycle at 1e-4/t_c, "
+                  "dt = t_c/10; φ = 0.74 on the unloading branch), one per seed, then the D2 run above (default "
+                  "dt, rate, skin). Error of one run = standard deviation over seeds (RMS over ε_d); "
+                  "it falls roughly as N^(-1/2), so each factor 10 of CPU buys a factor 3 in precision.", "",
+                  "| N | seeds | CPU of one D2 run [s] | spread s_dev | spread F_dev | relative spread p |",
+                  "|---|---|---|---|---|---|"]
+        for r in nser:
+            e = r["spread"]
+            lines.append(f"| {r['N']} | {r['seeds']} | {r['wall_s']:.1f} | {e['s_dev']:.2e} | {e['F_dev']:.2e} | "
+                         f"{e['p_rel']:.2e} |")
     notes_path = os.path.join(HERE, "accuracy_cost_notes.md")
     if os.path.exists(notes_path):
         with open(notes_path) as fh:
