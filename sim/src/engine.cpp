@@ -154,18 +154,12 @@ void Engine::check_sanity() const {
     }
   }
   // Largest overlap relative to the smaller radius, over listed pairs.
-  Vec3 off[27];
-  image_offsets(s.box, off);
   double worst = 0;
   int wi = -1, wj = -1;
-  for (int i = 0; i < n; ++i)
-    for (int p = list_.first[i]; p < list_.first[i + 1]; ++p) {
-      const int j = list_.partner[p];
-      const Vec3 d = s.position[j] + off[list_.image[p]] - s.position[i];
-      const double delta = s.radius[i] + s.radius[j] - norm(d);
-      const double rel = delta / std::min(s.radius[i], s.radius[j]);
-      if (rel > worst) { worst = rel; wi = i; wj = j; }
-    }
+  for_each_contact(s, list_, [&](int i, int j, const Vec3&, double, double delta) {
+    const double rel = delta / std::min(s.radius[i], s.radius[j]);
+    if (rel > worst) { worst = rel; wi = i; wj = j; }
+  });
   if (worst > model_.max_overlap_fraction) {
     std::ostringstream m;
     m << "overlap of " << worst << " x the smaller radius between particles " << s.id[wi]

@@ -21,33 +21,25 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
   m.eps_d = deviatoric_magnitude(m.strain.x, m.strain.y, m.strain.z);
   m.nu = s.volume_fraction();
 
-  Vec3 off[27];
-  image_offsets(s.box, off);
   std::vector<int> degree(n, 0);
   std::vector<std::pair<int, int>> pairs;
   Sym3 contact_stress, fabric;
   double overlap_sum = 0;
-  for (int i = 0; i < n; ++i)
-    for (int p = list.first[i]; p < list.first[i + 1]; ++p) {
-      const int j = list.partner[p];
-      const Vec3 d = s.position[j] + off[list.image[p]] - s.position[i];
-      const double r = norm(d);
-      const double delta = s.radius[i] + s.radius[j] - r;
-      if (delta <= 0) continue;
-      const Vec3 nrm = d * (1.0 / r);
-      const Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + hadamard(rate, d);
-      const double fn = law(delta, -dot(v_rel, nrm));
-      contact_stress.add_outer(d, nrm, fn);   // branch (x) force on j, repulsion positive
-      const double vi = 4.0 / 3.0 * M_PI * s.radius[i] * s.radius[i] * s.radius[i];
-      const double vj = 4.0 / 3.0 * M_PI * s.radius[j] * s.radius[j] * s.radius[j];
-      fabric.add_outer(nrm, nrm, vi + vj);
-      m.E_pot += law.energy(delta);
-      const double rel = delta / std::min(s.radius[i], s.radius[j]);
-      m.overlap_max_rel = std::max(m.overlap_max_rel, rel);
-      overlap_sum += rel;
-      ++degree[i]; ++degree[j];
-      pairs.emplace_back(i, j);
-    }
+  for_each_contact(s, list, [&](int i, int j, const Vec3& d, double r, double delta) {
+    const Vec3 nrm = d * (1.0 / r);
+    const Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + hadamard(rate, d);
+    const double fn = law(delta, -dot(v_rel, nrm));
+    contact_stress.add_outer(d, nrm, fn);   // branch (x) force on j, repulsion positive
+    const double vi = 4.0 / 3.0 * M_PI * s.radius[i] * s.radius[i] * s.radius[i];
+    const double vj = 4.0 / 3.0 * M_PI * s.radius[j] * s.radius[j] * s.radius[j];
+    fabric.add_outer(nrm, nrm, vi + vj);
+    m.E_pot += law.energy(delta);
+    const double rel = delta / std::min(s.radius[i], s.radius[j]);
+    m.overlap_max_rel = std::max(m.overlap_max_rel, rel);
+    overlap_sum += rel;
+    ++degree[i]; ++degree[j];
+    pairs.emplace_back(i, j);
+  });
   m.contacts = static_cast<long>(pairs.size());
   m.overlap_mean_rel = m.contacts ? overlap_sum / m.contacts : 0.0;
   for (int i = 0; i < n; ++i) {

@@ -9,6 +9,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "dem/contact_law.hpp"
 #include "dem/engine.hpp"
 #include "dem/io.hpp"
 #include "dem/measure.hpp"
@@ -42,28 +43,14 @@ std::string csv_preamble(const Model& m, const std::string& stage) {
 
 std::vector<int> contact_counts(const State& s, const NeighborList& list) {
   std::vector<int> c(s.count(), 0);
-  Vec3 off[27];
-  image_offsets(s.box, off);
-  for (int i = 0; i < s.count(); ++i)
-    for (int p = list.first[i]; p < list.first[i + 1]; ++p) {
-      const int j = list.partner[p];
-      const Vec3 d = s.position[j] + off[list.image[p]] - s.position[i];
-      const double reach = s.radius[i] + s.radius[j];
-      if (dot(d, d) < reach * reach) { ++c[i]; ++c[j]; }
-    }
+  for_each_contact(s, list, [&](int i, int j, const Vec3&, double, double) { ++c[i]; ++c[j]; });
   return c;
 }
 
 double potential_energy(const Model& m, const State& s, const NeighborList& list) {
-  Vec3 off[27];
-  image_offsets(s.box, off);
+  const LinearSpringDashpot law(m.contact);
   double e = 0;
-  for (int i = 0; i < s.count(); ++i)
-    for (int p = list.first[i]; p < list.first[i + 1]; ++p) {
-      const int j = list.partner[p];
-      const double delta = s.radius[i] + s.radius[j] - norm(s.position[j] + off[list.image[p]] - s.position[i]);
-      if (delta > 0) e += 0.5 * m.contact.stiffness * delta * delta;
-    }
+  for_each_contact(s, list, [&](int, int, const Vec3&, double, double delta) { e += law.energy(delta); });
   return e;
 }
 

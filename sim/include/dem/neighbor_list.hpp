@@ -10,6 +10,7 @@
 // lambda_min the smallest stretch L/L_build of the box. No unlisted pair can touch while
 //     2 u_max + 2 r_max (1/lambda_min - 1)_+  <  skin.
 #pragma once
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -58,5 +59,24 @@ inline double displacement2_since_build(const State& s, const StalenessTest& t, 
 
 /// True when the list may miss a contact (criterion in the file comment).
 bool neighbor_list_stale(const State& state, const NeighborList& list);
+
+/// Calls visit(i, j, d, r, delta) for every listed pair in contact, in list order: d is the
+/// branch vector from i to the listed image of j [m], r = |d| [m], delta = r_i + r_j - r > 0
+/// the overlap [m]. The one loop behind measurements, checks and output (not the force loop).
+template <class Visit>
+void for_each_contact(const State& s, const NeighborList& list, Visit&& visit) {
+  Vec3 off[27];
+  image_offsets(s.box, off);
+  for (int i = 0; i < s.count(); ++i)
+    for (int p = list.first[i]; p < list.first[i + 1]; ++p) {
+      const int j = list.partner[p];
+      const Vec3 d = s.position[j] + off[list.image[p]] - s.position[i];
+      const double reach = s.radius[i] + s.radius[j];
+      const double r2 = dot(d, d);
+      if (r2 >= reach * reach) continue;
+      const double r = std::sqrt(r2);
+      visit(i, j, d, r, reach - r);
+    }
+}
 
 }  // namespace dem
