@@ -301,8 +301,8 @@ void validate(const Model& m) {
          "dense packings need far less: use 0.02 (t_c/50)");
   if (!(m.skin_over_rmin > 0 && m.skin_over_rmin <= 4)) fail("integration.skin_over_rmin must be in (0, 4]");
   if (m.threads < 0) fail("integration.threads must be >= 0 (0 = all cores)");
-  if (!(m.max_overlap_fraction > 0 && m.max_overlap_fraction < 1))
-    fail("integration.max_overlap_fraction must be in (0, 1)");
+  if (!(m.max_overlap_fraction > 0 && m.max_overlap_fraction <= 2))
+    fail("integration.max_overlap_fraction must be in (0, 2]");
   if (m.check_every_steps < 1) fail("integration.check_every_steps must be >= 1");
   const Protocol& p = m.protocol;
   if (!(p.initial_phi > 0 && p.initial_phi <= 0.45))

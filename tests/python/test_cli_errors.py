@@ -35,10 +35,12 @@ def test_finished_results_are_not_overwritten(small_run):
 
 def test_blow_up_is_detected_and_the_last_good_state_kept(tmp_path):
     # A dense packing with a time step near the single-contact limit: in a packing the
-    # effective stiffness is several contacts', so the integration diverges.
+    # effective stiffness is several contacts', so the integration diverges (without damping,
+    # which would hold the growth to a transient).
     scene = tmp_path / "s.toml"
     scene.write_text(f'[particles]\npacking_file = "{PACKING}"\n[integration]\ndt_over_tc = 0.6\n'
-                     "check_every_steps = 20\n[protocol]\ntarget_phi = 0.65\ncheckpoints_unloading = [0.7]\n")
+                     "check_every_steps = 20\n[contact]\ndamping_kg_s = 0\nbackground_damping_kg_s = 0\n"
+                     "[protocol]\ntarget_phi = 0.65\ncheckpoints_unloading = [0.7]\n")
     p = run_dem("run", scene, "--out", tmp_path / "o", "--quiet", timeout=300)
     assert p.returncode == 3, p.stderr[-2000:]
     assert "blew up" in p.stderr and "dt_over_tc" in p.stderr
