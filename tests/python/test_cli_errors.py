@@ -68,3 +68,21 @@ def test_fast_shear_is_flagged_as_not_quasi_static(small_run, tmp_path):
     slow = run_dem("mode", "--packing", packing, "--mode", "D2", "--rate-tc", 1e-5, "--eps-max", 0.01,
                    "--quiet", "--out", tmp_path / "slow.csv", check=True)
     assert "not quasi-static" not in slow.stderr
+
+
+def test_fit_map_writes_one_row_per_cell_and_never_overwrites(tmp_path):
+    out = tmp_path / "map.csv"
+    args = ("fit-map", "--out", out, "--lengths", "1", "8", "--noises", "0.01", "--correlations", "0", "0.5",
+            "--trials", "10")
+    run_dem(*args, check=True)
+    rows = [r for r in out.read_text().splitlines() if not r.startswith("#")]
+    assert rows[0].startswith("length_beta_eps,noise_over_amplitude,noise_correlation,beta_rel_error_median")
+    assert len(rows) == 1 + 2 * 2
+    # the saturated, low-noise cell recovers beta to a few percent
+    cells = {tuple(r.split(",")[:3]): r.split(",") for r in rows[1:]}
+    assert float(cells[("8", "0.01", "0")][3]) < 0.05
+    p = run_dem(*args)
+    assert p.returncode == 1 and "exists" in p.stderr
+    p = run_dem("fit-map", "--out", tmp_path / "bad.csv", "--correlations", "1.0", "--trials", "5")
+    assert p.returncode == 1 and "correlation must be in [0, 1)" in p.stderr
+    assert not (tmp_path / "bad.csv").exists()
