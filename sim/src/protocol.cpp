@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <sstream>
 
@@ -269,17 +270,28 @@ std::string json_escape(const std::string& s) {
 }
 
 struct Manifest {
+  struct Output {
+    std::string stage, file;
+    std::int64_t steps = -1;   // -1: produced by an earlier invocation
+    double wall_s = 0, particle_steps_per_s = 0;
+  };
   std::string path, scene, command;
-  std::vector<std::pair<std::string, std::string>> stages;   // name, file
+  std::vector<Output> stages;
   bool complete = false;
   void save() const {
     std::ostringstream o;
     o << "{\n  \"tool\": \"dem\",\n  \"version\": \"" DEM_VERSION "\",\n  \"command\": \""
       << json_escape(command) << "\",\n  \"complete\": " << (complete ? "true" : "false")
       << ",\n  \"outputs\": [";
-    for (std::size_t i = 0; i < stages.size(); ++i)
-      o << (i ? ",\n    " : "\n    ") << "{\"stage\": \"" << json_escape(stages[i].first)
-        << "\", \"file\": \"" << json_escape(stages[i].second) << "\"}";
+    for (std::size_t i = 0; i < stages.size(); ++i) {
+      const Output& st = stages[i];
+      o << (i ? ",\n    " : "\n    ") << "{\"stage\": \"" << json_escape(st.stage) << "\", \"file\": \""
+        << json_escape(st.file) << "\"";
+      if (st.steps >= 0)
+        o << ", \"steps\": " << st.steps << ", \"wall_s\": " << st.wall_s
+          << ", \"particle_steps_per_s\": " << st.particle_steps_per_s;
+      o << "}";
+    }
     o << "\n  ]\n}\n";
     write_file_atomic(path, o.str());
   }
@@ -314,8 +326,8 @@ void run_protocol(const Model& model, const RunOptions& opt) {
   auto record = [&](const std::string& sub, const std::string& name) {
     const std::string file = (fs::path(sub) / (name + ".csv")).string();
     for (const auto& st : man.stages)
-      if (st.second == file) return;
-    man.stages.emplace_back(name, file);
+      if (st.file == file) return;
+    man.stages.push_back({name, file});
   };
   auto stage_csv = [&](const std::string& sub, const std::string& name) {
     const fs::path f = dir / sub / (name + ".csv");
@@ -323,6 +335,20 @@ void run_protocol(const Model& model, const RunOptions& opt) {
       throw std::runtime_error(f.string() + " exists: pass --force to overwrite finished results");
     record(sub, name);
     return f.string();
+  };
+  // Runs a stage and records its steps and wall time in the manifest entry of its CSV.
+  auto timed_stage = [&](State& state, const StageSpec& s, const std::string& sub,
+                         const std::function<void(double, const State&)>& on_checkpoint) {
+    const std::string csv = stage_csv(sub, s.name);
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::int64_t steps = run_stage(model, state, s, csv, vtk_dir, on_checkpoint, opt.quiet);
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    for (auto& st : man.stages)
+      if (st.stage == s.name) {
+        st.steps = steps;
+        st.wall_s = wall;
+        st.particle_steps_per_s = wall > 0 ? steps * double(state.count()) / wall : 0.0;
+      }
   };
   if (!want_prep) {   // keep the outputs of earlier invocations in the manifest
     for (const char* sub : {"prep", "deviatoric"}) {
@@ -350,12 +376,12 @@ void run_protocol(const Model& model, const RunOptions& opt) {
     // 1. isotropic compression to target_phi (skipped when the packing is already denser)
     if (phi0 < p.target_phi) {
       StageSpec s{"compress", Vec3{-1, -1, -1} * p.compress_rate, StopKind::VolumeFractionUp, p.target_phi, {}};
-      run_stage(model, state, s, stage_csv("prep", "compress"), vtk_dir, nullptr, opt.quiet);
+      timed_stage(state, s, "prep", nullptr);
     }
     // 2. relaxation at constant volume
     {
       StageSpec s{"relax", Vec3{0, 0, 0}, StopKind::Relaxed, 0, {}};
-      run_stage(model, state, s, stage_csv("prep", "relax"), vtk_dir, nullptr, opt.quiet);
+      timed_stage(state, s, "prep", nullptr);
     }
     man.save();
     // 3. cycle: load to cycle_phi_max, unload to target_phi, checkpoints on the way
@@ -373,7 +399,7 @@ void run_protocol(const Model& model, const RunOptions& opt) {
                   p.cycle_phi_max, {}};
       for (double phi : p.checkpoints_loading)
         if (phi > state.volume_fraction() && phi < p.cycle_phi_max) s.checkpoint_phis.push_back(phi);
-      run_stage(model, state, s, stage_csv("prep", "cycle_loading"), vtk_dir, save_ckpt("loading"), opt.quiet);
+      timed_stage(state, s, "prep", save_ckpt("loading"));
     }
     {
       StageSpec s{"cycle_unloading", Vec3{1, 1, 1} * p.cycle_rate, StopKind::VolumeFractionDown,
@@ -386,7 +412,7 @@ void run_protocol(const Model& model, const RunOptions& opt) {
       if (top_checkpoint) save_ckpt("unloading")(p.cycle_phi_max, state);
       const bool bottom = std::any_of(p.checkpoints_unloading.begin(), p.checkpoints_unloading.end(),
                                       [&](double f) { return f <= p.target_phi; });
-      run_stage(model, state, s, stage_csv("prep", "cycle_unloading"), vtk_dir, save_ckpt("unloading"), opt.quiet);
+      timed_stage(state, s, "prep", save_ckpt("unloading"));
       if (bottom) save_ckpt("unloading")(p.target_phi, state);
     }
     man.save();
@@ -409,7 +435,7 @@ void run_protocol(const Model& model, const RunOptions& opt) {
         State state = std::move(c.state);
         note("deviatoric " + name + " from " + ck.filename().string());
         StageSpec s{name, mode.rate_shape * p.deviatoric_rate, StopKind::DeviatoricStrain, p.eps_d_max, {}};
-        run_stage(model, state, s, stage_csv("deviatoric", name), vtk_dir, nullptr, opt.quiet);
+        timed_stage(state, s, "deviatoric", nullptr);
         man.save();
       }
     }
