@@ -1,11 +1,9 @@
 #include "dem/engine.hpp"
+#include "dem/parallel.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <sstream>
-#ifdef _OPENMP
-#include <omp.h>
-#endif
 
 namespace dem {
 
@@ -108,11 +106,8 @@ void Engine::step_threaded(const Vec3& factor, bool affine, const StalenessTest&
   worst_displacement2_.assign(threads_, 0.0);
 #pragma omp parallel num_threads(threads_)
   {
-#ifdef _OPENMP
-    const int t = omp_get_thread_num(), nt = omp_get_num_threads();
-#else
-    const int t = 0, nt = 1;
-#endif
+    const ThreadRank rank = this_thread_rank();
+    const int t = rank.index, nt = rank.count;
     // 1-3 on the blocks of the current list (any split would do: particles are independent).
     double worst = 0;
     for (int b = t; b < scratch_.blocks(); b += nt)

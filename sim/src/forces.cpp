@@ -1,10 +1,8 @@
 #include "dem/forces.hpp"
+#include "dem/parallel.hpp"
 
 #include <algorithm>
 #include <cmath>
-#ifdef _OPENMP
-#include <omp.h>
-#endif
 
 namespace dem {
 
@@ -103,11 +101,8 @@ void compute_forces(const Model& model, State& s, const NeighborList& list,
   } else {
 #pragma omp parallel num_threads(blocks)
     {
-#ifdef _OPENMP
-      const int t = omp_get_thread_num(), nt = omp_get_num_threads();
-#else
-      const int t = 0, nt = 1;
-#endif
+      const ThreadRank rank = this_thread_rank();
+      const int t = rank.index, nt = rank.count;
       for (int b = t; b < blocks; b += nt) accumulate_pair_forces(model, s, list, rate, b, scratch, f);
 #pragma omp barrier
       for (int b = t; b < blocks; b += nt) apply_spilled_forces(b, scratch, f);
