@@ -46,11 +46,11 @@ int exec_python(const std::string& module, const std::vector<std::string>& args)
 }
 
 // Integration is stable for a single contact up to dt/t_c = 2/pi (refused above), but dense
-// packings went unstable at 0.48-0.54 (docs/stability.md): warn before that.
+// packings went unstable at 0.48-0.52 (docs/stability.md): warn before that.
 void warn_time_step(const dem::Model& m) {
   if (m.dt_over_tc > 0.45)
     std::fprintf(stderr, "dem: warning: integration.dt_over_tc = %g is near the stability limit of dense packings "
-                         "(0.48-0.54 measured, docs/stability.md); expect a blow-up, or use 0.1\n", m.dt_over_tc);
+                         "(0.48-0.52 measured, docs/stability.md); expect a blow-up, or use 0.1\n", m.dt_over_tc);
 }
 
 void print_info(const dem::Model& m) {
