@@ -77,18 +77,7 @@ void print_info(const dem::Model& m) {
 
 }  // namespace
 
-// OpenMP threads that spin while waiting at a barrier are fastest on an idle machine and
-// catastrophic on a busy one (measured: 2 threads next to two other jobs on 2 cores ran 35x
-// slower than 1 thread). libgomp reads its wait policy when it is loaded, before main, so the
-// runner restarts itself once with OMP_WAIT_POLICY=passive unless the user chose a policy.
-void choose_openmp_wait_policy(char** argv) {
-  if (std::getenv("OMP_WAIT_POLICY") || std::getenv("GOMP_SPINCOUNT")) return;
-  setenv("OMP_WAIT_POLICY", "passive", 1);
-  execv("/proc/self/exe", argv);   // returns only on failure: then run with the default policy
-}
-
 int main(int argc, char** argv) {
-  choose_openmp_wait_policy(argv);
   CLI::App app{"dem: DEM runner, fitter and YADE cross-check for frictionless polydisperse spheres"};
   app.require_subcommand(1);
   std::vector<std::string> overrides;
