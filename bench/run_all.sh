@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerates every benchmark table and chart in docs/ (about 15 minutes on 2 cores; run on a
+# Regenerates every benchmark table and chart in docs/ (about 45 minutes on 2 cores; run on a
 # quiet machine). Needs: scripts/setup.sh, and for the peer codes scripts/install-deps.sh --bench.
 # The stored YADE reference (data/yade) is separate: bash yade_ref/make_reference.sh (hours).
 set -euo pipefail
