@@ -52,11 +52,20 @@ def test_live_small_d2_run_agrees_with_yade(small_run, tmp_path):
     assert abs(a["p_Pa"][0] / b["p_Pa"][0] - 1) < 1e-5
     assert abs(a["F_dev"][0] - b["F_dev"][0]) < 1e-9 and a["C"][0] == b["C"][0]
     res, _ = compare(a, b)
-    # 400 spheres: calibrated spread of one code against itself (dt changed by 0.1 %) is ~1 %
-    # in p and ~10 % of the s_dev plateau at this size; see docs/yade.md.
-    assert res["p_Pa"]["max_rel"] < 0.03, res["p_Pa"]
-    assert res["s_dev"]["rms_abs"] < 0.03, res["s_dev"]
-    assert res["C"]["rms_abs"] < 0.3, res["C"]
+    # 400 spheres are chaotic: two codes (or two integrators) follow different trajectories
+    # from the first step, and the curves differ by the sample-to-sample spread of this small
+    # packing (YADE vs ours on the three packings of this fixture: 0.007-0.031 in s_dev RMS,
+    # 2-4 % in p). The tolerance is calibrated here, on this packing, by our own code with the
+    # other integrator (velocity Verlet: as decorrelated as YADE's leapfrog is), times 4, with
+    # floors. The physics itself is pinned by the first-row identities above.
+    other = tmp_path / "ours_verlet.csv"
+    run_dem("mode", "--packing", packing, "--mode", "D2", "--rate-tc", 4e-5, "--eps-max", 0.06, "--quiet",
+            "--set", "integration.integrator=velocity_verlet", "--set", "contact.background_damping_kg_s=0",
+            "--set", "output.sample_strain=0.002", "--out", other, check=True)
+    self_res, _ = compare(a, read_curve(other))
+    assert res["p_Pa"]["max_rel"] < max(0.03, 4 * self_res["p_Pa"]["max_rel"]), (res["p_Pa"], self_res["p_Pa"])
+    assert res["s_dev"]["rms_abs"] < max(0.02, 4 * self_res["s_dev"]["rms_abs"]), (res["s_dev"], self_res["s_dev"])
+    assert res["C"]["rms_abs"] < max(0.3, 4 * self_res["C"]["rms_abs"]), (res["C"], self_res["C"])
 
 
 REF = os.path.join(ROOT, "data", "yade")
