@@ -30,6 +30,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 from demkit.curves import read_curve  # noqa: E402
+sys.path.insert(0, HERE)
+from report import write_markdown  # noqa: E402
 
 DEM = os.path.join(ROOT, "build", "dem")
 PACKING = os.path.join(ROOT, "data", "yade", "packing_phi0.740.txt")
@@ -250,13 +252,7 @@ def report(results, eps):
             e = r["spread"]
             lines.append(f"| {r['N']} | {r['seeds']} | {r['wall_s']:.1f} | {e['s_dev']:.2e} | {e['F_dev']:.2e} | "
                          f"{e['p_rel']:.2e} |")
-    notes_path = os.path.join(HERE, "accuracy_cost_notes.md")
-    if os.path.exists(notes_path):
-        with open(notes_path) as fh:
-            lines += ["", fh.read()]
-    with open(os.path.join(ROOT, "docs", "accuracy_cost.md"), "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_markdown(os.path.join(ROOT, "docs", "accuracy_cost.md"), lines, os.path.join(HERE, "accuracy_cost_notes.md"))
 
 
 if __name__ == "__main__":

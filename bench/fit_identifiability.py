@@ -17,6 +17,9 @@ import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
+sys.path.insert(0, HERE)
+from report import write_markdown  # noqa: E402
+
 DEM = os.path.join(ROOT, "build", "dem")
 CSV = os.path.join(HERE, "fit_identifiability.csv")
 # Where the N = 9261 paper-scene curves sit (data/paper_n9261/fit_parameters.md, s_dev of D2
@@ -132,12 +135,8 @@ def main():
               f"{near['beta_coverage']:.2f}. The asymptote is well determined; the rate of a single N = 9261 curve "
               "only to some 20 %, because DEM noise is strongly correlated. A longer curve does not help much "
               "(the noise, not the length, limits β there); averaging curves over packings (seeds) or a larger N does.", ""]
-    notes = os.path.join(HERE, "fit_identifiability_notes.md")
-    if os.path.exists(notes):
-        lines += [open(notes).read()]
-    with open(os.path.join(ROOT, "docs", "fit_identifiability.md"), "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_markdown(os.path.join(ROOT, "docs", "fit_identifiability.md"), lines,
+                   os.path.join(HERE, "fit_identifiability_notes.md"))
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 import decks  # noqa: E402
+from report import write_markdown  # noqa: E402
 
 DEM = os.path.join(ROOT, "build", "dem")
 PACKING = os.path.join(ROOT, "data", "packings", "n9261_phi0.70.txt")
@@ -167,13 +168,7 @@ def main():
         if p1 and p2:
             lines.append(f"| {n} | {kind} | {p1 / 1e6:.2f} M | {1e9 / p1:.1f} | {p2 / 1e6:.2f} M | {p2 / (2 * p1):.0%} | "
                          f"{r[1].get('list_rebuilds')} in {r[1].get('steps')} steps |")
-    notes = os.path.join(HERE, "benchmarks_notes.md")
-    if os.path.exists(notes):
-        with open(notes) as fh:
-            lines += ["", fh.read()]
-    with open(a.out, "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_markdown(a.out, lines, os.path.join(HERE, "benchmarks_notes.md"))
     shutil.rmtree(work, ignore_errors=True)
 
 
