@@ -143,7 +143,11 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
     double num = 0;
     for (std::size_t i = 1; i < res.size(); ++i) num += res[i] * res[i - 1];
     r.residual_autocorrelation = rss > 0 ? num / rss : 0.0;
-    const double rho = std::min(r.residual_autocorrelation, 0.95);
+    // The lag-1 estimate is biased low on short series, by about (1 + 4 rho)/n (Kendall 1954;
+    // Marriott & Pope 1954); without the correction the inflated intervals of 30-point DEM
+    // curves held the truth in only 65 % of trials (docs/fit_identifiability.md).
+    const double rho_hat = r.residual_autocorrelation;
+    const double rho = std::min(rho_hat + (1 + 4 * rho_hat) / static_cast<double>(res.size()), 0.95);
     if (o.correct_autocorrelation && rho > 0) r.se_inflation = std::sqrt((1 + rho) / (1 - rho));
   }
   r.rmse = std::sqrt(rss / r.n);
