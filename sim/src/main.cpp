@@ -13,6 +13,7 @@
 #include "dem/engine.hpp"
 #include "dem/io.hpp"
 #include "dem/measure.hpp"
+#include "dem/plan.hpp"
 #include "dem/protocol.hpp"
 #include "dem/scene.hpp"
 #include "demfit/cli.hpp"
@@ -98,8 +99,11 @@ int main(int argc, char** argv) {
   // info
   auto* info = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates)");
   std::string info_scene;
+  bool info_json = false;
   info->add_option("scene", info_scene, "scene TOML file")->required()->check(CLI::ExistingFile);
   info->add_option("--set", overrides, "override a scene key");
+  info->add_flag("--json", info_json, "print the run plan as JSON instead: members (seeds), checkpoints, modes, "
+                                      "estimated particle-steps per task (read by workflow/Snakefile)");
 
   // bench
   auto* bench = app.add_subcommand("bench", "particle-steps per second on a packing under D2");
@@ -119,7 +123,13 @@ int main(int argc, char** argv) {
   double mode_rate_tc = -1, mode_eps = -1;
   bool mode_force = false, mode_quiet = false;
   mode_cmd->add_option("--scene", mode_scene, "scene TOML for the physics (default: built-in defaults)")->check(CLI::ExistingFile);
-  mode_cmd->add_option("--packing", mode_packing, "YADE-format packing (our checkpoints/*.txt)")->required()->check(CLI::ExistingFile);
+  int mode_threads = -1;
+  mode_cmd->add_option("--packing", mode_packing, "YADE-format packing (our checkpoints/*.txt), or a checkpoint "
+                                                   "(*.ckpt: bit-exact state, the curve equals `dem run`'s)")->required()->check(CLI::ExistingFile);
+  mode_cmd->add_option("--threads", mode_threads, "OpenMP threads (overrides integration.threads)");
+  std::string mode_stage_name;
+  mode_cmd->add_option("--name", mode_stage_name, "stage name in the CSV (default: the mode's name; `dem run` uses "
+                                                  "MODE_phiX.XXX)");
   mode_cmd->add_option("--mode", mode_name, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, or a [modes] name");
   mode_cmd->add_option("--rate-tc", mode_rate_tc, "mode rate times t_c (default: protocol.deviatoric_rate_tc)");
   mode_cmd->add_option("--eps-max", mode_eps, "stop at this eps_d (default: protocol.eps_d_max)");
@@ -185,7 +195,9 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (*info) {
-      print_info(dem::load_scene_file(info_scene, overrides));
+      const dem::Model model = dem::load_scene_file(info_scene, overrides);
+      if (info_json) std::printf("%s", dem::plan_json(model).c_str());
+      else print_info(model);
       return 0;
     }
     if (*bench) {
@@ -213,14 +225,17 @@ int main(int argc, char** argv) {
       if (mode_rate_tc > 0) overrides.push_back("protocol.deviatoric_rate_tc=" + std::to_string(mode_rate_tc));
       if (mode_eps > 0) overrides.push_back("protocol.eps_d_max=" + std::to_string(mode_eps));
       overrides.push_back("protocol.modes=[\"" + mode_name + "\"]");
+      if (mode_threads >= 0) overrides.push_back("integration.threads=" + std::to_string(mode_threads));
       std::string resolved;
       dem::Model model = mode_scene.empty() ? dem::load_scene("", overrides, &resolved, "defaults")
                                             : dem::load_scene_file(mode_scene, overrides, &resolved);
       if (fs::exists(mode_out) && !mode_force)
         throw std::runtime_error(mode_out + " exists: pass --force to overwrite it");
-      dem::State state = dem::read_packing(mode_packing, model.density);
+      dem::State state = fs::path(mode_packing).extension() == ".ckpt"
+                             ? dem::read_checkpoint(mode_packing).state
+                             : dem::read_packing(mode_packing, model.density);
       const auto& m = model.protocol.modes.front();
-      dem::StageSpec spec{m.name, m.rate_shape * model.protocol.deviatoric_rate, dem::StopKind::DeviatoricStrain,
+      dem::StageSpec spec{mode_stage_name.empty() ? m.name : mode_stage_name, m.rate_shape * model.protocol.deviatoric_rate, dem::StopKind::DeviatoricStrain,
                           model.protocol.eps_d_max, {}};
       if (!mode_quiet) print_info(model);
       else warn_time_step(model);

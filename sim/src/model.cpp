@@ -21,6 +21,16 @@ PairCollision pair_collision(double k, double gamma, double m_r) {
   return {tc, std::exp(-eta * tc)};
 }
 
+unsigned long long member_seed(unsigned long long seed, int k) {
+  if (k == 0) return seed;
+  // SplitMix64 (Steele, Lea, Flood 2014) of seed and member index.
+  unsigned long long z = seed + 0x9E3779B97F4A7C15ULL * static_cast<unsigned long long>(k + 1);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+  z ^= z >> 31;
+  return z >> 11;   // 53 bits
+}
+
 void Model::finalize() {
   const double m = sphere_mass(radius_min, density);
   const PairCollision c = pair_collision(contact.stiffness, contact.damping, 0.5 * m);

@@ -14,6 +14,7 @@
 #include "dem/engine.hpp"
 #include "dem/io.hpp"
 #include "dem/measure.hpp"
+#include "dem/scene.hpp"
 
 namespace fs = std::filesystem;
 
@@ -64,13 +65,13 @@ double energy_floor(const Model& m, const State& s) {
 // Above this inertial number the deviatoric response depends visibly on the strain rate.
 constexpr double kQuasiStaticInertial = 1e-3;
 
+}  // namespace
+
 std::string fmt_phi(double phi) {
   char b[32];
   std::snprintf(b, sizeof b, "phi%.3f", phi);
   return b;
 }
-
-}  // namespace
 
 std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
                        const std::string& csv_path, const std::string& vtk_dir,
@@ -300,6 +301,10 @@ struct Manifest {
 }  // namespace
 
 void run_protocol(const Model& model, const RunOptions& opt) {
+  if (model.ensemble_packings > 1)
+    throw SceneError("ensemble.packings = " + std::to_string(model.ensemble_packings) +
+                     ": this scene is an ensemble of independent packings; run it with `dem ensemble SCENE --out DIR` "
+                     "(or pass --set ensemble.packings=1 for one packing)");
   const fs::path dir(opt.out_dir);
   const bool want_prep = opt.stages == "all" || opt.stages == "prep";
   const bool want_dev = opt.stages == "all" || opt.stages == "deviatoric";

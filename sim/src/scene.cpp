@@ -213,6 +213,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   r.get("output", "vtk", m.output.vtk);
   r.get("output", "vtk_per_stage", m.output.vtk_per_stage);
   r.get("output", "progress_seconds", m.output.progress_seconds);
+  r.get("ensemble", "packings", m.ensemble_packings);
 
   // User-defined modes: [modes] name = [rx, ry, rz]
   r.allow_any("modes");
@@ -328,6 +329,11 @@ void validate(const Model& m) {
   if (!(p.eps_d_max > 0 && p.eps_d_max <= 2)) fail("protocol.eps_d_max must be in (0, 2]");
   if (!(m.output.sample_strain > 0)) fail("output.sample_strain must be positive");
   if (m.output.relax_sample_steps < 1) fail("output.relax_sample_steps must be >= 1");
+  if (m.ensemble_packings < 1 || m.ensemble_packings > 10000)
+    fail("ensemble.packings must be in [1, 10000] (independent packings of the scene)");
+  if (m.ensemble_packings > 1 && !m.packing_file.empty())
+    fail("ensemble.packings = " + std::to_string(m.ensemble_packings) + " with particles.packing_file: every "
+         "member would start from the same packing; an ensemble needs random placements (packing_file = \"\")");
 }
 
 }  // namespace dem

@@ -83,6 +83,10 @@ struct Model {
   Protocol protocol;
   OutputOptions output;
 
+  /// [ensemble] packings: independent packings of this scene (K >= 1). Member k is the same
+  /// scene with particles.seed = member_seed(seed, k); K = 1 is a single packing.
+  int ensemble_packings = 1;
+
   // Derived quantities (filled by finalize()).
   double t_contact = 0;              ///< t_c of two radius_min spheres [s]
   double restitution = 0;            ///< e of two radius_min spheres
@@ -96,6 +100,11 @@ struct Model {
 /// Throws std::invalid_argument when the pair is overdamped (gamma^2/(4 m_r^2) >= k/m_r).
 struct PairCollision { double t_contact; double restitution; };
 PairCollision pair_collision(double stiffness, double damping, double reduced_mass);
+
+/// Seed of ensemble member k (k = 0 .. K-1): member 0 keeps `seed`, the others get
+/// well-separated seeds (SplitMix64 of seed and k, below 2^53 so TOML and JSON keep them exact),
+/// so that the ensembles of seeds 1 and 2 share no member.
+unsigned long long member_seed(unsigned long long seed, int k);
 
 /// Mass [kg] of a sphere of radius r [m] and density rho [kg/m^3].
 double sphere_mass(double radius, double density);

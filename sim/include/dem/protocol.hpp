@@ -31,6 +31,9 @@ struct RunOptions {
 /// the last good state to DIR/failed_<stage>.ckpt).
 void run_protocol(const Model& model, const RunOptions& options);
 
+/// File-name tag of a volume fraction: "phi0.700" (3 decimals; checkpoint and curve names).
+std::string fmt_phi(double phi);
+
 /// How a stage ends.
 enum class StopKind { VolumeFractionUp, VolumeFractionDown, DeviatoricStrain, Relaxed };
 

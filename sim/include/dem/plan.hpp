@@ -1,0 +1,24 @@
+// The run plan of a scene as data: which packings (ensemble members and their seeds), which
+// checkpoints, which modes, and the estimated cost of each task. workflow/Snakefile builds its
+// task graph from it (`dem info SCENE --json`), so the scene is parsed and validated in one place.
+#pragma once
+#include <string>
+
+#include "dem/model.hpp"
+
+namespace dem {
+
+/// Estimated particle-steps of one deviatoric mode run (N x steps to eps_d_max).
+double mode_particle_steps(const Model& model, const DeformationMode& mode);
+
+/// Estimated particle-steps of one preparation (compression and cycle; the relaxation, whose
+/// length depends on the packing, is counted as 20% of those).
+double prep_particle_steps(const Model& model);
+
+/// JSON: {"packings": K, "members": [{"name": "m000", "seed": S}, ...],
+///        "checkpoints": [{"phi": 0.8, "stem": "unloading_phi0.800"}, ...] (descending phi),
+///        "modes": ["D2", ...], "prep_particle_steps": P, "mode_particle_steps": {"D2": M, ...},
+///        "threads": T}
+std::string plan_json(const Model& model);
+
+}  // namespace dem
