@@ -42,16 +42,84 @@ std::string num(double v, int prec = 6) {
 
 }  // namespace
 
+void write_nu_laws(const FitsByModeQuantity& by_mode_q, const std::string& out_dir) {
+  // Linear law around the mean nu, weighted by the SEs.
+  Table laws({"mode", "quantity", "parameter", "law", "a", "se_a", "b", "se_b", "nu_ref", "r_squared", "n", "warnings"});
+  for (auto& [key, list] : by_mode_q) {
+    if (list.size() < 3) continue;
+    double nu_ref = 0;
+    for (auto& pr : list) nu_ref += pr.first;
+    nu_ref /= list.size();
+    for (const char* pname : {"x_max", "beta", "x0"}) {
+      std::vector<double> x, y, s;
+      for (auto& [phi, r] : list) {
+        const double v = std::string(pname) == "x_max" ? r.x_max : std::string(pname) == "beta" ? r.beta : r.x0;
+        const double se = std::string(pname) == "x_max" ? r.se_x_max : std::string(pname) == "beta" ? r.se_beta : r.se_x0;
+        if (!std::isfinite(v)) continue;
+        x.push_back(phi); y.push_back(v); s.push_back(std::isfinite(se) && se > 0 ? se : 0.0);
+      }
+      if (x.size() < 3) continue;
+      bool all_se = std::all_of(s.begin(), s.end(), [](double v) { return v > 0; });
+      try {
+        CurveFit cf = fit_law("linear", x, y, {y[0], 0.0}, all_se ? s : std::vector<double>{}, nu_ref);
+        std::string w;
+        for (auto& ws : cf.warnings) w += (w.empty() ? "" : "; ") + ws;
+        laws.add_row({key.first, key.second, pname, "a + b (nu - nu_ref)", num(cf.params[0]), num(cf.errors[0]),
+                      num(cf.params[1]), num(cf.errors[1]), num(nu_ref, 4), num(cf.r_squared, 4), std::to_string(cf.n), w});
+      } catch (const std::exception& ex) {
+        std::cerr << "dem fit: nu law " << key.first << " " << key.second << " " << pname << ": " << ex.what() << "\n";
+      }
+    }
+  }
+  if (!laws.rows.empty())
+    write_table_all(laws, out_dir + "/nu_laws", "Fitted parameters as linear functions of the volume fraction nu");
+
+}
+
+void write_isotropic(const std::vector<std::string>& unloading_csvs, const std::string& out_dir) {
+  std::vector<double> x, yp, yc, caux;
+  for (const auto& path : unloading_csvs) {
+    if (!fs::exists(path)) continue;
+    Table t = read_table(path);
+    const auto& nu = t.column("nu");
+    const auto& pstar = t.column("p_star");
+    const auto& cnr = t.column("C_nonrattler");
+    const auto& c = t.column("C");
+    for (std::size_t i = 0; i < nu.size(); ++i)
+      if (pstar[i] > 1e-7 && cnr[i] > 0) { x.push_back(nu[i]); yp.push_back(pstar[i]); yc.push_back(cnr[i]); caux.push_back(c[i]); }
+  }
+  Table iso({"law", "formula", "p0", "se_p0", "p1", "se_p1", "p2", "se_p2", "p3", "se_p3", "r_squared", "n"});
+  if (x.size() < 6) return;
+  const double numin = *std::min_element(x.begin(), x.end());
+  try {
+    CurveFit cf = fit_law("power", x, yc, {6.0, 5.0, numin * 0.98, 0.5});
+    iso.add_row({"C_nonrattler(nu)", "p0 + p1 (nu/p2 - 1)^p3 (p2 = nu_c)", num(cf.params[0]), num(cf.errors[0]),
+                 num(cf.params[1]), num(cf.errors[1]), num(cf.params[2]), num(cf.errors[2]), num(cf.params[3]),
+                 num(cf.errors[3]), num(cf.r_squared, 5), std::to_string(cf.n)});
+    std::vector<double> aux(x.size(), 0.0);
+    aux.insert(aux.end(), caux.begin(), caux.end());
+    CurveFit pf = fit_law("pressure", x, yp, {0.05, numin * 0.98, 0.0}, aux);
+    iso.add_row({"p_star(nu)", "p0 (nu C / p1)(-eps)(1 - p2 eps), eps = ln(p1/nu)", num(pf.params[0]), num(pf.errors[0]),
+                 num(pf.params[1]), num(pf.errors[1]), num(pf.params[2]), num(pf.errors[2]), "", "",
+                 num(pf.r_squared, 5), std::to_string(pf.n)});
+  } catch (const std::exception& ex) {
+    std::cerr << "dem fit: isotropic laws: " << ex.what() << "\n";
+  }
+  if (!iso.rows.empty())
+    write_table_all(iso, out_dir + "/isotropic", "Isotropic (unloading) branch: coordination and pressure laws");
+}
+
 int run_fit_command(const FitCommandOptions& o) {
   const fs::path run(o.run_dir);
   const fs::path dev = run / "deviatoric";
   const fs::path out = run / "fit";
-  if (!fs::is_directory(dev)) {
-    std::cerr << "dem fit: " << dev << " does not exist: give a folder written by `dem run`\n";
-    return 1;
-  }
   if (fs::exists(out / "parameters.csv") && !o.force) {
     std::cerr << "dem fit: " << out << " already holds fit results: pass --force to overwrite\n";
+    return 1;
+  }
+  if (fs::is_directory(run / "members")) return run_ensemble_fit_command(o);
+  if (!fs::is_directory(dev)) {
+    std::cerr << "dem fit: " << dev << " does not exist: give a folder written by `dem run`\n";
     return 1;
   }
   fs::create_directories(out);
@@ -80,7 +148,7 @@ int run_fit_command(const FitCommandOptions& o) {
   Table params({"mode", "nu", "quantity", "x0", "se_x0", "x_max", "se_x_max", "beta", "se_beta",
                 "corr_xmax_beta", "initial_slope", "se_initial_slope", "eps_95", "r_squared", "rmse", "n",
                 "eps_last", "gsl_max_rel_diff", "residual_autocorr", "se_inflation", "warnings"});
-  std::map<std::pair<std::string, std::string>, std::vector<std::pair<double, FitResult>>> by_mode_q;
+  FitsByModeQuantity by_mode_q;
   int warnings = 0;
   for (auto& c : curves) {
     const auto& e = c.t.column("eps_d");
@@ -140,69 +208,8 @@ int run_fit_command(const FitCommandOptions& o) {
     write_table_all(shared, (out / "shared_path").string(),
                     "D2 vs D3: F-test of one shared law against two (corrected for correlated residuals unless --independent-errors) and the largest gap between the fitted curves; same_path: p >= 0.01 or gap <= --gap-tolerance");
 
-  // Parameters against the volume fraction: linear law around the mean nu, weighted by the SEs.
-  Table laws({"mode", "quantity", "parameter", "law", "a", "se_a", "b", "se_b", "nu_ref", "r_squared", "n", "warnings"});
-  for (auto& [key, list] : by_mode_q) {
-    if (list.size() < 3) continue;
-    double nu_ref = 0;
-    for (auto& pr : list) nu_ref += pr.first;
-    nu_ref /= list.size();
-    for (const char* pname : {"x_max", "beta", "x0"}) {
-      std::vector<double> x, y, s;
-      for (auto& [phi, r] : list) {
-        const double v = std::string(pname) == "x_max" ? r.x_max : std::string(pname) == "beta" ? r.beta : r.x0;
-        const double se = std::string(pname) == "x_max" ? r.se_x_max : std::string(pname) == "beta" ? r.se_beta : r.se_x0;
-        if (!std::isfinite(v)) continue;
-        x.push_back(phi); y.push_back(v); s.push_back(std::isfinite(se) && se > 0 ? se : 0.0);
-      }
-      if (x.size() < 3) continue;
-      bool all_se = std::all_of(s.begin(), s.end(), [](double v) { return v > 0; });
-      try {
-        CurveFit cf = fit_law("linear", x, y, {y[0], 0.0}, all_se ? s : std::vector<double>{}, nu_ref);
-        std::string w;
-        for (auto& ws : cf.warnings) w += (w.empty() ? "" : "; ") + ws;
-        laws.add_row({key.first, key.second, pname, "a + b (nu - nu_ref)", num(cf.params[0]), num(cf.errors[0]),
-                      num(cf.params[1]), num(cf.errors[1]), num(nu_ref, 4), num(cf.r_squared, 4), std::to_string(cf.n), w});
-      } catch (const std::exception& ex) {
-        std::cerr << "dem fit: nu law " << key.first << " " << key.second << " " << pname << ": " << ex.what() << "\n";
-      }
-    }
-  }
-  if (!laws.rows.empty())
-    write_table_all(laws, (out / "nu_laws").string(), "Fitted parameters as linear functions of the volume fraction nu");
-
-  // Isotropic branch from the unloading leg of the cycle.
-  const fs::path unload = run / "prep" / "cycle_unloading.csv";
-  if (fs::exists(unload)) {
-    Table t = read_table(unload.string());
-    const auto& nu = t.column("nu");
-    const auto& pstar = t.column("p_star");
-    const auto& cnr = t.column("C_nonrattler");
-    const auto& c = t.column("C");
-    std::vector<double> x, yp, yc, caux;
-    for (std::size_t i = 0; i < nu.size(); ++i)
-      if (pstar[i] > 1e-7 && cnr[i] > 0) { x.push_back(nu[i]); yp.push_back(pstar[i]); yc.push_back(cnr[i]); caux.push_back(c[i]); }
-    Table iso({"law", "formula", "p0", "se_p0", "p1", "se_p1", "p2", "se_p2", "p3", "se_p3", "r_squared", "n"});
-    if (x.size() >= 6) {
-      const double numin = *std::min_element(x.begin(), x.end());
-      try {
-        CurveFit cf = fit_law("power", x, yc, {6.0, 5.0, numin * 0.98, 0.5});
-        iso.add_row({"C_nonrattler(nu)", "p0 + p1 (nu/p2 - 1)^p3 (p2 = nu_c)", num(cf.params[0]), num(cf.errors[0]),
-                     num(cf.params[1]), num(cf.errors[1]), num(cf.params[2]), num(cf.errors[2]), num(cf.params[3]),
-                     num(cf.errors[3]), num(cf.r_squared, 5), std::to_string(cf.n)});
-        std::vector<double> aux(x.size(), 0.0);
-        aux.insert(aux.end(), caux.begin(), caux.end());
-        CurveFit pf = fit_law("pressure", x, yp, {0.05, numin * 0.98, 0.0}, aux);
-        iso.add_row({"p_star(nu)", "p0 (nu C / p1)(-eps)(1 - p2 eps), eps = ln(p1/nu)", num(pf.params[0]), num(pf.errors[0]),
-                     num(pf.params[1]), num(pf.errors[1]), num(pf.params[2]), num(pf.errors[2]), "", "",
-                     num(pf.r_squared, 5), std::to_string(pf.n)});
-      } catch (const std::exception& ex) {
-        std::cerr << "dem fit: isotropic laws: " << ex.what() << "\n";
-      }
-      if (!iso.rows.empty())
-        write_table_all(iso, (out / "isotropic").string(), "Isotropic (unloading) branch: coordination and pressure laws");
-    }
-  }
+  write_nu_laws(by_mode_q, out.string());
+  write_isotropic({(run / "prep" / "cycle_unloading.csv").string()}, out.string());
   std::cerr << "dem fit: " << params.rows.size() << " fits written to " << out.string() << " (" << warnings << " warnings)\n";
   if (!o.no_plots) {
     const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.plots \"" +

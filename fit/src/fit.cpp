@@ -186,7 +186,7 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
     r.warnings.push_back("covariance could not be computed (the Jacobian is rank deficient): "
                          "the data do not determine all three parameters");
   }
-  if (r.residual_autocorrelation > 0.5)
+  if (o.residual_diagnostics && r.residual_autocorrelation > 0.5)
     r.warnings.push_back("residuals are strongly correlated (lag-1 autocorrelation " + fmt(r.residual_autocorrelation) +
                          (o.correct_autocorrelation ? "): standard errors inflated by " + fmt(r.se_inflation)
                                                     : "): standard errors assume independent points and are too small"));
@@ -203,13 +203,13 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
   const double amplitude = std::fabs(r.x_max - r.x0);
   const char* names[3] = {"x0", "x_max", "beta"};
   const double scales[3] = {amplitude, amplitude, r.beta}, ses[3] = {r.se_x0, r.se_x_max, r.se_beta};
-  for (int a = 0; a < 3; ++a)
+  for (int a = 0; a < 3 && o.residual_diagnostics; ++a)
     if (std::isfinite(ses[a]) && scales[a] > 0 && ses[a] / scales[a] > o.max_relative_error)
       r.warnings.push_back(std::string(names[a]) + " is poorly determined (standard error " +
                            fmt(100 * ses[a] / scales[a]) + "% of " + (a < 2 ? "the amplitude |x_max - x0|" : "its value") + ")");
   // Non-monotone: a reversal after the extreme much larger than the point-to-point noise
   // (estimated from second differences: var(y[i+1] - 2y[i] + y[i-1]) = 6 sigma^2 for white noise).
-  if (y.size() >= 5) {
+  if (o.residual_diagnostics && y.size() >= 5) {
     const bool rising = r.x_max >= r.x0;
     double sum2 = 0;
     for (std::size_t i = 1; i + 1 < y.size(); ++i) {

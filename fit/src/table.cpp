@@ -129,4 +129,6 @@ void write_table_all(const Table& t, const std::string& stem, const std::string&
   write_atomic(stem + ".tex", tex.str());
 }
 
+void write_text_file(const std::string& path, const std::string& content) { write_atomic(path, content); }
+
 }  // namespace demfit

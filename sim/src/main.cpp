@@ -96,6 +96,20 @@ int main(int argc, char** argv) {
   run->add_flag("--force", force, "overwrite finished results in --out");
   run->add_flag("--quiet", quiet, "no progress lines on stderr");
 
+  // ensemble: K packings through the Snakemake workflow
+  auto* ens = app.add_subcommand("ensemble", "run an ensemble scene ([ensemble] packings = K) through the Snakemake "
+                                             "workflow (workflow/Snakefile): one task per preparation and per mode; "
+                                             "run again to continue after an interruption");
+  std::string ens_scene, ens_out, ens_profile;
+  int ens_cores = 0;
+  bool ens_force = false;
+  ens->add_option("scene", ens_scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
+  ens->add_option("--out", ens_out, "results folder")->required();
+  ens->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
+  ens->add_option("--cores", ens_cores, "single-threaded tasks at once (default: all cores; with --profile: the profile's)");
+  ens->add_option("--profile", ens_profile, "Snakemake profile: slurm (workflow/profiles/slurm) or a folder");
+  ens->add_flag("--force", ens_force, "start afresh: remove the results of another scene in --out");
+
   // info
   auto* info = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates)");
   std::string info_scene;
@@ -193,6 +207,15 @@ int main(int argc, char** argv) {
       else warn_time_step(model);
       dem::run_protocol(model, o);
       return 0;
+    }
+    if (*ens) {
+      std::string resolved;
+      dem::load_scene_file(ens_scene, overrides, &resolved);
+      dem::prepare_ensemble_folder(ens_out, resolved, ens_force);
+      std::vector<std::string> args = {ens_out, "--dem", fs::canonical("/proc/self/exe").string()};
+      if (ens_cores > 0) args.insert(args.end(), {"--cores", std::to_string(ens_cores)});
+      if (!ens_profile.empty()) args.insert(args.end(), {"--profile", ens_profile});
+      return exec_python("demkit.ensemble", args);
     }
     if (*info) {
       const dem::Model model = dem::load_scene_file(info_scene, overrides);

@@ -3,10 +3,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <functional>
+#include <stdexcept>
 #include <sstream>
 #include <vector>
 
+#include "dem/io.hpp"
 #include "dem/measure.hpp"
 #include "dem/protocol.hpp"
 
@@ -48,6 +52,48 @@ std::string plan_json(const Model& m) {
     o << (i ? ", " : "") << "\"" << m.protocol.modes[i].name << "\": " << mode_particle_steps(m, m.protocol.modes[i]);
   o << "},\n  \"threads\": " << m.threads << "\n}\n";
   return o.str();
+}
+
+namespace {
+
+std::vector<std::string> lines_of(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string ln; std::getline(in, ln);) out.push_back(ln);
+  return out;
+}
+
+// The first lines of `a` that `b` lacks (a short hint of what differs).
+std::string differing_lines(const std::string& a, const std::string& b) {
+  const auto la = lines_of(a), lb = lines_of(b);
+  std::string d;
+  int shown = 0;
+  for (const auto& ln : la)
+    if (std::find(lb.begin(), lb.end(), ln) == lb.end() && shown++ < 4) d += "\n    " + ln;
+  return d;
+}
+
+}  // namespace
+
+void prepare_ensemble_folder(const std::string& dir_name, const std::string& resolved, bool force) {
+  namespace fs = std::filesystem;
+  const fs::path dir(dir_name), scene = dir / "scene.toml";
+  if (fs::exists(scene)) {
+    std::ifstream in(scene);
+    std::stringstream old;
+    old << in.rdbuf();
+    if (old.str() == resolved) return;   // the same ensemble: continue
+    if (!force)
+      throw std::runtime_error(dir_name + " holds the results of another scene (its scene.toml differs in:" +
+                               differing_lines(old.str(), resolved) +
+                               "\n  ); choose another --out, or pass --force to remove those results");
+    for (const char* sub : {"members", "ensemble", "fit", "plots", "logs", ".snakemake"}) fs::remove_all(dir / sub);
+    for (const char* f : {"scene.toml", "manifest.json"}) fs::remove(dir / f);
+  } else if (fs::exists(dir) && !fs::is_empty(dir) && !force) {
+    throw std::runtime_error(dir_name + " exists and is not an ensemble folder (no scene.toml): choose another --out");
+  }
+  fs::create_directories(dir);
+  write_file_atomic(scene.string(), resolved);
 }
 
 }  // namespace dem

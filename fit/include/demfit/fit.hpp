@@ -41,6 +41,10 @@ struct FitOptions {
   bool correct_autocorrelation = false;
   bool fix_x0 = false;            ///< hold x0 at x0_value (e.g. a curve known to start at 0)
   double x0_value = 0.0;
+  /// Judge the fit by its own residuals: autocorrelation, point-to-point noise (non-monotone
+  /// data) and residual-based standard errors (poorly determined). Off for ensemble means,
+  /// whose errors come from the spread between packings (fit_ensemble).
+  bool residual_diagnostics = true;
   double max_relative_error = 0.5;  ///< warn when SE exceeds this fraction of |x_max - x0| (x0, x_max) or of beta
 };
 

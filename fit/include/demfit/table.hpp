@@ -20,6 +20,8 @@ struct Table {
 
 /// Reads a CSV file. Throws std::runtime_error if unreadable or ragged.
 Table read_table(const std::string& path);
+/// Writes text to path atomically (path.part, then rename). Throws std::runtime_error.
+void write_text_file(const std::string& path, const std::string& content);
 /// Writes stem.csv, stem.json, stem.md, stem.tex atomically.
 void write_table_all(const Table& t, const std::string& stem, const std::string& caption);
 

@@ -1,0 +1,171 @@
+"""Driver of the ensemble workflow (workflow/Snakefile): runs Snakemake on a results folder,
+shows progress with the time left, and keeps Snakemake's own log in DIR/logs/snakemake.log.
+
+Called by `dem ensemble SCENE --out DIR` after the runner has validated the scene and written
+DIR/scene.toml; by hand:  python3 -m demkit.ensemble DIR [--cores N] [--profile slurm]
+
+Progress is measured from the files the tasks leave (status JSONs), weighted by each task's
+estimated particle-steps from `dem info --json`, so it reads the same on one machine and on a
+cluster.
+"""
+import argparse
+import glob
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SNAKEFILE = os.path.join(REPO, "workflow", "Snakefile")
+PROFILES = os.path.join(REPO, "workflow", "profiles")
+
+
+def load_plan(dem, out):
+    r = subprocess.run([dem, "info", os.path.join(out, "scene.toml"), "--json"], capture_output=True, text=True)
+    if r.returncode != 0:
+        sys.exit(f"dem ensemble: {r.stderr.strip()}")
+    return json.loads(r.stdout)
+
+
+def task_weights(plan):
+    """{status file relative to DIR: particle-steps} for every task of the plan."""
+    w = {}
+    for m in plan["members"]:
+        w[f"members/{m['name']}/prep.json"] = plan["prep_particle_steps"]
+        for c in plan["checkpoints"]:
+            phi = c["stem"].split("_", 1)[1]
+            for mode in plan["modes"]:
+                w[f"members/{m['name']}/deviatoric/{mode}_{phi}.json"] = plan["mode_particle_steps"][mode]
+    return w
+
+
+def fmt_time(s):
+    s = int(round(s))
+    return f"{s // 3600}h{s % 3600 // 60:02d}m" if s >= 3600 else f"{s // 60}m{s % 60:02d}s" if s >= 60 else f"{s}s"
+
+
+class Progress:
+    def __init__(self, out, weights, stream=sys.stderr):
+        self.out, self.weights, self.stream = out, weights, stream
+        self.total = sum(weights.values())
+        self.t0 = time.time()
+        self.done0 = self.done_weight()[1]   # work finished by an earlier run (resume)
+        self.tty = stream.isatty()
+        self.last_line = ""
+
+    def done_weight(self):
+        n, w = 0, 0.0
+        for f, wt in self.weights.items():
+            if os.path.exists(os.path.join(self.out, f)):
+                n += 1
+                w += wt
+        return n, w
+
+    def line(self):
+        n, w = self.done_weight()
+        el = time.time() - self.t0
+        new = w - self.done0
+        frac = w / self.total if self.total else 1.0
+        left = el * (self.total - w) / new if new > 0 else float("nan")
+        eta = f"~{fmt_time(left)} left" if new > 0 and w < self.total else ("reducing" if w >= self.total else "estimating")
+        return f"[ensemble] {n}/{len(self.weights)} tasks, {100 * frac:3.0f}% of the work, {fmt_time(el)} elapsed, {eta}"
+
+    def show(self, final=False):
+        ln = self.line()
+        if self.tty:
+            self.stream.write("\r" + ln.ljust(len(self.last_line)) + ("\n" if final else ""))
+        elif final or ln != self.last_line:
+            self.stream.write(ln + "\n")
+        self.stream.flush()
+        self.last_line = ln
+
+
+def snakemake_command(out, dem, cores, profile, extra):
+    cmd = ["snakemake", "-s", SNAKEFILE, "-d", out, "--config", f"dem={dem}", f"python={sys.executable}",
+           "--rerun-incomplete", "--keep-going", "--printshellcmds", "--nocolor"]
+    if profile:
+        path = profile if os.sep in profile else os.path.join(PROFILES, profile)
+        if not os.path.isdir(path):
+            sys.exit(f"dem ensemble: no Snakemake profile '{profile}' (shipped: "
+                     f"{', '.join(sorted(os.listdir(PROFILES)))}; or give a folder with a config.yaml)")
+        cmd += ["--profile", path]
+    if cores:
+        cmd += ["--cores", str(cores)]
+    elif not profile:
+        cmd += ["--cores", str(os.cpu_count() or 1)]
+    return cmd + list(extra)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description="run the ensemble workflow on a results folder")
+    ap.add_argument("out", help="results folder holding scene.toml (written by `dem ensemble`)")
+    ap.add_argument("--dem", default=os.path.join(REPO, "build", "dem"), help="the dem executable")
+    ap.add_argument("--cores", type=int, default=0, help="parallel single-threaded tasks (default: all cores)")
+    ap.add_argument("--profile", default="", help="Snakemake profile: 'slurm' (shipped) or a folder")
+    ap.add_argument("--progress-seconds", type=float, default=5.0)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    extra = argv[argv.index("--") + 1:] if "--" in argv else []   # after --: more Snakemake arguments
+    a = ap.parse_args(argv[:len(argv) - len(extra) - (1 if "--" in argv else 0)])
+    if shutil.which("snakemake") is None:
+        sys.exit("dem ensemble: snakemake is not installed (Debian package 'snakemake'; scripts/install-deps.sh installs it)")
+    out = os.path.abspath(a.out)
+    dem = os.path.abspath(a.dem)
+    plan = load_plan(dem, out)
+    os.makedirs(os.path.join(out, "logs"), exist_ok=True)
+    log_path = os.path.join(out, "logs", "snakemake.log")
+    env = dict(os.environ)
+    env["PYTHONPATH"] = REPO + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env.setdefault("OMP_WAIT_POLICY", "passive")   # single-threaded tasks: never spin on shared cores
+    prog = Progress(out, task_weights(plan))
+    sys.stderr.write(f"dem ensemble: {plan['packings']} packings x {len(plan['checkpoints'])} volume fractions x "
+                     f"{len(plan['modes'])} modes = {len(prog.weights)} tasks + reduce, "
+                     f"{prog.total / 1e9:.1f}e9 particle-steps (estimated); Snakemake log: {log_path}\n")
+    cmd = snakemake_command(out, dem, a.cores, a.profile, extra)
+    with open(log_path, "a") as log:
+        log.write(f"\n=== {time.strftime('%Y-%m-%d %H:%M:%S')} {' '.join(cmd)}\n")
+        log.flush()
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)
+        try:
+            while proc.poll() is None:
+                prog.show()
+                try:
+                    proc.wait(timeout=a.progress_seconds)
+                except subprocess.TimeoutExpired:
+                    pass
+        except KeyboardInterrupt:
+            proc.terminate()
+            proc.wait()
+            prog.show(final=True)
+            sys.stderr.write("dem ensemble: interrupted; run the same command again to continue where it stopped\n")
+            return 130
+    prog.show(final=True)
+    if proc.returncode != 0:
+        sys.stderr.write(f"dem ensemble: Snakemake failed (exit {proc.returncode}); the end of {log_path}:\n")
+        with open(log_path) as fh:
+            tail = fh.readlines()[-25:]
+        sys.stderr.write("".join("    " + ln for ln in tail))
+        sys.stderr.write("dem ensemble: finished tasks are kept; run the same command again to continue\n")
+        return 1
+    report_members(out)
+    sys.stderr.write(f"dem ensemble: done in {fmt_time(time.time() - prog.t0)}: averages in {out}/ensemble, "
+                     f"fit tables in {out}/fit, plots in {out}/plots\n")
+    return 0
+
+
+def report_members(out):
+    bad = []
+    for f in sorted(glob.glob(os.path.join(out, "members", "*", "**", "*.json"), recursive=True)):
+        if os.path.basename(f) == "manifest.json":
+            continue
+        with open(f) as fh:
+            st = json.load(fh)
+        if st.get("status") not in (None, "complete"):
+            bad.append(f"{os.path.relpath(f, out)}: {st['status']}: {st.get('message') or st.get('reason', '')}")
+    for b in bad:
+        sys.stderr.write(f"dem ensemble: warning: {b}\n")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,164 @@
+"""Plots of an ensemble folder (written by `dem fit DIR` after `dem ensemble`):
+
+  plots/ensemble_<quantity>.png/.svg   mean curve and 95 % band of every (mode, nu): s_dev, F_dev, p_star, C
+  plots/fit_<mode>_phiX.XXX.png/.svg   s_dev and F_dev: mean, band, members (thin) and the fitted law
+  plots/fit_parameters.png/.svg        x_max and beta against nu with their 95 % intervals
+  plots/isotropic.png/.svg             p_star and C* on the unloading branch of every member
+
+    python3 -m demkit.ensemble_plots DIR
+"""
+import csv
+import glob
+import os
+import re
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from demkit.curves import read_curve  # noqa: E402
+from demkit.plots import LABELS, law, save  # noqa: E402
+
+NAME_RE = re.compile(r"([A-Za-z0-9_]+)_phi([0-9.]+)\.csv$")
+
+
+def ensemble_curves(run):
+    out = []
+    for f in sorted(glob.glob(os.path.join(run, "ensemble", "*_phi*.csv"))):
+        m = NAME_RE.search(os.path.basename(f))
+        if m:
+            out.append((m.group(1), float(m.group(2)), read_curve(f)))
+    return out
+
+
+def read_rows(path):
+    if not os.path.exists(path):
+        return []
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def plot_bands(run, outdir, curves):
+    nus = sorted({nu for _, nu, _ in curves})
+    cmap = plt.get_cmap("viridis")
+    written = []
+    for q in ("s_dev", "F_dev", "p_star", "C"):
+        fig, ax = plt.subplots(figsize=(6.4, 4.4))
+        for mode, nu, c in curves:
+            color = cmap(nus.index(nu) / max(1, len(nus) - 1))
+            ax.fill_between(c["eps_d"], c[q + "_lo95"], c[q + "_hi95"], color=color, alpha=0.25, lw=0)
+            ax.plot(c["eps_d"], c[q + "_mean"], "-" if mode == "D2" else "--", color=color, lw=1.3,
+                    label=f"{mode} ν={nu:.3f}")
+        k = int(curves[0][2]["n_packings"][0])
+        ax.set_title(f"mean of {k} packings, 95 % confidence band", fontsize=9)
+        ax.set_xlabel(r"deviatoric strain $\varepsilon_d$")
+        ax.set_ylabel(LABELS[q])
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=2)
+        fig.tight_layout()
+        stem = os.path.join(outdir, f"ensemble_{q}")
+        save(fig, stem)
+        written.append(stem + ".png")
+    return written
+
+
+def member_curve(run, member, mode, nu, q):
+    f = os.path.join(run, "members", member, "deviatoric", f"{mode}_phi{nu:.3f}.csv")
+    return read_curve(f) if os.path.exists(f) else None
+
+
+def plot_fit_cells(run, outdir, curves, rows):
+    members = sorted(os.path.basename(d) for d in glob.glob(os.path.join(run, "members", "m*")))
+    written = []
+    for mode, nu, c in curves:
+        fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+        for ax, q in zip(axes, ("s_dev", "F_dev")):
+            for m in members:
+                mc = member_curve(run, m, mode, nu, q)
+                if mc is not None:
+                    ax.plot(mc["eps_d"], mc[q], "-", color="0.75", lw=0.6)
+            e = c["eps_d"]
+            ax.fill_between(e, c[q + "_lo95"], c[q + "_hi95"], color="C0", alpha=0.3, lw=0, label="95 % band of the mean")
+            ax.plot(e, c[q + "_mean"], "C0-", lw=1.2, label=f"mean of {int(c['n_packings'][0])} packings (members grey)")
+            r = [r for r in rows if r["mode"] == mode and abs(float(r["nu"]) - nu) < 1e-6 and r["quantity"] == q]
+            if r and r[0]["x_max"] != "nan":
+                p = [float(r[0][n]) for n in ("x0", "x_max", "beta")]
+                ax.plot(e, law(*p, e), "r--", lw=1.2,
+                        label=f"fit: $x_{{max}}$={p[1]:.3g} [{float(r[0]['x_max_lo95']):.3g}, {float(r[0]['x_max_hi95']):.3g}], "
+                              f"β={p[2]:.3g} [{float(r[0]['beta_lo95']):.3g}, {float(r[0]['beta_hi95']):.3g}]")
+            ax.set_xlabel(r"$\varepsilon_d$"); ax.set_ylabel(LABELS[q]); ax.grid(alpha=0.3); ax.legend(fontsize=7)
+        fig.suptitle(f"{mode}, ν = {nu:.3f}")
+        fig.tight_layout()
+        stem = os.path.join(outdir, f"fit_{mode}_phi{nu:.3f}")
+        save(fig, stem)
+        written.append(stem + ".png")
+    return written
+
+
+def plot_parameters(outdir, rows):
+    if not rows:
+        return []
+    fig, axes = plt.subplots(2, 2, figsize=(9, 6))
+    for k, q in enumerate(("s_dev", "F_dev")):
+        for j, par in enumerate(("x_max", "beta")):
+            ax = axes[j, k]
+            for mode, marker, dx in (("D2", "o", -0.001), ("D3", "s", 0.001)):
+                sel = [r for r in rows if r["mode"] == mode and r["quantity"] == q and r[par] != "nan"]
+                if not sel:
+                    continue
+                nu = np.array([float(r["nu"]) for r in sel]) + dx
+                v = np.array([float(r[par]) for r in sel])
+                lo = np.array([float(r[par + "_lo95"]) for r in sel])
+                hi = np.array([float(r[par + "_hi95"]) for r in sel])
+                ax.errorbar(nu, v, yerr=[np.nan_to_num(v - lo), np.nan_to_num(hi - v)], fmt=marker, capsize=3, label=mode)
+            ax.set_xlabel("ν"); ax.set_ylabel(f"{par} of {q}"); ax.grid(alpha=0.3); ax.legend(fontsize=8)
+    fig.suptitle("fitted to the ensemble mean; bars: 95 % intervals between packings", fontsize=9)
+    fig.tight_layout()
+    stem = os.path.join(outdir, "fit_parameters")
+    save(fig, stem)
+    return [stem + ".png"]
+
+
+def plot_isotropic(run, outdir):
+    files = sorted(glob.glob(os.path.join(run, "members", "m*", "prep", "cycle_unloading.csv")))
+    if not files:
+        return []
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for f in files:
+        c = read_curve(f)
+        axes[0].semilogy(c["nu"], np.maximum(c["p_star"], 1e-9), "-", lw=0.8)
+        axes[1].plot(c["nu"], c["C_nonrattler"], "-", lw=0.8)
+    axes[0].set_xlabel("volume fraction ν"); axes[0].set_ylabel(LABELS["p_star"])
+    axes[1].set_xlabel("volume fraction ν"); axes[1].set_ylabel("C* (without rattlers)")
+    fig.suptitle(f"unloading branch of {len(files)} packings", fontsize=9)
+    for a in axes:
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    stem = os.path.join(outdir, "isotropic")
+    save(fig, stem)
+    return [stem + ".png"]
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 1 or not os.path.isdir(argv[0]):
+        print("usage: python3 -m demkit.ensemble_plots ENSEMBLE_DIR", file=sys.stderr)
+        return 2
+    run = argv[0]
+    outdir = os.path.join(run, "plots")
+    os.makedirs(outdir, exist_ok=True)
+    curves = ensemble_curves(run)
+    rows = read_rows(os.path.join(run, "fit", "parameters.csv"))
+    written = []
+    if curves:
+        written += plot_bands(run, outdir, curves) + plot_fit_cells(run, outdir, curves, rows)
+    written += plot_parameters(outdir, rows) + plot_isotropic(run, outdir)
+    print(f"dem plot: {len(written)} figures in {outdir}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

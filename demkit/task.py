@@ -1,0 +1,78 @@
+"""One workflow task: run a `dem` command, keep its stderr in a log, write a status file.
+
+    python3 -m demkit.task --status S.json --log L.log [--requires P.json] -- dem ARGS...
+
+Exit codes of `dem` (README): 0 done, 3 blow-up. A blow-up is a result of the simulation, not a
+failure of the task: the status file says `blew_up` with the runner's message, the reduce step
+reports the member and leaves it out of the averages. Any other exit code fails the task (the
+workflow stops it and retries it on the next run). `--requires` names the status file of the
+task this one builds on: if that one did not complete, this task is skipped with a status
+saying why (so a packing whose preparation blew up is reported, not silently dropped).
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+
+def write_json_atomic(path, obj):
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    tmp = path + ".part"
+    with open(tmp, "w") as fh:
+        json.dump(obj, fh, indent=1)
+        fh.write("\n")
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def last_error_line(log_path):
+    try:
+        with open(log_path) as fh:
+            lines = [ln.strip() for ln in fh if ln.strip()]
+    except OSError:
+        return ""
+    for ln in reversed(lines):
+        if ln.startswith("dem"):
+            return ln
+    return lines[-1] if lines else ""
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--status", help="status JSON to write (complete | blew_up | skipped)")
+    ap.add_argument("--log", required=True, help="file for the command's stderr")
+    ap.add_argument("--requires", help="status JSON of the task this one builds on")
+    ap.add_argument("command", nargs=argparse.REMAINDER)
+    a = ap.parse_args(argv)
+    cmd = a.command[1:] if a.command and a.command[0] == "--" else a.command
+    if not cmd:
+        ap.error("no command after --")
+    if a.requires:
+        with open(a.requires) as fh:
+            before = json.load(fh)
+        if before.get("status") != "complete":
+            write_json_atomic(a.status, {"status": "skipped", "command": cmd,
+                                         "reason": f"{a.requires}: {before.get('status')}: {before.get('message', '')}"})
+            return 0
+    os.makedirs(os.path.dirname(a.log) or ".", exist_ok=True)
+    t0 = time.time()
+    with open(a.log, "w") as log:
+        rc = subprocess.run(cmd, stderr=log, stdout=log).returncode
+    wall = time.time() - t0
+    if rc not in (0, 3):
+        sys.stderr.write(f"demkit.task: {' '.join(cmd)} exited {rc}: {last_error_line(a.log)} (log: {a.log})\n")
+        return rc
+    if a.status:
+        status = {"status": "complete" if rc == 0 else "blew_up", "exit_code": rc, "wall_s": round(wall, 3),
+                  "command": cmd, "host": os.uname().nodename}
+        if rc == 3:
+            status["message"] = last_error_line(a.log)
+        write_json_atomic(a.status, status)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,290 @@
+#include "demfit/ensemble.hpp"
+
+#include <gsl/gsl_cdf.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+
+namespace demfit {
+
+namespace {
+
+const double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+std::string fmt(double v) {
+  std::ostringstream o;
+  o.precision(3);
+  o << v;
+  return o.str();
+}
+
+// Mean over the members listed in `use` (indices, repeats allowed) at every grid point.
+std::vector<double> mean_of(const std::vector<std::vector<double>>& members, const std::vector<int>& use) {
+  std::vector<double> m(members.front().size(), 0.0);
+  for (int k : use)
+    for (std::size_t i = 0; i < m.size(); ++i) m[i] += members[k][i];
+  for (double& v : m) v /= static_cast<double>(use.size());
+  return m;
+}
+
+std::array<double, 3> params_of(const FitResult& r) { return {r.x0, r.x_max, r.beta}; }
+
+// Jackknife standard error of a statistic from its leave-one-out values.
+double jackknife_se(const std::vector<double>& loo) {
+  const double k = static_cast<double>(loo.size());
+  const double mean = std::accumulate(loo.begin(), loo.end(), 0.0) / k;
+  double s = 0;
+  for (double v : loo) s += (v - mean) * (v - mean);
+  return std::sqrt((k - 1) / k * s);
+}
+
+double sample_sd(const std::vector<double>& v) {
+  if (v.size() < 2) return kNaN;
+  const double mean = std::accumulate(v.begin(), v.end(), 0.0) / v.size();
+  double s = 0;
+  for (double x : v) s += (x - mean) * (x - mean);
+  return std::sqrt(s / (v.size() - 1));
+}
+
+double quantile(std::vector<double> v, double q) {
+  std::sort(v.begin(), v.end());
+  const double pos = q * (v.size() - 1);
+  const std::size_t i = static_cast<std::size_t>(pos);
+  return i + 1 < v.size() ? v[i] + (pos - i) * (v[i + 1] - v[i]) : v.back();
+}
+
+// The largest drop of the mean after its running extreme, judged against the spread of the
+// same drop between members; warns when it is significant (one-sided 99.9 %) and material.
+void check_monotone(const std::vector<std::vector<double>>& members, const std::vector<double>& mean, bool rising,
+                    std::vector<std::string>& warnings) {
+  const int K = static_cast<int>(members.size());
+  const double range = *std::max_element(mean.begin(), mean.end()) - *std::min_element(mean.begin(), mean.end());
+  std::size_t ext = 0;
+  double best_t = 0, best_drop = 0;
+  for (std::size_t i = 1; i < mean.size(); ++i) {
+    if (rising ? mean[i] > mean[ext] : mean[i] < mean[ext]) { ext = i; continue; }
+    const double drop = rising ? mean[ext] - mean[i] : mean[i] - mean[ext];
+    if (drop <= 0.05 * range) continue;
+    std::vector<double> d(K);
+    for (int k = 0; k < K; ++k) d[k] = rising ? members[k][ext] - members[k][i] : members[k][i] - members[k][ext];
+    const double se = sample_sd(d) / std::sqrt(static_cast<double>(K));
+    const double t = se > 0 ? drop / se : std::numeric_limits<double>::infinity();
+    if (t > best_t) { best_t = t; best_drop = drop; }
+  }
+  if (best_t > t_quantile(0.999, K - 1))
+    warnings.push_back("the ensemble mean reverses by " + fmt(best_drop) + " after its extreme (t = " + fmt(best_t) +
+                       " against the spread between packings, significant at 99.9 %): the saturating law does not "
+                       "describe this curve");
+}
+
+}  // namespace
+
+std::vector<double> resample(const std::vector<double>& x, const std::vector<double>& y, const std::vector<double>& grid) {
+  if (x.size() != y.size() || x.size() < 2) throw std::invalid_argument("resample: need >= 2 points of equal-length x and y");
+  for (std::size_t i = 1; i < x.size(); ++i)
+    if (!(x[i] > x[i - 1])) throw std::invalid_argument("resample: strain does not increase at row " + std::to_string(i));
+  std::vector<double> out(grid.size());
+  std::size_t j = 0;
+  for (std::size_t i = 0; i < grid.size(); ++i) {
+    const double g = grid[i];
+    if (g < x.front() || g > x.back()) throw std::invalid_argument("resample: grid point " + fmt(g) + " outside the curve");
+    while (j + 2 < x.size() && x[j + 1] < g) ++j;
+    const double w = (g - x[j]) / (x[j + 1] - x[j]);
+    out[i] = w == 0 ? y[j] : w == 1 ? y[j + 1] : y[j] + w * (y[j + 1] - y[j]);
+  }
+  return out;
+}
+
+double t_quantile(double q, double dof) { return dof > 0 ? gsl_cdf_tdist_Pinv(q, dof) : kNaN; }
+
+Band band(const std::vector<std::vector<double>>& members, double level) {
+  Band b;
+  b.n = static_cast<int>(members.size());
+  if (b.n == 0) throw std::invalid_argument("band: no members");
+  const std::size_t n = members.front().size();
+  for (auto& m : members)
+    if (m.size() != n) throw std::invalid_argument("band: members differ in length");
+  const double t = t_quantile(0.5 * (1 + level), b.n - 1);
+  std::vector<double> col(b.n);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int k = 0; k < b.n; ++k) col[k] = members[k][i];
+    const double mean = std::accumulate(col.begin(), col.end(), 0.0) / b.n;
+    const double sd = sample_sd(col), se = sd / std::sqrt(static_cast<double>(b.n));
+    b.mean.push_back(mean);
+    b.sd.push_back(sd);
+    b.se.push_back(se);
+    b.lo.push_back(mean - t * se);
+    b.hi.push_back(mean + t * se);
+  }
+  return b;
+}
+
+EnsembleFit fit_ensemble(const std::vector<double>& grid, const std::vector<std::vector<double>>& members,
+                         const EnsembleFitOptions& o) {
+  const int K = static_cast<int>(members.size());
+  if (K == 0) throw std::invalid_argument("fit_ensemble: no members");
+  EnsembleFit r;
+  r.packings = K;
+  r.boot_se.fill(kNaN); r.boot_lo.fill(kNaN); r.boot_hi.fill(kNaN);
+  r.member_mean.fill(kNaN); r.member_sd.fill(kNaN);
+  if (K == 1) {   // one packing: the single-curve path with its limits stated
+    FitOptions fo = o.fit;
+    fo.correct_autocorrelation = true;
+    r.fit = fit_saturating(grid, members[0], fo);
+    r.error_method = "AR(1) residuals of one curve";
+    const double z = t_quantile(0.5 * (1 + o.level), 1e9);
+    const auto p = params_of(r.fit);
+    const double se[3] = {r.fit.se_x0, r.fit.se_x_max, r.fit.se_beta};
+    for (int a = 0; a < 3; ++a) { r.lo[a] = p[a] - z * se[a]; r.hi[a] = p[a] + z * se[a]; }
+    r.fit.warnings.push_back("one packing: errors from the curve's own correlated residuals, which under-cover "
+                             "(docs/fit_identifiability.md); set [ensemble] packings >= 4 for errors between packings");
+    return r;
+  }
+  FitOptions fo = o.fit;
+  fo.residual_diagnostics = false;   // the mean's residuals say nothing about the packings
+  fo.correct_autocorrelation = false;
+  std::vector<int> all(K);
+  std::iota(all.begin(), all.end(), 0);
+  const std::vector<double> mean = mean_of(members, all);
+  r.fit = fit_saturating(grid, mean, fo);
+  r.error_method = "jackknife over packings";
+  const auto est = params_of(r.fit);
+
+  // Jackknife: the same fit with each member left out.
+  std::vector<std::vector<double>> loo(4);   // x0, x_max, beta, initial slope
+  int failed = 0;
+  for (int k = 0; k < K; ++k) {
+    std::vector<int> use;
+    for (int j = 0; j < K; ++j)
+      if (j != k) use.push_back(j);
+    FitResult f;
+    try { f = fit_saturating(grid, mean_of(members, use), fo); } catch (const std::exception&) { f.ok = false; }
+    if (!f.ok) ++failed;
+    r.leave_one_out.push_back(params_of(f));
+    loo[0].push_back(f.x0); loo[1].push_back(f.x_max); loo[2].push_back(f.beta);
+    loo[3].push_back(f.beta * (f.x_max - f.x0));
+  }
+  const double t = t_quantile(0.5 * (1 + o.level), K - 1);
+  double se[4];
+  for (int a = 0; a < 4; ++a) se[a] = jackknife_se(loo[a]);
+  r.fit.se_x0 = fo.fix_x0 ? kNaN : se[0];
+  r.fit.se_x_max = se[1];
+  r.fit.se_beta = se[2];
+  r.fit.se_initial_slope = se[3];
+  r.fit.se_inflation = 1;
+  for (int a = 0; a < 3; ++a) {
+    r.lo[a] = est[a] - t * se[a];
+    r.hi[a] = est[a] + t * se[a];
+    for (int b = 0; b < 3; ++b) {
+      // jackknife covariance of the leave-one-out values about their mean
+      double ma = std::accumulate(loo[a].begin(), loo[a].end(), 0.0) / K, mb = std::accumulate(loo[b].begin(), loo[b].end(), 0.0) / K;
+      double c = 0;
+      for (int k = 0; k < K; ++k) c += (loo[a][k] - ma) * (loo[b][k] - mb);
+      c *= (K - 1.0) / K;
+      r.fit.corr[a][b] = se[a] > 0 && se[b] > 0 ? c / (se[a] * se[b]) : kNaN;
+    }
+  }
+
+  // Bootstrap over packings (cross-check; percentile interval).
+  if (o.bootstrap > 0) {
+    std::mt19937_64 rng(o.seed);
+    std::uniform_int_distribution<int> pick(0, K - 1);
+    std::vector<std::vector<double>> bs(3);
+    for (int b = 0; b < o.bootstrap; ++b) {
+      std::vector<int> use(K);
+      for (int& u : use) u = pick(rng);
+      try {
+        const FitResult f = fit_saturating(grid, mean_of(members, use), fo);
+        if (!f.ok) continue;
+        bs[0].push_back(f.x0); bs[1].push_back(f.x_max); bs[2].push_back(f.beta);
+      } catch (const std::exception&) {
+      }
+    }
+    if (bs[0].size() >= 10)
+      for (int a = 0; a < 3; ++a) {
+        r.boot_se[a] = sample_sd(bs[a]);
+        r.boot_lo[a] = quantile(bs[a], 0.5 * (1 - o.level));
+        r.boot_hi[a] = quantile(bs[a], 0.5 * (1 + o.level));
+      }
+  }
+
+  // Each member alone: how much one packing scatters (reported, not used for the errors).
+  if (o.member_fits) {
+    std::vector<std::vector<double>> mf(3);
+    for (const auto& m : members) {
+      try {
+        const FitResult f = fit_saturating(grid, m, fo);
+        if (!f.ok) continue;
+        mf[0].push_back(f.x0); mf[1].push_back(f.x_max); mf[2].push_back(f.beta);
+      } catch (const std::exception&) {
+      }
+    }
+    r.member_fits_ok = static_cast<int>(mf[0].size());
+    for (int a = 0; a < 3 && !mf[a].empty(); ++a) {
+      r.member_mean[a] = std::accumulate(mf[a].begin(), mf[a].end(), 0.0) / mf[a].size();
+      r.member_sd[a] = sample_sd(mf[a]);
+    }
+  }
+
+  // Warnings the ensemble supports.
+  auto& w = r.fit.warnings;
+  if (failed > 0)
+    w.push_back(std::to_string(failed) + " of " + std::to_string(K) + " leave-one-out fits did not converge: the "
+                "errors are unreliable");
+  if (K == 2)
+    w.push_back("only 2 packings: intervals use t_1 = 12.7 and are wide; 4 or more packings make them useful");
+  const double amplitude = std::fabs(r.fit.x_max - r.fit.x0);
+  const char* names[3] = {"x0", "x_max", "beta"};
+  const double scales[3] = {amplitude, amplitude, r.fit.beta};
+  for (int a = 0; a < 3; ++a)
+    if (std::isfinite(se[a]) && scales[a] > 0 && se[a] / scales[a] > fo.max_relative_error)
+      w.push_back(std::string(names[a]) + " is poorly determined (standard error between packings " +
+                  fmt(100 * se[a] / scales[a]) + "% of " + (a < 2 ? "the amplitude |x_max - x0|" : "its value") + ")");
+  std::vector<std::vector<double>> in_window;
+  std::vector<double> mean_w;
+  for (const auto& m : members) {
+    std::vector<double> v;
+    for (std::size_t i = 0; i < grid.size(); ++i)
+      if (grid[i] >= fo.window_min && grid[i] <= fo.window_max) v.push_back(m[i]);
+    in_window.push_back(v);
+  }
+  for (std::size_t i = 0; i < grid.size(); ++i)
+    if (grid[i] >= fo.window_min && grid[i] <= fo.window_max) mean_w.push_back(mean[i]);
+  if (mean_w.size() >= 3) check_monotone(in_window, mean_w, r.fit.x_max >= r.fit.x0, w);
+  return r;
+}
+
+EnsembleSharedPath test_shared_path_ensemble(const EnsembleFit& a, const EnsembleFit& b, double alpha) {
+  EnsembleSharedPath t;
+  const int K = a.packings;
+  if (K < 2 || b.packings != K || a.leave_one_out.size() != static_cast<std::size_t>(K) ||
+      b.leave_one_out.size() != static_cast<std::size_t>(K))
+    throw std::invalid_argument("shared-path test needs the same K >= 2 packings in both modes");
+  t.packings = K;
+  const auto pa = params_of(a.fit), pb = params_of(b.fit);
+  double pmin = 1;
+  for (int j = 0; j < 3; ++j) {
+    std::vector<double> d(K);
+    for (int k = 0; k < K; ++k) d[k] = b.leave_one_out[k][j] - a.leave_one_out[k][j];
+    t.difference[j] = pb[j] - pa[j];
+    t.se[j] = jackknife_se(d);
+    const double tj = t.se[j] > 0 ? std::fabs(t.difference[j]) / t.se[j] : (t.difference[j] == 0 ? 0 : 1e300);
+    t.p[j] = 2 * gsl_cdf_tdist_Q(tj, K - 1);
+    pmin = std::min(pmin, t.p[j]);
+  }
+  t.p_value = std::min(1.0, 3 * pmin);
+  const double lo = 0, hi = std::min(a.fit.e_last, b.fit.e_last);
+  for (int k = 0; k <= 200; ++k) {
+    const double x = lo + (hi - lo) * k / 200.0;
+    t.max_gap = std::max(t.max_gap, std::fabs(saturating(pb[0], pb[1], pb[2], x) - saturating(pa[0], pa[1], pa[2], x)));
+  }
+  t.same_path = t.p_value >= alpha;
+  return t;
+}
+
+}  // namespace demfit

@@ -1,0 +1,263 @@
+// `dem fit DIR` on an ensemble folder: members -> ensemble averages -> fits with errors
+// between packings -> tables (same formats as a single run) -> plots.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <regex>
+#include <set>
+#include <sstream>
+
+#include "demfit/cli.hpp"
+#include "demfit/ensemble.hpp"
+#include "demfit/table.hpp"
+
+namespace fs = std::filesystem;
+
+namespace demfit {
+
+namespace {
+
+std::string num(double v, int prec = 6) {
+  if (!std::isfinite(v)) return "nan";
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*g", prec, v);
+  return b;
+}
+
+// Value of "key": "..." in a flat JSON object (our own status files).
+std::string json_field(const std::string& text, const std::string& key) {
+  const std::regex re("\"" + key + "\"\\s*:\\s*\"((?:[^\"\\\\]|\\\\.)*)\"");
+  std::smatch m;
+  return std::regex_search(text, m, re) ? m[1].str() : "";
+}
+
+struct MemberStatus { std::string member, status, message; };
+
+// One (mode, nu) of the ensemble: the members that finished, and those that did not.
+struct Cell {
+  std::string mode, tag;   // tag: "phi0.800"
+  double nu = 0;
+  std::vector<std::string> members;
+  std::vector<Table> curves;
+  std::vector<MemberStatus> excluded;
+};
+
+std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run) {
+  const std::regex name_re(R"(([A-Za-z0-9_]+)_(phi([0-9.]+))\.json)");
+  std::map<std::pair<std::string, double>, Cell> cells;
+  std::vector<fs::path> member_dirs;
+  for (auto& d : fs::directory_iterator(run / "members"))
+    if (d.is_directory()) member_dirs.push_back(d.path());
+  std::sort(member_dirs.begin(), member_dirs.end());
+  for (const auto& md : member_dirs) {
+    const std::string member = md.filename().string();
+    if (!fs::is_directory(md / "deviatoric")) continue;
+    std::vector<fs::path> files;
+    for (auto& f : fs::directory_iterator(md / "deviatoric")) files.push_back(f.path());
+    std::sort(files.begin(), files.end());
+    for (const auto& f : files) {
+      std::smatch m;
+      const std::string fname = f.filename().string();
+      if (!std::regex_match(fname, m, name_re)) continue;
+      Cell& c = cells[{m[1].str(), std::stod(m[3].str())}];
+      c.mode = m[1]; c.tag = m[2]; c.nu = std::stod(m[3].str());
+      std::ifstream in(f);
+      std::stringstream ss;
+      ss << in.rdbuf();
+      const std::string status = json_field(ss.str(), "status");
+      const fs::path csv = md / "deviatoric" / (m[1].str() + "_" + m[2].str() + ".csv");
+      if (status == "complete" && fs::exists(csv)) {
+        c.members.push_back(member);
+        c.curves.push_back(read_table(csv.string()));
+      } else {
+        std::string why = json_field(ss.str(), "message");
+        if (why.empty()) why = json_field(ss.str(), "reason");
+        c.excluded.push_back({member, status.empty() ? "unknown" : status, why});
+      }
+    }
+  }
+  return cells;
+}
+
+// Common grid: the first member's strains up to the shortest member's end (members share the
+// sampling, so this is resampling by identity in practice).
+std::vector<double> common_grid(const Cell& c) {
+  double end = 1e300;
+  for (const auto& t : c.curves) end = std::min(end, t.column("eps_d").back());
+  std::vector<double> g;
+  for (double e : c.curves.front().column("eps_d"))
+    if (e <= end * (1 + 1e-12)) g.push_back(std::min(e, end));
+  return g;
+}
+
+// Columns averaged: every numeric curve column but the step counter and the grid itself.
+std::vector<std::string> averaged_columns(const Table& t) {
+  std::vector<std::string> cols;
+  for (std::size_t k = 0; k < t.header.size(); ++k) {
+    const std::string& h = t.header[k];
+    if (h == "step" || h == "eps_d" || h == "stage") continue;
+    const auto& col = t.numeric[k];
+    if (!col.empty() && std::all_of(col.begin(), col.end(), [](double v) { return std::isfinite(v); })) cols.push_back(h);
+  }
+  return cols;
+}
+
+std::vector<std::vector<double>> member_values(const Cell& c, const std::vector<double>& grid, const std::string& col) {
+  std::vector<std::vector<double>> v;
+  for (const auto& t : c.curves) v.push_back(resample(t.column("eps_d"), t.column(col), grid));
+  return v;
+}
+
+void write_ensemble_csv(const Cell& c, const std::vector<double>& grid, const std::string& path) {
+  const auto cols = averaged_columns(c.curves.front());
+  std::vector<Band> bands;
+  for (const auto& col : cols) bands.push_back(band(member_values(c, grid, col)));
+  std::ostringstream o;
+  o.precision(10);
+  o << "# dem ensemble curve: " << c.mode << " from nu = " << c.nu << ", " << c.members.size() << " packings (";
+  for (std::size_t k = 0; k < c.members.size(); ++k) o << (k ? " " : "") << c.members[k];
+  o << ")\n# each member resampled (linear) on the common eps_d grid; for every curve column X (units as in the "
+       "member curves, docs/definitions.md):\n# X_mean mean over packings, X_sd their sample standard deviation, "
+       "X_se = X_sd/sqrt(n_packings), X_lo95/X_hi95 = X_mean -/+ t_{n-1,0.975} X_se (95% confidence band of the mean)\n";
+  if (!c.excluded.empty()) {
+    o << "# excluded members:";
+    for (auto& e : c.excluded) o << " " << e.member << " (" << e.status << ")";
+    o << "\n";
+  }
+  o << "eps_d,n_packings";
+  for (const auto& col : cols)
+    for (const char* s : {"_mean", "_sd", "_se", "_lo95", "_hi95"}) o << "," << col << s;
+  o << "\n";
+  for (std::size_t i = 0; i < grid.size(); ++i) {
+    o << grid[i] << "," << c.members.size();
+    for (const auto& b : bands)
+      for (double v : {b.mean[i], b.sd[i], b.se[i], b.lo[i], b.hi[i]}) o << "," << num(v, 10);
+    o << "\n";
+  }
+  write_text_file(path, o.str());
+}
+
+Table parameter_table() {
+  return Table({"mode", "nu", "quantity", "packings", "x0", "se_x0", "x_max", "se_x_max", "x_max_lo95", "x_max_hi95",
+                "beta", "se_beta", "beta_lo95", "beta_hi95", "corr_xmax_beta", "initial_slope", "se_initial_slope",
+                "eps_95", "r_squared", "rmse", "n", "eps_last", "error_method", "bootstrap_se_x_max",
+                "bootstrap_se_beta", "member_sd_x_max", "member_sd_beta", "warnings"});
+}
+
+std::vector<std::string> parameter_row(const Cell& c, const std::string& q, const EnsembleFit& f, const std::string& w) {
+  const FitResult& r = f.fit;
+  return {c.mode, num(c.nu, 4), q, std::to_string(f.packings), num(r.x0), num(r.se_x0), num(r.x_max), num(r.se_x_max),
+          num(f.lo[1]), num(f.hi[1]), num(r.beta), num(r.se_beta), num(f.lo[2]), num(f.hi[2]), num(r.corr[1][2], 3),
+          num(r.initial_slope), num(r.se_initial_slope), num(r.eps_95), num(r.r_squared, 5), num(r.rmse),
+          std::to_string(r.n), num(r.e_last, 4), f.error_method, num(f.boot_se[1]), num(f.boot_se[2]),
+          num(f.member_sd[1]), num(f.member_sd[2]), w};
+}
+
+void write_members_table(const std::map<std::pair<std::string, double>, Cell>& cells, const fs::path& dir) {
+  Table t({"mode", "nu", "member", "status", "message"});
+  for (const auto& [key, c] : cells) {
+    for (const auto& m : c.members) t.add_row({c.mode, num(c.nu, 4), m, "complete", ""});
+    for (const auto& e : c.excluded) t.add_row({c.mode, num(c.nu, 4), e.member, e.status, e.message});
+  }
+  write_table_all(t, (dir / "members").string(), "Ensemble members per (mode, nu): used (complete) or left out, with the reason");
+}
+
+}  // namespace
+
+int run_ensemble_fit_command(const FitCommandOptions& o) {
+  const fs::path run(o.run_dir), out = run / "fit", ens = run / "ensemble";
+  auto cells = collect_cells(run);
+  if (cells.empty()) {
+    std::cerr << "dem fit: no finished mode runs under " << (run / "members") << " (is the ensemble workflow finished?)\n";
+    return 1;
+  }
+  for (const fs::path& d : {out, ens}) fs::remove_all(d);   // no stale tables or averages of another run
+  fs::create_directories(out);
+  fs::create_directories(ens);
+  write_members_table(cells, ens);
+
+  EnsembleFitOptions eo;
+  eo.fit.window_min = o.window_min;
+  eo.fit.window_max = o.window_max;
+  eo.fit.loss = o.loss == "huber" ? Loss::Huber : o.loss == "cauchy" ? Loss::Cauchy : Loss::None;
+  Table params = parameter_table();
+  FitsByModeQuantity by_mode_q;
+  std::map<std::tuple<std::string, double, std::string>, EnsembleFit> fits;
+  std::map<std::pair<std::string, double>, std::vector<std::string>> fitted_members;
+  int warnings = 0, fitted = 0;
+  for (auto& [key, c] : cells) {
+    for (const auto& e : c.excluded)
+      std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << ": member " << e.member
+                << " left out (" << e.status << (e.message.empty() ? "" : ": " + e.message) << ")\n";
+    if (c.members.empty()) continue;
+    const auto grid = common_grid(c);
+    write_ensemble_csv(c, grid, (ens / (c.mode + "_" + c.tag + ".csv")).string());
+    fitted_members[key] = c.members;
+    for (const char* q : {"s_dev", "F_dev"}) {
+      std::string w;
+      for (const auto& e : c.excluded) w += (w.empty() ? "" : "; ") + ("member " + e.member + " left out: " + e.status);
+      try {
+        const EnsembleFit f = fit_ensemble(grid, member_values(c, grid, q), eo);
+        for (const auto& s : f.fit.warnings) {
+          w += (w.empty() ? "" : "; ") + s;
+          std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": " << s << "\n";
+          ++warnings;
+        }
+        params.add_row(parameter_row(c, q, f, w));
+        by_mode_q[{c.mode, q}].emplace_back(c.nu, f.fit);
+        fits[{c.mode, c.nu, q}] = f;
+        ++fitted;
+      } catch (const std::exception& ex) {
+        std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": not fitted: " << ex.what() << "\n";
+        ++warnings;
+      }
+    }
+  }
+  write_table_all(params, (out / "parameters").string(),
+                  "Saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d) fitted to the ensemble mean; "
+                  "standard errors and 95% intervals (t, packings - 1 dof) from the jackknife over packings");
+
+  // D2 vs D3 from the same checkpoints, paired by member.
+  Table shared({"nu", "quantity", "mode_a", "mode_b", "packings", "diff_x0", "se_diff_x0", "diff_x_max",
+                "se_diff_x_max", "diff_beta", "se_diff_beta", "p_value", "max_gap", "same_path"});
+  for (auto& [key, f2] : fits) {
+    const auto& [mode, nu, q] = key;
+    if (mode != "D2" || !fits.count({"D3", nu, q})) continue;
+    if (fitted_members[{"D2", nu}] != fitted_members[{"D3", nu}]) {
+      std::cerr << "dem fit: shared-path test nu=" << num(nu, 4) << " " << q << ": D2 and D3 have different members; skipped\n";
+      continue;
+    }
+    try {
+      const EnsembleSharedPath t = test_shared_path_ensemble(f2, fits.at({"D3", nu, q}));
+      shared.add_row({num(nu, 4), q, "D2", "D3", std::to_string(t.packings), num(t.difference[0]), num(t.se[0]),
+                      num(t.difference[1]), num(t.se[1]), num(t.difference[2]), num(t.se[2]), num(t.p_value, 3),
+                      num(t.max_gap, 4), t.same_path ? "yes" : "no"});
+    } catch (const std::exception& ex) {
+      std::cerr << "dem fit: shared-path test nu=" << num(nu, 4) << " " << q << ": " << ex.what() << "\n";
+    }
+  }
+  if (!shared.rows.empty())
+    write_table_all(shared, (out / "shared_path").string(),
+                    "D2 vs D3 from the same packings: paired jackknife differences of (x0, x_max, beta) against t "
+                    "(packings - 1 dof), Bonferroni p over the three; same_path: p >= 0.01");
+  write_nu_laws(by_mode_q, out.string());
+  std::vector<std::string> unloading;
+  for (auto& d : fs::directory_iterator(run / "members"))
+    unloading.push_back((d.path() / "prep" / "cycle_unloading.csv").string());
+  std::sort(unloading.begin(), unloading.end());
+  write_isotropic(unloading, out.string());
+  std::cerr << "dem fit: " << fitted << " ensemble fits written to " << out.string() << " (" << warnings << " warnings)\n";
+  if (!o.no_plots) {
+    const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.ensemble_plots \"" +
+                            run.string() + "\"";
+    if (std::system(cmd.c_str()) != 0) std::cerr << "dem fit: plotting failed (tables are written)\n";
+  }
+  return fitted > 0 ? 0 : 1;
+}
+
+}  // namespace demfit
