@@ -54,6 +54,7 @@ class Progress:
         self.done0 = self.done_weight()[1]   # work finished by an earlier run (resume)
         self.tty = stream.isatty()
         self.last_line = ""
+        self.last_n, self.last_print = -1, 0.0
 
     def done_weight(self):
         n, w = 0, 0.0
@@ -74,10 +75,12 @@ class Progress:
 
     def show(self, final=False):
         ln = self.line()
+        n = self.done_weight()[0]
         if self.tty:
             self.stream.write("\r" + ln.ljust(len(self.last_line)) + ("\n" if final else ""))
-        elif final or ln != self.last_line:
+        elif final or n != self.last_n or time.time() - self.last_print >= 60:
             self.stream.write(ln + "\n")
+            self.last_n, self.last_print = n, time.time()
         self.stream.flush()
         self.last_line = ln
 
@@ -113,7 +116,7 @@ def main(argv=None):
     out = os.path.abspath(a.out)
     dem = os.path.abspath(a.dem)
     plan = load_plan(dem, out)
-    os.makedirs(os.path.join(out, "logs"), exist_ok=True)
+    os.makedirs(os.path.join(out, "logs", "slurm"), exist_ok=True)   # sbatch --output needs the folder
     log_path = os.path.join(out, "logs", "snakemake.log")
     env = dict(os.environ)
     env["PYTHONPATH"] = REPO + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")

@@ -11,6 +11,7 @@
 // measured in docs/ensembles.md (bench/ensemble_coverage.py, `dem ensemble-coverage`).
 #pragma once
 #include <array>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -72,5 +73,39 @@ struct EnsembleSharedPath {
   bool same_path = true;          ///< p_value >= alpha
 };
 EnsembleSharedPath test_shared_path_ensemble(const EnsembleFit& first, const EnsembleFit& second, double alpha = 0.01);
+
+}  // namespace demfit
+
+namespace demfit {
+
+/// Coverage experiment: synthetic ensembles of K DEM-like curves with known parameters.
+/// Member k of mode A is x(e; x0, x_max + d_k, beta) + AR(1) noise, d_k ~ N(0, member_spread)
+/// (packings differ in their plateau); mode B (the "D3" of the same packings) shares d_k and
+/// half of each member's noise (correlation 0.5), so the true paths are identical.
+struct EnsembleCoverageSetup {
+  int packings = 8;                       ///< K
+  double x0 = 0.0, x_max = 0.17, beta = 60.0;   ///< truth (s_dev of D2 at nu = 0.70)
+  double length = 5.0;                    ///< beta * eps_last
+  double points_per_approach = 8.3;       ///< samples per 1/beta (sample_strain 0.002 at beta = 60)
+  double noise = 0.1;                     ///< AR(1) marginal sd / amplitude |x_max - x0|
+  double correlation = 0.85;              ///< lag-1 autocorrelation of the noise
+  double member_spread = 0.05;            ///< sd of the members' plateaus / amplitude
+  int trials = 200;
+  int bootstrap = 0;                      ///< bootstrap resamples per trial (0: skip its coverage)
+  std::uint64_t seed = 1;
+};
+
+struct EnsembleCoverageCell {
+  double xmax_coverage = 0, beta_coverage = 0;           ///< jackknife-t 95 % intervals (what dem fit states)
+  double boot_xmax_coverage = 0, boot_beta_coverage = 0;  ///< bootstrap percentile intervals (NaN if skipped)
+  double ar1_xmax_coverage = 0, ar1_beta_coverage = 0;   ///< one member alone, AR(1)-inflated 1.96 SE (single-curve path)
+  double false_rejection_01 = 0, false_rejection_05 = 0; ///< shared-path test rejecting the true shared law at 1 %, 5 %
+  double xmax_halfwidth_median = 0;                      ///< median 95 % half-width of x_max / amplitude
+  double beta_halfwidth_median = 0;                      ///< median 95 % half-width of beta / beta
+  int converged = 0;                                     ///< trials whose mean fit converged
+};
+
+/// Runs setup.trials synthetic ensembles (failed fits count as not covering).
+EnsembleCoverageCell ensemble_coverage(const EnsembleCoverageSetup& setup);
 
 }  // namespace demfit
