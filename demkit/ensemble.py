@@ -9,6 +9,7 @@ estimated particle-steps from `dem info --json`, so it reads the same on one mac
 cluster.
 """
 import argparse
+import fcntl
 import glob
 import json
 import os
@@ -101,6 +102,23 @@ def snakemake_command(out, dem, cores, profile, extra):
     return cmd + list(extra)
 
 
+def hold_folder_lock(out, dem):
+    """Hold DIR/.dem-ensemble.lock for the life of this process (the kernel drops it when the
+    process dies, however it dies). Holding it proves no other `dem ensemble` works on DIR, so a
+    Snakemake lock left behind by a killed run is stale and can be removed."""
+    fh = open(os.path.join(out, ".dem-ensemble.lock"), "w")
+    try:
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        sys.exit(f"dem ensemble: another `dem ensemble` is running on {out}; wait for it, or stop it first")
+    locks = glob.glob(os.path.join(out, ".snakemake", "locks", "*"))
+    if locks:
+        sys.stderr.write("dem ensemble: removing the lock of an interrupted earlier run\n")
+        subprocess.run(["snakemake", "-s", SNAKEFILE, "-d", out, "--unlock", "--config", f"dem={dem}"],
+                       capture_output=True)
+    return fh
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description="run the ensemble workflow on a results folder")
     ap.add_argument("out", help="results folder holding scene.toml (written by `dem ensemble`)")
@@ -116,6 +134,7 @@ def main(argv=None):
     out = os.path.abspath(a.out)
     dem = os.path.abspath(a.dem)
     plan = load_plan(dem, out)
+    lock = hold_folder_lock(out, dem)  # noqa: F841 (held until exit)
     os.makedirs(os.path.join(out, "logs", "slurm"), exist_ok=True)   # sbatch --output needs the folder
     log_path = os.path.join(out, "logs", "snakemake.log")
     env = dict(os.environ)

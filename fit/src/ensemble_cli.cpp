@@ -84,13 +84,31 @@ std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run
   return cells;
 }
 
+// Rows with strictly increasing eps_d: the runner's last row lands exactly on eps_d_max one
+// (shortened) step after a sampled row, and both can print as the same number; keep the later.
+std::vector<std::size_t> increasing_rows(const Table& t) {
+  const auto& e = t.column("eps_d");
+  std::vector<std::size_t> rows;
+  for (std::size_t i = 0; i < e.size(); ++i) {
+    while (!rows.empty() && !(e[i] > e[rows.back()])) rows.pop_back();
+    rows.push_back(i);
+  }
+  return rows;
+}
+
+std::vector<double> pick(const std::vector<double>& v, const std::vector<std::size_t>& rows) {
+  std::vector<double> out;
+  for (auto i : rows) out.push_back(v[i]);
+  return out;
+}
+
 // Common grid: the first member's strains up to the shortest member's end (members share the
 // sampling, so this is resampling by identity in practice).
 std::vector<double> common_grid(const Cell& c) {
   double end = 1e300;
   for (const auto& t : c.curves) end = std::min(end, t.column("eps_d").back());
   std::vector<double> g;
-  for (double e : c.curves.front().column("eps_d"))
+  for (double e : pick(c.curves.front().column("eps_d"), increasing_rows(c.curves.front())))
     if (e <= end * (1 + 1e-12)) g.push_back(std::min(e, end));
   return g;
 }
@@ -109,7 +127,10 @@ std::vector<std::string> averaged_columns(const Table& t) {
 
 std::vector<std::vector<double>> member_values(const Cell& c, const std::vector<double>& grid, const std::string& col) {
   std::vector<std::vector<double>> v;
-  for (const auto& t : c.curves) v.push_back(resample(t.column("eps_d"), t.column(col), grid));
+  for (const auto& t : c.curves) {
+    const auto rows = increasing_rows(t);
+    v.push_back(resample(pick(t.column("eps_d"), rows), pick(t.column(col), rows), grid));
+  }
   return v;
 }
 

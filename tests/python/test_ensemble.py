@@ -1,0 +1,200 @@
+"""The ensemble workflow end to end on a tiny scene: averages against hand computation, member 0
+against the single-packing run, resume after a killed workflow, reported (not dropped) failures,
+and the same results through a real single-node Slurm."""
+import csv
+import glob
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from conftest import DEM, ROOT, run_dem
+from demkit.curves import read_curve
+
+TINY = """
+[particles]
+count = 250
+seed = 5
+[protocol]
+target_phi = 0.64
+compress_rate_tc = 2e-4
+cycle_rate_tc = 1e-4
+checkpoints_unloading = [0.74]
+modes = ["D2", "D3"]
+deviatoric_rate_tc = 4e-5
+eps_d_max = 0.06
+[integration]
+dt_over_tc = 0.1
+[output]
+sample_strain = 0.003
+vtk = false
+[ensemble]
+packings = 3
+"""
+T2_975 = 4.302652729911275   # Student's t quantile, 2 degrees of freedom (tables)
+
+
+def ensemble(scene, out, *extra, env=None, check=True):
+    p = subprocess.run([DEM, "ensemble", str(scene), "--out", str(out), *extra], capture_output=True, text=True,
+                       timeout=600, env=env)
+    if check and p.returncode != 0:
+        raise AssertionError(f"dem ensemble failed ({p.returncode}):\n{p.stderr[-4000:]}")
+    return p
+
+
+@pytest.fixture(scope="session")
+def tiny(tmp_path_factory):
+    d = tmp_path_factory.mktemp("ens")
+    scene = d / "tiny.toml"
+    scene.write_text(TINY)
+    p = ensemble(scene, d / "run", "--cores", "2")
+    return {"dir": d / "run", "scene": scene, "stderr": p.stderr}
+
+
+def member_curves(run, name):
+    return [read_curve(f) for f in sorted(glob.glob(str(run / "members" / "m*" / "deviatoric" / f"{name}.csv")))]
+
+
+def strictly_increasing(curve):
+    """Rows whose eps_d the next row exceeds (the last row lands on eps_d_max right after a
+    sampled row and can print as the same number): keep the later of equal strains."""
+    e = curve["eps_d"]
+    keep = np.append(e[1:] > e[:-1], True)
+    return {k: v[keep] for k, v in curve.items()}
+
+
+def test_averages_and_bands_equal_hand_computation(tiny):
+    run = tiny["dir"]
+    for name in ("D2_phi0.740", "D3_phi0.740"):
+        members = [strictly_increasing(m) for m in member_curves(run, name)]
+        assert len(members) == 3
+        ens = read_curve(run / "ensemble" / f"{name}.csv")
+        n = len(ens["eps_d"])
+        for m in members:   # members share the sampling: the grid is their strain column
+            np.testing.assert_allclose(m["eps_d"][:n], ens["eps_d"], rtol=0, atol=1e-12)
+        for col in ("s_dev", "F_dev", "p_Pa", "C", "eps_v"):
+            y = np.array([m[col][:n] for m in members])
+            mean, sd = y.mean(axis=0), y.std(axis=0, ddof=1)
+            scale = np.abs(y).max() + 1e-300
+            np.testing.assert_allclose(ens[col + "_mean"], mean, rtol=1e-9, atol=1e-9 * scale)
+            np.testing.assert_allclose(ens[col + "_sd"], sd, rtol=1e-8, atol=1e-9 * scale)
+            np.testing.assert_allclose(ens[col + "_se"], sd / np.sqrt(3), rtol=1e-8, atol=1e-9 * scale)
+            np.testing.assert_allclose(ens[col + "_hi95"], mean + T2_975 * sd / np.sqrt(3), rtol=1e-8, atol=1e-9 * scale)
+        assert (ens["n_packings"] == 3).all()
+
+
+def test_member_zero_is_the_single_packing_run_and_members_differ(tiny, tmp_path):
+    run = tiny["dir"]
+    single = tmp_path / "single"
+    run_dem("run", tiny["scene"], "--out", single, "--set", "ensemble.packings=1", "--threads", "1", "--quiet", check=True)
+    for name in ("D2_phi0.740", "D3_phi0.740"):
+        a = (single / "deviatoric" / f"{name}.csv").read_bytes()
+        b = (run / "members" / "m000" / "deviatoric" / f"{name}.csv").read_bytes()
+        assert a == b, f"{name}: member 0 differs from `dem run` of the same seed"
+    seeds = set()
+    for scene in sorted(glob.glob(str(run / "members" / "m*" / "scene.toml"))):
+        seeds.update(ln for ln in open(scene) if ln.startswith("seed"))
+    assert len(seeds) == 3, f"members must have distinct seeds: {seeds}"
+    a, b = member_curves(run, "D2_phi0.740")[:2]
+    assert np.abs(a["s_dev"] - b["s_dev"]).max() > 1e-4, "members are not independent packings"
+
+
+def test_fit_tables_carry_errors_between_packings(tiny):
+    run = tiny["dir"]
+    with open(run / "fit" / "parameters.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {(r["mode"], r["quantity"]) for r in rows} == {(m, q) for m in ("D2", "D3") for q in ("s_dev", "F_dev")}
+    for r in rows:
+        assert r["packings"] == "3" and r["error_method"] == "jackknife over packings"
+        lo, x, hi, se = (float(r[k]) for k in ("x_max_lo95", "x_max", "x_max_hi95", "se_x_max"))
+        assert lo < x < hi
+        assert hi - x == pytest.approx(T2_975 * se, rel=1e-4)
+    with open(run / "fit" / "shared_path.csv", newline="") as fh:
+        shared = list(csv.DictReader(fh))
+    assert len(shared) == 2 and all(s["packings"] == "3" for s in shared)
+    with open(run / "ensemble" / "members.csv", newline="") as fh:
+        assert [m["status"] for m in csv.DictReader(fh)] == ["complete"] * 6
+    for png in ("ensemble_s_dev", "fit_D2_phi0.740", "fit_parameters", "isotropic"):
+        assert (run / "plots" / f"{png}.png").stat().st_size > 1000
+    assert "done in" in tiny["stderr"] and "% of the work" in tiny["stderr"]
+
+
+def test_killed_workflow_resumes_and_loses_only_running_tasks(tiny, tmp_path):
+    out = tmp_path / "killed"
+    p = subprocess.Popen([DEM, "ensemble", str(tiny["scene"]), "--out", str(out), "--cores", "1"],
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.time() + 300
+    while time.time() < deadline and not glob.glob(str(out / "members" / "*" / "deviatoric" / "*.json")):
+        time.sleep(0.2)
+    os.killpg(p.pid, signal.SIGKILL)   # the driver, Snakemake and the running tasks, at once
+    p.wait()
+    finished = {f: os.stat(f).st_mtime_ns for f in glob.glob(str(out / "members" / "*" / "**" / "*.json"), recursive=True)
+                if not f.endswith("manifest.json")}
+    assert finished, "nothing finished before the kill"
+    assert not (out / "fit" / "parameters.csv").exists()
+    r = ensemble(tiny["scene"], out, "--cores", "2")
+    for f, t in finished.items():
+        assert os.stat(f).st_mtime_ns == t, f"{f} was recomputed after the resume"
+    for name in ("D2_phi0.740", "D3_phi0.740"):
+        assert (out / "ensemble" / f"{name}.csv").read_bytes() == (tiny["dir"] / "ensemble" / f"{name}.csv").read_bytes()
+    assert "done in" in r.stderr
+
+
+def test_blown_up_member_is_reported_not_dropped(tiny, tmp_path):
+    # The task wrapper turns a blow-up (exit 3) into a status, not a failed workflow ...
+    status = tmp_path / "x.json"
+    rc = subprocess.run([sys.executable, "-m", "demkit.task", "--status", str(status), "--log", str(tmp_path / "x.log"),
+                         "--", "sh", "-c", "echo 'dem: simulation blew up: overlap' >&2; exit 3"],
+                        env={**os.environ, "PYTHONPATH": ROOT}).returncode
+    assert rc == 0
+    st = json.loads(status.read_text())
+    assert st["status"] == "blew_up" and "blew up" in st["message"]
+    # ... and the reduce leaves that member out of the averages, saying so.
+    run = tmp_path / "copy"
+    shutil.copytree(tiny["dir"], run)
+    (run / "members" / "m001" / "deviatoric" / "D2_phi0.740.json").write_text(status.read_text())
+    fit = run_dem("fit", run, "--force", "--no-plots")
+    assert fit.returncode == 0, fit.stderr
+    assert "member m001 left out (blew_up" in fit.stderr
+    ens = read_curve(run / "ensemble" / "D2_phi0.740.csv")
+    assert (ens["n_packings"] == 2).all()
+    with open(run / "ensemble" / "members.csv", newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if r["status"] != "complete"]
+    assert [(r["member"], r["mode"], r["status"]) for r in rows] == [("m001", "D2", "blew_up")]
+    with open(run / "fit" / "parameters.csv", newline="") as fh:
+        d2 = [r for r in csv.DictReader(fh) if r["mode"] == "D2"]
+    assert all(r["packings"] == "2" and "m001 left out" in r["warnings"] for r in d2)
+
+
+def test_other_scene_in_the_folder_and_ensembles_in_dem_run_are_refused(tiny, tmp_path):
+    r = ensemble(tiny["scene"], tiny["dir"], "--set", "contact.stiffness_N_m=5e7", check=False)
+    assert r.returncode == 1 and "holds the results of another scene" in r.stderr and "stiffness" in r.stderr
+    r = run_dem("run", tiny["scene"], "--out", tmp_path / "x")
+    assert r.returncode == 2 and "dem ensemble" in r.stderr
+    assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or shutil.which("sbatch") is None,
+                    reason="needs root and Debian's slurm-wlm + munge (scripts/install-deps.sh) to start a Slurm")
+def test_slurm_profile_gives_the_local_results(tiny, tmp_path):
+    cluster = tmp_path / "slurm"
+    start = subprocess.run(["bash", os.path.join(ROOT, "scripts", "slurm-local.sh"), "start", str(cluster)],
+                           capture_output=True, text=True, timeout=120)
+    assert start.returncode == 0, start.stderr
+    try:
+        env = {**os.environ, "SLURM_CONF": str(cluster / "slurm.conf"), "CI": "true"}   # CI: poll every 1 s, not 10 s
+        out = tmp_path / "run"
+        ensemble(tiny["scene"], out, "--profile", "slurm", env=env)
+        assert len(glob.glob(str(out / "logs" / "slurm" / "*.out"))) >= 10, "tasks did not go through sbatch"
+        for f in sorted(glob.glob(str(tiny["dir"] / "ensemble" / "*.csv"))):
+            assert (out / "ensemble" / os.path.basename(f)).read_bytes() == open(f, "rb").read(), f
+        a = (tiny["dir"] / "fit" / "parameters.csv").read_text()
+        assert (out / "fit" / "parameters.csv").read_text() == a
+    finally:
+        subprocess.run(["bash", os.path.join(ROOT, "scripts", "slurm-local.sh"), "stop", str(cluster)], timeout=60)
