@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# The main job on the default quick scene: run the whole protocol, fit, plot.
-# Results go to runs/quickstart (refused if it holds finished results; pass --force to redo).
+# The main job on the default quick scene: an ensemble of 8 packings of 1000 spheres through the
+# whole protocol, D2 and D3 from three volume fractions, averaged with 95 % bands, fitted, plotted
+# (Snakemake underneath, one single-threaded task per core). Results in runs/quickstart.
+# Run again to continue an interrupted run; pass --force to redo a finished one.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=runs/quickstart
-build/dem run data/scenes/quickstart.toml --out "$out" "$@"
-build/dem fit "$out" "$@"
-echo "quickstart.sh: curves in $out/deviatoric, fit tables in $out/fit, plots in $out/plots" >&2
+build/dem ensemble data/scenes/quickstart.toml --out "$out" "$@"
+echo "quickstart.sh: mean curves with 95 % bands in $out/ensemble, fit tables in $out/fit, plots in $out/plots" >&2

@@ -109,7 +109,8 @@ int main(int argc, char** argv) {
   ens->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
   ens->add_option("--cores", ens_cores, "single-threaded tasks at once (default: all cores; with --profile: the profile's)");
   ens->add_option("--profile", ens_profile, "Snakemake profile: slurm (workflow/profiles/slurm) or a folder");
-  ens->add_flag("--force", ens_force, "start afresh: remove the results of another scene in --out");
+  ens->add_flag("--force", ens_force, "start afresh: remove the results in --out (without it a rerun continues "
+                                     "where the last one stopped, and another scene's results are refused)");
 
   // info
   auto* info = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates)");
@@ -330,30 +331,7 @@ int main(int argc, char** argv) {
     }
     if (*ecov) {
       if (fs::exists(ecov_out) && !ecov_force) throw std::runtime_error(ecov_out + " exists: pass --force to overwrite it");
-      std::ostringstream csv;
-      csv << "# dem ensemble-coverage: " << ecov_setup.trials << " synthetic ensembles per cell, seed " << ecov_setup.seed
-          << "; members x0 = " << ecov_setup.x0 << ", x_max = " << ecov_setup.x_max << " + N(0, " << ecov_setup.member_spread
-          << " amplitude), beta = " << ecov_setup.beta << ", AR(1) noise sd " << ecov_setup.noise
-          << " amplitude; coverage = fraction of trials whose 95% interval holds the truth (jackknife-t: what dem fit "
-             "states; bootstrap percentile; ar1: one member alone, AR(1)-inflated); false_rejection: D2/D3 test on "
-             "paths that are the same\n"
-             "packings,length_beta_eps,noise_correlation,xmax_coverage,beta_coverage,boot_xmax_coverage,boot_beta_coverage,"
-             "ar1_xmax_coverage,ar1_beta_coverage,false_rejection_01,false_rejection_05,xmax_halfwidth_over_amplitude,"
-             "beta_halfwidth_over_beta,converged\n";
-      for (double rho : ecov_rhos)
-        for (double length : ecov_lengths)
-          for (int k : ecov_ks) {
-            demfit::EnsembleCoverageSetup s = ecov_setup;
-            s.packings = k; s.length = length; s.correlation = rho;
-            const auto c = demfit::ensemble_coverage(s);
-            csv << k << "," << length << "," << rho << "," << c.xmax_coverage << "," << c.beta_coverage << ","
-                << c.boot_xmax_coverage << "," << c.boot_beta_coverage << "," << c.ar1_xmax_coverage << ","
-                << c.ar1_beta_coverage << "," << c.false_rejection_01 << "," << c.false_rejection_05 << ","
-                << c.xmax_halfwidth_median << "," << c.beta_halfwidth_median << "," << c.converged << "\n";
-            std::fprintf(stderr, "dem ensemble-coverage: K = %d, length %g, rho %g: coverage x_max %.3f beta %.3f\n", k,
-                         length, rho, c.xmax_coverage, c.beta_coverage);
-          }
-      dem::write_file_atomic(ecov_out, csv.str());
+      dem::write_file_atomic(ecov_out, demfit::ensemble_coverage_csv(ecov_setup, ecov_ks, ecov_lengths, ecov_rhos));
       return 0;
     }
     if (*compare) return exec_python("demkit.compare", compare->remaining());

@@ -82,13 +82,13 @@ void prepare_ensemble_folder(const std::string& dir_name, const std::string& res
     std::ifstream in(scene);
     std::stringstream old;
     old << in.rdbuf();
-    if (old.str() == resolved) return;   // the same ensemble: continue
+    if (old.str() == resolved && !force) return;   // the same ensemble: continue where it stopped
     if (!force)
       throw std::runtime_error(dir_name + " holds the results of another scene (its scene.toml differs in:" +
                                differing_lines(old.str(), resolved) +
                                "\n  ); choose another --out, or pass --force to remove those results");
     for (const char* sub : {"members", "ensemble", "fit", "plots", "logs", ".snakemake"}) fs::remove_all(dir / sub);
-    for (const char* f : {"scene.toml", "manifest.json"}) fs::remove(dir / f);
+    for (const char* f : {"scene.toml", "manifest.json", ".dem-ensemble.lock"}) fs::remove(dir / f);
   } else if (fs::exists(dir) && !fs::is_empty(dir) && !force) {
     throw std::runtime_error(dir_name + " exists and is not an ensemble folder (no scene.toml): choose another --out");
   }

@@ -13,6 +13,7 @@
 #include <array>
 #include <cstdint>
 #include <string>
+#include <string>
 #include <vector>
 
 #include "demfit/fit.hpp"
@@ -107,5 +108,10 @@ struct EnsembleCoverageCell {
 
 /// Runs setup.trials synthetic ensembles (failed fits count as not covering).
 EnsembleCoverageCell ensemble_coverage(const EnsembleCoverageSetup& setup);
+
+/// `dem ensemble-coverage`: the cells of every (correlation, length, K) as a CSV text with a
+/// comment header saying what was done; progress on stderr.
+std::string ensemble_coverage_csv(const EnsembleCoverageSetup& base, const std::vector<int>& packings,
+                                  const std::vector<double>& lengths, const std::vector<double>& correlations);
 
 }  // namespace demfit

@@ -23,8 +23,8 @@ std::string plan_json(const Model& model);
 
 /// Readies DIR for the ensemble workflow: writes DIR/scene.toml (the resolved scene) unless it
 /// holds exactly this text already (then the workflow continues where it stopped). A folder
-/// with the results of another scene is refused, naming the differing lines, unless `force`,
-/// which removes those results first. Throws std::runtime_error.
+/// with the results of another scene is refused, naming the differing lines. `force` removes
+/// the results in DIR (of this scene or another) and starts afresh. Throws std::runtime_error.
 void prepare_ensemble_folder(const std::string& dir, const std::string& resolved_scene, bool force);
 
 }  // namespace dem
