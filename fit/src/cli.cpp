@@ -33,12 +33,7 @@ void add_fit_options(CLI::App& app, FitCommandOptions& o) {
 
 namespace {
 
-std::string num(double v, int prec = 6) {
-  if (!std::isfinite(v)) return "nan";
-  char b[64];
-  std::snprintf(b, sizeof b, "%.*g", prec, v);
-  return b;
-}
+std::string num(double v, int prec = 6) { return table_number(v, prec); }
 
 }  // namespace
 

@@ -22,12 +22,7 @@ namespace demfit {
 
 namespace {
 
-std::string num(double v, int prec = 6) {
-  if (!std::isfinite(v)) return "nan";
-  char b[64];
-  std::snprintf(b, sizeof b, "%.*g", prec, v);
-  return b;
-}
+std::string num(double v, int prec = 6) { return table_number(v, prec); }
 
 // Value of "key": "..." in a flat JSON object (our own status files).
 std::string json_field(const std::string& text, const std::string& key) {

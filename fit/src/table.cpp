@@ -129,6 +129,13 @@ void write_table_all(const Table& t, const std::string& stem, const std::string&
   write_atomic(stem + ".tex", tex.str());
 }
 
+std::string table_number(double v, int prec) {
+  if (!std::isfinite(v)) return "nan";
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*g", prec, v);
+  return b;
+}
+
 void write_text_file(const std::string& path, const std::string& content) { write_atomic(path, content); }
 
 }  // namespace demfit

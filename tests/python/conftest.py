@@ -28,11 +28,11 @@ vtk = true
 """
 
 
-def run_dem(*args, check=False, timeout=900):
-    """Run build/dem with args; return CompletedProcess (text)."""
+def run_dem(*args, check=False, timeout=900, env=None):
+    """Run build/dem with args (environment `env`, default ours); return CompletedProcess (text)."""
     if not os.path.exists(DEM):
         pytest.fail(f"{DEM} is missing: run scripts/setup.sh first")
-    p = subprocess.run([DEM, *map(str, args)], capture_output=True, text=True, timeout=timeout)
+    p = subprocess.run([DEM, *map(str, args)], capture_output=True, text=True, timeout=timeout, env=env)
     if check and p.returncode != 0:
         raise AssertionError(f"dem {' '.join(map(str, args))} failed ({p.returncode}):\n{p.stderr[-3000:]}")
     return p

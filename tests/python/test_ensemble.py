@@ -41,11 +41,7 @@ T2_975 = 4.302652729911275   # Student's t quantile, 2 degrees of freedom (table
 
 
 def ensemble(scene, out, *extra, env=None, check=True):
-    p = subprocess.run([DEM, "ensemble", str(scene), "--out", str(out), *extra], capture_output=True, text=True,
-                       timeout=600, env=env)
-    if check and p.returncode != 0:
-        raise AssertionError(f"dem ensemble failed ({p.returncode}):\n{p.stderr[-4000:]}")
-    return p
+    return run_dem("ensemble", scene, "--out", out, *extra, check=check, timeout=600, env=env)
 
 
 @pytest.fixture(scope="session")

@@ -20,6 +20,8 @@ struct Table {
 
 /// Reads a CSV file. Throws std::runtime_error if unreadable or ragged.
 Table read_table(const std::string& path);
+/// A number for a table cell: %.{prec}g, "nan" for non-finite values.
+std::string table_number(double v, int prec = 6);
 /// Writes text to path atomically (path.part, then rename). Throws std::runtime_error.
 void write_text_file(const std::string& path, const std::string& content);
 /// Writes stem.csv, stem.json, stem.md, stem.tex atomically.
