@@ -48,7 +48,7 @@ def plot_bands(run, outdir, curves):
     for q in ("s_dev", "F_dev", "p_star", "C"):
         fig, ax = plt.subplots(figsize=(6.4, 4.4))
         for mode, nu, c in curves:
-            color = cmap(nus.index(nu) / max(1, len(nus) - 1))
+            color = cmap(0.85 * nus.index(nu) / max(1, len(nus) - 1))   # stop before viridis' pale yellow
             ax.fill_between(c["eps_d"], c[q + "_lo95"], c[q + "_hi95"], color=color, alpha=0.25, lw=0)
             ax.plot(c["eps_d"], c[q + "_mean"], "-" if mode == "D2" else "--", color=color, lw=1.3,
                     label=f"{mode} ν={nu:.3f}")
