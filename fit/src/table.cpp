@@ -18,12 +18,18 @@ std::vector<std::string> split(const std::string& line) {
   if (!line.empty() && line.back() == ',') out.push_back("");
   return out;
 }
+// Every write and the close are checked: on a full disk only path.part is left.
 void write_atomic(const std::string& path, const std::string& s) {
   const std::string tmp = path + ".part";
   {
     std::ofstream o(tmp, std::ios::trunc);
     if (!o) throw std::runtime_error("cannot write " + tmp);
     o << s;
+    o.flush();
+    o.close();
+    if (!o)
+      throw std::runtime_error("writing " + tmp + " failed (disk full?): " + path + " was not written (only the "
+                               "incomplete .part is left); free space and run again");
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + tmp);
 }
@@ -57,12 +63,17 @@ const std::vector<double>& Table::column(const std::string& name) const {
 Table read_table(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error("cannot read " + path);
+  return parse_table(in, path);
+}
+
+Table parse_table(std::istream& in, const std::string& path) {
   Table t;
   t.source = path;
   std::string line;
   int lineno = 0;
   while (std::getline(in, line)) {
     ++lineno;
+    if (!line.empty() && line[0] == '#') t.comments.push_back(line);
     if (line.empty() || line[0] == '#') continue;
     auto cells = split(line);
     if (t.header.empty()) { t.header = cells; t.numeric.assign(cells.size(), {}); continue; }

@@ -321,7 +321,7 @@ void validate_particles_and_contact(const Model& m) {
   if (m.count < 2) fail("particles.count must be at least 2");
   if (!finite_positive(m.radius_min)) fail("particles.radius_min_m must be positive and finite");
   if (!(m.radius_max >= m.radius_min) || !std::isfinite(m.radius_max))
-    fail("particles.radius_max_m must be finite and at least particles.radius_min_m");
+    fail("particles.radius_max_m must be at least particles.radius_min_m, and finite");
   if (!finite_positive(m.density)) fail("particles.density_kg_m3 must be positive and finite");
   if (!finite_positive(m.contact.stiffness)) fail("contact.stiffness_N_m must be positive and finite");
   if (!(m.contact.damping >= 0) || !std::isfinite(m.contact.damping))
