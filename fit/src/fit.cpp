@@ -227,8 +227,10 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
                          (o.correct_autocorrelation ? "): standard errors inflated by " + fmt(r.se_inflation)
                                                     : "): standard errors assume independent points and are too small"));
   if (beta_on_bound)
-    r.warnings.push_back("rate beta sits on its bound " + fmt(r.beta) + ": no standard error quoted; "
-                         "the curve shows no saturation in this window");
+    r.warnings.push_back("rate beta sits on its bound " + fmt(r.beta) + ": no standard error quoted; " +
+                         (r.beta >= o.beta_max * 0.9999
+                              ? "the curve saturates before its first sampled strains (sample more finely)"
+                              : "the curve shows no saturation in this window"));
   if (xmax_on_bound) r.warnings.push_back("asymptote x_max sits on its bound 0: no standard error quoted");
   if (r.eps_95 > r.e_last)
     r.warnings.push_back("curve stops before saturation: 95% of the approach is reached only at eps_d = " +

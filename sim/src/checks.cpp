@@ -150,7 +150,7 @@ Physics preparation_physics(const Model& m) {
 }
 
 std::string physics_hash(const Physics& p) {
-  std::uint64_t h = 1469598103934665603ULL;
+  std::uint64_t h = 14695981039346656037ULL;
   for (const auto& [k, v] : p)
     for (char c : k + "=" + v + ";") { h ^= static_cast<unsigned char>(c); h *= 1099511628211ULL; }
   char b[20];

@@ -191,7 +191,7 @@ const char kMagic[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '3'};
 const char kMagicV2[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '2'};
 
 std::uint64_t fnv1a(const char* data, std::size_t n) {
-  std::uint64_t h = 1469598103934665603ULL;
+  std::uint64_t h = 14695981039346656037ULL;
   for (std::size_t i = 0; i < n; ++i) { h ^= static_cast<unsigned char>(data[i]); h *= 1099511628211ULL; }
   return h;
 }

@@ -10,7 +10,7 @@
 
 namespace {
 std::uint64_t fnv1a(const std::string& s) {
-  std::uint64_t h = 1469598103934665603ULL;
+  std::uint64_t h = 14695981039346656037ULL;
   for (char c : s) { h ^= static_cast<unsigned char>(c); h *= 1099511628211ULL; }
   return h;
 }
