@@ -110,7 +110,7 @@ void check_one_physics(const std::vector<Curve>& curves) {
     if (ph.empty()) continue;
     if (!first) { first = &c; continue; }
     const std::string ref = physics_of(first->t);
-    if (ph.substr(0, ph.find(' ')) != ref.substr(0, ref.find(' ')))
+    if (ph != ref)
       throw std::runtime_error("the curves were computed with different physics and cannot be fitted into one table: " +
                                first->t.source + " vs " + c.t.source + ": " + physics_difference(ref, ph) +
                                ". Fit each physics in its own folder (or rerun with --force)");

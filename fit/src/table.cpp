@@ -19,7 +19,7 @@ std::vector<std::string> split(const std::string& line) {
   return out;
 }
 // Every write and the close are checked: on a full disk only path.part is left.
-void write_atomic(const std::string& path, const std::string& s) {
+void write_part(const std::string& path, const std::string& s) {
   const std::string tmp = path + ".part";
   {
     std::ofstream o(tmp, std::ios::trunc);
@@ -31,7 +31,9 @@ void write_atomic(const std::string& path, const std::string& s) {
       throw std::runtime_error("writing " + tmp + " failed (disk full?): " + path + " was not written (only the "
                                "incomplete .part is left); free space and run again");
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + tmp);
+}
+void commit_part(const std::string& path) {
+  if (std::rename((path + ".part").c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + path + ".part");
 }
 std::string json_str(const std::string& s) {
   std::string o = "\"";
@@ -134,10 +136,10 @@ void write_table_all(const Table& t, const std::string& stem, const std::string&
     tex << " \\\\\n";
   }
   tex << "\\hline\n\\end{tabular}\n";
-  write_atomic(stem + ".csv", csv.str());
-  write_atomic(stem + ".json", js.str());
-  write_atomic(stem + ".md", md.str());
-  write_atomic(stem + ".tex", tex.str());
+  // All four or none: renamed into place only once every one is written.
+  const std::pair<const char*, std::string> files[] = {{".csv", csv.str()}, {".json", js.str()}, {".md", md.str()}, {".tex", tex.str()}};
+  for (const auto& [ext, text] : files) write_part(stem + ext, text);
+  for (const auto& [ext, text] : files) commit_part(stem + ext);
 }
 
 }  // namespace demfit

@@ -479,10 +479,11 @@ void run_protocol(const Model& model, const RunOptions& opt) {
                              "another --out, or pass --force to replace them");
   if (want_prep && !resume) check_memory(model);
   const std::string resume_after = resume ? last_finished_prep_stage(dir) : "";
-  State resumed;
-  if (!resume_after.empty()) resumed = resume_state(model, dir, resume_after);
+  State start;   // the state the preparation starts from: read and checked before writing
+  if (!resume_after.empty()) start = resume_state(model, dir, resume_after);
   if (!want_prep) check_checkpoints(model, dir);
   if (want_dev && !opt.force) check_kept_curves(model, dir);
+  if (want_prep && resume_after.empty()) start = initial_state(model, note);
   if (opt.force) clear_replaced(dir, want_prep);
   if (resume)
     std::cerr << "dem: " << dir.string() << " holds an interrupted run (manifest.json: complete: false): resuming "
@@ -543,7 +544,7 @@ void run_protocol(const Model& model, const RunOptions& opt) {
   };
 
   if (want_prep) {
-    State state = resume_after.empty() ? initial_state(model, note) : std::move(resumed);
+    State state = std::move(start);
     auto save_ckpt = [&](const std::string& branch) {
       return [&, branch](double phi, const State& st) {
         const std::string stem = branch + "_" + fmt_phi(phi);

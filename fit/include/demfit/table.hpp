@@ -24,8 +24,8 @@ struct Table {
 Table read_table(const std::string& path);
 /// The same from a stream; `source` names it in messages.
 Table parse_table(std::istream& in, const std::string& source);
-/// Writes stem.csv, stem.json, stem.md, stem.tex atomically. Throws std::runtime_error when
-/// a write fails (full disk): then only *.part files are left.
+/// Writes stem.csv, stem.json, stem.md, stem.tex atomically, all four or none. Throws
+/// std::runtime_error when a write fails (full disk): then only *.part files are left.
 void write_table_all(const Table& t, const std::string& stem, const std::string& caption);
 
 }  // namespace demfit
