@@ -58,8 +58,8 @@ void warn_time_step(const dem::Model& m) {
 void print_info(const dem::Model& m) {
   warn_time_step(m);
   const auto& p = m.protocol;
-  std::printf("particles          N = %d, r in [%g, %g] m, rho = %g kg/m^3\n", m.count, m.radius_min,
-              m.radius_max, m.density);
+  std::printf("particles          N = %d, r in [%g, %g] m, rho = %g kg/m^3, memory ~%.3g MB (estimate)\n", m.count,
+              m.radius_min, m.radius_max, m.density, dem::estimated_memory_bytes(m.count) / 1e6);
   std::printf("contact            k = %g N/m, gamma = %g kg/s, gamma_b = %g kg/s, %s\n",
               m.contact.stiffness, m.contact.damping, m.background_damping,
               m.contact.allow_attractive ? "attractive allowed" : "clamped at zero");

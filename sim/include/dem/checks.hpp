@@ -25,7 +25,7 @@ void validate_state(const State& state, const std::string& origin);
 void check_packing(const Model& model, const State& state, const std::string& origin);
 
 /// Rough peak memory [bytes] of a run of n spheres (state, its last good copy, neighbour
-/// list, scratch): about 1 kB per sphere.
+/// list, scratch): 0.6 kB per sphere (0.33 kB measured at N = 9261).
 double estimated_memory_bytes(long long n);
 
 /// Throws SceneError when a random placement of particles.count spheres needs more memory
