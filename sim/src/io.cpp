@@ -202,7 +202,7 @@ struct Writer {
   void str(const std::string& s) { pod<std::uint64_t>(s.size()); buf += s; }
   template <class T> void vec(const std::vector<T>& v) {
     pod<std::uint64_t>(v.size());
-    buf.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+    if (!v.empty()) buf.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
   }
 };
 struct Reader {
@@ -215,7 +215,10 @@ struct Reader {
   template <class T> std::vector<T> vec() {
     auto n = pod<std::uint64_t>();
     if (n > (buf.size() - pos) / sizeof(T)) throw std::runtime_error(path + ": checkpoint is truncated");
-    std::vector<T> v(n); std::memcpy(v.data(), buf.data() + pos, n * sizeof(T)); pos += n * sizeof(T); return v;
+    std::vector<T> v(n);
+    if (n > 0) std::memcpy(v.data(), buf.data() + pos, n * sizeof(T));   // data() may be null when n == 0 (UBSan)
+    pos += n * sizeof(T);
+    return v;
   }
 };
 }  // namespace
