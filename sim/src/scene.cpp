@@ -4,6 +4,7 @@
 
 #include <toml++/toml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -126,12 +127,46 @@ class KeyReader {
   std::set<std::string> free_sections_;
 };
 
+// End of a string starting at i (at its opening quote), or npos if it does not end.
+std::size_t string_end(const std::string& t, std::size_t i) {
+  const char q = t[i];
+  const bool multi = t.compare(i, 3, std::string(3, q)) == 0;
+  for (std::size_t k = i + (multi ? 3 : 1); k < t.size(); ++k) {
+    if (q == '"' && t[k] == '\\') { ++k; continue; }
+    if (!multi && t[k] == '\n') return std::string::npos;
+    if (multi ? t.compare(k, 3, std::string(3, q)) == 0 : t[k] == q) return k + (multi ? 2 : 0);
+  }
+  return std::string::npos;
+}
+
+// TOML allows non-ASCII characters only in comments and strings. toml++ 3.3.0 reaches
+// __builtin_unreachable (undefined behaviour) on some of them elsewhere (found by
+// tests/fuzz/fuzz_scene), so they are refused before it parses the text.
+void check_ascii_outside_strings(const std::string& t, const std::string& origin) {
+  int line = 1;
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    const char c = t[i];
+    if (c == '\n') ++line;
+    else if (c == '#') { while (i + 1 < t.size() && t[i + 1] != '\n') ++i; }
+    else if (c == '"' || c == '\'') {
+      const std::size_t end = string_end(t, i);
+      if (end == std::string::npos) return;   // unterminated: toml++ reports it
+      line += static_cast<int>(std::count(t.begin() + i, t.begin() + end, '\n'));
+      i = end;
+    } else if (static_cast<unsigned char>(c) >= 0x80) {
+      throw SceneError(origin + ":" + std::to_string(line) + ": TOML syntax error: a non-ASCII character outside a "
+                       "comment or string (keys and values are ASCII; write e.g. nu, sigma)");
+    }
+  }
+}
+
 void apply_override(toml::table& root, const std::string& ov) {
   const auto eq = ov.find('=');
   if (eq == std::string::npos || eq == 0)
     throw SceneError("override '" + ov + "' must look like section.key=value");
   const std::string key = ov.substr(0, eq);
   std::string value = ov.substr(eq + 1);
+  check_ascii_outside_strings(key + " = " + value, "override '" + ov + "'");
   if (key.find('.') == std::string::npos)
     throw SceneError("override '" + ov + "': name the section, e.g. contact.damping_kg_s=0");
   toml::table parsed;
@@ -171,6 +206,7 @@ bool builtin_mode(const std::string& name, DeformationMode* mode) {
 Model load_scene(const std::string& text, const std::vector<std::string>& overrides,
                  std::string* resolved, const std::string& origin) {
   toml::table root;
+  check_ascii_outside_strings(text, origin);
   try {
     root = toml::parse(text, origin);
   } catch (const toml::parse_error& e) {
@@ -295,6 +331,7 @@ Model load_scene_file(const std::string& path, const std::vector<std::string>& o
   ss << in.rdbuf();
   if (in.bad()) throw SceneError("cannot read scene file '" + path + "'");
   toml::table parsed;
+  check_ascii_outside_strings(ss.str(), path);
   try {
     parsed = toml::parse(ss.str(), path);
   } catch (const toml::parse_error&) {

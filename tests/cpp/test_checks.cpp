@@ -209,3 +209,14 @@ TEST(Fit, SharedPathDegreesOfFreedomFollowFixX0) {
   const int n = t.first.n + t.second.n;
   EXPECT_NEAR(t.f_statistic, (sh - sep) / 2 / (sep / (n - 4)), 1e-9 * t.f_statistic);
 }
+
+TEST(Scene, NonAsciiOutsideCommentsAndStringsIsRefusedBeforeTomlParsesIt) {
+  // Found by tests/fuzz/fuzz_scene: toml++ 3.3.0 reaches __builtin_unreachable (undefined
+  // behaviour) on a non-ASCII character where it expects a value, e.g. a pasted 'Σ'.
+  EXPECT_TRUE(has(scene_error("[protocol]\ncycle_rate_tc = \xce\xa3-5.\n"), "t.toml:2: TOML syntax error: a non-ASCII"));
+  EXPECT_TRUE(has(scene_error("[particles]\ncount = 300 \xce\xbd\n"), "non-ASCII"));
+  EXPECT_TRUE(has(error_of([] { dem::load_scene("", {"particles.count=3\xce\xa3"}); }), "non-ASCII"));
+  // ... but they are fine in comments and strings.
+  EXPECT_EQ(scene_error("# target \xce\xbd = 0.64\n[particles]\ncount = 300 # \xce\xa3\npacking_file = \"\xce\xbd.txt\"\n"
+                        "[modes]\n'x' = [1.0, 0.0, -1.0]\n"), "");
+}
