@@ -150,7 +150,8 @@ void check_ascii_outside_strings(const std::string& t, const std::string& origin
     else if (c == '#') { while (i + 1 < t.size() && t[i + 1] != '\n') ++i; }
     else if (c == '"' || c == '\'') {
       const std::size_t end = string_end(t, i);
-      if (end == std::string::npos) return;   // unterminated: toml++ reports it
+      if (end == std::string::npos)   // toml++ would read on past it (and hit the same problem)
+        throw SceneError(origin + ":" + std::to_string(line) + ": TOML syntax error: a string is not closed");
       line += static_cast<int>(std::count(t.begin() + i, t.begin() + end, '\n'));
       i = end;
     } else if (static_cast<unsigned char>(c) >= 0x80) {

@@ -18,7 +18,7 @@ head -c 6000 data/paper_n9261/D2_phi0.700.csv > "$corpus/curve/d2_head.csv"
 # A small real checkpoint (first byte 1: the target appends the checksum itself).
 if [ ! -e "$corpus/checkpoint/seed.ckpt" ]; then
   tmp=$(mktemp -d)
-  printf '[particles]\ncount = 20\n[integration]\nthreads = 1\n[protocol]\ncheckpoints_unloading = [0.70]\ncycle_phi_max = 0.72\ncompress_rate_tc = 1e-3\ncycle_rate_tc = 1e-3\nrelax_max_time_tc = 100\nmodes = ["D2"]\n[output]\nvtk = false\n' > "$tmp/s.toml"
+  printf '[particles]\ncount = 60\n[integration]\nthreads = 1\n[protocol]\ncheckpoints_unloading = [0.70]\ncycle_phi_max = 0.72\ncompress_rate_tc = 1e-3\ncycle_rate_tc = 1e-3\nrelax_max_time_tc = 100\nmodes = ["D2"]\n[output]\nvtk = false\n' > "$tmp/s.toml"
   build/dem run "$tmp/s.toml" --out "$tmp/r" --stages prep --quiet >/dev/null 2>&1 || true
   if [ -e "$tmp/r/checkpoints/unloading_phi0.700.ckpt" ]; then
     { printf '\001'; head -c -8 "$tmp/r/checkpoints/unloading_phi0.700.ckpt"; } > "$corpus/checkpoint/seed.ckpt"

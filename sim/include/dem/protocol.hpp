@@ -5,6 +5,7 @@
 //   DIR/manifest.json                 scene, version, command, per-stage status
 //   DIR/scene.toml                    the resolved scene (every key with its value)
 //   DIR/prep/{compress,relax,cycle_loading,cycle_unloading}.csv
+//   DIR/prep/after_<stage>.ckpt      end state of each preparation stage (resume points)
 //   DIR/checkpoints/unloading_phi0.700.{ckpt,txt}   (txt: YADE text packing)
 //   DIR/deviatoric/D2_phi0.700.csv ...
 //   DIR/vtk/<stage>_NNNN.vtu and DIR/vtk/<stage>.pvd
