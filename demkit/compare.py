@@ -6,9 +6,12 @@ and the largest and RMS differences of p, s_dev, F_dev and C are reported:
   s_dev  absolute, and relative to A's plateau (mean over the second half of the grid)
   F_dev  likewise
   C      absolute
-Exit code 0 when every difference is within its tolerance, 4 otherwise, 1 on bad input.
+Exit code 0 when every difference is within its tolerance, 4 otherwise, 1 on bad input
+(eps_d must increase from row to row in both curves).
 Default tolerances (see docs/yade.md for how they were calibrated): p 3 % (max), s_dev 15 %
-and F_dev 25 % of the plateau (RMS), C 0.15 (RMS).
+and F_dev 25 % of the plateau (RMS), C 0.15 (RMS); and the common eps_d range must cover at
+least 90 % of each curve's range (a curve that stopped early is compared over its end only,
+which is not a comparison of the two curves).
 """
 import argparse
 import json
@@ -21,16 +24,35 @@ from demkit.curves import read_curve, require, CurveError
 QUANTITIES = ("p_Pa", "s_dev", "F_dev", "C")
 
 
+def check_increasing(curve, name):
+    """eps_d must increase strictly from row to row (interpolation needs it)."""
+    e = curve["eps_d"]
+    bad = np.nonzero(~(np.diff(e) > 0))[0]
+    if len(e) < 2 or len(bad):
+        row = int(bad[0]) + 2 if len(bad) else 1
+        raise CurveError(f"{name}: eps_d does not increase at data row {row} "
+                         f"({'fewer than 2 rows' if len(e) < 2 else f'{e[row - 2]:.6g} then {e[row - 1]:.6g}'}): "
+                         "not a deviatoric curve of one run")
+
+
+def coverage(a, b, lo, hi):
+    """Fraction of each curve's eps_d range that the common range [lo, hi] covers."""
+    ranges = [float(c["eps_d"].max() - c["eps_d"].min()) for c in (a, b)]
+    return min((hi - lo) / r if r > 0 else 0.0 for r in ranges)
+
+
 def compare(a, b, npoints=200):
     """Return a dict of differences between curve dicts a and b (see module doc)."""
     require(a, ("eps_d",) + QUANTITIES, "first curve")
     require(b, ("eps_d",) + QUANTITIES, "second curve")
+    check_increasing(a, "first curve")
+    check_increasing(b, "second curve")
     lo = max(a["eps_d"].min(), b["eps_d"].min())
     hi = min(a["eps_d"].max(), b["eps_d"].max())
     if not hi > lo:
         raise CurveError("the two curves do not overlap in eps_d")
     grid = np.linspace(lo, hi, npoints)
-    res = {"eps_d_range": [float(lo), float(hi)], "points": npoints}
+    res = {"eps_d_range": [float(lo), float(hi)], "points": npoints, "coverage": coverage(a, b, lo, hi)}
     for q in QUANTITIES:
         ya = np.interp(grid, a["eps_d"], a[q])
         yb = np.interp(grid, b["eps_d"], b[q])
@@ -57,6 +79,8 @@ def verdict(res, tol):
     out = {}
     for q, (key, limit) in checks.items():
         out[q] = {"measure": key, "value": res[q][key], "tolerance": limit, "ok": res[q][key] <= limit}
+    cov = tol.get("coverage", 0.9)
+    out["coverage"] = {"measure": "min", "value": res["coverage"], "tolerance": cov, "ok": res["coverage"] >= cov}
     return out
 
 
@@ -92,6 +116,8 @@ def main(argv=None):
     ap.add_argument("--tol-s-dev", type=float, default=0.15)
     ap.add_argument("--tol-f-dev", type=float, default=0.25)
     ap.add_argument("--tol-c", type=float, default=0.15)
+    ap.add_argument("--min-coverage", type=float, default=0.9,
+                    help="smallest fraction of each curve's eps_d range the comparison must cover")
     a = ap.parse_args(argv)
     try:
         ca, cb = read_curve(a.first), read_curve(b_path := a.second)
@@ -99,7 +125,7 @@ def main(argv=None):
     except CurveError as e:
         print(f"dem compare: {e}", file=sys.stderr)
         return 1
-    tol = {"p": a.tol_p, "s_dev": a.tol_s_dev, "F_dev": a.tol_f_dev, "C": a.tol_c}
+    tol = {"p": a.tol_p, "s_dev": a.tol_s_dev, "F_dev": a.tol_f_dev, "C": a.tol_c, "coverage": a.min_coverage}
     v = verdict(res, tol)
     res["verdict"] = v
     print(f"compare {a.first} vs {b_path} over eps_d in [{res['eps_d_range'][0]:.4f}, {res['eps_d_range'][1]:.4f}]")
@@ -108,6 +134,9 @@ def main(argv=None):
         r = res[q]
         print(f"{q:8s} {r['max_abs']:12.4g} {r['rms_abs']:12.4g} {v[q]['measure']:>10s} {v[q]['value']:10.4g} "
               f"{v[q]['tolerance']:10.4g}  {'yes' if v[q]['ok'] else 'NO'}")
+    c = v["coverage"]
+    print(f"{'coverage':8s} {'':12s} {'':12s} {'min':>10s} {c['value']:10.4g} {c['tolerance']:10.4g}  "
+          f"{'yes' if c['ok'] else 'NO (the curves cover different eps_d ranges)'}")
     if a.plot:
         overlay(ca, cb, a.labels.split(","), a.plot)
     if a.json:

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # All tests: C++ (ctest) and the pipeline (pytest). Needs scripts/setup.sh first.
-# Opt-in long tests: DEM_LONG_TESTS=1 scripts/test.sh
+# Extra checks, not run here: the sanitizer build and the fuzzers (README, "Keeping it correct").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cmake --build build -j"$(nproc)" >/dev/null

@@ -8,8 +8,8 @@
 #    into a pair kn = k, cn = gamma (checked at start, the script stops if not);
 #  - no friction, ks = cs = 0, rotations blocked (normal forces on spheres give no torque);
 #  - NewtonIntegrator(damping=0): leapfrog = our symplectic_euler integrator;
-#  - YADE's linear viscoelastic law lets the force turn attractive: compare with our
-#    contact.allow_attractive = true;
+#  - YADE 2023.02a's linear viscoelastic law clamps the force at zero on separation, as our
+#    default contact.allow_attractive = false does (docs/yade.md: the collision check);
 #  - background damping -gamma_b v' (v' = vel - velGrad.pos, the fluctuation velocity) by a
 #    PyRunner every step when --gamma-b > 0 (slow in Python; default 0 in both codes);
 #  - the cell is driven by O.cell.velGrad = diag(rate) (YADE integrates the cell linearly per

@@ -2,6 +2,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -33,7 +34,83 @@ void add_fit_options(CLI::App& app, FitCommandOptions& o) {
 
 namespace {
 
+// Ceres and GSL optima further apart than this (relative) are flagged.
+constexpr double kMaxSolverGap = 1e-3;
+
+std::string join(const std::vector<std::string>& v) {
+  std::string s;
+  for (const auto& x : v) s += (s.empty() ? "" : "; ") + x;
+  return s;
+}
+
 std::string num(double v, int prec = 6) { return table_number(v, prec); }
+
+struct Curve { std::string mode; double phi; Table t; };
+
+// The deviatoric curves to fit: those the run's manifest lists (a rerun may leave others, of
+// other physics, in the folder), or every deviatoric/MODE_phiX.XXX.csv when there is no
+// manifest (a folder of curves assembled by hand).
+std::vector<fs::path> curve_files(const fs::path& run) {
+  const std::regex name_re(R"(([A-Za-z0-9_]+)_phi([0-9.]+)\.csv)");
+  std::vector<fs::path> files;
+  if (fs::exists(run / "manifest.json")) {
+    std::ifstream in(run / "manifest.json");
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::regex entry(R"re("file": "(deviatoric/[^"]+)")re");
+    for (std::sregex_iterator it(text.begin(), text.end(), entry), end; it != end; ++it) {
+      const fs::path f = run / (*it)[1].str();
+      if (fs::exists(f)) files.push_back(f);
+      else std::cerr << "dem fit: warning: " << f.string() << " is listed in manifest.json but missing (run not finished?)\n";
+    }
+    for (auto& f : fs::directory_iterator(run / "deviatoric"))
+      if (f.path().extension() == ".csv" && std::find(files.begin(), files.end(), f.path()) == files.end())
+        std::cerr << "dem fit: note: " << f.path().string() << " is not listed in manifest.json: not fitted\n";
+  } else {
+    for (auto& f : fs::directory_iterator(run / "deviatoric")) files.push_back(f.path());
+  }
+  std::vector<fs::path> out;
+  for (const auto& f : files)
+    if (std::regex_match(f.filename().string(), name_re)) out.push_back(f);
+  return out;
+}
+
+// The `# physics:` record of a curve ("" if it has none).
+std::string physics_of(const Table& t) {
+  for (const auto& c : t.comments)
+    if (c.rfind("# physics: ", 0) == 0) return c.substr(11);
+  return "";
+}
+
+// The key=value words of b that differ from a's.
+std::string physics_difference(const std::string& a, const std::string& b) {
+  std::istringstream ia(a), ib(b);
+  std::vector<std::string> wa, wb;
+  for (std::string w; ia >> w;) wa.push_back(w);
+  for (std::string w; ib >> w;) wb.push_back(w);
+  std::string d;
+  for (std::size_t i = 1; i < wa.size(); ++i)
+    if (std::find(wb.begin(), wb.end(), wa[i]) == wb.end()) {
+      const std::string key = wa[i].substr(0, wa[i].find('='));
+      for (const auto& w : wb)
+        if (w.rfind(key + "=", 0) == 0) d += (d.empty() ? "" : "; ") + wa[i] + " vs " + w.substr(key.size() + 1);
+    }
+  return d;
+}
+
+// Curves of different physics (e.g. two stiffnesses) must not be fitted into one table.
+void check_one_physics(const std::vector<Curve>& curves) {
+  const Curve* first = nullptr;
+  for (const auto& c : curves) {
+    const std::string ph = physics_of(c.t);
+    if (ph.empty()) continue;
+    if (!first) { first = &c; continue; }
+    const std::string ref = physics_of(first->t);
+    if (ph != ref)
+      throw std::runtime_error("the curves were computed with different physics and cannot be fitted into one table: " +
+                               first->t.source + " vs " + c.t.source + ": " + physics_difference(ref, ph) +
+                               ". Fit each physics in its own folder (or rerun with --force)");
+  }
+}
 
 }  // namespace
 
@@ -126,25 +203,25 @@ int run_fit_command(const FitCommandOptions& o) {
 
   // Curves named MODE_phiX.XXX.csv
   const std::regex name_re(R"(([A-Za-z0-9_]+)_phi([0-9.]+)\.csv)");
-  struct Curve { std::string mode; double phi; Table t; };
   std::vector<Curve> curves;
-  for (auto& f : fs::directory_iterator(dev)) {
+  for (const auto& f : curve_files(run)) {
     std::smatch m;
-    const std::string fname = f.path().filename().string();
-    if (!std::regex_match(fname, m, name_re)) continue;
-    curves.push_back({m[1], std::stod(m[2]), read_table(f.path().string())});
+    const std::string fname = f.filename().string();
+    std::regex_match(fname, m, name_re);
+    curves.push_back({m[1], std::stod(m[2]), read_table(f.string())});
   }
   if (curves.empty()) {
     std::cerr << "dem fit: no MODE_phiX.XXX.csv curves in " << dev << " (is the run finished?)\n";
     return 1;
   }
+  check_one_physics(curves);
   std::sort(curves.begin(), curves.end(), [](auto& a, auto& b) { return a.mode != b.mode ? a.mode < b.mode : a.phi < b.phi; });
 
   Table params({"mode", "nu", "quantity", "x0", "se_x0", "x_max", "se_x_max", "beta", "se_beta",
                 "corr_xmax_beta", "initial_slope", "se_initial_slope", "eps_95", "r_squared", "rmse", "n",
                 "eps_last", "gsl_max_rel_diff", "residual_autocorr", "se_inflation", "warnings"});
   FitsByModeQuantity by_mode_q;
-  int warnings = 0;
+  int warnings = 0, usable = 0;
   for (auto& c : curves) {
     const auto& e = c.t.column("eps_d");
     for (const char* q : {"s_dev", "F_dev"}) {
@@ -160,8 +237,13 @@ int run_fit_command(const FitCommandOptions& o) {
           const double scale = std::max(std::fabs(r.x_max), std::fabs(r.x0));
           gsl_gap = std::max({std::fabs(g[0] - r.x0) / scale, std::fabs(g[1] - r.x_max) / scale,
                               std::fabs(g[2] - r.beta) / r.beta});
-        } catch (const std::exception&) {
+        } catch (const std::exception& ex) {
+          r.warnings.push_back(std::string("GSL cross-check failed: ") + ex.what());
         }
+        if (gsl_gap > kMaxSolverGap)
+          r.warnings.push_back("Ceres and GSL optima differ by " + num(gsl_gap, 2) + " (relative, > " + num(kMaxSolverGap) +
+                               "): the data do not pin down the optimum; treat the values with caution");
+        if (!r.ok) throw std::runtime_error(join(r.warnings));
         std::string w;
         for (auto& s : r.warnings) {
           w += (w.empty() ? "" : "; ") + s;
@@ -173,6 +255,7 @@ int run_fit_command(const FitCommandOptions& o) {
                         num(r.se_initial_slope), num(r.eps_95), num(r.r_squared, 5), num(r.rmse), std::to_string(r.n),
                         num(r.e_last, 4), num(gsl_gap, 2), num(r.residual_autocorrelation, 3), num(r.se_inflation, 3), w});
         by_mode_q[{c.mode, q}].emplace_back(c.phi, r);
+        ++usable;
       } catch (const std::exception& ex) {
         std::cerr << "dem fit: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << ex.what() << "\n";
         params.add_row({c.mode, num(c.phi, 4), q, "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan",
@@ -193,6 +276,8 @@ int run_fit_command(const FitCommandOptions& o) {
           try {
             SharedPathTest t = test_shared_path(a.t.column("eps_d"), a.t.column(q), b.t.column("eps_d"), b.t.column(q),
                                                 o.gap_tolerance, fo);
+            if (!t.first.ok || !t.second.ok || !t.shared.ok)
+              throw std::runtime_error("a fit of the test is not usable (ill-conditioned or not converged): no verdict");
             shared.add_row({num(a.phi, 4), q, "D2", "D3", num(t.f_statistic, 4), num(t.p_value, 3), num(t.max_gap, 4),
                             t.same_path ? "yes" : "no", num(t.shared.x_max), num(t.shared.beta)});
           } catch (const std::exception& ex) {
@@ -205,11 +290,16 @@ int run_fit_command(const FitCommandOptions& o) {
 
   write_nu_laws(by_mode_q, out.string());
   write_isotropic({(run / "prep" / "cycle_unloading.csv").string()}, out.string());
-  std::cerr << "dem fit: " << params.rows.size() << " fits written to " << out.string() << " (" << warnings << " warnings)\n";
+  std::cerr << "dem fit: " << usable << " of " << params.rows.size() << " fits usable, written to " << out.string()
+            << " (" << warnings << " warnings)\n";
   if (!o.no_plots) {
     const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.plots \"" +
                             run.string() + "\" --fits";
     if (std::system(cmd.c_str()) != 0) std::cerr << "dem fit: plotting failed (tables are written)\n";
+  }
+  if (usable == 0) {
+    std::cerr << "dem fit: no curve could be fitted (see the reasons above and in parameters.csv): nothing to report\n";
+    return 1;
   }
   return 0;
 }

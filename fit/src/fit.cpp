@@ -3,6 +3,7 @@
 #include <ceres/ceres.h>
 #include <gsl/gsl_blas.h>
 #include <gsl/gsl_cdf.h>
+#include <gsl/gsl_linalg.h>
 #include <gsl/gsl_multifit_nlinear.h>
 #include <gsl/gsl_vector.h>
 
@@ -71,6 +72,31 @@ std::vector<double> start_values(const std::vector<double>& e, const std::vector
   return {x0, xmax, beta};
 }
 
+// Reciprocal condition number of the Jacobian at the optimum, its columns scaled to the
+// parameters' natural units (x0 and x_max by the amplitude |x_max - x0|, beta by beta):
+// near 0 when the data cannot separate the parameters (e.g. a curve saturated at its first
+// point, where beta, and x0 with it, are free).
+double jacobian_rcond(const std::vector<double>& e, double x0, double x_max, double beta, bool fix_x0) {
+  const double amp = std::fabs(x_max - x0);
+  const std::size_t n = e.size(), p = fix_x0 ? 2 : 3;
+  if (!(amp > 0) || !(beta > 0) || n < p) return 0.0;
+  gsl_matrix* J = gsl_matrix_alloc(n, p);
+  gsl_matrix* V = gsl_matrix_alloc(p, p);
+  gsl_vector* S = gsl_vector_alloc(p);
+  gsl_vector* work = gsl_vector_alloc(p);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double ex = std::exp(-beta * e[i]);
+    std::size_t c = 0;
+    if (!fix_x0) gsl_matrix_set(J, i, c++, ex * amp);
+    gsl_matrix_set(J, i, c++, (1 - ex) * amp);
+    gsl_matrix_set(J, i, c, (x_max - x0) * e[i] * ex * beta);
+  }
+  gsl_linalg_SV_decomp(J, V, S, work);
+  const double smax = gsl_vector_get(S, 0), smin = gsl_vector_get(S, p - 1);
+  gsl_matrix_free(J); gsl_matrix_free(V); gsl_vector_free(S); gsl_vector_free(work);
+  return smax > 0 && std::isfinite(smin) ? smin / smax : 0.0;
+}
+
 double mad_scale(std::vector<double> r) {
   for (auto& v : r) v = std::fabs(v);
   std::nth_element(r.begin(), r.begin() + r.size() / 2, r.end());
@@ -91,6 +117,7 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
   FitResult r;
   r.n = static_cast<int>(e.size());
   r.e_last = *std::max_element(e.begin(), e.end());
+  r.e_first = *std::min_element(e.begin(), e.end());
   std::vector<double> p = start_values(e, y);
   p[2] = std::clamp(p[2], o.beta_min * 1.01, o.beta_max * 0.99);
   if (o.nonnegative_asymptote) p[1] = std::max(p[1], 0.0);
@@ -186,13 +213,24 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
     r.warnings.push_back("covariance could not be computed (the Jacobian is rank deficient): "
                          "the data do not determine all three parameters");
   }
+  r.jacobian_rcond = jacobian_rcond(e, r.x0, r.x_max, r.beta, o.fix_x0);
+  if (r.ok && !beta_on_bound && !xmax_on_bound && r.jacobian_rcond < o.min_jacobian_rcond) {
+    r.ok = false;
+    r.se_x0 = r.se_x_max = r.se_beta = r.se_initial_slope = kNaN;
+    r.warnings.push_back("ill-conditioned covariance (reciprocal condition number " + fmt(r.jacobian_rcond) +
+                         " of the scaled Jacobian): the data do not determine all parameters (e.g. the curve saturates "
+                         "within its first points); the values are not supported by the data (sample more finely or "
+                         "fit a longer curve)");
+  }
   if (o.residual_diagnostics && r.residual_autocorrelation > 0.5)
     r.warnings.push_back("residuals are strongly correlated (lag-1 autocorrelation " + fmt(r.residual_autocorrelation) +
                          (o.correct_autocorrelation ? "): standard errors inflated by " + fmt(r.se_inflation)
                                                     : "): standard errors assume independent points and are too small"));
   if (beta_on_bound)
-    r.warnings.push_back("rate beta sits on its bound " + fmt(r.beta) + ": no standard error quoted; "
-                         "the curve shows no saturation in this window");
+    r.warnings.push_back("rate beta sits on its bound " + fmt(r.beta) + ": no standard error quoted; " +
+                         (r.beta >= o.beta_max * 0.9999
+                              ? "the curve saturates before its first sampled strains (sample more finely)"
+                              : "the curve shows no saturation in this window"));
   if (xmax_on_bound) r.warnings.push_back("asymptote x_max sits on its bound 0: no standard error quoted");
   if (r.eps_95 > r.e_last)
     r.warnings.push_back("curve stops before saturation: 95% of the approach is reached only at eps_d = " +
@@ -291,15 +329,17 @@ SharedPathTest test_shared_path(const std::vector<double>& e1, const std::vector
   t.shared = fit_saturating(es, ys, o);
   const double rss_sep = 2 * (t.first.cost + t.second.cost), rss_sh = 2 * t.shared.cost;
   const int n = t.first.n + t.second.n;
-  if (n > 6 && rss_sep > 0) {
-    t.f_statistic = std::max(0.0, (rss_sh - rss_sep) / 3.0 / (rss_sep / (n - 6)));
+  const int k = o.fix_x0 ? 2 : 3;   // free parameters per law
+  if (n > 2 * k && rss_sep > 0) {
+    t.f_statistic = std::max(0.0, (rss_sh - rss_sep) / k / (rss_sep / (n - 2 * k)));
     // Correlated residuals: the residual variance per independent point is larger by the
     // same factor that inflates the standard errors (1 unless correct_autocorrelation).
     const double infl = std::max(t.first.se_inflation, t.second.se_inflation);
     t.f_statistic /= infl * infl;
-    t.p_value = gsl_cdf_fdist_Q(t.f_statistic, 3, n - 6);
+    t.p_value = gsl_cdf_fdist_Q(t.f_statistic, k, n - 2 * k);
   }
-  const double lo = std::max(t.first.e_last * 0, 0.0), hi = std::min(t.first.e_last, t.second.e_last);
+  // The gap over the strains both curves were fitted on (the fit window, not from eps = 0).
+  const double lo = std::max(t.first.e_first, t.second.e_first), hi = std::min(t.first.e_last, t.second.e_last);
   for (int k = 0; k <= 200; ++k) {
     const double x = lo + (hi - lo) * k / 200.0;
     t.max_gap = std::max(t.max_gap, std::fabs(saturating(t.first.x0, t.first.x_max, t.first.beta, x) -

@@ -18,14 +18,22 @@ std::vector<std::string> split(const std::string& line) {
   if (!line.empty() && line.back() == ',') out.push_back("");
   return out;
 }
-void write_atomic(const std::string& path, const std::string& s) {
+// Every write and the close are checked: on a full disk only path.part is left.
+void write_part(const std::string& path, const std::string& s) {
   const std::string tmp = path + ".part";
   {
     std::ofstream o(tmp, std::ios::trunc);
     if (!o) throw std::runtime_error("cannot write " + tmp);
     o << s;
+    o.flush();
+    o.close();
+    if (!o)
+      throw std::runtime_error("writing " + tmp + " failed (disk full?): " + path + " was not written (only the "
+                               "incomplete .part is left); free space and run again");
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + tmp);
+}
+void commit_part(const std::string& path) {
+  if (std::rename((path + ".part").c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + path + ".part");
 }
 std::string json_str(const std::string& s) {
   std::string o = "\"";
@@ -57,12 +65,17 @@ const std::vector<double>& Table::column(const std::string& name) const {
 Table read_table(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error("cannot read " + path);
+  return parse_table(in, path);
+}
+
+Table parse_table(std::istream& in, const std::string& path) {
   Table t;
   t.source = path;
   std::string line;
   int lineno = 0;
   while (std::getline(in, line)) {
     ++lineno;
+    if (!line.empty() && line[0] == '#') t.comments.push_back(line);
     if (line.empty() || line[0] == '#') continue;
     auto cells = split(line);
     if (t.header.empty()) { t.header = cells; t.numeric.assign(cells.size(), {}); continue; }
@@ -123,10 +136,10 @@ void write_table_all(const Table& t, const std::string& stem, const std::string&
     tex << " \\\\\n";
   }
   tex << "\\hline\n\\end{tabular}\n";
-  write_atomic(stem + ".csv", csv.str());
-  write_atomic(stem + ".json", js.str());
-  write_atomic(stem + ".md", md.str());
-  write_atomic(stem + ".tex", tex.str());
+  // All four or none: renamed into place only once every one is written.
+  const std::pair<const char*, std::string> files[] = {{".csv", csv.str()}, {".json", js.str()}, {".md", md.str()}, {".tex", tex.str()}};
+  for (const auto& [ext, text] : files) write_part(stem + ext, text);
+  for (const auto& [ext, text] : files) commit_part(stem + ext);
 }
 
 std::string table_number(double v, int prec) {
@@ -136,6 +149,9 @@ std::string table_number(double v, int prec) {
   return b;
 }
 
-void write_text_file(const std::string& path, const std::string& content) { write_atomic(path, content); }
+void write_text_file(const std::string& path, const std::string& content) {
+  write_part(path, content);
+  commit_part(path);
+}
 
 }  // namespace demfit

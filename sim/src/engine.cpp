@@ -143,8 +143,10 @@ void Engine::check_sanity() const {
     if (!std::isfinite(x.x + x.y + x.z + v.x + v.y + v.z)) {
       std::ostringstream m;
       m << "non-finite position or velocity of particle " << s.id[i] << " at step " << s.step
-        << ": the integration diverged; reduce integration.dt_over_tc (now "
-        << model_.dt_over_tc << "; dense packings are stable up to about 0.5, docs/stability.md) or the strain rate";
+        << ": the integration diverged. The packing passed its checks at start (radii within the scene's bounds, "
+        << "no coincident centres, overlaps below max_overlap_fraction), so the time step or the rate is too large: "
+        << "reduce integration.dt_over_tc (now " << model_.dt_over_tc
+        << "; dense packings are stable up to about 0.5, docs/stability.md) or the strain rate";
       throw BlowUp(m.str());
     }
   }

@@ -1,5 +1,7 @@
 #include "dem/io.hpp"
 
+#include "dem/checks.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -19,7 +21,10 @@ void write_file_atomic(const std::string& path, const std::string& content) {
     if (!out) throw std::runtime_error("cannot open " + tmp + " for writing");
     out.write(content.data(), static_cast<std::streamsize>(content.size()));
     out.flush();
-    if (!out) throw std::runtime_error("write to " + tmp + " failed (disk full?)");
+    out.close();
+    if (!out)
+      throw std::runtime_error("writing " + tmp + " failed (disk full?): " + path + " was not written; free space and "
+                               "run the command again (the incomplete " + tmp + " is left behind)");
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0)
     throw std::runtime_error("cannot rename " + tmp + " to " + path);
@@ -28,6 +33,24 @@ void write_file_atomic(const std::string& path, const std::string& content) {
 State read_packing(const std::string& path, double density) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error("cannot read packing file '" + path + "'");
+  return parse_packing(in, density, path);
+}
+
+namespace {
+[[noreturn]] void packing_error(const std::string& origin, int lineno, const std::string& what) {
+  throw std::runtime_error(origin + ":" + std::to_string(lineno) + ": " + what);
+}
+// The numbers of a line, which must be exactly `want` numbers and nothing else.
+bool read_numbers(const std::string& text, double* v, int want) {
+  std::istringstream ls(text);
+  for (int k = 0; k < want; ++k)
+    if (!(ls >> v[k])) return false;
+  std::string extra;
+  return !(ls >> extra);
+}
+}  // namespace
+
+State parse_packing(std::istream& in, double density, const std::string& path) {
   std::string line;
   State s;
   bool have_cell = false;
@@ -37,24 +60,21 @@ State read_packing(const std::string& path, double density) {
     ++lineno;
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
     if (line.rfind("##PERIODIC::", 0) == 0) {
-      std::istringstream ls(line.substr(12));
-      if (!(ls >> s.box.length.x >> s.box.length.y >> s.box.length.z) ||
-          s.box.length.x <= 0 || s.box.length.y <= 0 || s.box.length.z <= 0)
-        throw std::runtime_error(path + ":" + std::to_string(lineno) +
-                                 ": expected '##PERIODIC:: Lx Ly Lz' with positive lengths");
+      double L[3];
+      if (have_cell || !read_numbers(line.substr(12), L, 3) || !(L[0] > 0 && L[1] > 0 && L[2] > 0) ||
+          !std::isfinite(L[0] + L[1] + L[2]))
+        packing_error(path, lineno, "expected '##PERIODIC:: Lx Ly Lz' (one such line, positive finite lengths)");
+      s.box.length = Vec3{L[0], L[1], L[2]};
       have_cell = true;
       continue;
     }
     if (line[0] == '#') continue;
-    std::istringstream ls(line);
-    double x, y, z, r;
-    std::string extra;
-    if (!(ls >> x >> y >> z >> r))
-      throw std::runtime_error(path + ":" + std::to_string(lineno) +
-                               ": expected 'x y z r' (four numbers, metres)");
-    if (!(r > 0) || !std::isfinite(x + y + z + r))
-      throw std::runtime_error(path + ":" + std::to_string(lineno) + ": radius must be positive and values finite");
-    xs.insert(xs.end(), {x, y, z, r});
+    double v[4];
+    if (!read_numbers(line, v, 4))
+      packing_error(path, lineno, "expected 'x y z r' (four numbers, metres, nothing else on the line)");
+    if (!(v[3] > 0) || !std::isfinite(v[0] + v[1] + v[2] + v[3]))
+      packing_error(path, lineno, "radius must be positive and values finite");
+    xs.insert(xs.end(), v, v + 4);
   }
   if (!have_cell)
     throw std::runtime_error(path + ": no '##PERIODIC:: Lx Ly Lz' line; only periodic packings "
@@ -82,6 +102,7 @@ State read_packing(const std::string& path, double density) {
 }
 
 void write_packing(const std::string& path, const State& s) {
+  validate_state(s, "write_packing " + path);   // ids a permutation: order[] below is safe
   std::vector<int> order(s.count());
   for (int i = 0; i < s.count(); ++i) order[s.id[i]] = i;
   std::ostringstream out;
@@ -163,8 +184,17 @@ State random_packing(const Model& m, double phi) {
 }
 
 // ---- checkpoints ----
+// Version 3: magic "DEMCKPT3", the fields below, "END!", then the FNV-1a 64 checksum of every
+// byte before it. Version 2 (the same without the checksum) is still read.
 namespace {
-const char kMagic[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '2'};
+const char kMagic[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '3'};
+const char kMagicV2[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '2'};
+
+std::uint64_t fnv1a(const char* data, std::size_t n) {
+  std::uint64_t h = 14695981039346656037ULL;
+  for (std::size_t i = 0; i < n; ++i) { h ^= static_cast<unsigned char>(data[i]); h *= 1099511628211ULL; }
+  return h;
+}
 
 struct Writer {
   std::string buf;
@@ -172,24 +202,29 @@ struct Writer {
   void str(const std::string& s) { pod<std::uint64_t>(s.size()); buf += s; }
   template <class T> void vec(const std::vector<T>& v) {
     pod<std::uint64_t>(v.size());
-    buf.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+    if (!v.empty()) buf.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
   }
 };
 struct Reader {
   const std::string& buf; size_t pos = 0; std::string path;
-  void need(size_t n) {
-    if (pos + n > buf.size()) throw std::runtime_error(path + ": checkpoint is truncated");
+  void need(std::uint64_t n) {
+    if (n > buf.size() - pos) throw std::runtime_error(path + ": checkpoint is truncated");
   }
   template <class T> T pod() { need(sizeof(T)); T v; std::memcpy(&v, buf.data() + pos, sizeof v); pos += sizeof v; return v; }
   std::string str() { auto n = pod<std::uint64_t>(); need(n); std::string s = buf.substr(pos, n); pos += n; return s; }
   template <class T> std::vector<T> vec() {
-    auto n = pod<std::uint64_t>(); need(n * sizeof(T));
-    std::vector<T> v(n); std::memcpy(v.data(), buf.data() + pos, n * sizeof(T)); pos += n * sizeof(T); return v;
+    auto n = pod<std::uint64_t>();
+    if (n > (buf.size() - pos) / sizeof(T)) throw std::runtime_error(path + ": checkpoint is truncated");
+    std::vector<T> v(n);
+    if (n > 0) std::memcpy(v.data(), buf.data() + pos, n * sizeof(T));   // data() may be null when n == 0 (UBSan)
+    pos += n * sizeof(T);
+    return v;
   }
 };
 }  // namespace
 
 void write_checkpoint(const std::string& path, const Checkpoint& c) {
+  validate_state(c.state, "write_checkpoint " + path);
   Writer w;
   w.buf.append(kMagic, 8);
   w.str(c.scene_toml);
@@ -199,6 +234,7 @@ void write_checkpoint(const std::string& path, const Checkpoint& c) {
   w.pod(s.box.length); w.pod(s.box.length0); w.pod(s.box.reference); w.pod(s.box.log_strain); w.pod(s.time); w.pod(s.step);
   w.vec(s.position_at_build); w.pod(s.length_at_build); w.pod<std::uint8_t>(s.list_valid);
   w.buf.append("END!", 4);
+  w.pod(fnv1a(w.buf.data(), w.buf.size()));
   write_file_atomic(path, w.buf);
 }
 
@@ -206,9 +242,29 @@ Checkpoint read_checkpoint(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error("cannot read checkpoint '" + path + "'");
   std::string buf((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (buf.size() < 12 || std::memcmp(buf.data(), kMagic, 8) != 0)
-    throw std::runtime_error(path + ": not a dem checkpoint (wrong magic; version 2 expected)");
-  Reader r{buf, 8, path};
+  if (in.bad()) throw std::runtime_error("reading checkpoint '" + path + "' failed (I/O error)");
+  return parse_checkpoint(buf, path);
+}
+
+Checkpoint parse_checkpoint(const std::string& buf, const std::string& path) {
+  const bool v3 = buf.size() >= 8 && std::memcmp(buf.data(), kMagic, 8) == 0;
+  const bool v2 = buf.size() >= 8 && std::memcmp(buf.data(), kMagicV2, 8) == 0;
+  if (!v3 && !v2) {
+    if (buf.size() >= 7 && std::memcmp(buf.data(), kMagic, 7) == 0)
+      throw std::runtime_error(path + ": checkpoint format version '" + std::string(1, buf[7]) +
+                               "' is not readable by this dem (versions 2 and 3 are): rerun the preparation");
+    throw std::runtime_error(path + ": not a dem checkpoint (wrong magic; version 3 expected)");
+  }
+  if (v3) {
+    if (buf.size() < 8 + 12) throw std::runtime_error(path + ": checkpoint is truncated");
+    std::uint64_t stored;
+    std::memcpy(&stored, buf.data() + buf.size() - 8, 8);
+    if (fnv1a(buf.data(), buf.size() - 8) != stored)
+      throw std::runtime_error(path + ": checkpoint is corrupt (checksum mismatch: the file was altered or damaged); "
+                               "rerun the preparation (dem run SCENE --out DIR --stages prep --force)");
+  }
+  const std::string body = v3 ? buf.substr(0, buf.size() - 8) : buf;
+  Reader r{body, 8, path};
   Checkpoint c;
   c.scene_toml = r.str();
   c.label = r.str();
@@ -220,10 +276,10 @@ Checkpoint read_checkpoint(const std::string& path) {
   s.position_at_build = r.vec<Vec3>(); s.length_at_build = r.pod<Vec3>();
   s.list_valid = r.pod<std::uint8_t>() != 0;
   r.need(4);
-  if (buf.compare(r.pos, 4, "END!") != 0) throw std::runtime_error(path + ": checkpoint is corrupt (no end marker)");
-  const size_t n = s.position.size();
-  if (s.velocity.size() != n || s.radius.size() != n || s.mass.size() != n || s.id.size() != n)
-    throw std::runtime_error(path + ": checkpoint arrays have inconsistent sizes");
+  if (body.compare(r.pos, 4, "END!") != 0 || r.pos + 4 != body.size())
+    throw std::runtime_error(path + ": checkpoint is corrupt (no end marker where expected)");
+  validate_state(s, path);
+  if (s.list_valid && s.position_at_build.size() != s.position.size()) s.list_valid = false;
   return c;
 }
 

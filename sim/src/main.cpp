@@ -9,6 +9,7 @@
 #include <sstream>
 #include <unistd.h>
 
+#include "dem/checks.hpp"
 #include "dem/collision.hpp"
 #include "dem/engine.hpp"
 #include "dem/io.hpp"
@@ -58,8 +59,8 @@ void warn_time_step(const dem::Model& m) {
 void print_info(const dem::Model& m) {
   warn_time_step(m);
   const auto& p = m.protocol;
-  std::printf("particles          N = %d, r in [%g, %g] m, rho = %g kg/m^3\n", m.count, m.radius_min,
-              m.radius_max, m.density);
+  std::printf("particles          N = %d, r in [%g, %g] m, rho = %g kg/m^3, memory ~%.3g MB (estimate)\n", m.count,
+              m.radius_min, m.radius_max, m.density, dem::estimated_memory_bytes(m.count) / 1e6);
   std::printf("contact            k = %g N/m, gamma = %g kg/s, gamma_b = %g kg/s, %s\n",
               m.contact.stiffness, m.contact.damping, m.background_damping,
               m.contact.allow_attractive ? "attractive allowed" : "clamped at zero");
@@ -75,6 +76,28 @@ void print_info(const dem::Model& m) {
     std::printf("mode %-13s  rate shape (%g, %g, %g): %.3g steps to eps_d = %g\n", mode.name.c_str(),
                 mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z, p.eps_d_max / per_step, p.eps_d_max);
   }
+}
+
+// A command-line value that cannot be right (exit code 2).
+struct ArgumentError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// A positive finite option value as an exact TOML number (17 significant digits).
+std::string exact_number(const char* option, double v) {
+  if (!(v > 0) || !std::isfinite(v)) throw ArgumentError(std::string(option) + " must be a positive finite number");
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
+
+// An output CSV path, checked before anything runs: not a folder, in a folder that exists.
+void check_output_file(const std::string& out, bool force) {
+  if (fs::is_directory(out)) throw ArgumentError("--out " + out + " is a folder: give a file name, e.g. " + out + "/D2.csv");
+  const fs::path parent = fs::path(out).parent_path();
+  if (!parent.empty() && !fs::is_directory(parent))
+    throw ArgumentError("--out " + out + ": the folder " + parent.string() + " does not exist: create it first");
+  if (fs::exists(out) && !force) throw std::runtime_error(out + " exists: pass --force to overwrite it");
 }
 
 }  // namespace
@@ -147,8 +170,8 @@ int main(int argc, char** argv) {
   mode_cmd->add_option("--name", mode_stage_name, "stage name in the CSV (default: the mode's name; `dem run` uses "
                                                   "MODE_phiX.XXX)");
   mode_cmd->add_option("--mode", mode_name, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, or a [modes] name");
-  mode_cmd->add_option("--rate-tc", mode_rate_tc, "mode rate times t_c (default: protocol.deviatoric_rate_tc)");
-  mode_cmd->add_option("--eps-max", mode_eps, "stop at this eps_d (default: protocol.eps_d_max)");
+  auto* mode_rate_opt = mode_cmd->add_option("--rate-tc", mode_rate_tc, "mode rate times t_c (default: protocol.deviatoric_rate_tc)");
+  auto* mode_eps_opt = mode_cmd->add_option("--eps-max", mode_eps, "stop at this eps_d (default: protocol.eps_d_max)");
   mode_cmd->add_option("--out", mode_out, "output CSV")->required();
   mode_cmd->add_option("--set", overrides, "override a scene key");
   mode_cmd->add_flag("--force", mode_force, "overwrite an existing output CSV");
@@ -208,7 +231,11 @@ int main(int argc, char** argv) {
   auto* plot = app.add_subcommand("plot", "plot a run folder's curves (PNG/SVG)");
   plot->allow_extras();
 
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;   // --help: 0; any bad argument: 2 (README's catalogue)
+  }
 
   try {
     if (*run) {
@@ -264,18 +291,18 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (*mode_cmd) {
-      if (mode_rate_tc > 0) overrides.push_back("protocol.deviatoric_rate_tc=" + std::to_string(mode_rate_tc));
-      if (mode_eps > 0) overrides.push_back("protocol.eps_d_max=" + std::to_string(mode_eps));
+      if (mode_rate_opt->count()) overrides.push_back("protocol.deviatoric_rate_tc=" + exact_number("--rate-tc", mode_rate_tc));
+      if (mode_eps_opt->count()) overrides.push_back("protocol.eps_d_max=" + exact_number("--eps-max", mode_eps));
       overrides.push_back("protocol.modes=[\"" + mode_name + "\"]");
       if (mode_threads >= 0) overrides.push_back("integration.threads=" + std::to_string(mode_threads));
       std::string resolved;
       dem::Model model = mode_scene.empty() ? dem::load_scene("", overrides, &resolved, "defaults")
                                             : dem::load_scene_file(mode_scene, overrides, &resolved);
-      if (fs::exists(mode_out) && !mode_force)
-        throw std::runtime_error(mode_out + " exists: pass --force to overwrite it");
+      check_output_file(mode_out, mode_force);
       dem::State state = fs::path(mode_packing).extension() == ".ckpt"
                              ? dem::read_checkpoint(mode_packing).state
                              : dem::read_packing(mode_packing, model.density);
+      dem::check_packing(model, state, mode_packing);
       const auto& m = model.protocol.modes.front();
       dem::StageSpec spec{mode_stage_name.empty() ? m.name : mode_stage_name, m.rate_shape * model.protocol.deviatoric_rate, dem::StopKind::DeviatoricStrain,
                           model.protocol.eps_d_max, {}};
@@ -290,9 +317,16 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (*collide) {
-      overrides.insert(overrides.begin(), "contact.background_damping_kg_s=0");
+      overrides.insert(overrides.begin(), {"contact.background_damping_kg_s=0", "integration.threads=1"});
       const dem::Model model = dem::load_scene("", overrides, nullptr, "collide");
+      for (auto [name, v] : {std::pair{"--r1", col_r1}, {"--r2", col_r2}, {"--v0", col_v0}})
+        if (!(v > 0) || !std::isfinite(v)) throw ArgumentError(std::string(name) + " must be a positive finite number");
       const dem::CollisionResult r = dem::simulate_collision(model, col_r1, col_r2, col_v0);
+      if (r.steps_in_contact < 20 || r.max_overlap > model.max_overlap_fraction)
+        throw ArgumentError("the contact lasted " + std::to_string(r.steps_in_contact) + " time steps with an overlap of " +
+                            std::to_string(r.max_overlap) + " x the smaller radius: --v0 is too large for this stiffness "
+                            "(the spheres pass through each other, t_c and e are meaningless); lower --v0 so that the "
+                            "overlap stays well below the radius (and the contact spans >= 20 steps)");
       const double m1 = dem::sphere_mass(col_r1, model.density), m2 = dem::sphere_mass(col_r2, model.density);
       const dem::PairCollision a = dem::pair_collision(model.contact.stiffness, model.contact.damping, m1 * m2 / (m1 + m2));
       std::printf("{\"t_contact_s\": %.12g, \"restitution\": %.12g, \"t_contact_analytic_s\": %.12g, "
@@ -339,9 +373,11 @@ int main(int argc, char** argv) {
   } catch (const dem::SceneError& e) {
     std::cerr << "dem: scene error: " << e.what() << "\n";
     return 2;
+  } catch (const ArgumentError& e) {
+    std::cerr << "dem: bad argument: " << e.what() << "\n";
+    return 2;
   } catch (const dem::BlowUp& e) {
-    std::cerr << "dem: simulation blew up: " << e.what()
-              << "\n     the last good state was saved as failed_<stage>.ckpt in the results folder\n";
+    std::cerr << "dem: simulation blew up: " << e.what() << "\n";
     return 3;
   } catch (const std::exception& e) {
     std::cerr << "dem: error: " << e.what() << "\n";

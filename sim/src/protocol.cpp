@@ -10,6 +10,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "dem/checks.hpp"
 #include "dem/contact_law.hpp"
 #include "dem/engine.hpp"
 #include "dem/io.hpp"
@@ -29,7 +30,7 @@ std::string csv_header() {
 }
 
 // Comment lines of every curve CSV: what the columns mean.
-std::string csv_preamble(const Model& m, const std::string& stage) {
+std::string csv_preamble(const Model& m, const std::string& stage, const Physics& physics) {
   std::ostringstream o;
   o << "# dem curve: stage=" << stage << "\n"
     << "# units: SI; *_Pa pascal, *_J joule, time_s second; other columns dimensionless\n"
@@ -39,7 +40,8 @@ std::string csv_preamble(const Model& m, const std::string& stage) {
     << "# fabric: F=(1/V) sum_p V_p sum_c n(x)n; C=2*contacts/N; rattlers: <4 contacts, removed recursively\n"
     << "# overlap_*_rel: overlap / smaller radius of the pair; inertial_number=max|rate| 2<r> sqrt(rho/p)\n"
     << "# t_c=" << m.t_contact << " s, dt=" << m.dt << " s, k=" << m.contact.stiffness
-    << " N/m, gamma=" << m.contact.damping << " kg/s, gamma_b=" << m.background_damping << " kg/s\n";
+    << " N/m, gamma=" << m.contact.damping << " kg/s, gamma_b=" << m.background_damping << " kg/s\n"
+    << "# physics: " << physics_line(physics) << "\n";
   return o.str();
 }
 
@@ -76,7 +78,7 @@ std::string fmt_phi(double phi) {
 std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
                        const std::string& csv_path, const std::string& vtk_dir,
                        const std::function<void(double, const State&)>& on_checkpoint,
-                       bool quiet) {
+                       bool quiet, const std::string& failed_checkpoint) {
   using clock = std::chrono::steady_clock;
   // Strains from the stage start; lengths re-based so that opposite rates cancel exactly.
   state.box.length0 = state.box.length;
@@ -124,9 +126,19 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   }
   const std::size_t n_checkpoint_events = spec.stop == StopKind::DeviatoricStrain ? 0 : events.size() - 1;
 
-  std::ofstream csv(csv_path + ".part", std::ios::trunc);
-  if (!csv) throw std::runtime_error("cannot write " + csv_path + ".part");
-  csv << csv_preamble(model, spec.name) << csv_header() << ",stage\n";
+  const std::string part = csv_path + ".part";
+  std::ofstream csv(part, std::ios::trunc);
+  if (!csv) throw std::runtime_error("cannot write " + part + ": check that the folder exists and is writable");
+  // Every write is checked: on a full disk the stage stops with only the .part file.
+  auto check_csv = [&]() {
+    if (!csv)
+      throw std::runtime_error("writing " + part + " failed (disk full?): stage " + spec.name + " stopped; " +
+                               csv_path + " was not written (only the incomplete .part is left); free space and run again");
+  };
+  const bool shear = spec.stop == StopKind::DeviatoricStrain;
+  csv << csv_preamble(model, spec.name, shear ? shear_physics(model) : preparation_physics(model)) << csv_header()
+      << ",stage\n";
+  check_csv();
 
   Measurement last_m = measure(model, state, engine.neighbor_list(), spec.rate);
   auto write_row = [&](const Measurement& m) { csv << curve_row(m) << "," << spec.name << "\n"; };
@@ -214,6 +226,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
         max_inertial = std::max(max_inertial, last_m.inertial_number);
         write_row(last_m);
         csv.flush();
+        check_csv();
         last_sample_x = progress_value();
         last_good = state;
       }
@@ -237,17 +250,19 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
         }
       }
     }
-  } catch (const BlowUp&) {
+  } catch (const BlowUp& e) {
     csv.close();
     // Keep the partial curve visibly partial (.part) and save the last good state.
-    Checkpoint c{"", "last good state of stage " + spec.name, last_good};
-    const fs::path dir = fs::path(csv_path).parent_path().parent_path();
-    write_checkpoint((dir / ("failed_" + spec.name + ".ckpt")).string(), c);
-    throw;
+    const std::string failed = failed_checkpoint.empty() ? csv_path + ".failed.ckpt" : failed_checkpoint;
+    write_checkpoint(failed, Checkpoint{"", "last good state of stage " + spec.name, last_good});
+    throw BlowUp(std::string(e.what()) + "\n     the last good state of stage " + spec.name + " was saved as " + failed);
   }
   snapshot();
+  csv.flush();
+  check_csv();
   csv.close();
-  fs::rename(csv_path + ".part", csv_path);
+  check_csv();
+  fs::rename(part, csv_path);
   if (spec.stop == StopKind::DeviatoricStrain && max_inertial > kQuasiStaticInertial)
     std::cerr << "dem: warning: stage " << spec.name << " reached an inertial number of " << max_inertial
               << " (> " << kQuasiStaticInertial << "): not quasi-static; the curves depend on the rate. "
@@ -272,7 +287,7 @@ std::string json_escape(const std::string& s) {
 
 struct Manifest {
   struct Output {
-    std::string stage, file;
+    std::string stage, file, physics;
     std::int64_t steps = -1;   // -1: produced by an earlier invocation
     double wall_s = 0, particle_steps_per_s = 0;
   };
@@ -287,7 +302,7 @@ struct Manifest {
     for (std::size_t i = 0; i < stages.size(); ++i) {
       const Output& st = stages[i];
       o << (i ? ",\n    " : "\n    ") << "{\"stage\": \"" << json_escape(st.stage) << "\", \"file\": \""
-        << json_escape(st.file) << "\"";
+        << json_escape(st.file) << "\", \"physics\": \"" << json_escape(st.physics) << "\"";
       if (st.steps >= 0)
         o << ", \"steps\": " << st.steps << ", \"wall_s\": " << st.wall_s
           << ", \"particle_steps_per_s\": " << st.particle_steps_per_s;
@@ -297,6 +312,149 @@ struct Manifest {
     write_file_atomic(path, o.str());
   }
 };
+
+// The preparation stages in order; each ends with DIR/prep/after_<stage>.ckpt (resume point).
+const std::vector<std::string> kPrepStages = {"compress", "relax", "cycle_loading", "cycle_unloading"};
+
+std::string read_text(const fs::path& f) {
+  std::ifstream in(f, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+bool manifest_complete(const fs::path& file) {
+  return read_text(file).find("\"complete\": true") != std::string::npos;
+}
+
+// The `# physics:` line of a curve CSV ("" if it has none: written by an older dem).
+std::string curve_physics_line(const fs::path& csv) {
+  std::ifstream in(csv);
+  std::string line;
+  while (std::getline(in, line) && !line.empty() && line[0] == '#')
+    if (line.rfind("# physics: ", 0) == 0) return line.substr(11);
+  return "";
+}
+
+std::string first_word(const std::string& s) { return s.substr(0, s.find(' ')); }
+
+std::vector<std::string> csv_stems(const fs::path& folder) {
+  std::vector<std::string> names;
+  if (fs::is_directory(folder))
+    for (auto& f : fs::directory_iterator(folder))
+      if (f.path().extension() == ".csv") names.push_back(f.path().stem().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+// The physics of the scene stored in a checkpoint.
+Model checkpoint_model(const Checkpoint& c, const std::string& origin) {
+  try {
+    return load_scene(c.scene_toml, {}, nullptr, origin + " (its scene)");
+  } catch (const SceneError& e) {
+    throw std::runtime_error(origin + ": the scene stored in the checkpoint cannot be read (" + e.what() +
+                             "): rerun the preparation");
+  }
+}
+
+// --stages deviatoric: every checkpoint exists and was prepared with this scene's material physics.
+void check_checkpoints(const Model& model, const fs::path& dir) {
+  for (double phi : model.protocol.checkpoints_unloading) {
+    const fs::path ck = dir / "checkpoints" / ("unloading_" + fmt_phi(phi) + ".ckpt");
+    if (!fs::exists(ck))
+      throw std::runtime_error("checkpoint " + ck.string() + " is missing: run --stages prep first");
+    const Checkpoint c = read_checkpoint(ck.string());
+    const std::string d = physics_diff(material_physics(checkpoint_model(c, ck.string())), material_physics(model),
+                                       "checkpoint", "this scene");
+    if (!d.empty())
+      throw SceneError(ck.string() + " was prepared with other physics: " + d + ". Curves from it would mix two "
+                       "physics: run with the scene it was prepared with (" + (dir / "scene.toml").string() +
+                       "), or rerun the preparation (--stages all --force)");
+  }
+}
+
+// Curves that a rerun keeps must be of this scene's shear physics.
+void check_kept_curves(const Model& model, const fs::path& dir) {
+  const Physics want = shear_physics(model);
+  for (const auto& name : csv_stems(dir / "deviatoric")) {
+    const fs::path f = dir / "deviatoric" / (name + ".csv");
+    const std::string line = curve_physics_line(f);
+    if (line.empty()) continue;   // older dem: no record to check
+    const std::string d = physics_diff(parse_physics_line(line), want, "kept curve", "this scene");
+    if (!d.empty())
+      throw SceneError(f.string() + " was computed with other physics: " + d + ". Keeping it would mix two physics "
+                       "in one folder (and in dem fit): pass --force to recompute the deviatoric curves, or choose "
+                       "another --out");
+  }
+}
+
+// --force: remove what the rerun replaces, and say so.
+void clear_replaced(const fs::path& dir, bool prep) {
+  if (!fs::is_directory(dir)) return;
+  std::vector<std::string> removed;
+  auto drop = [&](const fs::path& p) {
+    if (!fs::exists(p)) return;
+    fs::remove_all(p);
+    removed.push_back(fs::relative(p, dir).string() + (fs::path(p).has_extension() ? "" : "/"));
+  };
+  for (const char* sub : {"deviatoric", "fit", "plots"}) drop(dir / sub);
+  if (prep)
+    for (const char* sub : {"prep", "checkpoints", "vtk", "manifest.json"}) drop(dir / sub);
+  std::vector<fs::path> files;
+  for (auto& f : fs::directory_iterator(dir)) files.push_back(f.path());
+  if (fs::is_directory(dir / "vtk"))
+    for (auto& f : fs::directory_iterator(dir / "vtk")) {
+      const std::string n = f.path().filename().string();
+      if (std::none_of(kPrepStages.begin(), kPrepStages.end(), [&](const std::string& s) { return n.rfind(s, 0) == 0; }))
+        files.push_back(f.path());
+    }
+  for (const auto& f : files)
+    if (f.filename().string().rfind("failed_", 0) == 0 || f.parent_path().filename() == "vtk") drop(f);
+  if (!removed.empty()) {
+    std::string list;
+    for (std::size_t i = 0; i < removed.size() && i < 12; ++i) list += (i ? ", " : "") + removed[i];
+    if (removed.size() > 12) list += ", ... (" + std::to_string(removed.size()) + " in all)";
+    std::cerr << "dem: --force: removed the earlier results this run replaces in " << dir.string() << ": " << list << "\n";
+  }
+}
+
+// The last preparation stage whose curve and end state exist ("" if none).
+std::string last_finished_prep_stage(const fs::path& dir) {
+  std::string last;
+  for (const auto& st : kPrepStages)
+    if (fs::exists(dir / "prep" / (st + ".csv")) && fs::exists(dir / "prep" / ("after_" + st + ".ckpt"))) last = st;
+  return last;
+}
+
+// The state an interrupted preparation resumes from, after checking it is of this scene.
+State resume_state(const Model& model, const fs::path& dir, const std::string& stage) {
+  const fs::path ck = dir / "prep" / ("after_" + stage + ".ckpt");
+  Checkpoint c = read_checkpoint(ck.string());
+  const std::string d = physics_diff(preparation_physics(checkpoint_model(c, ck.string())),
+                                     preparation_physics(model), "interrupted run", "this scene");
+  if (!d.empty())
+    throw SceneError(dir.string() + " holds an interrupted preparation of other physics: " + d + ". Run the scene it "
+                     "was started with (" + (dir / "scene.toml").string() + ") to resume it, pass --force to start "
+                     "afresh, or choose another --out");
+  return std::move(c.state);
+}
+
+// The starting state of a fresh preparation: a packing file (checked against the scene) or placement.
+State initial_state(const Model& model, const std::function<void(const std::string&)>& note) {
+  State state;
+  if (!model.packing_file.empty() && fs::path(model.packing_file).extension() == ".ckpt") {
+    note("continuing from checkpoint " + model.packing_file);
+    state = read_checkpoint(model.packing_file).state;
+  } else if (!model.packing_file.empty()) {
+    note("reading packing " + model.packing_file);
+    state = read_packing(model.packing_file, model.density);
+  } else {
+    note("placing " + std::to_string(model.count) + " spheres at phi = " + std::to_string(model.protocol.initial_phi));
+    return random_packing(model, model.protocol.initial_phi);
+  }
+  check_packing(model, state, model.packing_file);
+  return state;
+}
 
 }  // namespace
 
@@ -309,13 +467,31 @@ void run_protocol(const Model& model, const RunOptions& opt) {
   const bool want_prep = opt.stages == "all" || opt.stages == "prep";
   const bool want_dev = opt.stages == "all" || opt.stages == "deviatoric";
   if (!want_prep && !want_dev)
-    throw std::runtime_error("--stages must be all, prep or deviatoric (got '" + opt.stages + "')");
-  if (fs::exists(dir / "manifest.json") && !opt.force && want_prep)
-    throw std::runtime_error("results already exist in " + dir.string() +
-                             " (manifest.json): choose another --out, or pass --force to overwrite");
-  if (opt.force && fs::is_directory(dir))   // stale failure states of an earlier attempt
-    for (auto& f : fs::directory_iterator(dir))
-      if (f.path().filename().string().rfind("failed_", 0) == 0) fs::remove(f.path());
+    throw SceneError("--stages must be all, prep or deviatoric (got '" + opt.stages + "')");
+  auto note = [&](const std::string& what) {
+    if (!opt.quiet) std::cerr << "dem: " << what << "\n";
+  };
+
+  // 1. Checks, before anything is written.
+  const bool resume = want_prep && !opt.force && fs::exists(dir / "manifest.json");
+  if (resume && manifest_complete(dir / "manifest.json"))
+    throw std::runtime_error("results already exist in " + dir.string() + " (manifest.json: a finished run): choose "
+                             "another --out, or pass --force to replace them");
+  if (want_prep && !resume) check_memory(model);
+  const std::string resume_after = resume ? last_finished_prep_stage(dir) : "";
+  State start;   // the state the preparation starts from: read and checked before writing
+  if (!resume_after.empty()) start = resume_state(model, dir, resume_after);
+  if (!want_prep) check_checkpoints(model, dir);
+  if (want_dev && !opt.force) check_kept_curves(model, dir);
+  if (want_prep && resume_after.empty()) start = initial_state(model, note);
+  if (opt.force) clear_replaced(dir, want_prep);
+  if (resume)
+    std::cerr << "dem: " << dir.string() << " holds an interrupted run (manifest.json: complete: false): resuming "
+              << (resume_after.empty() ? "the preparation from its start"
+                                       : "after the finished stage " + resume_after + " (prep/after_" + resume_after + ".ckpt)")
+              << "; finished deviatoric curves are kept\n";
+
+  // 2. The folder, the scene and a manifest that says "not complete" until the end.
   fs::create_directories(dir / "prep");
   fs::create_directories(dir / "checkpoints");
   fs::create_directories(dir / "deviatoric");
@@ -324,21 +500,31 @@ void run_protocol(const Model& model, const RunOptions& opt) {
   write_file_atomic((dir / "scene.toml").string(), opt.scene_toml);
 
   Manifest man{(dir / "manifest.json").string(), opt.scene_toml, opt.command_line, {}, false};
+  const std::string prep_hash = physics_hash(preparation_physics(model)), shear_hash = physics_hash(shear_physics(model));
   const Protocol& p = model.protocol;
-  auto note = [&](const std::string& what) {
-    if (!opt.quiet) std::cerr << "dem: " << what << "\n";
-  };
-  auto record = [&](const std::string& sub, const std::string& name) {
+  auto record = [&](const std::string& sub, const std::string& name, const std::string& physics) {
     const std::string file = (fs::path(sub) / (name + ".csv")).string();
-    for (const auto& st : man.stages)
-      if (st.file == file) return;
-    man.stages.push_back({name, file});
+    for (auto& st : man.stages)
+      if (st.file == file) { st.physics = physics; return; }
+    man.stages.push_back({name, file, physics});
   };
+  // Outputs of earlier invocations that this one keeps.
+  std::size_t first_prep = 0;
+  if (!resume_after.empty())
+    first_prep = std::find(kPrepStages.begin(), kPrepStages.end(), resume_after) - kPrepStages.begin() + 1;
+  for (const char* sub : {"prep", "deviatoric"})
+    for (const auto& name : csv_stems(dir / sub)) {
+      const bool rerun = want_prep && std::string(sub) == "prep" &&
+                         std::find(kPrepStages.begin() + first_prep, kPrepStages.end(), name) != kPrepStages.end();
+      if ((!want_prep || resume) && !rerun) record(sub, name, first_word(curve_physics_line(dir / sub / (name + ".csv"))));
+    }
+  man.save();
+
   auto stage_csv = [&](const std::string& sub, const std::string& name) {
     const fs::path f = dir / sub / (name + ".csv");
-    if (fs::exists(f) && !opt.force)
+    if (fs::exists(f) && !opt.force && !resume)
       throw std::runtime_error(f.string() + " exists: pass --force to overwrite finished results");
-    record(sub, name);
+    record(sub, name, sub == "deviatoric" ? shear_hash : prep_hash);
     return f.string();
   };
   // Runs a stage and records its steps and wall time in the manifest entry of its CSV.
@@ -346,7 +532,8 @@ void run_protocol(const Model& model, const RunOptions& opt) {
                          const std::function<void(double, const State&)>& on_checkpoint) {
     const std::string csv = stage_csv(sub, s.name);
     const auto t0 = std::chrono::steady_clock::now();
-    const std::int64_t steps = run_stage(model, state, s, csv, vtk_dir, on_checkpoint, opt.quiet);
+    const std::int64_t steps = run_stage(model, state, s, csv, vtk_dir, on_checkpoint, opt.quiet,
+                                         (dir / ("failed_" + s.name + ".ckpt")).string());
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     for (auto& st : man.stages)
       if (st.stage == s.name) {
@@ -355,41 +542,9 @@ void run_protocol(const Model& model, const RunOptions& opt) {
         st.particle_steps_per_s = wall > 0 ? steps * double(state.count()) / wall : 0.0;
       }
   };
-  if (!want_prep) {   // keep the outputs of earlier invocations in the manifest
-    for (const char* sub : {"prep", "deviatoric"}) {
-      std::vector<std::string> names;
-      for (auto& f : fs::directory_iterator(dir / sub))
-        if (f.path().extension() == ".csv") names.push_back(f.path().stem().string());
-      std::sort(names.begin(), names.end());
-      for (const auto& name : names) record(sub, name);
-    }
-  }
 
   if (want_prep) {
-    State state;
-    if (!model.packing_file.empty() && fs::path(model.packing_file).extension() == ".ckpt") {
-      note("continuing from checkpoint " + model.packing_file);
-      state = read_checkpoint(model.packing_file).state;
-    } else if (!model.packing_file.empty()) {
-      note("reading packing " + model.packing_file);
-      state = read_packing(model.packing_file, model.density);
-    } else {
-      note("placing " + std::to_string(model.count) + " spheres at phi = " + std::to_string(p.initial_phi));
-      state = random_packing(model, p.initial_phi);
-    }
-    const double phi0 = state.volume_fraction();
-    // 1. isotropic compression to target_phi (skipped when the packing is already denser)
-    if (phi0 < p.target_phi) {
-      StageSpec s{"compress", Vec3{-1, -1, -1} * p.compress_rate, StopKind::VolumeFractionUp, p.target_phi, {}};
-      timed_stage(state, s, "prep", nullptr);
-    }
-    // 2. relaxation at constant volume
-    {
-      StageSpec s{"relax", Vec3{0, 0, 0}, StopKind::Relaxed, 0, {}};
-      timed_stage(state, s, "prep", nullptr);
-    }
-    man.save();
-    // 3. cycle: load to cycle_phi_max, unload to target_phi, checkpoints on the way
+    State state = std::move(start);
     auto save_ckpt = [&](const std::string& branch) {
       return [&, branch](double phi, const State& st) {
         const std::string stem = branch + "_" + fmt_phi(phi);
@@ -399,28 +554,41 @@ void run_protocol(const Model& model, const RunOptions& opt) {
         note("checkpoint " + stem);
       };
     };
-    {
-      StageSpec s{"cycle_loading", Vec3{-1, -1, -1} * p.cycle_rate, StopKind::VolumeFractionUp,
-                  p.cycle_phi_max, {}};
-      for (double phi : p.checkpoints_loading)
-        if (phi > state.volume_fraction() && phi < p.cycle_phi_max) s.checkpoint_phis.push_back(phi);
-      timed_stage(state, s, "prep", save_ckpt("loading"));
+    // Each stage as a function of the state; after it, its end state is the resume point.
+    const std::vector<std::function<void(State&)>> stages = {
+        [&](State& st) {   // 1. isotropic compression to target_phi (skipped when already denser)
+          if (st.volume_fraction() >= p.target_phi) return;
+          timed_stage(st, {"compress", Vec3{-1, -1, -1} * p.compress_rate, StopKind::VolumeFractionUp, p.target_phi, {}},
+                      "prep", nullptr);
+        },
+        [&](State& st) {   // 2. relaxation at constant volume
+          timed_stage(st, {"relax", Vec3{0, 0, 0}, StopKind::Relaxed, 0, {}}, "prep", nullptr);
+        },
+        [&](State& st) {   // 3. cycle: load to cycle_phi_max, checkpoints on the way
+          StageSpec s{"cycle_loading", Vec3{-1, -1, -1} * p.cycle_rate, StopKind::VolumeFractionUp, p.cycle_phi_max, {}};
+          for (double phi : p.checkpoints_loading)
+            if (phi > st.volume_fraction() && phi < p.cycle_phi_max) s.checkpoint_phis.push_back(phi);
+          timed_stage(st, s, "prep", save_ckpt("loading"));
+        },
+        [&](State& st) {   // 4. unload to target_phi, checkpoints on the way
+          StageSpec s{"cycle_unloading", Vec3{1, 1, 1} * p.cycle_rate, StopKind::VolumeFractionDown, p.target_phi, {}};
+          bool top_checkpoint = false;
+          for (double phi : p.checkpoints_unloading) {
+            if (phi < p.cycle_phi_max && phi > p.target_phi) s.checkpoint_phis.push_back(phi);
+            else top_checkpoint |= phi >= p.cycle_phi_max;
+          }
+          if (top_checkpoint) save_ckpt("unloading")(p.cycle_phi_max, st);
+          const bool bottom = std::any_of(p.checkpoints_unloading.begin(), p.checkpoints_unloading.end(),
+                                          [&](double f) { return f <= p.target_phi; });
+          timed_stage(st, s, "prep", save_ckpt("unloading"));
+          if (bottom) save_ckpt("unloading")(p.target_phi, st);
+        }};
+    for (std::size_t i = first_prep; i < stages.size(); ++i) {
+      stages[i](state);
+      write_checkpoint((dir / "prep" / ("after_" + kPrepStages[i] + ".ckpt")).string(),
+                       Checkpoint{opt.scene_toml, "end of stage " + kPrepStages[i], state});
+      man.save();
     }
-    {
-      StageSpec s{"cycle_unloading", Vec3{1, 1, 1} * p.cycle_rate, StopKind::VolumeFractionDown,
-                  p.target_phi, {}};
-      bool top_checkpoint = false;
-      for (double phi : p.checkpoints_unloading) {
-        if (phi < p.cycle_phi_max && phi > p.target_phi) s.checkpoint_phis.push_back(phi);
-        else top_checkpoint |= phi >= p.cycle_phi_max;
-      }
-      if (top_checkpoint) save_ckpt("unloading")(p.cycle_phi_max, state);
-      const bool bottom = std::any_of(p.checkpoints_unloading.begin(), p.checkpoints_unloading.end(),
-                                      [&](double f) { return f <= p.target_phi; });
-      timed_stage(state, s, "prep", save_ckpt("unloading"));
-      if (bottom) save_ckpt("unloading")(p.target_phi, state);
-    }
-    man.save();
   }
 
   if (want_dev) {
@@ -432,7 +600,7 @@ void run_protocol(const Model& model, const RunOptions& opt) {
         throw std::runtime_error("checkpoint " + ck.string() + " is missing: run --stages prep first");
       for (const auto& mode : p.modes) {
         const std::string name = mode.name + "_" + fmt_phi(phi);
-        if (!want_prep && !opt.force && fs::exists(dir / "deviatoric" / (name + ".csv"))) {
+        if ((!want_prep || resume) && !opt.force && fs::exists(dir / "deviatoric" / (name + ".csv"))) {
           note("deviatoric " + name + ": finished earlier, kept (--force recomputes it)");
           continue;
         }

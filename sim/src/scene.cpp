@@ -1,9 +1,13 @@
 #include "dem/scene.hpp"
 
+#include "dem/protocol.hpp"
+
 #include <toml++/toml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <set>
 #include <sstream>
 
@@ -28,8 +32,18 @@ class KeyReader {
     } else if constexpr (std::is_same_v<T, std::string>) {
       if (auto v = node->value_exact<std::string>()) out = *v; else type_error(name, "a string");
     } else if constexpr (std::is_integral_v<T>) {
-      if (auto v = node->value_exact<int64_t>()) out = static_cast<T>(*v);
-      else type_error(name, "an integer");
+      auto v = node->value_exact<int64_t>();
+      if (!v) type_error(name, "an integer");
+      const bool fits = std::is_signed_v<T>
+                            ? *v >= static_cast<int64_t>(std::numeric_limits<T>::min()) &&
+                                  *v <= static_cast<int64_t>(std::numeric_limits<T>::max())
+                            : *v >= 0;
+      if (!fits)
+        throw SceneError(origin_ + ": key '" + name + "' = " + std::to_string(*v) + " is out of range [" +
+                         std::to_string(std::is_signed_v<T> ? std::numeric_limits<T>::min() : 0) + ", " +
+                         std::to_string(std::is_signed_v<T> ? std::numeric_limits<T>::max()
+                                                            : std::numeric_limits<int64_t>::max()) + "]");
+      out = static_cast<T>(*v);
     } else if constexpr (std::is_same_v<T, double>) {
       if (auto v = node->value<double>()) out = *v; else type_error(name, "a number");
     } else if constexpr (std::is_same_v<T, std::vector<double>>) {
@@ -113,12 +127,47 @@ class KeyReader {
   std::set<std::string> free_sections_;
 };
 
+// End of a string starting at i (at its opening quote), or npos if it does not end.
+std::size_t string_end(const std::string& t, std::size_t i) {
+  const char q = t[i];
+  const bool multi = t.compare(i, 3, std::string(3, q)) == 0;
+  for (std::size_t k = i + (multi ? 3 : 1); k < t.size(); ++k) {
+    if (q == '"' && t[k] == '\\') { ++k; continue; }
+    if (!multi && t[k] == '\n') return std::string::npos;
+    if (multi ? t.compare(k, 3, std::string(3, q)) == 0 : t[k] == q) return k + (multi ? 2 : 0);
+  }
+  return std::string::npos;
+}
+
+// TOML allows non-ASCII characters only in comments and strings. toml++ 3.3.0 reaches
+// __builtin_unreachable (undefined behaviour) on some of them elsewhere (found by
+// tests/fuzz/fuzz_scene), so they are refused before it parses the text.
+void check_ascii_outside_strings(const std::string& t, const std::string& origin) {
+  int line = 1;
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    const char c = t[i];
+    if (c == '\n') ++line;
+    else if (c == '#') { while (i + 1 < t.size() && t[i + 1] != '\n') ++i; }
+    else if (c == '"' || c == '\'') {
+      const std::size_t end = string_end(t, i);
+      if (end == std::string::npos)   // toml++ would read on past it (and hit the same problem)
+        throw SceneError(origin + ":" + std::to_string(line) + ": TOML syntax error: a string is not closed");
+      line += static_cast<int>(std::count(t.begin() + i, t.begin() + end, '\n'));
+      i = end;
+    } else if (static_cast<unsigned char>(c) >= 0x80) {
+      throw SceneError(origin + ":" + std::to_string(line) + ": TOML syntax error: a non-ASCII character outside a "
+                       "comment or string (keys and values are ASCII; write e.g. nu, sigma)");
+    }
+  }
+}
+
 void apply_override(toml::table& root, const std::string& ov) {
   const auto eq = ov.find('=');
   if (eq == std::string::npos || eq == 0)
     throw SceneError("override '" + ov + "' must look like section.key=value");
   const std::string key = ov.substr(0, eq);
   std::string value = ov.substr(eq + 1);
+  check_ascii_outside_strings(key + " = " + value, "override '" + ov + "'");
   if (key.find('.') == std::string::npos)
     throw SceneError("override '" + ov + "': name the section, e.g. contact.damping_kg_s=0");
   toml::table parsed;
@@ -158,6 +207,7 @@ bool builtin_mode(const std::string& name, DeformationMode* mode) {
 Model load_scene(const std::string& text, const std::vector<std::string>& overrides,
                  std::string* resolved, const std::string& origin) {
   toml::table root;
+  check_ascii_outside_strings(text, origin);
   try {
     root = toml::parse(text, origin);
   } catch (const toml::parse_error& e) {
@@ -280,22 +330,48 @@ Model load_scene_file(const std::string& path, const std::vector<std::string>& o
   if (!in) throw SceneError("cannot read scene file '" + path + "'");
   std::stringstream ss;
   ss << in.rdbuf();
+  if (in.bad()) throw SceneError("cannot read scene file '" + path + "'");
+  toml::table parsed;
+  check_ascii_outside_strings(ss.str(), path);
+  try {
+    parsed = toml::parse(ss.str(), path);
+  } catch (const toml::parse_error&) {
+    return load_scene(ss.str(), overrides, resolved, path);   // reports the syntax error
+  }
+  if (parsed.empty())
+    throw SceneError(path + ": the scene file is empty (no keys): it would silently run the built-in N = 9261 paper "
+                     "scene for hours; start from a scene in data/scenes/ (quickstart.toml, paper_n9261.toml) "
+                     "and change what you need");
   return load_scene(ss.str(), overrides, resolved, path);
 }
 
-void validate(const Model& m) {
-  auto fail = [](const std::string& msg) { throw SceneError(msg); };
+namespace {
+
+[[noreturn]] void fail(const std::string& msg) { throw SceneError(msg); }
+bool finite_positive(double v) { return v > 0 && std::isfinite(v); }
+std::string g(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%g", v);
+  return b;
+}
+
+void validate_particles_and_contact(const Model& m) {
   if (m.count < 2) fail("particles.count must be at least 2");
-  if (!(m.radius_min > 0)) fail("particles.radius_min_m must be positive");
-  if (!(m.radius_max >= m.radius_min))
-    fail("particles.radius_max_m must be at least particles.radius_min_m");
-  if (!(m.density > 0)) fail("particles.density_kg_m3 must be positive");
-  if (!(m.contact.stiffness > 0)) fail("contact.stiffness_N_m must be positive");
-  if (!(m.contact.damping >= 0)) fail("contact.damping_kg_s must be zero or positive");
-  if (!(m.background_damping >= 0)) fail("contact.background_damping_kg_s must be zero or positive");
+  if (!finite_positive(m.radius_min)) fail("particles.radius_min_m must be positive and finite");
+  if (!(m.radius_max >= m.radius_min) || !std::isfinite(m.radius_max))
+    fail("particles.radius_max_m must be at least particles.radius_min_m, and finite");
+  if (!finite_positive(m.density)) fail("particles.density_kg_m3 must be positive and finite");
+  if (!finite_positive(m.contact.stiffness)) fail("contact.stiffness_N_m must be positive and finite");
+  if (!(m.contact.damping >= 0) || !std::isfinite(m.contact.damping))
+    fail("contact.damping_kg_s must be zero or positive and finite");
+  if (!(m.background_damping >= 0) || !std::isfinite(m.background_damping))
+    fail("contact.background_damping_kg_s must be zero or positive and finite");
+}
+
+void validate_integration(const Model& m) {
   // Linear spring: both integrators are stable for omega_0 dt < 2, i.e. dt/t_c < 2/pi.
   const double dt_limit = 2.0 / M_PI;
-  if (!(m.dt_over_tc > 0)) fail("integration.dt_over_tc must be positive");
+  if (!finite_positive(m.dt_over_tc)) fail("integration.dt_over_tc must be positive");
   if (m.dt_over_tc >= dt_limit)
     fail("integration.dt_over_tc = " + std::to_string(m.dt_over_tc) + " is beyond the stability "
          "limit 2/pi = 0.637 of the integrator for a single contact (omega_0 dt < 2); "
@@ -305,6 +381,22 @@ void validate(const Model& m) {
   if (!(m.max_overlap_fraction > 0 && m.max_overlap_fraction <= 2))
     fail("integration.max_overlap_fraction must be in (0, 2]");
   if (m.check_every_steps < 1) fail("integration.check_every_steps must be >= 1");
+}
+
+// Checkpoint lists: inside [target_phi, cycle_phi_max], no NaN, no two with the same file name.
+void validate_checkpoints(const Protocol& p, const std::vector<double>& phis, const std::string& key) {
+  std::set<std::string> names;
+  for (double phi : phis) {
+    if (!(phi >= p.target_phi && phi <= p.cycle_phi_max))
+      fail("protocol." + key + " value " + g(phi) + " lies outside [target_phi, cycle_phi_max] = [" +
+           g(p.target_phi) + ", " + g(p.cycle_phi_max) + "]");
+    if (!names.insert(fmt_phi(phi)).second)
+      fail("protocol." + key + " lists " + g(phi) + " twice, or two values that round to the same file name " +
+           fmt_phi(phi) + " (3 decimals): keep one of them");
+  }
+}
+
+void validate_protocol(const Model& m) {
   const Protocol& p = m.protocol;
   if (!(p.initial_phi > 0 && p.initial_phi <= 0.45))
     fail("protocol.initial_phi must be in (0, 0.45]: random placement cannot go denser");
@@ -313,22 +405,34 @@ void validate(const Model& m) {
   const double phi_limit = 0.9;
   for (double phi : {p.target_phi, p.cycle_phi_max})
     if (!(phi > 0 && phi < phi_limit))
-      fail("volume fraction " + std::to_string(phi) + " in [protocol] is beyond what these soft "
+      fail("volume fraction " + g(phi) + " in [protocol] is beyond what these soft "
            "spheres can pack without overlaps of the order of their radius; keep phi below 0.9");
   if (!(p.target_phi > p.initial_phi)) fail("protocol.target_phi must exceed protocol.initial_phi");
   if (!(p.cycle_phi_max >= p.target_phi)) fail("protocol.cycle_phi_max must be >= protocol.target_phi");
-  for (double phi : p.checkpoints_unloading)
-    if (phi < p.target_phi || phi > p.cycle_phi_max)
-      fail("protocol.checkpoints_unloading value " + std::to_string(phi) +
-           " lies outside [target_phi, cycle_phi_max]");
-  for (double phi : p.checkpoints_loading)
-    if (phi < p.target_phi || phi > p.cycle_phi_max)
-      fail("protocol.checkpoints_loading value " + std::to_string(phi) +
-           " lies outside [target_phi, cycle_phi_max]");
-  if (!(p.relax_ke_ratio > 0)) fail("protocol.relax_ke_ratio must be positive");
+  validate_checkpoints(p, p.checkpoints_unloading, "checkpoints_unloading");
+  validate_checkpoints(p, p.checkpoints_loading, "checkpoints_loading");
+  std::set<std::string> modes;
+  for (const auto& mode : p.modes)
+    if (!modes.insert(mode.name).second) fail("protocol.modes lists '" + mode.name + "' twice: keep one");
+  if (!finite_positive(p.relax_ke_ratio)) fail("protocol.relax_ke_ratio must be positive and finite");
   if (!(p.eps_d_max > 0 && p.eps_d_max <= 2)) fail("protocol.eps_d_max must be in (0, 2]");
-  if (!(m.output.sample_strain > 0)) fail("output.sample_strain must be positive");
+}
+
+void validate_output(const Model& m) {
+  if (!finite_positive(m.output.sample_strain)) fail("output.sample_strain must be positive and finite");
   if (m.output.relax_sample_steps < 1) fail("output.relax_sample_steps must be >= 1");
+  if (m.output.vtk_per_stage < 0) fail("output.vtk_per_stage must be >= 0");
+  if (!(m.output.progress_seconds >= 0) || !std::isfinite(m.output.progress_seconds))
+    fail("output.progress_seconds must be zero or positive and finite (use --quiet for no progress lines)");
+}
+
+}  // namespace
+
+void validate(const Model& m) {
+  validate_particles_and_contact(m);
+  validate_integration(m);
+  validate_protocol(m);
+  validate_output(m);
   if (m.ensemble_packings < 1 || m.ensemble_packings > 10000)
     fail("ensemble.packings must be in [1, 10000] (independent packings of the scene)");
   if (m.ensemble_packings > 1 && !m.packing_file.empty())

@@ -17,7 +17,7 @@ def test_unknown_key_names_the_key(tmp_path):
 
 def test_bad_override_and_unstable_time_step(tmp_path):
     scene = tmp_path / "s.toml"
-    scene.write_text("")
+    scene.write_text("[particles]\ncount = 300\n")
     p = run_dem("run", scene, "--out", tmp_path / "o", "--set", "integration.dt_over_tc=0.8")
     assert p.returncode == 2 and "stability limit" in p.stderr
     p = run_dem("info", scene, "--set", "particles.radius_min_m=-1")

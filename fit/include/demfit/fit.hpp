@@ -46,6 +46,9 @@ struct FitOptions {
   /// whose errors come from the spread between packings (fit_ensemble).
   bool residual_diagnostics = true;
   double max_relative_error = 0.5;  ///< warn when SE exceeds this fraction of |x_max - x0| (x0, x_max) or of beta
+  /// Below this reciprocal condition number of the scaled Jacobian the fit is refused
+  /// (ok = false, no standard errors): the data do not determine the parameters.
+  double min_jacobian_rcond = 1e-4;
 };
 
 /// Result of one fit. Standard errors are from the Jacobian at the optimum scaled by the
@@ -63,6 +66,8 @@ struct FitResult {
   double se_inflation = 1;        ///< factor applied to the standard errors (1: none)
   int n = 0;                      ///< points used
   double e_last = 0;              ///< largest strain among the points used
+  double e_first = 0;             ///< smallest strain among the points used
+  double jacobian_rcond = 0;      ///< reciprocal condition number of the scaled Jacobian (0..1)
   std::vector<std::string> warnings;   ///< reasons to distrust a number (see fit_saturating)
 };
 
@@ -84,10 +89,10 @@ std::vector<double> fit_saturating_gsl(const std::vector<double>& e, const std::
 struct SharedPathTest {
   FitResult shared;               ///< one law for both curves (3 parameters)
   FitResult first, second;        ///< separate laws (3 + 3 parameters)
-  double f_statistic = 0;         ///< ((RSS_shared - RSS_sep)/3) / (RSS_sep/(n - 6)), divided by the
+  double f_statistic = 0;         ///< ((RSS_shared - RSS_sep)/k) / (RSS_sep/(n - 2k)), k = 3 (2 with fix_x0), divided by the
                                   ///< squared SE inflation when correct_autocorrelation is on
-  double p_value = 1;             ///< upper tail of F(3, n - 6)
-  double max_gap = 0;             ///< max |x_first(e) - x_second(e)| over the common range
+  double p_value = 1;             ///< upper tail of F(k, n - 2k)
+  double max_gap = 0;             ///< max |x_first(e) - x_second(e)| over the strains both fits used
   bool same_path = false;         ///< the paper's claim accepted: p >= 0.01 or max_gap < tolerance
 };
 SharedPathTest test_shared_path(const std::vector<double>& e1, const std::vector<double>& y1,

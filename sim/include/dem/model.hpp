@@ -21,8 +21,9 @@ struct ContactLaw {
   double stiffness = 1e8;       ///< k [N/m = kg/s^2], > 0
   double damping = 1.0;         ///< gamma [kg/s], >= 0; constant, not mass-scaled
   /// If false (default) the force is clamped at zero when the dashpot outweighs the spring
-  /// on separation (no sticking; physical for dry grains). If true the force may turn
-  /// attractive, as in YADE's Law2_ScGeom_ViscElPhys_Basic.
+  /// on separation (no sticking; physical for dry grains), which is also what YADE 2023.02a's
+  /// Law2_ScGeom_ViscElPhys_Basic does (docs/yade.md). If true the force may turn attractive
+  /// (the textbook linear spring-dashpot, which the analytic t_c and e describe exactly).
   bool allow_attractive = false;
 };
 

@@ -5,6 +5,7 @@
 //   DIR/manifest.json                 scene, version, command, per-stage status
 //   DIR/scene.toml                    the resolved scene (every key with its value)
 //   DIR/prep/{compress,relax,cycle_loading,cycle_unloading}.csv
+//   DIR/prep/after_<stage>.ckpt      end state of each preparation stage (resume points)
 //   DIR/checkpoints/unloading_phi0.700.{ckpt,txt}   (txt: YADE text packing)
 //   DIR/deviatoric/D2_phi0.700.csv ...
 //   DIR/vtk/<stage>_NNNN.vtu and DIR/vtk/<stage>.pvd
@@ -27,8 +28,13 @@ struct RunOptions {
   bool quiet = false;                  ///< no progress lines
 };
 
-/// Runs the scene. Throws std::runtime_error (existing results, I/O) or BlowUp (after writing
-/// the last good state to DIR/failed_<stage>.ckpt).
+/// Runs the scene. Checks everything it can before writing anything (checkpoints present and
+/// of the same material physics, kept curves of the same shear physics, memory). A rerun
+/// without --force of an interrupted run resumes it: the preparation from the last finished
+/// stage (DIR/prep/after_<stage>.ckpt), the deviatoric modes by keeping finished curves.
+/// --force removes the outputs it replaces first. Throws SceneError (mixed physics),
+/// std::runtime_error (existing results, I/O) or BlowUp (after writing the last good state
+/// to DIR/failed_<stage>.ckpt).
 void run_protocol(const Model& model, const RunOptions& options);
 
 /// File-name tag of a volume fraction: "phi0.700" (3 decimals; checkpoint and curve names).
@@ -49,9 +55,13 @@ struct StageSpec {
 /// leaves only csv_path.part). Strains are measured from the stage start. For every phi in
 /// spec.checkpoint_phis crossed, the step is shortened to land on it exactly and
 /// on_checkpoint(phi, state) is called. Returns the number of steps taken.
+/// The CSV's comment lines include `# physics: HASH key=value ...` (shear_physics for
+/// deviatoric stages, preparation_physics otherwise; checks.hpp). Throws std::runtime_error
+/// when a write fails (full disk: only csv_path.part is left) and BlowUp after saving the
+/// last good state as `failed_checkpoint` (default: csv_path + ".failed.ckpt").
 std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
                        const std::string& csv_path, const std::string& vtk_dir,
                        const std::function<void(double, const State&)>& on_checkpoint,
-                       bool quiet);
+                       bool quiet, const std::string& failed_checkpoint = "");
 
 }  // namespace dem
