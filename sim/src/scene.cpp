@@ -143,6 +143,13 @@ std::size_t string_end(const std::string& t, std::size_t i) {
 // __builtin_unreachable (undefined behaviour) on some of them elsewhere (found by
 // tests/fuzz/fuzz_scene), so they are refused before it parses the text.
 void check_ascii_outside_strings(const std::string& t, const std::string& origin) {
+  // Control characters other than tab and line ends are not TOML anywhere (third finding).
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    const unsigned char c = static_cast<unsigned char>(t[i]);
+    if ((c < 0x20 && c != '\t' && c != '\n' && c != '\r') || c == 0x7f)
+      throw SceneError(origin + ":" + std::to_string(1 + std::count(t.begin(), t.begin() + i, '\n')) +
+                       ": TOML syntax error: a control character (byte " + std::to_string(c) + "): is this a text file?");
+  }
   int line = 1;
   for (std::size_t i = 0; i < t.size(); ++i) {
     const char c = t[i];
