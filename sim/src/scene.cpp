@@ -139,26 +139,43 @@ std::size_t string_end(const std::string& t, std::size_t i) {
   return std::string::npos;
 }
 
-// TOML allows non-ASCII characters only in comments and strings. toml++ 3.3.0 reaches
-// __builtin_unreachable (undefined behaviour) on some of them elsewhere (found by
-// tests/fuzz/fuzz_scene), so they are refused before it parses the text.
-void check_ascii_outside_strings(const std::string& t, const std::string& origin) {
+// The scene text as toml++ gets it: pure ASCII. toml++ 3.3.0 reaches __builtin_unreachable
+// (undefined behaviour) on non-ASCII characters in several places, also in strings after a
+// syntax error and in its error paths (three findings of tests/fuzz/fuzz_scene). So non-ASCII
+// bytes in comments become '?' (comments carry no values), and anywhere else, strings
+// included, they are refused, as are control characters and unclosed strings.
+std::string ascii_scene(std::string t, const std::string& origin) {
   int line = 1;
+  auto fail = [&](const std::string& what) {
+    throw SceneError(origin + ":" + std::to_string(line) + ": TOML syntax error: " + what);
+  };
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    const unsigned char c = static_cast<unsigned char>(t[i]);
+    if ((c < 0x20 && c != '\t' && c != '\n' && c != '\r') || c == 0x7f)
+      fail("a control character (byte " + std::to_string(c) + "): is this a text file?");
+    if (c == '\n') ++line;
+  }
+  line = 1;
   for (std::size_t i = 0; i < t.size(); ++i) {
     const char c = t[i];
-    if (c == '\n') ++line;
-    else if (c == '#') { while (i + 1 < t.size() && t[i + 1] != '\n') ++i; }
-    else if (c == '"' || c == '\'') {
+    if (c == '\n') {
+      ++line;
+    } else if (c == '#') {
+      for (; i + 1 < t.size() && t[i + 1] != '\n'; ++i)
+        if (static_cast<unsigned char>(t[i + 1]) >= 0x80) t[i + 1] = '?';
+    } else if (c == '"' || c == '\'') {
       const std::size_t end = string_end(t, i);
-      if (end == std::string::npos)   // toml++ would read on past it (and hit the same problem)
-        throw SceneError(origin + ":" + std::to_string(line) + ": TOML syntax error: a string is not closed");
+      if (end == std::string::npos) fail("a string is not closed");
+      for (std::size_t k = i; k <= end; ++k)
+        if (static_cast<unsigned char>(t[k]) >= 0x80)
+          fail("a non-ASCII character in a string (scene values are ASCII: rename the file or folder, or link it)");
       line += static_cast<int>(std::count(t.begin() + i, t.begin() + end, '\n'));
       i = end;
     } else if (static_cast<unsigned char>(c) >= 0x80) {
-      throw SceneError(origin + ":" + std::to_string(line) + ": TOML syntax error: a non-ASCII character outside a "
-                       "comment or string (keys and values are ASCII; write e.g. nu, sigma)");
+      fail("a non-ASCII character outside a comment (keys and values are ASCII; write e.g. nu, sigma)");
     }
   }
+  return t;
 }
 
 void apply_override(toml::table& root, const std::string& ov) {
@@ -167,7 +184,7 @@ void apply_override(toml::table& root, const std::string& ov) {
     throw SceneError("override '" + ov + "' must look like section.key=value");
   const std::string key = ov.substr(0, eq);
   std::string value = ov.substr(eq + 1);
-  check_ascii_outside_strings(key + " = " + value, "override '" + ov + "'");
+  ascii_scene(key + " = " + value, "override '" + ov + "'");
   if (key.find('.') == std::string::npos)
     throw SceneError("override '" + ov + "': name the section, e.g. contact.damping_kg_s=0");
   toml::table parsed;
@@ -207,9 +224,8 @@ bool builtin_mode(const std::string& name, DeformationMode* mode) {
 Model load_scene(const std::string& text, const std::vector<std::string>& overrides,
                  std::string* resolved, const std::string& origin) {
   toml::table root;
-  check_ascii_outside_strings(text, origin);
   try {
-    root = toml::parse(text, origin);
+    root = toml::parse(ascii_scene(text, origin), origin);
   } catch (const toml::parse_error& e) {
     std::ostringstream m;
     m << origin << ":" << e.source().begin.line << ": TOML syntax error: " << e.description();
@@ -332,9 +348,8 @@ Model load_scene_file(const std::string& path, const std::vector<std::string>& o
   ss << in.rdbuf();
   if (in.bad()) throw SceneError("cannot read scene file '" + path + "'");
   toml::table parsed;
-  check_ascii_outside_strings(ss.str(), path);
   try {
-    parsed = toml::parse(ss.str(), path);
+    parsed = toml::parse(ascii_scene(ss.str(), path), path);
   } catch (const toml::parse_error&) {
     return load_scene(ss.str(), overrides, resolved, path);   // reports the syntax error
   }
