@@ -5,4 +5,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 cmake --build build -j"$(nproc)" >/dev/null
 (cd build && ctest --output-on-failure)
-/usr/bin/python3 -m pytest -q tests/python "$@"
+# Passive OpenMP waiting: the pipeline tests start multi-threaded runs, and spinning threads on a
+# machine busy with other jobs run up to 35x slower (docs/benchmarks.md).
+OMP_WAIT_POLICY=passive /usr/bin/python3 -m pytest -q tests/python "$@"
