@@ -124,7 +124,8 @@ Physics material_physics(const Model& m) {
           {"contact.allow_attractive", m.contact.allow_attractive ? "true" : "false"},
           {"contact.background_damping_kg_s", num(m.background_damping)},
           {"integration.integrator", m.integrator == Integrator::VelocityVerlet ? "velocity_verlet" : "symplectic_euler"},
-          {"integration.dt_over_tc", num(m.dt_over_tc)}};
+          {"integration.dt_over_tc", num(m.dt_over_tc)},
+          {"integration.kinematics", m.sllod ? "sllod" : "plain"}};
 }
 
 Physics shear_physics(const Model& m) {

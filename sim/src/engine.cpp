@@ -22,6 +22,7 @@ Engine::Engine(const Model& model, State& state, bool forces_are_current)
   threads_ = resolve_threads(model.threads);
   skin_ = model.skin_over_rmin * model.radius_min;
   if (model.integrator == Integrator::SymplecticEuler) { kick_before_ = 1.0; kick_after_ = 0.0; }
+  sllod_ = model.sllod;
   if (state.list_valid && state.position_at_build.size() == state.position.size()) {
     restore_neighbor_list(state, list_, skin_);
   } else {
@@ -44,6 +45,7 @@ Vec3 Engine::deform_box(const Vec3& rate) {
 double Engine::advance_particles(int begin, int end, const Vec3& factor, bool affine,
                                  const StalenessTest& test) {
   const double h = kick_before_ * model_.dt, dt = model_.dt;
+  const Vec3 shrink{1.0 / factor.x, 1.0 / factor.y, 1.0 / factor.z};
   Vec3* x = state_.position.data();
   Vec3* v = state_.velocity.data();
   Vec3* f = state_.force.data();
@@ -52,7 +54,10 @@ double Engine::advance_particles(int begin, int end, const Vec3& factor, bool af
   for (int i = begin; i < end; ++i) {
     v[i] += f[i] * (h / m[i]);                     // 1. kick
     x[i] += v[i] * dt;                             // 2. drift
-    if (affine) x[i] = hadamard(x[i], factor);     // 3. affine motion
+    if (affine) {
+      x[i] = hadamard(x[i], factor);               // 3. affine motion
+      if (sllod_) v[i] = hadamard(v[i], shrink);   //    SLLOD: v' *= exp(-rate dt)
+    }
     f[i] = Vec3{0, 0, 0};                          //    (forces are summed afresh in 5)
     if (test.limit2 >= 0) worst = std::max(worst, displacement2_since_build(state_, test, i));
   }

@@ -309,7 +309,8 @@ int main(int argc, char** argv) {
       if (!mode_quiet) print_info(model);
       else warn_time_step(model);
       const auto t0 = std::chrono::steady_clock::now();
-      const auto steps = dem::run_stage(model, state, spec, mode_out, "", nullptr, mode_quiet);
+      const auto steps = m.path.empty() ? dem::run_stage(model, state, spec, mode_out, "", nullptr, mode_quiet)
+                                        : dem::run_path(model, state, m, spec.name, mode_out, mode_quiet);
       const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       std::fprintf(stderr, "dem mode: %lld steps of %d particles in %.2f s: %.3f M particle-steps/s -> %s\n",
                    static_cast<long long>(steps), state.count(), wall, steps * double(state.count()) / wall / 1e6,

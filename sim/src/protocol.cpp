@@ -12,38 +12,18 @@
 
 #include "dem/checks.hpp"
 #include "dem/contact_law.hpp"
+#include "dem/curve_file.hpp"
 #include "dem/engine.hpp"
 #include "dem/io.hpp"
 #include "dem/measure.hpp"
 #include "dem/scene.hpp"
+#include "stage_common.hpp"
 
 namespace fs = std::filesystem;
 
 namespace dem {
 
 namespace {
-
-std::string csv_header() {
-  std::string h;
-  for (auto& c : curve_columns()) h += (h.empty() ? "" : ",") + c;
-  return h;
-}
-
-// Comment lines of every curve CSV: what the columns mean.
-std::string csv_preamble(const Model& m, const std::string& stage, const Physics& physics) {
-  std::ostringstream o;
-  o << "# dem curve: stage=" << stage << "\n"
-    << "# units: SI; *_Pa pascal, *_J joule, time_s second; other columns dimensionless\n"
-    << "# strains: true (log) box strains ln(L/L0) since the stage start, extension positive\n"
-    << "# eps_v=(eps_xx+eps_yy+eps_zz)/3; eps_d, sigma_dev, F_dev = sqrt(((a-b)^2+(b-c)^2+(c-a)^2)/2) of the diagonal\n"
-    << "# stress: compression positive, contact + kinetic (fluctuation) parts; p=tr/3; p_star=2<r>p/k; s_dev=sigma_dev/p\n"
-    << "# fabric: F=(1/V) sum_p V_p sum_c n(x)n; C=2*contacts/N; rattlers: <4 contacts, removed recursively\n"
-    << "# overlap_*_rel: overlap / smaller radius of the pair; inertial_number=max|rate| 2<r> sqrt(rho/p)\n"
-    << "# t_c=" << m.t_contact << " s, dt=" << m.dt << " s, k=" << m.contact.stiffness
-    << " N/m, gamma=" << m.contact.damping << " kg/s, gamma_b=" << m.background_damping << " kg/s\n"
-    << "# physics: " << physics_line(physics) << "\n";
-  return o.str();
-}
 
 std::vector<int> contact_counts(const State& s, const NeighborList& list) {
   std::vector<int> c(s.count(), 0);
@@ -57,15 +37,6 @@ double potential_energy(const Model& m, const State& s, const NeighborList& list
   for_each_contact(s, list, [&](int, int, const Vec3&, double, double delta) { e += law.energy(delta); });
   return e;
 }
-
-// Energy of a 0.1%-of-r_min overlap per particle: the floor of the relaxation criterion [J].
-double energy_floor(const Model& m, const State& s) {
-  const double d = 1e-3 * m.radius_min;
-  return s.count() * 0.5 * m.contact.stiffness * d * d;
-}
-
-// Above this inertial number the deviatoric response depends visibly on the strain rate.
-constexpr double kQuasiStaticInertial = 1e-3;
 
 }  // namespace
 
@@ -126,22 +97,11 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   }
   const std::size_t n_checkpoint_events = spec.stop == StopKind::DeviatoricStrain ? 0 : events.size() - 1;
 
-  const std::string part = csv_path + ".part";
-  std::ofstream csv(part, std::ios::trunc);
-  if (!csv) throw std::runtime_error("cannot write " + part + ": check that the folder exists and is writable");
-  // Every write is checked: on a full disk the stage stops with only the .part file.
-  auto check_csv = [&]() {
-    if (!csv)
-      throw std::runtime_error("writing " + part + " failed (disk full?): stage " + spec.name + " stopped; " +
-                               csv_path + " was not written (only the incomplete .part is left); free space and run again");
-  };
   const bool shear = spec.stop == StopKind::DeviatoricStrain;
-  csv << csv_preamble(model, spec.name, shear ? shear_physics(model) : preparation_physics(model)) << csv_header()
-      << ",stage\n";
-  check_csv();
+  CurveFile csv(csv_path, curve_preamble(model, spec.name, shear ? shear_physics(model) : preparation_physics(model)));
 
   Measurement last_m = measure(model, state, engine.neighbor_list(), spec.rate);
-  auto write_row = [&](const Measurement& m) { csv << curve_row(m) << "," << spec.name << "\n"; };
+  auto write_row = [&](const Measurement& m) { csv.row(curve_row(m), spec.name); };
   write_row(last_m);
   State last_good = state;
   double last_sample_x = progress_value();
@@ -216,17 +176,11 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
       if (sample || done) {
         engine.check_sanity();
         last_m = measure(model, state, engine.neighbor_list(), spec.rate);
-        const double e_ref = std::max(last_m.E_pot, e_floor);
-        if (last_m.E_kin > 1e3 * e_ref && last_m.E_kin > 10 * prev_sample_ekin)
-          throw BlowUp("kinetic energy exploded to " + std::to_string(last_m.E_kin) + " J (" +
-                       std::to_string(last_m.E_kin / e_ref) + " x the elastic energy) at step " +
-                       std::to_string(state.step) + ": the time step (dt_over_tc = " +
-                       std::to_string(model.dt_over_tc) + ") or the strain rate is too large");
+        check_kinetic_energy(model, state, last_m, e_floor, prev_sample_ekin);
         prev_sample_ekin = last_m.E_kin;
         max_inertial = std::max(max_inertial, last_m.inertial_number);
         write_row(last_m);
-        csv.flush();
-        check_csv();
+        csv.check(spec.name);
         last_sample_x = progress_value();
         last_good = state;
       }
@@ -251,18 +205,14 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
       }
     }
   } catch (const BlowUp& e) {
-    csv.close();
+    csv.abandon();
     // Keep the partial curve visibly partial (.part) and save the last good state.
     const std::string failed = failed_checkpoint.empty() ? csv_path + ".failed.ckpt" : failed_checkpoint;
     write_checkpoint(failed, Checkpoint{"", "last good state of stage " + spec.name, last_good});
     throw BlowUp(std::string(e.what()) + "\n     the last good state of stage " + spec.name + " was saved as " + failed);
   }
   snapshot();
-  csv.flush();
-  check_csv();
-  csv.close();
-  check_csv();
-  fs::rename(part, csv_path);
+  csv.commit(spec.name);
   if (spec.stop == StopKind::DeviatoricStrain && max_inertial > kQuasiStaticInertial)
     std::cerr << "dem: warning: stage " << spec.name << " reached an inertial number of " << max_inertial
               << " (> " << kQuasiStaticInertial << "): not quasi-static; the curves depend on the rate. "
@@ -527,6 +477,14 @@ void run_protocol(const Model& model, const RunOptions& opt) {
     record(sub, name, sub == "deviatoric" ? shear_hash : prep_hash);
     return f.string();
   };
+  auto record_time = [&](const std::string& stage, std::int64_t steps, double wall, int n) {
+    for (auto& st : man.stages)
+      if (st.stage == stage) {
+        st.steps = steps;
+        st.wall_s = wall;
+        st.particle_steps_per_s = wall > 0 ? steps * double(n) / wall : 0.0;
+      }
+  };
   // Runs a stage and records its steps and wall time in the manifest entry of its CSV.
   auto timed_stage = [&](State& state, const StageSpec& s, const std::string& sub,
                          const std::function<void(double, const State&)>& on_checkpoint) {
@@ -534,13 +492,15 @@ void run_protocol(const Model& model, const RunOptions& opt) {
     const auto t0 = std::chrono::steady_clock::now();
     const std::int64_t steps = run_stage(model, state, s, csv, vtk_dir, on_checkpoint, opt.quiet,
                                          (dir / ("failed_" + s.name + ".ckpt")).string());
-    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    for (auto& st : man.stages)
-      if (st.stage == s.name) {
-        st.steps = steps;
-        st.wall_s = wall;
-        st.particle_steps_per_s = wall > 0 ? steps * double(state.count()) / wall : 0.0;
-      }
+    record_time(s.name, steps, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+                state.count());
+  };
+
+  auto timed_path = [&](State& state, const DeformationMode& mode, const std::string& name) {
+    const std::string csv = stage_csv("deviatoric", name);
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::int64_t steps = run_path(model, state, mode, name, csv, opt.quiet, (dir / ("failed_" + name + ".ckpt")).string());
+    record_time(name, steps, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), state.count());
   };
 
   if (want_prep) {
@@ -607,8 +567,12 @@ void run_protocol(const Model& model, const RunOptions& opt) {
         Checkpoint c = read_checkpoint(ck.string());
         State state = std::move(c.state);
         note("deviatoric " + name + " from " + ck.filename().string());
-        StageSpec s{name, mode.rate_shape * p.deviatoric_rate, StopKind::DeviatoricStrain, p.eps_d_max, {}};
-        timed_stage(state, s, "deviatoric", nullptr);
+        if (mode.path.empty()) {
+          StageSpec s{name, mode.rate_shape * p.deviatoric_rate, StopKind::DeviatoricStrain, p.eps_d_max, {}};
+          timed_stage(state, s, "deviatoric", nullptr);
+        } else {
+          timed_path(state, mode, name);
+        }
         man.save();
       }
     }

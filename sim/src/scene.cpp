@@ -1,5 +1,6 @@
 #include "dem/scene.hpp"
 
+#include "dem/control.hpp"
 #include "dem/protocol.hpp"
 
 #include <toml++/toml.h>
@@ -208,6 +209,113 @@ void apply_override(toml::table& root, const std::string& ov) {
   sec->insert_or_assign(leaf, *val);
 }
 
+
+// One stage of a [paths] entry: an inline table (see data/scenes/paths_example.toml).
+PathStage parse_path_stage(const toml::table& t, const std::string& where,
+                           const std::map<std::string, Vec3>& custom) {
+  auto fail = [&](const std::string& what) { throw SceneError(where + ": " + what); };
+  static const std::set<std::string> keys = {"name", "rate", "sigma_p0", "sigma_Pa", "pressure_p0", "pressure_Pa",
+                                             "constant_volume", "until"};
+  for (auto&& [k, v] : t)
+    if (!keys.count(std::string(k.str())))
+      fail("unknown key '" + std::string(k.str()) + "'; a stage has name, rate, sigma_p0 or sigma_Pa, "
+           "pressure_p0 or pressure_Pa, constant_volume, until");
+  PathStage s;
+  if (auto n = t["name"].value<std::string>()) s.name = *n;
+  else if (t.contains("name")) fail("name must be a string");
+  // rate: [rx, ry, rz] or a mode name, "-NAME" for its reverse
+  if (const toml::node* r = t.get("rate")) {
+    if (auto name = r->value<std::string>()) {
+      const bool neg = !name->empty() && (*name)[0] == '-';
+      const std::string base = neg ? name->substr(1) : *name;
+      DeformationMode dm;
+      if (custom.count(base)) dm.rate_shape = custom.at(base);
+      else if (!builtin_mode(base, &dm))
+        fail("rate = \"" + *name + "\" names no mode (built in: D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, "
+             "or a [modes] entry; \"-D2\" reverses D2)");
+      s.rate_shape = neg ? dm.rate_shape * -1.0 : dm.rate_shape;
+      if (s.name.empty()) s.name = *name;
+    } else if (auto* a = r->as_array(); a && a->size() == 3 && (*a)[0].value<double>() && (*a)[1].value<double>() &&
+                                        (*a)[2].value<double>()) {
+      s.rate_shape = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(), *(*a)[2].value<double>());
+    } else {
+      fail("rate must be [rate_x, rate_y, rate_z] (multiples of protocol.deviatoric_rate_tc) or a mode name");
+    }
+  }
+  const bool p0 = t.contains("sigma_p0") || t.contains("pressure_p0");
+  const bool pa = t.contains("sigma_Pa") || t.contains("pressure_Pa");
+  if (p0 && pa) fail("give targets either in multiples of p0 (*_p0) or in pascals (*_Pa), not both");
+  s.relative = !pa;
+  for (const char* key : {"sigma_p0", "sigma_Pa"}) {
+    const toml::node* n = t.get(key);
+    if (!n) continue;
+    const toml::table* st = n->as_table();
+    if (!st) fail(std::string(key) + " must be a table of axes, e.g. { x = 1.0, y = 1.0 }");
+    for (auto&& [k, v] : *st) {
+      const std::string ax(k.str());
+      auto val = v.value<double>();
+      if ((ax != "x" && ax != "y" && ax != "z") || !val)
+        fail(std::string(key) + "." + ax + ": axes are x, y, z and each target is a number");
+      (ax == "x" ? s.sigma.x : ax == "y" ? s.sigma.y : s.sigma.z) = *val;
+    }
+  }
+  for (const char* key : {"pressure_p0", "pressure_Pa"})
+    if (const toml::node* n = t.get(key)) {
+      auto v = n->value<double>();
+      if (!v) fail(std::string(key) + " must be a number");
+      s.pressure = *v;
+    }
+  if (const toml::node* n = t.get("constant_volume")) {
+    auto v = n->value_exact<bool>();
+    if (!v) fail("constant_volume must be true or false");
+    s.constant_volume = *v;
+  }
+  const toml::table* until = t.get("until") ? t.get("until")->as_table() : nullptr;
+  if (!until || until->size() != 1)
+    fail("until must be a table with one stop condition, e.g. until = { eps_d = 0.2 }; stops: eps_d (added by the "
+         "stage), time_tc (duration / t_c), eps_v, eps_xx, eps_yy, eps_zz (since the path start), p_p0, p_Pa, s_dev, phi");
+  static const std::map<std::string, PathStop> stops = {
+      {"eps_d", PathStop::EpsD},   {"time_tc", PathStop::Time}, {"eps_v", PathStop::EpsV},
+      {"eps_xx", PathStop::EpsXX}, {"eps_yy", PathStop::EpsYY}, {"eps_zz", PathStop::EpsZZ},
+      {"p_p0", PathStop::Pressure}, {"p_Pa", PathStop::Pressure}, {"s_dev", PathStop::SDev}, {"phi", PathStop::Phi}};
+  const auto first = until->begin();
+  const std::string stop(first->first.str());
+  const toml::node& uv = first->second;
+  if (!stops.count(stop))
+    fail("until." + stop + " is not a stop condition; use eps_d, time_tc, eps_v, eps_xx, eps_yy, eps_zz, p_p0, p_Pa, s_dev or phi");
+  auto value = uv.value<double>();
+  if (!value || !std::isfinite(*value)) fail("until." + stop + " must be a finite number");
+  s.stop = stops.at(stop);
+  s.until = *value;
+  s.until_relative = stop == "p_p0";
+  return s;
+}
+
+// [paths] name = [ {stage}, {stage}, ... ]
+std::map<std::string, std::vector<PathStage>> parse_paths(toml::table& root, const std::string& origin,
+                                                          const std::map<std::string, Vec3>& custom) {
+  std::map<std::string, std::vector<PathStage>> paths;
+  toml::table* t = root.get("paths") ? root.get("paths")->as_table() : nullptr;
+  if (!t) { root.insert("paths", toml::table{}); return paths; }
+  for (auto&& [k, v] : *t) {
+    const std::string name(k.str());
+    const toml::array* a = v.as_array();
+    if (!a) throw SceneError(origin + ": paths." + name + " must be an array of stage tables, e.g. "
+                             "[{ rate = \"D2\", until = { eps_d = 0.2 } }, { rate = \"-D2\", until = { eps_d = 0.4 } }]");
+    std::vector<PathStage> stages;
+    for (std::size_t i = 0; i < a->size(); ++i) {
+      const std::string where = origin + ": paths." + name + " stage " + std::to_string(i + 1);
+      const toml::table* st = (*a)[i].as_table();
+      if (!st) throw SceneError(where + " must be a table { rate = ..., until = { ... } }");
+      stages.push_back(parse_path_stage(*st, where, custom));
+      if (stages.back().name.empty()) stages.back().name = "s" + std::to_string(i + 1);
+    }
+    validate_path(name, stages);
+    paths[name] = stages;
+  }
+  return paths;
+}
+
 }  // namespace
 
 bool builtin_mode(const std::string& name, DeformationMode* mode) {
@@ -251,6 +359,12 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   else if (integrator == "symplectic_euler") m.integrator = Integrator::SymplecticEuler;
   else throw SceneError(origin + ": integration.integrator = '" + integrator +
                         "' is unknown; use \"velocity_verlet\" or \"symplectic_euler\"");
+  std::string kinematics = "sllod";
+  r.get("integration", "kinematics", kinematics);
+  if (kinematics == "sllod" || kinematics == "plain") m.sllod = kinematics == "sllod";
+  else throw SceneError(origin + ": integration.kinematics = '" + kinematics +
+                        "' is unknown; use \"sllod\" (default: the kinetic stress does work in a deforming box) or "
+                        "\"plain\" (the scheme of dem 0.1)");
   r.get("integration", "dt_over_tc", m.dt_over_tc);
   r.get("integration", "skin_over_rmin", m.skin_over_rmin);
   r.get("integration", "threads", m.threads);
@@ -297,14 +411,21 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   } else {
     root.insert("modes", toml::table{});
   }
+  r.allow_any("paths");
+  const auto paths = parse_paths(root, origin, custom);
+  r.get("servo", "waves", p.servo.waves);
+  r.get("servo", "rate_max_tc", p.servo.rate_max_tc);
   r.reject_unknown();
 
   for (auto& name : modes) {
     DeformationMode dm;
+    if (custom.count(name) && paths.count(name))
+      throw SceneError(origin + ": '" + name + "' is both a [modes] and a [paths] entry: rename one");
     if (custom.count(name)) { dm.name = name; dm.rate_shape = custom[name]; }
+    else if (paths.count(name)) { dm.name = name; dm.path = paths.at(name); }
     else if (!builtin_mode(name, &dm))
       throw SceneError(origin + ": protocol.modes names '" + name + "', which is neither built in "
-                       "(D2, D3, iso_compress, iso_expand, uniaxial_x/y/z) nor defined in [modes]");
+                       "(D2, D3, iso_compress, iso_expand, uniaxial_x/y/z) nor defined in [modes] or [paths]");
     p.modes.push_back(dm);
   }
 
@@ -319,6 +440,16 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   p.cycle_rate = cycle_tc / m.t_contact;
   p.deviatoric_rate = dev_tc / m.t_contact;
   p.relax_max_time = relax_max_tc * m.t_contact;
+  if (p.servo.rate_max_tc == 0) p.servo.rate_max_tc = 2 * dev_tc;
+  if (!(p.servo.rate_max_tc > 0) || !std::isfinite(p.servo.rate_max_tc))
+    throw SceneError(origin + ": servo.rate_max_tc must be a positive number (0: twice protocol.deviatoric_rate_tc)");
+  if (!(p.servo.waves >= 0.1) || !std::isfinite(p.servo.waves))
+    throw SceneError(origin + ": servo.waves must be >= 0.1 (the servo time in elastic-wave crossings of the box; "
+                     "shorter makes the servo fight the packing's own dynamics)");
+  p.servo.rate_max = p.servo.rate_max_tc / m.t_contact;
+  for (auto& mode : p.modes)
+    for (auto& st : mode.path)
+      if (st.stop == PathStop::Time) st.until *= m.t_contact;   // time_tc -> seconds
   auto positive = [&](double v, const char* key) {
     if (!(v > 0) || !std::isfinite(v))
       throw SceneError(origin + ": protocol." + key + " must be a positive number");

@@ -29,7 +29,8 @@ class Engine {
   /// One time step of model.dt with the box true-strain rate `strain_rate` [1/s] (diagonal):
   ///  1. kick       v += a*dt*F/m            (a = 1/2 Verlet, 1 symplectic Euler)
   ///  2. drift      x += dt*v                (fluctuation motion)
-  ///  3. deform     L *= exp(rate*dt), x *= exp(rate*dt)   (affine motion of box and particles)
+  ///  3. deform     L *= exp(rate*dt), x *= exp(rate*dt)   (affine motion of box and particles);
+  ///                SLLOD (model.sllod): v *= exp(-rate*dt), the -E_dot v' term of the peculiar motion
   ///  4. neighbours rebuild the Verlet list if it may miss a contact
   ///  5. forces     contact law over the list, then background damping
   ///  6. kick       v += b*dt*F/m            (b = 1/2 Verlet, 0 symplectic Euler)
@@ -68,6 +69,7 @@ class Engine {
   int threads_ = 1;
   double skin_ = 0;
   double kick_before_ = 0.5, kick_after_ = 0.5;
+  bool sllod_ = true;
 };
 
 /// Number of OpenMP threads a model asks for (0 = all available).

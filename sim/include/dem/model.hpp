@@ -3,6 +3,7 @@
 // All quantities are SI: metres, kilograms, seconds, newtons, pascals.
 #pragma once
 #include <array>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -27,11 +28,53 @@ struct ContactLaw {
   bool allow_attractive = false;
 };
 
-/// A deformation applied to the periodic box: a constant diagonal true-strain rate
-/// (box lengths follow L_k(t) = L_k(0) exp(rate_k t)).
+/// What ends a stage of a loading path (PathStage::stop).
+enum class PathStop {
+  EpsD,       ///< eps_d of the box strain gained in this stage reaches `until` (an increment, > 0)
+  Time,       ///< the stage has lasted `until` seconds
+  EpsV,       ///< eps_v since the path start crosses `until` (a value, reached from either side)
+  EpsXX, EpsYY, EpsZZ,   ///< that true strain component since the path start crosses `until`
+  Pressure,   ///< p crosses `until` [Pa]
+  SDev,       ///< s_dev crosses `until`
+  Phi,        ///< the volume fraction crosses `until`
+};
+
+/// One stage of a loading path (strain reversal, cyclic shear, mixed control). Each axis is
+/// either strain-rate controlled (its `rate_shape` entry, times protocol.deviatoric_rate) or
+/// stress controlled (a finite `sigma` entry: a servo drives sigma_ii to it). Alternatively
+/// `pressure` holds the mean pressure at a target with the prescribed rate as the deviatoric
+/// direction (isobaric shear). Targets are in pascals after the path start has resolved
+/// multiples of p0 (the pressure at the path start; PathStage::relative).
+struct PathStage {
+  std::string name;                     ///< label in the curve's `stage` column
+  Vec3 rate_shape{0, 0, 0};             ///< prescribed strain-rate shape [-]
+  Vec3 sigma{NAN, NAN, NAN};            ///< normal-stress target per axis (NaN: strain controlled), compression > 0
+  double pressure = NAN;                ///< mean-pressure target (NaN: none)
+  bool relative = true;                 ///< sigma, pressure (and a Pressure stop) in multiples of p0, else [Pa]
+  bool constant_volume = false;         ///< asserts tr(rate) = 0 and no servo (checked)
+  PathStop stop = PathStop::EpsD;
+  double until = 0;                     ///< stop value (see PathStop); a Pressure stop in Pa once resolved
+  bool until_relative = false;          ///< a Pressure stop given in multiples of p0
+  bool has_servo() const { return std::isfinite(pressure) || std::isfinite(sigma.x) || std::isfinite(sigma.y) ||
+                                  std::isfinite(sigma.z); }
+};
+
+/// A deformation applied to the periodic box from each checkpoint. A plain mode is a constant
+/// diagonal true-strain rate (box lengths follow L_k(t) = L_k(0) exp(rate_k t)) up to eps_d_max;
+/// a loading path ([paths] in the scene) is a list of stages, written as one curve.
 struct DeformationMode {
-  std::string name;             ///< e.g. "D2", "D3", "iso", "uniaxial_z"
+  std::string name;             ///< e.g. "D2", "D3", "iso", "uniaxial_z", or a [paths] name
   Vec3 rate_shape{0, 0, 0};     ///< dimensionless direction, multiplied by the mode rate [1/s]
+  std::vector<PathStage> path;  ///< non-empty: a loading path (rate_shape unused)
+};
+
+/// The stress servo of path stages (control.hpp): a PI law on the stress error with its gain
+/// from the packing's affine stiffness, a time constant of `waves` elastic-wave crossings of
+/// the box and a strain-rate limit.
+struct ServoOptions {
+  double waves = 1;             ///< servo time constant / time for an elastic wave to cross the box
+  double rate_max = 0;          ///< |servo strain rate| limit [1/s] (derived: rate_max_tc / t_c)
+  double rate_max_tc = 0;       ///< scene value; 0: 2 x protocol.deviatoric_rate_tc
 };
 
 /// The protocol: preparation (compress, relax, cycle) then deviatoric modes from checkpoints.
@@ -48,6 +91,7 @@ struct Protocol {
   std::vector<DeformationMode> modes;          ///< run from every unloading checkpoint
   double deviatoric_rate = 0;        ///< mode rate [1/s] (multiplies rate_shape)
   double eps_d_max = 0.4;            ///< deviatoric runs stop at this eps_d (or |eps| for others)
+  ServoOptions servo;                ///< stress control of loading-path stages
 };
 
 /// Output cadence and formats.
@@ -74,6 +118,12 @@ struct Model {
 
   // integration
   Integrator integrator = Integrator::VelocityVerlet;
+  /// Fluctuation velocities in the deforming box. true (SLLOD, default): v' also feels
+  /// -E_dot v' (integrated exactly as v' *= exp(-rate dt) with the box deformation), so the
+  /// kinetic stress does work and E_kin + E_pot changes by -V sigma:E_dot dt (docs/kinematics.md).
+  /// false ("plain", dem 0.1): v' is left unchanged by the deformation, which leaves the
+  /// kinetic stress's work out of the energy balance.
+  bool sllod = true;
   double dt_over_tc = 1.0 / 50.0;    ///< dt as a fraction of t_c of the two smallest particles
   double skin_over_rmin = 0.4;       ///< Verlet skin / radius_min
   int threads = 0;                   ///< OpenMP threads; 0: all available

@@ -64,4 +64,18 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
                        const std::function<void(double, const State&)>& on_checkpoint,
                        bool quiet, const std::string& failed_checkpoint = "");
 
+/// Runs the loading path `mode.path` (stages in order, strains accumulated from the path start)
+/// from `state`, writing one curve to csv_path (rows of every stage, the stage's name in the
+/// `stage` column; path_columns() after the usual columns). Relative targets (multiples of p0)
+/// are resolved with p0 = the pressure at the path start. Each stage ends on its stop
+/// condition; a stage whose stop has not come after a strain of 4 or a time of 4 / rate_max is
+/// stopped with an error naming it. A path of one strain-controlled stage ending on eps_d gives
+/// the rows of run_stage on the same mode bit for bit. Errors as run_stage.
+std::int64_t run_path(const Model& model, State& state, const DeformationMode& mode, const std::string& label,
+                      const std::string& csv_path, bool quiet, const std::string& failed_checkpoint = "");
+
+/// The columns a path curve has after curve_columns(): the applied box strain rate, the servo's
+/// targets (NaN where none) and its relative error.
+const std::vector<std::string>& path_columns();
+
 }  // namespace dem
