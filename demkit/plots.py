@@ -3,6 +3,8 @@
 Writes RUN_DIR/plots/*.png and *.svg:
   deviatoric_<quantity>.png   s_dev, F_dev, p_star, C against eps_d, one line per (mode, nu)
   isotropic.png               p_star and C against nu on the loading/unloading cycle
+  path_<name>_<nu>.png        loading paths ([paths]): s_dev with the signed stress ratio, F_dev,
+                              eps_v (dilatancy) and the servo error against the accumulated eps_d
   fit_<mode>_<nu>.png         (--fits) curves with their fitted law and residuals
   fit_parameters.png          (--fits) x_max and beta against nu with error bars
 """
@@ -41,13 +43,54 @@ def save(fig, stem):
     plt.close(fig)
 
 
+def is_path(c):
+    return "control_error_rel" in c
+
+
+def plot_path(mode, nu, c, outdir):
+    """One loading path: s_dev (and the signed ratio (sigma_xx - sigma_zz)/p), F_dev, eps_v and
+    the servo's relative error against the eps_d accumulated along the path, stages shaded."""
+    x = c["eps_d_accumulated"]
+    fig, axes = plt.subplots(1, 4, figsize=(15, 3.8))
+    stages = list(c["stage"]) if "stage" in c else []
+    bounds = [i for i in range(1, len(stages)) if stages[i] != stages[i - 1]]
+    axes[0].plot(x, c["s_dev"], "-", label=LABELS["s_dev"])
+    axes[0].plot(x, (c["sigma_xx_Pa"] - c["sigma_zz_Pa"]) / c["p_Pa"], "--", label=r"$(\sigma_{xx}-\sigma_{zz})/p$")
+    axes[0].axhline(0, color="0.6", lw=0.8)
+    axes[1].plot(x, c["F_dev"], "-")
+    axes[2].plot(x, c["eps_v"], "-")
+    err = np.nan_to_num(c["control_error_rel"])
+    if np.any(err > 0):
+        axes[3].semilogy(x, np.maximum(err, 1e-6), "-")
+    else:
+        axes[3].text(0.5, 0.5, "strain controlled:\nno servo", ha="center", va="center", transform=axes[3].transAxes)
+    for ax, lab in zip(axes, [None, LABELS["F_dev"], r"volumetric strain $\varepsilon_v$ (dilatancy: > 0)",
+                              "servo error |target - measured| / target"]):
+        for b in bounds:
+            ax.axvline(x[b], color="0.7", lw=0.8, ls=":")
+        ax.set_xlabel(r"accumulated $\varepsilon_d$")
+        if lab:
+            ax.set_ylabel(lab)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"path {mode} from ν = {nu:.3f}" + (f" (stages: {', '.join(dict.fromkeys(stages))})" if stages else ""),
+                 fontsize=9)
+    fig.tight_layout()
+    stem = os.path.join(outdir, f"path_{mode}_phi{nu:.3f}")
+    save(fig, stem)
+    return stem + ".png"
+
+
 def plot_deviatoric(run, outdir):
     curves = deviatoric_curves(run)
+    written = [plot_path(mode, nu, c, outdir) for mode, nu, c in curves if is_path(c)]
+    curves = [cv for cv in curves if not is_path(cv[2])]
+    if not curves:
+        return written
     if not curves:
         return []
     nus = sorted({c[1] for c in curves})
     cmap = plt.get_cmap("viridis")
-    written = []
     for q in ("s_dev", "F_dev", "p_star", "C"):
         fig, ax = plt.subplots(figsize=(6, 4.2))
         for mode, nu, c in curves:

@@ -208,7 +208,13 @@ int run_fit_command(const FitCommandOptions& o) {
     std::smatch m;
     const std::string fname = f.filename().string();
     std::regex_match(fname, m, name_re);
-    curves.push_back({m[1], std::stod(m[2]), read_table(f.string())});
+    Table t = read_table(f.string());
+    if (std::find(t.header.begin(), t.header.end(), "control_error_rel") != t.header.end()) {
+      std::cerr << "dem fit: note: " << f.string() << " is a loading path ([paths]: stages, stress control); the "
+                << "saturating law is fitted to the monotonic modes only: plot it with `dem plot`\n";
+      continue;
+    }
+    curves.push_back({m[1], std::stod(m[2]), std::move(t)});
   }
   if (curves.empty()) {
     std::cerr << "dem fit: no MODE_phiX.XXX.csv curves in " << dev << " (is the run finished?)\n";

@@ -45,6 +45,7 @@ struct Cell {
 std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run) {
   const std::regex name_re(R"(([A-Za-z0-9_]+)_(phi([0-9.]+))\.json)");
   std::map<std::pair<std::string, double>, Cell> cells;
+  std::set<std::pair<std::string, double>> path_cells;   // loading paths: not averaged
   std::vector<fs::path> member_dirs;
   for (auto& d : fs::directory_iterator(run / "members"))
     if (d.is_directory()) member_dirs.push_back(d.path());
@@ -67,8 +68,15 @@ std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run
       const std::string status = json_field(ss.str(), "status");
       const fs::path csv = md / "deviatoric" / (m[1].str() + "_" + m[2].str() + ".csv");
       if (status == "complete" && fs::exists(csv)) {
+        Table t = read_table(csv.string());
+        if (std::find(t.header.begin(), t.header.end(), "control_error_rel") != t.header.end()) {
+          if (path_cells.insert({m[1].str(), std::stod(m[3].str())}).second)
+            std::cerr << "dem fit: note: " << m[1].str() << "_" << m[2].str() << " is a loading path ([paths]); "
+                      << "ensemble averages and fits cover the monotonic modes only\n";
+          continue;
+        }
         c.members.push_back(member);
-        c.curves.push_back(read_table(csv.string()));
+        c.curves.push_back(std::move(t));
       } else {
         std::string why = json_field(ss.str(), "message");
         if (why.empty()) why = json_field(ss.str(), "reason");
@@ -76,6 +84,7 @@ std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run
       }
     }
   }
+  for (const auto& k : path_cells) cells.erase(k);
   return cells;
 }
 

@@ -70,11 +70,15 @@ void print_info(const dem::Model& m) {
   std::printf("rates              compress %.4g /s, cycle %.4g /s, deviatoric %.4g /s\n", p.compress_rate,
               p.cycle_rate, p.deviatoric_rate);
   for (auto& mode : p.modes) {
-    const double devs = dem::deviatoric_magnitude(mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z);
-    const double per_step = (devs > 0 ? devs : std::fabs(mode.rate_shape.x + mode.rate_shape.y + mode.rate_shape.z) / 3) *
-                            p.deviatoric_rate * m.dt;
+    if (!mode.path.empty()) {
+      std::string stages;
+      for (const auto& s : mode.path) stages += (stages.empty() ? "" : ", ") + s.name + (s.has_servo() ? " (servo)" : "");
+      std::printf("path %-13s  %zu stages: %s; about %.3g steps\n", mode.name.c_str(), mode.path.size(), stages.c_str(),
+                  dem::mode_steps(m, mode));
+      continue;
+    }
     std::printf("mode %-13s  rate shape (%g, %g, %g): %.3g steps to eps_d = %g\n", mode.name.c_str(),
-                mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z, p.eps_d_max / per_step, p.eps_d_max);
+                mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z, dem::mode_steps(m, mode), p.eps_d_max);
   }
 }
 

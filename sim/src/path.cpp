@@ -17,7 +17,8 @@ namespace dem {
 
 const std::vector<std::string>& path_columns() {
   static const std::vector<std::string> cols = {"rate_xx_1_s",  "rate_yy_1_s",  "rate_zz_1_s", "target_xx_Pa",
-                                                "target_yy_Pa", "target_zz_Pa", "target_p_Pa", "control_error_rel"};
+                                                "target_yy_Pa", "target_zz_Pa", "target_p_Pa", "control_error_rel",
+                                                "eps_d_accumulated"};
   return cols;
 }
 
@@ -80,11 +81,11 @@ struct StopProbe {
   }
 };
 
-std::string extra_row(const Vec3& rate, const Servo& servo, const Sym3& stress) {
+std::string extra_row(const Vec3& rate, const Servo& servo, const Sym3& stress, double accumulated) {
   char b[400];
   const Vec3 t = servo.sigma_target();
-  std::snprintf(b, sizeof b, ",%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g", rate.x, rate.y, rate.z, t.x, t.y,
-                t.z, servo.pressure_target(), servo.relative_error(stress));
+  std::snprintf(b, sizeof b, ",%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g", rate.x, rate.y, rate.z, t.x, t.y,
+                t.z, servo.pressure_target(), servo.relative_error(stress), accumulated);
   return b;
 }
 
@@ -101,6 +102,7 @@ struct PathRun {
   double max_inertial = 0;
   State last_good;
   std::int64_t steps = 0;
+  double accumulated = 0;   // eps_d travelled along the whole path (sum of |d eps_d| per step)
 };
 
 // Runs one stage to its stop condition, writing rows; returns nothing, throws on failure.
@@ -147,7 +149,9 @@ void run_path_stage(PathRun& run, const PathStage& stage) {
     const Vec3 e = state.box.true_strain();
     const Vec3 de = e - e_prev;
     e_prev = e;
-    travel += std::max(deviatoric_magnitude(de.x, de.y, de.z), std::fabs(de.x + de.y + de.z) / 3.0);
+    const double dd = deviatoric_magnitude(de.x, de.y, de.z);
+    travel += std::max(dd, std::fabs(de.x + de.y + de.z) / 3.0);
+    run.accumulated += dd;
     if (every > 0 && stage_steps % every == 0) {
       resp = axis_response(model, state, run.engine.neighbor_list(), rate);
       if (servo.active()) rate = servo.update(resp, every * dt);
@@ -169,7 +173,7 @@ void run_path_stage(PathRun& run, const PathStage& stage) {
       check_kinetic_energy(model, state, last_m, run.e_floor, run.prev_ekin);
       run.prev_ekin = last_m.E_kin;
       run.max_inertial = std::max(run.max_inertial, last_m.inertial_number);
-      run.csv.row(curve_row(last_m) + extra_row(rate, servo, last_m.stress), stage.name);
+      run.csv.row(curve_row(last_m) + extra_row(rate, servo, last_m.stress, run.accumulated), stage.name);
       run.csv.check(stage.name);
       last_sample = sample_on_x ? probe.value(state, resp) : travel;
       run.last_good = state;
@@ -196,8 +200,9 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
   state.box.log_strain = Vec3{0, 0, 0};
   Engine engine(model, state);
   CurveFile csv(csv_path, curve_preamble(model, label, shear_physics(model)), path_columns());
-  const AxisResponse r0 = axis_response(model, state, engine.neighbor_list(), Vec3{0, 0, 0});
-  const double p0 = r0.p();
+  // p0: the pressure of the first row (the dashpots see the first stage's prescribed rate).
+  const Vec3 rate0 = mode.path.front().rate_shape * model.protocol.deviatoric_rate;
+  const double p0 = axis_response(model, state, engine.neighbor_list(), rate0).p();
   for (const PathStage& st : mode.path)
     if ((st.relative && st.has_servo()) || st.until_relative)
       if (!(p0 > 0))
@@ -205,13 +210,12 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
                                  "but it is " + std::to_string(p0) + " Pa (no contacts): give targets in Pa (*_Pa)");
   PathRun run{model, state, engine, csv, label, quiet, energy_floor(model, state), 0, 0, state, 0};
   // The first row: the start state, with the first stage's name.
-  const Vec3 rate0 = mode.path.front().rate_shape * model.protocol.deviatoric_rate;
   const Measurement m0 = measure(model, state, engine.neighbor_list(), rate0);
   run.prev_ekin = m0.E_kin;
   {
     const PathStage first = resolve(mode.path.front(), p0);
     Servo servo(first, rate0, model.protocol.servo);
-    csv.row(curve_row(m0) + extra_row(rate0, servo, m0.stress), first.name);
+    csv.row(curve_row(m0) + extra_row(rate0, servo, m0.stress, 0.0), first.name);
   }
   try {
     for (const PathStage& st : mode.path) run_path_stage(run, resolve(st, p0));

@@ -16,12 +16,42 @@
 
 namespace dem {
 
-double mode_particle_steps(const Model& m, const DeformationMode& mode) {
+namespace {
+
+// Steps of one path stage: exact for eps_d and time stops without servo; otherwise an estimate
+// (a strain stop taken from 0, a stress or phi stop as eps_d_max of shear).
+double path_stage_steps(const Model& m, const PathStage& s) {
+  const Vec3& r = s.rate_shape;
+  const double unit = m.protocol.deviatoric_rate * m.dt;   // strain per step of a unit rate shape
+  const double dev = deviatoric_magnitude(r.x, r.y, r.z);
+  const double comp[3] = {r.x, r.y, r.z};
+  switch (s.stop) {
+    case PathStop::EpsD: return s.until / (std::max(dev, 1e-3) * unit);
+    case PathStop::Time: return s.until / m.dt;
+    case PathStop::EpsV: return std::fabs(s.until) / (std::max(std::fabs(r.x + r.y + r.z) / 3, 1e-3) * unit);
+    case PathStop::EpsXX: case PathStop::EpsYY: case PathStop::EpsZZ: {
+      const int a = s.stop == PathStop::EpsXX ? 0 : s.stop == PathStop::EpsYY ? 1 : 2;
+      return std::fabs(s.until) / (std::max(std::fabs(comp[a]), 1e-3) * unit);
+    }
+    default: return m.protocol.eps_d_max / (std::max(dev, 1.0) * unit);
+  }
+}
+
+}  // namespace
+
+double mode_steps(const Model& m, const DeformationMode& mode) {
+  if (!mode.path.empty()) {
+    double steps = 0;
+    for (const auto& s : mode.path) steps += path_stage_steps(m, s);
+    return steps;
+  }
   const Vec3& r = mode.rate_shape;
   const double dev = deviatoric_magnitude(r.x, r.y, r.z);
   const double per_step = (dev > 0 ? dev : std::fabs(r.x + r.y + r.z) / 3) * m.protocol.deviatoric_rate * m.dt;
-  return m.count * m.protocol.eps_d_max / per_step;
+  return m.protocol.eps_d_max / per_step;
 }
+
+double mode_particle_steps(const Model& m, const DeformationMode& mode) { return m.count * mode_steps(m, mode); }
 
 double prep_particle_steps(const Model& m) {
   const Protocol& p = m.protocol;

@@ -8,7 +8,10 @@
 
 namespace dem {
 
-/// Estimated particle-steps of one deviatoric mode run (N x steps to eps_d_max).
+/// Steps of one deviatoric mode run (to eps_d_max) or loading path (its stages; estimated for
+/// stops on stress, phi or a strain component).
+double mode_steps(const Model& model, const DeformationMode& mode);
+/// Estimated particle-steps of one mode or path run (N x mode_steps).
 double mode_particle_steps(const Model& model, const DeformationMode& mode);
 
 /// Estimated particle-steps of one preparation (compression and cycle; the relaxation, whose

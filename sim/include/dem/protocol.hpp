@@ -74,8 +74,9 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
 std::int64_t run_path(const Model& model, State& state, const DeformationMode& mode, const std::string& label,
                       const std::string& csv_path, bool quiet, const std::string& failed_checkpoint = "");
 
-/// The columns a path curve has after curve_columns(): the applied box strain rate, the servo's
-/// targets (NaN where none) and its relative error.
+/// The columns a path curve has after curve_columns(): the applied box strain rate [1/s], the
+/// servo's targets [Pa] (NaN where none), its relative error, and eps_d accumulated along the
+/// path (sum of |d eps_d|: grows through a reversal, where eps_d itself dips to 0).
 const std::vector<std::string>& path_columns();
 
 }  // namespace dem
