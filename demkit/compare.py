@@ -1,15 +1,17 @@
 """Compare two curve CSVs (ours vs YADE, or two runs of one code): `dem compare A.csv B.csv`.
 
 Both curves are put on a common eps_d grid (the overlap of their ranges, linear interpolation)
-and the largest and RMS differences of p, s_dev, F_dev and C are reported:
+and the largest and RMS differences of p, s_dev, F_dev, C and eps_v are reported:
   p      relative to the mean p of A over the grid
   s_dev  absolute, and relative to A's plateau (mean over the second half of the grid)
   F_dev  likewise
   C      absolute
+  eps_v  absolute (the volume change of stress-controlled tests; 0 for both at constant volume)
 Exit code 0 when every difference is within its tolerance, 4 otherwise, 1 on bad input
 (eps_d must increase from row to row in both curves).
 Default tolerances (see docs/yade.md for how they were calibrated): p 3 % (max), s_dev 15 %
-and F_dev 25 % of the plateau (RMS), C 0.15 (RMS); and the common eps_d range must cover at
+and F_dev 25 % of the plateau (RMS), C 0.15 (RMS), eps_v 5e-4 (RMS; 7x the floor of a
+1000-sphere triaxial test, docs/control.md); and the common eps_d range must cover at
 least 90 % of each curve's range (a curve that stopped early is compared over its end only,
 which is not a comparison of the two curves).
 """
@@ -21,7 +23,7 @@ import numpy as np
 
 from demkit.curves import read_curve, require, CurveError
 
-QUANTITIES = ("p_Pa", "s_dev", "F_dev", "C")
+QUANTITIES = ("p_Pa", "s_dev", "F_dev", "C", "eps_v")
 
 
 def check_increasing(curve, name):
@@ -75,6 +77,7 @@ def verdict(res, tol):
         "s_dev": ("rms_rel", tol["s_dev"]),
         "F_dev": ("rms_rel", tol["F_dev"]),
         "C": ("rms_abs", tol["C"]),
+        "eps_v": ("rms_abs", tol["eps_v"]),
     }
     out = {}
     for q, (key, limit) in checks.items():
@@ -88,7 +91,8 @@ def overlay(a, b, labels, path):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(2, 2, figsize=(9, 6), sharex=True)
+    fig, axes = plt.subplots(2, 3, figsize=(13, 6), sharex=True)
+    axes.flat[len(QUANTITIES)].set_visible(False)
     for ax, q in zip(axes.flat, QUANTITIES):
         ax.plot(a["eps_d"], a[q], "-", label=labels[0])
         ax.plot(b["eps_d"], b[q], "--", label=labels[1])
@@ -116,6 +120,8 @@ def main(argv=None):
     ap.add_argument("--tol-s-dev", type=float, default=0.15)
     ap.add_argument("--tol-f-dev", type=float, default=0.25)
     ap.add_argument("--tol-c", type=float, default=0.15)
+    ap.add_argument("--tol-eps-v", type=float, default=5e-4,
+                    help="RMS |d eps_v| (dilatancy of stress-controlled tests; 0 for both at constant volume)")
     ap.add_argument("--min-coverage", type=float, default=0.9,
                     help="smallest fraction of each curve's eps_d range the comparison must cover")
     a = ap.parse_args(argv)
@@ -125,7 +131,8 @@ def main(argv=None):
     except CurveError as e:
         print(f"dem compare: {e}", file=sys.stderr)
         return 1
-    tol = {"p": a.tol_p, "s_dev": a.tol_s_dev, "F_dev": a.tol_f_dev, "C": a.tol_c, "coverage": a.min_coverage}
+    tol = {"p": a.tol_p, "s_dev": a.tol_s_dev, "F_dev": a.tol_f_dev, "C": a.tol_c, "eps_v": a.tol_eps_v,
+           "coverage": a.min_coverage}
     v = verdict(res, tol)
     res["verdict"] = v
     print(f"compare {a.first} vs {b_path} over eps_d in [{res['eps_d_range'][0]:.4f}, {res['eps_d_range'][1]:.4f}]")

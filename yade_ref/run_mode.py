@@ -3,6 +3,11 @@
 #
 #   yade -n -x -j1 yade_ref/run_mode.py --packing P.txt --mode D2 --rate-tc 4e-5 --eps-max 0.3 --out yade.csv
 #
+# Constant side stress (triaxial, docs/control.md): --mode uniaxial_z --side-stress-p0 1 holds
+# sigma_xx = sigma_yy = 1 x p0 (the pressure of the packing as loaded) with YADE's own
+# PeriTriaxController (quasi-static branch, dynCell=False, stressMask x|y) while z is compressed at
+# the rate to eps_zz = -eps_max.
+#
 # Physics set to match ours (see docs/yade.md for every choice):
 #  - ViscElMat with kn = 2k, cn = 2*gamma per material: two equal materials combine in series
 #    into a pair kn = k, cn = gamma (checked at start, the script stops if not);
@@ -22,7 +27,7 @@ import time
 
 from yade import O, Vector3, Matrix3, ViscElMat, ForceResetter, InsertionSortCollider, Bo1_Sphere_Aabb, \
     InteractionLoop, Ig2_Sphere_Sphere_ScGeom, Ip2_ViscElMat_ViscElMat_ViscElPhys, \
-    Law2_ScGeom_ViscElPhys_Basic, NewtonIntegrator, PyRunner, utils
+    Law2_ScGeom_ViscElPhys_Basic, NewtonIntegrator, PyRunner, PeriTriaxController, utils
 
 MODES = {"D2": (1.0, 0.0, -1.0), "D3": (0.5, 0.5, -1.0), "iso_compress": (-1.0, -1.0, -1.0),
          "iso_expand": (1.0, 1.0, 1.0), "uniaxial_x": (-1.0, 0.0, 0.0), "uniaxial_y": (0.0, -1.0, 0.0),
@@ -52,6 +57,10 @@ def parse():
     ap.add_argument("--dt-over-tc", type=float, default=0.02)
     ap.add_argument("--out", required=True)
     ap.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (timing runs)")
+    ap.add_argument("--side-stress-p0", type=float, default=0.0,
+                    help="with --mode uniaxial_z: hold sigma_xx = sigma_yy at this multiple of p0 (PeriTriaxController)")
+    ap.add_argument("--servo-rate-factor", type=float, default=2.0,
+                    help="PeriTriaxController maxStrainRate of the stress axes, in multiples of the rate")
     return ap.parse_args(sys.argv[1:])
 
 
@@ -201,14 +210,27 @@ def main():
     out.write(f"# yade curve: stage={a.mode} (YADE reference, yade_ref/run_mode.py)\n")
     out.write("# units and definitions as in our runner (docs/definitions.md); strains ln(L/L0) of O.cell.size\n")
     out.write(f"# t_c={tc:.8g} s, dt={dt:.8g} s, k={a.k} N/m, gamma={a.gamma} kg/s, gamma_b={a.gamma_b} kg/s\n")
-    out.write(",".join(COLUMNS) + "\n")
     steps_per_sample = max(1, int(round(a.sample_strain / per_step)))
     # One step with dt = 0 creates the interactions of the initial packing without moving it
     # (O.iter becomes 1), so the first row measures the packing as loaded.
     O.dt = 0.0
     O.run(1, True)
     O.dt = dt
-    out.write(",".join(measure()) + "\n")
+    first = measure()
+    if a.side_stress_p0 > 0:
+        if a.mode != "uniaxial_z":
+            sys.exit("run_mode.py: --side-stress-p0 needs --mode uniaxial_z (x and y stress controlled, z compressed)")
+        p0 = float(first[COLUMNS.index("p_Pa")])
+        goal = -a.side_stress_p0 * p0          # YADE: tension positive
+        # z: strain goal a little beyond the end, so it runs at the full rate until n_steps stop it
+        ctrl = PeriTriaxController(goal=Vector3(goal, goal, -1.01 * a.eps_max), stressMask=3, dynCell=False,
+                                   maxStrainRate=Vector3(a.servo_rate_factor * rate, a.servo_rate_factor * rate, rate),
+                                   maxUnbalanced=-1.0, globUpdate=1, label="triax")
+        O.engines = O.engines[:-1] + [ctrl] + O.engines[-1:]
+        out.write(f"# PeriTriaxController: sigma_xx = sigma_yy = {a.side_stress_p0} x p0 = {-goal:.8g} Pa (contact stress), "
+                  f"maxStrainRate x,y = {a.servo_rate_factor} x rate, growDamping {ctrl.growDamping}\n")
+    out.write(",".join(COLUMNS) + "\n")
+    out.write(",".join(first) + "\n")
     done = 0
     wall = 0.0
     while done < n_steps:
