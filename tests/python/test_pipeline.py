@@ -58,10 +58,13 @@ def test_deviatoric_modes_conserve_volume_and_saturate(small_run):
         assert abs(e[-1] - 0.3) < 1e-9, name                      # stops exactly at eps_d_max
         early, late = s[e < 0.01].mean(), s[e > 0.15].mean()
         assert late > early + 0.05, (name, early, late)           # s_dev grows ...
-        # ... and saturates: the late half rises far less than the initial slope would give
-        slope0 = np.polyfit(e[e < 0.03], s[e < 0.03], 1)[0]
-        slope_late = np.polyfit(e[e > 0.15], s[e > 0.15], 1)[0]
-        assert slope0 > 0 and abs(slope_late) < 0.25 * slope0, (name, slope0, slope_late)
+        # ... and saturates: above eps_d = 0.15 it lies less than half of its early gain (by
+        # eps_d = 0.05-0.1) above the early level. A linear rise would lie 2x above it. (A fit
+        # of the late slope was too fragile on 400 spheres: one avalanche at the window's start
+        # tilts it; the plateau's level is robust.)
+        mid = s[(e > 0.05) & (e < 0.1)].mean()
+        assert mid > early + 0.03, (name, early, mid)
+        assert late < mid + 0.5 * (mid - early), (name, early, mid, late)
         assert 0.05 < late < 0.4, (name, late)                    # macroscopic friction of order 0.1-0.2
         assert f[e > 0.15].mean() > f[0] + 0.01, name              # fabric anisotropy builds up
         assert np.all(c["p_Pa"] > 0), name
