@@ -34,6 +34,8 @@ from report import write_markdown  # noqa: E402
 DEM = os.path.join(ROOT, "build", "dem")
 SCENE = os.path.join(ROOT, "data", "scenes", "quickstart.toml")
 PLATEAU = (0.15, 0.3)
+# What the stored results used (the quick scene's physics at the time): pinned so a rerun reproduces them.
+PINNED = ["--set", "ensemble.packings=1", "--set", "integration.dt_over_tc=0.1", "--set", "protocol.deviatoric_rate_tc=3e-5"]
 T975 = {2: 12.706, 3: 4.303, 4: 3.182, 5: 2.776, 6: 2.571, 7: 2.447, 8: 2.365, 9: 2.306, 10: 2.262, 12: 2.201,
         15: 2.145, 16: 2.131, 20: 2.093, 30: 2.045}
 
@@ -53,7 +55,7 @@ def run(args):
     cv = os.path.join(out, f"cv_{tag}.csv")
     if not os.path.exists(cv):
         subprocess.run([DEM, "mode", "--scene", SCENE, "--packing", ckpt, "--mode", "D2", "--eps-max", "0.3",
-                        "--out", cv, "--threads", "1", "--quiet", "--set", "ensemble.packings=1"], check=True)
+                        "--out", cv, "--threads", "1", "--quiet", *PINNED], check=True)
     c = read_curve(cv)
     p_match = plateau(c, "p_Pa")
     scene = os.path.join(out, f"iso_{tag}.toml")
@@ -64,7 +66,7 @@ def run(args):
     iso = os.path.join(out, f"iso_{tag}.csv")
     if not os.path.exists(iso):
         subprocess.run([DEM, "mode", "--scene", scene, "--packing", ckpt, "--mode", "isobaric", "--out", iso,
-                        "--threads", "1", "--quiet", "--set", "ensemble.packings=1"], check=True)
+                        "--threads", "1", "--quiet", *PINNED], check=True)
     i = read_curve(iso)
     return {"tag": tag, "p_cv_Pa": p_match, "s_dev_cv": plateau(c, "s_dev"), "F_dev_cv": plateau(c, "F_dev"),
             "nu_cv": plateau(c, "nu"), "p_iso_Pa": plateau(i, "p_Pa"), "s_dev_iso": plateau(i, "s_dev"),

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The main job on the default quick scene: an ensemble of 8 packings of 1000 spheres through the
+# The main job on the default quick scene: an ensemble of 14 packings of 1000 spheres through the
 # whole protocol, D2 and D3 from three volume fractions, averaged with 95 % bands, fitted, plotted
 # (Snakemake underneath, one single-threaded task per core). Results in runs/quickstart.
 # Run again to continue an interrupted run; pass --force to redo a finished one.
