@@ -52,7 +52,7 @@ def test_jamming_fraction_in_the_range_of_the_papers(small_run):
 
 def test_deviatoric_modes_conserve_volume_and_saturate(small_run):
     for name, c in curves(small_run["dir"], "deviatoric/*.csv").items():
-        e, s, f = c["eps_d"], c["s_dev"], c["F_dev"]
+        e, s = c["eps_d"], c["s_dev"]
         assert np.max(np.abs(c["eps_v"])) < 1e-12, name          # volume conserved
         assert abs(c["nu"][-1] - c["nu"][0]) < 1e-10, name
         assert abs(e[-1] - 0.3) < 1e-9, name                      # stops exactly at eps_d_max
@@ -66,7 +66,11 @@ def test_deviatoric_modes_conserve_volume_and_saturate(small_run):
         assert mid > early + 0.03, (name, early, mid)
         assert late < mid + 0.5 * (mid - early), (name, early, mid, late)
         assert 0.05 < late < 0.4, (name, late)                    # macroscopic friction of order 0.1-0.2
-        assert f[e > 0.15].mean() > f[0] + 0.01, name              # fabric anisotropy builds up
+        # fabric anisotropy builds up along the loading: contacts align with the compressed z
+        # axis. (Judged signed: a 400-sphere packing can start with an anisotropy of the
+        # opposite orientation as large as the plateau, so F_dev's magnitude may dip first.)
+        a = c["F_zz"] - 0.5 * (c["F_xx"] + c["F_yy"])
+        assert a[e > 0.15].mean() > max(a[0], 0) + 0.02, (name, a[0], a[e > 0.15].mean())
         assert np.all(c["p_Pa"] > 0), name
 
 
