@@ -8,6 +8,13 @@
 # PeriTriaxController (quasi-static branch, dynCell=False, stressMask x|y) while z is compressed at
 # the rate to eps_zz = -eps_max.
 #
+# Isobaric shear: --mode D2 --isobaric-p0 1 holds the mean contact stress at 1 x p0 by an
+# isotropic strain rate added to the mode's, set every --servo-every steps by a Python servo
+# (YADE has no mean-pressure controller): a PeriTriaxController-like dead-beat on the mean stress,
+# u = (p - p_goal) / (G * servo_every * dt) x (1 - growDamping), G = sum_c kn l_c^2 / (3 V) the
+# affine stiffness of p to an isotropic strain, |u| <= servo-rate-factor x rate. Not our PI law
+# (docs/control.md): a second, independent control of the same test.
+#
 # Physics set to match ours (see docs/yade.md for every choice):
 #  - ViscElMat with kn = 2k, cn = 2*gamma per material: two equal materials combine in series
 #    into a pair kn = k, cn = gamma (checked at start, the script stops if not);
@@ -59,6 +66,9 @@ def parse():
     ap.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (timing runs)")
     ap.add_argument("--side-stress-p0", type=float, default=0.0,
                     help="with --mode uniaxial_z: hold sigma_xx = sigma_yy at this multiple of p0 (PeriTriaxController)")
+    ap.add_argument("--isobaric-p0", type=float, default=0.0,
+                    help="with --mode D2/D3: hold the mean stress at this multiple of p0 (Python servo)")
+    ap.add_argument("--servo-every", type=int, default=10, help="steps between updates of the isobaric servo")
     ap.add_argument("--servo-rate-factor", type=float, default=2.0,
                     help="PeriTriaxController maxStrainRate of the stress axes, in multiples of the rate")
     return ap.parse_args(sys.argv[1:])
@@ -229,6 +239,38 @@ def main():
         O.engines = O.engines[:-1] + [ctrl] + O.engines[-1:]
         out.write(f"# PeriTriaxController: sigma_xx = sigma_yy = {a.side_stress_p0} x p0 = {-goal:.8g} Pa (contact stress), "
                   f"maxStrainRate x,y = {a.servo_rate_factor} x rate, growDamping {ctrl.growDamping}\n")
+    if a.isobaric_p0 > 0:
+        if abs(sum(shape)) > 1e-12:
+            sys.exit("run_mode.py: --isobaric-p0 needs a volume-conserving --mode (D2, D3)")
+        p_goal = a.isobaric_p0 * float(first[COLUMNS.index("p_Pa")])
+        servo = {"u": 0.0}
+
+        def isobaric_servo():
+            L = O.cell.size
+            V = L[0] * L[1] * L[2]
+            H = O.cell.hSize
+            g = 0.0
+            s_tr = 0.0
+            for i in O.interactions:
+                if not i.isReal or i.geom.penetrationDepth <= 0:
+                    continue
+                b1, b2 = O.bodies[i.id1], O.bodies[i.id2]
+                branch = b2.state.pos + H * Vector3(i.cellDist) - b1.state.pos
+                g += i.phys.kn * branch.dot(branch)
+                s_tr += branch.dot(i.phys.normalForce)
+            p = s_tr / (3 * V)                   # compression positive (force on id2 along the branch)
+            G = g / (3 * V)
+            u = (p - p_goal) / (G * a.servo_every * dt) if G > 0 else 0.0
+            u = (1 - 0.25) * u + 0.25 * servo["u"]   # low-pass, like growDamping
+            lim = a.servo_rate_factor * rate
+            u = max(-lim, min(lim, u))
+            servo["u"] = u
+            O.cell.velGrad = Matrix3(shape[0] * rate + u, 0, 0, 0, shape[1] * rate + u, 0, 0, 0, shape[2] * rate + u)
+
+        globals()["isobaric_servo"] = isobaric_servo
+        O.engines = O.engines[:-1] + [PyRunner(iterPeriod=a.servo_every, command="isobaric_servo()")] + O.engines[-1:]
+        out.write(f"# isobaric servo (Python): p = {a.isobaric_p0} x p0 = {p_goal:.8g} Pa (contact stress), dead-beat over "
+                  f"{a.servo_every} steps, low-pass 0.25, |u| <= {a.servo_rate_factor} x rate\n")
     out.write(",".join(COLUMNS) + "\n")
     out.write(",".join(first) + "\n")
     done = 0
