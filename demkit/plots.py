@@ -11,6 +11,7 @@ Writes RUN_DIR/plots/*.png and *.svg:
 import argparse
 import glob
 import math
+import json
 import os
 import re
 import sys
@@ -108,14 +109,27 @@ def plot_deviatoric(run, outdir):
     return written
 
 
+def prep_stages(run):
+    """The preparation stages of a run folder in the order they ran (manifest.json), else by name."""
+    try:
+        with open(os.path.join(run, "manifest.json")) as f:
+            outputs = json.load(f)["outputs"]
+        names = [os.path.splitext(os.path.basename(o["file"]))[0] for o in outputs if o["file"].startswith("prep")]
+    except (OSError, ValueError, KeyError):
+        names = sorted(os.path.splitext(f)[0] for f in os.listdir(os.path.join(run, "prep")))
+    return [n for n in names if os.path.exists(os.path.join(run, "prep", n + ".csv"))]
+
+
 def plot_isotropic(run, outdir):
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     any_data = False
-    for name, style in (("cycle_loading", "-"), ("cycle_unloading", "--")):
-        f = os.path.join(run, "prep", name + ".csv")
-        if not os.path.exists(f):
+    for name in prep_stages(run):
+        c = read_curve(os.path.join(run, "prep", name + ".csv"))
+        # Loading and unloading stages; not relaxations (constant nu) nor the compression of the
+        # random placement (a gas below nu = 0.5).
+        if len(c["nu"]) < 2 or c["nu"][0] < 0.5 or np.ptp(c["nu"]) < 1e-6:
             continue
-        c = read_curve(f)
+        style = "-" if c["nu"][-1] > c["nu"][0] else "--"
         any_data = True
         axes[0].semilogy(c["nu"], np.maximum(c["p_star"], 1e-9), style, label=name)
         axes[1].plot(c["nu"], c["C"], style, label=name + " C")

@@ -1,4 +1,5 @@
 #include "dem/checks.hpp"
+#include "dem/preparation.hpp"
 
 #include <unistd.h>
 
@@ -22,17 +23,7 @@ namespace {
 
 bool finite3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
-std::string num(double v) {
-  char b[40];
-  std::snprintf(b, sizeof b, "%.17g", v);
-  return b;
-}
-
-std::string list(const std::vector<double>& v) {
-  std::string s;
-  for (double x : v) s += (s.empty() ? "" : ",") + num(x);
-  return "[" + s + "]";
-}
+std::string num(double v) { return physics_number(v); }
 
 void check_ids(const State& s, const std::string& origin) {
   std::vector<char> seen(s.count(), 0);
@@ -115,6 +106,18 @@ void check_memory(const Model& m) {
   }
 }
 
+std::string physics_number(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
+
+std::string physics_list(const std::vector<double>& v) {
+  std::string s;
+  for (double x : v) s += (s.empty() ? "" : ",") + physics_number(x);
+  return "[" + s + "]";
+}
+
 Physics material_physics(const Model& m) {
   return {{"particles.radius_min_m", num(m.radius_min)},
           {"particles.radius_max_m", num(m.radius_max)},
@@ -141,14 +144,7 @@ Physics preparation_physics(const Model& m) {
                      {"particles.seed", std::to_string(m.seed)},
                      {"particles.packing_file", m.packing_file.empty() ? "none" : m.packing_file},
                      {"protocol.initial_phi", num(q.initial_phi)},
-                     {"protocol.target_phi", num(q.target_phi)},
-                     {"protocol.compress_rate_tc", num(q.compress_rate * m.t_contact)},
-                     {"protocol.relax_ke_ratio", num(q.relax_ke_ratio)},
-                     {"protocol.relax_max_time_tc", num(q.relax_max_time / m.t_contact)},
-                     {"protocol.cycle_phi_max", num(q.cycle_phi_max)},
-                     {"protocol.cycle_rate_tc", num(q.cycle_rate * m.t_contact)},
-                     {"protocol.checkpoints_loading", list(q.checkpoints_loading)},
-                     {"protocol.checkpoints_unloading", list(q.checkpoints_unloading)}});
+                     {"protocol.preparation", preparation_record(q, m.t_contact)}});
   return p;
 }
 

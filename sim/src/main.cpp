@@ -15,6 +15,7 @@
 #include "dem/io.hpp"
 #include "dem/measure.hpp"
 #include "dem/plan.hpp"
+#include "dem/preparation.hpp"
 #include "dem/protocol.hpp"
 #include "dem/scene.hpp"
 #include "demfit/cli.hpp"
@@ -67,8 +68,10 @@ void print_info(const dem::Model& m) {
   std::printf("smallest pair      t_c = %.6g s, e = %.6g\n", m.t_contact, m.restitution);
   std::printf("time step          dt = %.6g s (t_c / %.4g), %s\n", m.dt, 1.0 / m.dt_over_tc,
               m.integrator == dem::Integrator::VelocityVerlet ? "velocity Verlet" : "symplectic Euler");
-  std::printf("rates              compress %.4g /s, cycle %.4g /s, deviatoric %.4g /s\n", p.compress_rate,
-              p.cycle_rate, p.deviatoric_rate);
+  for (const auto& st : p.preparation)
+    std::printf("prep %-15s %s\n", st.name.c_str(), dem::describe(st, m.t_contact).c_str());
+  std::printf("modes              from the checkpoints %s, deviatoric rate %.4g /s (%.4g/t_c)\n", p.modes_from.c_str(),
+              p.deviatoric_rate, p.deviatoric_rate * m.t_contact);
   for (auto& mode : p.modes) {
     if (!mode.path.empty()) {
       std::string stages;

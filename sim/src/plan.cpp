@@ -1,4 +1,5 @@
 #include "dem/plan.hpp"
+#include "dem/preparation.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -54,11 +55,7 @@ double mode_steps(const Model& m, const DeformationMode& mode) {
 double mode_particle_steps(const Model& m, const DeformationMode& mode) { return m.count * mode_steps(m, mode); }
 
 double prep_particle_steps(const Model& m) {
-  const Protocol& p = m.protocol;
-  // ln(phi) moves by 3 rate dt per step under isotropic compression.
-  const double compress = std::max(0.0, std::log(p.target_phi / p.initial_phi)) / (3 * p.compress_rate * m.dt);
-  const double cycle = 2 * std::log(p.cycle_phi_max / p.target_phi) / (3 * p.cycle_rate * m.dt);
-  return 3.0 * m.count * (compress + cycle);
+  return 3.0 * preparation_particle_steps(m);
 }
 
 std::string plan_json(const Model& m) {
@@ -70,11 +67,11 @@ std::string plan_json(const Model& m) {
     std::snprintf(name, sizeof name, "m%03d", k);
     o << (k ? ", " : "") << "{\"name\": \"" << name << "\", \"seed\": " << member_seed(m.seed, k) << "}";
   }
-  std::vector<double> phis = m.protocol.checkpoints_unloading;
-  std::sort(phis.begin(), phis.end(), std::greater<double>());
-  o << "],\n  \"checkpoints\": [";
+  const std::vector<double> phis = mode_checkpoints(m.protocol);
+  o << "],\n  \"series\": \"" << m.protocol.modes_from << "\",\n  \"checkpoints\": [";
   for (std::size_t i = 0; i < phis.size(); ++i)
-    o << (i ? ", " : "") << "{\"phi\": " << phis[i] << ", \"stem\": \"unloading_" << fmt_phi(phis[i]) << "\"}";
+    o << (i ? ", " : "") << "{\"phi\": " << phis[i] << ", \"stem\": \"" << checkpoint_stem(m.protocol.modes_from, phis[i])
+      << "\"}";
   o << "],\n  \"modes\": [";
   for (std::size_t i = 0; i < m.protocol.modes.size(); ++i) o << (i ? ", " : "") << "\"" << m.protocol.modes[i].name << "\"";
   o << "],\n  \"prep_particle_steps\": " << prep_particle_steps(m) << ",\n  \"mode_particle_steps\": {";

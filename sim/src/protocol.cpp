@@ -1,4 +1,5 @@
 #include "dem/protocol.hpp"
+#include "dem/preparation.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -117,7 +118,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   snapshot();
 
   const double x_start = progress_value();
-  const double x_end = spec.stop == StopKind::Relaxed ? state.time + model.protocol.relax_max_time : events.back();
+  const double x_end = spec.stop == StopKind::Relaxed ? state.time + spec.max_time : events.back();
   const double vtk_dx = model.output.vtk_per_stage > 0 ? (x_end - x_start) / (model.output.vtk_per_stage + 1) : 0;
   double next_vtk_x = x_start + vtk_dx;
   const double sample_dx = spec.stop == StopKind::VolumeFractionUp || spec.stop == StopKind::VolumeFractionDown
@@ -147,7 +148,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
         if (steps % model.output.relax_sample_steps == 0) sample = true;
         if (steps % 100 == 0) {
           const double ek = state.kinetic_energy();
-          if (ek < model.protocol.relax_ke_ratio *
+          if (ek < spec.ke_ratio *
                        std::max(potential_energy(model, state, engine.neighbor_list()), e_floor))
             done = true;
         }
@@ -263,8 +264,51 @@ struct Manifest {
   }
 };
 
-// The preparation stages in order; each ends with DIR/prep/after_<stage>.ckpt (resume point).
-const std::vector<std::string> kPrepStages = {"compress", "relax", "cycle_loading", "cycle_unloading"};
+// The preparation stages' names in order; each ends with DIR/prep/after_<stage>.ckpt (resume point).
+std::vector<std::string> prep_stage_names(const Model& model) {
+  std::vector<std::string> names;
+  for (const auto& s : model.protocol.preparation) names.push_back(s.name);
+  return names;
+}
+
+// Runs a stage spec on the state (with the run's bookkeeping), calling on_checkpoint at its checkpoints.
+using RunSpec = std::function<void(State&, const StageSpec&, const std::function<void(double, const State&)>&)>;
+// Saves the state as checkpoint <series>_<phi>.
+using SaveCheckpoint = std::function<void(const std::string& series, double phi, const State&)>;
+
+// Runs one preparation stage (PrepStage in model.hpp says what it does). Returns false if skipped.
+bool run_prep_stage(const PrepStage& s, State& st, const RunSpec& run, const SaveCheckpoint& save) {
+  if (s.kind == PrepStage::Kind::Relax) {
+    run(st, StageSpec{s.name, Vec3{0, 0, 0}, StopKind::Relaxed, 0, {}, s.ke_ratio, s.max_time}, nullptr);
+    return true;
+  }
+  const bool up = s.kind == PrepStage::Kind::Compress;
+  const double phi0 = st.volume_fraction();
+  if (up ? phi0 >= s.phi : phi0 <= s.phi) {
+    std::cerr << "dem: stage " << s.name << " skipped: the packing is already at phi " << phi0 << ", "
+              << (up ? "at or above" : "at or below") << " its target " << s.phi << "\n";
+    if (!s.checkpoints.empty())
+      std::cerr << "dem: warning: the checkpoints of stage " << s.name << " (" << s.checkpoint_name
+                << ") are not written\n";
+    return false;
+  }
+  StageSpec spec{s.name, Vec3{1, 1, 1} * (up ? -s.rate : s.rate),
+                 up ? StopKind::VolumeFractionUp : StopKind::VolumeFractionDown, s.phi, {}};
+  auto same = [](double a, double b) { return std::fabs(a - b) <= 1e-9 * b; };
+  std::vector<double> at_start, at_end;
+  for (double cp : s.checkpoints) {
+    if (same(cp, phi0)) at_start.push_back(cp);
+    else if (same(cp, s.phi)) at_end.push_back(cp);
+    else if (up ? (cp > phi0 && cp < s.phi) : (cp < phi0 && cp > s.phi)) spec.checkpoint_phis.push_back(cp);
+    else
+      std::cerr << "dem: warning: checkpoint " << checkpoint_stem(s.checkpoint_name, cp) << " not written: stage "
+                << s.name << " started at phi " << phi0 << ", already past it\n";
+  }
+  for (double cp : at_start) save(s.checkpoint_name, cp, st);
+  run(st, spec, [&](double phi, const State& now) { save(s.checkpoint_name, phi, now); });
+  for (double cp : at_end) save(s.checkpoint_name, cp, st);
+  return true;
+}
 
 std::string read_text(const fs::path& f) {
   std::ifstream in(f, std::ios::binary);
@@ -309,8 +353,8 @@ Model checkpoint_model(const Checkpoint& c, const std::string& origin) {
 
 // --stages deviatoric: every checkpoint exists and was prepared with this scene's material physics.
 void check_checkpoints(const Model& model, const fs::path& dir) {
-  for (double phi : model.protocol.checkpoints_unloading) {
-    const fs::path ck = dir / "checkpoints" / ("unloading_" + fmt_phi(phi) + ".ckpt");
+  for (double phi : mode_checkpoints(model.protocol)) {
+    const fs::path ck = dir / "checkpoints" / (checkpoint_stem(model.protocol.modes_from, phi) + ".ckpt");
     if (!fs::exists(ck))
       throw std::runtime_error("checkpoint " + ck.string() + " is missing: run --stages prep first");
     const Checkpoint c = read_checkpoint(ck.string());
@@ -339,7 +383,7 @@ void check_kept_curves(const Model& model, const fs::path& dir) {
 }
 
 // --force: remove what the rerun replaces, and say so.
-void clear_replaced(const fs::path& dir, bool prep) {
+void clear_replaced(const fs::path& dir, bool prep, const std::vector<std::string>& prep_names) {
   if (!fs::is_directory(dir)) return;
   std::vector<std::string> removed;
   auto drop = [&](const fs::path& p) {
@@ -355,7 +399,7 @@ void clear_replaced(const fs::path& dir, bool prep) {
   if (fs::is_directory(dir / "vtk"))
     for (auto& f : fs::directory_iterator(dir / "vtk")) {
       const std::string n = f.path().filename().string();
-      if (std::none_of(kPrepStages.begin(), kPrepStages.end(), [&](const std::string& s) { return n.rfind(s, 0) == 0; }))
+      if (std::none_of(prep_names.begin(), prep_names.end(), [&](const std::string& s) { return n.rfind(s, 0) == 0; }))
         files.push_back(f.path());
     }
   for (const auto& f : files)
@@ -369,9 +413,9 @@ void clear_replaced(const fs::path& dir, bool prep) {
 }
 
 // The last preparation stage whose curve and end state exist ("" if none).
-std::string last_finished_prep_stage(const fs::path& dir) {
+std::string last_finished_prep_stage(const fs::path& dir, const std::vector<std::string>& prep_names) {
   std::string last;
-  for (const auto& st : kPrepStages)
+  for (const auto& st : prep_names)
     if (fs::exists(dir / "prep" / (st + ".csv")) && fs::exists(dir / "prep" / ("after_" + st + ".ckpt"))) last = st;
   return last;
 }
@@ -428,13 +472,14 @@ void run_protocol(const Model& model, const RunOptions& opt) {
     throw std::runtime_error("results already exist in " + dir.string() + " (manifest.json: a finished run): choose "
                              "another --out, or pass --force to replace them");
   if (want_prep && !resume) check_memory(model);
-  const std::string resume_after = resume ? last_finished_prep_stage(dir) : "";
+  const std::vector<std::string> prep_names = prep_stage_names(model);
+  const std::string resume_after = resume ? last_finished_prep_stage(dir, prep_names) : "";
   State start;   // the state the preparation starts from: read and checked before writing
   if (!resume_after.empty()) start = resume_state(model, dir, resume_after);
   if (!want_prep) check_checkpoints(model, dir);
   if (want_dev && !opt.force) check_kept_curves(model, dir);
   if (want_prep && resume_after.empty()) start = initial_state(model, note);
-  if (opt.force) clear_replaced(dir, want_prep);
+  if (opt.force) clear_replaced(dir, want_prep, prep_names);
   if (resume)
     std::cerr << "dem: " << dir.string() << " holds an interrupted run (manifest.json: complete: false): resuming "
               << (resume_after.empty() ? "the preparation from its start"
@@ -461,11 +506,11 @@ void run_protocol(const Model& model, const RunOptions& opt) {
   // Outputs of earlier invocations that this one keeps.
   std::size_t first_prep = 0;
   if (!resume_after.empty())
-    first_prep = std::find(kPrepStages.begin(), kPrepStages.end(), resume_after) - kPrepStages.begin() + 1;
+    first_prep = std::find(prep_names.begin(), prep_names.end(), resume_after) - prep_names.begin() + 1;
   for (const char* sub : {"prep", "deviatoric"})
     for (const auto& name : csv_stems(dir / sub)) {
       const bool rerun = want_prep && std::string(sub) == "prep" &&
-                         std::find(kPrepStages.begin() + first_prep, kPrepStages.end(), name) != kPrepStages.end();
+                         std::find(prep_names.begin() + first_prep, prep_names.end(), name) != prep_names.end();
       if ((!want_prep || resume) && !rerun) record(sub, name, first_word(curve_physics_line(dir / sub / (name + ".csv"))));
     }
   man.save();
@@ -505,57 +550,27 @@ void run_protocol(const Model& model, const RunOptions& opt) {
 
   if (want_prep) {
     State state = std::move(start);
-    auto save_ckpt = [&](const std::string& branch) {
-      return [&, branch](double phi, const State& st) {
-        const std::string stem = branch + "_" + fmt_phi(phi);
-        write_checkpoint((dir / "checkpoints" / (stem + ".ckpt")).string(),
-                         Checkpoint{opt.scene_toml, branch + " " + fmt_phi(phi), st});
-        write_packing((dir / "checkpoints" / (stem + ".txt")).string(), st);
-        note("checkpoint " + stem);
-      };
+    const SaveCheckpoint save = [&](const std::string& series, double phi, const State& st) {
+      const std::string stem = checkpoint_stem(series, phi);
+      write_checkpoint((dir / "checkpoints" / (stem + ".ckpt")).string(),
+                       Checkpoint{opt.scene_toml, series + " " + fmt_phi(phi), st});
+      write_packing((dir / "checkpoints" / (stem + ".txt")).string(), st);
+      note("checkpoint " + stem);
     };
-    // Each stage as a function of the state; after it, its end state is the resume point.
-    const std::vector<std::function<void(State&)>> stages = {
-        [&](State& st) {   // 1. isotropic compression to target_phi (skipped when already denser)
-          if (st.volume_fraction() >= p.target_phi) return;
-          timed_stage(st, {"compress", Vec3{-1, -1, -1} * p.compress_rate, StopKind::VolumeFractionUp, p.target_phi, {}},
-                      "prep", nullptr);
-        },
-        [&](State& st) {   // 2. relaxation at constant volume
-          timed_stage(st, {"relax", Vec3{0, 0, 0}, StopKind::Relaxed, 0, {}}, "prep", nullptr);
-        },
-        [&](State& st) {   // 3. cycle: load to cycle_phi_max, checkpoints on the way
-          StageSpec s{"cycle_loading", Vec3{-1, -1, -1} * p.cycle_rate, StopKind::VolumeFractionUp, p.cycle_phi_max, {}};
-          for (double phi : p.checkpoints_loading)
-            if (phi > st.volume_fraction() && phi < p.cycle_phi_max) s.checkpoint_phis.push_back(phi);
-          timed_stage(st, s, "prep", save_ckpt("loading"));
-        },
-        [&](State& st) {   // 4. unload to target_phi, checkpoints on the way
-          StageSpec s{"cycle_unloading", Vec3{1, 1, 1} * p.cycle_rate, StopKind::VolumeFractionDown, p.target_phi, {}};
-          bool top_checkpoint = false;
-          for (double phi : p.checkpoints_unloading) {
-            if (phi < p.cycle_phi_max && phi > p.target_phi) s.checkpoint_phis.push_back(phi);
-            else top_checkpoint |= phi >= p.cycle_phi_max;
-          }
-          if (top_checkpoint) save_ckpt("unloading")(p.cycle_phi_max, st);
-          const bool bottom = std::any_of(p.checkpoints_unloading.begin(), p.checkpoints_unloading.end(),
-                                          [&](double f) { return f <= p.target_phi; });
-          timed_stage(st, s, "prep", save_ckpt("unloading"));
-          if (bottom) save_ckpt("unloading")(p.target_phi, st);
-        }};
-    for (std::size_t i = first_prep; i < stages.size(); ++i) {
-      stages[i](state);
-      write_checkpoint((dir / "prep" / ("after_" + kPrepStages[i] + ".ckpt")).string(),
-                       Checkpoint{opt.scene_toml, "end of stage " + kPrepStages[i], state});
+    const RunSpec run = [&](State& st, const StageSpec& s, const std::function<void(double, const State&)>& on_ck) {
+      timed_stage(st, s, "prep", on_ck);
+    };
+    for (std::size_t i = first_prep; i < p.preparation.size(); ++i) {
+      run_prep_stage(p.preparation[i], state, run, save);
+      write_checkpoint((dir / "prep" / ("after_" + prep_names[i] + ".ckpt")).string(),
+                       Checkpoint{opt.scene_toml, "end of stage " + prep_names[i], state});
       man.save();
     }
   }
 
   if (want_dev) {
-    std::vector<double> phis = p.checkpoints_unloading;
-    std::sort(phis.begin(), phis.end(), std::greater<double>());
-    for (double phi : phis) {
-      const fs::path ck = dir / "checkpoints" / ("unloading_" + fmt_phi(phi) + ".ckpt");
+    for (double phi : mode_checkpoints(p)) {
+      const fs::path ck = dir / "checkpoints" / (checkpoint_stem(p.modes_from, phi) + ".ckpt");
       if (!fs::exists(ck))
         throw std::runtime_error("checkpoint " + ck.string() + " is missing: run --stages prep first");
       for (const auto& mode : p.modes) {

@@ -1,7 +1,9 @@
 #include "dem/scene.hpp"
 
 #include "dem/control.hpp"
+#include "dem/preparation.hpp"
 #include "dem/protocol.hpp"
+#include "preparation_toml.hpp"
 
 #include <toml++/toml.h>
 
@@ -66,6 +68,17 @@ class KeyReader {
         out.push_back(*v);
       }
     }
+  }
+
+  // A key read elsewhere (not through get): known, never given a default.
+  void known(const std::string& section, const std::string& key) { known_[section].insert(key); }
+
+  // A key that keeps its value when absent and gets no default in the resolved scene.
+  template <class T>
+  void get_if_present(const std::string& section, const std::string& key, T& out) {
+    toml::table* sec = section_table(section);
+    if (sec && sec->get(key)) get(section, key, out);
+    else known(section, key);
   }
 
   // Sections whose keys are free (user-defined modes).
@@ -316,6 +329,23 @@ std::map<std::string, std::vector<PathStage>> parse_paths(toml::table& root, con
   return paths;
 }
 
+// protocol.preparation if the scene lists it (then the keys of the built-in preparation are refused).
+const toml::array* explicit_preparation(toml::table& root, const std::string& origin) {
+  const toml::table* proto = root.get("protocol") ? root.get("protocol")->as_table() : nullptr;
+  const toml::node* n = proto ? proto->get("preparation") : nullptr;
+  if (!n) return nullptr;
+  const toml::array* a = n->as_array();
+  if (!a)
+    throw SceneError(origin + ": protocol.preparation must be an array of stage tables, e.g. [{ name = \"compress\", "
+                     "kind = \"compress\", rate_tc = 1e-4, until = { phi = 0.64 } }, ...] (docs/protocol.md)");
+  for (const char* key : {"target_phi", "compress_rate_tc", "relax_ke_ratio", "relax_max_time_tc", "cycle_phi_max",
+                          "cycle_rate_tc", "checkpoints_unloading", "checkpoints_loading"})
+    if (proto->contains(key))
+      throw SceneError(origin + ": protocol." + key + " belongs to the built-in preparation, but protocol.preparation "
+                       "lists the stages: remove protocol." + key + " and give its value in the stage it belongs to");
+  return a;
+}
+
 }  // namespace
 
 bool builtin_mode(const std::string& name, DeformationMode* mode) {
@@ -376,14 +406,22 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   p.checkpoints_unloading = {0.80, 0.75, 0.70, 0.68};
   std::vector<std::string> modes = {"D2", "D3"};
   r.get("protocol", "initial_phi", p.initial_phi);
-  r.get("protocol", "target_phi", p.target_phi);
-  r.get("protocol", "compress_rate_tc", compress_tc);
-  r.get("protocol", "relax_ke_ratio", p.relax_ke_ratio);
-  r.get("protocol", "relax_max_time_tc", relax_max_tc);
-  r.get("protocol", "cycle_phi_max", p.cycle_phi_max);
-  r.get("protocol", "cycle_rate_tc", cycle_tc);
-  r.get("protocol", "checkpoints_unloading", p.checkpoints_unloading);
-  r.get("protocol", "checkpoints_loading", p.checkpoints_loading);
+  const toml::array* preparation = explicit_preparation(root, origin);
+  p.preparation_explicit = preparation != nullptr;
+  r.known("protocol", "preparation");
+  if (p.preparation_explicit) {
+    r.get("protocol", "modes_from", p.modes_from);
+  } else {
+    r.get_if_present("protocol", "modes_from", p.modes_from);
+    r.get("protocol", "target_phi", p.target_phi);
+    r.get("protocol", "compress_rate_tc", compress_tc);
+    r.get("protocol", "relax_ke_ratio", p.relax_ke_ratio);
+    r.get("protocol", "relax_max_time_tc", relax_max_tc);
+    r.get("protocol", "cycle_phi_max", p.cycle_phi_max);
+    r.get("protocol", "cycle_rate_tc", cycle_tc);
+    r.get("protocol", "checkpoints_unloading", p.checkpoints_unloading);
+    r.get("protocol", "checkpoints_loading", p.checkpoints_loading);
+  }
   r.get("protocol", "modes", modes);
   r.get("protocol", "deviatoric_rate_tc", dev_tc);
   r.get("protocol", "eps_d_max", p.eps_d_max);
@@ -463,6 +501,8 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
       throw SceneError(origin + ": a strain rate of " + std::to_string(rate_tc) +
                        "/t_c deforms the box by 1% per contact time: far from quasi-static; "
                        "use rates below 1e-3 (typical: 1e-6 to 1e-4)");
+  p.preparation = preparation ? parse_preparation(*preparation, m.t_contact, origin) : default_preparation(p);
+  validate_preparation(p, m.t_contact, origin);
   if (resolved) {
     std::ostringstream o;
     o << root;
@@ -542,10 +582,21 @@ void validate_checkpoints(const Protocol& p, const std::vector<double>& phis, co
   }
 }
 
+void validate_modes_and_strain(const Protocol& p) {
+  std::set<std::string> modes;
+  for (const auto& mode : p.modes)
+    if (!modes.insert(mode.name).second) fail("protocol.modes lists '" + mode.name + "' twice: keep one");
+  if (!(p.eps_d_max > 0 && p.eps_d_max <= 2)) fail("protocol.eps_d_max must be in (0, 2]");
+}
+
 void validate_protocol(const Model& m) {
   const Protocol& p = m.protocol;
   if (!(p.initial_phi > 0 && p.initial_phi <= 0.45))
     fail("protocol.initial_phi must be in (0, 0.45]: random placement cannot go denser");
+  if (p.preparation_explicit) {   // its stages are checked by validate_preparation
+    validate_modes_and_strain(p);
+    return;
+  }
   // Soft spheres can be pushed past jamming, but at phi near 1 overlaps are of the order of
   // the radius and the linear contact law is meaningless.
   const double phi_limit = 0.9;
@@ -557,11 +608,8 @@ void validate_protocol(const Model& m) {
   if (!(p.cycle_phi_max >= p.target_phi)) fail("protocol.cycle_phi_max must be >= protocol.target_phi");
   validate_checkpoints(p, p.checkpoints_unloading, "checkpoints_unloading");
   validate_checkpoints(p, p.checkpoints_loading, "checkpoints_loading");
-  std::set<std::string> modes;
-  for (const auto& mode : p.modes)
-    if (!modes.insert(mode.name).second) fail("protocol.modes lists '" + mode.name + "' twice: keep one");
   if (!finite_positive(p.relax_ke_ratio)) fail("protocol.relax_ke_ratio must be positive and finite");
-  if (!(p.eps_d_max > 0 && p.eps_d_max <= 2)) fail("protocol.eps_d_max must be in (0, 2]");
+  validate_modes_and_strain(p);
 }
 
 void validate_output(const Model& m) {

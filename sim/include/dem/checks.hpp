@@ -34,6 +34,12 @@ void check_memory(const Model& model);
 
 /// The physical keys of a model with their values (%.17g), in a fixed order.
 using Physics = std::vector<std::pair<std::string, std::string>>;
+
+/// A number as physics records write it: 17 significant digits ("%.17g"), so equal records
+/// mean equal doubles.
+std::string physics_number(double v);
+/// A list of numbers as "[a,b,c]" (physics_number each).
+std::string physics_list(const std::vector<double>& v);
 /// What a deviatoric curve depends on besides its start state: radius bounds (t_c), density,
 /// contact law, integrator and dt_over_tc. Not the skin or the threads (round-off only).
 Physics material_physics(const Model& model);

@@ -77,6 +77,25 @@ struct ServoOptions {
   double rate_max_tc = 0;       ///< scene value; 0: 2 x protocol.deviatoric_rate_tc
 };
 
+/// One stage of the preparation (`protocol.preparation` in a scene, or the built-in list made
+/// from the compress/relax/cycle keys, default_preparation()). Either an isotropic compression
+/// or expansion at a constant true strain rate until the volume fraction reaches `phi`, or a
+/// relaxation at constant volume until E_kin < ke_ratio * max(E_pot, E_floor) or `max_time`.
+/// A compression (expansion) that starts at or above (below) its `phi` is skipped with a note.
+/// Checkpoints: a phi strictly between the stage's start and `phi` is landed on exactly; one
+/// equal to the start (end) volume fraction is saved before (after) the stage.
+struct PrepStage {
+  enum class Kind { Compress, Expand, Relax };
+  std::string name;                  ///< file stem: prep/<name>.csv, resume point prep/after_<name>.ckpt
+  Kind kind = Kind::Relax;
+  double rate = 0;                   ///< compress/expand: true strain rate per axis, magnitude [1/s]
+  double phi = 0;                    ///< compress/expand: target volume fraction
+  double ke_ratio = 1e-8;            ///< relax: ends when E_kin < ke_ratio * max(E_pot, E_floor)
+  double max_time = 0;               ///< relax: ends after this duration at the latest [s]
+  std::string checkpoint_name;       ///< checkpoints/<checkpoint_name>_phiX.XXX.{ckpt,txt}
+  std::vector<double> checkpoints;   ///< volume fractions at which the state is saved
+};
+
 /// The protocol: preparation (compress, relax, cycle) then deviatoric modes from checkpoints.
 struct Protocol {
   double initial_phi = 0.3;          ///< random placement volume fraction, (0, 0.45]
@@ -88,7 +107,12 @@ struct Protocol {
   double cycle_rate = 0;             ///< isotropic strain rate during the cycle [1/s]
   std::vector<double> checkpoints_unloading;   ///< phi values for checkpoints on unloading
   std::vector<double> checkpoints_loading;     ///< phi values on loading (optional)
-  std::vector<DeformationMode> modes;          ///< run from every unloading checkpoint
+  /// The preparation stages in order (filled by load_scene: `protocol.preparation` or the
+  /// built-in list made from the keys above).
+  std::vector<PrepStage> preparation;
+  bool preparation_explicit = false; ///< true: the scene lists protocol.preparation
+  std::string modes_from = "unloading";        ///< the checkpoint series the modes start from
+  std::vector<DeformationMode> modes;          ///< run from every checkpoint of `modes_from`
   double deviatoric_rate = 0;        ///< mode rate [1/s] (multiplies rate_shape)
   double eps_d_max = 0.4;            ///< deviatoric runs stop at this eps_d (or |eps| for others)
   ServoOptions servo;                ///< stress control of loading-path stages

@@ -14,11 +14,13 @@ double mode_steps(const Model& model, const DeformationMode& mode);
 /// Estimated particle-steps of one mode or path run (N x mode_steps).
 double mode_particle_steps(const Model& model, const DeformationMode& mode);
 
-/// Estimated particle-steps of one preparation (compression and cycle; the relaxation, whose
-/// length depends on the packing, is counted as 20% of those).
+/// Estimated particle-steps of one preparation, for progress weights: the steps of its
+/// compress/expand stages (preparation_particle_steps) times 3, a rough allowance for the
+/// relaxations, whose length depends on the packing, and the list rebuilds of compression.
 double prep_particle_steps(const Model& model);
 
 /// JSON: {"packings": K, "members": [{"name": "m000", "seed": S}, ...],
+///        "series": "unloading" (protocol.modes_from),
 ///        "checkpoints": [{"phi": 0.8, "stem": "unloading_phi0.800"}, ...] (descending phi),
 ///        "modes": ["D2", ...], "prep_particle_steps": P, "mode_particle_steps": {"D2": M, ...},
 ///        "threads": T}

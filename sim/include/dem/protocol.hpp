@@ -4,9 +4,11 @@
 // Run folder layout (DIR = --out):
 //   DIR/manifest.json                 scene, version, command, per-stage status
 //   DIR/scene.toml                    the resolved scene (every key with its value)
-//   DIR/prep/{compress,relax,cycle_loading,cycle_unloading}.csv
+//   DIR/prep/<stage>.csv             one per preparation stage (built in: compress, relax,
+//                                    cycle_loading, cycle_unloading; or protocol.preparation)
 //   DIR/prep/after_<stage>.ckpt      end state of each preparation stage (resume points)
-//   DIR/checkpoints/unloading_phi0.700.{ckpt,txt}   (txt: YADE text packing)
+//   DIR/checkpoints/<series>_phi0.700.{ckpt,txt}   (series: unloading, loading, or the
+//                                    stage's checkpoint_name; txt: YADE text packing)
 //   DIR/deviatoric/D2_phi0.700.csv ...
 //   DIR/vtk/<stage>_NNNN.vtu and DIR/vtk/<stage>.pvd
 #pragma once
@@ -49,6 +51,8 @@ struct StageSpec {
   StopKind stop = StopKind::Relaxed;
   double target = 0;                 ///< phi, or strain (eps_d; |eps_v| for isotropic shapes)
   std::vector<double> checkpoint_phis;   ///< volume fractions at which on_checkpoint is called
+  double ke_ratio = 0;               ///< Relaxed: ends when E_kin < ke_ratio * max(E_pot, E_floor)
+  double max_time = 0;               ///< Relaxed: ends after this duration at the latest [s]
 };
 
 /// Runs one stage on (model, state), writing its curve CSV to csv_path (atomically; a crash
