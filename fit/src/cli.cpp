@@ -194,7 +194,6 @@ int run_fit_command(const FitCommandOptions& o) {
     std::cerr << "dem fit: " << dev << " does not exist: give a folder written by `dem run`\n";
     return 1;
   }
-  fs::create_directories(out);
   FitOptions fo;
   fo.window_min = o.window_min;
   fo.window_max = o.window_max;
@@ -221,6 +220,10 @@ int run_fit_command(const FitCommandOptions& o) {
     return 1;
   }
   check_one_physics(curves);
+  // The inputs are good: what this fit writes replaces all of fit/ (no table of an earlier fit,
+  // e.g. a shared-path test of a mode no longer there, survives beside the new ones).
+  fs::remove_all(out);
+  fs::create_directories(out);
   std::sort(curves.begin(), curves.end(), [](auto& a, auto& b) { return a.mode != b.mode ? a.mode < b.mode : a.phi < b.phi; });
 
   Table params({"mode", "nu", "quantity", "x0", "se_x0", "x_max", "se_x_max", "beta", "se_beta",

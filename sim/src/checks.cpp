@@ -131,6 +131,24 @@ Physics material_physics(const Model& m) {
           {"integration.kinematics", m.sllod ? "sllod" : "plain"}};
 }
 
+namespace {
+std::string vec(const Vec3& v) {
+  return "[" + physics_number(v.x) + "," + physics_number(v.y) + "," + physics_number(v.z) + "]";
+}
+}  // namespace
+
+std::string mode_definition(const Model& m, const DeformationMode& mode) {
+  if (mode.path.empty())
+    return "rate_shape=" + vec(mode.rate_shape) + ";eps_d_max=" + physics_number(m.protocol.eps_d_max);
+  std::string d = "path=";
+  for (const auto& s : mode.path)
+    d += s.name + ":rate=" + vec(s.rate_shape) + ":sigma=" + vec(s.sigma) + ":pressure=" + physics_number(s.pressure) +
+         (s.relative ? ":p0" : ":Pa") + (s.constant_volume ? ":constant_volume" : "") + ":stop" +
+         std::to_string(static_cast<int>(s.stop)) + "=" + physics_number(s.until) + (s.until_relative ? "p0" : "") + "/";
+  return d + ";servo.waves=" + physics_number(m.protocol.servo.waves) +
+         ";servo.rate_max_tc=" + physics_number(m.protocol.servo.rate_max_tc);
+}
+
 Physics shear_physics(const Model& m) {
   Physics p = material_physics(m);
   p.emplace_back("protocol.deviatoric_rate_tc", num(m.protocol.deviatoric_rate * m.t_contact));

@@ -8,7 +8,8 @@
 
 namespace dem {
 
-std::string curve_preamble(const Model& m, const std::string& stage, const Physics& physics) {
+std::string curve_preamble(const Model& m, const std::string& stage, const Physics& physics,
+                           const std::string& definition) {
   std::ostringstream o;
   o << "# dem curve: stage=" << stage << "\n"
     << "# units: SI; *_Pa pascal, *_J joule, time_s second; other columns dimensionless\n"
@@ -20,6 +21,7 @@ std::string curve_preamble(const Model& m, const std::string& stage, const Physi
     << "# t_c=" << m.t_contact << " s, dt=" << m.dt << " s, k=" << m.contact.stiffness
     << " N/m, gamma=" << m.contact.damping << " kg/s, gamma_b=" << m.background_damping << " kg/s\n"
     << "# physics: " << physics_line(physics) << "\n";
+  if (!definition.empty()) o << "# definition: " << definition << "\n";
   return o.str();
 }
 

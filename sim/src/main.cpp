@@ -312,7 +312,7 @@ int main(int argc, char** argv) {
       dem::check_packing(model, state, mode_packing);
       const auto& m = model.protocol.modes.front();
       dem::StageSpec spec{mode_stage_name.empty() ? m.name : mode_stage_name, m.rate_shape * model.protocol.deviatoric_rate, dem::StopKind::DeviatoricStrain,
-                          model.protocol.eps_d_max, {}};
+                          model.protocol.eps_d_max, {}, 0, 0, dem::mode_definition(model, m)};
       if (!mode_quiet) print_info(model);
       else warn_time_step(model);
       const auto t0 = std::chrono::steady_clock::now();
@@ -329,6 +329,13 @@ int main(int argc, char** argv) {
       const dem::Model model = dem::load_scene("", overrides, nullptr, "collide");
       for (auto [name, v] : {std::pair{"--r1", col_r1}, {"--r2", col_r2}, {"--v0", col_v0}})
         if (!(v > 0) || !std::isfinite(v)) throw ArgumentError(std::string(name) + " must be a positive finite number");
+      // dt is t_c / dt_over_tc of the scene's smallest pair: a smaller sphere is resolved by fewer steps.
+      for (auto [name, r] : {std::pair{"--r1", col_r1}, {"--r2", col_r2}})
+        if (r < model.radius_min || r > model.radius_max)
+          throw ArgumentError(std::string(name) + " = " + std::to_string(r) + " m lies outside the scene's radius range [" +
+                              std::to_string(model.radius_min) + ", " + std::to_string(model.radius_max) + "] m, "
+                              "from which the time step is set: pass --set particles.radius_min_m=... and "
+                              "--set particles.radius_max_m=... to cover it");
       const dem::CollisionResult r = dem::simulate_collision(model, col_r1, col_r2, col_v0);
       if (r.steps_in_contact < 20 || r.max_overlap > model.max_overlap_fraction)
         throw ArgumentError("the contact lasted " + std::to_string(r.steps_in_contact) + " time steps with an overlap of " +

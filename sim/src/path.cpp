@@ -199,7 +199,7 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
   state.box.reference = state.box.length;
   state.box.log_strain = Vec3{0, 0, 0};
   Engine engine(model, state);
-  CurveFile csv(csv_path, curve_preamble(model, label, shear_physics(model)), path_columns());
+  CurveFile csv(csv_path, curve_preamble(model, label, shear_physics(model), mode_definition(model, mode)), path_columns());
   // p0: the pressure of the first row (the dashpots see the first stage's prescribed rate).
   const Vec3 rate0 = mode.path.front().rate_shape * model.protocol.deviatoric_rate;
   const double p0 = axis_response(model, state, engine.neighbor_list(), rate0).p();

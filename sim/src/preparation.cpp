@@ -194,8 +194,8 @@ std::string checkpoint_stem(const std::string& series, double phi) { return seri
 
 std::string preparation_record(const Protocol& p, double t_c) {
   std::string r;
-  for (const auto& s : p.preparation) r += (r.empty() ? "" : "/") + record_of(s, t_c);
-  return r + "/modes_from=" + p.modes_from;
+  for (const auto& s : p.preparation) r += (r.empty() ? "" : "/") + record_of(s, t_c);   // not modes_from: modes only
+  return r;
 }
 
 double preparation_particle_steps(const Model& m) {

@@ -99,7 +99,8 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   const std::size_t n_checkpoint_events = spec.stop == StopKind::DeviatoricStrain ? 0 : events.size() - 1;
 
   const bool shear = spec.stop == StopKind::DeviatoricStrain;
-  CurveFile csv(csv_path, curve_preamble(model, spec.name, shear ? shear_physics(model) : preparation_physics(model)));
+  CurveFile csv(csv_path, curve_preamble(model, spec.name, shear ? shear_physics(model) : preparation_physics(model),
+                                         spec.definition));
 
   Measurement last_m = measure(model, state, engine.neighbor_list(), spec.rate);
   auto write_row = [&](const Measurement& m) { csv.row(curve_row(m), spec.name); };
@@ -279,7 +280,7 @@ using SaveCheckpoint = std::function<void(const std::string& series, double phi,
 // Runs one preparation stage (PrepStage in model.hpp says what it does). Returns false if skipped.
 bool run_prep_stage(const PrepStage& s, State& st, const RunSpec& run, const SaveCheckpoint& save) {
   if (s.kind == PrepStage::Kind::Relax) {
-    run(st, StageSpec{s.name, Vec3{0, 0, 0}, StopKind::Relaxed, 0, {}, s.ke_ratio, s.max_time}, nullptr);
+    run(st, StageSpec{s.name, Vec3{0, 0, 0}, StopKind::Relaxed, 0, {}, s.ke_ratio, s.max_time, ""}, nullptr);
     return true;
   }
   const bool up = s.kind == PrepStage::Kind::Compress;
@@ -293,7 +294,7 @@ bool run_prep_stage(const PrepStage& s, State& st, const RunSpec& run, const Sav
     return false;
   }
   StageSpec spec{s.name, Vec3{1, 1, 1} * (up ? -s.rate : s.rate),
-                 up ? StopKind::VolumeFractionUp : StopKind::VolumeFractionDown, s.phi, {}};
+                 up ? StopKind::VolumeFractionUp : StopKind::VolumeFractionDown, s.phi, {}, 0, 0, ""};
   auto same = [](double a, double b) { return std::fabs(a - b) <= 1e-9 * b; };
   std::vector<double> at_start, at_end;
   for (double cp : s.checkpoints) {
@@ -321,14 +322,16 @@ bool manifest_complete(const fs::path& file) {
   return read_text(file).find("\"complete\": true") != std::string::npos;
 }
 
-// The `# physics:` line of a curve CSV ("" if it has none: written by an older dem).
-std::string curve_physics_line(const fs::path& csv) {
+// The text after `tag` (e.g. "# physics: ") in the comment lines of a curve CSV ("" if none:
+// written by an older dem).
+std::string curve_comment(const fs::path& csv, const std::string& tag) {
   std::ifstream in(csv);
   std::string line;
   while (std::getline(in, line) && !line.empty() && line[0] == '#')
-    if (line.rfind("# physics: ", 0) == 0) return line.substr(11);
+    if (line.rfind(tag, 0) == 0) return line.substr(tag.size());
   return "";
 }
+std::string curve_physics_line(const fs::path& csv) { return curve_comment(csv, "# physics: "); }
 
 std::string first_word(const std::string& s) { return s.substr(0, s.find(' ')); }
 
@@ -351,19 +354,20 @@ Model checkpoint_model(const Checkpoint& c, const std::string& origin) {
   }
 }
 
-// --stages deviatoric: every checkpoint exists and was prepared with this scene's material physics.
+// --stages deviatoric: every checkpoint exists and was prepared by this scene (material physics
+// and preparation), so that the scene.toml written beside the curves describes their start.
 void check_checkpoints(const Model& model, const fs::path& dir) {
   for (double phi : mode_checkpoints(model.protocol)) {
     const fs::path ck = dir / "checkpoints" / (checkpoint_stem(model.protocol.modes_from, phi) + ".ckpt");
     if (!fs::exists(ck))
       throw std::runtime_error("checkpoint " + ck.string() + " is missing: run --stages prep first");
     const Checkpoint c = read_checkpoint(ck.string());
-    const std::string d = physics_diff(material_physics(checkpoint_model(c, ck.string())), material_physics(model),
-                                       "checkpoint", "this scene");
+    const std::string d = physics_diff(preparation_physics(checkpoint_model(c, ck.string())),
+                                       preparation_physics(model), "checkpoint", "this scene");
     if (!d.empty())
-      throw SceneError(ck.string() + " was prepared with other physics: " + d + ". Curves from it would mix two "
-                       "physics: run with the scene it was prepared with (" + (dir / "scene.toml").string() +
-                       "), or rerun the preparation (--stages all --force)");
+      throw SceneError(ck.string() + " was prepared with other physics: " + d + ". Curves from it would not be what "
+                       "this scene describes: run with the scene it was prepared with (" + (dir / "scene.toml").string() +
+                       "; change only the modes and the deviatoric rate), or rerun the preparation (--stages all --force)");
   }
 }
 
@@ -379,6 +383,14 @@ void check_kept_curves(const Model& model, const fs::path& dir) {
       throw SceneError(f.string() + " was computed with other physics: " + d + ". Keeping it would mix two physics "
                        "in one folder (and in dem fit): pass --force to recompute the deviatoric curves, or choose "
                        "another --out");
+    // The same mode, defined as this scene defines it (rate shape, eps_d_max, path stages).
+    const std::string had = curve_comment(f, "# definition: ");
+    const std::string mode_name = name.substr(0, name.rfind("_phi"));
+    for (const auto& mode : model.protocol.modes)
+      if (mode.name == mode_name && !had.empty() && had != mode_definition(model, mode))
+        throw SceneError(f.string() + " is mode " + mode_name + " as an earlier scene defined it (" + had +
+                         "); this scene defines it as " + mode_definition(model, mode) + ". A rerun would keep the "
+                         "old curve: pass --force to recompute the deviatoric curves, or choose another --out");
   }
 }
 
@@ -583,7 +595,7 @@ void run_protocol(const Model& model, const RunOptions& opt) {
         State state = std::move(c.state);
         note("deviatoric " + name + " from " + ck.filename().string());
         if (mode.path.empty()) {
-          StageSpec s{name, mode.rate_shape * p.deviatoric_rate, StopKind::DeviatoricStrain, p.eps_d_max, {}};
+          StageSpec s{name, mode.rate_shape * p.deviatoric_rate, StopKind::DeviatoricStrain, p.eps_d_max, {}, 0, 0, mode_definition(model, mode)};
           timed_stage(state, s, "deviatoric", nullptr);
         } else {
           timed_path(state, mode, name);

@@ -474,6 +474,23 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   } catch (const std::invalid_argument& e) {
     throw SceneError(origin + ": " + e.what());
   }
+  auto positive = [&](double v, const char* key) {
+    if (!(v > 0) || !std::isfinite(v))
+      throw SceneError(origin + ": protocol." + key + " must be a positive number");
+  };
+  positive(compress_tc, "compress_rate_tc");
+  positive(cycle_tc, "cycle_rate_tc");
+  positive(dev_tc, "deviatoric_rate_tc");
+  positive(relax_max_tc, "relax_max_time_tc");
+  for (auto [rate_tc, key] : {std::pair{compress_tc, "compress_rate_tc"}, {cycle_tc, "cycle_rate_tc"},
+                              {dev_tc, "deviatoric_rate_tc"}})
+    if (rate_tc > 1e-2) {
+      char b[300];
+      std::snprintf(b, sizeof b, "%s: protocol.%s = %g deforms the box by %.3g%% per contact time: far from "
+                    "quasi-static; use rates below 1e-3 (typical: 1e-6 to 1e-4)", origin.c_str(), key, rate_tc,
+                    100 * rate_tc);
+      throw SceneError(b);
+    }
   p.compress_rate = compress_tc / m.t_contact;
   p.cycle_rate = cycle_tc / m.t_contact;
   p.deviatoric_rate = dev_tc / m.t_contact;
@@ -488,19 +505,6 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   for (auto& mode : p.modes)
     for (auto& st : mode.path)
       if (st.stop == PathStop::Time) st.until *= m.t_contact;   // time_tc -> seconds
-  auto positive = [&](double v, const char* key) {
-    if (!(v > 0) || !std::isfinite(v))
-      throw SceneError(origin + ": protocol." + key + " must be a positive number");
-  };
-  positive(compress_tc, "compress_rate_tc");
-  positive(cycle_tc, "cycle_rate_tc");
-  positive(dev_tc, "deviatoric_rate_tc");
-  positive(relax_max_tc, "relax_max_time_tc");
-  for (double rate_tc : {compress_tc, cycle_tc, dev_tc})
-    if (rate_tc > 1e-2)
-      throw SceneError(origin + ": a strain rate of " + std::to_string(rate_tc) +
-                       "/t_c deforms the box by 1% per contact time: far from quasi-static; "
-                       "use rates below 1e-3 (typical: 1e-6 to 1e-4)");
   p.preparation = preparation ? parse_preparation(*preparation, m.t_contact, origin) : default_preparation(p);
   validate_preparation(p, m.t_contact, origin);
   if (resolved) {
@@ -524,7 +528,11 @@ Model load_scene_file(const std::string& path, const std::vector<std::string>& o
   } catch (const toml::parse_error&) {
     return load_scene(ss.str(), overrides, resolved, path);   // reports the syntax error
   }
-  if (parsed.empty())
+  const bool no_keys = std::all_of(parsed.begin(), parsed.end(), [](const auto& kv) {
+    const toml::table* t = kv.second.as_table();
+    return t && t->empty();
+  });
+  if (no_keys)
     throw SceneError(path + ": the scene file is empty (no keys): it would silently run the built-in N = 9261 paper "
                      "scene for hours; start from a scene in data/scenes/ (quickstart.toml, paper_n9261.toml) "
                      "and change what you need");

@@ -11,6 +11,7 @@
 
 #include "dem/checks.hpp"
 #include "dem/io.hpp"
+#include "dem/preparation.hpp"
 #include "dem/scene.hpp"
 #include "demfit/fit.hpp"
 #include "test_support.hpp"
@@ -141,7 +142,35 @@ TEST(Scene, NonFiniteOutOfRangeAndDuplicateValuesAreRefused) {
   EXPECT_TRUE(has(scene_error("[protocol]\nmodes = [\"D2\", \"D2\"]\n"), "'D2' twice"));
   EXPECT_TRUE(has(scene_error("[output]\nsample_strain = inf\n"), "sample_strain"));
   EXPECT_TRUE(has(scene_error("[output]\nprogress_seconds = -1\n"), "progress_seconds"));
-  EXPECT_TRUE(has(scene_error("[protocol]\ndeviatoric_rate_tc = inf\n"), "deviatoric_rate_tc"));
+  for (const char* v : {"inf", "nan", "0", "-1"})   // named as itself, not through servo.rate_max_tc's default
+    EXPECT_TRUE(has(scene_error(std::string("[protocol]\ndeviatoric_rate_tc = ") + v + "\n"),
+                    "protocol.deviatoric_rate_tc must be a positive number")) << v;
+}
+
+TEST(Scene, SpelledOutPreparationHasTheBuiltInRecordAndAStageChangeChangesIt) {
+  const std::string builtin = "[protocol]\ncheckpoints_loading = [0.7]\n";
+  const std::string spelled =
+      "[protocol]\npreparation = [\n"
+      "{ name = \"compress\", kind = \"compress\", rate_tc = 1e-4, until = { phi = 0.64 } },\n"
+      "{ name = \"relax\", kind = \"relax\", until = { ke_ratio = 1e-8 }, max_time_tc = 2e5 },\n"
+      "{ name = \"cycle_loading\", kind = \"compress\", rate_tc = 2e-5, until = { phi = 0.82 }, "
+      "checkpoint_name = \"loading\", checkpoints = [0.7] },\n"
+      "{ name = \"cycle_unloading\", kind = \"expand\", rate_tc = 2e-5, until = { phi = 0.64 }, "
+      "checkpoint_name = \"unloading\", checkpoints = [0.80, 0.75, 0.70, 0.68] } ]\n";
+  const dem::Model a = dem::load_scene(builtin), b = dem::load_scene(spelled);
+  EXPECT_EQ(dem::physics_line(dem::preparation_physics(a)), dem::physics_line(dem::preparation_physics(b)));
+  EXPECT_EQ(dem::mode_checkpoints(a.protocol), dem::mode_checkpoints(b.protocol));
+  std::string slower = spelled;
+  slower.replace(slower.find("rate_tc = 2e-5"), 14, "rate_tc = 1e-5");
+  const std::string d = dem::physics_diff(dem::preparation_physics(dem::load_scene(slower)),
+                                          dem::preparation_physics(b), "a", "b");
+  EXPECT_TRUE(has(d, "protocol.preparation") && has(d, "cycle_loading:compress:rate_tc=1.0000000000000001e-05")) << d;
+  // Without any keys of its own, a file of section headers would run the built-in paper scene.
+  const std::string path = (std::filesystem::temp_directory_path() / "dem_headers_only.toml").string();
+  { std::ofstream(path) << "[particles]\n[protocol]\n"; }
+  const auto e = error_of([&] { dem::load_scene_file(path); });
+  std::remove(path.c_str());
+  EXPECT_TRUE(has(e, "empty")) << e;
 }
 
 TEST(Scene, EmptyFileAndHugeCountAreRefusedBeforeRunning) {

@@ -118,15 +118,29 @@ def test_killed_deviatoric_stage_resumes_and_keeps_finished_curves(tiny, tmp_pat
 
 # ---- full disk -------------------------------------------------------------------------
 
-@pytest.fixture
-def small_disk(tmp_path):
-    """A 256 kB tmpfs; needs root (CI runs the tests as root)."""
+def mounted_disk(tmp_path, size):
+    """A tmpfs of `size` (e.g. "256k") under tmp_path; needs root (CI runs the tests as root)."""
     if os.geteuid() != 0:
         pytest.skip("mounting a small tmpfs needs root: the full-disk tests run as root in CI")
     d = tmp_path / "disk"
     d.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(d)]).returncode != 0:
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(d)]).returncode != 0:
         pytest.skip("cannot mount a tmpfs here (no CAP_SYS_ADMIN)")
+    return d
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 256 kB tmpfs."""
+    d = mounted_disk(tmp_path, "256k")
+    yield d
+    subprocess.run(["umount", "-l", str(d)])
+
+
+@pytest.fixture
+def run_sized_disk(tmp_path):
+    """A 1 MB tmpfs: room for a whole 200-sphere run once the filler is gone."""
+    d = mounted_disk(tmp_path, "1m")
     yield d
     subprocess.run(["umount", "-l", str(d)])
 
@@ -345,6 +359,9 @@ def test_collide_refuses_impossible_input_at_once(tmp_path):
         assert p.returncode == 2, (args, p.stderr)
     assert time.time() - t0 < 10
     assert "--v0 is too large" in run_dem("collide", "--v0", 1e6).stderr
+    # A sphere smaller than the scene's radius_min (which sets dt) is named as the cause, not --v0.
+    p = run_dem("collide", "--r1", 1e-5)
+    assert p.returncode == 2 and "--r1" in p.stderr and "particles.radius_min_m" in p.stderr, p.stderr
 
 
 def test_exit_codes_follow_the_readme(tmp_path):
@@ -367,3 +384,77 @@ def test_compare_refuses_partial_overlap_and_unordered_strain(tmp_path):
     shuffled.write_text("\n".join(head + data[:5] + [data[7], data[6]] + data[8:]) + "\n")
     p = run_dem("compare", ours, shuffled)
     assert p.returncode == 1 and "does not increase" in p.stderr, p.stderr
+
+
+# ---- what a rerun keeps must be what the scene says (issue 10, found in the audit) ---------
+
+def test_kept_curves_of_another_extent_or_mode_definition_are_refused(tiny, tmp_path):
+    out = copy_run(tiny, tmp_path / "run")
+    scene_before = (out / "scene.toml").read_bytes()
+    for change in (["--set", "protocol.eps_d_max=0.04"], ["--set", "modes.D2=[1.0, -1.0, 0.0]"]):
+        p = run_dem("run", tiny / "tiny.toml", "--out", out, "--stages", "deviatoric", "--quiet", *change)
+        assert p.returncode == 2, p.stderr
+        assert "as an earlier scene defined it" in p.stderr and "--force" in p.stderr, p.stderr
+        assert (out / "scene.toml").read_bytes() == scene_before
+    p = run_dem("run", tiny / "tiny.toml", "--out", out, "--stages", "deviatoric", "--quiet", "--force",
+                "--set", "protocol.eps_d_max=0.04", check=True)
+    eps = [float(r.split(",")[6]) for r in (out / "deviatoric" / "D2_phi0.690.csv").read_text().splitlines()
+           if r and not r.startswith(("#", "step"))]
+    assert eps[-1] == pytest.approx(0.04, abs=1e-9)
+
+
+def test_deviatoric_stage_refuses_checkpoints_of_another_preparation(tiny, tmp_path):
+    out = copy_run(tiny, tmp_path / "run")
+    scene_before = (out / "scene.toml").read_bytes()
+    p = run_dem("run", tiny / "tiny.toml", "--out", out, "--stages", "deviatoric", "--quiet",
+                "--set", "protocol.cycle_rate_tc=1e-5")
+    assert p.returncode == 2 and "protocol.preparation" in p.stderr and "cycle_loading" in p.stderr, p.stderr
+    assert (out / "scene.toml").read_bytes() == scene_before
+    # What a deviatoric rerun may change: the modes and their rate.
+    run_dem("run", tiny / "tiny.toml", "--out", out, "--stages", "deviatoric", "--quiet", "--force",
+            "--set", "protocol.deviatoric_rate_tc=1e-4", check=True)
+
+
+def test_fit_force_leaves_no_table_of_the_earlier_fit(tiny, tmp_path):
+    out = copy_run(tiny, tmp_path / "run")
+    run_dem("fit", out, "--no-plots", check=True)
+    assert (out / "fit" / "shared_path.csv").exists()
+    run_dem("run", tiny / "tiny.toml", "--out", out, "--stages", "deviatoric", "--quiet", "--force",
+            "--set", 'protocol.modes=["D2"]', check=True)
+    (out / "fit").mkdir(exist_ok=True)
+    (out / "fit" / "shared_path.csv").write_text("mode,stale\n")   # as an earlier fit of D2 and D3 left it
+    (out / "fit" / "parameters.csv").write_text("stale\n")
+    run_dem("fit", out, "--no-plots", "--force", check=True)
+    assert not (out / "fit" / "shared_path.csv").exists()
+    assert "D2" in (out / "fit" / "parameters.csv").read_text()
+
+
+def test_interrupted_deviatoric_rerun_of_a_finished_run_is_marked_incomplete(tiny, tmp_path):
+    out = copy_run(tiny, tmp_path / "run")
+    assert manifest(out)["complete"] is True
+    args = ["run", tiny / "tiny.toml", "--out", out, "--stages", "deviatoric", "--quiet", "--force",
+            "--set", "protocol.deviatoric_rate_tc=2e-5", "--set", 'protocol.modes=["D2"]']
+    # Killed while the second curve is being written (the copied folder holds finished ones).
+    assert kill_when(args, out / "deviatoric" / "D2_phi0.690.csv.part") == -signal.SIGKILL
+    assert manifest(out)["complete"] is False
+    run_dem(*args, check=True)
+    assert manifest(out)["complete"] is True
+
+
+def test_full_disk_during_the_preparation_fails_then_resumes_to_the_same_bytes(tiny, run_sized_disk):
+    small_disk = run_sized_disk
+    out = small_disk / "run"
+    prep_bytes = sum(f.stat().st_size for f in (tiny / "ref").rglob("*") if f.is_file() and "deviatoric" not in f.parts)
+    fill(small_disk, prep_bytes // 2)
+    args = ("run", tiny / "tiny.toml", "--out", out, "--quiet")
+    p = run_dem(*args)
+    assert p.returncode == 1 and "disk full" in p.stderr, p.stderr
+    assert manifest(out)["complete"] is False
+    for f in files_of(out):   # whatever was renamed into place is whole
+        if f.endswith((".csv", ".ckpt", ".txt")) and not f.startswith("prep/after_"):
+            assert (out / f).read_bytes() == (tiny / "ref" / f).read_bytes(), f
+    (small_disk / "filler").unlink()
+    p = run_dem(*args, check=True)
+    assert "resuming" in p.stderr
+    same_results(tiny / "ref", out)
+    assert not [f for f in files_of(out) if f.endswith(".part")]

@@ -43,6 +43,10 @@ std::string physics_list(const std::vector<double>& v);
 /// What a deviatoric curve depends on besides its start state: radius bounds (t_c), density,
 /// contact law, integrator and dt_over_tc. Not the skin or the threads (round-off only).
 Physics material_physics(const Model& model);
+/// What a deviatoric curve of `mode` is, beyond its physics (one line, no spaces): a plain
+/// mode's rate shape and protocol.eps_d_max; a path's stages (rate, targets, stop) and the
+/// servo options. A kept curve whose definition differs from the scene's is not kept silently.
+std::string mode_definition(const Model& model, const DeformationMode& mode);
 /// material_physics plus protocol.deviatoric_rate_tc: the physics of a deviatoric curve.
 Physics shear_physics(const Model& model);
 /// material_physics plus everything the preparation depends on (count, seed, packing file,

@@ -10,8 +10,10 @@
 
 namespace dem {
 
-/// The comment lines of every curve CSV (what the columns mean, the run's physics record).
-std::string curve_preamble(const Model& m, const std::string& stage, const Physics& physics);
+/// The comment lines of every curve CSV (what the columns mean, the run's physics record, and
+/// for deviatoric curves `# definition: ` + mode_definition()).
+std::string curve_preamble(const Model& m, const std::string& stage, const Physics& physics,
+                           const std::string& definition = "");
 
 class CurveFile {
  public:

@@ -39,7 +39,8 @@ std::vector<double> mode_checkpoints(const Protocol& p);
 std::string checkpoint_stem(const std::string& series, double phi);
 
 /// One line (no spaces) that fixes the preparation's physics: every stage with its kind,
-/// rate [1/t_c], target, relaxation criterion and checkpoints. Equal for a scene that spells out
+/// rate [1/t_c], target, relaxation criterion and checkpoints (not modes_from, which only
+/// picks where the modes start). Equal for a scene that spells out
 /// the built-in list and for the built-in list itself.
 std::string preparation_record(const Protocol& p, double t_contact);
 

@@ -53,6 +53,7 @@ struct StageSpec {
   std::vector<double> checkpoint_phis;   ///< volume fractions at which on_checkpoint is called
   double ke_ratio = 0;               ///< Relaxed: ends when E_kin < ke_ratio * max(E_pot, E_floor)
   double max_time = 0;               ///< Relaxed: ends after this duration at the latest [s]
+  std::string definition;            ///< deviatoric: mode_definition(), written in the curve's preamble
 };
 
 /// Runs one stage on (model, state), writing its curve CSV to csv_path (atomically; a crash
