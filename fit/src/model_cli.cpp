@@ -248,7 +248,7 @@ int run(const ModelCommandOptions& o) {
         double mean = 0, ss = 0;
         for (const auto& e : est) mean += e[i] / K;
         for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
-        cal.se_jackknife[i] = std::sqrt((K - 1.0) / K * ss);
+        cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
       }
     }
   }

@@ -204,8 +204,9 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   std::vector<double> isob = start.iso();
   std::vector<double> shear(start.shear, start.shear + kNumShear);
   double numin = 1e9;
+  // Both jamming fractions must lie below every start state (the curves' nu); branch points
+  // below them are allowed (C = C0 there; p* < 0 is simply a large residual).
   for (const auto& c : curves) numin = std::min(numin, c.nu);
-  for (double v : iso.nu) numin = std::min(numin, v);
 
   ceres::Problem problem;
   int n_res = 0;
@@ -318,6 +319,12 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     cal.warnings.push_back("covariance could not be computed (rank-deficient Jacobian): some parameters are not "
                            "determined by these curves");
   }
+  for (int i : {kNuC, kNuCC})
+    if (o.fit_isotropic && isob[i] >= numin * (1 - 2e-6)) {
+      cal.se_cov[i] = kNaN;
+      cal.warnings.push_back(std::string(iso_name(i)) + " sits on its bound (the lowest start volume fraction " +
+                             std::to_string(numin) + "): no standard error quoted");
+    }
   return cal;
 }
 
