@@ -325,6 +325,14 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
       cal.warnings.push_back(std::string(iso_name(i)) + " sits on its bound (the lowest start volume fraction " +
                              std::to_string(numin) + "): no standard error quoted");
     }
+  if (o.fit_isotropic && !iso.nu.empty()) {
+    const double lowest = *std::min_element(iso.nu.begin(), iso.nu.end());
+    if (std::fabs(isob[kNuCC] - lowest) < 1e-9) {
+      cal.se_cov[kNuCC] = kNaN;
+      cal.warnings.push_back("nu_cC sits on the lowest jammed point of the isotropic branch (" + std::to_string(lowest) +
+                             "): the power law's onset is set by where the branch data start, no standard error quoted");
+    }
+  }
   return cal;
 }
 
