@@ -24,7 +24,7 @@ const double kNaN = std::numeric_limits<double>::quiet_NaN();
 void init_glog() {
   static std::once_flag once;
   std::call_once(once, [] {
-    google::InitGoogleLogging("demfit");
+    if (!google::IsGoogleLoggingInitialized()) google::InitGoogleLogging("demfit");
     FLAGS_minloglevel = 2;   // errors only
   });
 }

@@ -21,6 +21,7 @@
 #include "demfit/cli.hpp"
 #include "demfit/ensemble.hpp"
 #include "demfit/identifiability.hpp"
+#include "demfit/model_cli.hpp"
 
 namespace fs = std::filesystem;
 
@@ -196,6 +197,10 @@ int main(int argc, char** argv) {
   demfit::FitCommandOptions fit_opts;
   auto* fit = app.add_subcommand("fit", "fit the anisotropy-evolution model to a run's curves");
   demfit::add_fit_options(*fit, fit_opts);
+  demfit::ModelCommandOptions model_opts;
+  auto* modelcmd = app.add_subcommand("model", "calibrate the incremental anisotropic model on an ensemble's D2 curves "
+                                               "and isotropic branch, predict D3 (docs/model.md)");
+  demfit::add_model_options(*modelcmd, model_opts);
   auto* fitmap = app.add_subcommand("fit-map", "identifiability map of the fit: seeded synthetic curves of known "
                                                 "parameters, fitted over a grid of curve lengths and noise levels (CSV)");
   std::string map_out;
@@ -351,6 +356,7 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (*fit) return demfit::run_fit_command(fit_opts);
+    if (*modelcmd) return demfit::run_model_command(model_opts);
     if (*fitmap) {
       if (fs::exists(map_out) && !map_force) throw std::runtime_error(map_out + " exists: pass --force to overwrite it");
       std::ostringstream csv;

@@ -1,0 +1,271 @@
+// The incremental anisotropic constitutive model (Magnanimo & Luding 2011; Imole et al. 2013;
+// Kumar, Luding & Magnanimo 2014), in the scalar form of the biaxial/axisymmetric frame:
+// pressure p, stress ratio s = sigma_dev/p and deviatoric fabric F (both signed along the
+// loading direction), volume fraction nu. Equations and the source of every term: docs/model.md.
+//
+// Units: pressures are dimensionless p* = 2<r> p / k (as the curves' p_star column); strains
+// are true (log) strains; eps_vol is the full volumetric strain tr(E) = 3 eps_v (extension
+// positive), eps_d the deviatoric magnitude of docs/definitions.md, signed by the loading
+// direction. Everything here is templated on the scalar so that Ceres can differentiate it.
+#pragma once
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace demfit::model {
+
+/// Layout of the isotropic parameter block (the laws of Goncu et al. 2010 for the unloading branch).
+enum IsoIndex {
+  kP0 = 0,     ///< p0 [-] (p* units): prefactor of the pressure law
+  kNuC,        ///< nu_c [-]: jamming volume fraction of the pressure law
+  kGammaP,     ///< gamma_p [-]: non-linearity of the pressure law
+  kC0,         ///< C0 [-]: coordination number at jamming
+  kC1,         ///< C1 [-]: amplitude of the coordination power law
+  kNuCC,       ///< nu_cC [-]: jamming volume fraction of the coordination law
+  kAlpha,      ///< alpha [-]: exponent of the coordination law
+  kNumIso
+};
+
+/// Layout of the shear parameter block: six quantities, each a law of nu with two
+/// coefficients, q(nu) = a + b (nu - nu_ref) (rates through their logarithm, so they stay > 0).
+enum ShearIndex {
+  kSmaxA = 0, kSmaxB,      ///< s_max(nu) [-]: critical-state stress ratio
+  kLnBetaSA, kLnBetaSB,    ///< ln beta_s(nu), beta_s [-] (per unit eps_d): rate of the stress ratio
+  kFmaxA, kFmaxB,          ///< F_max(nu) [-]: critical-state deviatoric fabric
+  kLnBetaFA, kLnBetaFB,    ///< ln beta_F(nu), beta_F [-]: rate of the fabric
+  kAnisoA, kAnisoB,        ///< a_A(nu) [-]: anisotropy modulus A = a_A B F
+  kLnBetaPA, kLnBetaPB,    ///< ln beta_p(nu), beta_p [-]: relaxation rate of the anisotropic excess pressure
+  kNumShear
+};
+
+/// Named view of all parameters (double), with units; `iso()`/`shear()` give the Ceres blocks.
+struct Parameters {
+  double p0 = 0.04;        ///< [-] p* prefactor of the isotropic pressure law
+  double nu_c = 0.664;     ///< [-] jamming volume fraction of the pressure law
+  double gamma_p = 0.0;    ///< [-] non-linearity of the pressure law
+  double C0 = 5.6;         ///< [-] coordination number at jamming
+  double C1 = 8.3;         ///< [-] coordination power-law amplitude
+  double nu_cC = 0.667;    ///< [-] jamming volume fraction of the coordination law
+  double alpha = 0.5;      ///< [-] coordination power-law exponent
+  double shear[kNumShear] = {0.16, -0.5, std::log(50.0), -5.0, 0.11, -0.8, std::log(40.0), -8.0,
+                             0.3, -5.0, std::log(20.0), 0.0};
+  double nu_ref = 0.74;    ///< [-] volume fraction the nu-laws are centred on
+  std::vector<double> iso() const { return {p0, nu_c, gamma_p, C0, C1, nu_cC, alpha}; }
+  void set_iso(const double* v) { p0 = v[0]; nu_c = v[1]; gamma_p = v[2]; C0 = v[3]; C1 = v[4]; nu_cC = v[5]; alpha = v[6]; }
+};
+
+/// Names of the shear coefficients as written in tables.
+inline const char* shear_name(int i) {
+  static const char* n[kNumShear] = {"s_max_a", "s_max_b", "ln_beta_s_a", "ln_beta_s_b", "F_max_a", "F_max_b",
+                                     "ln_beta_F_a", "ln_beta_F_b", "a_A_a", "a_A_b", "ln_beta_p_a", "ln_beta_p_b"};
+  return n[i];
+}
+inline const char* iso_name(int i) {
+  static const char* n[kNumIso] = {"p0", "nu_c", "gamma_p", "C0", "C1", "nu_cC", "alpha"};
+  return n[i];
+}
+
+/// C(nu) = C0 + C1 (nu/nu_cC - 1)^alpha [-] (Goncu et al. 2010), C0 below nu_cC.
+template <class T>
+T coordination(const T* iso, const T& nu) {
+  using std::pow;
+  const T base = nu / iso[kNuCC] - T(1.0);
+  if (!(base > T(0.0))) return iso[kC0];
+  return iso[kC0] + iso[kC1] * pow(base, iso[kAlpha]);
+}
+
+/// Isotropic pressure p*(nu) = p0 (nu C(nu)/nu_c) x (1 + gamma_p x), x = ln(nu/nu_c) [-]
+/// (Goncu et al. 2010, with -eps_v = ln(nu/nu_c) the full volumetric strain from jamming).
+template <class T>
+T isotropic_pressure(const T* iso, const T& nu) {
+  using std::log;
+  const T x = log(nu / iso[kNuC]);
+  return iso[kP0] * (nu * coordination(iso, nu) / iso[kNuC]) * x * (T(1.0) + iso[kGammaP] * x);
+}
+
+/// Bulk modulus B = dp*/d ln(nu) [-] of the isotropic law (so that isotropic compression,
+/// d ln nu = -d eps_vol, integrates exactly to p*(nu)). Closed-form derivative.
+template <class T>
+T bulk_modulus(const T* iso, const T& nu) {
+  using std::log;
+  using std::pow;
+  const T x = log(nu / iso[kNuC]);
+  const T C = coordination(iso, nu);
+  const T base = nu / iso[kNuCC] - T(1.0);
+  T dC = T(0.0);   // nu dC/dnu
+  if (base > T(0.0)) dC = iso[kC1] * iso[kAlpha] * pow(base, iso[kAlpha] - T(1.0)) * nu / iso[kNuCC];
+  const T g = x * (T(1.0) + iso[kGammaP] * x);            // x (1 + gamma x)
+  const T dg = T(1.0) + T(2.0) * iso[kGammaP] * x;        // d g / d ln nu
+  return iso[kP0] / iso[kNuC] * (nu * C * g + nu * dC * g + nu * C * dg);
+}
+
+/// The shear laws evaluated at nu.
+template <class T>
+struct Local {
+  T s_max, beta_s, F_max, beta_F, a_A, beta_p;
+};
+template <class T>
+Local<T> local(const T* shear, const T& nu, double nu_ref) {
+  using std::exp;
+  const T d = nu - T(nu_ref);
+  return {shear[kSmaxA] + shear[kSmaxB] * d, exp(shear[kLnBetaSA] + shear[kLnBetaSB] * d),
+          shear[kFmaxA] + shear[kFmaxB] * d, exp(shear[kLnBetaFA] + shear[kLnBetaFB] * d),
+          shear[kAnisoA] + shear[kAnisoB] * d, exp(shear[kLnBetaPA] + shear[kLnBetaPB] * d)};
+}
+
+/// State of the material point.
+template <class T>
+struct State {
+  T ln_nu;   ///< ln(volume fraction)
+  T p;       ///< pressure p* [-]
+  T s;       ///< stress ratio sigma_dev/p [-], signed along the first loading direction
+  T F;       ///< deviatoric fabric [-], signed likewise
+};
+
+/// How the volume is controlled during a segment.
+enum class Control {
+  Volume,     ///< prescribed d eps_vol = volume_rate * |d eps_d| (0: constant volume, D2/D3)
+  Isobaric    ///< d p = 0: d eps_vol solved from the pressure equation (mixed control)
+};
+
+/// One monotone piece of a strain path.
+struct Segment {
+  double eps_d = 0.1;          ///< signed deviatoric strain of the segment [-] (negative: reversed)
+  Control control = Control::Volume;
+  double volume_rate = 0.0;    ///< d eps_vol / |d eps_d| [-] for Control::Volume
+  double eps_vol = 0.0;        ///< pure volumetric segment (eps_d = 0): full volumetric strain [-]
+  int outputs = 50;            ///< points written along the segment (its end included)
+  double max_step = 5e-4;      ///< largest RK4 step in |eps_d| (or |eps_vol|) [-]
+};
+
+/// One output point of a path.
+template <class T>
+struct Point {
+  double eps_d_acc;   ///< accumulated |eps_d| since the path start [-]
+  double eps_d;       ///< signed deviatoric strain since the path start [-]
+  T eps_vol;          ///< full volumetric strain since the path start [-]
+  State<T> state;
+};
+
+/// Material functions that the right-hand side needs, with the packing's isotropic scale k:
+/// p_ref(nu) = k p_iso(nu), B(nu) = k dp_iso/dln nu (k = p(0)/p_iso(nu0): the state's own
+/// offset from the fitted law; docs/model.md).
+template <class T>
+struct Material {
+  const T* iso;
+  const T* shear;
+  double nu_ref;
+  T k;
+};
+
+/// Derivatives per unit |d eps_d| along a segment with direction sigma (+1/-1), or per unit
+/// eps_vol for a pure volumetric segment (sigma = 0). Returns d/dl of (ln nu, p, s, F).
+template <class T>
+State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg) {
+  using std::exp;
+  const T nu = exp(y.ln_nu);
+  const T B = m.k * bulk_modulus(m.iso, nu);
+  const T p_ref = m.k * isotropic_pressure(m.iso, nu);
+  const Local<T> L = local(m.shear, nu, m.nu_ref);
+  const T A = L.a_A * B * y.F;                       // anisotropy modulus [K]
+  State<T> d;
+  if (sigma == 0.0) {   // pure volumetric: d eps_vol = +1 per unit l (sign carried by seg.eps_vol)
+    const T dev = T(seg.eps_vol > 0 ? 1.0 : -1.0);
+    d.ln_nu = -dev;
+    d.p = -B * dev;
+    d.s = -(A - y.s * B) / y.p * dev;
+    d.F = T(0.0);
+    return d;
+  }
+  const T relax = L.beta_p * (y.p - p_ref);          // excess pressure relaxing with |d eps_d|
+  T dvol;                                            // d eps_vol per |d eps_d|
+  if (seg.control == Control::Isobaric) dvol = (A * T(sigma) - relax) / B;
+  else dvol = T(seg.volume_rate);
+  d.ln_nu = -dvol;
+  d.p = -B * dvol + A * T(sigma) - relax;
+  d.F = L.beta_F * (T(sigma) * L.F_max - y.F);
+  d.s = L.beta_s * (T(sigma) * L.s_max - y.s) - (A - y.s * B) / y.p * dvol;
+  return d;
+}
+
+template <class T>
+State<T> axpy(const State<T>& y, const State<T>& d, double h) {
+  return {y.ln_nu + T(h) * d.ln_nu, y.p + T(h) * d.p, y.s + T(h) * d.s, y.F + T(h) * d.F};
+}
+
+/// One classical RK4 step of length h (in |eps_d|, or |eps_vol| for a volumetric segment).
+template <class T>
+State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double h) {
+  const State<T> k1 = rhs(m, y, sigma, seg);
+  const State<T> k2 = rhs(m, axpy(y, k1, h / 2), sigma, seg);
+  const State<T> k3 = rhs(m, axpy(y, k2, h / 2), sigma, seg);
+  const State<T> k4 = rhs(m, axpy(y, k3, h), sigma, seg);
+  State<T> out = y;
+  out.ln_nu += T(h / 6) * (k1.ln_nu + T(2) * k2.ln_nu + T(2) * k3.ln_nu + k4.ln_nu);
+  out.p += T(h / 6) * (k1.p + T(2) * k2.p + T(2) * k3.p + k4.p);
+  out.s += T(h / 6) * (k1.s + T(2) * k2.s + T(2) * k3.s + k4.s);
+  out.F += T(h / 6) * (k1.F + T(2) * k2.F + T(2) * k3.F + k4.F);
+  return out;
+}
+
+/// Integrates the model along `path` from the state (nu0, p0, s0, F0) (p0 in p* units).
+/// Returns the initial point and `outputs` points per segment. The isotropic scale k is
+/// p0 / p_iso(nu0). Throws std::invalid_argument for an empty path or a non-positive state.
+template <class T>
+std::vector<Point<T>> integrate(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
+                                double F0, const std::vector<Segment>& path) {
+  using std::log;
+  if (path.empty()) throw std::invalid_argument("model path: no segments");
+  if (!(nu0 > 0 && p0 > 0)) throw std::invalid_argument("model path: initial nu and p must be positive");
+  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0))};
+  State<T> y{T(log(nu0)), T(p0), T(s0), T(F0)};
+  T eps_vol = T(0.0);
+  double acc = 0, eps_d = 0;
+  std::vector<Point<T>> out{{0.0, 0.0, eps_vol, y}};
+  for (const Segment& seg : path) {
+    const bool vol = seg.eps_d == 0.0;
+    if (vol && seg.eps_vol == 0.0) throw std::invalid_argument("model path: a segment with no strain");
+    if (seg.outputs < 1) throw std::invalid_argument("model path: a segment needs at least one output point");
+    const double sigma = vol ? 0.0 : (seg.eps_d > 0 ? 1.0 : -1.0);
+    const double length = vol ? std::fabs(seg.eps_vol) : std::fabs(seg.eps_d);
+    const double dl = length / seg.outputs;
+    const int sub = std::max(1, static_cast<int>(std::ceil(dl / seg.max_step)));
+    const double h = dl / sub;
+    for (int o = 0; o < seg.outputs; ++o) {
+      for (int k = 0; k < sub; ++k) {
+        const State<T> y1 = rk4_step(m, y, sigma, seg, h);
+        eps_vol += y.ln_nu - y1.ln_nu;
+        y = y1;
+      }
+      if (!vol) { acc += dl; eps_d += sigma * dl; }
+      out.push_back({acc, eps_d, eps_vol, y});
+    }
+  }
+  return out;
+}
+
+/// Monotone constant-volume shear from the state (nu0, p0, s0, F0), evaluated at the given
+/// strains (increasing, >= 0): the path on which the model is calibrated (D2, D3).
+template <class T>
+std::vector<State<T>> monotone_shear(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
+                                     double F0, const std::vector<double>& eps, double max_step = 5e-4) {
+  using std::exp;
+  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0))};
+  State<T> y{T(std::log(nu0)), T(p0), T(s0), T(F0)};
+  Segment seg;   // constant volume, forward
+  std::vector<State<T>> out;
+  out.reserve(eps.size());
+  double at = 0;
+  for (double e : eps) {
+    if (e < at) throw std::invalid_argument("monotone_shear: strains must increase");
+    const double dl = e - at;
+    const int sub = dl > 0 ? std::max(1, static_cast<int>(std::ceil(dl / max_step))) : 0;
+    for (int k = 0; k < sub; ++k) y = rk4_step(m, y, 1.0, seg, dl / sub);
+    at = e;
+    out.push_back(y);
+  }
+  return out;
+}
+
+}  // namespace demfit::model

@@ -1,0 +1,27 @@
+// `dem model ENSEMBLE_DIR`: calibrate the incremental anisotropic model on the D2 ensemble
+// curves and the isotropic branch, predict the D3 curves, write tables and plots (docs/model.md).
+#pragma once
+#include <string>
+#include <vector>
+
+namespace CLI { class App; }
+
+namespace demfit {
+
+struct ModelCommandOptions {
+  std::string dir;                        ///< ensemble folder reduced by `dem fit` (ensemble/D2_phiX.csv ...)
+  std::string out;                        ///< output folder (default DIR/model)
+  std::vector<std::string> isotropic;     ///< cycle_unloading.csv files (default: DIR/members/*/[prep/]cycle_unloading.csv)
+  std::string calibrate_mode = "D2";      ///< the mode fitted; every other mode is predicted
+  double eps_max = 1e9;                   ///< fit and compare only eps_d <= eps_max [-]
+  bool jackknife = true;                  ///< errors from the jackknife over packings (needs DIR/members)
+  bool no_plots = false;
+  bool force = false;                     ///< overwrite an existing output folder
+};
+
+void add_model_options(CLI::App& app, ModelCommandOptions& o);
+
+/// Returns the exit code: 0 ok, 2 bad input (message says what and how to fix), 1 other failure.
+int run_model_command(const ModelCommandOptions& o);
+
+}  // namespace demfit

@@ -1,0 +1,84 @@
+// Calibration of the incremental anisotropic model (demfit/model.hpp) with Ceres: one joint
+// fit of the isotropic branch (p*, C against nu) and the D2 ensemble mean curves at every nu,
+// the nu-dependence of each shear parameter a law inside the fit; prediction of curves it was
+// not fitted on (D3) with errors against the DEM ensemble band. docs/model.md.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "demfit/model.hpp"
+
+namespace demfit::model {
+
+/// One ensemble mean curve (a row per eps_d): the columns `dem fit` writes to ensemble/*.csv.
+struct CurveData {
+  std::string mode;          ///< D2, D3, ...
+  double nu = 0;             ///< volume fraction of the start state [-]
+  int packings = 0;          ///< K
+  std::vector<double> eps;   ///< eps_d [-], increasing from 0
+  std::vector<double> p, s, F;            ///< means: p* [-], s_dev [-], F_dev [-]
+  std::vector<double> se_p, se_s, se_F;   ///< between-packing standard errors of the means
+  std::vector<double> hw_p, hw_s, hw_F;   ///< 95 % band half-widths (hi95 - mean)
+  std::string source;        ///< file it came from
+};
+
+/// Reads an ensemble mean curve; throws std::runtime_error naming the file and the missing column.
+CurveData read_curve(const std::string& path, const std::string& mode, double nu);
+
+/// Isotropic (unloading) branch points, pooled over packings.
+struct IsoData {
+  std::vector<double> nu, p, C;   ///< nu [-], p* [-], C_nonrattler [-]
+};
+/// Reads `cycle_unloading.csv` files (columns nu, p_star, C_nonrattler; p* > 1e-7 kept).
+IsoData read_isotropic(const std::vector<std::string>& paths);
+
+struct CalibrationOptions {
+  double nu_ref = 0;             ///< centre of the nu-laws [-]; 0: mean nu of the curves
+  double eps_max = 1e9;          ///< fit only eps_d <= eps_max [-]
+  double se_floor = 0.25;        ///< sigma of a point >= se_floor x the median SE of its quantity and curve
+  int max_iterations = 300;
+  double max_step = 5e-4;        ///< RK4 step in eps_d [-]
+  bool fit_isotropic = true;     ///< false: isotropic block held at `start` (e.g. synthetic tests)
+  const Parameters* start = nullptr;   ///< start values (nullptr: from per-curve saturating fits)
+};
+
+/// Result of a calibration. Parameter order: the 7 isotropic, then the 12 shear coefficients.
+struct Calibration {
+  Parameters params;
+  std::vector<std::string> names;       ///< 19 names
+  std::vector<double> value, se_cov;    ///< estimate; SE from the covariance x max(1, chi2/dof)
+  std::vector<double> se_jackknife;     ///< SE from the jackknife over packings (empty when not run)
+  std::vector<std::vector<double>> corr;   ///< correlation matrix (covariance)
+  double chi2 = 0;                      ///< weighted sum of squared residuals
+  int n_residuals = 0, n_free = 0;
+  double chi2_dof() const { return n_residuals > n_free ? chi2 / (n_residuals - n_free) : 0.0; }
+  bool ok = false;
+  std::string message;                  ///< Ceres' summary line
+  std::vector<std::string> warnings;
+  /// The errors to quote: jackknife where it ran, else the covariance.
+  const std::vector<double>& se() const { return se_jackknife.empty() ? se_cov : se_jackknife; }
+};
+
+/// The joint fit. Throws std::invalid_argument for unusable input (no curves, too few points,
+/// curves that do not start at eps_d = 0, non-positive pressure) with a message naming the fix.
+Calibration calibrate(const std::vector<CurveData>& curves, const IsoData& iso, const CalibrationOptions& o = {});
+
+/// Model curves for the grid of `c` from its first row (the start state), eps_d <= eps_max.
+struct ModelCurve {
+  std::vector<double> eps, p, s, F, nu;
+};
+ModelCurve predict_curve(const Parameters& params, const CurveData& c, double eps_max = 1e9, double max_step = 5e-4);
+
+/// Prediction error of one quantity of one curve against the DEM ensemble.
+struct PredictionError {
+  std::string quantity;            ///< p_star, s_dev, F_dev
+  double rms = 0, max_abs = 0;     ///< RMS and max |model - DEM mean| [units of the quantity]
+  double band = 0;                 ///< mean 95 % half-width of the DEM band [same units]
+  double rms_over_band = 0, max_over_band = 0;   ///< the two above divided by the band
+  double frac_in_band = 0;         ///< fraction of points where the model lies inside the band
+  double bias = 0;                 ///< mean (model - DEM) [same units]
+  int n = 0;
+};
+std::vector<PredictionError> prediction_errors(const ModelCurve& m, const CurveData& c);
+
+}  // namespace demfit::model

@@ -1,0 +1,318 @@
+// `dem model DIR`: the incremental anisotropic model calibrated on the D2 ensemble curves and
+// the isotropic branch, then used to predict the other modes (D3); tables, curves, plots.
+#include "demfit/model_cli.hpp"
+
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <regex>
+#include <sstream>
+#include <stdexcept>
+
+#include "demfit/ensemble.hpp"
+#include "demfit/model_fit.hpp"
+#include "demfit/table.hpp"
+
+namespace fs = std::filesystem;
+
+namespace demfit {
+
+namespace {
+
+using namespace demfit::model;
+
+struct InputError : std::runtime_error { using std::runtime_error::runtime_error; };
+
+std::string num(double v, int prec = 6) { return table_number(v, prec); }
+
+struct CurveFile { std::string mode, tag; double nu; fs::path path; };
+
+std::vector<CurveFile> find_curves(const fs::path& dir) {
+  const fs::path ens = dir / "ensemble";
+  if (!fs::is_directory(ens))
+    throw InputError(ens.string() + " does not exist: give an ensemble folder reduced by `dem fit DIR` "
+                     "(it writes DIR/ensemble/MODE_phiX.csv)");
+  static const std::regex re(R"(([A-Za-z0-9_]+)_(phi([0-9.]+))\.csv)");
+  std::vector<CurveFile> out;
+  for (auto& e : fs::directory_iterator(ens)) {
+    std::smatch m;
+    const std::string name = e.path().filename().string();
+    if (std::regex_match(name, m, re)) out.push_back({m[1], m[2], std::stod(m[3]), e.path()});
+  }
+  std::sort(out.begin(), out.end(), [](const CurveFile& a, const CurveFile& b) {
+    return a.mode != b.mode ? a.mode < b.mode : a.nu < b.nu;
+  });
+  return out;
+}
+
+std::vector<fs::path> member_dirs(const fs::path& dir) {
+  std::vector<fs::path> out;
+  if (!fs::is_directory(dir / "members")) return out;
+  for (auto& e : fs::directory_iterator(dir / "members"))
+    if (e.is_directory()) out.push_back(e.path());
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+fs::path unloading_of(const fs::path& member) {
+  for (const fs::path& p : {member / "prep" / "cycle_unloading.csv", member / "cycle_unloading.csv"})
+    if (fs::exists(p)) return p;
+  return {};
+}
+
+fs::path member_curve(const fs::path& member, const CurveFile& c) {
+  const std::string name = c.mode + "_" + c.tag + ".csv";
+  for (const fs::path& p : {member / "deviatoric" / name, member / name})
+    if (fs::exists(p)) return p;
+  return {};
+}
+
+// Leave-one-out ensemble mean: (K mean - x_k)/(K - 1), member k resampled on the curve's grid.
+CurveData leave_one_out(const CurveData& c, const fs::path& member_csv) {
+  const Table t = read_table(member_csv.string());
+  CurveData o = c;
+  const auto& e = t.column("eps_d");
+  const double K = c.packings;
+  const std::pair<const char*, std::vector<double>*> q[] = {{"p_star", &o.p}, {"s_dev", &o.s}, {"F_dev", &o.F}};
+  for (auto& [name, v] : q) {
+    const auto x = resample(e, t.column(name), c.eps);
+    for (std::size_t i = 0; i < v->size(); ++i) (*v)[i] = (K * (*v)[i] - x[i]) / (K - 1);
+  }
+  return o;
+}
+
+std::string law_of(const std::string& n) {
+  if (n == "p0" || n == "nu_c" || n == "gamma_p") return "p*(nu) = p0 (nu C(nu)/nu_c) x (1 + gamma_p x), x = ln(nu/nu_c)";
+  if (n == "C0" || n == "C1" || n == "nu_cC" || n == "alpha") return "C(nu) = C0 + C1 (nu/nu_cC - 1)^alpha";
+  const std::string q = n.substr(0, n.size() - 2);
+  return q + "(nu) = " + q + "_a + " + q + "_b (nu - nu_ref)";
+}
+
+std::string unit_of(const std::string& n) {
+  if (n == "p0") return "p* (p = p* k/(2<r>))";
+  if (n.size() > 2 && n.compare(n.size() - 2, 2, "_b") == 0) return "[coefficient_a] per unit nu";
+  if (n.rfind("ln_beta", 0) == 0) return "ln(1/unit eps_d)";
+  return "-";
+}
+
+void write_parameter_tables(const Calibration& cal, int packings, const fs::path& out) {
+  Table t({"parameter", "law", "value", "se", "se_method", "lo95", "hi95", "se_covariance", "se_jackknife", "units"});
+  const bool jk = !cal.se_jackknife.empty();
+  const double tq = jk ? t_quantile(0.975, packings - 1) : 1.959964;
+  for (std::size_t i = 0; i < cal.value.size(); ++i) {
+    const double se = cal.se()[i];
+    t.add_row({cal.names[i], law_of(cal.names[i]), num(cal.value[i]), num(se),
+               jk ? "jackknife over packings" : "covariance x max(1, chi2/dof)", num(cal.value[i] - tq * se),
+               num(cal.value[i] + tq * se), num(cal.se_cov[i]), jk ? num(cal.se_jackknife[i]) : "nan", unit_of(cal.names[i])});
+  }
+  t.add_row({"nu_ref", "centre of the nu-laws (fixed)", num(cal.params.nu_ref), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+  t.add_row({"chi2_per_dof", "weighted residuals of the joint fit", num(cal.chi2_dof()), "nan",
+             std::to_string(cal.n_residuals) + " residuals", "nan", "nan", "nan", "nan", "-"});
+  write_table_all(t, (out / "parameters").string(),
+                  "Incremental anisotropic model: joint fit of the isotropic branch and the D2 ensemble curves "
+                  "(docs/model.md); 95 % intervals: estimate -/+ t se");
+  std::vector<std::string> h = {"parameter"};
+  for (const auto& n : cal.names) h.push_back(n);
+  Table c(h);
+  for (std::size_t a = 0; a < cal.names.size(); ++a) {
+    std::vector<std::string> r = {cal.names[a]};
+    for (std::size_t b = 0; b < cal.names.size(); ++b) r.push_back(num(cal.corr[a][b], 3));
+    c.add_row(r);
+  }
+  write_table_all(c, (out / "correlations").string(), "Correlations of the model parameters (covariance of the joint fit)");
+}
+
+void write_laws_table(const Parameters& P, const std::vector<double>& nus, const fs::path& out) {
+  Table t({"nu [-]", "s_max [-]", "beta_s [1/eps_d]", "F_max [-]", "beta_F [1/eps_d]", "a_A [-]", "beta_p [1/eps_d]",
+           "B [p*]", "p_iso [p*]", "C_iso [-]", "G_over_p_initial [-]"});
+  const auto iso = P.iso();
+  for (double nu : nus) {
+    const Local<double> L = local(P.shear, nu, P.nu_ref);
+    t.add_row({num(nu, 4), num(L.s_max), num(L.beta_s), num(L.F_max), num(L.beta_F), num(L.a_A), num(L.beta_p),
+               num(bulk_modulus(iso.data(), nu)), num(isotropic_pressure(iso.data(), nu)), num(coordination(iso.data(), nu)),
+               num(L.beta_s * L.s_max)});
+  }
+  write_table_all(t, (out / "laws").string(), "The calibrated nu-laws evaluated at the ensemble's volume fractions "
+                                              "(G/p at s = 0: beta_s s_max)");
+}
+
+void write_model_curve(const ModelCurve& m, const CurveData& c, const std::string& role, const fs::path& path) {
+  std::ostringstream o;
+  o << "# dem model: model curve and DEM ensemble (" << c.packings << " packings) for " << c.mode << " from nu = "
+    << c.nu << " (" << role << "); p_star, s_dev, F_dev dimensionless; *_lo95/_hi95: the ensemble's 95 % band\n";
+  o << "eps_d,p_star_model,s_dev_model,F_dev_model,nu_model,p_star_mean,p_star_lo95,p_star_hi95,s_dev_mean,s_dev_lo95,"
+       "s_dev_hi95,F_dev_mean,F_dev_lo95,F_dev_hi95\n";
+  for (std::size_t i = 0; i < m.eps.size(); ++i)
+    o << num(m.eps[i], 8) << "," << num(m.p[i], 8) << "," << num(m.s[i], 8) << "," << num(m.F[i], 8) << ","
+      << num(m.nu[i], 8) << "," << num(c.p[i], 8) << "," << num(c.p[i] - c.hw_p[i], 8) << "," << num(c.p[i] + c.hw_p[i], 8)
+      << "," << num(c.s[i], 8) << "," << num(c.s[i] - c.hw_s[i], 8) << "," << num(c.s[i] + c.hw_s[i], 8) << ","
+      << num(c.F[i], 8) << "," << num(c.F[i] - c.hw_F[i], 8) << "," << num(c.F[i] + c.hw_F[i], 8) << "\n";
+  write_text_file(path.string(), o.str());
+}
+
+// Paths with no DEM counterpart here: undrained cyclic shear with reversals and isobaric D2.
+void write_model_paths(const Parameters& P, const CurveData& c, const std::string& tag, const fs::path& dir) {
+  const auto iso = P.iso();
+  const std::pair<std::string, std::vector<Segment>> paths[] = {
+      {"cyclic", {{0.1, Control::Volume, 0, 0, 50}, {-0.2, Control::Volume, 0, 0, 100}, {0.2, Control::Volume, 0, 0, 100},
+                  {-0.2, Control::Volume, 0, 0, 100}}},
+      {"isobaric", {{0.3, Control::Isobaric, 0, 0, 150}}}};
+  for (const auto& [name, path] : paths) {
+    const auto pts = integrate<double>(iso.data(), P.shear, P.nu_ref, c.nu, c.p.front(), c.s.front(), c.F.front(), path);
+    std::ostringstream o;
+    o << "# dem model: model-only path '" << name << "' from the start state of nu = " << c.nu
+      << " (no DEM ensemble of this path here); s_dev, F_dev signed along the first loading direction; "
+         "eps_vol the full volumetric strain tr(E) (= 3 eps_v of the curves)\n";
+    o << "eps_d_accumulated,eps_d,eps_vol,nu,p_star,s_dev,F_dev\n";
+    for (const auto& q : pts)
+      o << num(q.eps_d_acc, 8) << "," << num(q.eps_d, 8) << "," << num(q.eps_vol, 8) << "," << num(std::exp(q.state.ln_nu), 8)
+        << "," << num(q.state.p, 8) << "," << num(q.state.s, 8) << "," << num(q.state.F, 8) << "\n";
+    write_text_file((dir / (name + "_" + tag + ".csv")).string(), o.str());
+  }
+}
+
+int run(const ModelCommandOptions& o) {
+  const fs::path dir(o.dir);
+  if (!fs::is_directory(dir)) throw InputError(o.dir + " is not a folder: give an ensemble folder reduced by `dem fit`");
+  const fs::path out = o.out.empty() ? dir / "model" : fs::path(o.out);
+  if (fs::exists(out / "parameters.csv") && !o.force)
+    throw InputError(out.string() + " already holds model results: pass --force to overwrite, or --out another folder");
+  const auto files = find_curves(dir);
+  std::vector<CurveData> fit_curves, other;
+  std::vector<CurveFile> fit_files, other_files;
+  for (const auto& f : files) {
+    CurveData c = read_curve(f.path.string(), f.mode, f.nu);
+    if (f.mode == o.calibrate_mode) { fit_curves.push_back(c); fit_files.push_back(f); }
+    else { other.push_back(c); other_files.push_back(f); }
+  }
+  if (fit_curves.empty())
+    throw InputError("no " + o.calibrate_mode + "_phiX.csv under " + (dir / "ensemble").string() +
+                     ": run the ensemble with mode " + o.calibrate_mode + " (or pick another with --calibrate-mode)");
+  const auto members = member_dirs(dir);
+  std::vector<std::string> iso_files = o.isotropic;
+  if (iso_files.empty())
+    for (const auto& m : members)
+      if (!unloading_of(m).empty()) iso_files.push_back(unloading_of(m).string());
+  if (iso_files.empty())
+    throw InputError("no isotropic branch: neither DIR/members/*/prep/cycle_unloading.csv nor DIR/members/*/cycle_unloading.csv "
+                     "exists; pass the unloading curves with --isotropic FILE...");
+  for (const auto& f : iso_files)
+    if (!fs::exists(f)) throw InputError("--isotropic " + f + " does not exist");
+  const IsoData iso = read_isotropic(iso_files);
+
+  CalibrationOptions co;
+  co.eps_max = o.eps_max;
+  std::cerr << "dem model: fitting " << fit_curves.size() << " " << o.calibrate_mode << " curves and "
+            << iso.nu.size() << " isotropic points\n";
+  Calibration cal;
+  try {
+    cal = calibrate(fit_curves, iso, co);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(e.what());
+  }
+  std::cerr << "dem model: " << cal.message << "  chi2/dof = " << num(cal.chi2_dof(), 4) << "\n";
+
+  // Jackknife over packings: the same fit with each packing left out of every mean curve and
+  // of the isotropic branch.
+  const int K = fit_curves.front().packings;
+  if (o.jackknife && K >= 2) {
+    bool complete = static_cast<int>(members.size()) == K;
+    for (const auto& c : fit_curves) complete = complete && c.packings == K;
+    for (std::size_t j = 0; complete && j < fit_files.size(); ++j)
+      for (const auto& m : members) complete = complete && !member_curve(m, fit_files[j]).empty();
+    if (!complete) {
+      cal.warnings.push_back("jackknife skipped: DIR/members does not hold the " + std::to_string(K) +
+                             " member curves of every fitted mean; errors from the covariance instead");
+    } else {
+      std::vector<std::vector<double>> est;
+      CalibrationOptions cj = co;
+      cj.start = &cal.params;
+      for (int k = 0; k < K; ++k) {
+        std::vector<CurveData> loo;
+        for (std::size_t j = 0; j < fit_curves.size(); ++j)
+          loo.push_back(leave_one_out(fit_curves[j], member_curve(members[k], fit_files[j])));
+        std::vector<std::string> iso_k;
+        const std::string own = unloading_of(members[k]).string();
+        for (const auto& f : iso_files) if (f != own) iso_k.push_back(f);
+        const Calibration ck = calibrate(loo, read_isotropic(iso_k), cj);
+        est.push_back(ck.value);
+        std::cerr << "dem model: jackknife " << k + 1 << "/" << K << " (" << members[k].filename().string()
+                  << " left out): chi2/dof = " << num(ck.chi2_dof(), 4) << "\n";
+      }
+      cal.se_jackknife.assign(cal.value.size(), 0.0);
+      for (std::size_t i = 0; i < cal.value.size(); ++i) {
+        double mean = 0, ss = 0;
+        for (const auto& e : est) mean += e[i] / K;
+        for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
+        cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
+      }
+    }
+  }
+
+  fs::create_directories(out / "curves");
+  write_parameter_tables(cal, K, out);
+  std::vector<double> nus;
+  for (const auto& c : fit_curves) nus.push_back(c.nu);
+  write_laws_table(cal.params, nus, out);
+
+  Table pred({"mode", "nu", "role", "quantity", "n", "rms [quantity]", "max_abs [quantity]", "bias [quantity]",
+              "band_halfwidth [quantity]", "rms_over_band [-]", "max_over_band [-]", "frac_in_band [-]"});
+  auto evaluate = [&](const CurveData& c, const CurveFile& f, const std::string& role) {
+    const ModelCurve m = predict_curve(cal.params, c, o.eps_max);
+    write_model_curve(m, c, role, out / "curves" / (f.mode + "_" + f.tag + ".csv"));
+    for (const auto& e : prediction_errors(m, c)) {
+      pred.add_row({c.mode, num(c.nu, 4), role, e.quantity, std::to_string(e.n), num(e.rms, 4), num(e.max_abs, 4),
+                    num(e.bias, 4), num(e.band, 4), num(e.rms_over_band, 3), num(e.max_over_band, 3), num(e.frac_in_band, 3)});
+      std::cerr << "dem model: " << c.mode << " nu=" << num(c.nu, 4) << " " << role << " " << e.quantity
+                << ": rms " << num(e.rms, 3) << " = " << num(e.rms_over_band, 3) << " band, max " << num(e.max_over_band, 3)
+                << " band, in band " << num(100 * e.frac_in_band, 3) << " %\n";
+    }
+  };
+  for (std::size_t j = 0; j < fit_curves.size(); ++j) evaluate(fit_curves[j], fit_files[j], "fitted");
+  for (std::size_t j = 0; j < other.size(); ++j) evaluate(other[j], other_files[j], "predicted");
+  write_table_all(pred, (out / "prediction").string(),
+                  "Model against the DEM ensemble mean per mode, nu and quantity: RMS, max and mean (bias) of "
+                  "model - DEM over eps_d > 0, in the quantity's units and relative to the mean 95 % band half-width; "
+                  "role: fitted (calibration curves) or predicted (not fitted)");
+  for (std::size_t j = 0; j < fit_curves.size(); ++j) write_model_paths(cal.params, fit_curves[j], fit_files[j].tag, out / "curves");
+
+  for (const auto& w : cal.warnings) std::cerr << "dem model: warning: " << w << "\n";
+  std::cerr << "dem model: tables and curves written to " << out.string() << "\n";
+  if (!o.no_plots) {
+    const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.model_plots \"" +
+                            out.string() + "\"";
+    if (std::system(cmd.c_str()) != 0) std::cerr << "dem model: plotting failed (tables are written)\n";
+  }
+  return cal.ok ? 0 : 1;
+}
+
+}  // namespace
+
+void add_model_options(CLI::App& app, ModelCommandOptions& o) {
+  app.add_option("dir", o.dir, "ensemble folder reduced by `dem fit` (ensemble/MODE_phiX.csv, members/)")->required();
+  app.add_option("--out", o.out, "output folder (default DIR/model)");
+  app.add_option("--isotropic", o.isotropic, "unloading-branch curves (default DIR/members/*/[prep/]cycle_unloading.csv)");
+  app.add_option("--calibrate-mode", o.calibrate_mode, "mode whose curves are fitted; all others are predicted");
+  app.add_option("--eps-max", o.eps_max, "fit and compare only eps_d <= this [-]");
+  app.add_flag("--no-jackknife{false}", o.jackknife, "errors from the covariance only (faster)");
+  app.add_flag("--no-plots", o.no_plots, "skip the matplotlib plots");
+  app.add_flag("--force", o.force, "overwrite an existing output folder");
+}
+
+int run_model_command(const ModelCommandOptions& o) {
+  try {
+    return run(o);
+  } catch (const InputError& e) {
+    std::cerr << "dem model: " << e.what() << "\n";
+    return 2;
+  } catch (const std::runtime_error& e) {   // unreadable or ragged CSV, missing column
+    std::cerr << "dem model: bad input: " << e.what() << " (the ensemble CSVs must be those `dem fit` writes)\n";
+    return 2;
+  }
+}
+
+}  // namespace demfit

@@ -1,0 +1,386 @@
+#include "demfit/model_fit.hpp"
+
+#include <ceres/ceres.h>
+#include <glog/logging.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <numeric>
+#include <stdexcept>
+
+#include "demfit/fit.hpp"
+#include "demfit/table.hpp"
+
+namespace demfit::model {
+
+namespace {
+
+const double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+void init_glog() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    if (!google::IsGoogleLoggingInitialized()) google::InitGoogleLogging("demfit");
+    FLAGS_minloglevel = 2;
+  });
+}
+
+double median(std::vector<double> v) {
+  v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !(x > 0) || !std::isfinite(x); }), v.end());
+  if (v.empty()) return 0.0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+// Point weights 1/sigma: sigma = max(se, floor x median se) (a point whose packings happen to
+// agree must not pin the fit; the first row, where every packing starts from the same state,
+// has se of the start-state spread).
+std::vector<double> weights(const std::vector<double>& se, double floor_rel, const std::string& what) {
+  const double med = median(se);
+  if (!(med > 0))
+    throw std::invalid_argument("model calibration: " + what +
+                                " has no positive standard errors (one packing?): the joint fit weights every point "
+                                "by the spread between packings; run an ensemble with >= 2 packings");
+  std::vector<double> w(se.size());
+  for (std::size_t i = 0; i < se.size(); ++i)
+    w[i] = 1.0 / std::max(std::isfinite(se[i]) ? se[i] : 0.0, floor_rel * med);
+  return w;
+}
+
+// One D2 curve: residuals (model - mean)/sigma for p*, s_dev, F_dev at every strain.
+struct CurveResidual {
+  std::vector<double> eps, p, s, F, wp, ws, wF;
+  double nu0, p0, s0, F0, nu_ref, max_step;
+  template <class T>
+  bool operator()(T const* const* par, T* r) const {
+    const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step);
+    const std::size_t n = eps.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      r[i] = (st[i].p - T(p[i])) * T(wp[i]);
+      r[n + i] = (st[i].s - T(s[i])) * T(ws[i]);
+      r[2 * n + i] = (st[i].F - T(F[i])) * T(wF[i]);
+    }
+    return true;
+  }
+};
+
+// One point of the isotropic branch: (p_iso(nu) - p)/sigma_p, (C(nu) - C)/sigma_C.
+struct IsoResidual {
+  double nu, p, C, wp, wC;
+  template <class T>
+  bool operator()(const T* iso, T* r) const {
+    r[0] = (isotropic_pressure(iso, T(nu)) - T(p)) * T(wp);
+    r[1] = (coordination(iso, T(nu)) - T(C)) * T(wC);
+    return true;
+  }
+};
+
+CurveData truncated(const CurveData& c, double eps_max) {
+  CurveData t = c;
+  std::size_t n = 0;
+  while (n < c.eps.size() && c.eps[n] <= eps_max + 1e-12) ++n;
+  for (auto* v : {&t.eps, &t.p, &t.s, &t.F, &t.se_p, &t.se_s, &t.se_F, &t.hw_p, &t.hw_s, &t.hw_F}) v->resize(n);
+  return t;
+}
+
+void check_curve(const CurveData& c) {
+  if (c.eps.size() < 6)
+    throw std::invalid_argument("model calibration: " + c.source + " has " + std::to_string(c.eps.size()) +
+                                " rows in the fitted range; need at least 6 (widen --eps-max or sample the runs more finely)");
+  if (std::fabs(c.eps.front()) > 1e-12)
+    throw std::invalid_argument("model calibration: " + c.source + " does not start at eps_d = 0 (its first row is the "
+                                "start state the model integrates from): give the ensemble curve from `dem fit`");
+  if (!(c.p.front() > 0) || !(c.nu > 0))
+    throw std::invalid_argument("model calibration: " + c.source + " starts with p* <= 0 or nu <= 0: the model needs a "
+                                "jammed start state (nu above jamming)");
+  for (std::size_t i = 1; i < c.eps.size(); ++i)
+    if (!(c.eps[i] > c.eps[i - 1]))
+      throw std::invalid_argument("model calibration: " + c.source + ": eps_d is not increasing at row " + std::to_string(i));
+}
+
+// Start values: the isotropic laws fitted alone (fit_law), the shear laws from a saturating
+// fit per curve regressed on nu.
+Parameters start_values(const std::vector<CurveData>& curves, const IsoData& iso, double nu_ref) {
+  Parameters s;
+  s.nu_ref = nu_ref;
+  const double numin = *std::min_element(iso.nu.begin(), iso.nu.end());
+  try {
+    const CurveFit cf = fit_law("power", iso.nu, iso.C, {6.0, 5.0, numin * 0.98, 0.5});
+    if (cf.ok) { s.C0 = cf.params[0]; s.C1 = cf.params[1]; s.nu_cC = cf.params[2]; s.alpha = cf.params[3]; }
+  } catch (const std::exception&) {}
+  s.nu_cC = std::min(s.nu_cC, numin * (1 - 1e-6));
+  s.nu_c = std::min(s.nu_cC, numin) * (1 - 1e-3);
+  // p0 by linear least squares at gamma_p = 0.
+  double num = 0, den = 0;
+  for (std::size_t i = 0; i < iso.nu.size(); ++i) {
+    double par[kNumIso] = {1.0, s.nu_c, 0.0, s.C0, s.C1, s.nu_cC, s.alpha};
+    const double g = isotropic_pressure(par, iso.nu[i]);
+    num += g * iso.p[i]; den += g * g;
+  }
+  if (den > 0 && num > 0) s.p0 = num / den;
+  // Shear laws: saturating fits of each curve, then a weighted line through them.
+  std::vector<double> nus, smax, lbs, fmax, lbf;
+  for (const auto& c : curves) {
+    try {
+      FitOptions fo;
+      fo.residual_diagnostics = false;
+      const FitResult fs = fit_saturating(c.eps, c.s, fo), ff = fit_saturating(c.eps, c.F, fo);
+      nus.push_back(c.nu); smax.push_back(fs.x_max); lbs.push_back(std::log(fs.beta));
+      fmax.push_back(ff.x_max); lbf.push_back(std::log(ff.beta));
+    } catch (const std::exception&) {}
+  }
+  auto line = [&](const std::vector<double>& y, double* a, double* b) {
+    const std::size_t n = y.size();
+    if (n == 0) return;
+    double mx = 0, my = 0;
+    for (std::size_t i = 0; i < n; ++i) { mx += nus[i] - nu_ref; my += y[i]; }
+    mx /= n; my /= n;
+    double sxy = 0, sxx = 0;
+    for (std::size_t i = 0; i < n; ++i) { sxy += (nus[i] - nu_ref - mx) * (y[i] - my); sxx += (nus[i] - nu_ref - mx) * (nus[i] - nu_ref - mx); }
+    *b = sxx > 0 ? sxy / sxx : 0.0;
+    *a = my - *b * mx;
+  };
+  line(smax, &s.shear[kSmaxA], &s.shear[kSmaxB]);
+  line(lbs, &s.shear[kLnBetaSA], &s.shear[kLnBetaSB]);
+  line(fmax, &s.shear[kFmaxA], &s.shear[kFmaxB]);
+  line(lbf, &s.shear[kLnBetaFA], &s.shear[kLnBetaFB]);
+  s.shear[kAnisoA] = 0.2; s.shear[kAnisoB] = 0.0;
+  s.shear[kLnBetaPA] = std::log(20.0); s.shear[kLnBetaPB] = 0.0;
+  return s;
+}
+
+}  // namespace
+
+CurveData read_curve(const std::string& path, const std::string& mode, double nu) {
+  const Table t = read_table(path);
+  CurveData c;
+  c.mode = mode; c.nu = nu; c.source = path;
+  c.eps = t.column("eps_d");
+  const auto& n = t.column("n_packings");
+  c.packings = n.empty() ? 0 : static_cast<int>(n.front());
+  const std::pair<const char*, std::vector<double>*> mean[] = {{"p_star", &c.p}, {"s_dev", &c.s}, {"F_dev", &c.F}};
+  const std::pair<const char*, std::vector<double>*> se[] = {{"p_star", &c.se_p}, {"s_dev", &c.se_s}, {"F_dev", &c.se_F}};
+  const std::pair<const char*, std::vector<double>*> hw[] = {{"p_star", &c.hw_p}, {"s_dev", &c.hw_s}, {"F_dev", &c.hw_F}};
+  for (auto& [q, v] : mean) *v = t.column(std::string(q) + "_mean");
+  for (auto& [q, v] : se) *v = t.column(std::string(q) + "_se");
+  for (std::size_t k = 0; k < 3; ++k) {
+    const auto& hi = t.column(std::string(hw[k].first) + "_hi95");
+    *hw[k].second = hi;
+    for (std::size_t i = 0; i < hi.size(); ++i) (*hw[k].second)[i] = hi[i] - (*mean[k].second)[i];
+  }
+  const auto& nu_col = t.column("nu_mean");
+  if (!nu_col.empty() && std::isfinite(nu_col.front())) c.nu = nu_col.front();
+  return c;
+}
+
+IsoData read_isotropic(const std::vector<std::string>& paths) {
+  IsoData d;
+  for (const auto& path : paths) {
+    const Table t = read_table(path);
+    const auto& nu = t.column("nu");
+    const auto& p = t.column("p_star");
+    const auto& C = t.column("C_nonrattler");
+    for (std::size_t i = 0; i < nu.size(); ++i)
+      if (p[i] > 1e-7 && C[i] > 0 && std::isfinite(nu[i])) { d.nu.push_back(nu[i]); d.p.push_back(p[i]); d.C.push_back(C[i]); }
+  }
+  return d;
+}
+
+Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o) {
+  init_glog();
+  if (curves_in.empty()) throw std::invalid_argument("model calibration: no curves to fit (need D2 ensemble curves)");
+  if (o.fit_isotropic && iso.nu.size() < 8)
+    throw std::invalid_argument("model calibration: only " + std::to_string(iso.nu.size()) +
+                                " isotropic-branch points (need >= 8 jammed points of cycle_unloading.csv with p* > 0)");
+  std::vector<CurveData> curves;
+  double nu_mean = 0;
+  for (const auto& c : curves_in) { curves.push_back(truncated(c, o.eps_max)); check_curve(curves.back()); nu_mean += c.nu; }
+  nu_mean /= curves.size();
+  const double nu_ref = o.nu_ref > 0 ? o.nu_ref : nu_mean;
+  Parameters start = o.start ? *o.start : start_values(curves, iso, nu_ref);
+  start.nu_ref = nu_ref;
+  std::vector<double> isob = start.iso();
+  std::vector<double> shear(start.shear, start.shear + kNumShear);
+  double numin = 1e9;
+  // Both jamming fractions must lie below every start state (the curves' nu); branch points
+  // below them are allowed (C = C0 there; p* < 0 is simply a large residual).
+  for (const auto& c : curves) numin = std::min(numin, c.nu);
+
+  ceres::Problem problem;
+  int n_res = 0;
+  for (const auto& c : curves) {
+    auto* f = new CurveResidual{c.eps, c.p, c.s, c.F, weights(c.se_p, o.se_floor, c.source + " p_star"),
+                                weights(c.se_s, o.se_floor, c.source + " s_dev"), weights(c.se_F, o.se_floor, c.source + " F_dev"),
+                                c.nu, c.p.front(), c.s.front(), c.F.front(), nu_ref, o.max_step};
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
+    cost->AddParameterBlock(kNumIso);
+    cost->AddParameterBlock(kNumShear);
+    cost->SetNumResiduals(3 * static_cast<int>(c.eps.size()));
+    problem.AddResidualBlock(cost, nullptr, isob.data(), shear.data());
+    n_res += 3 * static_cast<int>(c.eps.size());
+  }
+  if (o.fit_isotropic) {
+    // Weights: the scatter of the branch about the isotropic laws fitted alone (reduced chi2 = 1
+    // for this block), so that neither block dominates by its number of points.
+    ceres::Problem pre;
+    std::vector<double> isopre = isob;
+    for (std::size_t i = 0; i < iso.nu.size(); ++i)
+      pre.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
+                               new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0, 1.0}), nullptr, isopre.data());
+    pre.SetParameterUpperBound(isopre.data(), kNuC, numin * (1 - 1e-6));
+    pre.SetParameterUpperBound(isopre.data(), kNuCC, numin * (1 - 1e-6));
+    pre.SetParameterLowerBound(isopre.data(), kAlpha, 0.05);
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::DENSE_QR;
+    so.max_num_iterations = 500;
+    ceres::Solver::Summary sum;
+    ceres::Solve(so, &pre, &sum);
+    double rp = 0, rc = 0;
+    for (std::size_t i = 0; i < iso.nu.size(); ++i) {
+      const double dp = isotropic_pressure(isopre.data(), iso.nu[i]) - iso.p[i];
+      const double dc = coordination(isopre.data(), iso.nu[i]) - iso.C[i];
+      rp += dp * dp; rc += dc * dc;
+    }
+    const double dof = std::max<double>(1.0, iso.nu.size() - kNumIso / 2.0);
+    const double sp = std::max(std::sqrt(rp / dof), 1e-12), sc = std::max(std::sqrt(rc / dof), 1e-12);
+    isob = isopre;
+    for (std::size_t i = 0; i < iso.nu.size(); ++i)
+      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
+                                   new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0 / sp, 1.0 / sc}),
+                               nullptr, isob.data());
+    n_res += 2 * static_cast<int>(iso.nu.size());
+  } else {
+    problem.SetParameterBlockConstant(isob.data());
+  }
+  problem.SetParameterUpperBound(isob.data(), kNuC, numin * (1 - 1e-6));
+  problem.SetParameterUpperBound(isob.data(), kNuCC, numin * (1 - 1e-6));
+  problem.SetParameterLowerBound(isob.data(), kAlpha, 0.05);
+  problem.SetParameterLowerBound(isob.data(), kP0, 1e-9);
+  for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
+    problem.SetParameterLowerBound(shear.data(), i, std::log(1e-3));
+    problem.SetParameterUpperBound(shear.data(), i, std::log(5e3));
+  }
+
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = o.max_iterations;
+  so.function_tolerance = 1e-12;
+  so.parameter_tolerance = 1e-12;
+  so.num_threads = 1;
+  ceres::Solver::Summary sum;
+  ceres::Solve(so, &problem, &sum);
+
+  Calibration cal;
+  cal.ok = sum.IsSolutionUsable() && sum.termination_type == ceres::CONVERGENCE;
+  cal.message = sum.BriefReport();
+  if (!cal.ok) cal.warnings.push_back("optimiser did not converge: " + sum.message);
+  cal.params = start;
+  cal.params.set_iso(isob.data());
+  std::copy(shear.begin(), shear.end(), cal.params.shear);
+  cal.chi2 = 2 * sum.final_cost;
+  cal.n_residuals = n_res;
+  cal.n_free = (o.fit_isotropic ? kNumIso : 0) + kNumShear;
+  for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(isob[i]); }
+  for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(shear[i]); }
+
+  // Covariance of all 19 (isotropic block zero when held), scaled by max(1, chi2/dof).
+  const int np = kNumIso + kNumShear;
+  cal.se_cov.assign(np, kNaN);
+  cal.corr.assign(np, std::vector<double>(np, kNaN));
+  ceres::Covariance::Options co;
+  co.algorithm_type = ceres::DENSE_SVD;
+  co.null_space_rank = -1;
+  ceres::Covariance cov(co);
+  std::vector<const double*> blocks = {shear.data()};
+  if (o.fit_isotropic) blocks.insert(blocks.begin(), isob.data());
+  if (cov.Compute(blocks, &problem)) {
+    std::vector<double> full(np * np, 0.0);
+    if (o.fit_isotropic) {
+      cov.GetCovarianceMatrix(blocks, full.data());
+    } else {
+      std::vector<double> sub(kNumShear * kNumShear);
+      cov.GetCovarianceMatrix(blocks, sub.data());
+      for (int a = 0; a < kNumShear; ++a)
+        for (int b = 0; b < kNumShear; ++b) full[(kNumIso + a) * np + kNumIso + b] = sub[a * kNumShear + b];
+    }
+    const double scale = std::max(1.0, cal.chi2_dof());
+    for (int a = 0; a < np; ++a) {
+      const double v = full[a * np + a] * scale;
+      cal.se_cov[a] = (o.fit_isotropic || a >= kNumIso) ? std::sqrt(std::max(v, 0.0)) : kNaN;
+    }
+    for (int a = 0; a < np; ++a)
+      for (int b = 0; b < np; ++b) {
+        const double d = std::sqrt(full[a * np + a] * full[b * np + b]);
+        cal.corr[a][b] = d > 0 ? full[a * np + b] / d : kNaN;
+      }
+  } else {
+    cal.warnings.push_back("covariance could not be computed (rank-deficient Jacobian): some parameters are not "
+                           "determined by these curves");
+  }
+  for (int i : {kNuC, kNuCC})
+    if (o.fit_isotropic && isob[i] >= numin * (1 - 2e-6)) {
+      cal.se_cov[i] = kNaN;
+      cal.warnings.push_back(std::string(iso_name(i)) + " sits on its bound (the lowest start volume fraction " +
+                             std::to_string(numin) + "): no standard error quoted");
+    }
+  if (o.fit_isotropic && !iso.nu.empty()) {
+    const double lowest = *std::min_element(iso.nu.begin(), iso.nu.end());
+    if (std::fabs(isob[kNuCC] - lowest) < 1e-9) {
+      cal.se_cov[kNuCC] = kNaN;
+      cal.warnings.push_back("nu_cC sits on the lowest jammed point of the isotropic branch (" + std::to_string(lowest) +
+                             "): the power law's onset is set by where the branch data start, no standard error quoted");
+    }
+  }
+  return cal;
+}
+
+ModelCurve predict_curve(const Parameters& params, const CurveData& c, double eps_max, double max_step) {
+  const CurveData t = truncated(c, eps_max);
+  if (t.eps.empty() || std::fabs(t.eps.front()) > 1e-12)
+    throw std::invalid_argument("model prediction: " + c.source + " does not start at eps_d = 0");
+  const std::vector<double> iso = params.iso();
+  const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
+                                         t.F.front(), t.eps, max_step);
+  ModelCurve m;
+  m.eps = t.eps;
+  for (const auto& y : st) { m.p.push_back(y.p); m.s.push_back(y.s); m.F.push_back(y.F); m.nu.push_back(std::exp(y.ln_nu)); }
+  return m;
+}
+
+std::vector<PredictionError> prediction_errors(const ModelCurve& m, const CurveData& c) {
+  std::vector<PredictionError> out;
+  const std::vector<double>* mv[3] = {&m.p, &m.s, &m.F};
+  const std::vector<double>* dv[3] = {&c.p, &c.s, &c.F};
+  const std::vector<double>* hv[3] = {&c.hw_p, &c.hw_s, &c.hw_F};
+  const char* names[3] = {"p_star", "s_dev", "F_dev"};
+  for (int q = 0; q < 3; ++q) {
+    PredictionError e;
+    e.quantity = names[q];
+    double ss = 0, hw = 0, bias = 0;
+    int in = 0;
+    // The first row is the start state itself (zero error by construction): left out.
+    for (std::size_t i = 1; i < m.eps.size() && i < dv[q]->size(); ++i) {
+      const double d = (*mv[q])[i] - (*dv[q])[i];
+      ss += d * d;
+      bias += d;
+      e.max_abs = std::max(e.max_abs, std::fabs(d));
+      const double h = (*hv[q])[i];
+      hw += h;
+      if (std::fabs(d) <= h) ++in;
+      ++e.n;
+    }
+    if (e.n == 0) continue;
+    e.rms = std::sqrt(ss / e.n);
+    e.bias = bias / e.n;
+    e.band = hw / e.n;
+    e.rms_over_band = e.band > 0 ? e.rms / e.band : kNaN;
+    e.max_over_band = e.band > 0 ? e.max_abs / e.band : kNaN;
+    e.frac_in_band = static_cast<double>(in) / e.n;
+    out.push_back(e);
+  }
+  return out;
+}
+
+}  // namespace demfit::model

@@ -1,0 +1,331 @@
+// The incremental anisotropic model (demfit/model.hpp) against closed forms, and its joint
+// calibration against synthetic ensembles made by the model with known parameters.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+#include "demfit/ensemble.hpp"
+#include "demfit/fit.hpp"
+#include "demfit/model.hpp"
+#include "demfit/model_fit.hpp"
+
+using namespace demfit::model;
+
+namespace {
+
+// Isotropic laws close to the N = 9261 ensemble's (data/figure3_n9261/fit/isotropic.md).
+Parameters truth() {
+  Parameters P;
+  P.p0 = 0.0412; P.nu_c = 0.6642; P.gamma_p = 0.0; P.C0 = 5.63; P.C1 = 8.30; P.nu_cC = 0.667; P.alpha = 0.514;
+  const double sh[kNumShear] = {0.16, -0.5, std::log(50.0), -6.0, 0.11, -0.8, std::log(40.0), -4.0, 0.4, -10.0,
+                                std::log(15.0), -7.0};
+  std::copy(sh, sh + kNumShear, P.shear);
+  P.nu_ref = 0.74;
+  return P;
+}
+
+Segment shear_seg(double eps_d, int outputs, Control c = Control::Volume) {
+  Segment s;
+  s.eps_d = eps_d; s.outputs = outputs; s.control = c;
+  return s;
+}
+
+}  // namespace
+
+// The per-curve law x = x_max - (x_max - x0) exp(-beta eps) is the monotone constant-volume
+// limit for s and F, whatever the pressure does (a_A, beta_p non-zero here).
+TEST(Model, SaturatingLawIsTheMonotoneLimit) {
+  const Parameters P = truth();
+  const auto iso = P.iso();
+  for (double nu : {0.68, 0.75, 0.81}) {
+    const double p0 = isotropic_pressure(iso.data(), nu) * 1.1, s0 = 0.012, F0 = -0.004;
+    const auto pts = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, s0, F0, {shear_seg(0.4, 80)});
+    const Local<double> L = local(P.shear, nu, P.nu_ref);
+    for (const auto& q : pts) {
+      EXPECT_NEAR(q.state.s, demfit::saturating(s0, L.s_max, L.beta_s, q.eps_d), 1e-9) << nu << " " << q.eps_d;
+      EXPECT_NEAR(q.state.F, demfit::saturating(F0, L.F_max, L.beta_F, q.eps_d), 1e-9) << nu << " " << q.eps_d;
+      EXPECT_NEAR(std::exp(q.state.ln_nu), nu, 1e-14);   // constant volume
+    }
+  }
+}
+
+// Isotropic compression and decompression integrate exactly to the packing's pressure law
+// k p_iso(nu) (B = dp/dln nu is its derivative), from any start on or off the fitted law.
+TEST(Model, IsotropicPathFollowsThePressureLaw) {
+  const Parameters P = truth();
+  const auto iso = P.iso();
+  for (double k : {1.0, 0.8}) {
+    const double nu0 = 0.70;
+    Segment comp;
+    comp.eps_d = 0; comp.eps_vol = -std::log(0.80 / nu0); comp.outputs = 40;
+    Segment dec = comp;
+    dec.eps_vol = std::log(0.80 / 0.68);
+    const auto pts = integrate<double>(iso.data(), P.shear, P.nu_ref, nu0, k * isotropic_pressure(iso.data(), nu0), 0.0, 0.0,
+                                       {comp, dec});
+    for (const auto& q : pts) {
+      const double nu = std::exp(q.state.ln_nu);
+      EXPECT_NEAR(q.state.p, k * isotropic_pressure(iso.data(), nu), 1e-9 * isotropic_pressure(iso.data(), 0.8));
+      EXPECT_NEAR(q.eps_vol, -std::log(nu / nu0), 1e-12);
+    }
+    EXPECT_NEAR(std::exp(pts.back().state.ln_nu), 0.68, 1e-12);
+  }
+}
+
+// Constant volume, the pressure equation dp/de = a_A B F(e) - beta_p (p - p_ref) with the
+// exponential F(e) is linear: closed form. With the rates -> 0 it is the linear-elastic case
+// p = p0 + a_A B F0 e (the anisotropy modulus as a constant cross-modulus).
+TEST(Model, PressureUnderShearMatchesClosedForm) {
+  Parameters P = truth();
+  const auto iso = P.iso();
+  const double nu = 0.72;
+  const double p_ref = isotropic_pressure(iso.data(), nu), B = bulk_modulus(iso.data(), nu);
+  const double p0 = 1.05 * p_ref, F0 = 0.01;
+  const double k = p0 / p_ref;
+  const Local<double> L = local(P.shear, nu, P.nu_ref);
+  const auto pts = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.0, F0, {shear_seg(0.4, 40)});
+  const double aB = L.a_A * k * B, bp = L.beta_p, bF = L.beta_F, Fm = L.F_max;
+  for (const auto& q : pts) {
+    const double e = q.eps_d;
+    const double qex = (p0 - k * p_ref) * std::exp(-bp * e) + aB * Fm * (1 - std::exp(-bp * e)) / bp -
+                       aB * (Fm - F0) * (std::exp(-bF * e) - std::exp(-bp * e)) / (bp - bF);
+    EXPECT_NEAR(q.state.p, k * p_ref + qex, 1e-9 * p0) << e;
+  }
+  // Linear-elastic special case: no evolution of F, s, or the excess pressure.
+  for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) P.shear[i] = -60.0;   // beta = e^-60 ~ 1e-26
+  for (int i : {kLnBetaSB, kLnBetaFB, kLnBetaPB}) P.shear[i] = 0.0;
+  const auto lin = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.05, F0, {shear_seg(0.3, 30)});
+  for (const auto& q : lin) {
+    EXPECT_NEAR(q.state.p, p0 + L.a_A * k * B * F0 * q.eps_d, 1e-12 * p0);
+    EXPECT_NEAR(q.state.s, 0.05, 1e-15);
+    EXPECT_NEAR(q.state.F, F0, 1e-15);
+  }
+}
+
+// Reversal: loading the other way from an isotropic state mirrors s and F and leaves p
+// unchanged; after a reversal, s and F relax towards -x_max from the reversal value
+// (closed form), and the accumulated strain keeps growing while eps_d comes back.
+TEST(Model, ReversalSymmetryAndClosedForm) {
+  const Parameters P = truth();
+  const auto iso = P.iso();
+  const double nu = 0.70, p0 = isotropic_pressure(iso.data(), nu);
+  const auto fwd = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.0, 0.0, {shear_seg(0.2, 40)});
+  const auto bwd = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.0, 0.0, {shear_seg(-0.2, 40)});
+  ASSERT_EQ(fwd.size(), bwd.size());
+  for (std::size_t i = 0; i < fwd.size(); ++i) {
+    EXPECT_NEAR(bwd[i].state.s, -fwd[i].state.s, 1e-14);
+    EXPECT_NEAR(bwd[i].state.F, -fwd[i].state.F, 1e-14);
+    EXPECT_NEAR(bwd[i].state.p, fwd[i].state.p, 1e-14);
+    EXPECT_NEAR(bwd[i].eps_d, -fwd[i].eps_d, 1e-15);
+  }
+  const auto rev = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.0, 0.0, {shear_seg(0.1, 20), shear_seg(-0.3, 60)});
+  const Local<double> L = local(P.shear, nu, P.nu_ref);
+  const double s_r = rev[20].state.s, F_r = rev[20].state.F;
+  EXPECT_NEAR(s_r, demfit::saturating(0.0, L.s_max, L.beta_s, 0.1), 1e-9);
+  for (std::size_t i = 20; i < rev.size(); ++i) {
+    const double de = rev[i].eps_d_acc - 0.1;
+    // RK4 truncation: (beta h)^4 / 120 per unit approach, h = 5e-4, beta ~ 60
+    EXPECT_NEAR(rev[i].state.s, demfit::saturating(s_r, -L.s_max, L.beta_s, de), 1e-8);
+    EXPECT_NEAR(rev[i].state.F, demfit::saturating(F_r, -L.F_max, L.beta_F, de), 1e-8);
+    EXPECT_NEAR(rev[i].eps_d, 0.1 - de, 1e-12);
+  }
+  EXPECT_NEAR(rev.back().eps_d_acc, 0.4, 1e-12);
+}
+
+// Mixed control: an isobaric segment holds p exactly; the volume change has the sign of the
+// excess-pressure source a_A B F - beta_p (p - p_ref) (dilatancy where it is positive).
+TEST(Model, IsobaricSegmentHoldsPressure) {
+  const Parameters P = truth();
+  const auto iso = P.iso();
+  for (double nu : {0.70, 0.81}) {
+    const double p0 = isotropic_pressure(iso.data(), nu);
+    const auto pts = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.0, 0.0, {shear_seg(0.3, 60, Control::Isobaric)});
+    for (const auto& q : pts) EXPECT_NEAR(q.state.p, p0, 1e-12 * p0);
+    const Local<double> L = local(P.shear, nu, P.nu_ref);
+    // Early on p = p_ref and F > 0: dilation (eps_vol > 0) iff a_A > 0.
+    EXPECT_EQ(pts[5].eps_vol > 0, L.a_A > 0) << nu << " a_A=" << L.a_A;
+  }
+}
+
+namespace {
+
+// A synthetic ensemble: K members of the model's curves plus AR(1) noise (lag-1 rho) per
+// member and quantity, on the grid of a DEM ensemble; mean, SE and 95 % half-width as `dem fit`
+// writes them; members kept for the jackknife.
+struct Synthetic {
+  std::vector<CurveData> mean;
+  std::vector<std::vector<CurveData>> members;   // [curve][member]
+};
+
+Synthetic synthetic(const Parameters& P, const std::vector<double>& nus, int K, double rho, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> g(0.0, 1.0);
+  Synthetic S;
+  const auto iso = P.iso();
+  std::vector<double> eps;
+  for (int i = 0; i <= 100; ++i) eps.push_back(0.004 * i);
+  for (double nu : nus) {
+    const double p0 = isotropic_pressure(iso.data(), nu);
+    const auto st = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.01, 0.01, eps, 1e-3);
+    std::vector<CurveData> mem;
+    for (int k = 0; k < K; ++k) {
+      CurveData c;
+      c.mode = "D2"; c.nu = nu; c.packings = K; c.eps = eps; c.source = "synthetic";
+      const double sd[3] = {0.01 * p0, 0.015, 0.008};   // p*, s_dev, F_dev noise per packing
+      double z[3] = {g(rng), g(rng), g(rng)};
+      for (std::size_t i = 0; i < eps.size(); ++i) {
+        if (i > 0)
+          for (double& v : z) v = rho * v + std::sqrt(1 - rho * rho) * g(rng);
+        // the start state is common to the packings' mean (the model starts from it)
+        const double f = i == 0 ? 0.0 : 1.0;
+        c.p.push_back(st[i].p + f * sd[0] * z[0]);
+        c.s.push_back(st[i].s + f * sd[1] * z[1]);
+        c.F.push_back(st[i].F + f * sd[2] * z[2]);
+      }
+      mem.push_back(c);
+    }
+    CurveData m = mem[0];
+    for (auto* v : {&m.se_p, &m.se_s, &m.se_F, &m.hw_p, &m.hw_s, &m.hw_F}) v->assign(eps.size(), 0.0);
+    for (std::size_t i = 0; i < eps.size(); ++i) {
+      std::vector<std::vector<double>> cols(3);
+      for (const auto& c : mem) { cols[0].push_back(c.p[i]); cols[1].push_back(c.s[i]); cols[2].push_back(c.F[i]); }
+      double* mv[3] = {&m.p[i], &m.s[i], &m.F[i]};
+      double* sv[3] = {&m.se_p[i], &m.se_s[i], &m.se_F[i]};
+      for (int q = 0; q < 3; ++q) {
+        double mean = 0, ss = 0;
+        for (double v : cols[q]) mean += v / K;
+        for (double v : cols[q]) ss += (v - mean) * (v - mean);
+        *mv[q] = mean;
+        *sv[q] = i == 0 ? 0.0 : std::sqrt(ss / (K - 1) / K);
+      }
+    }
+    // Start-state SE: what the DEM first row has (spread of the start states); a floor suffices.
+    m.se_p[0] = m.se_p[1]; m.se_s[0] = m.se_s[1]; m.se_F[0] = m.se_F[1];
+    S.mean.push_back(m);
+    S.members.push_back(mem);
+  }
+  return S;
+}
+
+}  // namespace
+
+// Calibration recovers the known shear laws from synthetic ensembles with strongly correlated
+// noise (rho = 0.9, as DEM curves have; K = 8 packings, 4 volume fractions) within the
+// jackknife-over-packings intervals the command states (estimate -/+ t_{K-1} se). Over 8
+// seeded ensembles x 12 coefficients the 95 % intervals held the truth in 0.86 of the cases
+// when this test was written (a slight under-coverage of the jackknife on a non-linear fit
+// with K = 8, docs/model.md); the covariance of the weighted fit, which treats the correlated
+// points as independent, covers far less.
+TEST(ModelFit, RecoversKnownParametersWithinJackknifeErrors) {
+  const Parameters P = truth();
+  const int K = 8, seeds = 8;
+  const double t95 = demfit::t_quantile(0.975, K - 1);
+  int covered = 0, covered_cov = 0, total = 0;
+  for (int seed = 1; seed <= seeds; ++seed) {
+    const Synthetic S = synthetic(P, {0.69, 0.73, 0.77, 0.81}, K, 0.9, seed);
+    CalibrationOptions o;
+    o.fit_isotropic = false;
+    o.nu_ref = P.nu_ref;
+    o.max_step = 1e-3;
+    Parameters start = P;   // start away from the truth: the fit must find it
+    for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.8 : 1.1);
+    o.start = &start;
+    const Calibration cal = calibrate(S.mean, {}, o);
+    ASSERT_TRUE(cal.ok) << cal.message;
+    std::vector<std::vector<double>> est;
+    CalibrationOptions oj = o;
+    oj.start = &cal.params;
+    for (int k = 0; k < K; ++k) {
+      std::vector<CurveData> loo;
+      for (std::size_t j = 0; j < S.mean.size(); ++j) {
+        CurveData c = S.mean[j];
+        const CurveData& x = S.members[j][k];
+        for (std::size_t i = 0; i < c.eps.size(); ++i) {
+          c.p[i] = (K * c.p[i] - x.p[i]) / (K - 1);
+          c.s[i] = (K * c.s[i] - x.s[i]) / (K - 1);
+          c.F[i] = (K * c.F[i] - x.F[i]) / (K - 1);
+        }
+        loo.push_back(c);
+      }
+      est.push_back(calibrate(loo, {}, oj).value);
+    }
+    for (int i = 0; i < kNumShear; ++i) {
+      const int a = kNumIso + i;
+      double mean = 0, ss = 0;
+      for (const auto& e : est) mean += e[a] / K;
+      for (const auto& e : est) ss += (e[a] - mean) * (e[a] - mean);
+      const double se = std::sqrt((K - 1.0) / K * ss), err = std::fabs(cal.value[a] - P.shear[i]);
+      EXPECT_LT(err, 6 * se) << "seed " << seed << " " << shear_name(i) << ": estimate " << cal.value[a] << " truth "
+                             << P.shear[i] << " jackknife se " << se;
+      covered += err < t95 * se;
+      covered_cov += err < 1.96 * cal.se_cov[a];
+      ++total;
+    }
+  }
+  const double coverage = static_cast<double>(covered) / total, coverage_cov = static_cast<double>(covered_cov) / total;
+  std::printf("jackknife-t 95 %% coverage %.3f, covariance 95 %% coverage %.3f (%d intervals)\n", coverage, coverage_cov, total);
+  EXPECT_GE(coverage, 0.80);
+  EXPECT_LT(coverage_cov, coverage - 0.15) << "correlated noise: the covariance of independent points should under-cover";
+}
+
+// Noise-free curves of the model: the joint fit (isotropic block included, branch points made
+// by the laws) returns the truth from a start 10-20 % away.
+TEST(ModelFit, RecoversExactParametersFromNoiseFreeCurves) {
+  const Parameters P = truth();
+  Synthetic S = synthetic(P, {0.69, 0.73, 0.77, 0.81}, 2, 0.0, 3);
+  for (std::size_t j = 0; j < S.mean.size(); ++j) {   // replace the mean by the members' noise-free model curve
+    const auto iso = P.iso();
+    CurveData& c = S.mean[j];
+    const auto st = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, c.nu, c.p[0], c.s[0], c.F[0], c.eps, 1e-3);
+    for (std::size_t i = 0; i < c.eps.size(); ++i) { c.p[i] = st[i].p; c.s[i] = st[i].s; c.F[i] = st[i].F; }
+  }
+  IsoData iso;
+  const auto ib = P.iso();
+  for (int i = 0; i < 40; ++i) {
+    const double nu = 0.668 + 0.004 * i;
+    iso.nu.push_back(nu); iso.p.push_back(isotropic_pressure(ib.data(), nu)); iso.C.push_back(coordination(ib.data(), nu));
+  }
+  Parameters start = P;
+  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.8 : 1.1);
+  CalibrationOptions o;
+  o.start = &start;
+  o.nu_ref = P.nu_ref;
+  o.max_step = 1e-3;
+  const Calibration cal = calibrate(S.mean, iso, o);
+  ASSERT_TRUE(cal.ok) << cal.message;
+  for (int i = 0; i < kNumShear; ++i)
+    EXPECT_NEAR(cal.value[kNumIso + i], P.shear[i], 1e-5 * std::max(1.0, std::fabs(P.shear[i]))) << shear_name(i);
+  EXPECT_NEAR(cal.params.p0, P.p0, 1e-6);
+  EXPECT_NEAR(cal.params.alpha, P.alpha, 1e-4);
+}
+
+TEST(ModelFit, BadInputIsRefusedWithTheFix) {
+  const Parameters P = truth();
+  Synthetic S = synthetic(P, {0.72}, 3, 0.5, 1);
+  CurveData shifted = S.mean[0];
+  for (double& e : shifted.eps) e += 0.01;
+  CalibrationOptions no_iso;
+  no_iso.fit_isotropic = false;
+  no_iso.start = &P;
+  try {
+    calibrate({shifted}, {}, no_iso);
+    FAIL() << "a curve not starting at eps_d = 0 was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("does not start at eps_d = 0"), std::string::npos) << e.what();
+  }
+  CurveData one = S.mean[0];
+  for (double& v : one.se_s) v = 0.0;
+  CalibrationOptions o;
+  o.fit_isotropic = false;
+  o.start = &P;
+  try {
+    calibrate({one}, {}, o);
+    FAIL() << "a curve without between-packing errors was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find(">= 2 packings"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(calibrate({}, {}, o), std::invalid_argument);
+  EXPECT_THROW(calibrate(S.mean, {}, CalibrationOptions{}), std::invalid_argument);   // no isotropic branch
+}
