@@ -20,6 +20,7 @@ Engine::Engine(const Model& model, State& state, bool forces_are_current)
     : model_(model), state_(state) {
   if (state.count() < 2) throw std::invalid_argument("Engine: the state holds fewer than 2 particles");
   threads_ = resolve_threads(model.threads);
+  blocks_ = block_count(model.blocks, threads_);
   skin_ = model.skin_over_rmin * model.radius_min;
   if (model.integrator == Integrator::SymplecticEuler) { kick_before_ = 1.0; kick_after_ = 0.0; }
   sllod_ = model.sllod;
@@ -82,7 +83,7 @@ void Engine::finish_forces_and_kick(int begin, int end) {
 }
 
 void Engine::evaluate_forces() {
-  compute_forces(model_, state_, list_, rate_, threads_, scratch_);
+  compute_forces(model_, state_, list_, rate_, threads_, blocks_, scratch_);
 }
 
 void Engine::step(const Vec3& strain_rate) {
@@ -90,7 +91,7 @@ void Engine::step(const Vec3& strain_rate) {
   const bool affine = !(strain_rate.x == 0 && strain_rate.y == 0 && strain_rate.z == 0);
   const Vec3 factor = affine ? deform_box(strain_rate) : Vec3{1, 1, 1};
   const StalenessTest test = staleness_test(state_, list_);   // box of this step, list of the last
-  if (threads_ <= 1) step_serial(factor, affine, test);
+  if (threads_ <= 1 && blocks_ <= 1) step_serial(factor, affine, test);
   else step_threaded(factor, affine, test);
   state_.time += model_.dt;
   ++state_.step;
@@ -107,9 +108,9 @@ void Engine::step_serial(const Vec3& factor, bool affine, const StalenessTest& t
 }
 
 void Engine::step_threaded(const Vec3& factor, bool affine, const StalenessTest& test) {
-  partition_pairs(list_, threads_, scratch_);
+  partition_pairs(list_, blocks_, scratch_);
   worst_displacement2_.assign(threads_, 0.0);
-#pragma omp parallel num_threads(threads_)
+#pragma omp parallel num_threads(threads_) if (threads_ > 1)
   {
     const ThreadRank rank = this_thread_rank();
     const int t = rank.index, nt = rank.count;
@@ -125,7 +126,7 @@ void Engine::step_threaded(const Vec3& factor, bool affine, const StalenessTest&
       double all = 0;
       for (double w : worst_displacement2_) all = std::max(all, w);
       rebuild_neighbors_if_stale(test, all);
-      partition_pairs(list_, threads_, scratch_);
+      partition_pairs(list_, blocks_, scratch_);
     }
     // 5: own pairs, then (after every block has queued its spills) the spills, then 6.
     Vec3* f = state_.force.data();

@@ -25,10 +25,11 @@ inline bool contact_force(const Law& law, const Vec3& xi, const Vec3& xj_image, 
   return true;
 }
 
-// Pairs of particles [begin, end): forces on j >= end go to `spill`.
+// Pairs of particles [begin, end): forces on j >= end go to spill[block_of[j]].
 template <class Law>
 void pair_loop(const Law& law, const State& s, const NeighborList& list, const Vec3& rate,
-               int begin, int end, Vec3* f, std::vector<SpilledForce>& spill) {
+               int begin, int end, Vec3* f, std::vector<std::vector<SpilledForce>>& spill,
+               const std::uint16_t* block_of) {
   Vec3 off[27];
   image_offsets(s.box, off);
   const Vec3* x = s.position.data();
@@ -45,7 +46,7 @@ void pair_loop(const Law& law, const State& s, const NeighborList& list, const V
       const int j = partner[p];
       Vec3 fj;
       if (!contact_force(law, xi, x[j] + off[image[p]], vi, v[j], ri, rad[j], rate, fj)) continue;
-      if (j < end) f[j] += fj; else spill.push_back({j, fj});
+      if (j < end) f[j] += fj; else spill[block_of[j]].push_back({j, fj});
       fi -= fj;
     }
     f[i] += fi;
@@ -72,34 +73,41 @@ void partition_pairs(const NeighborList& list, int blocks, ForceScratch& scratch
     scratch.bounds[b] = static_cast<int>(
         std::lower_bound(list.first.begin(), list.first.end() - 1, target) - list.first.begin());
   }
-  scratch.spill.resize(blocks);
+  scratch.block_of.resize(n);
+  for (int b = 0; b < blocks; ++b)
+    std::fill(scratch.block_of.begin() + scratch.bounds[b], scratch.block_of.begin() + scratch.bounds[b + 1],
+              static_cast<std::uint16_t>(b));
+  scratch.spill.assign(blocks, std::vector<std::vector<SpilledForce>>(blocks));
   scratch.list_builds = list.builds;
+}
+
+int block_count(int blocks_setting, int threads) {
+  return std::clamp(blocks_setting > 0 ? blocks_setting : threads, 1, 65535);
 }
 
 void accumulate_pair_forces(const Model& model, const State& state, const NeighborList& list,
                             const Vec3& rate, int b, ForceScratch& scratch, Vec3* force) {
   const LinearSpringDashpot law(model.contact);
-  scratch.spill[b].clear();
-  pair_loop(law, state, list, rate, scratch.bounds[b], scratch.bounds[b + 1], force, scratch.spill[b]);
+  for (auto& to : scratch.spill[b]) to.clear();
+  pair_loop(law, state, list, rate, scratch.bounds[b], scratch.bounds[b + 1], force, scratch.spill[b],
+            scratch.block_of.data());
 }
 
 void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force) {
-  const int begin = scratch.bounds[b], end = scratch.bounds[b + 1];
   for (int from = 0; from < b; ++from)
-    for (const SpilledForce& s : scratch.spill[from])
-      if (s.j >= begin && s.j < end) force[s.j] += s.f;
+    for (const SpilledForce& s : scratch.spill[from][b]) force[s.j] += s.f;
 }
 
 void compute_forces(const Model& model, State& s, const NeighborList& list,
-                    const Vec3& rate, int threads, ForceScratch& scratch) {
+                    const Vec3& rate, int threads, int blocks, ForceScratch& scratch) {
   s.force.assign(s.count(), Vec3{0, 0, 0});
-  partition_pairs(list, threads, scratch);
-  const int blocks = scratch.blocks();
+  partition_pairs(list, blocks, scratch);
   Vec3* f = s.force.data();
-  if (blocks == 1) {
-    accumulate_pair_forces(model, s, list, rate, 0, scratch, f);
+  if (threads <= 1) {
+    for (int b = 0; b < blocks; ++b) accumulate_pair_forces(model, s, list, rate, b, scratch, f);
+    for (int b = 1; b < blocks; ++b) apply_spilled_forces(b, scratch, f);
   } else {
-#pragma omp parallel num_threads(blocks)
+#pragma omp parallel num_threads(threads)
     {
       const ThreadRank rank = this_thread_rank();
       const int t = rank.index, nt = rank.count;

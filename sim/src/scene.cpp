@@ -398,6 +398,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   r.get("integration", "dt_over_tc", m.dt_over_tc);
   r.get("integration", "skin_over_rmin", m.skin_over_rmin);
   r.get("integration", "threads", m.threads);
+  r.get_if_present("integration", "blocks", m.blocks);
   r.get("integration", "max_overlap_fraction", m.max_overlap_fraction);
   r.get("integration", "check_every_steps", m.check_every_steps);
 
@@ -572,6 +573,8 @@ void validate_integration(const Model& m) {
          "dense packings need far less: use 0.02 (t_c/50)");
   if (!(m.skin_over_rmin > 0 && m.skin_over_rmin <= 4)) fail("integration.skin_over_rmin must be in (0, 4]");
   if (m.threads < 0) fail("integration.threads must be >= 0 (0 = all cores)");
+  if (m.blocks < 0 || m.blocks > 4096)
+    fail("integration.blocks must be in [0, 4096] (0: one per thread; N: results independent of the thread count)");
   if (!(m.max_overlap_fraction > 0 && m.max_overlap_fraction <= 2))
     fail("integration.max_overlap_fraction must be in (0, 2]");
   if (m.check_every_steps < 1) fail("integration.check_every_steps must be >= 1");

@@ -1,6 +1,8 @@
 // The cell/Verlet path against the all-pairs oracle.
 #include <gtest/gtest.h>
 
+#include <cstring>
+
 #include <cmath>
 
 #include "dem/engine.hpp"
@@ -42,7 +44,7 @@ TEST(NeighborList, ForcesEqualAllPairsOracleOnShearedConfigurations) {
       // Same positions and velocities for both paths (the engine's stored forces belong to
       // the half-step velocity).
       dem::ForceScratch scratch;
-      dem::compute_forces(m, s, e.neighbor_list(), rate, 1, scratch);
+      dem::compute_forces(m, s, e.neighbor_list(), rate, 1, 1, scratch);
       dem::State oracle = s;
       dem::compute_forces_all_pairs(m, oracle, rate);
       const double scale = max_force(oracle);
@@ -83,19 +85,66 @@ TEST(NeighborList, BlockSplitPairLoopEqualsAllPairsOracle) {
   dem::State oracle = s;
   dem::compute_forces_all_pairs(m, oracle, rate);
   const double scale = max_force(oracle);
-  for (int blocks : {2, 3, 5}) {
-    dem::State t = s;
-    dem::ForceScratch scratch;
-    dem::compute_forces(m, t, e.neighbor_list(), rate, blocks, scratch);
-    ASSERT_EQ(scratch.blocks(), blocks);
-    std::size_t spilled = 0;
-    for (auto& q : scratch.spill) spilled += q.size();
-    EXPECT_GT(spilled, 0u) << "the test must cross block boundaries";
-    EXPECT_TRUE(scratch.spill.back().empty()) << "the last block has no later block to spill to";
-    double worst = 0;
-    for (int i = 0; i < t.count(); ++i) worst = std::max(worst, norm(t.force[i] - oracle.force[i]));
-    EXPECT_LT(worst / scale, 1e-12) << blocks << " blocks";
+  for (int blocks : {2, 3, 5, 12})
+    for (int threads : {1, 2, 3}) {
+      dem::State t = s;
+      dem::ForceScratch scratch;
+      dem::compute_forces(m, t, e.neighbor_list(), rate, threads, blocks, scratch);
+      ASSERT_EQ(scratch.blocks(), blocks);
+      std::size_t spilled = 0;
+      for (int from = 0; from < blocks; ++from)
+        for (int to = 0; to < blocks; ++to) {
+          spilled += scratch.spill[from][to].size();
+          if (to <= from) EXPECT_TRUE(scratch.spill[from][to].empty()) << "spills go to later blocks only";
+          for (const auto& sp : scratch.spill[from][to])
+            ASSERT_TRUE(sp.j >= scratch.bounds[to] && sp.j < scratch.bounds[to + 1]) << "bucket of the wrong block";
+        }
+      EXPECT_GT(spilled, 0u) << "the test must cross block boundaries";
+      double worst = 0;
+      for (int i = 0; i < t.count(); ++i) worst = std::max(worst, norm(t.force[i] - oracle.force[i]));
+      EXPECT_LT(worst / scale, 1e-12) << blocks << " blocks, " << threads << " threads";
+    }
+}
+
+TEST(NeighborList, FixedBlocksGiveTheSameBitsForEveryThreadCount) {
+  // integration.blocks fixes the summation order: 1-4 threads (and more threads than a block
+  // count divides evenly) must give identical positions, velocities and forces across rebuilds.
+  // A dense start (compressed to phi ~ 0.66: ~6 contacts a particle, so the order of the
+  // force terms matters to the last bit).
+  dem::State start = dem_test::random_state(500, 0.40, 1.0, 4);
+  {
+    const dem::Model m = dem_test::model_with({"integration.threads=1"});
+    dem::Engine e(m, start);
+    for (int k = 0; k < 2800; ++k) e.step(Vec3(-1, -1, -1) * (3e-3 / m.t_contact));
+    ASSERT_GT(start.volume_fraction(), 0.64);
   }
+  auto run = [&](int threads) {
+    dem::State s = start;
+    dem::Model m = dem_test::model_with({"integration.threads=" + std::to_string(threads), "integration.blocks=6"});
+    const Vec3 rate = Vec3(1, 0, -1) * (1e-3 / m.t_contact);
+    dem::Engine e(m, s);
+    for (int k = 0; k < 300; ++k) e.step(rate);
+    EXPECT_GT(e.neighbor_list().builds, 2) << "the test must cross list rebuilds";
+    return s;
+  };
+  const dem::State one = run(1);
+  for (int threads : {2, 3, 4}) {
+    const dem::State t = run(threads);
+    ASSERT_EQ(t.id, one.id);
+    EXPECT_EQ(0, std::memcmp(t.position.data(), one.position.data(), one.position.size() * sizeof(Vec3))) << threads;
+    EXPECT_EQ(0, std::memcmp(t.velocity.data(), one.velocity.data(), one.velocity.size() * sizeof(Vec3))) << threads;
+    EXPECT_EQ(0, std::memcmp(t.force.data(), one.force.data(), one.force.size() * sizeof(Vec3))) << threads;
+  }
+  // Another block count is another summation order: the test above would catch a thread
+  // count that changed the blocks.
+  dem::State d1 = start, d5 = start;
+  dem::Model m1 = dem_test::model_with({"integration.threads=1"});
+  dem::Model m5 = dem_test::model_with({"integration.threads=1", "integration.blocks=5"});
+  dem::Engine e1(m1, d1), e5(m5, d5);
+  const Vec3 rate = Vec3(1, 0, -1) * (1e-3 / m1.t_contact);
+  for (int k = 0; k < 300; ++k) { e1.step(rate); e5.step(rate); }
+  EXPECT_NE(0, std::memcmp(d1.velocity.data(), d5.velocity.data(), d1.velocity.size() * sizeof(Vec3)))
+      << "one and five blocks summed in the same order: the test above proves nothing";
 }
 
 TEST(NeighborList, ThreadedStepsMatchOneThreadToRoundOff) {

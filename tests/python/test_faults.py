@@ -458,3 +458,16 @@ def test_full_disk_during_the_preparation_fails_then_resumes_to_the_same_bytes(t
     assert "resuming" in p.stderr
     same_results(tiny / "ref", out)
     assert not [f for f in files_of(out) if f.endswith(".part")]
+
+
+# ---- thread-count independence (issue 12) -------------------------------------------------
+
+def test_fixed_blocks_give_the_same_curve_bytes_for_1_to_4_threads(tiny, tmp_path):
+    curves = []
+    for threads in (1, 2, 3, 4):
+        out = tmp_path / f"D2_t{threads}.csv"
+        run_dem("mode", "--packing", tiny / "ref" / "checkpoints" / "unloading_phi0.720.ckpt", "--mode", "D2",
+                "--rate-tc", 2e-4, "--eps-max", 0.05, "--threads", threads, "--set", "integration.blocks=12",
+                "--quiet", "--out", out, check=True)
+        curves.append(out.read_bytes())
+    assert all(c == curves[0] for c in curves[1:])

@@ -67,6 +67,7 @@ class Engine {
   std::vector<double> worst_displacement2_;   // per thread
   Vec3 rate_{0, 0, 0};
   int threads_ = 1;
+  int blocks_ = 1;                   ///< pair-loop blocks (block_count of the model's setting)
   double skin_ = 0;
   double kick_before_ = 0.5, kick_after_ = 0.5;
   bool sllod_ = true;

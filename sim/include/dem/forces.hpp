@@ -17,17 +17,24 @@ struct SpilledForce {
   Vec3 f;   ///< [N]
 };
 
-/// Work split of the parallel half-list loop. Block b owns particles [bounds[b], bounds[b+1])
+/// Work split of the half-list loop. Block b owns particles [bounds[b], bounds[b+1])
 /// (contiguous, balanced by listed pairs). Its pairs add forces directly to its own
-/// particles; a force on a particle of a later block (neighbour across the block boundary or
-/// across the periodic boundary) is queued in spill[b] and added by that block's owner after
-/// a barrier, in block order. No per-thread copy of the force array is needed.
+/// particles; a force on a particle of a later block c (neighbour across the block boundary or
+/// across the periodic boundary) is queued in spill[b][c] and added by block c after every
+/// block has run its pairs, from blocks 0..c-1 in order. No per-thread copy of the force array
+/// is needed, and the summation order of every force depends on the blocks only: threads take
+/// blocks round-robin, so a fixed block count gives the same bits for any thread count.
 struct ForceScratch {
-  std::vector<int> bounds;                        ///< size blocks + 1
-  std::vector<std::vector<SpilledForce>> spill;   ///< per block
-  std::int64_t list_builds = -1;                  ///< list.builds the split was made for
+  std::vector<int> bounds;                                    ///< size blocks + 1
+  std::vector<std::uint16_t> block_of;                        ///< block of each particle
+  std::vector<std::vector<std::vector<SpilledForce>>> spill;  ///< [from block][to block]
+  std::int64_t list_builds = -1;                              ///< list.builds the split was made for
   int blocks() const { return static_cast<int>(bounds.size()) - 1; }
 };
+
+/// The block count of a run: `integration.blocks` if set (> 0: results independent of the
+/// thread count), else one block per thread.
+int block_count(int blocks_setting, int threads);
 
 /// Splits the particles into `blocks` contiguous ranges with about equal listed pairs
 /// (no-op if the split already belongs to this list build and block count).
@@ -47,11 +54,10 @@ void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force);
 ///    the overlap rate uses the full relative velocity, fluctuation plus affine flow
 ///    strain_rate (.) branch vector  [1/s . m];
 ///  - background damping -gamma_b * v on every particle [N], added after the pair forces.
-/// Pairs are summed in list order. With threads > 1 the particles are split into one block
-/// per thread (ForceScratch); the result is deterministic for a given thread count and
-/// differs between thread counts only by round-off of the summation order.
+/// Pairs are summed in list order within `blocks` blocks (ForceScratch; block_count()), run
+/// by `threads` threads: deterministic for a given block count, whatever the thread count.
 void compute_forces(const Model& model, State& state, const NeighborList& list,
-                    const Vec3& strain_rate, int threads, ForceScratch& scratch);
+                    const Vec3& strain_rate, int threads, int blocks, ForceScratch& scratch);
 
 /// The oracle: the same forces from a loop over all N(N-1)/2 pairs with the minimum-image
 /// convention (valid when every box edge exceeds 2 * (2 r_max)). O(N^2); for tests.

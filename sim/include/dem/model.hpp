@@ -151,6 +151,10 @@ struct Model {
   double dt_over_tc = 1.0 / 50.0;    ///< dt as a fraction of t_c of the two smallest particles
   double skin_over_rmin = 0.4;       ///< Verlet skin / radius_min
   int threads = 0;                   ///< OpenMP threads; 0: all available
+  /// Blocks of the pair loop (forces.hpp): the summation order of the forces depends on the
+  /// blocks, not on the threads that run them. 0: one block per thread (curves then depend on
+  /// the thread count through round-off); N > 0: the same bits for any thread count.
+  int blocks = 0;
   double max_overlap_fraction = 1.0; ///< stop if an overlap exceeds this fraction of the smaller radius (blow-up;
                                      ///< at phi = 0.82 real packings reach 0.4 (N = 9261) to 0.52 (N = 30000))
   long check_every_steps = 200;      ///< sanity-check cadence
