@@ -1,5 +1,6 @@
 #include "dem/engine.hpp"
 #include "dem/parallel.hpp"
+#include "dem/step_team.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -109,35 +110,34 @@ void Engine::step_serial(const Vec3& factor, bool affine, const StalenessTest& t
 
 void Engine::step_threaded(const Vec3& factor, bool affine, const StalenessTest& test) {
   partition_pairs(list_, blocks_, scratch_);
+  if (!team_ || team_->size() != threads_) team_ = std::make_unique<StepTeam>(threads_);
   worst_displacement2_.assign(threads_, 0.0);
-#pragma omp parallel num_threads(threads_) if (threads_ > 1)
-  {
-    const ThreadRank rank = this_thread_rank();
-    const int t = rank.index, nt = rank.count;
+  team_->run([&](int t) {
+    const int nt = threads_;
     // 1-3 on the blocks of the current list (any split would do: particles are independent).
     double worst = 0;
     for (int b = t; b < scratch_.blocks(); b += nt)
       worst = std::max(worst, advance_particles(scratch_.bounds[b], scratch_.bounds[b + 1],
                                                 factor, affine, test));
     worst_displacement2_[t] = worst;
-#pragma omp barrier
-#pragma omp single
-    {
+    team_->barrier();
+    if (t == 0) {
       double all = 0;
       for (double w : worst_displacement2_) all = std::max(all, w);
       rebuild_neighbors_if_stale(test, all);
       partition_pairs(list_, blocks_, scratch_);
     }
+    team_->barrier();
     // 5: own pairs, then (after every block has queued its spills) the spills, then 6.
     Vec3* f = state_.force.data();
     for (int b = t; b < scratch_.blocks(); b += nt)
       accumulate_pair_forces(model_, state_, list_, rate_, b, scratch_, f);
-#pragma omp barrier
+    team_->barrier();
     for (int b = t; b < scratch_.blocks(); b += nt) {
       apply_spilled_forces(b, scratch_, f);
       finish_forces_and_kick(scratch_.bounds[b], scratch_.bounds[b + 1]);
     }
-  }
+  });
 }
 
 void Engine::check_sanity() const {

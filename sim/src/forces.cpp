@@ -81,8 +81,11 @@ void partition_pairs(const NeighborList& list, int blocks, ForceScratch& scratch
   scratch.list_builds = list.builds;
 }
 
+// Four blocks by default: 1, 2, 3 and 4 threads sum every force in the same order.
+constexpr int kDefaultBlocks = 4;
+
 int block_count(int blocks_setting, int threads) {
-  return std::clamp(blocks_setting > 0 ? blocks_setting : threads, 1, 65535);
+  return std::clamp(blocks_setting > 0 ? blocks_setting : std::max(kDefaultBlocks, threads), 1, 65535);
 }
 
 void accumulate_pair_forces(const Model& model, const State& state, const NeighborList& list,

@@ -574,7 +574,7 @@ void validate_integration(const Model& m) {
   if (!(m.skin_over_rmin > 0 && m.skin_over_rmin <= 4)) fail("integration.skin_over_rmin must be in (0, 4]");
   if (m.threads < 0) fail("integration.threads must be >= 0 (0 = all cores)");
   if (m.blocks < 0 || m.blocks > 4096)
-    fail("integration.blocks must be in [0, 4096] (0: one per thread; N: results independent of the thread count)");
+    fail("integration.blocks must be in [0, 4096] (0: max(4, threads); N: the same results for any thread count)");
   if (!(m.max_overlap_fraction > 0 && m.max_overlap_fraction <= 2))
     fail("integration.max_overlap_fraction must be in (0, 2]");
   if (m.check_every_steps < 1) fail("integration.check_every_steps must be >= 1");

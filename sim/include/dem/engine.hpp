@@ -1,10 +1,12 @@
 // The time stepper: advances (Model, State) by one step, read as a list of named stages.
 #pragma once
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "dem/forces.hpp"
+#include "dem/step_team.hpp"
 #include "dem/model.hpp"
 #include "dem/neighbor_list.hpp"
 #include "dem/state.hpp"
@@ -64,6 +66,7 @@ class Engine {
   State& state_;
   NeighborList list_;
   ForceScratch scratch_;
+  std::unique_ptr<StepTeam> team_;   ///< the threads of step_threaded (threads_ > 1)
   std::vector<double> worst_displacement2_;   // per thread
   Vec3 rate_{0, 0, 0};
   int threads_ = 1;

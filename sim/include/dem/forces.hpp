@@ -33,7 +33,7 @@ struct ForceScratch {
 };
 
 /// The block count of a run: `integration.blocks` if set (> 0: results independent of the
-/// thread count), else one block per thread.
+/// thread count), else max(4, threads) (1-4 threads: the same bits).
 int block_count(int blocks_setting, int threads);
 
 /// Splits the particles into `blocks` contiguous ranges with about equal listed pairs

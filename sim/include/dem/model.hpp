@@ -152,8 +152,9 @@ struct Model {
   double skin_over_rmin = 0.4;       ///< Verlet skin / radius_min
   int threads = 0;                   ///< OpenMP threads; 0: all available
   /// Blocks of the pair loop (forces.hpp): the summation order of the forces depends on the
-  /// blocks, not on the threads that run them. 0: one block per thread (curves then depend on
-  /// the thread count through round-off); N > 0: the same bits for any thread count.
+  /// blocks, not on the threads that run them, so one block count gives the same bits for any
+  /// thread count. 0 (default): max(4, threads), i.e. 1-4 threads give identical curves (cost:
+  /// 3.7 % more instructions than one block on one thread, docs/benchmarks.md).
   int blocks = 0;
   double max_overlap_fraction = 1.0; ///< stop if an overlap exceeds this fraction of the smaller radius (blow-up;
                                      ///< at phi = 0.82 real packings reach 0.4 (N = 9261) to 0.52 (N = 30000))

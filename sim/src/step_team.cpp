@@ -1,0 +1,81 @@
+#include "dem/step_team.hpp"
+
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#define DEM_CPU_PAUSE() _mm_pause()
+#else
+#define DEM_CPU_PAUSE() std::atomic_signal_fence(std::memory_order_seq_cst)
+#endif
+
+namespace dem {
+
+StepTeam::StepTeam(int size) : size_(size < 1 ? 1 : size) {
+  for (int r = 1; r < size_; ++r) workers_.emplace_back([this, r] { worker(r); });
+}
+
+StepTeam::~StepTeam() {
+  stop_.store(true);
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    wake_.notify_all();
+  }
+  for (auto& t : workers_) t.join();
+}
+
+// Polls done(): `spins` times with a CPU pause, then up to `yields` times giving the core away
+// in between (yields < 0: until done). Returns when done() or the yields are used up.
+template <class Done>
+void StepTeam::spin_then_yield(const Done& done, int yields) const {
+  for (int i = 0; i < policy_.spins; ++i) {
+    if (done()) return;
+    DEM_CPU_PAUSE();
+  }
+  for (int i = 0; yields < 0 || i < yields; ++i) {
+    if (done()) return;
+    std::this_thread::yield();
+  }
+}
+
+void StepTeam::run(const std::function<void(int)>& body) {
+  if (size_ == 1) { body(0); return; }
+  body_ = &body;
+  finished_.store(0, std::memory_order_relaxed);
+  generation_.fetch_add(1);   // seq_cst: ordered with the sleepers_ load below
+  if (sleepers_.load() > 0) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    wake_.notify_all();
+  }
+  body(0);
+  spin_then_yield([&] { return finished_.load(std::memory_order_acquire) == size_ - 1; }, -1);
+}
+
+void StepTeam::barrier() {
+  if (size_ == 1) return;
+  const std::uint64_t phase = phase_.load(std::memory_order_acquire);
+  if (arrived_.fetch_add(1, std::memory_order_acq_rel) == size_ - 1) {
+    arrived_.store(0, std::memory_order_relaxed);
+    phase_.fetch_add(1, std::memory_order_release);   // releases everyone's writes
+    return;
+  }
+  spin_then_yield([&] { return phase_.load(std::memory_order_acquire) != phase; }, -1);
+}
+
+void StepTeam::worker(int rank) {
+  std::uint64_t seen = 0;
+  for (;;) {
+    auto started = [&] { return generation_.load(std::memory_order_acquire) != seen || stop_.load(); };
+    spin_then_yield(started, policy_.yields);
+    if (!started()) {   // a long pause between steps (output, another stage): sleep
+      sleepers_.fetch_add(1);   // seq_cst: ordered with run()'s generation_ increment
+      std::unique_lock<std::mutex> lock(mutex_);
+      wake_.wait(lock, started);
+      sleepers_.fetch_sub(1);
+    }
+    if (stop_.load()) return;
+    seen = generation_.load(std::memory_order_acquire);
+    (*body_)(rank);
+    finished_.fetch_add(1, std::memory_order_release);
+  }
+}
+
+}  // namespace dem
