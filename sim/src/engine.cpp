@@ -22,6 +22,7 @@ Engine::Engine(const Model& model, State& state, bool forces_are_current)
   if (state.count() < 2) throw std::invalid_argument("Engine: the state holds fewer than 2 particles");
   threads_ = resolve_threads(model.threads);
   blocks_ = block_count(model.blocks, threads_);
+  chooser_ = TeamSizeChooser(threads_, model.adaptive_threads);
   skin_ = model.skin_over_rmin * model.radius_min;
   if (model.integrator == Integrator::SymplecticEuler) { kick_before_ = 1.0; kick_after_ = 0.0; }
   sllod_ = model.sllod;
@@ -94,6 +95,7 @@ void Engine::step(const Vec3& strain_rate) {
   const StalenessTest test = staleness_test(state_, list_);   // box of this step, list of the last
   if (threads_ <= 1 && blocks_ <= 1) step_serial(factor, affine, test);
   else step_threaded(factor, affine, test);
+  chooser_.step_done();
   state_.time += model_.dt;
   ++state_.step;
   if (model_.check_every_steps > 0 && state_.step % model_.check_every_steps == 0) check_sanity();
@@ -110,34 +112,38 @@ void Engine::step_serial(const Vec3& factor, bool affine, const StalenessTest& t
 
 void Engine::step_threaded(const Vec3& factor, bool affine, const StalenessTest& test) {
   partition_pairs(list_, blocks_, scratch_);
-  if (!team_ || team_->size() != threads_) team_ = std::make_unique<StepTeam>(threads_);
-  worst_displacement2_.assign(threads_, 0.0);
-  team_->run([&](int t) {
-    const int nt = threads_;
+  const int nt = chooser_.members();
+  worst_displacement2_.assign(nt, 0.0);
+  auto sync = [&] { if (nt > 1) team_->barrier(); };
+  auto body = [&](int t) {
     // 1-3 on the blocks of the current list (any split would do: particles are independent).
     double worst = 0;
     for (int b = t; b < scratch_.blocks(); b += nt)
       worst = std::max(worst, advance_particles(scratch_.bounds[b], scratch_.bounds[b + 1],
                                                 factor, affine, test));
     worst_displacement2_[t] = worst;
-    team_->barrier();
+    sync();
     if (t == 0) {
       double all = 0;
       for (double w : worst_displacement2_) all = std::max(all, w);
       rebuild_neighbors_if_stale(test, all);
       partition_pairs(list_, blocks_, scratch_);
     }
-    team_->barrier();
-    // 5: own pairs, then (after every block has queued its spills) the spills, then 6.
+    sync();
+    // 5: own pairs, then (after every block has queued its spills) the spills, then 6. Each
+    // block's arithmetic is the same whichever member runs it: the bits do not depend on nt.
     Vec3* f = state_.force.data();
     for (int b = t; b < scratch_.blocks(); b += nt)
       accumulate_pair_forces(model_, state_, list_, rate_, b, scratch_, f);
-    team_->barrier();
+    sync();
     for (int b = t; b < scratch_.blocks(); b += nt) {
       apply_spilled_forces(b, scratch_, f);
       finish_forces_and_kick(scratch_.bounds[b], scratch_.bounds[b + 1]);
     }
-  });
+  };
+  if (nt == 1) { body(0); return; }
+  if (!team_ || team_->size() != nt) team_ = std::make_unique<StepTeam>(nt);
+  team_->run(body);
 }
 
 void Engine::check_sanity() const {

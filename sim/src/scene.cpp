@@ -399,6 +399,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   r.get("integration", "skin_over_rmin", m.skin_over_rmin);
   r.get("integration", "threads", m.threads);
   r.get_if_present("integration", "blocks", m.blocks);
+  r.get_if_present("integration", "adaptive_threads", m.adaptive_threads);
   r.get("integration", "max_overlap_fraction", m.max_overlap_fraction);
   r.get("integration", "check_every_steps", m.check_every_steps);
 

@@ -78,4 +78,26 @@ void StepTeam::worker(int rank) {
   }
 }
 
+TeamSizeChooser::TeamSizeChooser(int team, bool adaptive) : team_(team), adaptive_(adaptive && team > 1) {}
+
+void TeamSizeChooser::step_done() {
+  if (!adaptive_) return;
+  ++steps_;
+  const auto now = Clock::now();
+  const double wall = std::chrono::duration<double>(now - window_start_).count();
+  if (steps_ < 32 || wall < 5e-3) return;
+  const int mode = use_team_ ? 1 : 0;
+  rate_[mode] = steps_ / wall;
+  measured_[mode] = now;
+  steps_ = 0;
+  const int other = 1 - mode;
+  // A probe of the other mode that lost doubles the time to the next probe (up to 32 s).
+  if (probing_) recheck_ = rate_[mode] >= rate_[other] ? std::chrono::seconds(1) : std::min(recheck_ * 2, kMaxRecheck);
+  const bool stale = rate_[other] == 0 || now - measured_[other] > recheck_;
+  const bool best_is_team = rate_[1] >= rate_[0];
+  use_team_ = stale ? other == 1 : best_is_team;
+  probing_ = stale;
+  window_start_ = Clock::now();
+}
+
 }  // namespace dem

@@ -50,6 +50,9 @@ class Engine {
   const NeighborList& neighbor_list() const { return list_; }
   const Vec3& last_strain_rate() const { return rate_; }
   int threads() const { return threads_; }
+  /// Members that ran the last step (threads(), or 1 when the adaptive choice found one
+  /// thread faster on a busy machine; the results are the same bits either way).
+  int active_threads() const { return chooser_.members(); }
 
  private:
   // Stages, on particle ranges [begin, end) so that the threaded step runs them per block.
@@ -67,6 +70,7 @@ class Engine {
   NeighborList list_;
   ForceScratch scratch_;
   std::unique_ptr<StepTeam> team_;   ///< the threads of step_threaded (threads_ > 1)
+  TeamSizeChooser chooser_{1, false};   ///< team or this thread alone, step by step
   std::vector<double> worst_displacement2_;   // per thread
   Vec3 rate_{0, 0, 0};
   int threads_ = 1;

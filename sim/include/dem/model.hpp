@@ -156,6 +156,9 @@ struct Model {
   /// thread count. 0 (default): max(4, threads), i.e. 1-4 threads give identical curves (cost:
   /// 3.7 % more instructions than one block on one thread, docs/benchmarks.md).
   int blocks = 0;
+  /// Run a step on one thread instead of the team when that is measured to be faster (a
+  /// machine busy with other jobs); the same bits either way. false: always all threads.
+  bool adaptive_threads = true;
   double max_overlap_fraction = 1.0; ///< stop if an overlap exceeds this fraction of the smaller radius (blow-up;
                                      ///< at phi = 0.82 real packings reach 0.4 (N = 9261) to 0.52 (N = 30000))
   long check_every_steps = 200;      ///< sanity-check cadence

@@ -5,6 +5,7 @@
 // one thread; docs/benchmarks.md). Between steps idle members spin, yield, then sleep.
 #pragma once
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
@@ -58,6 +59,36 @@ class StepTeam {
   std::atomic<int> sleepers_{0};
   std::mutex mutex_;
   std::condition_variable wake_;
+};
+
+/// Chooses, step by step, whether the team or the calling thread alone runs the step: both
+/// give the same bits (the block count, not the thread count, fixes the summation order), so
+/// the choice is only about speed. It times windows of steps (>= 32 steps and >= 5 ms) in
+/// each mode, runs the faster one and re-measures the other after 1 s (doubling up to 32 s
+/// while it keeps losing). On an idle
+/// machine the team wins; beside other busy jobs, where every barrier may wait for a
+/// descheduled member, one thread can win (docs/benchmarks.md).
+class TeamSizeChooser {
+ public:
+  /// `team` members available; `adaptive` false: always the whole team.
+  TeamSizeChooser(int team, bool adaptive);
+  /// Members to use for the next step (1 or the team).
+  int members() const { return use_team_ ? team_ : 1; }
+  /// Call after each step.
+  void step_done();
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  int team_;
+  bool adaptive_;
+  bool use_team_ = true;
+  int steps_ = 0;
+  Clock::time_point window_start_ = Clock::now();
+  double rate_[2] = {0, 0};            // steps/s measured alone [0] and as a team [1]; 0: not yet
+  Clock::time_point measured_[2] = {};
+  bool probing_ = false;                 // the current window re-measures the losing mode
+  static constexpr Clock::duration kMaxRecheck = std::chrono::seconds(32);
+  Clock::duration recheck_ = std::chrono::seconds(1);
 };
 
 }  // namespace dem
