@@ -304,15 +304,20 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     const std::vector<double> wv = sv.empty() ? std::vector<double>() : weights(sv, o.se_floor, d.source + " eps_v");
     for (std::size_t i = 1, a = 0, b = 0; i < n; ++i) w1[i] = d.isobaric[i] ? wv[b++] : wp[a++];
     w1[0] = 0.0;
-    auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, weights(d.se_s, o.se_floor, d.source + " s_dev_signed"),
-                               weights(d.se_F, o.se_floor, d.source + " F_dev_signed"), d.direction, d.isobaric,
+    std::vector<double> ws = weights(d.se_s, o.se_floor, d.source + " s_dev_signed");
+    std::vector<double> wF = weights(d.se_F, o.se_floor, d.source + " F_dev_signed");
+    std::size_t prefix = 0;   // rows 1..prefix: forward constant-volume shear from the start (a D2 run)
+    if (o.skip_d2_prefix)
+      while (prefix + 1 < n && d.direction[prefix + 1] > 0 && !d.isobaric[prefix + 1]) ++prefix;
+    for (std::size_t i = 1; i <= prefix; ++i) w1[i] = ws[i] = wF[i] = 0.0;
+    auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, ws, wF, d.direction, d.isobaric,
                                d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
     cost->SetNumResiduals(3 * static_cast<int>(n));
     problem.AddResidualBlock(cost, nullptr, isob.data(), shear.data());
-    n_res += 3 * static_cast<int>(n) - 1;   // row 0 of the first residual carries no weight
+    n_res += 3 * static_cast<int>(n - 1 - prefix);   // weighted rows only
     for (double v : d.nu_m) numin = std::min(numin, v);
   }
   if (o.fit_isotropic) {

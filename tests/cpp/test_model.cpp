@@ -464,14 +464,13 @@ PathData synthetic_path(const Parameters& P, const std::string& name, double nu,
 }  // namespace
 
 // Identifiability: from D2 alone, a_A and beta_p are pinned only through the pressure excess
-// a_A B F_max / beta_p and its onset, so their estimates are strongly correlated. A strain
-// reversal, where A = a_A B F acts against the strain while F turns, separates them; an
-// isobaric test at these settings carries the same information as D2's pressure (its volume
-// change solves the same equation, docs/model.md) and helps less. Measured on a synthetic
+// a_A B F_max / beta_p and its onset, so their estimates are strongly correlated. Does a strain
+// reversal (A = a_A B F acting against the strain while F turns) or an isobaric test (the volume
+// change instead of the pressure) separate them? Measured on a synthetic
 // ensemble made by the model (K = 8, AR(1) noise, rho = 0.9): the correlation of the
 // coefficients a_A_a, ln_beta_p_a and the standard error of a_A_a with and without the paths;
 // the estimates recovered within the (covariance) errors.
-TEST(ModelFit, ReversalSeparatesAnisotropyModulusFromPressureRelaxation) {
+TEST(ModelFit, PathsNarrowButDoNotSeparateAnisotropyModulusAndPressureRelaxation) {
   const Parameters P = truth();
   const std::vector<double> nus = {0.69, 0.73, 0.77, 0.81};
   const int K = 8;
@@ -505,14 +504,16 @@ TEST(ModelFit, ReversalSeparatesAnisotropyModulusFromPressureRelaxation) {
     for (int i : {kAnisoA, kLnBetaPA})
       EXPECT_LT(std::fabs(cal.value[kNumIso + i] - P.shear[i]), 8 * cal.se_cov[kNumIso + i]) << c.name << " " << shear_name(i);
   }
-  // What this measures (seeded, deterministic): D2 alone leaves a_A and beta_p correlated; the
-  // reversal narrows both errors by about a third but leaves them correlated (0.83 against 0.86
-  // when written); the isobaric path narrows them less. So neither path separates the two
-  // within this model: both constrain the same pressure excess a_A B F / beta_p.
+  // What this measures (seeded, deterministic; numbers when written): D2 alone leaves a_A and
+  // beta_p correlated (0.86); the reversal (its rows after the turn: the loading part is a D2
+  // run, which the D2 curves carry) narrows both errors by about a fifth (se(a_A_a) 0.0064 ->
+  // 0.0053) but leaves them as correlated (0.87); the isobaric path likewise (0.88). Neither
+  // path separates them within this model: after a reversal, as under constant pressure, the
+  // excess pressure (or the volume) follows an amplitude a_A B F_max / beta_p on the time scales
+  // 1/beta_p and 1/beta_F, the same combination D2 pins (docs/model.md, Identifiability).
   EXPECT_GT(std::fabs(cases[0].corr), 0.8) << "D2 alone: a_A and beta_p strongly correlated";
-  EXPECT_LT(std::fabs(cases[1].corr), std::fabs(cases[0].corr)) << "the reversal decorrelates them a little";
-  EXPECT_GT(std::fabs(cases[1].corr), 0.6) << "but does not separate them (if this fails, update docs/model.md)";
-  EXPECT_LT(cases[1].se_a, 0.8 * cases[0].se_a) << "the reversal narrows a_A";
-  EXPECT_LT(cases[1].se_b, 0.8 * cases[0].se_b) << "and beta_p";
-  EXPECT_GT(cases[2].se_a, cases[1].se_a) << "the isobaric path narrows a_A less than the reversal";
+  EXPECT_GT(std::fabs(cases[1].corr), 0.8) << "the reversal does not separate them (if this fails, update docs/model.md)";
+  EXPECT_GT(std::fabs(cases[2].corr), 0.8) << "nor does the isobaric path";
+  EXPECT_LT(cases[1].se_a, 0.9 * cases[0].se_a) << "the reversal adds information on a_A";
+  EXPECT_LT(cases[1].se_b, 0.9 * cases[0].se_b) << "and on beta_p";
 }

@@ -40,6 +40,9 @@ struct CalibrationOptions {
   double max_step = 5e-4;        ///< RK4 step in eps_d [-]
   bool fit_isotropic = true;     ///< false: isotropic block held at `start` (e.g. synthetic tests)
   const Parameters* start = nullptr;   ///< start values (nullptr: from per-curve saturating fits)
+  /// Paths: leave out (weight 0) the leading rows that are forward constant-volume shear from the
+  /// start, up to the first turn: a D2 run from the same packings, which the D2 curves carry.
+  bool skip_d2_prefix = true;
 };
 
 /// Result of a calibration. Parameter order: the 7 isotropic, then the 12 shear coefficients.
