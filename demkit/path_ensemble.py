@@ -66,7 +66,7 @@ def write_atomic(path, text):
 
 
 def fmt(v):
-    return "nan" if not np.isfinite(v) else f"{v:.9g}"
+    return "nan" if not np.isfinite(v) else f"{v:.7g}"   # 7 digits: far below the packings' spread
 
 
 def signed_member(path):

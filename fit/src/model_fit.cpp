@@ -533,6 +533,17 @@ std::vector<PredictionError> path_errors(const PathPrediction& m, const PathData
   if (d.has_isobaric()) out.push_back(error_over("eps_v", m.ev, d.ev, d.hw_ev, isob));
   out.push_back(error_over("s_dev_signed", m.s, d.s, d.hw_s, all));
   out.push_back(error_over("F_dev_signed", m.F, d.F, d.hw_F, all));
+  // Where the path starts as forward constant-volume shear (a D2 run) and then turns: the same
+  // errors over the rows after the first turn only (what D2 cannot have told the model).
+  std::size_t prefix = 0;
+  while (prefix + 1 < n && d.direction[prefix + 1] > 0 && !d.isobaric[prefix + 1]) ++prefix;
+  if (prefix > 0 && prefix + 1 < n) {
+    std::vector<bool> after(n, false), after_vol(n, false);
+    for (std::size_t i = prefix + 1; i < n; ++i) { after[i] = true; after_vol[i] = !d.isobaric[i]; }
+    if (d.has_volume()) out.push_back(error_over("p_star (after turn)", m.p, d.p, d.hw_p, after_vol));
+    out.push_back(error_over("s_dev_signed (after turn)", m.s, d.s, d.hw_s, after));
+    out.push_back(error_over("F_dev_signed (after turn)", m.F, d.F, d.hw_F, after));
+  }
   return out;
 }
 
