@@ -102,6 +102,13 @@ void check_path(const PathData& d) {
                                 " rows; need at least 6");
   if (std::fabs(d.acc.front()) > 1e-12)
     throw std::invalid_argument("model calibration: " + d.source + " does not start at eps_d_accumulated = 0");
+  const std::size_t n = d.acc.size();
+  for (const auto* v : {&d.p, &d.ev, &d.s, &d.F, &d.se_p, &d.se_ev, &d.se_s, &d.se_F})
+    if (v->size() != n)
+      throw std::invalid_argument("model calibration: " + d.source + ": a column has " + std::to_string(v->size()) +
+                                  " rows, eps_d_accumulated " + std::to_string(n));
+  if (d.direction.size() != n || d.isobaric.size() != n || d.nu_m.size() != n)
+    throw std::invalid_argument("model calibration: " + d.source + ": direction/isobaric/nu_mean columns do not match the rows");
   if (!(d.p.front() > 0) || !(d.nu > 0))
     throw std::invalid_argument("model calibration: " + d.source + " starts with p* <= 0 or nu <= 0");
   for (std::size_t i = 1; i < d.acc.size(); ++i)
