@@ -4,6 +4,9 @@
                               (shaded) and the model (fitted mode solid, predicted modes dashed)
                               for every nu, one panel per mode
   model_paths.png/.svg        the model-only paths (undrained cyclic shear, isobaric D2)
+  model_path_<name>.png/.svg  DEM path ensembles (reversal, isobaric, cyclic; curves/paths/) against
+                              the model: p* (eps_v where p was held), s_dev and F_dev signed along
+                              the first loading direction, against the accumulated eps_d
 
     python3 -m demkit.model_plots OUT_DIR
 """
@@ -93,6 +96,46 @@ def plot_paths(out):
     return save(fig, os.path.join(out, "model_paths"))
 
 
+def plot_dem_paths(out):
+    files = sorted(glob.glob(os.path.join(out, "curves", "paths", "*_phi*.csv")))
+    groups = {}
+    for f in files:
+        m = re.search(r"([A-Za-z0-9_]+)_phi([0-9.]+)\.csv$", os.path.basename(f))
+        if m:
+            groups.setdefault(m.group(1), []).append((float(m.group(2)), f))
+    written = []
+    cmap = plt.get_cmap("viridis")
+    for name, items in sorted(groups.items()):
+        items.sort()
+        fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+        first = read_curve(items[0][1])
+        isobaric = max(first["isobaric"]) > 0.5
+        qs = (("eps_v" if isobaric else "p_star", r"$\varepsilon_v$ (extension > 0: dilatancy)" if isobaric else "p*"),
+              ("s_dev", r"$s_{dev}$ signed"), ("F_dev", r"$F_{dev}$ signed"))
+        for i, (nu, f) in enumerate(items):
+            c = read_curve(f)
+            with open(f) as fh:
+                role = "fitted" if "(fitted)" in fh.readline() else "predicted"
+            color = cmap(0.85 * i / max(1, len(items) - 1))
+            x = c["eps_d_accumulated"]
+            for ax, (q, label) in zip(axes, qs):
+                ax.fill_between(x, c[q + "_lo95"], c[q + "_hi95"], color=color, alpha=0.25, lw=0)
+                ax.plot(x, c[q + "_mean"], color=color, lw=0.8, alpha=0.7)
+                ax.plot(x, c[q + "_model"], "-" if role == "fitted" else "--", color=color, lw=1.6,
+                        label=f"ν={nu:.3f} ({role})")
+                ax.set_ylabel(label)
+        for ax in axes:
+            ax.set_xlabel(r"accumulated $\varepsilon_d$")
+            ax.grid(alpha=0.3)
+            if not isobaric:
+                ax.axhline(0, color="k", lw=0.4)
+        axes[0].set_title(f"{name}: DEM mean + 95 % band (thin, shaded), model (thick)", fontsize=9)
+        axes[-1].legend(fontsize=7)
+        fig.tight_layout()
+        written += save(fig, os.path.join(out, f"model_path_{name}"))
+    return written
+
+
 def main(argv):
     if len(argv) != 1:
         print(__doc__, file=sys.stderr)
@@ -102,7 +145,7 @@ def main(argv):
     if not curves:
         print(f"model_plots: no model curves under {out}/curves", file=sys.stderr)
         return 1
-    written = plot_quantities(out, curves) + plot_paths(out)
+    written = plot_quantities(out, curves) + plot_paths(out) + plot_dem_paths(out)
     print(f"model_plots: {len(written)} files written to {out}", file=sys.stderr)
     return 0
 

@@ -49,6 +49,20 @@ std::vector<CurveFile> find_curves(const fs::path& dir) {
   return out;
 }
 
+std::vector<CurveFile> find_paths(const fs::path& dir) {
+  static const std::regex re(R"(([A-Za-z0-9_]+)_(phi([0-9.]+))\.csv)");
+  std::vector<CurveFile> out;
+  for (auto& e : fs::directory_iterator(dir)) {
+    std::smatch m;
+    const std::string name = e.path().filename().string();
+    if (std::regex_match(name, m, re)) out.push_back({m[1], m[2], std::stod(m[3]), e.path()});
+  }
+  std::sort(out.begin(), out.end(), [](const CurveFile& a, const CurveFile& b) {
+    return a.mode != b.mode ? a.mode < b.mode : a.nu < b.nu;
+  });
+  return out;
+}
+
 std::vector<fs::path> member_dirs(const fs::path& dir) {
   std::vector<fs::path> out;
   if (!fs::is_directory(dir / "members")) return out;
@@ -69,6 +83,33 @@ fs::path member_curve(const fs::path& member, const CurveFile& c) {
   for (const fs::path& p : {member / "deviatoric" / name, member / name})
     if (fs::exists(p)) return p;
   return {};
+}
+
+fs::path member_path_curve(const fs::path& member, const CurveFile& c) {
+  const fs::path p = member / "paths" / (c.mode + "_" + c.tag + ".csv");
+  return fs::exists(p) ? p : fs::path();
+}
+
+// Leave-one-out path ensemble mean; the member file is on the ensemble's rows
+// (demkit/path_ensemble.py writes it so).
+PathData leave_one_out_path(const PathData& d, const fs::path& member_csv) {
+  const Table t = read_table(member_csv.string());
+  const auto& acc = t.column("eps_d_accumulated");
+  if (acc.size() != d.acc.size())
+    throw InputError(member_csv.string() + " has " + std::to_string(acc.size()) + " rows, the ensemble " +
+                     std::to_string(d.acc.size()) + ": rerun demkit.path_ensemble so members and means share the grid");
+  for (std::size_t i = 0; i < acc.size(); ++i)
+    if (std::fabs(acc[i] - d.acc[i]) > 1e-7)
+      throw InputError(member_csv.string() + ": row " + std::to_string(i) + " is not on the ensemble's grid");
+  PathData o = d;
+  const double K = d.packings;
+  const std::pair<const char*, std::vector<double>*> q[] = {
+      {"p_star", &o.p}, {"eps_v", &o.ev}, {"s_dev_signed", &o.s}, {"F_dev_signed", &o.F}};
+  for (auto& [name, v] : q) {
+    const auto& x = t.column(name);
+    for (std::size_t i = 0; i < v->size(); ++i) (*v)[i] = (K * (*v)[i] - x[i]) / (K - 1);
+  }
+  return o;
 }
 
 // Leave-one-out ensemble mean: (K mean - x_k)/(K - 1), member k resampled on the curve's grid.
@@ -99,7 +140,7 @@ std::string unit_of(const std::string& n) {
   return "-";
 }
 
-void write_parameter_tables(const Calibration& cal, int packings, const fs::path& out) {
+void write_parameter_tables(const Calibration& cal, int packings, const fs::path& out, const std::string& fit_label) {
   Table t({"parameter", "law", "value", "se", "se_method", "lo95", "hi95", "se_covariance", "se_jackknife", "units"});
   const bool jk = !cal.se_jackknife.empty();
   const double tq = jk ? t_quantile(0.975, packings - 1) : 1.959964;
@@ -113,8 +154,8 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   t.add_row({"chi2_per_dof", "weighted residuals of the joint fit", num(cal.chi2_dof()), "nan",
              std::to_string(cal.n_residuals) + " residuals", "nan", "nan", "nan", "nan", "-"});
   write_table_all(t, (out / "parameters").string(),
-                  "Incremental anisotropic model: joint fit of the isotropic branch and the D2 ensemble curves "
-                  "(docs/model.md); 95 % intervals: estimate -/+ t se");
+                  "Incremental anisotropic model: joint fit of the isotropic branch and the ensemble curves of " + fit_label +
+                  " (docs/model.md); 95 % intervals: estimate -/+ t se");
   std::vector<std::string> h = {"parameter"};
   for (const auto& n : cal.names) h.push_back(n);
   Table c(h);
@@ -154,6 +195,68 @@ void write_model_curve(const ModelCurve& m, const CurveData& c, const std::strin
   write_text_file(path.string(), o.str());
 }
 
+void write_path_curve(const PathPrediction& m, const PathData& d, const std::string& role, const fs::path& path) {
+  std::ostringstream o;
+  o << "# dem model: model and DEM path ensemble (" << d.packings << " packings) for the path " << d.name
+    << " from nu = " << d.nu << " (" << role << "); s_dev, F_dev signed along the first loading direction; eps_v = tr(E)/3 "
+       "(extension positive); *_lo95/_hi95: the ensemble's 95 % band; isobaric: 1 where p was held\n";
+  o << "eps_d_accumulated,eps_d_signed,isobaric,p_star_model,s_dev_model,F_dev_model,eps_v_model,nu_model";
+  for (const char* q : {"p_star", "s_dev", "F_dev", "eps_v"}) o << "," << q << "_mean," << q << "_lo95," << q << "_hi95";
+  o << "\n";
+  for (std::size_t i = 0; i < m.acc.size(); ++i) {
+    o << num(m.acc[i], 8) << "," << num(d.eps_signed[i], 8) << "," << d.isobaric[i] << "," << num(m.p[i], 8) << ","
+      << num(m.s[i], 8) << "," << num(m.F[i], 8) << "," << num(m.ev[i], 8) << "," << num(m.nu[i], 8);
+    const std::pair<const std::vector<double>*, const std::vector<double>*> q[] = {
+        {&d.p, &d.hw_p}, {&d.s, &d.hw_s}, {&d.F, &d.hw_F}, {&d.ev, &d.hw_ev}};
+    for (const auto& [v, h] : q)
+      o << "," << num((*v)[i], 8) << "," << num((*v)[i] - (*h)[i], 8) << "," << num((*v)[i] + (*h)[i], 8);
+    o << "\n";
+  }
+  write_text_file(path.string(), o.str());
+}
+
+// a_A(nu) and ln beta_p(nu) at the ensemble's volume fractions: standard errors and their
+// correlation from the covariance (and from the leave-one-out estimates where the jackknife ran).
+void write_identifiability(const Calibration& cal, const std::vector<std::vector<double>>& jack,
+                           const std::vector<double>& nus, const std::string& fit_label, const fs::path& out) {
+  const int np = static_cast<int>(cal.value.size());
+  auto cov = [&](int a, int b) { return cal.corr[a][b] * cal.se_cov[a] * cal.se_cov[b]; };
+  const int aA = kNumIso + kAnisoA, aB = kNumIso + kAnisoB, pA = kNumIso + kLnBetaPA, pB = kNumIso + kLnBetaPB;
+  Table t({"calibrated_on", "nu [-]", "a_A [-]", "se_a_A_cov", "se_a_A_jk", "ln_beta_p [ln(1/eps_d)]", "se_ln_beta_p_cov",
+           "se_ln_beta_p_jk", "corr_cov [-]", "corr_jk [-]"});
+  std::vector<double> grid = nus;
+  grid.insert(grid.begin(), cal.params.nu_ref);
+  for (std::size_t g = 0; g < grid.size(); ++g) {
+    const double d = grid[g] - cal.params.nu_ref;
+    // x = a + b d: var = C_aa + 2 d C_ab + d^2 C_bb; cov(x, y) = C_ac + d (C_ad + C_bc) + d^2 C_bd
+    const double vx = cov(aA, aA) + 2 * d * cov(aA, aB) + d * d * cov(aB, aB);
+    const double vy = cov(pA, pA) + 2 * d * cov(pA, pB) + d * d * cov(pB, pB);
+    const double cxy = cov(aA, pA) + d * (cov(aA, pB) + cov(aB, pA)) + d * d * cov(aB, pB);
+    double sx = std::nan(""), sy = std::nan(""), rj = std::nan("");
+    if (!jack.empty() && static_cast<int>(jack.front().size()) == np) {
+      const double K = jack.size();
+      std::vector<double> xs, ys;
+      for (const auto& e : jack) { xs.push_back(e[aA] + d * e[aB]); ys.push_back(e[pA] + d * e[pB]); }
+      double mx = 0, my = 0;
+      for (std::size_t k = 0; k < xs.size(); ++k) { mx += xs[k] / K; my += ys[k] / K; }
+      double sxx = 0, syy = 0, sxy = 0;
+      for (std::size_t k = 0; k < xs.size(); ++k) {
+        sxx += (xs[k] - mx) * (xs[k] - mx); syy += (ys[k] - my) * (ys[k] - my); sxy += (xs[k] - mx) * (ys[k] - my);
+      }
+      sx = std::sqrt((K - 1) / K * sxx); sy = std::sqrt((K - 1) / K * syy);
+      rj = sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : std::nan("");
+    }
+    const Local<double> L = local(cal.params.shear, grid[g], cal.params.nu_ref);
+    t.add_row({fit_label, num(grid[g], 4) + (g == 0 ? " (nu_ref)" : ""), num(L.a_A), num(std::sqrt(std::max(vx, 0.0))), num(sx),
+               num(std::log(L.beta_p)), num(std::sqrt(std::max(vy, 0.0))), num(sy),
+               num(vx > 0 && vy > 0 ? cxy / std::sqrt(vx * vy) : std::nan(""), 3), num(rj, 3)});
+  }
+  write_table_all(t, (out / "identifiability").string(),
+                  "Identifiability of the anisotropy modulus a_A and the pressure relaxation rate beta_p at each nu: "
+                  "standard errors and correlation from the covariance of the joint fit (scaled by max(1, chi2/dof)) and "
+                  "from the jackknife over packings (nan where it did not run); calibrated on " + fit_label);
+}
+
 // Paths with no DEM counterpart here: undrained cyclic shear with reversals and isobaric D2.
 void write_model_paths(const Parameters& P, const CurveData& c, const std::string& tag, const fs::path& dir) {
   const auto iso = P.iso();
@@ -182,16 +285,45 @@ int run(const ModelCommandOptions& o) {
   if (fs::exists(out / "parameters.csv") && !o.force)
     throw InputError(out.string() + " already holds model results: pass --force to overwrite, or --out another folder");
   const auto files = find_curves(dir);
+  std::vector<std::string> fit_names = o.calibrate_on.empty() ? std::vector<std::string>{o.calibrate_mode} : o.calibrate_on;
+  auto fitted = [&](const std::string& n) { return std::find(fit_names.begin(), fit_names.end(), n) != fit_names.end(); };
   std::vector<CurveData> fit_curves, other;
   std::vector<CurveFile> fit_files, other_files;
+  std::vector<std::string> known;
   for (const auto& f : files) {
     CurveData c = read_curve(f.path.string(), f.mode, f.nu);
-    if (f.mode == o.calibrate_mode) { fit_curves.push_back(c); fit_files.push_back(f); }
+    known.push_back(f.mode);
+    if (fitted(f.mode)) { fit_curves.push_back(c); fit_files.push_back(f); }
     else { other.push_back(c); other_files.push_back(f); }
   }
   if (fit_curves.empty())
-    throw InputError("no " + o.calibrate_mode + "_phiX.csv under " + (dir / "ensemble").string() +
-                     ": run the ensemble with mode " + o.calibrate_mode + " (or pick another with --calibrate-mode)");
+    throw InputError("no ensemble curve of the fitted modes (" + o.calibrate_mode + ", --calibrate-on) under " +
+                     (dir / "ensemble").string() + ": run the ensemble with mode D2 (or pick another with --calibrate-mode); "
+                     "paths alone cannot be the calibration, a monotone mode gives the start values");
+  // Path ensembles (demkit/path_ensemble.py): --paths, or DIR/paths when it exists.
+  fs::path paths_dir = o.paths.empty() ? dir / "paths" : fs::path(o.paths);
+  if (!o.paths.empty() && !fs::is_directory(paths_dir))
+    throw InputError("--paths " + o.paths + " is not a folder: give the output of `python3 -m demkit.path_ensemble` "
+                     "(PATH_phiX.csv files)");
+  std::vector<PathData> fit_paths, other_paths;
+  std::vector<CurveFile> fit_path_files, other_path_files;
+  if (fs::is_directory(paths_dir)) {
+    const auto pf = find_paths(paths_dir);
+    if (pf.empty() && !o.paths.empty())
+      throw InputError("--paths " + o.paths + " holds no PATH_phiX.csv (path ensembles of `python3 -m demkit.path_ensemble`)");
+    for (const auto& f : pf) {
+      PathData d = read_path(f.path.string(), f.mode, f.nu);
+      known.push_back(f.mode);
+      if (fitted(f.mode)) { fit_paths.push_back(d); fit_path_files.push_back(f); }
+      else { other_paths.push_back(d); other_path_files.push_back(f); }
+    }
+  }
+  for (const auto& n : fit_names)
+    if (std::find(known.begin(), known.end(), n) == known.end())
+      throw InputError("--calibrate-on " + n + ": no ensemble curve " + n + "_phiX.csv under " + (dir / "ensemble").string() +
+                       " nor path ensemble under " + paths_dir.string());
+  std::string fit_label;
+  for (const auto& n : fit_names) fit_label += (fit_label.empty() ? "" : "+") + n;
   const auto members = member_dirs(dir);
   std::vector<std::string> iso_files = o.isotropic;
   if (iso_files.empty())
@@ -206,11 +338,11 @@ int run(const ModelCommandOptions& o) {
 
   CalibrationOptions co;
   co.eps_max = o.eps_max;
-  std::cerr << "dem model: fitting " << fit_curves.size() << " " << o.calibrate_mode << " curves and "
-            << iso.nu.size() << " isotropic points\n";
+  std::cerr << "dem model: fitting " << fit_curves.size() << " mode curves, " << fit_paths.size() << " path curves ("
+            << fit_label << ") and " << iso.nu.size() << " isotropic points\n";
   Calibration cal;
   try {
-    cal = calibrate(fit_curves, iso, co);
+    cal = calibrate(fit_curves, iso, co, fit_paths);
   } catch (const std::invalid_argument& e) {
     throw InputError(e.what());
   }
@@ -219,16 +351,20 @@ int run(const ModelCommandOptions& o) {
   // Jackknife over packings: the same fit with each packing left out of every mean curve and
   // of the isotropic branch.
   const int K = fit_curves.front().packings;
+  std::vector<std::vector<double>> jack_est;   // leave-one-out estimates (for the jackknife correlations)
   if (o.jackknife && K >= 2) {
     bool complete = static_cast<int>(members.size()) == K;
     for (const auto& c : fit_curves) complete = complete && c.packings == K;
     for (std::size_t j = 0; complete && j < fit_files.size(); ++j)
       for (const auto& m : members) complete = complete && !member_curve(m, fit_files[j]).empty();
+    for (const auto& d : fit_paths) complete = complete && d.packings == K;
+    for (std::size_t j = 0; complete && j < fit_path_files.size(); ++j)
+      for (const auto& m : members) complete = complete && !member_path_curve(m, fit_path_files[j]).empty();
     if (!complete) {
       cal.warnings.push_back("jackknife skipped: DIR/members does not hold the " + std::to_string(K) +
                              " member curves of every fitted mean; errors from the covariance instead");
     } else {
-      std::vector<std::vector<double>> est;
+      std::vector<std::vector<double>>& est = jack_est;
       CalibrationOptions cj = co;
       cj.start = &cal.params;
       for (int k = 0; k < K; ++k) {
@@ -238,7 +374,10 @@ int run(const ModelCommandOptions& o) {
         std::vector<std::string> iso_k;
         const std::string own = unloading_of(members[k]).string();
         for (const auto& f : iso_files) if (f != own) iso_k.push_back(f);
-        const Calibration ck = calibrate(loo, read_isotropic(iso_k), cj);
+        std::vector<PathData> loo_paths;
+        for (std::size_t j = 0; j < fit_paths.size(); ++j)
+          loo_paths.push_back(leave_one_out_path(fit_paths[j], member_path_curve(members[k], fit_path_files[j])));
+        const Calibration ck = calibrate(loo, read_isotropic(iso_k), cj, loo_paths);
         est.push_back(ck.value);
         std::cerr << "dem model: jackknife " << k + 1 << "/" << K << " (" << members[k].filename().string()
                   << " left out): chi2/dof = " << num(ck.chi2_dof(), 4) << "\n";
@@ -254,7 +393,7 @@ int run(const ModelCommandOptions& o) {
   }
 
   fs::create_directories(out / "curves");
-  write_parameter_tables(cal, K, out);
+  write_parameter_tables(cal, K, out, fit_label);
   std::vector<double> nus;
   for (const auto& c : fit_curves) nus.push_back(c.nu);
   write_laws_table(cal.params, nus, out);
@@ -274,10 +413,27 @@ int run(const ModelCommandOptions& o) {
   };
   for (std::size_t j = 0; j < fit_curves.size(); ++j) evaluate(fit_curves[j], fit_files[j], "fitted");
   for (std::size_t j = 0; j < other.size(); ++j) evaluate(other[j], other_files[j], "predicted");
+  auto evaluate_path = [&](const PathData& d, const CurveFile& f, const std::string& role) {
+    const PathPrediction m = predict_path(cal.params, d);
+    fs::create_directories(out / "curves" / "paths");
+    write_path_curve(m, d, role, out / "curves" / "paths" / (f.mode + "_" + f.tag + ".csv"));
+    for (const auto& e : path_errors(m, d)) {
+      if (e.n == 0) continue;
+      pred.add_row({d.name, num(d.nu, 4), role, e.quantity, std::to_string(e.n), num(e.rms, 4), num(e.max_abs, 4),
+                    num(e.bias, 4), num(e.band, 4), num(e.rms_over_band, 3), num(e.max_over_band, 3), num(e.frac_in_band, 3)});
+      std::cerr << "dem model: " << d.name << " nu=" << num(d.nu, 4) << " " << role << " " << e.quantity << ": rms "
+                << num(e.rms, 3) << " = " << num(e.rms_over_band, 3) << " band, max " << num(e.max_over_band, 3)
+                << " band, in band " << num(100 * e.frac_in_band, 3) << " %\n";
+    }
+  };
+  for (std::size_t j = 0; j < fit_paths.size(); ++j) evaluate_path(fit_paths[j], fit_path_files[j], "fitted");
+  for (std::size_t j = 0; j < other_paths.size(); ++j) evaluate_path(other_paths[j], other_path_files[j], "predicted");
   write_table_all(pred, (out / "prediction").string(),
                   "Model against the DEM ensemble mean per mode, nu and quantity: RMS, max and mean (bias) of "
                   "model - DEM over eps_d > 0, in the quantity's units and relative to the mean 95 % band half-width; "
-                  "role: fitted (calibration curves) or predicted (not fitted)");
+                  "role: fitted (calibration curves) or predicted (not fitted); paths: s_dev, F_dev signed along the first "
+                  "loading direction, p_star on constant-volume rows, eps_v (= tr E/3) on isobaric rows; calibrated on " + fit_label);
+  write_identifiability(cal, jack_est, nus, fit_label, out);
   for (std::size_t j = 0; j < fit_curves.size(); ++j) write_model_paths(cal.params, fit_curves[j], fit_files[j].tag, out / "curves");
 
   for (const auto& w : cal.warnings) std::cerr << "dem model: warning: " << w << "\n";
@@ -297,6 +453,9 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
   app.add_option("--out", o.out, "output folder (default DIR/model)");
   app.add_option("--isotropic", o.isotropic, "unloading-branch curves (default DIR/members/*/[prep/]cycle_unloading.csv)");
   app.add_option("--calibrate-mode", o.calibrate_mode, "mode whose curves are fitted; all others are predicted");
+  app.add_option("--paths", o.paths, "path ensembles PATH_phiX.csv of demkit.path_ensemble (default DIR/paths if it exists)");
+  app.add_option("--calibrate-on", o.calibrate_on, "modes and paths fitted, comma-separated (e.g. D2,reversal,isobaric; "
+                 "default: --calibrate-mode); all others are predicted")->delimiter(',');
   app.add_option("--eps-max", o.eps_max, "fit and compare only eps_d <= this [-]");
   app.add_flag("--no-jackknife{false}", o.jackknife, "errors from the covariance only (faster)");
   app.add_flag("--no-plots", o.no_plots, "skip the matplotlib plots");

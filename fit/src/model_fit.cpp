@@ -77,6 +77,45 @@ struct IsoResidual {
   }
 };
 
+// One path ensemble: per row, (p* or eps_v, s, F) residuals; p* on rows at prescribed volume,
+// eps_v (= tr E / 3) on rows where p was held; row 0 is the start state (residual 0).
+struct PathResidual {
+  std::vector<double> acc, p, ev, s, F, w1, ws, wF;
+  std::vector<int> direction, isobaric;
+  double nu0, p0, s0, F0, nu_ref, max_step;
+  template <class T>
+  bool operator()(T const* const* par, T* r) const {
+    const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step);
+    const std::size_t n = acc.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      r[i] = isobaric[i] ? (st[i].eps_vol / T(3.0) - T(ev[i])) * T(w1[i]) : (st[i].state.p - T(p[i])) * T(w1[i]);
+      r[n + i] = (st[i].state.s - T(s[i])) * T(ws[i]);
+      r[2 * n + i] = (st[i].state.F - T(F[i])) * T(wF[i]);
+    }
+    return true;
+  }
+};
+
+void check_path(const PathData& d) {
+  if (d.acc.size() < 6)
+    throw std::invalid_argument("model calibration: " + d.source + " has " + std::to_string(d.acc.size()) +
+                                " rows; need at least 6");
+  if (std::fabs(d.acc.front()) > 1e-12)
+    throw std::invalid_argument("model calibration: " + d.source + " does not start at eps_d_accumulated = 0");
+  const std::size_t n = d.acc.size();
+  for (const auto* v : {&d.p, &d.ev, &d.s, &d.F, &d.se_p, &d.se_ev, &d.se_s, &d.se_F})
+    if (v->size() != n)
+      throw std::invalid_argument("model calibration: " + d.source + ": a column has " + std::to_string(v->size()) +
+                                  " rows, eps_d_accumulated " + std::to_string(n));
+  if (d.direction.size() != n || d.isobaric.size() != n || d.nu_m.size() != n)
+    throw std::invalid_argument("model calibration: " + d.source + ": direction/isobaric/nu_mean columns do not match the rows");
+  if (!(d.p.front() > 0) || !(d.nu > 0))
+    throw std::invalid_argument("model calibration: " + d.source + " starts with p* <= 0 or nu <= 0");
+  for (std::size_t i = 1; i < d.acc.size(); ++i)
+    if (d.acc[i] < d.acc[i - 1])
+      throw std::invalid_argument("model calibration: " + d.source + ": eps_d_accumulated decreases at row " + std::to_string(i));
+}
+
 CurveData truncated(const CurveData& c, double eps_max) {
   CurveData t = c;
   std::size_t n = 0;
@@ -188,7 +227,43 @@ IsoData read_isotropic(const std::vector<std::string>& paths) {
   return d;
 }
 
-Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o) {
+bool PathData::has_isobaric() const {
+  return std::any_of(isobaric.begin(), isobaric.end(), [](int v) { return v != 0; });
+}
+bool PathData::has_volume() const {
+  for (std::size_t i = 1; i < isobaric.size(); ++i)
+    if (!isobaric[i]) return true;
+  return false;
+}
+
+PathData read_path(const std::string& path, const std::string& name, double nu) {
+  const Table t = read_table(path);
+  PathData d;
+  d.name = name; d.nu = nu; d.source = path;
+  d.acc = t.column("eps_d_accumulated");
+  d.eps_signed = t.column("eps_d_signed");
+  for (double v : t.column("direction")) d.direction.push_back(static_cast<int>(std::lround(v)));
+  for (double v : t.column("isobaric")) d.isobaric.push_back(static_cast<int>(std::lround(v)));
+  const auto& n = t.column("n_packings");
+  d.packings = n.empty() ? 0 : static_cast<int>(n.front());
+  d.nu_m = t.column("nu_mean");
+  const std::pair<const char*, std::vector<double>*> mean[] = {
+      {"eps_v", &d.ev}, {"p_star", &d.p}, {"s_dev_signed", &d.s}, {"F_dev_signed", &d.F}};
+  std::vector<double>* se[] = {&d.se_ev, &d.se_p, &d.se_s, &d.se_F};
+  std::vector<double>* hw[] = {&d.hw_ev, &d.hw_p, &d.hw_s, &d.hw_F};
+  for (std::size_t k = 0; k < 4; ++k) {
+    *mean[k].second = t.column(std::string(mean[k].first) + "_mean");
+    *se[k] = t.column(std::string(mean[k].first) + "_se");
+    const auto& hi = t.column(std::string(mean[k].first) + "_hi95");
+    hw[k]->resize(hi.size());
+    for (std::size_t i = 0; i < hi.size(); ++i) (*hw[k])[i] = hi[i] - (*mean[k].second)[i];
+  }
+  if (!d.nu_m.empty() && std::isfinite(d.nu_m.front())) d.nu = d.nu_m.front();
+  return d;
+}
+
+Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
+                      const std::vector<PathData>& paths) {
   init_glog();
   if (curves_in.empty()) throw std::invalid_argument("model calibration: no curves to fit (need D2 ensemble curves)");
   if (o.fit_isotropic && iso.nu.size() < 8)
@@ -220,6 +295,37 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     cost->SetNumResiduals(3 * static_cast<int>(c.eps.size()));
     problem.AddResidualBlock(cost, nullptr, isob.data(), shear.data());
     n_res += 3 * static_cast<int>(c.eps.size());
+  }
+  for (const auto& d : paths) {
+    check_path(d);
+    const std::size_t n = d.acc.size();
+    // sigma of the first residual: the SE of p* over the constant-volume rows, of eps_v over
+    // the isobaric rows (each floored at 0.25 x its own median), row by row.
+    std::vector<double> sp, sv;
+    for (std::size_t i = 1; i < n; ++i) {
+      if (d.isobaric[i]) sv.push_back(d.se_ev[i]);
+      else sp.push_back(d.se_p[i]);
+    }
+    std::vector<double> w1(n, 0.0);
+    const std::vector<double> wp = sp.empty() ? std::vector<double>() : weights(sp, o.se_floor, d.source + " p_star");
+    const std::vector<double> wv = sv.empty() ? std::vector<double>() : weights(sv, o.se_floor, d.source + " eps_v");
+    for (std::size_t i = 1, a = 0, b = 0; i < n; ++i) w1[i] = d.isobaric[i] ? wv[b++] : wp[a++];
+    w1[0] = 0.0;
+    std::vector<double> ws = weights(d.se_s, o.se_floor, d.source + " s_dev_signed");
+    std::vector<double> wF = weights(d.se_F, o.se_floor, d.source + " F_dev_signed");
+    std::size_t prefix = 0;   // rows 1..prefix: forward constant-volume shear from the start (a D2 run)
+    if (o.skip_d2_prefix)
+      while (prefix + 1 < n && d.direction[prefix + 1] > 0 && !d.isobaric[prefix + 1]) ++prefix;
+    for (std::size_t i = 1; i <= prefix; ++i) w1[i] = ws[i] = wF[i] = 0.0;
+    auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, ws, wF, d.direction, d.isobaric,
+                               d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
+    cost->AddParameterBlock(kNumIso);
+    cost->AddParameterBlock(kNumShear);
+    cost->SetNumResiduals(3 * static_cast<int>(n));
+    problem.AddResidualBlock(cost, nullptr, isob.data(), shear.data());
+    n_res += 3 * static_cast<int>(n - 1 - prefix);   // weighted rows only
+    for (double v : d.nu_m) numin = std::min(numin, v);
   }
   if (o.fit_isotropic) {
     // Weights: the scatter of the branch about the isotropic laws fitted alone (reduced chi2 = 1
@@ -379,6 +485,71 @@ std::vector<PredictionError> prediction_errors(const ModelCurve& m, const CurveD
     e.max_over_band = e.band > 0 ? e.max_abs / e.band : kNaN;
     e.frac_in_band = static_cast<double>(in) / e.n;
     out.push_back(e);
+  }
+  return out;
+}
+
+PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step) {
+  if (d.acc.empty() || std::fabs(d.acc.front()) > 1e-12)
+    throw std::invalid_argument("model prediction: " + d.source + " does not start at eps_d_accumulated = 0");
+  const std::vector<double> iso = params.iso();
+  const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
+                                         d.F.front(), d.acc, d.direction, d.isobaric, max_step);
+  PathPrediction m;
+  m.acc = d.acc;
+  for (const auto& r : st) {
+    m.p.push_back(r.state.p); m.s.push_back(r.state.s); m.F.push_back(r.state.F);
+    m.nu.push_back(std::exp(r.state.ln_nu)); m.ev.push_back(r.eps_vol / 3.0);
+  }
+  return m;
+}
+
+namespace {
+PredictionError error_over(const char* name, const std::vector<double>& model, const std::vector<double>& dem,
+                           const std::vector<double>& hw, const std::vector<bool>& use) {
+  PredictionError e;
+  e.quantity = name;
+  double ss = 0, hws = 0, bias = 0;
+  int in = 0;
+  for (std::size_t i = 1; i < model.size() && i < dem.size(); ++i) {
+    if (!use[i]) continue;
+    const double d = model[i] - dem[i];
+    ss += d * d; bias += d;
+    e.max_abs = std::max(e.max_abs, std::fabs(d));
+    hws += hw[i];
+    if (std::fabs(d) <= hw[i]) ++in;
+    ++e.n;
+  }
+  if (e.n == 0) return e;
+  e.rms = std::sqrt(ss / e.n);
+  e.bias = bias / e.n;
+  e.band = hws / e.n;
+  e.rms_over_band = e.band > 0 ? e.rms / e.band : kNaN;
+  e.max_over_band = e.band > 0 ? e.max_abs / e.band : kNaN;
+  e.frac_in_band = static_cast<double>(in) / e.n;
+  return e;
+}
+}  // namespace
+
+std::vector<PredictionError> path_errors(const PathPrediction& m, const PathData& d) {
+  std::vector<PredictionError> out;
+  const std::size_t n = d.acc.size();
+  std::vector<bool> all(n, true), vol(n), isob(n);
+  for (std::size_t i = 0; i < n; ++i) { vol[i] = !d.isobaric[i]; isob[i] = d.isobaric[i] != 0; }
+  if (d.has_volume()) out.push_back(error_over("p_star", m.p, d.p, d.hw_p, vol));
+  if (d.has_isobaric()) out.push_back(error_over("eps_v", m.ev, d.ev, d.hw_ev, isob));
+  out.push_back(error_over("s_dev_signed", m.s, d.s, d.hw_s, all));
+  out.push_back(error_over("F_dev_signed", m.F, d.F, d.hw_F, all));
+  // Where the path starts as forward constant-volume shear (a D2 run) and then turns: the same
+  // errors over the rows after the first turn only (what D2 cannot have told the model).
+  std::size_t prefix = 0;
+  while (prefix + 1 < n && d.direction[prefix + 1] > 0 && !d.isobaric[prefix + 1]) ++prefix;
+  if (prefix > 0 && prefix + 1 < n) {
+    std::vector<bool> after(n, false), after_vol(n, false);
+    for (std::size_t i = prefix + 1; i < n; ++i) { after[i] = true; after_vol[i] = !d.isobaric[i]; }
+    if (d.has_volume()) out.push_back(error_over("p_star (after turn)", m.p, d.p, d.hw_p, after_vol));
+    out.push_back(error_over("s_dev_signed (after turn)", m.s, d.s, d.hw_s, after));
+    out.push_back(error_over("F_dev_signed (after turn)", m.F, d.F, d.hw_F, after));
   }
   return out;
 }

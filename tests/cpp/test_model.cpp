@@ -2,6 +2,7 @@
 // calibration against synthetic ensembles made by the model with known parameters.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <random>
 #include <stdexcept>
@@ -328,4 +329,191 @@ TEST(ModelFit, BadInputIsRefusedWithTheFix) {
   }
   EXPECT_THROW(calibrate({}, {}, o), std::invalid_argument);
   EXPECT_THROW(calibrate(S.mean, {}, CalibrationOptions{}), std::invalid_argument);   // no isotropic branch
+}
+
+// ---- Paths given row by row (integrate_rows), as the DEM path ensembles are sampled ----
+
+namespace {
+
+struct Rows {
+  std::vector<double> acc;
+  std::vector<int> dir, isob;
+};
+
+// Constant-volume (or isobaric) D2 to `turn`, then reversed to `end` of accumulated strain
+// (turn = end: monotone), rows every h, the turning point a row.
+Rows rows_of(double turn, double end, double h, bool isobaric) {
+  Rows r;
+  const int n1 = static_cast<int>(std::lround(turn / h)), n2 = static_cast<int>(std::lround((end - turn) / h));
+  for (int i = 0; i <= n1; ++i) { r.acc.push_back(turn * i / n1); r.dir.push_back(1); r.isob.push_back(isobaric); }
+  for (int i = 1; i <= n2; ++i) { r.acc.push_back(turn + (end - turn) * i / n2); r.dir.push_back(-1); r.isob.push_back(isobaric); }
+  return r;
+}
+
+// Excess pressure q(e) = p - k p_ref at constant volume for dq/de = sigma a B F(e) - beta_p q,
+// F(e) = sigma F_max + (F0 - sigma F_max) e^{-beta_F e}: the linear ODE's closed form.
+double excess(double q0, double F0, double sigma, double aB, double Fm, double bF, double bp, double e) {
+  return q0 * std::exp(-bp * e) + aB * Fm * (1 - std::exp(-bp * e)) / bp +
+         sigma * aB * (F0 - sigma * Fm) * (std::exp(-bF * e) - std::exp(-bp * e)) / (bp - bF);
+}
+
+}  // namespace
+
+// Rows and segments are the same integration; after a reversal at constant volume the pressure
+// follows the closed form with F relaxing from its reversal value towards -F_max: the
+// anisotropy term first pushes p down (A = a_A B F > 0 against a negative strain increment)
+// and up again once F has changed sign.
+TEST(Model, RowPathReversalMatchesClosedForm) {
+  const Parameters P = truth();
+  const auto iso = P.iso();
+  const double nu = 0.70, p0 = 1.02 * isotropic_pressure(iso.data(), nu), F0 = 0.005;
+  const Rows r = rows_of(0.15, 0.45, 0.003, false);
+  const auto rows = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.01, F0, r.acc, r.dir, r.isob);
+  const auto seg = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.01, F0, {shear_seg(0.15, 50), shear_seg(-0.3, 100)});
+  ASSERT_EQ(rows.size(), seg.size());
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    // the same integration; ceil(dl/max_step) may differ by one step where dl/max_step rounds: RK4 truncation
+    EXPECT_NEAR(rows[i].state.p, seg[i].state.p, 1e-8 * p0);
+    EXPECT_NEAR(rows[i].state.s, seg[i].state.s, 1e-8);
+    EXPECT_NEAR(rows[i].state.F, seg[i].state.F, 1e-8);
+  }
+  const double p_ref = isotropic_pressure(iso.data(), nu), k = p0 / p_ref;
+  const Local<double> L = local(P.shear, nu, P.nu_ref);
+  const double aB = L.a_A * k * bulk_modulus(iso.data(), nu);
+  const std::size_t ir = 50;   // the reversal row
+  const double q_r = rows[ir].state.p - k * p_ref, F_r = rows[ir].state.F;
+  EXPECT_NEAR(q_r, excess(p0 - k * p_ref, F0, 1.0, aB, L.F_max, L.beta_F, L.beta_p, 0.15), 1e-9 * p0);
+  double pmin = rows[ir].state.p;
+  for (std::size_t i = ir; i < rows.size(); ++i) {
+    const double e = r.acc[i] - 0.15;
+    EXPECT_NEAR(rows[i].state.p, k * p_ref + excess(q_r, F_r, -1.0, aB, L.F_max, L.beta_F, L.beta_p, e), 1e-9 * p0) << e;
+    pmin = std::min(pmin, rows[i].state.p);
+  }
+  if (L.a_A > 0) EXPECT_LT(pmin, rows[ir].state.p - 1e-3 * p0) << "a_A > 0: the pressure dips after the reversal";
+}
+
+// Isobaric rows hold p exactly and reach the critical state the pressure equation sets:
+// a_A(nu) B(nu) F_max(nu) = beta_p(nu) (p0 - k p_iso(nu)) (no volume change), s -> s_max(nu).
+TEST(Model, IsobaricRowsReachTheirCriticalState) {
+  const Parameters P = truth();
+  const auto iso = P.iso();
+  for (double nu0 : {0.70, 0.80}) {
+    const double p0 = isotropic_pressure(iso.data(), nu0);
+    const double k = 1.0;
+    const Rows r = rows_of(3.0, 3.0, 0.01, true);
+    const auto rows = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.0, 0.0, r.acc, r.dir, r.isob);
+    for (const auto& q : rows) EXPECT_NEAR(q.state.p, p0, 1e-12 * p0);
+    const double nu = std::exp(rows.back().state.ln_nu);
+    const Local<double> L = local(P.shear, nu, P.nu_ref);
+    const double lhs = L.a_A * k * bulk_modulus(iso.data(), nu) * L.F_max;
+    const double rhs = L.beta_p * (p0 - k * isotropic_pressure(iso.data(), nu));
+    EXPECT_NEAR(lhs, rhs, 1e-6 * std::fabs(lhs) + 1e-12) << nu0;
+    EXPECT_NEAR(rows.back().state.s, L.s_max, 1e-6);
+    EXPECT_NEAR(rows.back().eps_vol, -std::log(nu / nu0), 1e-12);   // the full volumetric strain
+    EXPECT_EQ(rows.back().eps_vol > 0, L.a_A > 0) << "dilatancy iff a_A > 0";
+  }
+}
+
+namespace {
+
+// A synthetic path ensemble: K members of the model along `r` plus AR(1) noise on p* (or eps_v
+// on isobaric rows), s and F; means, SEs and 95 % half-widths as demkit.path_ensemble writes them.
+PathData synthetic_path(const Parameters& P, const std::string& name, double nu, const Rows& r, int K, double rho,
+                        std::mt19937_64& rng) {
+  std::normal_distribution<double> g(0.0, 1.0);
+  const auto iso = P.iso();
+  const double p0 = isotropic_pressure(iso.data(), nu);
+  const auto st = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.01, 0.01, r.acc, r.dir, r.isob, 1e-3);
+  const std::size_t n = r.acc.size();
+  PathData d;
+  d.name = name; d.nu = nu; d.packings = K; d.source = "synthetic " + name;
+  d.acc = r.acc; d.direction = r.dir; d.isobaric = r.isob;
+  d.eps_signed.assign(n, 0.0);
+  for (auto* v : {&d.nu_m, &d.ev, &d.p, &d.s, &d.F, &d.se_ev, &d.se_p, &d.se_s, &d.se_F, &d.hw_ev, &d.hw_p, &d.hw_s, &d.hw_F})
+    v->assign(n, 0.0);
+  const double sd[4] = {0.01 * p0, 2e-4, 0.015, 0.008};   // p*, eps_v, s, F per packing
+  std::vector<std::vector<std::array<double, 4>>> mem(K, std::vector<std::array<double, 4>>(n));
+  for (int k = 0; k < K; ++k) {
+    double z[4] = {g(rng), g(rng), g(rng), g(rng)};
+    for (std::size_t i = 0; i < n; ++i) {
+      if (i > 0)
+        for (double& v : z) v = rho * v + std::sqrt(1 - rho * rho) * g(rng);
+      const double f = i == 0 ? 0.0 : 1.0;
+      mem[k][i] = {st[i].state.p + f * sd[0] * z[0], st[i].eps_vol / 3 + f * sd[1] * z[1], st[i].state.s + f * sd[2] * z[2],
+                   st[i].state.F + f * sd[3] * z[3]};
+    }
+  }
+  const double t95 = demfit::t_quantile(0.975, K - 1);
+  std::vector<double>* mv[4] = {&d.p, &d.ev, &d.s, &d.F};
+  std::vector<double>* sv[4] = {&d.se_p, &d.se_ev, &d.se_s, &d.se_F};
+  std::vector<double>* hv[4] = {&d.hw_p, &d.hw_ev, &d.hw_s, &d.hw_F};
+  for (std::size_t i = 0; i < n; ++i) {
+    d.nu_m[i] = std::exp(st[i].state.ln_nu);
+    for (int q = 0; q < 4; ++q) {
+      double m = 0, ss = 0;
+      for (int k = 0; k < K; ++k) m += mem[k][i][q] / K;
+      for (int k = 0; k < K; ++k) ss += (mem[k][i][q] - m) * (mem[k][i][q] - m);
+      (*mv[q])[i] = m;
+      (*sv[q])[i] = std::sqrt(ss / (K - 1) / K);
+      (*hv[q])[i] = t95 * (*sv[q])[i];
+    }
+  }
+  return d;
+}
+
+}  // namespace
+
+// Identifiability: from D2 alone, a_A and beta_p are pinned only through the pressure excess
+// a_A B F_max / beta_p and its onset, so their estimates are strongly correlated. Does a strain
+// reversal (A = a_A B F acting against the strain while F turns) or an isobaric test (the volume
+// change instead of the pressure) separate them? Measured on a synthetic
+// ensemble made by the model (K = 8, AR(1) noise, rho = 0.9): the correlation of the
+// coefficients a_A_a, ln_beta_p_a and the standard error of a_A_a with and without the paths;
+// the estimates recovered within the (covariance) errors.
+TEST(ModelFit, PathsNarrowButDoNotSeparateAnisotropyModulusAndPressureRelaxation) {
+  const Parameters P = truth();
+  const std::vector<double> nus = {0.69, 0.73, 0.77, 0.81};
+  const int K = 8;
+  const Synthetic S = synthetic(P, nus, K, 0.9, 11);
+  std::mt19937_64 rng(12);
+  std::vector<PathData> rev, isob;
+  for (double nu : nus) {
+    rev.push_back(synthetic_path(P, "reversal", nu, rows_of(0.15, 0.45, 0.006, false), K, 0.9, rng));
+    isob.push_back(synthetic_path(P, "isobaric", nu, rows_of(0.3, 0.3, 0.006, true), K, 0.9, rng));
+  }
+  Parameters start = P;
+  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.8 : 1.1);
+  CalibrationOptions o;
+  o.fit_isotropic = false;
+  o.nu_ref = P.nu_ref;
+  o.max_step = 1e-3;
+  o.start = &start;
+  const int a = kNumIso + kAnisoA, b = kNumIso + kLnBetaPA;
+  struct Case { const char* name; std::vector<PathData> paths; double corr = 0, se_a = 0, se_b = 0; };
+  std::vector<Case> cases = {{"D2", {}}, {"D2+reversal", rev}, {"D2+isobaric", isob}};
+  for (auto& c : cases) {
+    const Calibration cal = calibrate(S.mean, {}, o, c.paths);
+    ASSERT_TRUE(cal.ok) << c.name << ": " << cal.message;
+    c.corr = cal.corr[a][b];
+    c.se_a = cal.se_cov[a];
+    c.se_b = cal.se_cov[b];
+    std::printf("%-12s corr(a_A_a, ln_beta_p_a) = %+.3f  se(a_A_a) = %.4f  se(ln_beta_p_a) = %.4f  a_A_a = %.4f (truth %.4f)"
+                "  ln_beta_p_a = %.4f (truth %.4f)  chi2/dof %.2f\n",
+                c.name, c.corr, c.se_a, c.se_b, cal.value[a], P.shear[kAnisoA], cal.value[b], P.shear[kLnBetaPA], cal.chi2_dof());
+    // correlated noise: the covariance under-covers (docs/model.md); a generous bound
+    for (int i : {kAnisoA, kLnBetaPA})
+      EXPECT_LT(std::fabs(cal.value[kNumIso + i] - P.shear[i]), 8 * cal.se_cov[kNumIso + i]) << c.name << " " << shear_name(i);
+  }
+  // What this measures (seeded, deterministic; numbers when written): D2 alone leaves a_A and
+  // beta_p correlated (0.86); the reversal (its rows after the turn: the loading part is a D2
+  // run, which the D2 curves carry) narrows both errors by about a fifth (se(a_A_a) 0.0064 ->
+  // 0.0053) but leaves them as correlated (0.87); the isobaric path likewise (0.88). Neither
+  // path separates them within this model: after a reversal, as under constant pressure, the
+  // excess pressure (or the volume) follows an amplitude a_A B F_max / beta_p on the time scales
+  // 1/beta_p and 1/beta_F, the same combination D2 pins (docs/model.md, Identifiability).
+  EXPECT_GT(std::fabs(cases[0].corr), 0.8) << "D2 alone: a_A and beta_p strongly correlated";
+  EXPECT_GT(std::fabs(cases[1].corr), 0.8) << "the reversal does not separate them (if this fails, update docs/model.md)";
+  EXPECT_GT(std::fabs(cases[2].corr), 0.8) << "nor does the isobaric path";
+  EXPECT_LT(cases[1].se_a, 0.9 * cases[0].se_a) << "the reversal adds information on a_A";
+  EXPECT_LT(cases[1].se_b, 0.9 * cases[0].se_b) << "and on beta_p";
 }

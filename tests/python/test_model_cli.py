@@ -93,3 +93,58 @@ def test_bad_input_is_refused_with_the_fix(tmp_path, result):
     shutil.copy(src, bad / "ensemble" / "D2_phi0.750.csv")
     r = run(str(bad), "--no-plots")
     assert r.returncode == 2 and "--isotropic" in r.stderr, r.stderr
+
+
+# ---- Paths: the committed N = 1000 path ensembles (data/model_paths_qs16: 16 packings, nu = 0.69,
+# 0.74, 0.80; reversal, isobaric, cyclic; D2/D3 means, isotropic branches and D2 member curves) ----
+
+PATHS = os.path.join(ROOT, "data", "model_paths_qs16")
+
+
+@pytest.fixture(scope="module")
+def paths_result(tmp_path_factory):
+    out = str(tmp_path_factory.mktemp("model_paths"))
+    r = run(PATHS, "--out", out, "--no-jackknife", "--force", "--no-plots", "--calibrate-on", "D2,reversal")
+    assert r.returncode == 0, r.stderr
+    return out, r
+
+
+def test_paths_are_fitted_or_predicted_and_judged(paths_result):
+    out, r = paths_result
+    assert "reversal" in r.stderr and "fitting 3 mode curves, 3 path curves (D2+reversal)" in r.stderr
+    pred = rows(os.path.join(out, "prediction.csv"))
+    by = {(p["mode"], p["nu"], p["quantity"]): p for p in pred}
+    for nu in ("0.69", "0.74", "0.8"):
+        assert by[("reversal", nu, "p_star")]["role"] == "fitted"
+        assert by[("isobaric", nu, "eps_v")]["role"] == "predicted"
+        assert ("isobaric", nu, "p_star") not in by   # p is held there: eps_v is judged instead
+        for path in ("reversal", "cyclic", "isobaric"):
+            for q in ("s_dev_signed", "F_dev_signed"):
+                p = by[(path, nu, q)]
+                assert int(p["n"]) > 90 and math.isfinite(float(p["rms_over_band [-]"]))
+    # the model curve starts from the ensemble's signed start state, and holds p on isobaric rows
+    with open(os.path.join(out, "curves", "paths", "isobaric_phi0.740.csv")) as fh:
+        lines = [ln for ln in fh if not ln.startswith("#")]
+    head = lines[0].strip().split(",")
+    data = [dict(zip(head, map(float, ln.split(",")))) for ln in lines[1:]]
+    assert data[0]["s_dev_model"] == pytest.approx(data[0]["s_dev_mean"], abs=1e-7)
+    assert all(d["p_star_model"] == pytest.approx(data[0]["p_star_model"], rel=1e-9) for d in data)
+    assert data[-1]["eps_v_model"] > 0   # the model dilates at nu = 0.74 (a_A > 0), as the DEM does
+
+
+def test_identifiability_table(paths_result):
+    out, _ = paths_result
+    t = rows(os.path.join(out, "identifiability.csv"))
+    assert {r["calibrated_on"] for r in t} == {"D2+reversal"}
+    assert len(t) == 4   # nu_ref and the three volume fractions
+    for r in t:
+        assert -1 <= float(r["corr_cov [-]"]) <= 1 and float(r["se_a_A_cov"]) > 0
+
+
+def test_bad_path_options_are_refused(tmp_path):
+    r = run(PATHS, "--out", str(tmp_path / "o"), "--no-plots", "--no-jackknife", "--calibrate-on", "D2,nope")
+    assert r.returncode == 2 and "--calibrate-on nope" in r.stderr, r.stderr
+    r = run(PATHS, "--out", str(tmp_path / "o"), "--no-plots", "--no-jackknife", "--paths", str(tmp_path / "none"))
+    assert r.returncode == 2 and "--paths" in r.stderr and "not a folder" in r.stderr, r.stderr
+    r = run(PATHS, "--out", str(tmp_path / "o"), "--no-plots", "--no-jackknife", "--calibrate-on", "reversal")
+    assert r.returncode == 2 and "monotone mode" in r.stderr, r.stderr

@@ -8,6 +8,7 @@
 // positive), eps_d the deviatoric magnitude of docs/definitions.md, signed by the loading
 // direction. Everything here is templated on the scalar so that Ceres can differentiate it.
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -241,6 +242,50 @@ std::vector<Point<T>> integrate(const T* iso, const T* shear, double nu_ref, dou
       if (!vol) { acc += dl; eps_d += sigma * dl; }
       out.push_back({acc, eps_d, eps_vol, y});
     }
+  }
+  return out;
+}
+
+/// A path given row by row, as the DEM path curves are sampled: row i is reached from row i-1
+/// by |d eps_d| = acc[i] - acc[i-1] [-] in the direction direction[i] (+1 the first loading
+/// direction, -1 reversed; 0: no deviatoric strain, the row repeats the state), at constant
+/// volume (isobaric[i] == 0) or at constant pressure (isobaric[i] != 0). Segment ends (reversal
+/// points) must be rows, so that every interval is monotone. Returns the state and the full
+/// volumetric strain tr(E) since row 0 at every row (row 0: the start state (nu0, p0, s0, F0)).
+/// Throws std::invalid_argument for mismatched sizes, decreasing acc or a non-positive start.
+template <class T>
+struct RowState {
+  State<T> state;
+  T eps_vol;   ///< full volumetric strain tr(E) since row 0 [-] (extension positive)
+};
+template <class T>
+std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
+                                        double F0, const std::vector<double>& acc, const std::vector<int>& direction,
+                                        const std::vector<int>& isobaric, double max_step = 5e-4) {
+  if (acc.empty() || direction.size() != acc.size() || isobaric.size() != acc.size())
+    throw std::invalid_argument("model path rows: acc, direction and isobaric must have the same, non-zero length");
+  if (!(nu0 > 0 && p0 > 0)) throw std::invalid_argument("model path rows: initial nu and p must be positive");
+  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0))};
+  State<T> y{T(std::log(nu0)), T(p0), T(s0), T(F0)};
+  T eps_vol = T(0.0);
+  std::vector<RowState<T>> out;
+  out.reserve(acc.size());
+  out.push_back({y, eps_vol});
+  for (std::size_t i = 1; i < acc.size(); ++i) {
+    const double dl = acc[i] - acc[i - 1];
+    if (dl < 0) throw std::invalid_argument("model path rows: accumulated strain decreases at row " + std::to_string(i));
+    if (dl > 0 && direction[i] != 0) {
+      Segment seg;
+      seg.control = isobaric[i] ? Control::Isobaric : Control::Volume;
+      const double sigma = direction[i] > 0 ? 1.0 : -1.0;
+      const int sub = std::max(1, static_cast<int>(std::ceil(dl / max_step)));
+      for (int k = 0; k < sub; ++k) {
+        const State<T> y1 = rk4_step(m, y, sigma, seg, dl / sub);
+        eps_vol += y.ln_nu - y1.ln_nu;
+        y = y1;
+      }
+    }
+    out.push_back({y, eps_vol});
   }
   return out;
 }

@@ -13,6 +13,8 @@ struct ModelCommandOptions {
   std::string out;                        ///< output folder (default DIR/model)
   std::vector<std::string> isotropic;     ///< cycle_unloading.csv files (default: DIR/members/*/[prep/]cycle_unloading.csv)
   std::string calibrate_mode = "D2";      ///< the mode fitted; every other mode is predicted
+  std::string paths;                      ///< folder of path ensembles PATH_phiX.csv (default DIR/paths if it exists)
+  std::vector<std::string> calibrate_on;  ///< modes and paths fitted (default: {calibrate_mode}); the rest is predicted
   double eps_max = 1e9;                   ///< fit and compare only eps_d <= eps_max [-]
   bool jackknife = true;                  ///< errors from the jackknife over packings (needs DIR/members)
   bool no_plots = false;

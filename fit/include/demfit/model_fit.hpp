@@ -40,6 +40,9 @@ struct CalibrationOptions {
   double max_step = 5e-4;        ///< RK4 step in eps_d [-]
   bool fit_isotropic = true;     ///< false: isotropic block held at `start` (e.g. synthetic tests)
   const Parameters* start = nullptr;   ///< start values (nullptr: from per-curve saturating fits)
+  /// Paths: leave out (weight 0) the leading rows that are forward constant-volume shear from the
+  /// start, up to the first turn: a D2 run from the same packings, which the D2 curves carry.
+  bool skip_d2_prefix = true;
 };
 
 /// Result of a calibration. Parameter order: the 7 isotropic, then the 12 shear coefficients.
@@ -59,9 +62,33 @@ struct Calibration {
   const std::vector<double>& se() const { return se_jackknife.empty() ? se_cov : se_jackknife; }
 };
 
+/// An ensemble mean of a loading path (reversal, cyclic, isobaric; written by
+/// demkit/path_ensemble.py): rows on the accumulated deviatoric strain, deviators signed along
+/// the first loading direction (docs/model.md, "Paths").
+struct PathData {
+  std::string name;          ///< path name (reversal, isobaric, cyclic, ...)
+  double nu = 0;             ///< volume fraction of the start state [-]
+  int packings = 0;          ///< K
+  std::string source;        ///< file it came from
+  std::vector<double> acc;   ///< eps_d_accumulated [-], from 0, non-decreasing
+  std::vector<double> eps_signed;             ///< signed eps_d since the path start [-]
+  std::vector<int> direction, isobaric;       ///< per row: sign of the increment into it; 1 where p was held
+  std::vector<double> nu_m, ev, p, s, F;      ///< means: nu [-], eps_v = tr(E)/3 [-], p* [-], s_dev and F_dev signed [-]
+  std::vector<double> se_ev, se_p, se_s, se_F;   ///< between-packing standard errors of the means
+  std::vector<double> hw_ev, hw_p, hw_s, hw_F;   ///< 95 % band half-widths (hi95 - mean)
+  bool has_isobaric() const;                  ///< any row under pressure control
+  bool has_volume() const;                    ///< any row (after the first) at prescribed volume
+};
+
+/// Reads a path ensemble CSV; throws std::runtime_error naming the file and a missing column.
+PathData read_path(const std::string& path, const std::string& name, double nu);
+
 /// The joint fit. Throws std::invalid_argument for unusable input (no curves, too few points,
 /// curves that do not start at eps_d = 0, non-positive pressure) with a message naming the fix.
-Calibration calibrate(const std::vector<CurveData>& curves, const IsoData& iso, const CalibrationOptions& o = {});
+/// `paths`: path ensembles fitted as well (residuals of p* on constant-volume rows, eps_v on
+/// isobaric rows, s and F signed on every row; sigma as for the curves).
+Calibration calibrate(const std::vector<CurveData>& curves, const IsoData& iso, const CalibrationOptions& o = {},
+                      const std::vector<PathData>& paths = {});
 
 /// Model curves for the grid of `c` from its first row (the start state), eps_d <= eps_max.
 struct ModelCurve {
@@ -80,5 +107,15 @@ struct PredictionError {
   int n = 0;
 };
 std::vector<PredictionError> prediction_errors(const ModelCurve& m, const CurveData& c);
+
+/// The model along a path ensemble's rows from its first row (the start state, signed).
+struct PathPrediction {
+  std::vector<double> acc, p, s, F, nu, ev;   ///< as PathData; ev = eps_vol/3 (the curves' eps_v) [-]
+};
+PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4);
+
+/// Errors of a path prediction: s_dev and F_dev (signed), p_star where the volume was
+/// prescribed, eps_v where p was held (the model's dilatancy); rows after the first.
+std::vector<PredictionError> path_errors(const PathPrediction& m, const PathData& d);
 
 }  // namespace demfit::model
