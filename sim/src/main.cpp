@@ -1,4 +1,5 @@
-// dem: command-line front end. Subcommands: run, info, bench, fit, compare, plot.
+// dem: command-line front end. Each subcommand is a small struct: its options (add) and what
+// it does (run); main parses and maps exceptions to the README's exit codes.
 #include <CLI/CLI.hpp>
 
 #include <chrono>
@@ -108,289 +109,370 @@ void check_output_file(const std::string& out, bool force) {
   if (fs::exists(out) && !force) throw std::runtime_error(out + " exists: pass --force to overwrite it");
 }
 
+// Every subcommand: `add` declares it and its options on the app, `run` does it (returns the
+// exit code; throws for the codes main maps).
+struct RunCommand {
+  CLI::App* cmd = nullptr;
+  std::string scene, out, stages = "all";
+  bool force = false, quiet = false;
+  int threads = -1;
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("run", "run a scene: preparation, checkpoints, deviatoric modes");
+    cmd->add_option("scene", scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--out", out, "results folder")->required();
+    cmd->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
+    cmd->add_option("--stages", stages, "all | prep | deviatoric (deviatoric reuses DIR/checkpoints)");
+    cmd->add_option("--threads", threads, "threads (overrides integration.threads)");
+    cmd->add_flag("--force", force, "overwrite finished results in --out");
+    cmd->add_flag("--quiet", quiet, "no progress lines on stderr");
+  }
+  int run(std::vector<std::string> overrides, const std::string& command_line) const {
+    if (threads >= 0) overrides.push_back("integration.threads=" + std::to_string(threads));
+    std::string resolved;
+    dem::Model model = dem::load_scene_file(scene, overrides, &resolved);
+    dem::RunOptions o;
+    o.out_dir = out;
+    o.stages = stages;
+    o.force = force;
+    o.quiet = quiet;
+    o.scene_toml = resolved;
+    o.command_line = command_line;
+    if (!quiet) print_info(model);
+    else warn_time_step(model);
+    dem::run_protocol(model, o);
+    return 0;
+  }
+};
+
+// K packings through the Snakemake workflow.
+struct EnsembleCommand {
+  CLI::App* cmd = nullptr;
+  std::string scene, out, profile;
+  int cores = 0;
+  bool force = false;
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("ensemble", "run an ensemble scene ([ensemble] packings = K) through the Snakemake "
+                                         "workflow (workflow/Snakefile): one task per preparation and per mode; "
+                                         "run again to continue after an interruption");
+    cmd->add_option("scene", scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--out", out, "results folder")->required();
+    cmd->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
+    cmd->add_option("--cores", cores, "single-threaded tasks at once (default: all cores; with --profile: the profile's)");
+    cmd->add_option("--profile", profile, "Snakemake profile: slurm (workflow/profiles/slurm) or a folder");
+    cmd->add_flag("--force", force, "start afresh: remove the results in --out (without it a rerun continues "
+                                    "where the last one stopped, and another scene's results are refused)");
+  }
+  int run(const std::vector<std::string>& overrides) const {
+    std::string resolved;
+    dem::load_scene_file(scene, overrides, &resolved);
+    dem::prepare_ensemble_folder(out, resolved, force);
+    std::vector<std::string> args = {out, "--dem", fs::canonical("/proc/self/exe").string()};
+    if (cores > 0) args.insert(args.end(), {"--cores", std::to_string(cores)});
+    if (!profile.empty()) args.insert(args.end(), {"--profile", profile});
+    return exec_python("demkit.ensemble", args);
+  }
+};
+
+struct InfoCommand {
+  CLI::App* cmd = nullptr;
+  std::string scene;
+  bool json = false;
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates)");
+    cmd->add_option("scene", scene, "scene TOML file")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--set", overrides, "override a scene key");
+    cmd->add_flag("--json", json, "print the run plan as JSON instead: members (seeds), checkpoints, modes, "
+                                  "estimated particle-steps per task (read by workflow/Snakefile)");
+  }
+  int run(const std::vector<std::string>& overrides) const {
+    const dem::Model model = dem::load_scene_file(scene, overrides);
+    if (json) std::printf("%s", dem::plan_json(model).c_str());
+    else print_info(model);
+    return 0;
+  }
+};
+
+struct BenchCommand {
+  CLI::App* cmd = nullptr;
+  std::string packing = std::string(DEM_SOURCE_DIR) + "/data/packings/n9261_phi0.70.txt";
+  long steps = 20000;
+  int threads = 1;
+  double rate_tc = 5e-6;
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("bench", "particle-steps per second on a packing under D2");
+    cmd->add_option("--packing", packing, "YADE-format packing")->check(CLI::ExistingFile);
+    cmd->add_option("--steps", steps, "steps to time");
+    cmd->add_option("--threads", threads, "threads");
+    cmd->add_option("--rate-tc", rate_tc, "D2 strain rate times t_c");
+    cmd->add_option("--set", overrides, "override a scene key");
+  }
+  int run(std::vector<std::string> overrides) const {
+    overrides.push_back("integration.threads=" + std::to_string(threads));
+    dem::Model model = dem::load_scene("", overrides, nullptr, "bench");
+    dem::State state = dem::read_packing(packing, model.density);
+    const dem::Vec3 rate = dem::Vec3{1, 0, -1} * (rate_tc / model.t_contact);
+    dem::Engine engine(model, state);
+    for (int i = 0; i < 200; ++i) engine.step(rate);   // warm-up
+    const long builds0 = engine.neighbor_list().builds;
+    const auto t0 = std::chrono::steady_clock::now();
+    for (long i = 0; i < steps; ++i) engine.step(rate);
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const dem::Measurement m = dem::measure(model, state, engine.neighbor_list(), rate);
+    const double ps = static_cast<double>(steps) * state.count() / wall;
+    std::printf("packing %s\nN = %d, phi = %.4f, C = %.3f, threads = %d, steps = %ld\n", packing.c_str(),
+                state.count(), m.nu, m.C, engine.threads(), steps);
+    std::printf("wall %.3f s, %.3f M particle-steps/s, %.2f listed pairs per particle, %ld list rebuilds\n",
+                wall, ps / 1e6, static_cast<double>(engine.neighbor_list().pair_count()) / state.count(),
+                engine.neighbor_list().builds - builds0);
+    std::printf("particle_steps_per_s=%.6g\n", ps);
+    return 0;
+  }
+};
+
+// One deformation stage from a packing at rest (the unit of the YADE cross-check and of the
+// ensemble workflow's tasks).
+struct ModeCommand {
+  CLI::App* cmd = nullptr;
+  CLI::Option* rate_opt = nullptr;
+  CLI::Option* eps_opt = nullptr;
+  std::string scene, packing, mode = "D2", out, stage_name;
+  double rate_tc = -1, eps = -1;
+  bool force = false, quiet = false;
+  int threads = -1;
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("mode", "one deformation mode from a packing at rest, one CSV");
+    cmd->add_option("--scene", scene, "scene TOML for the physics (default: built-in defaults)")->check(CLI::ExistingFile);
+    cmd->add_option("--packing", packing, "YADE-format packing (our checkpoints/*.txt), or a checkpoint "
+                                          "(*.ckpt: bit-exact state, the curve equals `dem run`'s)")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--threads", threads, "threads (overrides integration.threads)");
+    cmd->add_option("--name", stage_name, "stage name in the CSV (default: the mode's name; `dem run` uses "
+                                          "MODE_phiX.XXX)");
+    cmd->add_option("--mode", mode, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, or a [modes] name");
+    rate_opt = cmd->add_option("--rate-tc", rate_tc, "mode rate times t_c (default: protocol.deviatoric_rate_tc)");
+    eps_opt = cmd->add_option("--eps-max", eps, "stop at this eps_d (default: protocol.eps_d_max)");
+    cmd->add_option("--out", out, "output CSV")->required();
+    cmd->add_option("--set", overrides, "override a scene key");
+    cmd->add_flag("--force", force, "overwrite an existing output CSV");
+    cmd->add_flag("--quiet", quiet, "no progress lines");
+  }
+  int run(std::vector<std::string> overrides) const {
+    if (rate_opt->count()) overrides.push_back("protocol.deviatoric_rate_tc=" + exact_number("--rate-tc", rate_tc));
+    if (eps_opt->count()) overrides.push_back("protocol.eps_d_max=" + exact_number("--eps-max", eps));
+    overrides.push_back("protocol.modes=[\"" + mode + "\"]");
+    if (threads >= 0) overrides.push_back("integration.threads=" + std::to_string(threads));
+    std::string resolved;
+    dem::Model model = scene.empty() ? dem::load_scene("", overrides, &resolved, "defaults")
+                                     : dem::load_scene_file(scene, overrides, &resolved);
+    check_output_file(out, force);
+    dem::State state = fs::path(packing).extension() == ".ckpt" ? dem::read_checkpoint(packing).state
+                                                                : dem::read_packing(packing, model.density);
+    dem::check_packing(model, state, packing);
+    const auto& m = model.protocol.modes.front();
+    const dem::StageSpec spec{stage_name.empty() ? m.name : stage_name, m.rate_shape * model.protocol.deviatoric_rate,
+                              dem::StopKind::DeviatoricStrain, model.protocol.eps_d_max, {}, 0, 0,
+                              dem::mode_definition(model, m)};
+    if (!quiet) print_info(model);
+    else warn_time_step(model);
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto steps = m.path.empty() ? dem::run_stage(model, state, spec, out, "", nullptr, quiet)
+                                      : dem::run_path(model, state, m, spec.name, out, quiet);
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    std::fprintf(stderr, "dem mode: %lld steps of %d particles in %.2f s: %.3f M particle-steps/s -> %s\n",
+                 static_cast<long long>(steps), state.count(), wall, steps * double(state.count()) / wall / 1e6,
+                 out.c_str());
+    return 0;
+  }
+};
+
+// Two-sphere collision against the closed form.
+struct CollideCommand {
+  CLI::App* cmd = nullptr;
+  double r1 = 0.5e-3, r2 = 0.5e-3, v0 = 0.1;
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("collide", "two-sphere head-on collision: contact time and restitution (JSON)");
+    cmd->add_option("--r1", r1, "radius of sphere 1 [m]");
+    cmd->add_option("--r2", r2, "radius of sphere 2 [m]");
+    cmd->add_option("--v0", v0, "approach speed [m/s]");
+    cmd->add_option("--set", overrides, "override a scene key (e.g. integration.dt_over_tc=0.0005)");
+  }
+  int run(std::vector<std::string> overrides) const {
+    overrides.insert(overrides.begin(), {"contact.background_damping_kg_s=0", "integration.threads=1"});
+    const dem::Model model = dem::load_scene("", overrides, nullptr, "collide");
+    for (auto [name, v] : {std::pair{"--r1", r1}, {"--r2", r2}, {"--v0", v0}})
+      if (!(v > 0) || !std::isfinite(v)) throw ArgumentError(std::string(name) + " must be a positive finite number");
+    // dt is t_c / dt_over_tc of the scene's smallest pair: a smaller sphere is resolved by fewer steps.
+    for (auto [name, r] : {std::pair{"--r1", r1}, {"--r2", r2}})
+      if (r < model.radius_min || r > model.radius_max)
+        throw ArgumentError(std::string(name) + " = " + std::to_string(r) + " m lies outside the scene's radius range [" +
+                            std::to_string(model.radius_min) + ", " + std::to_string(model.radius_max) + "] m, "
+                            "from which the time step is set: pass --set particles.radius_min_m=... and "
+                            "--set particles.radius_max_m=... to cover it");
+    const dem::CollisionResult r = dem::simulate_collision(model, r1, r2, v0);
+    if (r.steps_in_contact < 20 || r.max_overlap > model.max_overlap_fraction)
+      throw ArgumentError("the contact lasted " + std::to_string(r.steps_in_contact) + " time steps with an overlap of " +
+                          std::to_string(r.max_overlap) + " x the smaller radius: --v0 is too large for this stiffness "
+                          "(the spheres pass through each other, t_c and e are meaningless); lower --v0 so that the "
+                          "overlap stays well below the radius (and the contact spans >= 20 steps)");
+    const double m1 = dem::sphere_mass(r1, model.density), m2 = dem::sphere_mass(r2, model.density);
+    const dem::PairCollision a = dem::pair_collision(model.contact.stiffness, model.contact.damping, m1 * m2 / (m1 + m2));
+    std::printf("{\"t_contact_s\": %.12g, \"restitution\": %.12g, \"t_contact_analytic_s\": %.12g, "
+                "\"restitution_analytic\": %.12g, \"dt_s\": %.12g, \"allow_attractive\": %s}\n",
+                r.contact_time, r.restitution, a.t_contact, a.restitution, model.dt,
+                model.contact.allow_attractive ? "true" : "false");
+    return 0;
+  }
+};
+
+// Identifiability map of the single-curve fit (synthetic curves, CSV).
+struct FitMapCommand {
+  CLI::App* cmd = nullptr;
+  std::string out;
+  demfit::IdentifiabilitySetup setup;
+  std::vector<double> lengths{0.5, 1, 1.5, 2, 3, 5, 8, 13, 24}, noises{0.003, 0.01, 0.03, 0.1, 0.3}, rhos{0.0, 0.85};
+  bool force = false;
+  void add(CLI::App& app) {
+    setup.fit.correct_autocorrelation = true;   // as `dem fit` does by default
+    cmd = app.add_subcommand("fit-map", "identifiability map of the fit: seeded synthetic curves of known "
+                                        "parameters, fitted over a grid of curve lengths and noise levels (CSV)");
+    cmd->add_option("--out", out, "output CSV")->required();
+    cmd->add_option("--lengths", lengths, "curve lengths beta * eps_last [-] (3 = 95% saturation)");
+    cmd->add_option("--noises", noises, "noise standard deviation / amplitude |x_max - x0| [-]");
+    cmd->add_option("--correlations", rhos, "lag-1 autocorrelations of the noise, in [0, 1)");
+    cmd->add_option("--trials", setup.trials, "curves per cell");
+    cmd->add_option("--points-per-approach", setup.points_per_approach,
+                    "samples per approach strain 1/beta (8.3: sample_strain 0.002 at beta = 60)");
+    cmd->add_option("--beta", setup.beta, "true rate beta");
+    cmd->add_option("--x-max", setup.x_max, "true asymptote");
+    cmd->add_option("--x0", setup.x0, "true initial value");
+    cmd->add_option("--seed", setup.seed, "random seed (the same seed gives the same map)");
+    cmd->add_flag("--force", force, "overwrite an existing output CSV");
+  }
+  int run() const {
+    if (fs::exists(out) && !force) throw std::runtime_error(out + " exists: pass --force to overwrite it");
+    std::ostringstream csv;
+    csv << "# dem fit-map: fits of x = x_max - (x_max - x0) exp(-beta eps_d) to synthetic curves with "
+        << setup.points_per_approach << " points per 1/beta on (0, eps_last], Gaussian AR(1) noise, " << setup.trials
+        << " trials per cell, seed " << setup.seed << "\n# truth: x0 = " << setup.x0
+        << ", x_max = " << setup.x_max << ", beta = " << setup.beta
+        << "; errors relative to beta (rate) and to |x_max - x0| (asymptote); coverage = fraction of trials whose "
+           "95% interval (1.96 SE, SEs inflated for correlated residuals as in dem fit) holds the truth\n"
+           "length_beta_eps,noise_over_amplitude,noise_correlation,beta_rel_error_median,beta_rel_error_p90,"
+           "xmax_rel_error_median,beta_coverage,xmax_coverage,beta_reported_rel_se_median,flagged_fraction,unsaturated_fraction,converged\n";
+    for (double rho : rhos)
+      for (double noise : noises)
+        for (double length : lengths) {
+          demfit::IdentifiabilitySetup s = setup;
+          s.length = length; s.noise = noise; s.correlation = rho;
+          const demfit::IdentifiabilityCell c = demfit::identifiability_cell(s);
+          csv << length << "," << noise << "," << rho << "," << c.beta_rel_error_median << ","
+              << c.beta_rel_error_p90 << "," << c.xmax_rel_error_median << "," << c.beta_coverage << ","
+              << c.xmax_coverage << "," << c.beta_reported_rel_se_median << "," << c.flagged_fraction << ","
+              << c.unsaturated_fraction << "," << c.converged << "\n";
+        }
+    dem::write_file_atomic(out, csv.str());
+    std::fprintf(stderr, "dem fit-map: %zu cells -> %s\n", rhos.size() * noises.size() * lengths.size(), out.c_str());
+    return 0;
+  }
+};
+
+// Coverage of the ensemble fit's intervals on synthetic ensembles (CSV).
+struct EnsembleCoverageCommand {
+  CLI::App* cmd = nullptr;
+  std::string out;
+  demfit::EnsembleCoverageSetup setup;
+  std::vector<int> ks{2, 4, 8, 16, 32};
+  std::vector<double> lengths{3, 8}, rhos{0.85, 0.95};
+  bool force = false;
+  void add(CLI::App& app) {
+    cmd = app.add_subcommand("ensemble-coverage", "coverage of the ensemble fit's 95% intervals and the false-rejection "
+                                                  "rate of its D2/D3 test on synthetic ensembles of DEM-like curves (CSV)");
+    cmd->add_option("--out", out, "output CSV")->required();
+    cmd->add_option("--packings", ks, "ensemble sizes K")->delimiter(',');
+    cmd->add_option("--lengths", lengths, "curve lengths beta * eps_last")->delimiter(',');
+    cmd->add_option("--correlations", rhos, "lag-1 autocorrelations of the noise, in [0, 1)")->delimiter(',');
+    cmd->add_option("--noise", setup.noise, "AR(1) noise sd / amplitude");
+    cmd->add_option("--member-spread", setup.member_spread, "sd of the members' plateaus / amplitude");
+    cmd->add_option("--trials", setup.trials, "synthetic ensembles per cell");
+    cmd->add_option("--bootstrap", setup.bootstrap, "bootstrap resamples per trial (0: skip)");
+    cmd->add_option("--seed", setup.seed, "random seed");
+    cmd->add_flag("--force", force, "overwrite an existing output CSV");
+  }
+  int run() const {
+    if (fs::exists(out) && !force) throw std::runtime_error(out + " exists: pass --force to overwrite it");
+    dem::write_file_atomic(out, demfit::ensemble_coverage_csv(setup, ks, lengths, rhos));
+    return 0;
+  }
+};
+
+struct Commands {
+  RunCommand run;
+  EnsembleCommand ensemble;
+  InfoCommand info;
+  BenchCommand bench;
+  ModeCommand mode;
+  CollideCommand collide;
+  demfit::FitCommandOptions fit_opts;
+  CLI::App* fit = nullptr;
+  demfit::ModelCommandOptions model_opts;
+  CLI::App* model = nullptr;
+  FitMapCommand fit_map;
+  EnsembleCoverageCommand coverage;
+  CLI::App* compare = nullptr;
+  CLI::App* plot = nullptr;
+
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    run.add(app, overrides);
+    ensemble.add(app, overrides);
+    info.add(app, overrides);
+    bench.add(app, overrides);
+    mode.add(app, overrides);
+    collide.add(app, overrides);
+    fit = app.add_subcommand("fit", "fit the anisotropy-evolution model to a run's curves");
+    demfit::add_fit_options(*fit, fit_opts);
+    model = app.add_subcommand("model", "calibrate the incremental anisotropic model on an ensemble's D2 curves "
+                                        "and isotropic branch, predict D3 (docs/model.md)");
+    demfit::add_model_options(*model, model_opts);
+    fit_map.add(app);
+    coverage.add(app);
+    compare = app.add_subcommand("compare", "compare two curve CSVs (e.g. ours vs YADE)");
+    compare->allow_extras();
+    plot = app.add_subcommand("plot", "plot a run folder's curves (PNG/SVG)");
+    plot->allow_extras();
+  }
+
+  // The parsed subcommand's exit code.
+  int dispatch(const std::vector<std::string>& overrides, const std::string& command_line) const {
+    if (*run.cmd) return run.run(overrides, command_line);
+    if (*ensemble.cmd) return ensemble.run(overrides);
+    if (*info.cmd) return info.run(overrides);
+    if (*bench.cmd) return bench.run(overrides);
+    if (*mode.cmd) return mode.run(overrides);
+    if (*collide.cmd) return collide.run(overrides);
+    if (*fit) return demfit::run_fit_command(fit_opts);
+    if (*model) return demfit::run_model_command(model_opts);
+    if (*fit_map.cmd) return fit_map.run();
+    if (*coverage.cmd) return coverage.run();
+    if (*compare) return exec_python("demkit.compare", compare->remaining());
+    if (*plot) return exec_python("demkit.plots", plot->remaining());
+    return 0;
+  }
+};
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"dem: DEM runner, fitter and YADE cross-check for frictionless polydisperse spheres"};
   app.require_subcommand(1);
   std::vector<std::string> overrides;
-
-  // run
-  auto* run = app.add_subcommand("run", "run a scene: preparation, checkpoints, deviatoric modes");
-  std::string scene, out, stages = "all";
-  bool force = false, quiet = false;
-  int threads = -1;
-  run->add_option("scene", scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
-  run->add_option("--out", out, "results folder")->required();
-  run->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
-  run->add_option("--stages", stages, "all | prep | deviatoric (deviatoric reuses DIR/checkpoints)");
-  run->add_option("--threads", threads, "OpenMP threads (overrides integration.threads)");
-  run->add_flag("--force", force, "overwrite finished results in --out");
-  run->add_flag("--quiet", quiet, "no progress lines on stderr");
-
-  // ensemble: K packings through the Snakemake workflow
-  auto* ens = app.add_subcommand("ensemble", "run an ensemble scene ([ensemble] packings = K) through the Snakemake "
-                                             "workflow (workflow/Snakefile): one task per preparation and per mode; "
-                                             "run again to continue after an interruption");
-  std::string ens_scene, ens_out, ens_profile;
-  int ens_cores = 0;
-  bool ens_force = false;
-  ens->add_option("scene", ens_scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
-  ens->add_option("--out", ens_out, "results folder")->required();
-  ens->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
-  ens->add_option("--cores", ens_cores, "single-threaded tasks at once (default: all cores; with --profile: the profile's)");
-  ens->add_option("--profile", ens_profile, "Snakemake profile: slurm (workflow/profiles/slurm) or a folder");
-  ens->add_flag("--force", ens_force, "start afresh: remove the results in --out (without it a rerun continues "
-                                     "where the last one stopped, and another scene's results are refused)");
-
-  // info
-  auto* info = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates)");
-  std::string info_scene;
-  bool info_json = false;
-  info->add_option("scene", info_scene, "scene TOML file")->required()->check(CLI::ExistingFile);
-  info->add_option("--set", overrides, "override a scene key");
-  info->add_flag("--json", info_json, "print the run plan as JSON instead: members (seeds), checkpoints, modes, "
-                                      "estimated particle-steps per task (read by workflow/Snakefile)");
-
-  // bench
-  auto* bench = app.add_subcommand("bench", "particle-steps per second on a packing under D2");
-  std::string bench_packing = std::string(DEM_SOURCE_DIR) + "/data/packings/n9261_phi0.70.txt";
-  long bench_steps = 20000;
-  int bench_threads = 1;
-  double bench_rate_tc = 5e-6;
-  bench->add_option("--packing", bench_packing, "YADE-format packing")->check(CLI::ExistingFile);
-  bench->add_option("--steps", bench_steps, "steps to time");
-  bench->add_option("--threads", bench_threads, "OpenMP threads");
-  bench->add_option("--rate-tc", bench_rate_tc, "D2 strain rate times t_c");
-  bench->add_option("--set", overrides, "override a scene key");
-
-  // mode: one deformation stage from a packing at rest (the unit of the YADE cross-check)
-  auto* mode_cmd = app.add_subcommand("mode", "one deformation mode from a packing at rest, one CSV");
-  std::string mode_scene, mode_packing, mode_name = "D2", mode_out;
-  double mode_rate_tc = -1, mode_eps = -1;
-  bool mode_force = false, mode_quiet = false;
-  mode_cmd->add_option("--scene", mode_scene, "scene TOML for the physics (default: built-in defaults)")->check(CLI::ExistingFile);
-  int mode_threads = -1;
-  mode_cmd->add_option("--packing", mode_packing, "YADE-format packing (our checkpoints/*.txt), or a checkpoint "
-                                                   "(*.ckpt: bit-exact state, the curve equals `dem run`'s)")->required()->check(CLI::ExistingFile);
-  mode_cmd->add_option("--threads", mode_threads, "OpenMP threads (overrides integration.threads)");
-  std::string mode_stage_name;
-  mode_cmd->add_option("--name", mode_stage_name, "stage name in the CSV (default: the mode's name; `dem run` uses "
-                                                  "MODE_phiX.XXX)");
-  mode_cmd->add_option("--mode", mode_name, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, or a [modes] name");
-  auto* mode_rate_opt = mode_cmd->add_option("--rate-tc", mode_rate_tc, "mode rate times t_c (default: protocol.deviatoric_rate_tc)");
-  auto* mode_eps_opt = mode_cmd->add_option("--eps-max", mode_eps, "stop at this eps_d (default: protocol.eps_d_max)");
-  mode_cmd->add_option("--out", mode_out, "output CSV")->required();
-  mode_cmd->add_option("--set", overrides, "override a scene key");
-  mode_cmd->add_flag("--force", mode_force, "overwrite an existing output CSV");
-  mode_cmd->add_flag("--quiet", mode_quiet, "no progress lines");
-
-  // collide: two-sphere collision against the closed form
-  auto* collide = app.add_subcommand("collide", "two-sphere head-on collision: contact time and restitution (JSON)");
-  double col_r1 = 0.5e-3, col_r2 = 0.5e-3, col_v0 = 0.1;
-  collide->add_option("--r1", col_r1, "radius of sphere 1 [m]");
-  collide->add_option("--r2", col_r2, "radius of sphere 2 [m]");
-  collide->add_option("--v0", col_v0, "approach speed [m/s]");
-  collide->add_option("--set", overrides, "override a scene key (e.g. integration.dt_over_tc=0.0005)");
-
-  // fit, compare, plot
-  demfit::FitCommandOptions fit_opts;
-  auto* fit = app.add_subcommand("fit", "fit the anisotropy-evolution model to a run's curves");
-  demfit::add_fit_options(*fit, fit_opts);
-  demfit::ModelCommandOptions model_opts;
-  auto* modelcmd = app.add_subcommand("model", "calibrate the incremental anisotropic model on an ensemble's D2 curves "
-                                               "and isotropic branch, predict D3 (docs/model.md)");
-  demfit::add_model_options(*modelcmd, model_opts);
-  auto* fitmap = app.add_subcommand("fit-map", "identifiability map of the fit: seeded synthetic curves of known "
-                                                "parameters, fitted over a grid of curve lengths and noise levels (CSV)");
-  std::string map_out;
-  demfit::IdentifiabilitySetup map_setup;
-  map_setup.fit.correct_autocorrelation = true;   // as `dem fit` does by default
-  std::vector<double> map_lengths{0.5, 1, 1.5, 2, 3, 5, 8, 13, 24}, map_noises{0.003, 0.01, 0.03, 0.1, 0.3},
-      map_rhos{0.0, 0.85};
-  bool map_force = false;
-  fitmap->add_option("--out", map_out, "output CSV")->required();
-  fitmap->add_option("--lengths", map_lengths, "curve lengths beta * eps_last [-] (3 = 95% saturation)");
-  fitmap->add_option("--noises", map_noises, "noise standard deviation / amplitude |x_max - x0| [-]");
-  fitmap->add_option("--correlations", map_rhos, "lag-1 autocorrelations of the noise, in [0, 1)");
-  fitmap->add_option("--trials", map_setup.trials, "curves per cell");
-  fitmap->add_option("--points-per-approach", map_setup.points_per_approach,
-                     "samples per approach strain 1/beta (8.3: sample_strain 0.002 at beta = 60)");
-  fitmap->add_option("--beta", map_setup.beta, "true rate beta");
-  fitmap->add_option("--x-max", map_setup.x_max, "true asymptote");
-  fitmap->add_option("--x0", map_setup.x0, "true initial value");
-  fitmap->add_option("--seed", map_setup.seed, "random seed (the same seed gives the same map)");
-  fitmap->add_flag("--force", map_force, "overwrite an existing output CSV");
-  auto* ecov = app.add_subcommand("ensemble-coverage", "coverage of the ensemble fit's 95% intervals and the false-rejection "
-                                                      "rate of its D2/D3 test on synthetic ensembles of DEM-like curves (CSV)");
-  std::string ecov_out;
-  demfit::EnsembleCoverageSetup ecov_setup;
-  std::vector<int> ecov_ks{2, 4, 8, 16, 32};
-  std::vector<double> ecov_lengths{3, 8}, ecov_rhos{0.85, 0.95};
-  bool ecov_force = false;
-  ecov->add_option("--out", ecov_out, "output CSV")->required();
-  ecov->add_option("--packings", ecov_ks, "ensemble sizes K")->delimiter(',');
-  ecov->add_option("--lengths", ecov_lengths, "curve lengths beta * eps_last")->delimiter(',');
-  ecov->add_option("--correlations", ecov_rhos, "lag-1 autocorrelations of the noise, in [0, 1)")->delimiter(',');
-  ecov->add_option("--noise", ecov_setup.noise, "AR(1) noise sd / amplitude");
-  ecov->add_option("--member-spread", ecov_setup.member_spread, "sd of the members' plateaus / amplitude");
-  ecov->add_option("--trials", ecov_setup.trials, "synthetic ensembles per cell");
-  ecov->add_option("--bootstrap", ecov_setup.bootstrap, "bootstrap resamples per trial (0: skip)");
-  ecov->add_option("--seed", ecov_setup.seed, "random seed");
-  ecov->add_flag("--force", ecov_force, "overwrite an existing output CSV");
-  auto* compare = app.add_subcommand("compare", "compare two curve CSVs (e.g. ours vs YADE)");
-  compare->allow_extras();
-  auto* plot = app.add_subcommand("plot", "plot a run folder's curves (PNG/SVG)");
-  plot->allow_extras();
-
+  Commands commands;
+  commands.add(app, overrides);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 2;   // --help: 0; any bad argument: 2 (README's catalogue)
   }
-
   try {
-    if (*run) {
-      if (threads >= 0) overrides.push_back("integration.threads=" + std::to_string(threads));
-      std::string resolved;
-      dem::Model model = dem::load_scene_file(scene, overrides, &resolved);
-      dem::RunOptions o;
-      o.out_dir = out;
-      o.stages = stages;
-      o.force = force;
-      o.quiet = quiet;
-      o.scene_toml = resolved;
-      o.command_line = join_args(argc, argv);
-      if (!quiet) print_info(model);
-      else warn_time_step(model);
-      dem::run_protocol(model, o);
-      return 0;
-    }
-    if (*ens) {
-      std::string resolved;
-      dem::load_scene_file(ens_scene, overrides, &resolved);
-      dem::prepare_ensemble_folder(ens_out, resolved, ens_force);
-      std::vector<std::string> args = {ens_out, "--dem", fs::canonical("/proc/self/exe").string()};
-      if (ens_cores > 0) args.insert(args.end(), {"--cores", std::to_string(ens_cores)});
-      if (!ens_profile.empty()) args.insert(args.end(), {"--profile", ens_profile});
-      return exec_python("demkit.ensemble", args);
-    }
-    if (*info) {
-      const dem::Model model = dem::load_scene_file(info_scene, overrides);
-      if (info_json) std::printf("%s", dem::plan_json(model).c_str());
-      else print_info(model);
-      return 0;
-    }
-    if (*bench) {
-      overrides.push_back("integration.threads=" + std::to_string(bench_threads));
-      dem::Model model = dem::load_scene("", overrides, nullptr, "bench");
-      dem::State state = dem::read_packing(bench_packing, model.density);
-      const dem::Vec3 rate = dem::Vec3{1, 0, -1} * (bench_rate_tc / model.t_contact);
-      dem::Engine engine(model, state);
-      for (int i = 0; i < 200; ++i) engine.step(rate);   // warm-up
-      const long builds0 = engine.neighbor_list().builds;
-      const auto t0 = std::chrono::steady_clock::now();
-      for (long i = 0; i < bench_steps; ++i) engine.step(rate);
-      const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      const dem::Measurement m = dem::measure(model, state, engine.neighbor_list(), rate);
-      const double ps = static_cast<double>(bench_steps) * state.count() / wall;
-      std::printf("packing %s\nN = %d, phi = %.4f, C = %.3f, threads = %d, steps = %ld\n", bench_packing.c_str(),
-                  state.count(), m.nu, m.C, engine.threads(), bench_steps);
-      std::printf("wall %.3f s, %.3f M particle-steps/s, %.2f listed pairs per particle, %ld list rebuilds\n",
-                  wall, ps / 1e6, static_cast<double>(engine.neighbor_list().pair_count()) / state.count(),
-                  engine.neighbor_list().builds - builds0);
-      std::printf("particle_steps_per_s=%.6g\n", ps);
-      return 0;
-    }
-    if (*mode_cmd) {
-      if (mode_rate_opt->count()) overrides.push_back("protocol.deviatoric_rate_tc=" + exact_number("--rate-tc", mode_rate_tc));
-      if (mode_eps_opt->count()) overrides.push_back("protocol.eps_d_max=" + exact_number("--eps-max", mode_eps));
-      overrides.push_back("protocol.modes=[\"" + mode_name + "\"]");
-      if (mode_threads >= 0) overrides.push_back("integration.threads=" + std::to_string(mode_threads));
-      std::string resolved;
-      dem::Model model = mode_scene.empty() ? dem::load_scene("", overrides, &resolved, "defaults")
-                                            : dem::load_scene_file(mode_scene, overrides, &resolved);
-      check_output_file(mode_out, mode_force);
-      dem::State state = fs::path(mode_packing).extension() == ".ckpt"
-                             ? dem::read_checkpoint(mode_packing).state
-                             : dem::read_packing(mode_packing, model.density);
-      dem::check_packing(model, state, mode_packing);
-      const auto& m = model.protocol.modes.front();
-      dem::StageSpec spec{mode_stage_name.empty() ? m.name : mode_stage_name, m.rate_shape * model.protocol.deviatoric_rate, dem::StopKind::DeviatoricStrain,
-                          model.protocol.eps_d_max, {}, 0, 0, dem::mode_definition(model, m)};
-      if (!mode_quiet) print_info(model);
-      else warn_time_step(model);
-      const auto t0 = std::chrono::steady_clock::now();
-      const auto steps = m.path.empty() ? dem::run_stage(model, state, spec, mode_out, "", nullptr, mode_quiet)
-                                        : dem::run_path(model, state, m, spec.name, mode_out, mode_quiet);
-      const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      std::fprintf(stderr, "dem mode: %lld steps of %d particles in %.2f s: %.3f M particle-steps/s -> %s\n",
-                   static_cast<long long>(steps), state.count(), wall, steps * double(state.count()) / wall / 1e6,
-                   mode_out.c_str());
-      return 0;
-    }
-    if (*collide) {
-      overrides.insert(overrides.begin(), {"contact.background_damping_kg_s=0", "integration.threads=1"});
-      const dem::Model model = dem::load_scene("", overrides, nullptr, "collide");
-      for (auto [name, v] : {std::pair{"--r1", col_r1}, {"--r2", col_r2}, {"--v0", col_v0}})
-        if (!(v > 0) || !std::isfinite(v)) throw ArgumentError(std::string(name) + " must be a positive finite number");
-      // dt is t_c / dt_over_tc of the scene's smallest pair: a smaller sphere is resolved by fewer steps.
-      for (auto [name, r] : {std::pair{"--r1", col_r1}, {"--r2", col_r2}})
-        if (r < model.radius_min || r > model.radius_max)
-          throw ArgumentError(std::string(name) + " = " + std::to_string(r) + " m lies outside the scene's radius range [" +
-                              std::to_string(model.radius_min) + ", " + std::to_string(model.radius_max) + "] m, "
-                              "from which the time step is set: pass --set particles.radius_min_m=... and "
-                              "--set particles.radius_max_m=... to cover it");
-      const dem::CollisionResult r = dem::simulate_collision(model, col_r1, col_r2, col_v0);
-      if (r.steps_in_contact < 20 || r.max_overlap > model.max_overlap_fraction)
-        throw ArgumentError("the contact lasted " + std::to_string(r.steps_in_contact) + " time steps with an overlap of " +
-                            std::to_string(r.max_overlap) + " x the smaller radius: --v0 is too large for this stiffness "
-                            "(the spheres pass through each other, t_c and e are meaningless); lower --v0 so that the "
-                            "overlap stays well below the radius (and the contact spans >= 20 steps)");
-      const double m1 = dem::sphere_mass(col_r1, model.density), m2 = dem::sphere_mass(col_r2, model.density);
-      const dem::PairCollision a = dem::pair_collision(model.contact.stiffness, model.contact.damping, m1 * m2 / (m1 + m2));
-      std::printf("{\"t_contact_s\": %.12g, \"restitution\": %.12g, \"t_contact_analytic_s\": %.12g, "
-                  "\"restitution_analytic\": %.12g, \"dt_s\": %.12g, \"allow_attractive\": %s}\n",
-                  r.contact_time, r.restitution, a.t_contact, a.restitution, model.dt,
-                  model.contact.allow_attractive ? "true" : "false");
-      return 0;
-    }
-    if (*fit) return demfit::run_fit_command(fit_opts);
-    if (*modelcmd) return demfit::run_model_command(model_opts);
-    if (*fitmap) {
-      if (fs::exists(map_out) && !map_force) throw std::runtime_error(map_out + " exists: pass --force to overwrite it");
-      std::ostringstream csv;
-      csv << "# dem fit-map: fits of x = x_max - (x_max - x0) exp(-beta eps_d) to synthetic curves with "
-          << map_setup.points_per_approach << " points per 1/beta on (0, eps_last], Gaussian AR(1) noise, " << map_setup.trials
-          << " trials per cell, seed " << map_setup.seed << "\n# truth: x0 = " << map_setup.x0
-          << ", x_max = " << map_setup.x_max << ", beta = " << map_setup.beta
-          << "; errors relative to beta (rate) and to |x_max - x0| (asymptote); coverage = fraction of trials whose "
-             "95% interval (1.96 SE, SEs inflated for correlated residuals as in dem fit) holds the truth\n"
-             "length_beta_eps,noise_over_amplitude,noise_correlation,beta_rel_error_median,beta_rel_error_p90,"
-             "xmax_rel_error_median,beta_coverage,xmax_coverage,beta_reported_rel_se_median,flagged_fraction,unsaturated_fraction,converged\n";
-      for (double rho : map_rhos)
-        for (double noise : map_noises)
-          for (double length : map_lengths) {
-            demfit::IdentifiabilitySetup s = map_setup;
-            s.length = length; s.noise = noise; s.correlation = rho;
-            const demfit::IdentifiabilityCell c = demfit::identifiability_cell(s);
-            csv << length << "," << noise << "," << rho << "," << c.beta_rel_error_median << ","
-                << c.beta_rel_error_p90 << "," << c.xmax_rel_error_median << "," << c.beta_coverage << ","
-                << c.xmax_coverage << "," << c.beta_reported_rel_se_median << "," << c.flagged_fraction << "," << c.unsaturated_fraction << ","
-                << c.converged << "\n";
-          }
-      dem::write_file_atomic(map_out, csv.str());
-      std::fprintf(stderr, "dem fit-map: %zu cells -> %s\n", map_rhos.size() * map_noises.size() * map_lengths.size(),
-                   map_out.c_str());
-      return 0;
-    }
-    if (*ecov) {
-      if (fs::exists(ecov_out) && !ecov_force) throw std::runtime_error(ecov_out + " exists: pass --force to overwrite it");
-      dem::write_file_atomic(ecov_out, demfit::ensemble_coverage_csv(ecov_setup, ecov_ks, ecov_lengths, ecov_rhos));
-      return 0;
-    }
-    if (*compare) return exec_python("demkit.compare", compare->remaining());
-    if (*plot) return exec_python("demkit.plots", plot->remaining());
+    return commands.dispatch(overrides, join_args(argc, argv));
   } catch (const dem::SceneError& e) {
     std::cerr << "dem: scene error: " << e.what() << "\n";
     return 2;
@@ -404,5 +486,4 @@ int main(int argc, char** argv) {
     std::cerr << "dem: error: " << e.what() << "\n";
     return 1;
   }
-  return 0;
 }
