@@ -139,7 +139,8 @@ std::string vec(const Vec3& v) {
 
 std::string mode_definition(const Model& m, const DeformationMode& mode) {
   if (mode.path.empty())
-    return "rate_shape=" + vec(mode.rate_shape) + ";eps_d_max=" + physics_number(m.protocol.eps_d_max);
+    return "rate_shape=" + vec(mode.rate_shape) + (mode.sheared() ? ";shear_shape=" + vec(mode.shear_shape) : "") +
+           ";eps_d_max=" + physics_number(m.protocol.eps_d_max);
   std::string d = "path=";
   for (const auto& s : mode.path)
     d += s.name + ":rate=" + vec(s.rate_shape) + ":sigma=" + vec(s.sigma) + ":pressure=" + physics_number(s.pressure) +

@@ -81,8 +81,13 @@ void print_info(const dem::Model& m) {
                   dem::mode_steps(m, mode));
       continue;
     }
-    std::printf("mode %-13s  rate shape (%g, %g, %g): %.3g steps to eps_d = %g\n", mode.name.c_str(),
-                mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z, dem::mode_steps(m, mode), p.eps_d_max);
+    if (mode.sheared())
+      std::printf("mode %-13s  velocity gradient [[%g, %g, %g], [0, %g, %g], [0, 0, %g]]: %.3g steps to eps_d = %g\n",
+                  mode.name.c_str(), mode.rate_shape.x, mode.shear_shape.x, mode.shear_shape.y, mode.rate_shape.y,
+                  mode.shear_shape.z, mode.rate_shape.z, dem::mode_steps(m, mode), p.eps_d_max);
+    else
+      std::printf("mode %-13s  rate shape (%g, %g, %g): %.3g steps to eps_d = %g\n", mode.name.c_str(),
+                  mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z, dem::mode_steps(m, mode), p.eps_d_max);
   }
 }
 
@@ -317,7 +322,8 @@ int main(int argc, char** argv) {
       dem::check_packing(model, state, mode_packing);
       const auto& m = model.protocol.modes.front();
       dem::StageSpec spec{mode_stage_name.empty() ? m.name : mode_stage_name, m.rate_shape * model.protocol.deviatoric_rate, dem::StopKind::DeviatoricStrain,
-                          model.protocol.eps_d_max, {}, 0, 0, dem::mode_definition(model, m)};
+                          model.protocol.eps_d_max, {}, 0, 0, dem::mode_definition(model, m),
+                          m.shear_shape * model.protocol.deviatoric_rate};
       if (!mode_quiet) print_info(model);
       else warn_time_step(model);
       const auto t0 = std::chrono::steady_clock::now();
