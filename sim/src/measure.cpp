@@ -162,6 +162,16 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
     if (has_f && has_d) m.angle_F_D = axis_angle_deg(nf, nd);
   }
 
+  // In a sheared cell (or under a shear rate) the diagonal forms depend on the frame: the curve's
+  // eps_d, sigma_dev, s_dev, F_dev are the objective ones there, so that everything keyed to
+  // them (stops, sampling, dem fit, ensembles) works for simple shear. Diagonal runs: unchanged.
+  if (s.box.sheared() || rate.sheared()) {
+    m.eps_d = m.eps_d_eig;
+    m.sigma_dev = m.sigma_dev_eig;
+    m.s_dev = m.s_dev_eig;
+    m.F_dev = m.F_dev_eig;
+  }
+
   const double rate_max = std::max({std::fabs(rate.diag.x), std::fabs(rate.diag.y), std::fabs(rate.diag.z),
                                     std::fabs(rate.shear.x), std::fabs(rate.shear.y), std::fabs(rate.shear.z)});
   m.inertial_number = m.p > 0 ? rate_max * 2.0 * (rsum / n) * std::sqrt(model.density / m.p) : 0.0;

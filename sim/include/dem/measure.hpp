@@ -16,16 +16,16 @@ struct Measurement {
   double time = 0;                ///< [s]
   Vec3 strain;                    ///< true box strains ln(L/L0), extension positive
   double eps_v = 0;               ///< (eps_xx + eps_yy + eps_zz) / 3
-  double eps_d = 0;               ///< deviatoric magnitude of the strain diagonal
+  double eps_d = 0;               ///< deviatoric magnitude of the strain diagonal (sheared cell: eps_d_eig)
   double nu = 0;                  ///< volume fraction
   Sym3 stress;                    ///< [Pa], compression positive, contact + kinetic parts
   Sym3 stress_kinetic;            ///< the kinetic part alone [Pa]
   double p = 0;                   ///< tr(stress)/3 [Pa]
   double p_star = 0;              ///< 2 <r> p / k
-  double sigma_dev = 0;           ///< deviatoric magnitude of the stress diagonal [Pa]
+  double sigma_dev = 0;           ///< deviatoric magnitude of the stress diagonal [Pa] (sheared cell: sigma_dev_eig)
   double s_dev = 0;               ///< sigma_dev / p
   Sym3 fabric;                    ///< (1/V) sum_p V_p sum_c n n
-  double F_dev = 0;               ///< deviatoric magnitude of the fabric diagonal
+  double F_dev = 0;               ///< deviatoric magnitude of the fabric diagonal (sheared cell: F_dev_eig)
   double C = 0;                   ///< 2 * contacts / N
   double C_nonrattler = 0;        ///< 2 * contacts among non-rattlers / N_non-rattlers
   double rattler_fraction = 0;    ///< rattlers / N (fewer than 4 contacts, removed recursively)
