@@ -9,12 +9,14 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include "dem/checks.hpp"
 #include "dem/engine.hpp"
 #include "dem/forces.hpp"
 #include "dem/io.hpp"
 #include "dem/measure.hpp"
+#include "dem/protocol.hpp"
 #include "dem/scene.hpp"
 #include "test_support.hpp"
 
@@ -424,4 +426,49 @@ TEST(Shear, ScenesTakeAVelocityGradientAndRefuseEntriesBelowTheDiagonal) {
   } catch (const dem::SceneError& err) {
     EXPECT_NE(std::string(err.what()).find("diagonal rates only"), std::string::npos) << err.what();
   }
+}
+
+TEST(Shear, ModeStageRunsSimpleShearToItsStrainAcrossAFlip) {
+  // run_stage with SS_xz (the path of `dem mode` and `dem run`): lands on eps_d_max of the log
+  // strain, constant volume, the sheared preamble line, a flip on the way (gamma ~ 0.74).
+  const dem::Model m = dem_test::model_with({"output.sample_strain=0.02"});
+  dem::State s = dem_test::random_state(300, 0.38, 0.0, 7);
+  dem::DeformationMode dm;
+  ASSERT_TRUE(dem::builtin_mode("SS_xz", &dm));
+  const double rate = 5e-3 / m.t_contact;
+  dem::StageSpec spec{"SS_xz", dm.rate_shape * rate, dem::StopKind::DeviatoricStrain, 0.6, {}, 0, 0,
+                      dem::mode_definition(m, dm), dm.shear_shape * rate};
+  const std::string path = (std::filesystem::temp_directory_path() / "dem_ss_stage.csv").string();
+  dem::run_stage(m, s, spec, path, "", nullptr, true);
+  std::ifstream in(path);
+  std::string line, header, last;
+  bool sheared_note = false;
+  int rows = 0;
+  while (std::getline(in, line)) {
+    if (line.rfind("# sheared cell", 0) == 0) sheared_note = true;
+    if (line.empty() || line[0] == '#') continue;
+    if (header.empty()) { header = line; continue; }
+    last = line;
+    ++rows;
+  }
+  std::remove(path.c_str());
+  EXPECT_TRUE(sheared_note);
+  EXPECT_GT(rows, 25);
+  auto column = [&](const std::string& row, const std::string& name) {
+    std::vector<std::string> h, v;
+    std::stringstream hs(header), vs(row);
+    for (std::string t; std::getline(hs, t, ',');) h.push_back(t);
+    for (std::string t; std::getline(vs, t, ',');) v.push_back(t);
+    for (std::size_t k = 0; k < h.size(); ++k)
+      if (h[k] == name) return std::stod(v[k]);
+    ADD_FAILURE() << "no column " << name;
+    return 0.0;
+  };
+  EXPECT_NEAR(column(last, "eps_d"), 0.6, 1e-6);
+  EXPECT_EQ(column(last, "eps_d"), column(last, "eps_d_eig"));
+  EXPECT_NEAR(column(last, "eps_v"), 0.0, 1e-12);
+  const double gamma = 2 * std::sinh(0.6 / std::sqrt(3.0));
+  EXPECT_NEAR(column(last, "eps_xz"), std::asinh(gamma / 2) / std::sqrt(1 + 0.25 * gamma * gamma), 1e-8)
+      << "the log strain's shear component (for simple shear: asinh(g/2) / sqrt(1 + g^2/4))";
+  EXPECT_NE(s.box.flips[1], 0) << "the stage must flip the cell";
 }
