@@ -50,6 +50,8 @@ void validate_state(const State& s, const std::string& origin) {
     if (!(s.box.length[k] > 0) || !std::isfinite(s.box.length[k]))
       bad(origin, "box length along axis " + std::to_string(k) + " is " + num(s.box.length[k]) +
                       ": must be finite and positive (the file is corrupt)");
+  if (!finite3(s.box.tilt) || !finite3(s.box.tilt0) || !finite3(s.tilt_at_build))
+    bad(origin, "the cell's tilt is not finite (the file is corrupt)");
   for (int i = 0; i < s.count(); ++i) {
     const std::string who = "particle " + std::to_string(s.id[i]);
     if (!(s.radius[i] > 0) || !std::isfinite(s.radius[i])) bad(origin, who + " has radius " + num(s.radius[i]) + ": must be finite and positive");
