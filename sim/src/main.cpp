@@ -182,7 +182,7 @@ int main(int argc, char** argv) {
   std::string mode_stage_name;
   mode_cmd->add_option("--name", mode_stage_name, "stage name in the CSV (default: the mode's name; `dem run` uses "
                                                   "MODE_phiX.XXX)");
-  mode_cmd->add_option("--mode", mode_name, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, or a [modes] name");
+  mode_cmd->add_option("--mode", mode_name, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, SS_xy/xz/yz (simple shear), or a [modes] name");
   auto* mode_rate_opt = mode_cmd->add_option("--rate-tc", mode_rate_tc, "mode rate times t_c (default: protocol.deviatoric_rate_tc)");
   auto* mode_eps_opt = mode_cmd->add_option("--eps-max", mode_eps, "stop at this eps_d (default: protocol.eps_d_max)");
   mode_cmd->add_option("--out", mode_out, "output CSV")->required();
