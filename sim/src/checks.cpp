@@ -50,6 +50,8 @@ void validate_state(const State& s, const std::string& origin) {
     if (!(s.box.length[k] > 0) || !std::isfinite(s.box.length[k]))
       bad(origin, "box length along axis " + std::to_string(k) + " is " + num(s.box.length[k]) +
                       ": must be finite and positive (the file is corrupt)");
+  if (!finite3(s.box.tilt) || !finite3(s.box.tilt0) || !finite3(s.tilt_at_build))
+    bad(origin, "the cell's tilt is not finite (the file is corrupt)");
   for (int i = 0; i < s.count(); ++i) {
     const std::string who = "particle " + std::to_string(s.id[i]);
     if (!(s.radius[i] > 0) || !std::isfinite(s.radius[i])) bad(origin, who + " has radius " + num(s.radius[i]) + ": must be finite and positive");
@@ -139,7 +141,8 @@ std::string vec(const Vec3& v) {
 
 std::string mode_definition(const Model& m, const DeformationMode& mode) {
   if (mode.path.empty())
-    return "rate_shape=" + vec(mode.rate_shape) + ";eps_d_max=" + physics_number(m.protocol.eps_d_max);
+    return "rate_shape=" + vec(mode.rate_shape) + (mode.sheared() ? ";shear_shape=" + vec(mode.shear_shape) : "") +
+           ";eps_d_max=" + physics_number(m.protocol.eps_d_max);
   std::string d = "path=";
   for (const auto& s : mode.path)
     d += s.name + ":rate=" + vec(s.rate_shape) + ":sigma=" + vec(s.sigma) + ":pressure=" + physics_number(s.pressure) +

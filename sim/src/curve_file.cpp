@@ -21,6 +21,9 @@ std::string curve_preamble(const Model& m, const std::string& stage, const Physi
     << "# t_c=" << m.t_contact << " s, dt=" << m.dt << " s, k=" << m.contact.stiffness
     << " N/m, gamma=" << m.contact.damping << " kg/s, gamma_b=" << m.background_damping << " kg/s\n"
     << "# physics: " << physics_line(physics) << "\n";
+  if (definition.find("shear_shape=") != std::string::npos)
+    o << "# sheared cell: strains are the log strain 0.5 ln(F F^T) (eps_xy, eps_xz, eps_yz its shear components); "
+         "eps_d, sigma_dev, s_dev, F_dev are the eigenvalue (objective) forms, equal to the *_eig columns\n";
   if (!definition.empty()) o << "# definition: " << definition << "\n";
   return o.str();
 }

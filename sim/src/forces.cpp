@@ -9,9 +9,9 @@ namespace dem {
 namespace {
 
 // One pair: the contact force on j [N] (minus it on i); false if the spheres do not touch.
-template <class Law>
+template <bool Sheared, class Law>
 inline bool contact_force(const Law& law, const Vec3& xi, const Vec3& xj_image, const Vec3& vi,
-                          const Vec3& vj, double ri, double rj, const Vec3& rate, Vec3& f_on_j) {
+                          const Vec3& vj, double ri, double rj, const VelGrad& rate, Vec3& f_on_j) {
   const Vec3 d = xj_image - xi;
   const double r2 = dot(d, d);
   const double reach = ri + rj;
@@ -19,15 +19,16 @@ inline bool contact_force(const Law& law, const Vec3& xi, const Vec3& xj_image, 
   const double r = std::sqrt(r2);
   const double inv_r = 1.0 / r;
   const Vec3 n = d * inv_r;                          // unit normal from i to j
-  const Vec3 v_rel = (vj - vi) + hadamard(rate, d);  // fluctuation + affine relative velocity
+  // fluctuation + affine relative velocity (L d; a diagonal L: the component-wise product)
+  const Vec3 v_rel = (vj - vi) + (Sheared ? rate.apply(d) : hadamard(rate.diag, d));
   const double fn = law(reach - r, -dot(v_rel, n));
   f_on_j = n * fn;
   return true;
 }
 
 // Pairs of particles [begin, end): forces on j >= end go to spill[block_of[j]].
-template <class Law>
-void pair_loop(const Law& law, const State& s, const NeighborList& list, const Vec3& rate,
+template <bool Sheared, class Law>
+void pair_loop(const Law& law, const State& s, const NeighborList& list, const VelGrad& rate,
                int begin, int end, Vec3* f, std::vector<std::vector<SpilledForce>>& spill,
                const std::uint16_t* block_of) {
   Vec3 off[27];
@@ -45,7 +46,7 @@ void pair_loop(const Law& law, const State& s, const NeighborList& list, const V
     for (int p = first[i]; p < first[i + 1]; ++p) {
       const int j = partner[p];
       Vec3 fj;
-      if (!contact_force(law, xi, x[j] + off[image[p]], vi, v[j], ri, rad[j], rate, fj)) continue;
+      if (!contact_force<Sheared>(law, xi, x[j] + off[image[p]], vi, v[j], ri, rad[j], rate, fj)) continue;
       if (j < end) f[j] += fj; else spill[block_of[j]].push_back({j, fj});
       fi -= fj;
     }
@@ -89,11 +90,15 @@ int block_count(int blocks_setting, int threads) {
 }
 
 void accumulate_pair_forces(const Model& model, const State& state, const NeighborList& list,
-                            const Vec3& rate, int b, ForceScratch& scratch, Vec3* force) {
+                            const VelGrad& rate, int b, ForceScratch& scratch, Vec3* force) {
   const LinearSpringDashpot law(model.contact);
   for (auto& to : scratch.spill[b]) to.clear();
-  pair_loop(law, state, list, rate, scratch.bounds[b], scratch.bounds[b + 1], force, scratch.spill[b],
-            scratch.block_of.data());
+  if (rate.sheared())
+    pair_loop<true>(law, state, list, rate, scratch.bounds[b], scratch.bounds[b + 1], force, scratch.spill[b],
+                    scratch.block_of.data());
+  else
+    pair_loop<false>(law, state, list, rate, scratch.bounds[b], scratch.bounds[b + 1], force, scratch.spill[b],
+                     scratch.block_of.data());
 }
 
 void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force) {
@@ -102,7 +107,7 @@ void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force) {
 }
 
 void compute_forces(const Model& model, State& s, const NeighborList& list,
-                    const Vec3& rate, int threads, int blocks, ForceScratch& scratch) {
+                    const VelGrad& rate, int threads, int blocks, ForceScratch& scratch) {
   s.force.assign(s.count(), Vec3{0, 0, 0});
   partition_pairs(list, blocks, scratch);
   Vec3* f = s.force.data();
@@ -122,19 +127,32 @@ void compute_forces(const Model& model, State& s, const NeighborList& list,
   add_background_damping(model, s);
 }
 
-void compute_forces_all_pairs(const Model& model, State& s, const Vec3& rate) {
+Vec3 minimum_image(const Box& box, const Vec3& xi, const Vec3& xj) {
+  Vec3 d = xj - xi;
+  if (!box.tilted()) {
+    const Vec3 L = box.length;
+    for (int k = 0; k < 3; ++k) d[k] -= L[k] * std::round(d[k] / L[k]);
+    return d;
+  }
+  d -= box.lattice(0, 0, std::round(d.z / box.length.z));
+  d -= box.lattice(0, std::round(d.y / box.length.y), 0);
+  d -= box.lattice(std::round(d.x / box.length.x), 0, 0);
+  return d;
+}
+
+void compute_forces_all_pairs(const Model& model, State& s, const VelGrad& rate) {
   const int n = s.count();
   const LinearSpringDashpot law(model.contact);
-  const Vec3 L = s.box.length;
   s.force.assign(n, Vec3{0, 0, 0});
   for (int i = 0; i < n; ++i)
     for (int j = i + 1; j < n; ++j) {
-      Vec3 d = s.position[j] - s.position[i];
-      for (int k = 0; k < 3; ++k) d[k] -= L[k] * std::round(d[k] / L[k]);
+      const Vec3 d = minimum_image(s.box, s.position[i], s.position[j]);
       Vec3 fj;
-      if (!contact_force(law, s.position[i], s.position[i] + d, s.velocity[i], s.velocity[j],
-                         s.radius[i], s.radius[j], rate, fj))
-        continue;
+      const bool touch = rate.sheared() ? contact_force<true>(law, s.position[i], s.position[i] + d, s.velocity[i],
+                                                              s.velocity[j], s.radius[i], s.radius[j], rate, fj)
+                                        : contact_force<false>(law, s.position[i], s.position[i] + d, s.velocity[i],
+                                                               s.velocity[j], s.radius[i], s.radius[j], rate, fj);
+      if (!touch) continue;
       s.force[j] += fj;
       s.force[i] -= fj;
     }

@@ -102,7 +102,10 @@ State parse_packing(std::istream& in, double density, const std::string& path) {
 }
 
 void write_packing(const std::string& path, const State& s) {
-  validate_state(s, "write_packing " + path);   // ids a permutation: order[] below is safe
+  validate_state(s, "write_packing " + path);
+  if (s.box.tilted())
+    throw std::runtime_error("write_packing " + path + ": the cell is tilted (a sheared state), which the packing "
+                             "format '##PERIODIC:: Lx Ly Lz' cannot hold: keep the state as a checkpoint (.ckpt)");   // ids a permutation: order[] below is safe
   std::vector<int> order(s.count());
   for (int i = 0; i < s.count(); ++i) order[s.id[i]] = i;
   std::ostringstream out;
@@ -185,9 +188,13 @@ State random_packing(const Model& m, double phi) {
 
 // ---- checkpoints ----
 // Version 3: magic "DEMCKPT3", the fields below, "END!", then the FNV-1a 64 checksum of every
-// byte before it. Version 2 (the same without the checksum) is still read.
+// byte before it. Version 2 (the same without the checksum) is still read. Version 4
+// ("DEMCKPT4"): version 3 with the sheared cell after the list flag (tilt, tilt0, flips,
+// tilt_at_build), written only for a state whose cell has a tilt or was sheared since its
+// strains were zeroed: every diagonal run still writes the bytes of version 3.
 namespace {
 const char kMagic[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '3'};
+const char kMagicV4[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '4'};
 const char kMagicV2[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '2'};
 
 std::uint64_t fnv1a(const char* data, std::size_t n) {
@@ -226,13 +233,21 @@ struct Reader {
 void write_checkpoint(const std::string& path, const Checkpoint& c) {
   validate_state(c.state, "write_checkpoint " + path);
   Writer w;
-  w.buf.append(kMagic, 8);
+  const State& st = c.state;
+  const Vec3& tb = st.tilt_at_build;
+  const bool v4 = st.box.sheared() || tb.x != 0 || tb.y != 0 || tb.z != 0;
+  w.buf.append(v4 ? kMagicV4 : kMagic, 8);
   w.str(c.scene_toml);
   w.str(c.label);
   const State& s = c.state;
   w.vec(s.position); w.vec(s.velocity); w.vec(s.force); w.vec(s.radius); w.vec(s.mass); w.vec(s.id);
   w.pod(s.box.length); w.pod(s.box.length0); w.pod(s.box.reference); w.pod(s.box.log_strain); w.pod(s.time); w.pod(s.step);
   w.vec(s.position_at_build); w.pod(s.length_at_build); w.pod<std::uint8_t>(s.list_valid);
+  if (v4) {
+    w.pod(s.box.tilt); w.pod(s.box.tilt0);
+    for (int k = 0; k < 3; ++k) w.pod(s.box.flips[k]);
+    w.pod(s.tilt_at_build);
+  }
   w.buf.append("END!", 4);
   w.pod(fnv1a(w.buf.data(), w.buf.size()));
   write_file_atomic(path, w.buf);
@@ -247,13 +262,14 @@ Checkpoint read_checkpoint(const std::string& path) {
 }
 
 Checkpoint parse_checkpoint(const std::string& buf, const std::string& path) {
-  const bool v3 = buf.size() >= 8 && std::memcmp(buf.data(), kMagic, 8) == 0;
+  const bool v4 = buf.size() >= 8 && std::memcmp(buf.data(), kMagicV4, 8) == 0;
+  const bool v3 = v4 || (buf.size() >= 8 && std::memcmp(buf.data(), kMagic, 8) == 0);   // v3 and up: checksum
   const bool v2 = buf.size() >= 8 && std::memcmp(buf.data(), kMagicV2, 8) == 0;
   if (!v3 && !v2) {
     if (buf.size() >= 7 && std::memcmp(buf.data(), kMagic, 7) == 0)
       throw std::runtime_error(path + ": checkpoint format version '" + std::string(1, buf[7]) +
-                               "' is not readable by this dem (versions 2 and 3 are): rerun the preparation");
-    throw std::runtime_error(path + ": not a dem checkpoint (wrong magic; version 3 expected)");
+                               "' is not readable by this dem (versions 2, 3 and 4 are): rerun the preparation");
+    throw std::runtime_error(path + ": not a dem checkpoint (wrong magic; version 3 or 4 expected)");
   }
   if (v3) {
     if (buf.size() < 8 + 12) throw std::runtime_error(path + ": checkpoint is truncated");
@@ -275,6 +291,11 @@ Checkpoint parse_checkpoint(const std::string& buf, const std::string& path) {
   s.step = r.pod<std::int64_t>();
   s.position_at_build = r.vec<Vec3>(); s.length_at_build = r.pod<Vec3>();
   s.list_valid = r.pod<std::uint8_t>() != 0;
+  if (v4) {
+    s.box.tilt = r.pod<Vec3>(); s.box.tilt0 = r.pod<Vec3>();
+    for (int k = 0; k < 3; ++k) s.box.flips[k] = r.pod<std::int32_t>();
+    s.tilt_at_build = r.pod<Vec3>();
+  }
   r.need(4);
   if (body.compare(r.pos, 4, "END!") != 0 || r.pos + 4 != body.size())
     throw std::runtime_error(path + ": checkpoint is corrupt (no end marker where expected)");

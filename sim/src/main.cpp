@@ -82,8 +82,13 @@ void print_info(const dem::Model& m) {
                   dem::mode_steps(m, mode));
       continue;
     }
-    std::printf("mode %-13s  rate shape (%g, %g, %g): %.3g steps to eps_d = %g\n", mode.name.c_str(),
-                mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z, dem::mode_steps(m, mode), p.eps_d_max);
+    if (mode.sheared())
+      std::printf("mode %-13s  velocity gradient [[%g, %g, %g], [0, %g, %g], [0, 0, %g]]: %.3g steps to eps_d = %g\n",
+                  mode.name.c_str(), mode.rate_shape.x, mode.shear_shape.x, mode.shear_shape.y, mode.rate_shape.y,
+                  mode.shear_shape.z, mode.rate_shape.z, dem::mode_steps(m, mode), p.eps_d_max);
+    else
+      std::printf("mode %-13s  rate shape (%g, %g, %g): %.3g steps to eps_d = %g\n", mode.name.c_str(),
+                  mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z, dem::mode_steps(m, mode), p.eps_d_max);
   }
 }
 
@@ -247,7 +252,8 @@ struct ModeCommand {
     cmd->add_option("--threads", threads, "threads (overrides integration.threads)");
     cmd->add_option("--name", stage_name, "stage name in the CSV (default: the mode's name; `dem run` uses "
                                           "MODE_phiX.XXX)");
-    cmd->add_option("--mode", mode, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, or a [modes] name");
+    cmd->add_option("--mode", mode, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, SS_xy/xz/yz (simple shear), "
+                                    "or a [modes] name");
     rate_opt = cmd->add_option("--rate-tc", rate_tc, "mode rate times t_c (default: protocol.deviatoric_rate_tc)");
     eps_opt = cmd->add_option("--eps-max", eps, "stop at this eps_d (default: protocol.eps_d_max)");
     cmd->add_option("--out", out, "output CSV")->required();
@@ -270,7 +276,7 @@ struct ModeCommand {
     const auto& m = model.protocol.modes.front();
     const dem::StageSpec spec{stage_name.empty() ? m.name : stage_name, m.rate_shape * model.protocol.deviatoric_rate,
                               dem::StopKind::DeviatoricStrain, model.protocol.eps_d_max, {}, 0, 0,
-                              dem::mode_definition(model, m)};
+                              dem::mode_definition(model, m), m.shear_shape * model.protocol.deviatoric_rate};
     if (!quiet) print_info(model);
     else warn_time_step(model);
     const auto t0 = std::chrono::steady_clock::now();

@@ -44,6 +44,26 @@ Vec3 Box::true_strain() const {
           std::log(length.z / length0.z)};
 }
 
+void Box::deformation_gradient(double F[3][3]) const {
+  // H_u = H M^-1, M = [[1, m01, m02], [0, 1, m12], [0, 0, 1]]:
+  // M^-1 = [[1, -m01, m01 m12 - m02], [0, 1, -m12], [0, 0, 1]].
+  const double m01 = flips[0], m02 = flips[1], m12 = flips[2];
+  const double H[3][3] = {{length.x, tilt.x, tilt.y}, {0, length.y, tilt.z}, {0, 0, length.z}};
+  const double Mi[3][3] = {{1, -m01, m01 * m12 - m02}, {0, 1, -m12}, {0, 0, 1}};
+  double Hu[3][3] = {};
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) Hu[i][j] += H[i][k] * Mi[k][j];
+  // H0^-1 of the upper-triangular [[a, d, e], [0, b, f], [0, 0, c]].
+  const double a = length0.x, b = length0.y, c = length0.z, d = tilt0.x, e = tilt0.y, f = tilt0.z;
+  const double H0i[3][3] = {{1 / a, -d / (a * b), (d * f - b * e) / (a * b * c)}, {0, 1 / b, -f / (b * c)}, {0, 0, 1 / c}};
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      F[i][j] = 0;
+      for (int k = 0; k < 3; ++k) F[i][j] += Hu[i][k] * H0i[k][j];
+    }
+}
+
 double State::particle_volume() const {
   double v = 0;
   for (double r : radius) v += r * r * r;

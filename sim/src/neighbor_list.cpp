@@ -1,5 +1,7 @@
 #include "dem/neighbor_list.hpp"
 
+#include <Eigen/Dense>
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -9,6 +11,12 @@ namespace dem {
 double max_radius_of(const std::vector<double>& radius);
 
 void image_offsets(const Box& box, Vec3 offsets[27]) {
+  if (box.tilted()) {
+    for (int sx = -1; sx <= 1; ++sx)
+      for (int sy = -1; sy <= 1; ++sy)
+        for (int sz = -1; sz <= 1; ++sz) offsets[(sx + 1) * 9 + (sy + 1) * 3 + (sz + 1)] = box.lattice(sx, sy, sz);
+    return;
+  }
   for (int sx = -1; sx <= 1; ++sx)
     for (int sy = -1; sy <= 1; ++sy)
       for (int sz = -1; sz <= 1; ++sz)
@@ -21,36 +29,59 @@ namespace {
 struct CellGrid {
   int n[3];
   double inv_size[3];
+  const Box* tilted = nullptr;   ///< the cell when it is tilted: cells are slabs of fractional coordinates
   int index_of(const Vec3& x) const {
     int c[3];
-    for (int k = 0; k < 3; ++k) {
-      c[k] = static_cast<int>(x[k] * inv_size[k]);
-      c[k] = std::min(std::max(c[k], 0), n[k] - 1);
+    if (tilted) {
+      const Vec3 s = tilted->fractional(x);
+      for (int k = 0; k < 3; ++k) {
+        c[k] = static_cast<int>(std::floor(s[k] * n[k]));
+        c[k] = std::min(std::max(c[k], 0), n[k] - 1);
+      }
+    } else {
+      for (int k = 0; k < 3; ++k) {
+        c[k] = static_cast<int>(x[k] * inv_size[k]);
+        c[k] = std::min(std::max(c[k], 0), n[k] - 1);
+      }
     }
     return (c[0] * n[1] + c[1]) * n[2] + c[2];
   }
 };
 
-CellGrid make_grid(const Vec3& length, double cutoff) {
+// Perpendicular widths of the cell (the distance between opposite faces) [m]: V / |b x c| etc.
+Vec3 cell_widths(const Box& b) {
+  const double Lx = b.length.x, Ly = b.length.y, Lz = b.length.z, xy = b.tilt.x, xz = b.tilt.y, yz = b.tilt.z;
+  const double V = Lx * Ly * Lz;
+  const Vec3 bc{Ly * Lz, -xy * Lz, xy * yz - Ly * xz};
+  const Vec3 ca{0, Lz * Lx, -yz * Lx};
+  return {V / norm(bc), V / norm(ca), Lz};
+}
+
+// The grid of the box `b` (kept by pointer when tilted: b must outlive the grid).
+CellGrid make_grid(const Box& b, double cutoff) {
   CellGrid g{};
+  const bool tilted = b.tilted();
+  const Vec3 width = tilted ? cell_widths(b) : b.length;
   for (int k = 0; k < 3; ++k) {
-    if (length[k] < 2.0 * cutoff)
+    if (width[k] < 2.0 * cutoff)
       throw std::runtime_error(
-          "box edge " + std::to_string(length[k]) + " m is shorter than twice the neighbour "
-          "cutoff " + std::to_string(cutoff) + " m: use more particles or a smaller skin");
-    g.n[k] = std::max(1, static_cast<int>(length[k] / cutoff));
-    g.inv_size[k] = g.n[k] / length[k];
+          std::string(tilted ? "perpendicular width of the tilted cell " : "box edge ") + std::to_string(width[k]) +
+          " m is shorter than twice the neighbour cutoff " + std::to_string(cutoff) +
+          " m: use more particles or a smaller skin");
+    g.n[k] = std::max(1, static_cast<int>(width[k] / cutoff));
+    g.inv_size[k] = g.n[k] / b.length[k];
   }
+  if (tilted) g.tilted = &b;
   return g;
 }
 
 // Builds the CSR list from positions x (inside [0, L)) for the box length L.
-void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, const Vec3& L,
+void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, const Box& cell,
                  NeighborList& list) {
   const int n = static_cast<int>(x.size());
   const double rmax = max_radius_of(radius);
   const double cutoff = 2.0 * rmax + list.skin;
-  CellGrid g = make_grid(L, cutoff);
+  CellGrid g = make_grid(cell, cutoff);
   const int ncell = g.n[0] * g.n[1] * g.n[2];
   std::vector<std::int32_t> cell_of(n), cell_start(ncell + 1, 0), cell_members(n);
   for (int i = 0; i < n; ++i) { cell_of[i] = g.index_of(x[i]); ++cell_start[cell_of[i] + 1]; }
@@ -65,8 +96,7 @@ void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, 
   list.partner.clear();
   list.image.clear();
   Vec3 off[27];
-  Box b; b.length = L;
-  image_offsets(b, off);
+  image_offsets(cell, off);
   std::vector<std::pair<std::int32_t, std::uint8_t>> found;
   for (int i = 0; i < n; ++i) {
     found.clear();
@@ -113,6 +143,19 @@ void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, 
 
 void wrap_into_box(State& s) {
   const Vec3 L = s.box.length;
+  if (s.box.tilted()) {
+    // Subtract whole lattice vectors, c first (the only one with a z part), then b, then a.
+    const Box& b = s.box;
+    for (auto& x : s.position) {
+      const double nz = std::floor(x.z / L.z);
+      x -= b.lattice(0, 0, nz);
+      const double ny = std::floor(b.fractional(x).y);
+      x -= b.lattice(0, ny, 0);
+      const double nx = std::floor(b.fractional(x).x);
+      x -= b.lattice(nx, 0, 0);
+    }
+    return;
+  }
   for (auto& x : s.position)
     for (int k = 0; k < 3; ++k) {
       x[k] -= L[k] * std::floor(x[k] / L[k]);
@@ -129,7 +172,7 @@ void permute(std::vector<T>& v, const std::vector<std::int32_t>& order) {
 }
 
 void sort_by_cell(State& s, double cutoff) {
-  CellGrid g = make_grid(s.box.length, cutoff);
+  CellGrid g = make_grid(s.box, cutoff);
   const int n = s.count();
   std::vector<std::int32_t> key(n), order(n);
   for (int i = 0; i < n; ++i) { key[i] = g.index_of(s.position[i]); order[i] = i; }
@@ -152,19 +195,44 @@ void rebuild_neighbor_list(State& state, NeighborList& list, double skin, bool s
   if (sort) sort_by_cell(state, 2.0 * max_radius_of(state.radius) + skin);
   state.position_at_build = state.position;
   state.length_at_build = state.box.length;
-  build_pairs(state.position, state.radius, state.box.length, list);
+  state.tilt_at_build = state.box.tilt;
+  build_pairs(state.position, state.radius, state.box, list);
   state.list_valid = true;
   ++list.builds;
 }
 
 void restore_neighbor_list(const State& state, NeighborList& list, double skin) {
   list.skin = skin;
-  build_pairs(state.position_at_build, state.radius, state.length_at_build, list);
+  Box cell;
+  cell.length = state.length_at_build;
+  cell.tilt = state.tilt_at_build;
+  build_pairs(state.position_at_build, state.radius, cell, list);
 }
 
 StalenessTest staleness_test(const State& s, const NeighborList& list) {
   StalenessTest t;
   if (!s.list_valid || list.first.size() != s.position.size() + 1) return t;
+  const Vec3& tb = s.tilt_at_build;
+  if (s.box.tilted() || tb.x != 0 || tb.y != 0 || tb.z != 0) {
+    // back = H_b H^-1 (upper triangular); lambda_min = 1 / (largest singular value of back).
+    const Box& b = s.box;
+    const Eigen::Matrix3d H{{b.length.x, b.tilt.x, b.tilt.y}, {0, b.length.y, b.tilt.z}, {0, 0, b.length.z}};
+    const Vec3& Lb = s.length_at_build;
+    const Eigen::Matrix3d Hb{{Lb.x, tb.x, tb.y}, {0, Lb.y, tb.z}, {0, 0, Lb.z}};
+    const Eigen::Matrix3d back = Hb * H.inverse();
+    t.general = true;
+    const double U[6] = {back(0, 0), back(1, 1), back(2, 2), back(0, 1), back(0, 2), back(1, 2)};
+    std::copy(U, U + 6, t.back);
+    const Eigen::Matrix3d BtB = back.transpose() * back;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+    es.computeDirect(BtB, Eigen::EigenvaluesOnly);
+    const double sigma_max = std::sqrt(std::max(es.eigenvalues().maxCoeff(), 0.0));
+    const double squeeze = std::max(0.0, 2.0 * list.radius_max * (sigma_max - 1.0));
+    const double budget = list.skin - squeeze;
+    if (!(budget > 0)) return t;
+    t.limit2 = 0.25 * budget * budget;
+    return t;
+  }
   t.frame = Vec3{s.length_at_build.x / s.box.length.x, s.length_at_build.y / s.box.length.y,
                  s.length_at_build.z / s.box.length.z};
   const double lambda_min = 1.0 / std::max({t.frame.x, t.frame.y, t.frame.z});

@@ -195,7 +195,7 @@ void run_path_stage(PathRun& run, const PathStage& stage) {
 std::int64_t run_path(const Model& model, State& state, const DeformationMode& mode, const std::string& label,
                       const std::string& csv_path, bool quiet, const std::string& failed_checkpoint) {
   // Strains from the path start.
-  state.box.length0 = state.box.length;
+  state.box.zero_strain();
   state.box.reference = state.box.length;
   state.box.log_strain = Vec3{0, 0, 0};
   Engine engine(model, state);

@@ -47,7 +47,11 @@ double mode_steps(const Model& m, const DeformationMode& mode) {
     return steps;
   }
   const Vec3& r = mode.rate_shape;
-  const double dev = deviatoric_magnitude(r.x, r.y, r.z);
+  const Vec3& g = mode.shear_shape;
+  // A shear: the eps_d rate of D = sym(L) (the log strain's eps_d grows a little slower at large
+  // shear: an estimate).
+  const double dev = mode.sheared() ? deviatoric_magnitude_eig(Sym3{r.x, r.y, r.z, 0.5 * g.x, 0.5 * g.y, 0.5 * g.z})
+                                    : deviatoric_magnitude(r.x, r.y, r.z);
   const double per_step = (dev > 0 ? dev : std::fabs(r.x + r.y + r.z) / 3) * m.protocol.deviatoric_rate * m.dt;
   return m.protocol.eps_d_max / per_step;
 }

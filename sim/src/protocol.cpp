@@ -53,13 +53,18 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
                        bool quiet, const std::string& failed_checkpoint) {
   using clock = std::chrono::steady_clock;
   // Strains from the stage start; lengths re-based so that opposite rates cancel exactly.
-  state.box.length0 = state.box.length;
+  state.box.zero_strain();
   state.box.reference = state.box.length;
   state.box.log_strain = Vec3{0, 0, 0};
   Engine engine(model, state);
   const double dt = model.dt;
+  const VelGrad grad = spec.gradient();
+  const bool sheared = grad.sheared();   // progress: eps_d of the log strain tensor's eigenvalues
   const double vol_rate = spec.rate.x + spec.rate.y + spec.rate.z;
-  const double dev_shape = deviatoric_magnitude(spec.rate.x, spec.rate.y, spec.rate.z);
+  const double dev_shape =
+      sheared ? deviatoric_magnitude_eig(Sym3{grad.diag.x, grad.diag.y, grad.diag.z, 0.5 * grad.shear.x,
+                                              0.5 * grad.shear.y, 0.5 * grad.shear.z})
+              : deviatoric_magnitude(spec.rate.x, spec.rate.y, spec.rate.z);
   const bool isotropic_shape = dev_shape < 1e-12 * (std::fabs(vol_rate) + 1e-300);
 
   // Progress variable x and its increment per full step (linear in the step's rate scale).
@@ -68,6 +73,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
       case StopKind::VolumeFractionUp:
       case StopKind::VolumeFractionDown: return std::log(state.volume_fraction());
       case StopKind::DeviatoricStrain: {
+        if (sheared) return deviatoric_magnitude_eig(log_strain_tensor(state.box));
         const Vec3 e = state.box.true_strain();
         return isotropic_shape ? std::fabs(e.x + e.y + e.z) / 3.0 : deviatoric_magnitude(e.x, e.y, e.z);
       }
@@ -102,7 +108,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   CurveFile csv(csv_path, curve_preamble(model, spec.name, shear ? shear_physics(model) : preparation_physics(model),
                                          spec.definition));
 
-  Measurement last_m = measure(model, state, engine.neighbor_list(), spec.rate);
+  Measurement last_m = measure(model, state, engine.neighbor_list(), grad);
   auto write_row = [&](const Measurement& m) { csv.row(curve_row(m), spec.name); };
   write_row(last_m);
   State last_good = state;
@@ -142,8 +148,11 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
         const double remaining = std::fabs(events[next_event] - progress_value());
         if (remaining < std::fabs(step_increment)) scale = remaining / std::fabs(step_increment);
       }
-      engine.step(spec.rate * scale);
+      const double x_before = sheared ? progress_value() : 0.0;
+      engine.step(grad * scale);
       ++steps;
+      // The log strain of a shear is not linear in time: land with the last full step's increment.
+      if (sheared && scale == 1.0) step_increment = std::max(progress_value() - x_before, 1e-3 * dev_shape * dt);
       bool sample = false;
       if (spec.stop == StopKind::Relaxed) {
         if (steps % model.output.relax_sample_steps == 0) sample = true;
@@ -160,7 +169,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
           // landed on events[next_event]
           if (next_event < n_checkpoint_events && on_checkpoint) {
             const double phi = std::exp(events[next_event]);
-            last_m = measure(model, state, engine.neighbor_list(), spec.rate);
+            last_m = measure(model, state, engine.neighbor_list(), grad);
             write_row(last_m);
             last_sample_x = x;
             on_checkpoint(phi, state);
@@ -177,7 +186,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
       }
       if (sample || done) {
         engine.check_sanity();
-        last_m = measure(model, state, engine.neighbor_list(), spec.rate);
+        last_m = measure(model, state, engine.neighbor_list(), grad);
         check_kinetic_energy(model, state, last_m, e_floor, prev_sample_ekin);
         prev_sample_ekin = last_m.E_kin;
         max_inertial = std::max(max_inertial, last_m.inertial_number);
@@ -595,7 +604,8 @@ void run_protocol(const Model& model, const RunOptions& opt) {
         State state = std::move(c.state);
         note("deviatoric " + name + " from " + ck.filename().string());
         if (mode.path.empty()) {
-          StageSpec s{name, mode.rate_shape * p.deviatoric_rate, StopKind::DeviatoricStrain, p.eps_d_max, {}, 0, 0, mode_definition(model, mode)};
+          StageSpec s{name, mode.rate_shape * p.deviatoric_rate, StopKind::DeviatoricStrain, p.eps_d_max, {}, 0, 0, mode_definition(model, mode),
+                      mode.shear_shape * p.deviatoric_rate};
           timed_stage(state, s, "deviatoric", nullptr);
         } else {
           timed_path(state, mode, name);

@@ -225,7 +225,7 @@ void apply_override(toml::table& root, const std::string& ov) {
 
 // One stage of a [paths] entry: an inline table (see data/scenes/paths_example.toml).
 PathStage parse_path_stage(const toml::table& t, const std::string& where,
-                           const std::map<std::string, Vec3>& custom) {
+                           const std::map<std::string, DeformationMode>& custom) {
   auto fail = [&](const std::string& what) { throw SceneError(where + ": " + what); };
   static const std::set<std::string> keys = {"name", "rate", "sigma_p0", "sigma_Pa", "pressure_p0", "pressure_Pa",
                                              "constant_volume", "until"};
@@ -242,10 +242,13 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
       const bool neg = !name->empty() && (*name)[0] == '-';
       const std::string base = neg ? name->substr(1) : *name;
       DeformationMode dm;
-      if (custom.count(base)) dm.rate_shape = custom.at(base);
+      if (custom.count(base)) dm = custom.at(base);
       else if (!builtin_mode(base, &dm))
         fail("rate = \"" + *name + "\" names no mode (built in: D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, "
              "or a [modes] entry; \"-D2\" reverses D2)");
+      if (dm.shear_shape.x != 0 || dm.shear_shape.y != 0 || dm.shear_shape.z != 0)
+        fail("rate = \"" + *name + "\" has off-diagonal (shear) entries: path stages take diagonal rates only "
+             "(simple shear runs as a mode, protocol.modes; docs/simple_shear.md)");
       s.rate_shape = neg ? dm.rate_shape * -1.0 : dm.rate_shape;
       if (s.name.empty()) s.name = *name;
     } else if (auto* a = r->as_array(); a && a->size() == 3 && (*a)[0].value<double>() && (*a)[1].value<double>() &&
@@ -306,7 +309,7 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
 
 // [paths] name = [ {stage}, {stage}, ... ]
 std::map<std::string, std::vector<PathStage>> parse_paths(toml::table& root, const std::string& origin,
-                                                          const std::map<std::string, Vec3>& custom) {
+                                                          const std::map<std::string, DeformationMode>& custom) {
   std::map<std::string, std::vector<PathStage>> paths;
   toml::table* t = root.get("paths") ? root.get("paths")->as_table() : nullptr;
   if (!t) { root.insert("paths", toml::table{}); return paths; }
@@ -349,6 +352,14 @@ const toml::array* explicit_preparation(toml::table& root, const std::string& or
 }  // namespace
 
 bool builtin_mode(const std::string& name, DeformationMode* mode) {
+  // Simple shear SS_ij: v_i = 2 r x_j (constant volume). The factor 2 gives its stretching
+  // D = sym(L) the eigenvalues (1, 0, -1) r of D2: simple shear is D2 rotated by 45 degrees
+  // about the third axis plus a spin, at the same eps_d rate.
+  static const std::map<std::string, Vec3> shears = {{"SS_xy", {2, 0, 0}}, {"SS_xz", {0, 2, 0}}, {"SS_yz", {0, 0, 2}}};
+  if (auto sh = shears.find(name); sh != shears.end()) {
+    if (mode) { mode->name = name; mode->rate_shape = Vec3{0, 0, 0}; mode->shear_shape = sh->second; }
+    return true;
+  }
   static const std::map<std::string, Vec3> modes = {
       {"D2", {1, 0, -1}},          {"D3", {0.5, 0.5, -1}},      {"iso_compress", {-1, -1, -1}},
       {"iso_expand", {1, 1, 1}},   {"uniaxial_x", {-1, 0, 0}},  {"uniaxial_y", {0, -1, 0}},
@@ -435,18 +446,44 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   r.get("output", "progress_seconds", m.output.progress_seconds);
   r.get("ensemble", "packings", m.ensemble_packings);
 
-  // User-defined modes: [modes] name = [rx, ry, rz]
+  // User-defined modes: [modes] name = [rx, ry, rz] (diagonal) or a 3x3 velocity gradient
+  // [[Lxx, Lxy, Lxz], [Lyx, Lyy, Lyz], [Lzx, Lzy, Lzz]] with nothing below the diagonal.
   r.allow_any("modes");
-  std::map<std::string, Vec3> custom;
+  std::map<std::string, DeformationMode> custom;
   if (auto* t = root.get("modes") ? root.get("modes")->as_table() : nullptr) {
     for (auto&& [k, v] : *t) {
+      const std::string key(k.str());
+      DeformationMode dm;
+      dm.name = key;
       auto* a = v.as_array();
-      if (!a || a->size() != 3 || !(*a)[0].value<double>() || !(*a)[1].value<double>() ||
-          !(*a)[2].value<double>())
-        throw SceneError(origin + ": modes." + std::string(k.str()) +
-                         " must be [rate_x, rate_y, rate_z] (diagonal strain-rate shape)");
-      custom[std::string(k.str())] = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(),
-                                          *(*a)[2].value<double>());
+      auto row_of = [](const toml::node& n, double out[3]) {
+        auto* r3 = n.as_array();
+        if (!r3 || r3->size() != 3) return false;
+        for (int c = 0; c < 3; ++c) {
+          auto x = (*r3)[c].value<double>();
+          if (!x) return false;
+          out[c] = *x;
+        }
+        return true;
+      };
+      double L[3][3];
+      if (a && a->size() == 3 && (*a)[0].value<double>() && (*a)[1].value<double>() && (*a)[2].value<double>()) {
+        dm.rate_shape = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(), *(*a)[2].value<double>());
+      } else if (a && a->size() == 3 && row_of((*a)[0], L[0]) && row_of((*a)[1], L[1]) && row_of((*a)[2], L[2])) {
+        if (L[1][0] != 0 || L[2][0] != 0 || L[2][1] != 0)
+          throw SceneError(origin + ": modes." + key + " has entries below the diagonal (L_yx, L_zx or L_zy): the "
+                           "sheared cell is upper triangular (LAMMPS' convention), so name the axes such that the "
+                           "flow is v_x = L_xy y + L_xz z, v_y = L_yz z (e.g. v_z = g x is v_x = g z with x and z "
+                           "swapped); a symmetric (pure-shear) gradient is diagonal in its principal axes: give that "
+                           "diagonal [rx, ry, rz] (docs/simple_shear.md)");
+        dm.rate_shape = Vec3(L[0][0], L[1][1], L[2][2]);
+        dm.shear_shape = Vec3(L[0][1], L[0][2], L[1][2]);
+      } else {
+        throw SceneError(origin + ": modes." + key +
+                         " must be [rate_x, rate_y, rate_z] (diagonal strain-rate shape) or a velocity gradient "
+                         "[[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]] (multiples of protocol.deviatoric_rate_tc)");
+      }
+      custom[key] = dm;
     }
   } else {
     root.insert("modes", toml::table{});
@@ -461,11 +498,11 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
     DeformationMode dm;
     if (custom.count(name) && paths.count(name))
       throw SceneError(origin + ": '" + name + "' is both a [modes] and a [paths] entry: rename one");
-    if (custom.count(name)) { dm.name = name; dm.rate_shape = custom[name]; }
+    if (custom.count(name)) dm = custom[name];
     else if (paths.count(name)) { dm.name = name; dm.path = paths.at(name); }
     else if (!builtin_mode(name, &dm))
       throw SceneError(origin + ": protocol.modes names '" + name + "', which is neither built in "
-                       "(D2, D3, iso_compress, iso_expand, uniaxial_x/y/z) nor defined in [modes] or [paths]");
+                       "(D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, SS_xy/xz/yz) nor defined in [modes] or [paths]");
     p.modes.push_back(dm);
   }
 

@@ -41,29 +41,47 @@ class Engine {
   /// 5-6 as another, to read each particle's data from memory once per pass; the arithmetic
   /// is exactly that of the list. With threads > 1 each thread runs the passes on its own
   /// block of particles (ForceScratch), with one barrier before and one after the pair loop.
-  void step(const Vec3& strain_rate);
+  void step(const Vec3& strain_rate) { step(VelGrad(strain_rate)); }
+  /// The same with a velocity gradient L (upper triangular): the cell H follows dH/dt = L H
+  /// (H_new = exp(L dt) H, its diagonal from the accumulated log strain as above), particles
+  /// the affine map A = H_new H_old^-1, and SLLOD's fluctuation velocities A^-1 v' (the
+  /// exact solution of dv'/dt = -L v'). A tilt beyond half an edge is flipped to the most
+  /// orthogonal cell (Box), which rebuilds the neighbour list in the same step. A diagonal L
+  /// in an untilted box is exactly step(Vec3).
+  void step(const VelGrad& velocity_gradient);
 
   /// Runs the sanity checks now; throws BlowUp on failure. Called by step() every
   /// model.check_every_steps steps.
   void check_sanity() const;
 
   const NeighborList& neighbor_list() const { return list_; }
-  const Vec3& last_strain_rate() const { return rate_; }
+  const Vec3& last_strain_rate() const { return rate_.diag; }
+  const VelGrad& last_velocity_gradient() const { return rate_; }
+  /// Cell flips so far (statistics; each rebuilt the list).
+  long flips() const { return flips_; }
   int threads() const { return threads_; }
   /// Members that ran the last step (threads(), or 1 when the adaptive choice found one
   /// thread faster on a busy machine; the results are the same bits either way).
   int active_threads() const { return chooser_.members(); }
 
  private:
+  /// The map particles follow in stage 3: diagonal `factor` (orthorhombic box), or the
+  /// upper-triangular A (and A^-1 for SLLOD) stored as (xx, yy, zz, xy, xz, yz).
+  struct AffineMap {
+    Vec3 factor{1, 1, 1};
+    bool general = false;
+    double A[6] = {1, 1, 1, 0, 0, 0};
+    double A_inv[6] = {1, 1, 1, 0, 0, 0};
+  };
   // Stages, on particle ranges [begin, end) so that the threaded step runs them per block.
-  Vec3 deform_box(const Vec3& rate);   // 3 (box): returns the factor the particles follow
-  double advance_particles(int begin, int end, const Vec3& factor, bool affine,
+  AffineMap deform_box(const VelGrad& rate, bool* flipped);   // 3 (box): the map particles follow
+  double advance_particles(int begin, int end, const AffineMap& map, bool affine,
                            const StalenessTest& test);   // 1-3, zeroes F; returns max |u|^2
   void rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2);  // 4
   void finish_forces_and_kick(int begin, int end);       // 5 (damping) and 6
   void evaluate_forces();                                // 5 on its own (construction)
-  void step_serial(const Vec3& factor, bool affine, const StalenessTest& test);
-  void step_threaded(const Vec3& factor, bool affine, const StalenessTest& test);
+  void step_serial(const AffineMap& map, bool affine, const StalenessTest& test);
+  void step_threaded(const AffineMap& map, bool affine, const StalenessTest& test);
 
   const Model& model_;
   State& state_;
@@ -72,7 +90,8 @@ class Engine {
   std::unique_ptr<StepTeam> team_;   ///< the threads of step_threaded (threads_ > 1)
   TeamSizeChooser chooser_{1, false};   ///< team or this thread alone, step by step
   std::vector<double> worst_displacement2_;   // per thread
-  Vec3 rate_{0, 0, 0};
+  VelGrad rate_;
+  long flips_ = 0;
   int threads_ = 1;
   int blocks_ = 1;                   ///< pair-loop blocks (block_count of the model's setting)
   double skin_ = 0;

@@ -44,7 +44,7 @@ void partition_pairs(const NeighborList& list, int blocks, ForceScratch& scratch
 /// add to, normally zero), queueing forces on later blocks in scratch.spill[b].
 /// Safe to call concurrently for different blocks.
 void accumulate_pair_forces(const Model& model, const State& state, const NeighborList& list,
-                            const Vec3& strain_rate, int b, ForceScratch& scratch, Vec3* force);
+                            const VelGrad& strain_rate, int b, ForceScratch& scratch, Vec3* force);
 
 /// Adds to force[] the queued forces aimed at block b, from blocks 0..b-1 in order.
 void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force);
@@ -52,15 +52,21 @@ void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force);
 /// Computes state.force for the current positions and fluctuation velocities:
 ///  - every listed pair in contact: normal force from the contact law, equal and opposite;
 ///    the overlap rate uses the full relative velocity, fluctuation plus affine flow
-///    strain_rate (.) branch vector  [1/s . m];
+///    L branch vector  [1/s . m] (L = strain_rate; a diagonal rate: rate (.) branch);
 ///  - background damping -gamma_b * v on every particle [N], added after the pair forces.
 /// Pairs are summed in list order within `blocks` blocks (ForceScratch; block_count()), run
 /// by `threads` threads: deterministic for a given block count, whatever the thread count.
 void compute_forces(const Model& model, State& state, const NeighborList& list,
-                    const Vec3& strain_rate, int threads, int blocks, ForceScratch& scratch);
+                    const VelGrad& strain_rate, int threads, int blocks, ForceScratch& scratch);
 
 /// The oracle: the same forces from a loop over all N(N-1)/2 pairs with the minimum-image
-/// convention (valid when every box edge exceeds 2 * (2 r_max)). O(N^2); for tests.
-void compute_forces_all_pairs(const Model& model, State& state, const Vec3& strain_rate);
+/// convention (valid when every box edge exceeds 2 * (2 r_max)). In a tilted cell the image is
+/// found by rounding the fractional coordinates of the separation, z, then y, then x (exact
+/// for the upper-triangular cell while contacts are shorter than half of every edge).
+/// O(N^2); for tests.
+void compute_forces_all_pairs(const Model& model, State& state, const VelGrad& strain_rate);
+
+/// The minimum-image separation x_j - x_i of the oracle [m].
+Vec3 minimum_image(const Box& box, const Vec3& xi, const Vec3& xj);
 
 }  // namespace dem

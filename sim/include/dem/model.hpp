@@ -60,11 +60,15 @@ struct PathStage {
 };
 
 /// A deformation applied to the periodic box from each checkpoint. A plain mode is a constant
-/// diagonal true-strain rate (box lengths follow L_k(t) = L_k(0) exp(rate_k t)) up to eps_d_max;
+/// velocity gradient (diagonal: a true-strain rate (box lengths follow L_k(t) = L_k(0) exp(rate_k t)) up to eps_d_max;
 /// a loading path ([paths] in the scene) is a list of stages, written as one curve.
 struct DeformationMode {
   std::string name;             ///< e.g. "D2", "D3", "iso", "uniaxial_z", or a [paths] name
   Vec3 rate_shape{0, 0, 0};     ///< dimensionless direction, multiplied by the mode rate [1/s]
+  /// Upper entries (L_xy, L_xz, L_yz) of the velocity-gradient shape (simple shear; a sheared
+  /// cell, docs/simple_shear.md), multiplied by the mode rate like rate_shape.
+  Vec3 shear_shape{0, 0, 0};
+  bool sheared() const { return shear_shape.x != 0 || shear_shape.y != 0 || shear_shape.z != 0; }
   std::vector<PathStage> path;  ///< non-empty: a loading path (rate_shape unused)
 };
 

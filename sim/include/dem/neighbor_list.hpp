@@ -7,8 +7,13 @@
 //
 // Rebuild criterion (conservative, exact bound): let u_max be the largest fluctuation
 // displacement since the build, measured in the frame of the box at build time, and
-// lambda_min the smallest stretch L/L_build of the box. No unlisted pair can touch while
+// lambda_min the smallest stretch of the box since the build (L/L_build for a diagonal
+// deformation; the smallest singular value of H H_build^-1 in a tilted cell). No unlisted
+// pair can touch while
 //     2 u_max + 2 r_max (1/lambda_min - 1)_+  <  skin.
+// In a tilted cell the linked cells are slabs of the fractional coordinates, as many per
+// axis as the cell's perpendicular width holds cutoffs, so the 27-cell stencil stays exact;
+// a flip of the cell (a new set of lattice vectors) always rebuilds the list.
 #pragma once
 #include <cmath>
 #include <cstdint>
@@ -29,7 +34,7 @@ struct NeighborList {
   std::size_t pair_count() const { return partner.size(); }
 };
 
-/// Offsets of the 27 periodic images for the current box [m].
+/// Offsets of the 27 periodic images for the current box [m]: H (sx, sy, sz), s in {-1, 0, 1}.
 void image_offsets(const Box& box, Vec3 offsets[27]);
 
 /// Rebuilds the list: wraps positions into the box, optionally sorts particles by cell
@@ -44,16 +49,25 @@ void restore_neighbor_list(const State& state, NeighborList& list, double skin);
 
 /// The rebuild criterion in a form a fused particle pass can evaluate: the list is stale
 /// when limit2 < 0, or when some particle has |x (.) frame - x_at_build|^2 >= limit2
-/// (frame = L_at_build / L per axis [-], limit2 [m^2]).
+/// (frame = L_at_build / L per axis [-], limit2 [m^2]). In a tilted cell (general) the map
+/// back to the build frame is the upper-triangular H_build H^-1 (`back`: xx, yy, zz, xy, xz, yz).
 struct StalenessTest {
   Vec3 frame{1, 1, 1};
   double limit2 = -1;
+  bool general = false;
+  double back[6] = {1, 1, 1, 0, 0, 0};
 };
+
+/// y = U x for an upper-triangular U stored as (xx, yy, zz, xy, xz, yz).
+inline Vec3 upper_apply(const double* U, const Vec3& x) {
+  return {U[0] * x.x + U[3] * x.y + U[4] * x.z, U[1] * x.y + U[5] * x.z, U[2] * x.z};
+}
 StalenessTest staleness_test(const State& state, const NeighborList& list);
 
 /// Squared displacement of particle i since the build, in the build frame [m^2].
 inline double displacement2_since_build(const State& s, const StalenessTest& t, int i) {
-  const Vec3 u = hadamard(s.position[i], t.frame) - s.position_at_build[i];
+  const Vec3 u = (t.general ? upper_apply(t.back, s.position[i]) : hadamard(s.position[i], t.frame)) -
+                 s.position_at_build[i];
   return dot(u, u);
 }
 

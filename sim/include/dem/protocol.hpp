@@ -54,6 +54,9 @@ struct StageSpec {
   double ke_ratio = 0;               ///< Relaxed: ends when E_kin < ke_ratio * max(E_pot, E_floor)
   double max_time = 0;               ///< Relaxed: ends after this duration at the latest [s]
   std::string definition;            ///< deviatoric: mode_definition(), written in the curve's preamble
+  Vec3 shear{0, 0, 0};               ///< upper entries (L_xy, L_xz, L_yz) of the velocity gradient [1/s]
+                                     ///< (simple shear); with them a DeviatoricStrain stop is on eps_d_eig
+  VelGrad gradient() const { return {rate, shear}; }
 };
 
 /// Runs one stage on (model, state), writing its curve CSV to csv_path (atomically; a crash

@@ -23,6 +23,31 @@ inline double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
 /// Component-wise product (diagonal matrix times vector).
 constexpr Vec3 hadamard(const Vec3& a, const Vec3& b) { return {a.x * b.x, a.y * b.y, a.z * b.z}; }
 
+/// A velocity gradient L [1/s] (v_affine = L x) with no entry below the diagonal: the diagonal
+/// (xx, yy, zz) and the upper entries `shear` = (L_xy, L_xz, L_yz), e.g. simple shear
+/// v_x = gdot z is shear.y = gdot. Upper triangular because the cell is (LAMMPS' convention,
+/// docs/simple_shear.md). A diagonal rate converts implicitly: every diagonal caller is unchanged.
+struct VelGrad {
+  Vec3 diag{0, 0, 0};
+  Vec3 shear{0, 0, 0};   ///< (L_xy, L_xz, L_yz)
+  constexpr VelGrad() = default;
+  constexpr VelGrad(const Vec3& d) : diag(d) {}   // NOLINT: implicit on purpose
+  constexpr VelGrad(const Vec3& d, const Vec3& s) : diag(d), shear(s) {}
+  constexpr bool sheared() const { return shear.x != 0 || shear.y != 0 || shear.z != 0; }
+  constexpr bool zero() const { return !sheared() && diag.x == 0 && diag.y == 0 && diag.z == 0; }
+  constexpr VelGrad operator*(double s) const { return {diag * s, shear * s}; }
+  /// L d: the affine relative velocity across a branch vector d. The diagonal case is the
+  /// component-wise product (the same bits as before the shear existed).
+  constexpr Vec3 apply(const Vec3& d) const {
+    return sheared() ? Vec3{diag.x * d.x + shear.x * d.y + shear.y * d.z, diag.y * d.y + shear.z * d.z, diag.z * d.z}
+                     : hadamard(diag, d);
+  }
+  /// Entry (i, j) of L (0 below the diagonal).
+  constexpr double at(int i, int j) const {
+    return i == j ? diag[i] : (i > j ? 0.0 : (i == 0 ? (j == 1 ? shear.x : shear.y) : shear.z));
+  }
+};
+
 /// Symmetric 3x3 tensor stored as xx, yy, zz, xy, xz, yz.
 struct Sym3 {
   double xx = 0, yy = 0, zz = 0, xy = 0, xz = 0, yz = 0;
