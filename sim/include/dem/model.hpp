@@ -148,7 +148,7 @@ struct Model {
   Integrator integrator = Integrator::VelocityVerlet;
   /// Fluctuation velocities in the deforming box. true (SLLOD, default): v' also feels
   /// -E_dot v' (integrated exactly as v' *= exp(-rate dt) with the box deformation), so the
-  /// kinetic stress does work and E_kin + E_pot changes by -V sigma:E_dot dt (docs/kinematics.md).
+  /// kinetic stress does work and E_kin + E_pot changes by -V sigma:E_dot dt (docs/control.md, "Kinematics in the deforming box").
   /// false ("plain", dem 0.1): v' is left unchanged by the deformation, which leaves the
   /// kinetic stress's work out of the energy balance.
   bool sllod = true;
