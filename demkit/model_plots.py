@@ -4,7 +4,7 @@
                               (shaded) and the model (fitted mode solid, predicted modes dashed)
                               for every nu, one panel per mode
   model_paths.png/.svg        the model-only paths (undrained cyclic shear, isobaric D2)
-  model_path_<name>.png/.svg  DEM path ensembles (reversal, isobaric, cyclic; curves/paths/) against
+  model_path_<name>.png/.svg  DEM path ensembles (reversal, isobaric, cyclic, triaxial; curves/paths/) against
                               the model: p* (eps_v where p was held), s_dev and F_dev signed along
                               the first loading direction, against the accumulated eps_d
 
@@ -107,11 +107,14 @@ def plot_dem_paths(out):
     cmap = plt.get_cmap("viridis")
     for name, items in sorted(groups.items()):
         items.sort()
-        fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
         first = read_curve(items[0][1])
         isobaric = max(first["isobaric"]) > 0.5
+        triaxial = max(first["isobaric"]) > 1.5   # 2: constant side stress, p* and eps_v both free
         qs = (("eps_v" if isobaric else "p_star", r"$\varepsilon_v$ (extension > 0: dilatancy)" if isobaric else "p*"),
               ("s_dev", r"$s_{dev}$ signed"), ("F_dev", r"$F_{dev}$ signed"))
+        if triaxial:
+            qs = (("p_star", "p*"),) + qs
+        fig, axes = plt.subplots(1, len(qs), figsize=(5 * len(qs), 4.2))
         for i, (nu, f) in enumerate(items):
             c = read_curve(f)
             with open(f) as fh:
