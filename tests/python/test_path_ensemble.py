@@ -52,5 +52,5 @@ def test_triaxial_paths_are_flagged_and_gridded_on_eps_d(tmp_path):
     assert d["eps_d_accumulated"][-1] <= min(e[-1] for e in eds) + 1e-9   # eps_d, not the inflated sum
     assert d["eps_d_accumulated"][-1] > min(e[-1] for e in eds) - 0.004   # cut at a row of member 0
     assert np.allclose(d["sigma_r_p0_mean"], 1.0)
-    assert abs(d["eps_zz_mean"][-1] + 0.1) < 0.002
+    assert abs(d["eps_zz_mean"][-1] + 0.1) < 0.004   # the last rows of the shortest member
     assert np.all(np.diff(d["eps_d_accumulated"]) >= 0)
