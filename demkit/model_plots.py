@@ -4,7 +4,7 @@
                               (shaded) and the model (fitted mode solid, predicted modes dashed)
                               for every nu, one panel per mode
   model_paths.png/.svg        the model-only paths (undrained cyclic shear, isobaric D2)
-  model_path_<name>.png/.svg  DEM path ensembles (reversal, isobaric, cyclic; curves/paths/) against
+  model_path_<name>.png/.svg  DEM path ensembles (reversal, isobaric, cyclic, triaxial; curves/paths/) against
                               the model: p* (eps_v where p was held), s_dev and F_dev signed along
                               the first loading direction, against the accumulated eps_d
 
@@ -107,11 +107,14 @@ def plot_dem_paths(out):
     cmap = plt.get_cmap("viridis")
     for name, items in sorted(groups.items()):
         items.sort()
-        fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
         first = read_curve(items[0][1])
         isobaric = max(first["isobaric"]) > 0.5
+        triaxial = max(first["isobaric"]) > 1.5   # 2: constant side stress, p* and eps_v both free
         qs = (("eps_v" if isobaric else "p_star", r"$\varepsilon_v$ (extension > 0: dilatancy)" if isobaric else "p*"),
               ("s_dev", r"$s_{dev}$ signed"), ("F_dev", r"$F_{dev}$ signed"))
+        if triaxial:   # p* over its start value: the rise is a few % of p*, the packings differ by 7x in p*
+            qs = (("p_star", "p*/p*(0)"),) + qs
+        fig, axes = plt.subplots(1, len(qs), figsize=(5 * len(qs), 4.2))
         for i, (nu, f) in enumerate(items):
             c = read_curve(f)
             with open(f) as fh:
@@ -119,9 +122,10 @@ def plot_dem_paths(out):
             color = cmap(0.85 * i / max(1, len(items) - 1))
             x = c["eps_d_accumulated"]
             for ax, (q, label) in zip(axes, qs):
-                ax.fill_between(x, c[q + "_lo95"], c[q + "_hi95"], color=color, alpha=0.25, lw=0)
-                ax.plot(x, c[q + "_mean"], color=color, lw=0.8, alpha=0.7)
-                ax.plot(x, c[q + "_model"], "-" if role == "fitted" else "--", color=color, lw=1.6,
+                sc = 1.0 / c["p_star_mean"][0] if triaxial and q == "p_star" else 1.0
+                ax.fill_between(x, sc * c[q + "_lo95"], sc * c[q + "_hi95"], color=color, alpha=0.25, lw=0)
+                ax.plot(x, sc * c[q + "_mean"], color=color, lw=0.8, alpha=0.7)
+                ax.plot(x, sc * c[q + "_model"], "-" if role == "fitted" else "--", color=color, lw=1.6,
                         label=f"ν={nu:.3f} ({role})")
                 ax.set_ylabel(label)
         for ax in axes:

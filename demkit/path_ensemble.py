@@ -7,11 +7,15 @@ through a reversal needs the accumulated strain as the grid and a sign for the d
 
 RAW/mNNN/PATH_phiX.csv   path curves of `dem mode --mode PATH` (one per packing, the same path
                          and start volume fraction for every packing)
-DIR/paths/PATH_phiX.csv  ensemble: for X in nu, eps_v, p_star, s_dev_signed, F_dev_signed, s_dev,
+DIR/paths/PATH_phiX.csv  ensemble (grid: eps_d_accumulated; for a path held at constant side stress
+                         throughout (triaxial), eps_d since the start, see signed_member): for X in nu, eps_v, p_star, s_dev_signed, F_dev_signed, s_dev,
                          F_dev: X_mean, X_sd, X_se, X_lo95, X_hi95 (mean -/+ t_{K-1,0.975} se, the
                          band `dem fit` writes); eps_d_accumulated, eps_d_signed, direction
                          (+1/-1: the sign of the strain increment that reaches the row),
-                         isobaric (1 where the path held p), n_packings
+                         isobaric (1 where the path held p), triaxial (1 where the side stresses
+                         sigma_xx, sigma_yy were held and the axial z strain prescribed), n_packings;
+                         also eps_zz (the axial strain) and sigma_r_p0 = (sigma_xx + sigma_yy)/2 / p(row 0)
+                         (the side stress over the path's start pressure: 1 where a triaxial servo holds it)
 DIR/members/mNNN/paths/PATH_phiX.csv   each member resampled on that grid (for the jackknife)
 --source RUN             also copy, trimmed to the columns `dem model` reads, RUN/ensemble/{D2,D3}_phiX.csv,
                          RUN/members/*/prep/cycle_unloading.csv and RUN/members/*/deviatoric/D2_phiX.csv
@@ -33,7 +37,7 @@ import sys
 import numpy as np
 from scipy import stats
 
-QUANTITIES = ("nu", "eps_v", "p_star", "s_dev_signed", "F_dev_signed", "s_dev", "F_dev")
+QUANTITIES = ("nu", "eps_v", "p_star", "s_dev_signed", "F_dev_signed", "s_dev", "F_dev", "eps_zz", "sigma_r_p0")
 NAME_RE = re.compile(r"([A-Za-z0-9_]+)_phi([0-9.]+)\.csv$")
 
 
@@ -72,7 +76,7 @@ def fmt(v):
 def signed_member(path):
     _, c = read_csv(path)
     need = ("eps_d_accumulated", "eps_xx", "eps_zz", "eps_d", "eps_v", "nu", "p_star", "s_dev", "sigma_xx_Pa",
-            "sigma_zz_Pa", "F_dev", "F_xx", "F_zz", "target_p_Pa")
+            "sigma_zz_Pa", "sigma_yy_Pa", "p_Pa", "F_dev", "F_xx", "F_zz", "target_p_Pa")
     for n in need:
         if n not in c:
             raise SystemExit(f"path_ensemble: {path} has no column {n} (a path curve of `dem mode --mode PATH` is needed)")
@@ -86,7 +90,20 @@ def signed_member(path):
         "s_dev_signed": fnum(c["s_dev"]) * np.sign(fnum(c["sigma_zz_Pa"]) - fnum(c["sigma_xx_Pa"])),
         "F_dev_signed": fnum(c["F_dev"]) * np.sign(fnum(c["F_zz"]) - fnum(c["F_xx"])),
         "isobaric": np.isfinite(fnum(c["target_p_Pa"])).astype(int),
+        "eps_zz": fnum(c["eps_zz"]),
+        "sigma_r_p0": 0.5 * (fnum(c["sigma_xx_Pa"]) + fnum(c["sigma_yy_Pa"])) / fnum(c["p_Pa"])[0],
     }
+    tx = fnum(c["target_xx_Pa"]) if "target_xx_Pa" in c else np.full(len(acc), np.nan)
+    ty = fnum(c["target_yy_Pa"]) if "target_yy_Pa" in c else np.full(len(acc), np.nan)
+    tz = fnum(c["target_zz_Pa"]) if "target_zz_Pa" in c else np.full(len(acc), np.nan)
+    # constant side stress: x and y stress controlled, z strain controlled, no pressure servo
+    m["triaxial"] = (np.isfinite(tx) & np.isfinite(ty) & ~np.isfinite(tz) & ~np.isfinite(fnum(c["target_p_Pa"]))).astype(int)
+    if len(acc) > 1 and np.all(m["triaxial"][1:] == 1):
+        # Constant side stress: the side axes are servo-driven, and their back-and-forth (the two
+        # sides are held separately) adds to the accumulated sum |d eps_d| without being loading
+        # (0.246 against eps_d = 0.225 at eps_zz = -0.15). The path is monotone, so its abscissa is
+        # eps_d since the start itself (its running maximum, for the last digits of the noise).
+        m["acc"] = acc = np.maximum.accumulate(fnum(c["eps_d"]))
     if np.any(np.diff(acc) < 0):
         raise SystemExit(f"path_ensemble: {path}: eps_d_accumulated decreases")
     return m
@@ -124,6 +141,9 @@ def reduce_path(files, name, nu_tag, out_dir, members_out):
     iso = np.max([interp(m["acc"], m["isobaric"].astype(float), grid) for m in mem], axis=0)
     isobaric = (iso > 0.5).astype(int)
     isobaric[0] = isobaric[1] if len(grid) > 1 else 0
+    tri = np.max([interp(m["acc"], m["triaxial"].astype(float), grid) for m in mem], axis=0)
+    triaxial = (tri > 0.5).astype(int)
+    triaxial[0] = triaxial[1] if len(grid) > 1 else 0
     tq = stats.t.ppf(0.975, K - 1)
     cols = {}
     res = {q: np.array([interp(m["acc"], m[q], grid) for m in mem]) for q in QUANTITIES}
@@ -134,7 +154,7 @@ def reduce_path(files, name, nu_tag, out_dir, members_out):
         se = sd / np.sqrt(K)
         cols[q] = (mean, sd, se, mean - tq * se, mean + tq * se)
     eps_signed = np.mean([interp(m["acc"], m["eps_d_signed"], grid) for m in mem], axis=0)
-    head = ["eps_d_accumulated", "eps_d_signed", "direction", "isobaric", "n_packings"]
+    head = ["eps_d_accumulated", "eps_d_signed", "direction", "isobaric", "triaxial", "n_packings"]
     for q in QUANTITIES:
         head += [f"{q}_{s}" for s in ("mean", "sd", "se", "lo95", "hi95")]
     lines = [
@@ -144,11 +164,13 @@ def reduce_path(files, name, nu_tag, out_dir, members_out):
         "X_se = X_sd/sqrt(K), X_lo95/X_hi95 = X_mean -/+ t_{K-1,0.975} X_se (95% band of the mean)\n",
         "# signed along the first loading direction: eps_d_signed = eps_d sign(eps_xx - eps_zz), "
         "s_dev_signed = s_dev sign(sigma_zz - sigma_xx), F_dev_signed = F_dev sign(F_zz - F_xx); "
-        "s_dev, F_dev: magnitudes; direction: sign of the strain increment into the row; isobaric: 1 where p was held\n",
+        "s_dev, F_dev: magnitudes; direction: sign of the strain increment into the row; isobaric: 1 where p was held; "
+        "triaxial: 1 where sigma_xx, sigma_yy were held (constant side stress, axial z strain prescribed); "
+        "sigma_r_p0 = (sigma_xx + sigma_yy)/2 / p(row 0)\n",
         ",".join(head) + "\n",
     ]
     for i in range(len(grid)):
-        r = [fmt(grid[i]), fmt(eps_signed[i]), str(direction[i]), str(isobaric[i]), str(K)]
+        r = [fmt(grid[i]), fmt(eps_signed[i]), str(direction[i]), str(isobaric[i]), str(triaxial[i]), str(K)]
         for q in QUANTITIES:
             r += [fmt(v[i]) for v in cols[q]]
         lines.append(",".join(r) + "\n")

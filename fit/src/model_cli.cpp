@@ -199,17 +199,26 @@ void write_path_curve(const PathPrediction& m, const PathData& d, const std::str
   std::ostringstream o;
   o << "# dem model: model and DEM path ensemble (" << d.packings << " packings) for the path " << d.name
     << " from nu = " << d.nu << " (" << role << "); s_dev, F_dev signed along the first loading direction; eps_v = tr(E)/3 "
-       "(extension positive); *_lo95/_hi95: the ensemble's 95 % band; isobaric: 1 where p was held\n";
+       "(extension positive); *_lo95/_hi95: the ensemble's 95 % band; isobaric: 1 where p was held, 2 where the side "
+       "stress was held (triaxial); eps_zz_model = (tr E - 2 eps_d)/3, the axial strain of an axisymmetric strain "
+       "(docs/model.md); sigma_r_p0 = side stress p (1 - s/3) over p(row 0); *_dem: the DEM means (nan if not in the "
+       "ensemble)\n";
   o << "eps_d_accumulated,eps_d_signed,isobaric,p_star_model,s_dev_model,F_dev_model,eps_v_model,nu_model";
   for (const char* q : {"p_star", "s_dev", "F_dev", "eps_v"}) o << "," << q << "_mean," << q << "_lo95," << q << "_hi95";
+  o << ",eps_zz_model,eps_zz_dem,sigma_r_p0_model,sigma_r_p0_dem";
   o << "\n";
+  double eps_d_model = 0;   // the model's signed eps_d since the start (its own path: direction x |d eps_d|)
   for (std::size_t i = 0; i < m.acc.size(); ++i) {
+    if (i > 0) eps_d_model += d.direction[i] * (m.acc[i] - m.acc[i - 1]);
+    const double nan = std::nan("");
     o << num(m.acc[i], 8) << "," << num(d.eps_signed[i], 8) << "," << d.isobaric[i] << "," << num(m.p[i], 8) << ","
       << num(m.s[i], 8) << "," << num(m.F[i], 8) << "," << num(m.ev[i], 8) << "," << num(m.nu[i], 8);
     const std::pair<const std::vector<double>*, const std::vector<double>*> q[] = {
         {&d.p, &d.hw_p}, {&d.s, &d.hw_s}, {&d.F, &d.hw_F}, {&d.ev, &d.hw_ev}};
     for (const auto& [v, h] : q)
       o << "," << num((*v)[i], 8) << "," << num((*v)[i] - (*h)[i], 8) << "," << num((*v)[i] + (*h)[i], 8);
+    o << "," << num(model::axial_strain(3.0 * m.ev[i], eps_d_model), 8) << "," << num(i < d.ezz.size() ? d.ezz[i] : nan, 8)
+      << "," << num(m.p[i] * (1.0 - m.s[i] / 3.0) / m.p.front(), 8) << "," << num(i < d.sr.size() ? d.sr[i] : nan, 8);
     o << "\n";
   }
   write_text_file(path.string(), o.str());

@@ -244,6 +244,13 @@ PathData read_path(const std::string& path, const std::string& name, double nu) 
   d.eps_signed = t.column("eps_d_signed");
   for (double v : t.column("direction")) d.direction.push_back(static_cast<int>(std::lround(v)));
   for (double v : t.column("isobaric")) d.isobaric.push_back(static_cast<int>(std::lround(v)));
+  // Constant side stress (triaxial) rows: code 2 (Control::Triaxial; the column is optional,
+  // older path ensembles have none).
+  if (std::find(t.header.begin(), t.header.end(), "triaxial") != t.header.end()) {
+    const auto& tri = t.column("triaxial");
+    for (std::size_t i = 0; i < tri.size() && i < d.isobaric.size(); ++i)
+      if (std::lround(tri[i]) != 0) d.isobaric[i] = 2;
+  }
   const auto& n = t.column("n_packings");
   d.packings = n.empty() ? 0 : static_cast<int>(n.front());
   d.nu_m = t.column("nu_mean");
@@ -258,6 +265,9 @@ PathData read_path(const std::string& path, const std::string& name, double nu) 
     hw[k]->resize(hi.size());
     for (std::size_t i = 0; i < hi.size(); ++i) (*hw[k])[i] = hi[i] - (*mean[k].second)[i];
   }
+  const auto has = [&](const char* c) { return std::find(t.header.begin(), t.header.end(), c) != t.header.end(); };
+  if (has("eps_zz_mean")) d.ezz = t.column("eps_zz_mean");
+  if (has("sigma_r_p0_mean")) d.sr = t.column("sigma_r_p0_mean");
   if (!d.nu_m.empty() && std::isfinite(d.nu_m.front())) d.nu = d.nu_m.front();
   return d;
 }
@@ -535,8 +545,14 @@ std::vector<PredictionError> path_errors(const PathPrediction& m, const PathData
   std::vector<PredictionError> out;
   const std::size_t n = d.acc.size();
   std::vector<bool> all(n, true), vol(n), isob(n);
-  for (std::size_t i = 0; i < n; ++i) { vol[i] = !d.isobaric[i]; isob[i] = d.isobaric[i] != 0; }
-  if (d.has_volume()) out.push_back(error_over("p_star", m.p, d.p, d.hw_p, vol));
+  // p* where it is not held (constant volume and constant side stress rows), eps_v where the
+  // volume is free (isobaric and constant side stress rows).
+  bool any_p = false;
+  for (std::size_t i = 0; i < n; ++i) {
+    vol[i] = d.isobaric[i] != 1; isob[i] = d.isobaric[i] != 0;
+    if (i > 0 && vol[i]) any_p = true;
+  }
+  if (any_p) out.push_back(error_over("p_star", m.p, d.p, d.hw_p, vol));
   if (d.has_isobaric()) out.push_back(error_over("eps_v", m.ev, d.ev, d.hw_ev, isob));
   out.push_back(error_over("s_dev_signed", m.s, d.s, d.hw_s, all));
   out.push_back(error_over("F_dev_signed", m.F, d.F, d.hw_F, all));

@@ -414,6 +414,76 @@ TEST(Model, IsobaricRowsReachTheirCriticalState) {
   }
 }
 
+// Constant side stress (triaxial, isob code 2): sigma_r = p (1 - s/3) is held at its start value
+// on every row (the constraint solved for d eps_vol), s and p both change; the critical state is
+// that of the isobaric path (s = s_max and sigma_r fixed: p fixed, so a_A B F_max = beta_p (p - k p_iso));
+// the axial strain of an axisymmetric strain from (eps_vol, eps_d) inverts e_r - e_a = eps_d, 2 e_r + e_a = eps_vol.
+TEST(Model, TriaxialRowsHoldTheSideStress) {
+  const Parameters P = truth();
+  const auto iso = P.iso();
+  for (double nu0 : {0.70, 0.80}) {
+    const double p0 = 1.02 * isotropic_pressure(iso.data(), nu0), s0 = 0.03, F0 = 0.01;
+    const double k = p0 / isotropic_pressure(iso.data(), nu0);
+    const double sr0 = p0 * (1.0 - s0 / 3.0);
+    Rows r = rows_of(3.0, 3.0, 0.01, false);
+    for (auto& c : r.isob) c = 2;
+    const auto rows = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, s0, F0, r.acc, r.dir, r.isob);
+    for (const auto& q : rows) EXPECT_NEAR(side_stress(q.state), sr0, 1e-10 * p0);
+    // axial stress sigma_a = p + 2 s p / 3 rises: the mean stress rises by q/3
+    EXPECT_GT(rows[20].state.p, p0 * 1.01);
+    const double nu = std::exp(rows.back().state.ln_nu);
+    const Local<double> L = local(P.shear, nu, P.nu_ref);
+    EXPECT_NEAR(rows.back().state.s, L.s_max, 1e-6);
+    EXPECT_NEAR(rows.back().state.p, sr0 / (1.0 - L.s_max / 3.0), 1e-6 * p0);
+    const double lhs = L.a_A * k * bulk_modulus(iso.data(), nu) * L.F_max;
+    const double rhs = L.beta_p * (rows.back().state.p - k * isotropic_pressure(iso.data(), nu));
+    EXPECT_NEAR(lhs, rhs, 1e-5 * std::fabs(lhs) + 1e-12) << nu0;
+    EXPECT_NEAR(rows.back().eps_vol, -std::log(nu / nu0), 1e-12);
+  }
+  const double ea = axial_strain(0.01, 0.2), er = (0.01 - ea) / 2;
+  EXPECT_NEAR(er - ea, 0.2, 1e-15);
+  EXPECT_NEAR(std::sqrt(((er - er) * (er - er) + (er - ea) * (er - ea) + (ea - er) * (ea - er)) / 2), 0.2, 1e-15);
+}
+
+// Special case with a closed form: no anisotropy coupling (a_A = 0) and no pressure relaxation
+// (beta_p -> 0). Then dp = -B d eps_vol integrates to the isotropic law, p = k p_iso(nu), and the
+// constraint fixes p = sigma_r0 / (1 - s/3): the triaxial test is an isotropic compression driven
+// by the mean stress the deviator adds, the volume at every row the one where k p_iso(nu) equals it.
+// With s held at
+// 0 (s_max = s0 = 0) the constraint is dp = 0 and the rows equal the isobaric ones.
+TEST(Model, TriaxialReducesToIsotropicCompressionWithoutCoupling) {
+  Parameters P = truth();
+  P.shear[kAnisoA] = 0.0; P.shear[kAnisoB] = 0.0;
+  P.shear[kLnBetaPA] = -40.0; P.shear[kLnBetaPB] = 0.0;
+  const auto iso = P.iso();
+  const double nu0 = 0.72, p0 = 1.03 * isotropic_pressure(iso.data(), nu0), s0 = 0.02, F0 = 0.015;
+  const double k = p0 / isotropic_pressure(iso.data(), nu0), sr0 = p0 * (1.0 - s0 / 3.0);
+  Rows r = rows_of(0.4, 0.4, 0.004, false);
+  for (auto& c : r.isob) c = 2;
+  const auto rows = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, s0, F0, r.acc, r.dir, r.isob);
+  const Local<double> L0 = local(P.shear, nu0, P.nu_ref);
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const double nu = std::exp(rows[i].state.ln_nu);
+    EXPECT_NEAR(rows[i].state.p, k * isotropic_pressure(iso.data(), nu), 1e-9 * p0) << i;
+    EXPECT_NEAR(rows[i].state.p, sr0 / (1.0 - rows[i].state.s / 3.0), 1e-10 * p0) << i;
+    // F's law depends on the volume only through F_max(nu), beta_F(nu) (nu rises by 0.003 here)
+    EXPECT_NEAR(rows[i].state.F, L0.F_max - (L0.F_max - F0) * std::exp(-L0.beta_F * r.acc[i]), 3e-3) << i;
+  }
+  EXPECT_LT(rows.back().eps_vol, -1e-4) << "the rising mean stress compacts";
+  // s held at 0: the same rows as the isobaric path
+  P.shear[kSmaxA] = 0.0; P.shear[kSmaxB] = 0.0;
+  P.shear[kLnBetaPA] = std::log(15.0);
+  Rows ri = r;
+  for (auto& c : ri.isob) c = 1;
+  const auto tri = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu0, 1.02 * p0, 0.0, F0, r.acc, r.dir, r.isob);
+  const auto isb = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu0, 1.02 * p0, 0.0, F0, ri.acc, ri.dir, ri.isob);
+  for (std::size_t i = 0; i < tri.size(); ++i) {
+    EXPECT_EQ(tri[i].state.s, 0.0);
+    EXPECT_NEAR(tri[i].state.p, isb[i].state.p, 1e-14);
+    EXPECT_NEAR(tri[i].eps_vol, isb[i].eps_vol, 1e-14);
+  }
+}
+
 namespace {
 
 // A synthetic path ensemble: K members of the model along `r` plus AR(1) noise on p* (or eps_v

@@ -96,7 +96,7 @@ def test_bad_input_is_refused_with_the_fix(tmp_path, result):
 
 
 # ---- Paths: the committed N = 1000 path ensembles (data/model_paths_qs16: 16 packings, nu = 0.69,
-# 0.74, 0.80; reversal, isobaric, cyclic; D2/D3 means, isotropic branches and D2 member curves) ----
+# 0.74, 0.80; reversal, isobaric, cyclic, triaxial; D2/D3 means, isotropic branches and D2 member curves) ----
 
 PATHS = os.path.join(ROOT, "data", "model_paths_qs16")
 
@@ -130,6 +130,28 @@ def test_paths_are_fitted_or_predicted_and_judged(paths_result):
     assert data[0]["s_dev_model"] == pytest.approx(data[0]["s_dev_mean"], abs=1e-7)
     assert all(d["p_star_model"] == pytest.approx(data[0]["p_star_model"], rel=1e-9) for d in data)
     assert data[-1]["eps_v_model"] > 0   # the model dilates at nu = 0.74 (a_A > 0), as the DEM does
+
+
+def test_triaxial_path_holds_the_side_stress_and_is_judged(paths_result):
+    # constant side stress (docs/model.md): p* and eps_v are both free and both judged; the model
+    # holds sigma_r = p (1 - s/3) at its start value; the mapped axial strain ends near the DEM's -0.15
+    out, _ = paths_result
+    by = {(p["mode"], p["nu"], p["quantity"]): p for p in rows(os.path.join(out, "prediction.csv"))}
+    for nu in ("0.69", "0.74", "0.8"):
+        for q in ("p_star", "eps_v", "s_dev_signed", "F_dev_signed"):
+            p = by[("triaxial", nu, q)]
+            assert p["role"] == "predicted" and int(p["n"]) > 70 and math.isfinite(float(p["rms_over_band [-]"]))
+    with open(os.path.join(out, "curves", "paths", "triaxial_phi0.740.csv")) as fh:
+        lines = [ln for ln in fh if not ln.startswith("#")]
+    head = lines[0].strip().split(",")
+    data = [dict(zip(head, map(float, ln.split(",")))) for ln in lines[1:]]
+    assert all(d["isobaric"] == 2 for d in data)
+    sr = [d["p_star_model"] * (1 - d["s_dev_model"] / 3) for d in data]
+    assert all(v == pytest.approx(sr[0], rel=1e-6) for v in sr)   # 8 digits written
+    assert data[-1]["p_star_model"] > 1.03 * data[0]["p_star_model"]   # the mean stress rises by q/3
+    assert data[-1]["eps_zz_model"] == pytest.approx(data[-1]["eps_zz_dem"], abs=0.003)
+    assert data[-1]["eps_zz_dem"] == pytest.approx(-0.15, abs=0.005)
+    assert abs(data[-1]["sigma_r_p0_dem"] - 1) < 0.005   # the DEM servo held the side stress
 
 
 def test_identifiability_table(paths_result):

@@ -127,8 +127,19 @@ struct State {
 /// How the volume is controlled during a segment.
 enum class Control {
   Volume,     ///< prescribed d eps_vol = volume_rate * |d eps_d| (0: constant volume, D2/D3)
-  Isobaric    ///< d p = 0: d eps_vol solved from the pressure equation (mixed control)
+  Isobaric,   ///< d p = 0: d eps_vol solved from the pressure equation (mixed control)
+  Triaxial    ///< d sigma_r = 0, sigma_r = p (1 - s/3) the side stress of an axisymmetric state
+              ///< (compression positive, s = (sigma_a - sigma_r)/p signed): d eps_vol solved from
+              ///< (1 - s/3) dp - (p/3) ds = 0 (constant-side-stress test; docs/model.md)
 };
+
+/// Side (radial) stress of the axisymmetric state in p* units: sigma_a = p + 2 q/3,
+/// sigma_r = p - q/3 with q = s p = sigma_a - sigma_r (sigma_dev = |sigma_a - sigma_r| for
+/// axisymmetric stress, docs/definitions.md).
+template <class T>
+T side_stress(const State<T>& y) {
+  return y.p * (T(1.0) - y.s / T(3.0));
+}
 
 /// One monotone piece of a strain path.
 struct Segment {
@@ -181,12 +192,20 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   }
   const T relax = L.beta_p * (y.p - p_ref);          // excess pressure relaxing with |d eps_d|
   T dvol;                                            // d eps_vol per |d eps_d|
-  if (seg.control == Control::Isobaric) dvol = (A * T(sigma) - relax) / B;
-  else dvol = T(seg.volume_rate);
+  const T shear = L.beta_s * (T(sigma) * L.s_max - y.s);   // the deviatoric source of ds
+  if (seg.control == Control::Isobaric) {
+    dvol = (A * T(sigma) - relax) / B;
+  } else if (seg.control == Control::Triaxial) {
+    // (1 - s/3) dp - (p/3) ds = 0 with dp = -B dvol + A sigma - relax and
+    // ds = shear - (A - s B)/p dvol: the B s/3 terms cancel, leaving (B - A/3) dvol.
+    dvol = ((T(1.0) - y.s / T(3.0)) * (A * T(sigma) - relax) - y.p / T(3.0) * shear) / (B - A / T(3.0));
+  } else {
+    dvol = T(seg.volume_rate);
+  }
   d.ln_nu = -dvol;
   d.p = -B * dvol + A * T(sigma) - relax;
   d.F = L.beta_F * (T(sigma) * L.F_max - y.F);
-  d.s = L.beta_s * (T(sigma) * L.s_max - y.s) - (A - y.s * B) / y.p * dvol;
+  d.s = shear - (A - y.s * B) / y.p * dvol;
   return d;
 }
 
@@ -249,7 +268,9 @@ std::vector<Point<T>> integrate(const T* iso, const T* shear, double nu_ref, dou
 /// A path given row by row, as the DEM path curves are sampled: row i is reached from row i-1
 /// by |d eps_d| = acc[i] - acc[i-1] [-] in the direction direction[i] (+1 the first loading
 /// direction, -1 reversed; 0: no deviatoric strain, the row repeats the state), at constant
-/// volume (isobaric[i] == 0) or at constant pressure (isobaric[i] != 0). Segment ends (reversal
+/// volume (isobaric[i] == 0), at constant pressure (isobaric[i] == 1) or at constant side
+/// stress (isobaric[i] == 2: the triaxial test, Control::Triaxial; the axial strain of the row
+/// is then (eps_vol - 2 eps_d)/3, axial_strain()). Segment ends (reversal
 /// points) must be rows, so that every interval is monotone. Returns the state and the full
 /// volumetric strain tr(E) since row 0 at every row (row 0: the start state (nu0, p0, s0, F0)).
 /// Throws std::invalid_argument for mismatched sizes, decreasing acc or a non-positive start.
@@ -276,7 +297,7 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
     if (dl < 0) throw std::invalid_argument("model path rows: accumulated strain decreases at row " + std::to_string(i));
     if (dl > 0 && direction[i] != 0) {
       Segment seg;
-      seg.control = isobaric[i] ? Control::Isobaric : Control::Volume;
+      seg.control = isobaric[i] == 2 ? Control::Triaxial : isobaric[i] ? Control::Isobaric : Control::Volume;
       const double sigma = direction[i] > 0 ? 1.0 : -1.0;
       const int sub = std::max(1, static_cast<int>(std::ceil(dl / max_step)));
       for (int k = 0; k < sub; ++k) {
@@ -289,6 +310,11 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
   }
   return out;
 }
+
+/// Axial strain of an axisymmetric strain state diag(e_r, e_r, e_a) from its full volumetric
+/// strain eps_vol = 2 e_r + e_a and its deviatoric strain eps_d = e_r - e_a (the magnitude of
+/// docs/definitions.md, |e_a - e_r|, signed positive for axial compression): e_a = (eps_vol - 2 eps_d)/3.
+inline double axial_strain(double eps_vol, double eps_d) { return (eps_vol - 2.0 * eps_d) / 3.0; }
 
 /// Monotone constant-volume shear from the state (nu0, p0, s0, F0), evaluated at the given
 /// strains (increasing, >= 0): the path on which the model is calibrated (D2, D3).

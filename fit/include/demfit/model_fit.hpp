@@ -72,10 +72,13 @@ struct PathData {
   std::string source;        ///< file it came from
   std::vector<double> acc;   ///< eps_d_accumulated [-], from 0, non-decreasing
   std::vector<double> eps_signed;             ///< signed eps_d since the path start [-]
-  std::vector<int> direction, isobaric;       ///< per row: sign of the increment into it; 1 where p was held
+  std::vector<int> direction, isobaric;       ///< per row: sign of the increment into it; control: 0 constant
+                                              ///< volume, 1 p held, 2 side stress held (column `triaxial`)
   std::vector<double> nu_m, ev, p, s, F;      ///< means: nu [-], eps_v = tr(E)/3 [-], p* [-], s_dev and F_dev signed [-]
   std::vector<double> se_ev, se_p, se_s, se_F;   ///< between-packing standard errors of the means
   std::vector<double> hw_ev, hw_p, hw_s, hw_F;   ///< 95 % band half-widths (hi95 - mean)
+  std::vector<double> ezz, sr;                ///< optional (empty if absent): means of the axial strain eps_zz [-]
+                                              ///< and of the side stress (sigma_xx + sigma_yy)/2 over p(row 0) [-]
   bool has_isobaric() const;                  ///< any row under pressure control
   bool has_volume() const;                    ///< any row (after the first) at prescribed volume
 };
