@@ -17,10 +17,6 @@
 
 namespace demfit {
 
-namespace {
-
-const double kNaN = std::numeric_limits<double>::quiet_NaN();
-
 void init_glog() {
   static std::once_flag once;
   std::call_once(once, [] {
@@ -28,6 +24,10 @@ void init_glog() {
     FLAGS_minloglevel = 2;   // errors only
   });
 }
+
+namespace {
+
+const double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 std::string fmt(double v) {
   std::ostringstream o;

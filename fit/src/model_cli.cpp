@@ -31,25 +31,8 @@ std::string num(double v, int prec = 6) { return table_number(v, prec); }
 
 struct CurveFile { std::string mode, tag; double nu; fs::path path; };
 
-std::vector<CurveFile> find_curves(const fs::path& dir) {
-  const fs::path ens = dir / "ensemble";
-  if (!fs::is_directory(ens))
-    throw InputError(ens.string() + " does not exist: give an ensemble folder reduced by `dem fit DIR` "
-                     "(it writes DIR/ensemble/MODE_phiX.csv)");
-  static const std::regex re(R"(([A-Za-z0-9_]+)_(phi([0-9.]+))\.csv)");
-  std::vector<CurveFile> out;
-  for (auto& e : fs::directory_iterator(ens)) {
-    std::smatch m;
-    const std::string name = e.path().filename().string();
-    if (std::regex_match(name, m, re)) out.push_back({m[1], m[2], std::stod(m[3]), e.path()});
-  }
-  std::sort(out.begin(), out.end(), [](const CurveFile& a, const CurveFile& b) {
-    return a.mode != b.mode ? a.mode < b.mode : a.nu < b.nu;
-  });
-  return out;
-}
-
-std::vector<CurveFile> find_paths(const fs::path& dir) {
+// The MODE_phiX.XXX.csv files of a folder, by mode then nu.
+std::vector<CurveFile> curves_in(const fs::path& dir) {
   static const std::regex re(R"(([A-Za-z0-9_]+)_(phi([0-9.]+))\.csv)");
   std::vector<CurveFile> out;
   for (auto& e : fs::directory_iterator(dir)) {
@@ -62,6 +45,16 @@ std::vector<CurveFile> find_paths(const fs::path& dir) {
   });
   return out;
 }
+
+std::vector<CurveFile> find_curves(const fs::path& dir) {
+  const fs::path ens = dir / "ensemble";
+  if (!fs::is_directory(ens))
+    throw InputError(ens.string() + " does not exist: give an ensemble folder reduced by `dem fit DIR` "
+                     "(it writes DIR/ensemble/MODE_phiX.csv)");
+  return curves_in(ens);
+}
+
+std::vector<CurveFile> find_paths(const fs::path& dir) { return curves_in(dir); }
 
 std::vector<fs::path> member_dirs(const fs::path& dir) {
   std::vector<fs::path> out;

@@ -19,14 +19,6 @@ namespace {
 
 const double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-void init_glog() {
-  static std::once_flag once;
-  std::call_once(once, [] {
-    if (!google::IsGoogleLoggingInitialized()) google::InitGoogleLogging("demfit");
-    FLAGS_minloglevel = 2;
-  });
-}
-
 double median(std::vector<double> v) {
   v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !(x > 0) || !std::isfinite(x); }), v.end());
   if (v.empty()) return 0.0;

@@ -71,6 +71,9 @@ struct FitResult {
   std::vector<std::string> warnings;   ///< reasons to distrust a number (see fit_saturating)
 };
 
+/// Ceres' logging (glog) initialised once, errors only; every Ceres solve in demfit calls it.
+void init_glog();
+
 /// Fits x(e) to (e, y). Throws std::invalid_argument for unusable input (sizes differ,
 /// non-finite values, fewer than min_points in the window, a flat curve). Adds warnings when
 /// the data do not determine a parameter: no saturation reached (eps_95 beyond the data),
