@@ -47,28 +47,50 @@ std::string fmt_phi(double phi) {
   return b;
 }
 
-std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
-                       const std::string& csv_path, const std::string& vtk_dir,
-                       const std::function<void(double, const State&)>& on_checkpoint,
-                       bool quiet, const std::string& failed_checkpoint) {
-  using clock = std::chrono::steady_clock;
-  // Strains from the stage start; lengths re-based so that opposite rates cancel exactly.
-  state.box.zero_strain();
-  state.box.reference = state.box.length;
-  state.box.log_strain = Vec3{0, 0, 0};
-  Engine engine(model, state);
-  const double dt = model.dt;
-  const VelGrad grad = spec.gradient();
-  const bool sheared = grad.sheared();   // progress: eps_d of the log strain tensor's eigenvalues
-  const double vol_rate = spec.rate.x + spec.rate.y + spec.rate.z;
-  const double dev_shape =
-      sheared ? deviatoric_magnitude_eig(Sym3{grad.diag.x, grad.diag.y, grad.diag.z, 0.5 * grad.shear.x,
-                                              0.5 * grad.shear.y, 0.5 * grad.shear.z})
-              : deviatoric_magnitude(spec.rate.x, spec.rate.y, spec.rate.z);
-  const bool isotropic_shape = dev_shape < 1e-12 * (std::fabs(vol_rate) + 1e-300);
+namespace {
 
-  // Progress variable x and its increment per full step (linear in the step's rate scale).
-  auto progress_value = [&]() -> double {
+// How far a stage has come (its progress variable x) and where it must land exactly: ln(phi)
+// for volume-fraction stages (events: the checkpoints, then the target), eps_d for deviatoric
+// ones (the log strain's eigenvalues in a sheared cell), time for relaxations.
+struct StageProgress {
+  const StageSpec& spec;
+  VelGrad grad;
+  bool sheared = false, isotropic_shape = false;
+  double dev_shape = 0, vol_rate = 0;
+  double step_increment = 0;         // x per full step (linear in the step's rate scale)
+  std::vector<double> events;        // x values to land on exactly, in order
+  std::size_t checkpoint_events = 0; // the first ones are checkpoints; the last ends the stage
+
+  StageProgress(const StageSpec& s, double dt) : spec(s), grad(s.gradient()) {
+    sheared = grad.sheared();
+    vol_rate = s.rate.x + s.rate.y + s.rate.z;
+    dev_shape = sheared ? deviatoric_magnitude_eig(Sym3{grad.diag.x, grad.diag.y, grad.diag.z, 0.5 * grad.shear.x,
+                                                        0.5 * grad.shear.y, 0.5 * grad.shear.z})
+                        : deviatoric_magnitude(s.rate.x, s.rate.y, s.rate.z);
+    isotropic_shape = dev_shape < 1e-12 * (std::fabs(vol_rate) + 1e-300);
+    switch (s.stop) {
+      case StopKind::VolumeFractionUp:
+      case StopKind::VolumeFractionDown: {
+        step_increment = -vol_rate * dt;
+        for (double phi : s.checkpoint_phis) events.push_back(std::log(phi));
+        events.push_back(std::log(s.target));
+        const bool up = s.stop == StopKind::VolumeFractionUp;
+        std::sort(events.begin(), events.end());
+        if (!up) std::reverse(events.begin(), events.end());
+        if ((up && !(vol_rate < 0)) || (!up && !(vol_rate > 0)))
+          throw std::logic_error("stage " + s.name + ": rate does not move phi toward the target");
+        checkpoint_events = events.size() - 1;
+        break;
+      }
+      case StopKind::DeviatoricStrain:
+        step_increment = (isotropic_shape ? std::fabs(vol_rate) / 3.0 : dev_shape) * dt;
+        events.push_back(s.target);
+        break;
+      case StopKind::Relaxed: step_increment = dt; break;
+    }
+  }
+
+  double value(const State& state) const {
     switch (spec.stop) {
       case StopKind::VolumeFractionUp:
       case StopKind::VolumeFractionDown: return std::log(state.volume_fraction());
@@ -80,30 +102,82 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
       case StopKind::Relaxed: return state.time;
     }
     return 0;
-  };
-  double step_increment = 0;
-  std::vector<double> events;   // progress values to land on exactly, in order
-  switch (spec.stop) {
-    case StopKind::VolumeFractionUp:
-    case StopKind::VolumeFractionDown: {
-      step_increment = -vol_rate * dt;
-      for (double phi : spec.checkpoint_phis) events.push_back(std::log(phi));
-      events.push_back(std::log(spec.target));
-      const bool up = spec.stop == StopKind::VolumeFractionUp;
-      std::sort(events.begin(), events.end());
-      if (!up) std::reverse(events.begin(), events.end());
-      if ((up && !(vol_rate < 0)) || (!up && !(vol_rate > 0)))
-        throw std::logic_error("stage " + spec.name + ": rate does not move phi toward the target");
-      break;
-    }
-    case StopKind::DeviatoricStrain:
-      step_increment = (isotropic_shape ? std::fabs(vol_rate) / 3.0 : dev_shape) * dt;
-      events.push_back(spec.target);
-      break;
-    case StopKind::Relaxed: step_increment = dt; break;
   }
-  const std::size_t n_checkpoint_events = spec.stop == StopKind::DeviatoricStrain ? 0 : events.size() - 1;
 
+  // The fraction of a full step that lands exactly on the next event (1: no event this step).
+  double step_scale(const State& state, std::size_t next_event) const {
+    if (spec.stop == StopKind::Relaxed || next_event >= events.size()) return 1.0;
+    const double remaining = std::fabs(events[next_event] - value(state));
+    return remaining < std::fabs(step_increment) ? remaining / std::fabs(step_increment) : 1.0;
+  }
+};
+
+// VTK snapshots of a stage: NAME_NNNN.vtu and the NAME.pvd series (nothing without a vtk folder).
+struct VtkSeries {
+  const Model& model;
+  const std::string& dir;
+  const std::string& name;
+  std::vector<std::pair<double, std::string>> files;
+  void snapshot(const State& state, const NeighborList& list) {
+    if (!model.output.vtk || dir.empty()) return;
+    char file[256];
+    std::snprintf(file, sizeof file, "%s_%04zu.vtu", name.c_str(), files.size());
+    write_vtu(dir + "/" + file, state, contact_counts(state, list));
+    files.emplace_back(state.time, file);
+    write_pvd(dir + "/" + name + ".pvd", files);
+  }
+};
+
+// The progress line on stderr (every output.progress_seconds, and at the end): the stage's
+// state, the speed and the time left.
+struct ProgressLine {
+  using Clock = std::chrono::steady_clock;
+  const Model& model;
+  const std::string& name;
+  Clock::time_point start = Clock::now(), last = start;
+  void maybe_print(const State& state, const Measurement& m, std::int64_t steps, std::int64_t stage_step,
+                   double fraction, bool done) {
+    const auto now = Clock::now();
+    if (std::chrono::duration<double>(now - last).count() < model.output.progress_seconds && !done) return;
+    last = now;
+    const double wall = std::chrono::duration<double>(now - start).count();
+    const double frac = std::clamp(fraction, 0.0, 1.0);
+    const double rate = steps * static_cast<double>(state.count()) / std::max(wall, 1e-9);
+    const double eta = frac > 0 ? wall * (1 - frac) / frac : 0;
+    char line[400];
+    std::snprintf(line, sizeof line,
+                  "[%s] step %lld  eps_d %.4f  phi %.4f  p %.3e Pa  s_dev %.4f  C %.2f  "
+                  "%.2f M particle-steps/s  %3.0f%%  ~%.0f s left\n",
+                  name.c_str(), static_cast<long long>(stage_step), m.eps_d, state.volume_fraction(), m.p, m.s_dev,
+                  m.C, rate / 1e6, 100 * frac, eta);
+    std::cerr << line << std::flush;
+  }
+};
+
+// A relaxation is over when E_kin < ke_ratio * max(E_pot, E_floor) (tested every 100 steps) or
+// at its time limit.
+bool relaxed(const Model& model, const StageSpec& spec, const State& state, const NeighborList& list,
+             std::int64_t steps, double e_floor, double t_end) {
+  if (steps % 100 == 0 &&
+      state.kinetic_energy() < spec.ke_ratio * std::max(potential_energy(model, state, list), e_floor))
+    return true;
+  return state.time >= t_end;
+}
+
+}  // namespace
+
+std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
+                       const std::string& csv_path, const std::string& vtk_dir,
+                       const std::function<void(double, const State&)>& on_checkpoint,
+                       bool quiet, const std::string& failed_checkpoint) {
+  // Strains from the stage start; lengths re-based so that opposite rates cancel exactly.
+  state.box.zero_strain();
+  state.box.reference = state.box.length;
+  state.box.log_strain = Vec3{0, 0, 0};
+  Engine engine(model, state);
+  const double dt = model.dt;
+  StageProgress progress(spec, dt);
+  const VelGrad& grad = progress.grad;
   const bool shear = spec.stop == StopKind::DeviatoricStrain;
   CurveFile csv(csv_path, curve_preamble(model, spec.name, shear ? shear_physics(model) : preparation_physics(model),
                                          spec.definition));
@@ -112,20 +186,12 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   auto write_row = [&](const Measurement& m) { csv.row(curve_row(m), spec.name); };
   write_row(last_m);
   State last_good = state;
-  double last_sample_x = progress_value();
-  std::vector<std::pair<double, std::string>> vtk_files;
-  auto snapshot = [&]() {
-    if (!model.output.vtk || vtk_dir.empty()) return;
-    char name[256];
-    std::snprintf(name, sizeof name, "%s_%04zu.vtu", spec.name.c_str(), vtk_files.size());
-    write_vtu(vtk_dir + "/" + name, state, contact_counts(state, engine.neighbor_list()));
-    vtk_files.emplace_back(state.time, name);
-    write_pvd(vtk_dir + "/" + spec.name + ".pvd", vtk_files);
-  };
-  snapshot();
+  double last_sample_x = progress.value(state);
+  VtkSeries vtk{model, vtk_dir, spec.name, {}};
+  vtk.snapshot(state, engine.neighbor_list());
 
-  const double x_start = progress_value();
-  const double x_end = spec.stop == StopKind::Relaxed ? state.time + spec.max_time : events.back();
+  const double x_start = progress.value(state);
+  const double x_end = spec.stop == StopKind::Relaxed ? state.time + spec.max_time : progress.events.back();
   const double vtk_dx = model.output.vtk_per_stage > 0 ? (x_end - x_start) / (model.output.vtk_per_stage + 1) : 0;
   double next_vtk_x = x_start + vtk_dx;
   const double sample_dx = spec.stop == StopKind::VolumeFractionUp || spec.stop == StopKind::VolumeFractionDown
@@ -135,52 +201,42 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   std::size_t next_event = 0;
   std::int64_t steps = 0;
   const std::int64_t step0 = state.step;
-  auto wall0 = clock::now(), last_progress = wall0;
+  ProgressLine line{model, spec.name};
   double prev_sample_ekin = last_m.E_kin;
   double max_inertial = 0;
   bool done = false;
 
   try {
     while (!done) {
-      // Shorten the step to land exactly on the next event.
-      double scale = 1.0;
-      if (spec.stop != StopKind::Relaxed && next_event < events.size()) {
-        const double remaining = std::fabs(events[next_event] - progress_value());
-        if (remaining < std::fabs(step_increment)) scale = remaining / std::fabs(step_increment);
-      }
-      const double x_before = sheared ? progress_value() : 0.0;
+      double scale = progress.step_scale(state, next_event);   // shortened to land on an event
+      const double x_before = progress.sheared ? progress.value(state) : 0.0;
       engine.step(grad * scale);
       ++steps;
       // The log strain of a shear is not linear in time: land with the last full step's increment.
-      if (sheared && scale == 1.0) step_increment = std::max(progress_value() - x_before, 1e-3 * dev_shape * dt);
+      if (progress.sheared && scale == 1.0)
+        progress.step_increment = std::max(progress.value(state) - x_before, 1e-3 * progress.dev_shape * dt);
       bool sample = false;
       if (spec.stop == StopKind::Relaxed) {
-        if (steps % model.output.relax_sample_steps == 0) sample = true;
-        if (steps % 100 == 0) {
-          const double ek = state.kinetic_energy();
-          if (ek < spec.ke_ratio *
-                       std::max(potential_energy(model, state, engine.neighbor_list()), e_floor))
-            done = true;
-        }
-        if (state.time >= x_end) done = true;
+        sample = steps % model.output.relax_sample_steps == 0;
+        done = relaxed(model, spec, state, engine.neighbor_list(), steps, e_floor, x_end);
       } else {
-        const double x = progress_value();
-        while (next_event < events.size() && scale < 1.0) {
+        const double x = progress.value(state);
+        while (next_event < progress.events.size() && scale < 1.0) {
           // landed on events[next_event]
-          if (next_event < n_checkpoint_events && on_checkpoint) {
-            const double phi = std::exp(events[next_event]);
+          if (next_event < progress.checkpoint_events && on_checkpoint) {
+            const double phi = std::exp(progress.events[next_event]);
             last_m = measure(model, state, engine.neighbor_list(), grad);
             write_row(last_m);
             last_sample_x = x;
             on_checkpoint(phi, state);
           }
-          if (next_event == events.size() - 1) done = true;
+          if (next_event == progress.events.size() - 1) done = true;
           ++next_event;
           scale = 1.0;   // only one event per step
         }
         if (std::fabs(x - last_sample_x) >= sample_dx * (1 - 1e-9)) sample = true;
         if (vtk_dx > 0 && ((vtk_dx > 0 && x >= next_vtk_x) || (vtk_dx < 0 && x <= next_vtk_x))) {
-          snapshot();
+          vtk.snapshot(state, engine.neighbor_list());
           next_vtk_x += vtk_dx;
         }
       }
@@ -192,28 +248,12 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
         max_inertial = std::max(max_inertial, last_m.inertial_number);
         write_row(last_m);
         csv.check(spec.name);
-        last_sample_x = progress_value();
+        last_sample_x = progress.value(state);
         last_good = state;
       }
-      if (!quiet) {
-        auto now = clock::now();
-        const double since = std::chrono::duration<double>(now - last_progress).count();
-        if (since >= model.output.progress_seconds || done) {
-          last_progress = now;
-          const double wall = std::chrono::duration<double>(now - wall0).count();
-          const double frac = std::clamp((progress_value() - x_start) / (x_end - x_start), 0.0, 1.0);
-          const double rate = steps * static_cast<double>(state.count()) / std::max(wall, 1e-9);
-          const double eta = frac > 0 ? wall * (1 - frac) / frac : 0;
-          char line[400];
-          std::snprintf(line, sizeof line,
-                        "[%s] step %lld  eps_d %.4f  phi %.4f  p %.3e Pa  s_dev %.4f  C %.2f  "
-                        "%.2f M particle-steps/s  %3.0f%%  ~%.0f s left\n",
-                        spec.name.c_str(), static_cast<long long>(state.step - step0), last_m.eps_d,
-                        state.volume_fraction(), last_m.p, last_m.s_dev, last_m.C, rate / 1e6,
-                        100 * frac, eta);
-          std::cerr << line << std::flush;
-        }
-      }
+      if (!quiet)
+        line.maybe_print(state, last_m, steps, state.step - step0, (progress.value(state) - x_start) / (x_end - x_start),
+                         done);
     }
   } catch (const BlowUp& e) {
     csv.abandon();
@@ -222,7 +262,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
     write_checkpoint(failed, Checkpoint{"", "last good state of stage " + spec.name, last_good});
     throw BlowUp(std::string(e.what()) + "\n     the last good state of stage " + spec.name + " was saved as " + failed);
   }
-  snapshot();
+  vtk.snapshot(state, engine.neighbor_list());
   csv.commit(spec.name);
   if (spec.stop == StopKind::DeviatoricStrain && max_inertial > kQuasiStaticInertial)
     std::cerr << "dem: warning: stage " << spec.name << " reached an inertial number of " << max_inertial
