@@ -621,6 +621,11 @@ void run_protocol(const Model& model, const RunOptions& opt) {
     const RunSpec run = [&](State& st, const StageSpec& s, const std::function<void(double, const State&)>& on_ck) {
       timed_stage(st, s, "prep", on_ck);
     };
+    if (p.preparation_explicit &&
+        std::find(prep_names.begin(), prep_names.end(), "cycle_unloading") == prep_names.end())
+      std::cerr << "dem: note: no preparation stage is named cycle_unloading: `dem fit` and `dem model` read the "
+                   "isotropic (unloading) branch from prep/cycle_unloading.csv, so they will have none; name the "
+                   "unloading stage you want fitted so\n";
     for (std::size_t i = first_prep; i < p.preparation.size(); ++i) {
       run_prep_stage(p.preparation[i], state, run, save);
       write_checkpoint((dir / "prep" / ("after_" + prep_names[i] + ".ckpt")).string(),
