@@ -51,7 +51,7 @@ def test_constant_normal_stress_simple_shear_holds_sigma_zz_through_a_flip(scene
     assert c["eps_d"][-1] >= 0.55
     # shear stress at the plateau; the volume is free (eps_v = eps_zz: only z moves)
     ratio = -c["sigma_xz_Pa"] / c["sigma_zz_Pa"]
-    assert abs(ratio[c["eps_d_accumulated"] > 0.2].mean()) > 0.08
+    assert ratio[c["eps_d_accumulated"] > 0.2].mean() > 0.05   # measured 0.085-0.090
     assert np.abs(c["eps_v"]).max() > 1e-5
     assert c["eps_d_accumulated"][-1] == pytest.approx(0.55, abs=0.05)
 
