@@ -145,7 +145,7 @@ std::string mode_definition(const Model& m, const DeformationMode& mode) {
            ";eps_d_max=" + physics_number(m.protocol.eps_d_max);
   std::string d = "path=";
   for (const auto& s : mode.path)
-    d += s.name + ":rate=" + vec(s.rate_shape) + ":sigma=" + vec(s.sigma) + ":pressure=" + physics_number(s.pressure) +
+    d += s.name + ":rate=" + vec(s.rate_shape) + (s.sheared() ? ":shear_shape=" + vec(s.shear_shape) : "") + ":sigma=" + vec(s.sigma) + ":pressure=" + physics_number(s.pressure) +
          (s.relative ? ":p0" : ":Pa") + (s.constant_volume ? ":constant_volume" : "") + ":stop" +
          std::to_string(static_cast<int>(s.stop)) + "=" + physics_number(s.until) + (s.until_relative ? "p0" : "") + "/";
   return d + ";servo.waves=" + physics_number(m.protocol.servo.waves) +

@@ -6,24 +6,31 @@
 #include <cmath>
 
 #include "dem/contact_law.hpp"
+#include "dem/measure.hpp"
 #include "dem/scene.hpp"
 
 namespace dem {
 
-AxisResponse axis_response(const Model& model, const State& s, const NeighborList& list, const Vec3& rate) {
+AxisResponse axis_response(const Model& model, const State& s, const NeighborList& list, const VelGrad& rate) {
   AxisResponse r;
   const LinearSpringDashpot law(model.contact);
   const double k = model.contact.stiffness;
   Sym3 contact;
-  double M[3][3] = {};
+  double M[3][3] = {}, S[3][3] = {};
+  const bool sheared = rate.sheared() || s.box.sheared();
   for_each_contact(s, list, [&](int i, int j, const Vec3& d, double dist, double delta) {
     const Vec3 n = d * (1.0 / dist);
-    const Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + hadamard(rate, d);
+    const Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + rate.apply(d);
     contact.add_outer(d, n, law(delta, -dot(v_rel, n)));
     const double n2[3] = {n.x * n.x, n.y * n.y, n.z * n.z};
     const double w = k * dist * dist;
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b) M[a][b] += w * n2[a] * n2[b];
+    if (sheared) {
+      const double nn[3] = {n.x * n.y, n.x * n.z, n.y * n.z};
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) S[a][b] += w * n2[a] * nn[b];
+    }
   });
   Sym3 kinetic;
   for (int i = 0; i < s.count(); ++i) kinetic.add_outer(s.velocity[i], s.velocity[i], s.mass[i]);
@@ -31,7 +38,7 @@ AxisResponse axis_response(const Model& model, const State& s, const NeighborLis
   r.stress = contact * inv_v;
   r.stress += kinetic * inv_v;
   for (int a = 0; a < 3; ++a)
-    for (int b = 0; b < 3; ++b) r.M[a][b] = M[a][b] * inv_v;
+    for (int b = 0; b < 3; ++b) { r.M[a][b] = M[a][b] * inv_v; r.S[a][b] = S[a][b] * inv_v; }
   return r;
 }
 
@@ -48,11 +55,19 @@ double gain(const Vec3& c, const double M[3][3], const Vec3& b) {
   return g;
 }
 
+// c^T S g: the affine change of the controlled quantity per unit (negative) shear strain g.
+double shear_gain(const Vec3& c, const double S[3][3], const Vec3& g) {
+  double s = 0;
+  for (int i = 0; i < 3; ++i)
+    for (int m = 0; m < 3; ++m) s += component(c, i) * S[i][m] * component(g, m);
+  return s;
+}
+
 }  // namespace
 
 constexpr double kIntegralTimes = 4;   // T_i / tau
 
-Servo::Servo(const PathStage& stage, const Vec3& prescribed, const ServoOptions& options)
+Servo::Servo(const PathStage& stage, const VelGrad& prescribed, const ServoOptions& options)
     : prescribed_(prescribed), options_(options) {
   if (std::isfinite(stage.pressure)) {
     rows_.push_back({Vec3{1, 1, 1} * (1.0 / 3.0), Vec3{1, 1, 1}, stage.pressure});
@@ -80,7 +95,7 @@ void Servo::start(const AxisResponse& r, const Model& model, const State& state)
   for (Row& row : rows_) row.integral = 0;
 }
 
-Vec3 Servo::update(const AxisResponse& r, double elapsed) {
+VelGrad Servo::update(const AxisResponse& r, double elapsed) {
   if (!active()) return prescribed_;
   const int m = static_cast<int>(rows_.size());
   const double t_i = kIntegralTimes * tau_;
@@ -89,7 +104,9 @@ Vec3 Servo::update(const AxisResponse& r, double elapsed) {
   for (int a = 0; a < m; ++a) {
     err(a) = output(rows_[a], r.stress) - rows_[a].target;
     // feedback, minus the affine stress rate the prescribed strain rate causes (feed-forward)
-    rhs(a) = (err(a) + rows_[a].integral / t_i) / tau_ - gain(rows_[a].c, r.M, prescribed_);
+    // (the shear part's: zero for an isotropic fabric, first order in its anisotropy)
+    rhs(a) = (err(a) + rows_[a].integral / t_i) / tau_ - gain(rows_[a].c, r.M, prescribed_.diag);
+    if (prescribed_.sheared()) rhs(a) -= shear_gain(rows_[a].c, r.S, prescribed_.shear);
     for (int b = 0; b < m; ++b) G(a, b) = gain(rows_[a].c, r.M, rows_[b].b);
   }
   // A state without contacts has no stiffness: expand/compress at the limit toward the target.
@@ -104,7 +121,7 @@ Vec3 Servo::update(const AxisResponse& r, double elapsed) {
   if (limited) servo = servo * (options_.rate_max / peak);
   if (!limited && stiff)
     for (int a = 0; a < m; ++a) rows_[a].integral += err(a) * elapsed;
-  return prescribed_ + servo;
+  return {prescribed_.diag + servo, prescribed_.shear};
 }
 
 double Servo::relative_error(const Sym3& stress) const {
@@ -153,7 +170,11 @@ void validate_path(const std::string& path_name, const std::vector<PathStage>& p
              std::to_string(rate) + "): an axis is either strain-rate or stress controlled");
     }
     const double trace = s.rate_shape.x + s.rate_shape.y + s.rate_shape.z;
-    const double dev = deviatoric_magnitude(s.rate_shape.x, s.rate_shape.y, s.rate_shape.z);
+    // The shear entries (strain controlled) add to the deviatoric rate: eps_d of D = sym L.
+    const Vec3& g = s.shear_shape;
+    const double dev = s.sheared() ? deviatoric_magnitude_eig(Sym3{s.rate_shape.x, s.rate_shape.y, s.rate_shape.z,
+                                                                    0.5 * g.x, 0.5 * g.y, 0.5 * g.z})
+                                   : deviatoric_magnitude(s.rate_shape.x, s.rate_shape.y, s.rate_shape.z);
     if (!std::isnan(s.pressure)) {
       if (!(s.pressure > 0) || !std::isfinite(s.pressure))
         fail("the pressure target must be a positive number (compression)");
@@ -162,10 +183,10 @@ void validate_path(const std::string& path_name, const std::vector<PathStage>& p
         fail("under pressure control the prescribed rate is the deviatoric direction, but it has a volumetric part "
              "(rate_x + rate_y + rate_z = " + std::to_string(trace) + "): make it trace-free, e.g. [1, 0, -1]");
     }
-    if (stressed == 3 && s.stop != PathStop::Time && s.stop != PathStop::Pressure && s.stop != PathStop::SDev &&
-        s.stop != PathStop::Phi)
+    if (stressed == 3 && !(s.sheared() && s.stop == PathStop::EpsD) && s.stop != PathStop::Time &&
+        s.stop != PathStop::Pressure && s.stop != PathStop::SDev && s.stop != PathStop::Phi)
       fail(std::string("all three axes are stress controlled, so no strain is prescribed and a stop on ") +
-           stop_name(s.stop) + " may never come: stop on time_tc, p, s_dev or phi");
+           stop_name(s.stop) + " may never come: stop on time_tc, p, s_dev or phi (or eps_d with a prescribed shear)");
     const bool servo = s.has_servo();
     if (s.constant_volume && servo)
       fail("constant_volume fixes tr(E_dot) = 0, and the stress targets set the rates of the same axes: the box is "

@@ -24,7 +24,9 @@ namespace {
 double path_stage_steps(const Model& m, const PathStage& s) {
   const Vec3& r = s.rate_shape;
   const double unit = m.protocol.deviatoric_rate * m.dt;   // strain per step of a unit rate shape
-  const double dev = deviatoric_magnitude(r.x, r.y, r.z);
+  const Vec3& g = s.shear_shape;
+  const double dev = s.sheared() ? deviatoric_magnitude_eig(Sym3{r.x, r.y, r.z, 0.5 * g.x, 0.5 * g.y, 0.5 * g.z})
+                                 : deviatoric_magnitude(r.x, r.y, r.z);
   const double comp[3] = {r.x, r.y, r.z};
   switch (s.stop) {
     case PathStop::EpsD: return s.until / (std::max(dev, 1e-3) * unit);

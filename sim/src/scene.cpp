@@ -245,17 +245,36 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
       if (custom.count(base)) dm = custom.at(base);
       else if (!builtin_mode(base, &dm))
         fail("rate = \"" + *name + "\" names no mode (built in: D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, "
-             "or a [modes] entry; \"-D2\" reverses D2)");
-      if (dm.shear_shape.x != 0 || dm.shear_shape.y != 0 || dm.shear_shape.z != 0)
-        fail("rate = \"" + *name + "\" has off-diagonal (shear) entries: path stages take diagonal rates only "
-             "(simple shear runs as a mode, protocol.modes; docs/simple_shear.md)");
+             "SS_xy/xz/yz, or a [modes] entry; \"-D2\" reverses D2)");
       s.rate_shape = neg ? dm.rate_shape * -1.0 : dm.rate_shape;
+      s.shear_shape = neg ? dm.shear_shape * -1.0 : dm.shear_shape;
       if (s.name.empty()) s.name = *name;
     } else if (auto* a = r->as_array(); a && a->size() == 3 && (*a)[0].value<double>() && (*a)[1].value<double>() &&
                                         (*a)[2].value<double>()) {
       s.rate_shape = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(), *(*a)[2].value<double>());
+    } else if (a && a->size() == 3 && (*a)[0].as_array()) {
+      // a velocity gradient [[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]], as in [modes]
+      double L[3][3];
+      for (int i = 0; i < 3; ++i) {
+        auto* row = (*a)[i].as_array();
+        if (!row || row->size() != 3)
+          fail("rate as a velocity gradient must be [[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]] (three rows of three numbers)");
+        for (int c = 0; c < 3; ++c) {
+          auto x = (*row)[c].value<double>();
+          if (!x || !std::isfinite(*x))
+            fail("rate as a velocity gradient must be [[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]] (numbers)");
+          L[i][c] = *x;
+        }
+      }
+      if (L[1][0] != 0 || L[2][0] != 0 || L[2][1] != 0)
+        fail("rate has entries below the diagonal (L_yx, L_zx or L_zy): the sheared cell is upper triangular, so "
+             "name the axes such that the flow is v_x = L_xy y + L_xz z, v_y = L_yz z (e.g. v_z = g x is v_x = g z "
+             "with x and z swapped; docs/simple_shear.md)");
+      s.rate_shape = Vec3(L[0][0], L[1][1], L[2][2]);
+      s.shear_shape = Vec3(L[0][1], L[0][2], L[1][2]);
     } else {
-      fail("rate must be [rate_x, rate_y, rate_z] (multiples of protocol.deviatoric_rate_tc) or a mode name");
+      fail("rate must be [rate_x, rate_y, rate_z] (multiples of protocol.deviatoric_rate_tc), a velocity gradient "
+           "[[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]] or a mode name");
     }
   }
   const bool p0 = t.contains("sigma_p0") || t.contains("pressure_p0");

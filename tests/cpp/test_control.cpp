@@ -12,6 +12,7 @@
 #include "test_support.hpp"
 
 using dem::Vec3;
+using dem::VelGrad;
 
 namespace {
 
@@ -24,7 +25,7 @@ struct Balance {
 // Runs `steps` steps of a dilute, undamped gas of 400 spheres with the box rate that `rate_of`
 // returns (from the current response), and balances energy against the work of the stress.
 Balance run_balance(bool sllod, double dt_over_tc, int steps,
-                    const std::function<Vec3(const dem::AxisResponse&, const dem::Model&, const dem::State&)>& rate_of) {
+                    const std::function<VelGrad(const dem::AxisResponse&, const dem::Model&, const dem::State&)>& rate_of) {
   const dem::Model m = dem_test::model_with({"contact.damping_kg_s=0", "contact.background_damping_kg_s=0",
                                              "integration.dt_over_tc=" + std::to_string(dt_over_tc),
                                              std::string("integration.kinematics=") + (sllod ? "sllod" : "plain")});
@@ -34,17 +35,21 @@ Balance run_balance(bool sllod, double dt_over_tc, int steps,
     const auto q = dem::measure(m, s, e.neighbor_list(), Vec3{0, 0, 0});
     return q.E_kin + q.E_pot;
   };
-  auto power = [&](const dem::AxisResponse& r, const Vec3& rate, double* kinetic) {
+  // sigma : L for an upper-triangular L (sigma symmetric)
+  auto contract = [](const dem::Sym3& t, const VelGrad& L) {
+    return t.xx * L.diag.x + t.yy * L.diag.y + t.zz * L.diag.z + t.xy * L.shear.x + t.xz * L.shear.y + t.yz * L.shear.z;
+  };
+  auto power = [&](const dem::AxisResponse& r, const VelGrad& rate, double* kinetic) {
     const auto q = dem::measure(m, s, e.neighbor_list(), rate);   // kinetic part on its own
     const double V = s.box.volume();
-    *kinetic = -V * (q.stress_kinetic.xx * rate.x + q.stress_kinetic.yy * rate.y + q.stress_kinetic.zz * rate.z);
-    return -V * (r.stress.xx * rate.x + r.stress.yy * rate.y + r.stress.zz * rate.z);
+    *kinetic = -V * contract(q.stress_kinetic, rate);
+    return -V * contract(r.stress, rate);
   };
   Balance b;
   const double e0 = energy();
   for (int k = 0; k < steps; ++k) {
     const dem::AxisResponse r0 = dem::axis_response(m, s, e.neighbor_list(), Vec3{0, 0, 0});
-    const Vec3 rate = rate_of(r0, m, s);
+    const VelGrad rate = rate_of(r0, m, s);
     double k0 = 0, k1 = 0;
     const double p0 = power(dem::axis_response(m, s, e.neighbor_list(), rate), rate, &k0);
     e.step(rate);
@@ -58,8 +63,8 @@ Balance run_balance(bool sllod, double dt_over_tc, int steps,
 
 // About 7 % strain per axis in 4000 steps of t_c/50 (18 us).
 constexpr double kRate = 4e3;   // [1/s]
-Vec3 iso(const dem::AxisResponse&, const dem::Model&, const dem::State&) { return Vec3{-1, -1, -1} * kRate; }
-Vec3 d2(const dem::AxisResponse&, const dem::Model&, const dem::State&) { return Vec3{1, 0, -1} * kRate; }
+VelGrad iso(const dem::AxisResponse&, const dem::Model&, const dem::State&) { return Vec3{-1, -1, -1} * kRate; }
+VelGrad d2(const dem::AxisResponse&, const dem::Model&, const dem::State&) { return Vec3{1, 0, -1} * kRate; }
 
 }  // namespace
 
@@ -109,6 +114,34 @@ TEST(Kinematics, EnergyBalanceUnderAServoControlledStage) {
   EXPECT_LT(std::fabs(b.delta_e - b.work), 1e-3 * std::fabs(b.work)) << b.delta_e << " vs " << b.work;
 }
 
+TEST(Kinematics, EnergyBalanceUnderSimpleShearAtConstantNormalStress) {
+  // SS_xz prescribed, a servo on sigma_zz (target 1.5x the start) acting on L_zz: the work is
+  // -int V sigma:L dt with the shear term, and the servo changes L_zz every step.
+  dem::PathStage stage;
+  stage.shear_shape = Vec3{0, 2, 0};
+  dem::ServoOptions opt;
+  opt.waves = 1;
+  opt.rate_max = kRate;
+  std::unique_ptr<dem::Servo> servo;
+  double zz_rate = 0;
+  const Balance b = run_balance(true, 0.01, 8000, [&](const dem::AxisResponse& r, const dem::Model& m, const dem::State& s) {
+    if (!servo) {
+      stage.sigma = Vec3{NAN, NAN, 1.5 * r.stress.zz};
+      servo = std::make_unique<dem::Servo>(stage, VelGrad(Vec3{0, 0, 0}, stage.shear_shape * kRate), opt);
+      servo->start(r, m, s);
+    }
+    const VelGrad L = servo->update(r, m.dt);
+    EXPECT_EQ(L.shear.y, 2 * kRate);   // the shear stays strain controlled
+    EXPECT_EQ(L.diag.x, 0);
+    zz_rate = std::max(zz_rate, std::fabs(L.diag.z));
+    return L;
+  });
+  EXPECT_GT(zz_rate, 0);                                    // the servo moved the shear plane
+  ASSERT_GT(std::fabs(b.kinetic_work), 0.02 * std::fabs(b.work)) << "the test must exercise the kinetic stress";
+  // Measured: 1.6e-5 of the work at dt = t_c/100 (the kinetic stress does 18 % of it).
+  EXPECT_LT(std::fabs(b.delta_e - b.work), 1e-3 * std::fabs(b.work)) << b.delta_e << " vs " << b.work;
+}
+
 // ---------------------------------------------------------------------------------------
 
 TEST(Servo, AffineStiffnessOfAHandBuiltContactMatchesTheClosedForm) {
@@ -126,6 +159,54 @@ TEST(Servo, AffineStiffnessOfAHandBuiltContactMatchesTheClosedForm) {
   EXPECT_NEAR(a.stress.xx, k * delta * l / V, 1e-9 * k * delta * l / V);
 }
 
+TEST(Servo, ShearStiffnessInATiltedCellPredictsTheAffineStressRate) {
+  // One contact through the tilted top face of a cell (xz = 0.3 L_x), along a hand-chosen n.
+  // S_im = k l^2 n_i^2 n_a n_b / V; and the stress after a small affine step x -> (I + e L) x of a
+  // general upper-triangular L changes by -e (M diag(L) + S shear(L)) plus the geometric terms
+  // (f l / (k l^2) = delta / l = 1 %), which the servo's gain leaves out, as in the diagonal case.
+  const dem::Model m = dem_test::model_with({"contact.damping_kg_s=0"});
+  const double r = 1e-3, delta = 2e-5, l = 2 * r - delta;
+  const Vec3 L(10e-3, 12e-3, 15e-3);
+  const double xz = 0.3 * L.x;
+  const Vec3 n = Vec3(0.5, -0.3, 1.0) * (1 / std::sqrt(0.25 + 0.09 + 1.0));
+  const Vec3 xi(4e-3, 6e-3, L.z - 0.4e-3);
+  const Vec3 xj = xi + n * l - Vec3(xz, 0, L.z);   // its image j + c touches i
+  dem::State s0 = dem_test::make_state(L, {xi, xj}, {r, r});
+  s0.box.tilt = Vec3(0, xz, 0);
+  dem::State s = s0;
+  dem::Engine e(m, s);
+  const dem::AxisResponse a = dem::axis_response(m, s, e.neighbor_list(), VelGrad(Vec3{0, 0, 0}, Vec3{0, 1, 0}));
+  const double V = L.x * L.y * L.z, k = m.contact.stiffness, w = k * l * l / V;
+  const double nn[3] = {n.x * n.y, n.x * n.z, n.y * n.z}, n2[3] = {n.x * n.x, n.y * n.y, n.z * n.z};
+  for (int i = 0; i < 3; ++i)
+    for (int b = 0; b < 3; ++b) {
+      EXPECT_NEAR(a.S[i][b], w * n2[i] * nn[b], 1e-9 * w) << i << b;
+      EXPECT_NEAR(a.M[i][b], w * n2[i] * n2[b], 1e-9 * w) << i << b;
+    }
+  const VelGrad grad(Vec3{0.3, -0.2, 0.1}, Vec3{0.4, 1.0, -0.6});
+  const double eps = 1e-7;
+  dem::State t = s0;
+  auto map = [&](const Vec3& x) { return x + grad.apply(x) * eps; };
+  for (auto& x : t.position) x = map(x);
+  const Vec3 a_col = map(Vec3(L.x, 0, 0)), b_col = map(Vec3(0, L.y, 0)), c_col = map(Vec3(xz, 0, L.z));
+  t.box.length = Vec3(a_col.x, b_col.y, c_col.z);
+  t.box.tilt = Vec3(b_col.x, c_col.x, c_col.y);
+  dem::Engine et(m, t);
+  const dem::AxisResponse a1 = dem::axis_response(m, t, et.neighbor_list(), Vec3{0, 0, 0});
+  const double measured[3] = {a1.stress.xx - a.stress.xx, a1.stress.yy - a.stress.yy, a1.stress.zz - a.stress.zz};
+  // The full affine rate adds the geometric terms of sigma = (1/V) sum f l n n: f l (2 (L n)_i n_i -
+  // (n.L.n) n_i^2) / V - tr(L) sigma_ii, of relative size delta / l: the stiffness part is exact.
+  const Vec3 Ln = grad.apply(n);
+  const double nLn = dot(n, Ln), f = k * delta, trL = grad.diag.x + grad.diag.y + grad.diag.z;
+  for (int i = 0; i < 3; ++i) {
+    double stiffness = 0;
+    for (int j = 0; j < 3; ++j) stiffness -= eps * (a.M[i][j] * grad.diag[j] + a.S[i][j] * grad.shear[j]);
+    const double geometric = eps * (f * l * (2 * Ln[i] * n[i] - nLn * n2[i]) / V - trL * f * l * n2[i] / V);
+    EXPECT_NEAR(measured[i], stiffness + geometric, 1e-5 * std::fabs(stiffness)) << "axis " << i;
+    EXPECT_NEAR(measured[i], stiffness, 10 * delta / l * std::fabs(stiffness)) << "axis " << i;
+  }
+}
+
 TEST(Servo, PrescribedAxesKeepTheirRateAndTheLimitHolds) {
   dem::PathStage stage;
   stage.rate_shape = Vec3{0, 0, -1};
@@ -139,7 +220,7 @@ TEST(Servo, PrescribedAxesKeepTheirRateAndTheLimitHolds) {
     for (int b = 0; b < 3; ++b) r.M[a][b] = a == b ? 3e8 : 1e8;
   dem::State s = dem_test::random_state(100, 0.3, 0, 1);
   servo.start(r, dem_test::model_with({}), s);
-  const Vec3 rate = servo.update(r, 1e-6);
+  const Vec3 rate = servo.update(r, 1e-6).diag;
   EXPECT_EQ(rate.z, -5);
   EXPECT_NEAR(rate.x, 10, 1e-12);
   EXPECT_NEAR(rate.y, 10, 1e-12);
@@ -171,4 +252,37 @@ TEST(Servo, BadControlInputIsRefusedBeforeAnythingRuns) {
   refused("[{ rate = \"D2\" }]", "until");
   refused("[{ rate = \"D5\", until = { eps_d = 0.1 } }]", "names no mode");
   refused("[]", "no stages");
+  // simple shear at constant normal stress: the shear is strain controlled, the servo diagonal
+  refused("[{ rate = [[0, 0, 2], [0, 0, 0], [0, 0, -1]], sigma_p0 = { z = 1 }, until = { eps_d = 0.1 } }]",
+          "either strain-rate or stress");
+  refused("[{ rate = [[0, 0, 0], [0, 0, 0], [2, 0, 0]], sigma_p0 = { z = 1 }, until = { eps_d = 0.1 } }]",
+          "below the diagonal");
+  refused("[{ rate = [[0, 0, 2], [0, 0, 0]], until = { eps_d = 0.1 } }]", "velocity gradient");
+  refused("[{ rate = \"SS_xz\", sigma_p0 = { z = 1 }, until = { eps_zz = -0.1 } }]", "stress controlled");
+  refused("[{ rate = \"SS_xz\", until = { eps_v = 0.01 } }]", "eps_v never changes");
+  refused("[{ rate = \"SS_xz\", sigma_p0 = { z = 1 }, constant_volume = true, until = { eps_d = 0.1 } }]",
+          "over-constrained");
+  refused("[{ rate = \"SS_xz\", pressure_p0 = 1, sigma_p0 = { z = 1 }, until = { eps_d = 0.1 } }]",
+          "over-constrains");
+}
+
+TEST(Servo, PathStagesTakeAVelocityGradientOrAShearModeAndItsReverse) {
+  const dem::Model m = dem::load_scene(
+      "[protocol]\nmodes = [\"P\", \"Q\"]\n[modes]\nmy = [[0, 0.5, 0], [0, 0, 0], [0, 0, 0]]\n[paths]\n"
+      "P = [{ rate = \"SS_xz\", sigma_p0 = { z = 1 }, until = { eps_d = 0.2 } },\n"
+      "     { rate = \"-SS_xz\", sigma_p0 = { z = 1 }, until = { time_tc = 100 } },\n"
+      "     { rate = [[0, 0, 0], [0, 0, 1], [0, 0, 0]], pressure_p0 = 1, until = { eps_d = 0.1 } }]\n"
+      "Q = [{ rate = \"my\", sigma_p0 = { x = 1, y = 1, z = 1 }, until = { eps_d = 0.1 } },\n"
+      "     { rate = [0, 0, -1], until = { eps_zz = -0.1 } }]\n");
+  const auto& p = m.protocol.modes.at(0).path;
+  ASSERT_EQ(p.size(), 3u);
+  EXPECT_EQ(p[0].shear_shape.y, 2);
+  EXPECT_EQ(p[0].sigma.z, 1);
+  EXPECT_EQ(p[1].shear_shape.y, -2);
+  EXPECT_EQ(p[1].name, "-SS_xz");
+  EXPECT_EQ(p[2].shear_shape.z, 1);
+  EXPECT_EQ(p[2].rate_shape.x, 0);
+  EXPECT_EQ(m.protocol.modes.at(1).path[0].shear_shape.x, 0.5);
+  EXPECT_TRUE(m.protocol.modes.at(1).path[0].has_servo());
+  EXPECT_FALSE(m.protocol.modes.at(1).path[1].sheared());
 }

@@ -19,11 +19,15 @@ struct AxisResponse {
   double M[3][3] = {};       ///< affine stiffness M_ij = (1/V) sum_c k l_c^2 n_i^2 n_j^2 [Pa]: the
                              ///< stress change of axis i per unit compressive strain of axis j if
                              ///< every contact followed the box (an upper bound of the true one)
+  double S[3][3] = {};       ///< the same for the shear entries: S_im = (1/V) sum_c k l_c^2 n_i^2 n_a n_b
+                             ///< with m = (xy, xz, yz) = (a, b) [Pa]: the affine rate of sigma_ii is
+                             ///< -sum_j M_ij L_jj - sum_m S_im L_m (zero for an isotropic fabric)
   double p() const { return stress.trace() / 3.0; }
 };
 
-/// Stress and affine stiffness of `state` (list current); `rate` [1/s] enters the dashpot term.
-AxisResponse axis_response(const Model& model, const State& state, const NeighborList& list, const Vec3& rate);
+/// Stress and affine stiffness of `state` (list current, any tilted cell: branch vectors from
+/// the cell's images, V = det H); `rate` [1/s] (its L d) enters the dashpot term.
+AxisResponse axis_response(const Model& model, const State& state, const NeighborList& list, const VelGrad& rate);
 
 /// The servo of one path stage: each controlled quantity y (a normal stress sigma_ii, or the mean
 /// pressure p) has an actuator direction b (the axis, or (1,1,1)) and a target y*. With
@@ -34,17 +38,20 @@ AxisResponse axis_response(const Model& model, const State& state, const Neighbo
 /// integral term removes the lag behind a steadily loading axis. tau = options.waves x the
 /// time an elastic wave (speed sqrt(M/rho_bulk)) takes to cross the longest box edge, fixed at
 /// the stage start. |B u| is limited to options.rate_max; the integral is frozen while limited
-/// (anti-windup). The box rate is prescribed + B u.
+/// (anti-windup). The box rate is prescribed + B u. The prescribed part may carry shear entries
+/// (L_xy, L_xz, L_yz: simple shear at constant normal stress); they are strain controlled, the
+/// servo acts on the diagonal only, and their affine stress rate (AxisResponse::S) enters the
+/// feed-forward.
 class Servo {
  public:
   /// `stage` targets already in Pa; `prescribed` is the strain-controlled part [1/s].
-  Servo(const PathStage& stage, const Vec3& prescribed, const ServoOptions& options);
+  Servo(const PathStage& stage, const VelGrad& prescribed, const ServoOptions& options);
 
   bool active() const { return !rows_.empty(); }
   /// Starts the stage: fixes tau from the packing's stiffness, density and box.
   void start(const AxisResponse& r, const Model& model, const State& state);
   /// New box strain rate [1/s] from the current response, `elapsed` [s] after the last update.
-  Vec3 update(const AxisResponse& r, double elapsed);
+  VelGrad update(const AxisResponse& r, double elapsed);
   /// Servo time constant tau [s] (0 before start()).
   double tau() const { return tau_; }
   /// Target normal stress per axis [Pa] (NaN where the axis is not stress controlled) and the
@@ -58,7 +65,7 @@ class Servo {
   struct Row { Vec3 c; Vec3 b; double target; double integral = 0; };
   static double output(const Row& row, const Sym3& stress);
   std::vector<Row> rows_;
-  Vec3 prescribed_;
+  VelGrad prescribed_;
   Vec3 sigma_target_{NAN, NAN, NAN};
   double pressure_target_ = NAN;
   ServoOptions options_;

@@ -47,7 +47,10 @@ enum class PathStop {
 /// multiples of p0 (the pressure at the path start; PathStage::relative).
 struct PathStage {
   std::string name;                     ///< label in the curve's `stage` column
-  Vec3 rate_shape{0, 0, 0};             ///< prescribed strain-rate shape [-]
+  Vec3 rate_shape{0, 0, 0};             ///< prescribed strain-rate shape [-] (the diagonal of L)
+  /// Prescribed upper entries (L_xy, L_xz, L_yz) of the velocity-gradient shape: simple shear in
+  /// a sheared cell (docs/simple_shear.md). Always strain controlled; a servo acts on the diagonal.
+  Vec3 shear_shape{0, 0, 0};
   Vec3 sigma{NAN, NAN, NAN};            ///< normal-stress target per axis (NaN: strain controlled), compression > 0
   double pressure = NAN;                ///< mean-pressure target (NaN: none)
   bool relative = true;                 ///< sigma, pressure (and a Pressure stop) in multiples of p0, else [Pa]
@@ -55,6 +58,9 @@ struct PathStage {
   PathStop stop = PathStop::EpsD;
   double until = 0;                     ///< stop value (see PathStop); a Pressure stop in Pa once resolved
   bool until_relative = false;          ///< a Pressure stop given in multiples of p0
+  bool sheared() const { return shear_shape.x != 0 || shear_shape.y != 0 || shear_shape.z != 0; }
+  /// The prescribed velocity-gradient shape (diagonal + upper entries).
+  VelGrad gradient_shape() const { return {rate_shape, shear_shape}; }
   bool has_servo() const { return std::isfinite(pressure) || std::isfinite(sigma.x) || std::isfinite(sigma.y) ||
                                   std::isfinite(sigma.z); }
 };
