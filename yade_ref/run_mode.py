@@ -107,6 +107,10 @@ def parse():
     ap.add_argument("--gamma-b", type=float, default=0.0, help="background damping [kg/s] (Python loop, slow)")
     ap.add_argument("--density", type=float, default=2000.0)
     ap.add_argument("--dt-over-tc", type=float, default=0.02)
+    ap.add_argument("--r-min", type=float, default=0.0,
+                    help="radius [m] of the pair that defines t_c (default: the smallest in the packing). Ours takes "
+                         "t_c from the scene's particles.radius_min_m (0.5 mm by default), not from the packing: "
+                         "pass that value to run at our dt and rate exactly")
     ap.add_argument("--out", required=True)
     ap.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (timing runs)")
     ap.add_argument("--side-stress-p0", type=float, default=0.0,
@@ -143,7 +147,7 @@ def read_packing(path):
 def main():
     a = parse()
     cell, spheres = read_packing(a.packing)
-    rmin = min(s[3] for s in spheres)
+    rmin = a.r_min if a.r_min > 0 else min(s[3] for s in spheres)
     m_small = 4.0 / 3.0 * math.pi * rmin ** 3 * a.density
     mr = m_small / 2
     w0sq, eta = a.k / mr, a.gamma / (2 * mr)
