@@ -81,9 +81,11 @@ def verdict(res, tol):
     }
     out = {}
     for q, (key, limit) in checks.items():
-        out[q] = {"measure": key, "value": res[q][key], "tolerance": limit, "ok": res[q][key] <= limit}
+        value = float(res[q][key])               # builtin types: --json writes them (numpy bools it cannot)
+        out[q] = {"measure": key, "value": value, "tolerance": limit, "ok": bool(value <= limit)}
     cov = tol.get("coverage", 0.9)
-    out["coverage"] = {"measure": "min", "value": res["coverage"], "tolerance": cov, "ok": res["coverage"] >= cov}
+    value = float(res["coverage"])
+    out["coverage"] = {"measure": "min", "value": value, "tolerance": cov, "ok": bool(value >= cov)}
     return out
 
 

@@ -27,10 +27,21 @@
 #  - the cell is driven by O.cell.velGrad = diag(rate) (YADE integrates the cell linearly per
 #    step: L <- L (1 + rate dt), so its true strain per step is ln(1 + rate dt); relative
 #    difference ~rate*dt/2 ~ 1e-7 of the strain).
+#
+# Simple shear (docs/simple_shear.md): --mode SS_xy / SS_xz / SS_yz is v_i = 2 r x_j, i.e.
+# O.cell.velGrad with the single off-diagonal entry L[i][j] = 2 r (as our SS_ij: the factor 2
+# gives D = sym L the eigenvalues (1, 0, -1) r of D2). YADE integrates the deformation gradient
+# as O.cell.trsf <- (I + L dt) trsf, exact for simple shear (L^2 = 0): trsf_ij = gamma. The cell is
+# flipped by YADE itself (O.cell.flipFlippable = True; Cell::flipCell changes hSize and the
+# interactions' cellDist, not trsf). In a sheared run the curve's strains are the log strain
+# 0.5 ln(F F^T) of F = O.cell.trsf, and eps_d, sigma_dev_Pa, s_dev, F_dev hold the eigenvalue
+# (objective) forms, as ours writes them; the run stops at eps_d = sqrt(3) asinh(gamma/2) = eps_max.
 import argparse
 import math
 import sys
 import time
+
+import numpy as np
 
 from yade import O, Vector3, Matrix3, ViscElMat, ForceResetter, InsertionSortCollider, Bo1_Sphere_Aabb, \
     InteractionLoop, Ig2_Sphere_Sphere_ScGeom, Ip2_ViscElMat_ViscElMat_ViscElPhys, \
@@ -39,21 +50,55 @@ from yade import O, Vector3, Matrix3, ViscElMat, ForceResetter, InsertionSortCol
 MODES = {"D2": (1.0, 0.0, -1.0), "D3": (0.5, 0.5, -1.0), "iso_compress": (-1.0, -1.0, -1.0),
          "iso_expand": (1.0, 1.0, 1.0), "uniaxial_x": (-1.0, 0.0, 0.0), "uniaxial_y": (0.0, -1.0, 0.0),
          "uniaxial_z": (0.0, 0.0, -1.0)}
+# Simple shear SS_ij: v_i = 2 r x_j (upper triangular, as ours; docs/simple_shear.md).
+SHEARS = {"SS_xy": (0, 1), "SS_xz": (0, 2), "SS_yz": (1, 2)}
 COLUMNS = ["step", "time_s", "eps_xx", "eps_yy", "eps_zz", "eps_v", "eps_d", "nu", "p_Pa", "p_star",
            "sigma_xx_Pa", "sigma_yy_Pa", "sigma_zz_Pa", "sigma_xy_Pa", "sigma_xz_Pa", "sigma_yz_Pa",
            "sigma_dev_Pa", "s_dev", "F_xx", "F_yy", "F_zz", "F_xy", "F_xz", "F_yz", "F_dev", "C",
            "C_nonrattler", "rattler_fraction", "E_kin_J", "overlap_max_rel", "overlap_mean_rel",
-           "E_pot_J", "p_kin_Pa", "inertial_number", "contacts", "stage"]
+           "E_pot_J", "p_kin_Pa", "inertial_number", "contacts", "eps_xy", "eps_xz", "eps_yz", "eps_d_eig",
+           "sigma_dev_eig_Pa", "s_dev_eig", "F_dev_eig", "angle_sigma_F_deg", "angle_sigma_D_deg", "angle_F_D_deg",
+           "stage"]
 
 
 def dev(a, b, c):
     return math.sqrt(((a - b) ** 2 + (b - c) ** 2 + (c - a) ** 2) / 2.0)
 
 
+def dev_eig(m):
+    """Deviatoric magnitude sqrt(3 J2) of the eigenvalues of a symmetric 3x3 matrix."""
+    return dev(*np.linalg.eigvalsh(np.asarray(m, dtype=float)))
+
+
+def extreme_direction(m, major):
+    """Eigenvector of the largest (major) or smallest eigenvalue; None if it is degenerate
+    (gap within 1e-9 of the scale), as ours (sim/src/measure.cpp)."""
+    w, v = np.linalg.eigh(np.asarray(m, dtype=float))
+    scale = max(abs(w[0]), abs(w[2]))
+    gap = w[2] - w[1] if major else w[1] - w[0]
+    if not (scale > 0) or not (gap > 1e-9 * scale):
+        return None
+    return v[:, 2] if major else v[:, 0]
+
+
+def axis_angle_deg(a, b):
+    if a is None or b is None:
+        return float("nan")
+    c = min(1.0, abs(float(np.dot(a, b))) / (np.linalg.norm(a) * np.linalg.norm(b)))
+    return math.degrees(math.acos(c))
+
+
+def log_strain(F):
+    """Hencky strain 0.5 ln(F F^T) (docs/simple_shear.md)."""
+    F = np.asarray(F, dtype=float)
+    w, v = np.linalg.eigh(F @ F.T)
+    return v @ np.diag(0.5 * np.log(w)) @ v.T
+
+
 def parse():
     ap = argparse.ArgumentParser(prog="run_mode.py")
     ap.add_argument("--packing", required=True)
-    ap.add_argument("--mode", default="D2", choices=sorted(MODES))
+    ap.add_argument("--mode", default="D2", choices=sorted(MODES) + sorted(SHEARS))
     ap.add_argument("--rate-tc", type=float, default=5e-6, help="rate times t_c of the smallest pair")
     ap.add_argument("--eps-max", type=float, default=0.4)
     ap.add_argument("--sample-strain", type=float, default=0.002)
@@ -62,6 +107,10 @@ def parse():
     ap.add_argument("--gamma-b", type=float, default=0.0, help="background damping [kg/s] (Python loop, slow)")
     ap.add_argument("--density", type=float, default=2000.0)
     ap.add_argument("--dt-over-tc", type=float, default=0.02)
+    ap.add_argument("--r-min", type=float, default=0.0,
+                    help="radius [m] of the pair that defines t_c (default: the smallest in the packing). Ours takes "
+                         "t_c from the scene's particles.radius_min_m (0.5 mm by default), not from the packing: "
+                         "pass that value to run at our dt and rate exactly")
     ap.add_argument("--out", required=True)
     ap.add_argument("--max-steps", type=int, default=0, help="stop after this many steps (timing runs)")
     ap.add_argument("--side-stress-p0", type=float, default=0.0,
@@ -98,17 +147,32 @@ def read_packing(path):
 def main():
     a = parse()
     cell, spheres = read_packing(a.packing)
-    rmin = min(s[3] for s in spheres)
+    rmin = a.r_min if a.r_min > 0 else min(s[3] for s in spheres)
     m_small = 4.0 / 3.0 * math.pi * rmin ** 3 * a.density
     mr = m_small / 2
     w0sq, eta = a.k / mr, a.gamma / (2 * mr)
     tc = math.pi / math.sqrt(w0sq - eta * eta)
     dt = a.dt_over_tc * tc
     rate = a.rate_tc / tc
-    shape = MODES[a.mode]
-    dev_shape = dev(*shape)
-    per_step = (dev_shape if dev_shape > 0 else abs(sum(shape)) / 3) * rate * dt
-    n_steps = int(math.ceil(a.eps_max / per_step - 1e-9))
+    sheared = a.mode in SHEARS
+    grad = [[0.0] * 3 for _ in range(3)]          # velocity gradient in units of the rate
+    if sheared:
+        i_s, j_s = SHEARS[a.mode]
+        grad[i_s][j_s] = 2.0
+        shape = (0.0, 0.0, 0.0)
+        # eps_d = sqrt(3) asinh(gamma/2), gamma = 2 r t: the initial eps_d rate is sqrt(3) r
+        per_step = math.sqrt(3.0) * rate * dt
+        gamma_end = 2.0 * math.sinh(a.eps_max / math.sqrt(3.0))
+        n_steps = int(math.ceil(gamma_end / (2.0 * rate * dt) - 1e-9))
+    else:
+        shape = MODES[a.mode]
+        for k in range(3):
+            grad[k][k] = shape[k]
+        dev_shape = dev(*shape)
+        per_step = (dev_shape if dev_shape > 0 else abs(sum(shape)) / 3) * rate * dt
+        n_steps = int(math.ceil(a.eps_max / per_step - 1e-9))
+    D_rate = [[0.5 * (grad[p][q] + grad[q][p]) * rate for q in range(3)] for p in range(3)]
+    d_dir = extreme_direction(D_rate, False)     # most compressive direction of D = sym L
     if a.max_steps:
         n_steps = min(n_steps, a.max_steps)
 
@@ -128,7 +192,9 @@ def main():
     engines.append(NewtonIntegrator(damping=0))
     O.engines = engines
     O.dt = dt
-    O.cell.velGrad = Matrix3(shape[0] * rate, 0, 0, 0, shape[1] * rate, 0, 0, 0, shape[2] * rate)
+    O.cell.velGrad = Matrix3(*[grad[p][q] * rate for p in range(3) for q in range(3)])
+    if sheared:
+        O.cell.flipFlippable = True
     size0 = Vector3(O.cell.size)
     vol_particles = sum(4.0 / 3.0 * math.pi * s[3] ** 3 for s in spheres)
     mean_r = sum(s[3] for s in spheres) / len(spheres)
@@ -142,8 +208,14 @@ def main():
 
     def measure():
         L = O.cell.size
-        V = L[0] * L[1] * L[2]
-        eps = [math.log(L[k] / size0[k]) for k in range(3)]
+        if sheared:
+            V = O.cell.volume                     # det hSize (|columns| are not the edges of a tilted cell)
+            eps_t = log_strain([[O.cell.trsf[p, q] for q in range(3)] for p in range(3)])
+            eps = [float(eps_t[k, k]) for k in range(3)]
+        else:
+            V = L[0] * L[1] * L[2]
+            eps = [math.log(L[k] / size0[k]) for k in range(3)]
+            eps_t = np.diag(eps)
         sig = [[0.0] * 3 for _ in range(3)]
         fab = [[0.0] * 3 for _ in range(3)]
         deg = [0] * len(O.bodies)
@@ -205,20 +277,38 @@ def main():
         cnr = sum(1 for i1, i2 in pairs if not ratt[i1] and not ratt[i2])
         p = (S[0][0] + S[1][1] + S[2][2]) / 3
         sdev = dev(S[0][0], S[1][1], S[2][2])
-        rmax_rate = max(abs(x) for x in shape) * rate
-        row = [O.iter, O.time, eps[0], eps[1], eps[2], sum(eps) / 3, dev(*eps), vol_particles / V, p,
+        fdev = dev(F[0][0], F[1][1], F[2][2])
+        eps_d = dev(*eps)
+        # objective forms (docs/definitions.md), and the non-coaxiality angles
+        eps_d_eig = dev_eig(eps_t)
+        sdev_eig = dev_eig(S)
+        fdev_eig = dev_eig(F)
+        s_dir = extreme_direction(S, True)
+        f_dir = extreme_direction(F, True)
+        if sheared:                               # a sheared cell's curve carries the objective forms
+            eps_d, sdev, fdev = eps_d_eig, sdev_eig, fdev_eig
+        rmax_rate = max(abs(grad[p_][q_]) for p_ in range(3) for q_ in range(3)) * rate
+        row = [O.iter, O.time, eps[0], eps[1], eps[2], sum(eps) / 3, eps_d, vol_particles / V, p,
                2 * mean_r * p / a.k, S[0][0], S[1][1], S[2][2], S[0][1], S[0][2], S[1][2], sdev,
                sdev / p if p > 0 else 0.0, F[0][0], F[1][1], F[2][2], F[0][1], F[0][2], F[1][2],
-               dev(F[0][0], F[1][1], F[2][2]), 2 * len(pairs) / n, 2 * cnr / (n - nr) if nr < n else 0.0,
+               fdev, 2 * len(pairs) / n, 2 * cnr / (n - nr) if nr < n else 0.0,
                nr / n, ekin, omax, osum / len(pairs) if pairs else 0.0, epot,
                (kin[0][0] + kin[1][1] + kin[2][2]) / 3 / V,
-               rmax_rate * 2 * mean_r * math.sqrt(a.density / p) if p > 0 else 0.0, len(pairs)]
+               rmax_rate * 2 * mean_r * math.sqrt(a.density / p) if p > 0 else 0.0, len(pairs),
+               float(eps_t[0, 1]), float(eps_t[0, 2]), float(eps_t[1, 2]), eps_d_eig, sdev_eig,
+               sdev_eig / p if p > 0 else 0.0, fdev_eig, axis_angle_deg(s_dir, f_dir),
+               axis_angle_deg(s_dir, d_dir), axis_angle_deg(f_dir, d_dir)]
         return ["%.10g" % v if isinstance(v, float) else str(v) for v in row] + [a.mode]
 
     globals()["background_damping"] = background_damping
     out = open(a.out + ".part", "w")
     out.write(f"# yade curve: stage={a.mode} (YADE reference, yade_ref/run_mode.py)\n")
-    out.write("# units and definitions as in our runner (docs/definitions.md); strains ln(L/L0) of O.cell.size\n")
+    if sheared:
+        out.write(f"# simple shear: O.cell.velGrad[{SHEARS[a.mode][0]}][{SHEARS[a.mode][1]}] = 2 x rate; strains 0.5 ln(F F^T) "
+                  "of F = O.cell.trsf; eps_d, sigma_dev_Pa, s_dev, F_dev are the eigenvalue forms\n")
+        out.write("# units and definitions as in our runner (docs/definitions.md)\n")
+    else:
+        out.write("# units and definitions as in our runner (docs/definitions.md); strains ln(L/L0) of O.cell.size\n")
     out.write(f"# t_c={tc:.8g} s, dt={dt:.8g} s, k={a.k} N/m, gamma={a.gamma} kg/s, gamma_b={a.gamma_b} kg/s\n")
     steps_per_sample = max(1, int(round(a.sample_strain / per_step)))
     # One step with dt = 0 creates the interactions of the initial packing without moving it
@@ -227,6 +317,8 @@ def main():
     O.run(1, True)
     O.dt = dt
     first = measure()
+    if sheared and (a.side_stress_p0 > 0 or a.isobaric_p0 > 0):
+        sys.exit("run_mode.py: simple shear runs at constant volume (no --side-stress-p0 / --isobaric-p0)")
     if a.side_stress_p0 > 0:
         if a.mode != "uniaxial_z":
             sys.exit("run_mode.py: --side-stress-p0 needs --mode uniaxial_z (x and y stress controlled, z compressed)")
@@ -289,6 +381,10 @@ def main():
     n = len(O.bodies)
     sys.stderr.write(f"run_mode.py: {done} steps of {n} particles in {wall:.2f} s (stepping only): "
                      f"{done * n / max(wall, 1e-9) / 1e6:.3f} M particle-steps/s -> {a.out}\n")
+    if sheared:
+        T = O.cell.trsf
+        sys.stderr.write(f"run_mode.py: trsf = {[[T[p, q] for q in range(3)] for p in range(3)]}, "
+                         f"hSize = {[[O.cell.hSize[p, q] for q in range(3)] for p in range(3)]}\n")
     # Sanity: pair parameters as intended.
     for i in O.interactions:
         if i.isReal:
