@@ -1,5 +1,8 @@
 #include "dem/step_team.hpp"
 
+#include <cstdio>
+#include <cstdlib>
+
 #if defined(__x86_64__) || defined(__i386__)
 #include <immintrin.h>
 #define DEM_CPU_PAUSE() _mm_pause()
@@ -82,21 +85,34 @@ TeamSizeChooser::TeamSizeChooser(int team, bool adaptive) : team_(team), adaptiv
 
 void TeamSizeChooser::step_done() {
   if (!adaptive_) return;
-  ++steps_;
   const auto now = Clock::now();
+  if (!started_) {   // the first step (thread start, first list) does not count
+    started_ = true;
+    window_start_ = now;
+    return;
+  }
+  ++steps_;
   const double wall = std::chrono::duration<double>(now - window_start_).count();
-  if (steps_ < 32 || wall < 5e-3) return;
+  if (steps_ < 64 || wall < 20e-3) return;
   const int mode = use_team_ ? 1 : 0;
   rate_[mode] = steps_ / wall;
   measured_[mode] = now;
   steps_ = 0;
   const int other = 1 - mode;
+  // One thread only when clearly faster (windows are noisy: a list rebuild, a neighbour's
+  // burst) and only after the team lost twice in a row: a loss is confirmed at once.
+  const bool team_wins = rate_[0] < kSwitchMargin * rate_[1];
+  if (mode == 1) team_losses_ = team_wins ? 0 : team_losses_ + 1;
+  const bool best_is_team = team_losses_ < 2;
   // A probe of the other mode that lost doubles the time to the next probe (up to 32 s).
-  if (probing_) recheck_ = rate_[mode] >= rate_[other] ? std::chrono::seconds(1) : std::min(recheck_ * 2, kMaxRecheck);
+  if (probing_) recheck_ = (mode == 1) == best_is_team ? std::chrono::seconds(1) : std::min(recheck_ * 2, kMaxRecheck);
   const bool stale = rate_[other] == 0 || now - measured_[other] > recheck_;
-  const bool best_is_team = rate_[1] >= rate_[0];
-  use_team_ = stale ? other == 1 : best_is_team;
-  probing_ = stale;
+  const bool confirm = mode == 1 && team_losses_ == 1;   // measure the team once more
+  use_team_ = confirm || (stale ? other == 1 : best_is_team);
+  probing_ = stale && !confirm;
+  if (std::getenv("DEM_DEBUG_CHOOSER"))
+    std::fprintf(stderr, "chooser: mode %d rate %.1f steps/s (alone %.1f team %.1f) -> %s%s\n", mode, rate_[mode], rate_[0],
+                 rate_[1], use_team_ ? "team" : "alone", probing_ ? " (probe)" : "");
   window_start_ = Clock::now();
 }
 

@@ -63,9 +63,10 @@ class StepTeam {
 
 /// Chooses, step by step, whether the team or the calling thread alone runs the step: both
 /// give the same bits (the block count, not the thread count, fixes the summation order), so
-/// the choice is only about speed. It times windows of steps (>= 32 steps and >= 5 ms) in
-/// each mode, runs the faster one and re-measures the other after 1 s (doubling up to 32 s
-/// while it keeps losing). On an idle
+/// the choice is only about speed. It times windows of steps (>= 64 steps and >= 20 ms) in
+/// each mode, runs the team unless one thread was more than 15 % faster than it in two team
+/// windows in a row, and re-measures the other mode after 1 s (doubling up to 32 s while it
+/// keeps losing). On an idle
 /// machine the team wins; beside other busy jobs, where every barrier may wait for a
 /// descheduled member, one thread can win (docs/benchmarks.md).
 class TeamSizeChooser {
@@ -87,7 +88,10 @@ class TeamSizeChooser {
   double rate_[2] = {0, 0};            // steps/s measured alone [0] and as a team [1]; 0: not yet
   Clock::time_point measured_[2] = {};
   bool probing_ = false;                 // the current window re-measures the losing mode
+  bool started_ = false;                 // a first step was seen (windows start after it)
+  int team_losses_ = 0;                  // team windows in a row that one thread beat
   static constexpr Clock::duration kMaxRecheck = std::chrono::seconds(32);
+  static constexpr double kSwitchMargin = 1.15;   // one thread must be this much faster to be chosen
   Clock::duration recheck_ = std::chrono::seconds(1);
 };
 
