@@ -13,11 +13,6 @@
 using dem::Vec3;
 
 namespace {
-double max_force(const dem::State& s) {
-  double f = 0;
-  for (auto& v : s.force) f = std::max(f, norm(v));
-  return f;
-}
 int contacts_all_pairs(const dem::State& s) {
   int c = 0;
   const Vec3 L = s.box.length;
@@ -47,7 +42,7 @@ TEST(NeighborList, ForcesEqualAllPairsOracleOnShearedConfigurations) {
       dem::compute_forces(m, s, e.neighbor_list(), rate, 1, 1, scratch);
       dem::State oracle = s;
       dem::compute_forces_all_pairs(m, oracle, rate);
-      const double scale = max_force(oracle);
+      const double scale = dem_test::max_force(oracle);
       ASSERT_GT(scale, 0);
       double worst = 0;
       for (int i = 0; i < s.count(); ++i) worst = std::max(worst, norm(s.force[i] - oracle.force[i]));
@@ -84,7 +79,7 @@ TEST(NeighborList, BlockSplitPairLoopEqualsAllPairsOracle) {
   for (int k = 0; k < 500; ++k) e.step(rate);
   dem::State oracle = s;
   dem::compute_forces_all_pairs(m, oracle, rate);
-  const double scale = max_force(oracle);
+  const double scale = dem_test::max_force(oracle);
   for (int blocks : {2, 3, 5, 12})
     for (int threads : {1, 2, 3}) {
       dem::State t = s;

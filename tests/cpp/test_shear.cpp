@@ -26,12 +26,6 @@ using dem::VelGrad;
 
 namespace {
 
-double max_force(const dem::State& s) {
-  double f = 0;
-  for (auto& v : s.force) f = std::max(f, norm(v));
-  return f;
-}
-
 int contacts_all_pairs(const dem::State& s) {
   int c = 0;
   for (int i = 0; i < s.count(); ++i)
@@ -52,7 +46,7 @@ double list_vs_oracle(const dem::Model& m, dem::State& s, const dem::NeighborLis
   dem::compute_forces(m, s, list, g, 1, 1, scratch);
   dem::State oracle = s;
   dem::compute_forces_all_pairs(m, oracle, g);
-  const double scale = max_force(oracle);
+  const double scale = dem_test::max_force(oracle);
   EXPECT_GT(scale, 0);
   double worst = 0;
   for (int i = 0; i < s.count(); ++i) worst = std::max(worst, norm(s.force[i] - oracle.force[i]));

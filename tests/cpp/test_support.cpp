@@ -1,5 +1,6 @@
 #include "test_support.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include "dem/io.hpp"
@@ -41,6 +42,12 @@ dem::State random_state(int n, double phi, double v, unsigned seed, double rmin,
   std::uniform_real_distribution<double> u(0.0, 1.0);
   for (auto& vi : s.velocity) vi = dem::Vec3(v * (u(rng) - 0.5), v * (u(rng) - 0.5), v * (u(rng) - 0.5));
   return s;
+}
+
+double max_force(const dem::State& s) {
+  double f = 0;
+  for (auto& v : s.force) f = std::max(f, norm(v));
+  return f;
 }
 
 }  // namespace dem_test

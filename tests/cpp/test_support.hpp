@@ -22,4 +22,7 @@ dem::State make_state(const dem::Vec3& box, const std::vector<dem::Vec3>& x, con
 /// scale v [m/s].
 dem::State random_state(int n, double phi, double v, unsigned seed, double rmin = 0.5e-3, double rmax = 1.5e-3);
 
+/// The largest force magnitude of a state [N] (the scale of force comparisons).
+double max_force(const dem::State& s);
+
 }  // namespace dem_test

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from conftest import SMALL_SCENE, run_dem
+from test_paths import run_path
 from demkit.curves import read_curve
 
 PATHS = """
@@ -22,14 +23,6 @@ def scene(small_run, tmp_path_factory):
     f = tmp_path_factory.mktemp("shear_paths") / "paths.toml"
     f.write_text(SMALL_SCENE + PATHS)
     return f
-
-
-def run_path(scene, small_run, tmp_path, mode, phi, *extra):
-    out = tmp_path / f"{mode}_{phi}.csv"
-    r = run_dem("mode", "--scene", scene, "--packing", small_run["dir"] / "checkpoints" / f"unloading_phi{phi}.ckpt",
-                "--mode", mode, "--out", out, "--threads", "1", "--quiet", *extra)
-    assert r.returncode == 0, r.stderr
-    return out
 
 
 @pytest.mark.parametrize("phi", ["0.720", "0.780"])
