@@ -101,6 +101,16 @@ def test_strain_reversal_crosses_zero_and_reaches_the_opposite_asymptote(scene, 
     assert c["eps_d"][rev].min() < 0.005 and acc[-1] == pytest.approx(0.36, abs=2e-3)
 
 
+def run_bad_path(small_run, tmp_path, path):
+    """`dem mode` on a scene whose [paths] entry `bad` is `path`: (CompletedProcess, output CSV)."""
+    f = tmp_path / "bad.toml"
+    f.write_text(SMALL_SCENE + f"\n[paths]\nbad = {path}\n")
+    out = tmp_path / "bad.csv"
+    r = run_dem("mode", "--scene", f, "--packing", small_run["dir"] / "checkpoints" / "unloading_phi0.720.ckpt",
+                "--mode", "bad", "--out", out, "--quiet")
+    return r, out
+
+
 @pytest.mark.parametrize("path,needle", [
     ('[{ rate = [0, 0, 0], constant_volume = true, sigma_p0 = { x = 1, y = 1, z = 1 }, until = { time_tc = 100 } }]',
      "over-constrained"),
@@ -109,11 +119,7 @@ def test_strain_reversal_crosses_zero_and_reaches_the_opposite_asymptote(scene, 
     ('[{ rate = [1, 1, 1], until = { eps_d = 0.1 } }]', "never grows"),
 ])
 def test_bad_control_input_is_refused_before_anything_runs(small_run, tmp_path, path, needle):
-    f = tmp_path / "bad.toml"
-    f.write_text(SMALL_SCENE + f"\n[paths]\nbad = {path}\n")
-    out = tmp_path / "bad.csv"
-    r = run_dem("mode", "--scene", f, "--packing", small_run["dir"] / "checkpoints" / "unloading_phi0.720.ckpt",
-                "--mode", "bad", "--out", out, "--quiet")
+    r, out = run_bad_path(small_run, tmp_path, path)
     assert r.returncode == 2 and needle in r.stderr, r.stderr
     assert not out.exists() and not (tmp_path / "bad.csv.part").exists()
 

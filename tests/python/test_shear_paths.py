@@ -4,8 +4,8 @@ with SS_xz prescribed), its reversal, constant volume as a path, bad input refus
 import numpy as np
 import pytest
 
-from conftest import SMALL_SCENE, run_dem
-from test_paths import run_path
+from conftest import SMALL_SCENE
+from test_paths import run_bad_path, run_path
 from demkit.curves import read_curve
 
 PATHS = """
@@ -83,10 +83,6 @@ def test_reversed_constant_normal_stress_shear_runs_and_turns_the_shear_stress(s
     ('[{ rate = "SS_xz", sigma_p0 = { z = 1 }, until = { eps_zz = -0.1 } }]', "stress controlled"),
 ])
 def test_bad_shear_stages_are_refused(small_run, tmp_path, path, needle):
-    f = tmp_path / "bad.toml"
-    f.write_text(SMALL_SCENE + f"\n[paths]\nbad = {path}\n")
-    out = tmp_path / "bad.csv"
-    r = run_dem("mode", "--scene", f, "--packing", small_run["dir"] / "checkpoints" / "unloading_phi0.720.ckpt",
-                "--mode", "bad", "--out", out, "--quiet")
+    r, out = run_bad_path(small_run, tmp_path, path)
     assert r.returncode == 2 and needle in r.stderr, r.stderr
     assert not out.exists()
