@@ -31,6 +31,8 @@ Engine::Engine(const Model& model, State& state, bool forces_are_current)
   } else {
     rebuild_neighbor_list(state, list_, skin_, true);
   }
+  partition_pairs(list_, blocks_, scratch_);
+  pack_particles(state_, 0, state_.count(), scratch_);
   if (!forces_are_current || state.force.size() != state.position.size()) evaluate_forces();
 }
 
@@ -157,12 +159,16 @@ double Engine::advance_particles(int begin, int end, const AffineMap& map, bool 
     f[i] = Vec3{0, 0, 0};                          //    (forces are summed afresh in 5)
     if (test.limit2 >= 0) worst = std::max(worst, displacement2_since_build(state_, test, i));
   }
+  pack_particles(state_, begin, end, scratch_);    // 4. the records the pair kernels read
   return worst;
 }
 
 void Engine::rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2) {
-  if (test.limit2 < 0 || max_displacement2 >= test.limit2)
-    rebuild_neighbor_list(state_, list_, skin_, true);
+  if (test.limit2 < 0 || max_displacement2 >= test.limit2) {
+    rebuild_neighbor_list(state_, list_, skin_, true);   // sorts the particles: repack them
+    partition_pairs(list_, std::max(1, blocks_), scratch_);
+    pack_particles(state_, 0, state_.count(), scratch_);
+  }
 }
 
 void Engine::finish_forces_and_kick(int begin, int end) {

@@ -55,6 +55,10 @@ class Engine {
   void check_sanity() const;
 
   const NeighborList& neighbor_list() const { return list_; }
+  /// The pair loop's implementation (default: the fastest this CPU runs, best_pair_kernel()).
+  /// Every kernel gives the same bits; the choice is for tests and benchmarks.
+  void set_pair_kernel(PairKernel kernel) { scratch_.kernel = kernel; }
+  PairKernel pair_kernel() const { return scratch_.kernel; }
   const Vec3& last_strain_rate() const { return rate_.diag; }
   const VelGrad& last_velocity_gradient() const { return rate_; }
   /// Cell flips so far (statistics; each rebuilt the list).

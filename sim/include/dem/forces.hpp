@@ -1,7 +1,10 @@
 // Contact and background-damping forces: one pair loop over the Verlet list (fast path) and
 // a naive all-pairs loop (the oracle the fast path is tested against).
 #pragma once
+#include <cstddef>
 #include <cstdint>
+#include <new>
+#include <string>
 #include <vector>
 
 #include "dem/contact_law.hpp"
@@ -17,6 +20,34 @@ struct SpilledForce {
   Vec3 f;   ///< [N]
 };
 
+/// The implementation of the pair loop. All give the same bits (forces.cpp explains why):
+/// `reference` is the plain scalar loop (the oracle of the others), `generic` the two-pass
+/// chunked loop for any x86-64-v2 CPU, `avx2` and `avx512` the same loop vectorised for
+/// those instruction sets (runtime dispatch: chosen by the CPU, or DEM_PAIR_KERNEL=name).
+enum class PairKernel { reference, generic, avx2, avx512 };
+
+/// The fastest kernel this CPU runs, or the one named by DEM_PAIR_KERNEL (auto, avx512,
+/// avx2, generic, reference; throws std::runtime_error naming the choices if the name is
+/// unknown or the CPU lacks its instructions).
+PairKernel best_pair_kernel();
+bool pair_kernel_supported(PairKernel kernel);
+std::vector<PairKernel> supported_pair_kernels();
+const char* pair_kernel_name(PairKernel kernel);
+PairKernel pair_kernel_from_name(const std::string& name);
+
+/// std::allocator with a stated alignment [bytes] (for the packed particle records).
+template <class T, std::size_t Align>
+struct AlignedAllocator {
+  using value_type = T;
+  template <class U> struct rebind { using other = AlignedAllocator<U, Align>; };
+  AlignedAllocator() = default;
+  template <class U> AlignedAllocator(const AlignedAllocator<U, Align>&) {}
+  T* allocate(std::size_t n) { return static_cast<T*>(::operator new(n * sizeof(T), std::align_val_t(Align))); }
+  void deallocate(T* p, std::size_t) { ::operator delete(p, std::align_val_t(Align)); }
+  bool operator==(const AlignedAllocator&) const { return true; }
+  bool operator!=(const AlignedAllocator&) const { return false; }
+};
+
 /// Work split of the half-list loop. Block b owns particles [bounds[b], bounds[b+1])
 /// (contiguous, balanced by listed pairs). Its pairs add forces directly to its own
 /// particles; a force on a particle of a later block c (neighbour across the block boundary or
@@ -28,7 +59,12 @@ struct ForceScratch {
   std::vector<int> bounds;                                    ///< size blocks + 1
   std::vector<std::uint16_t> block_of;                        ///< block of each particle
   std::vector<std::vector<std::vector<SpilledForce>>> spill;  ///< [from block][to block]
+  std::vector<std::int32_t> pair_i;                           ///< i of each listed pair
+  /// One 64-byte record per particle for the vectorised kernels: x y z [m] r [m] vx vy vz
+  /// [m/s] 0 (pack_particles fills it; sized by partition_pairs).
+  std::vector<double, AlignedAllocator<double, 64>> packed;
   std::int64_t list_builds = -1;                              ///< list.builds the split was made for
+  PairKernel kernel = best_pair_kernel();                     ///< the pair loop's implementation
   int blocks() const { return static_cast<int>(bounds.size()) - 1; }
 };
 
@@ -45,6 +81,11 @@ void partition_pairs(const NeighborList& list, int blocks, ForceScratch& scratch
 /// Safe to call concurrently for different blocks.
 void accumulate_pair_forces(const Model& model, const State& state, const NeighborList& list,
                             const VelGrad& strain_rate, int b, ForceScratch& scratch, Vec3* force);
+
+/// Copies positions, radii and velocities of particles [begin, end) into scratch.packed (the
+/// records the vectorised kernels read). Call after the particles move and before
+/// accumulate_pair_forces; a no-op until partition_pairs has sized the records.
+void pack_particles(const State& state, int begin, int end, ForceScratch& scratch);
 
 /// Adds to force[] the queued forces aimed at block b, from blocks 0..b-1 in order.
 void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force);
