@@ -47,15 +47,38 @@ def with_rss(cmd, **kw):
     return out, wall, rc, float("nan")
 
 
-def bench_ours(packing, threads, steps):
+def bench_ours(packing, threads, steps, kernel="auto"):
     out, _, rc, rss = with_rss([DEM, "bench", "--packing", packing, "--threads", str(threads), "--steps", str(steps),
-                                "--rate-tc", str(RATE_TC)])
+                                "--rate-tc", str(RATE_TC), "--kernel", kernel])
     m = re.search(r"particle_steps_per_s=([0-9.eE+]+)", out)
     if rc or not m:
         return {"error": out[-500:]}
     rb = re.search(r"(\d+) list rebuilds", out)
+    kn = re.search(r"pair kernel (\w+)", out)
     return {"particle_steps_per_s": float(m.group(1)), "peak_rss_mib": rss,
-            "list_rebuilds": int(rb.group(1)) if rb else None, "steps": steps}
+            "list_rebuilds": int(rb.group(1)) if rb else None, "steps": steps, "kernel": kn.group(1) if kn else "?"}
+
+
+def supported_kernels():
+    """The pair kernels this CPU runs (dem bench refuses the others)."""
+    out = []
+    for k in ("reference", "generic", "avx2", "avx512"):
+        p = subprocess.run([DEM, "bench", "--steps", "1", "--kernel", k], capture_output=True, text=True)
+        if p.returncode == 0:
+            out.append(k)
+    return out
+
+
+def bench_kernels(packing, steps, rounds):
+    """Each kernel on one thread, interleaved over `rounds` rounds (the VM drifts); the median."""
+    kernels = supported_kernels()
+    runs = {k: [] for k in kernels}
+    for _ in range(rounds):
+        for k in kernels:
+            r = bench_ours(packing, 1, steps, k)
+            if "particle_steps_per_s" in r:
+                runs[k].append(r["particle_steps_per_s"])
+    return {k: {"median": sorted(v)[len(v) // 2], "runs": v} for k, v in runs.items() if v}
 
 
 def loop_time(out):
@@ -110,7 +133,7 @@ def make_packing(n, workdir):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="fewer steps, no N = 1e5 packing")
+    ap.add_argument("--quick", action="store_true", help="fewer steps, N only to 74 088")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "benchmarks.md"))
     a = ap.parse_args()
     if not os.path.exists(DEM):
@@ -121,6 +144,8 @@ def main():
                        "date": time.strftime("%Y-%m-%d")}, "packing": os.path.relpath(PACKING, ROOT),
            "mode": f"D2 at rate*t_c = {RATE_TC}", "codes": {}}
     C = res["codes"]
+    print("benchmark: pair kernels, interleaved", file=sys.stderr)
+    res["kernels"] = bench_kernels(PACKING, s_ours // 2, 2 if a.quick else 3)
     print("benchmark: same packing, D2, one code after the other", file=sys.stderr)
     for th in (1, 2):
         C[f"ours, {th} thread(s)"] = bench_ours(PACKING, th, s_ours)
@@ -137,7 +162,7 @@ def main():
     # N = 9261 k^3: the shared packing repeated k times along each axis, so every particle
     # sees the same neighbourhood and only N changes; N = 1000: a packing made by our runner.
     packings = {1000: make_packing(1000, work)}
-    for k in ((1, 2) if a.quick else (1, 2, 3)):
+    for k in ((1, 2) if a.quick else (1, 2, 3, 5)):
         n = 9261 * k ** 3
         packings[n] = PACKING if k == 1 else decks.replicate_packing(PACKING, k, os.path.join(work, f"rep{k}.txt"))
     for n, pk in packings.items():
@@ -157,16 +182,29 @@ def main():
         else:
             lines.append(f"| {k} | {v['particle_steps_per_s'] / 1e6:.2f} M | {v['peak_rss_mib']:.0f} | "
                          f"{v.get('ours_1thread_over_this', float('nan')):.2f} |")
+    lines += ["", "## Pair kernels", "",
+              "Ours, 1 thread, the same packing and steps; the kernels give the same bits (forces.cpp), so only the "
+              f"speed differs. Median of {len(next(iter(res['kernels'].values()))['runs']) if res['kernels'] else 0} "
+              "interleaved runs (the machine's speed drifts).", "",
+              "| kernel | particle-steps/s (median) | runs | / reference |", "|---|---|---|---|"]
+    ref = res["kernels"].get("reference", {}).get("median")
+    for k, v in res["kernels"].items():
+        lines.append(f"| {k} | {v['median'] / 1e6:.2f} M | {', '.join(f'{x / 1e6:.1f}' for x in v['runs'])} | "
+                     f"{v['median'] / ref if ref else float('nan'):.2f} |")
     lines += ["", "## Our cost against N", "",
               "D2 as above. N = 9261 k³ is the shared packing repeated k times along each axis (the same "
               "neighbourhood for every particle, so only N changes); N = 1000 is a φ = 0.70 packing made by our runner.", "",
-              "| N | packing | 1 thread | ns per particle-step | 2 threads | parallel efficiency | list rebuilds (1 thread) |",
+              "| N | packing | 1 thread | ns per particle-step (× N = 9261) | 2 threads | parallel efficiency | list rebuilds (1 thread) |",
               "|---|---|---|---|---|---|---|"]
+    base_ns = None
     for n, r in scaling.items():
         p1, p2 = r[1].get("particle_steps_per_s"), r[2].get("particle_steps_per_s")
         kind = "runner" if n == 1000 else ("shared" if n == 9261 else f"shared × {round((n / 9261) ** (1 / 3))}³")
+        if n == 9261:
+            base_ns = 1e9 / p1 if p1 else None
         if p1 and p2:
-            lines.append(f"| {n} | {kind} | {p1 / 1e6:.2f} M | {1e9 / p1:.1f} | {p2 / 1e6:.2f} M | {p2 / (2 * p1):.0%} | "
+            rel = f" ({1e9 / p1 / base_ns:.2f}×)" if n > 9261 and base_ns else ""
+            lines.append(f"| {n} | {kind} | {p1 / 1e6:.2f} M | {1e9 / p1:.1f}{rel} | {p2 / 1e6:.2f} M | {p2 / (2 * p1):.0%} | "
                          f"{r[1].get('list_rebuilds')} in {r[1].get('steps')} steps |")
     write_markdown(a.out, lines, os.path.join(HERE, "benchmarks_notes.md"))
     shutil.rmtree(work, ignore_errors=True)

@@ -203,8 +203,10 @@ struct BenchCommand {
   long steps = 20000;
   int threads = 1;
   double rate_tc = 5e-6;
+  std::string kernel = "auto";
   void add(CLI::App& app, std::vector<std::string>& overrides) {
     cmd = app.add_subcommand("bench", "particle-steps per second on a packing under D2");
+    cmd->add_option("--kernel", kernel, "pair kernel: auto, avx512, avx2, generic or reference (the same bits)");
     cmd->add_option("--packing", packing, "YADE-format packing")->check(CLI::ExistingFile);
     cmd->add_option("--steps", steps, "steps to time");
     cmd->add_option("--threads", threads, "threads");
@@ -217,6 +219,7 @@ struct BenchCommand {
     dem::State state = dem::read_packing(packing, model.density);
     const dem::Vec3 rate = dem::Vec3{1, 0, -1} * (rate_tc / model.t_contact);
     dem::Engine engine(model, state);
+    engine.set_pair_kernel(dem::pair_kernel_from_name(kernel));
     for (int i = 0; i < 200; ++i) engine.step(rate);   // warm-up
     const long builds0 = engine.neighbor_list().builds;
     const auto t0 = std::chrono::steady_clock::now();
@@ -224,8 +227,9 @@ struct BenchCommand {
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const dem::Measurement m = dem::measure(model, state, engine.neighbor_list(), rate);
     const double ps = static_cast<double>(steps) * state.count() / wall;
-    std::printf("packing %s\nN = %d, phi = %.4f, C = %.3f, threads = %d, steps = %ld\n", packing.c_str(),
-                state.count(), m.nu, m.C, engine.threads(), steps);
+    std::printf("packing %s\nN = %d, phi = %.4f, C = %.3f, threads = %d, steps = %ld, pair kernel %s\n",
+                packing.c_str(), state.count(), m.nu, m.C, engine.threads(), steps,
+                dem::pair_kernel_name(engine.pair_kernel()));
     std::printf("wall %.3f s, %.3f M particle-steps/s, %.2f listed pairs per particle, %ld list rebuilds\n",
                 wall, ps / 1e6, static_cast<double>(engine.neighbor_list().pair_count()) / state.count(),
                 engine.neighbor_list().builds - builds0);

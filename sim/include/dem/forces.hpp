@@ -26,9 +26,9 @@ struct SpilledForce {
 /// those instruction sets (runtime dispatch: chosen by the CPU, or DEM_PAIR_KERNEL=name).
 enum class PairKernel { reference, generic, avx2, avx512 };
 
-/// The fastest kernel this CPU runs, or the one named by DEM_PAIR_KERNEL (auto, avx512,
-/// avx2, generic, reference; throws std::runtime_error naming the choices if the name is
-/// unknown or the CPU lacks its instructions).
+/// The fastest kernel this CPU runs (avx2 where the CPU has it, else generic), or the one
+/// named by DEM_PAIR_KERNEL (auto, avx512, avx2, generic, reference; throws
+/// std::runtime_error naming the choices if the name is unknown or the CPU lacks it).
 PairKernel best_pair_kernel();
 bool pair_kernel_supported(PairKernel kernel);
 std::vector<PairKernel> supported_pair_kernels();
