@@ -143,6 +143,9 @@ double Engine::advance_particles(int begin, int end, const AffineMap& map, bool 
   Vec3* v = state_.velocity.data();
   Vec3* f = state_.force.data();
   const double* m = state_.mass.data();
+  double* packed = scratch_.packed.size() == 8 * static_cast<std::size_t>(state_.count()) ? scratch_.packed.data()
+                                                                                          : nullptr;
+  const double* rad = state_.radius.data();
   double worst = 0;
   for (int i = begin; i < end; ++i) {
     v[i] += f[i] * (h / m[i]);                     // 1. kick
@@ -158,8 +161,8 @@ double Engine::advance_particles(int begin, int end, const AffineMap& map, bool 
     }
     f[i] = Vec3{0, 0, 0};                          //    (forces are summed afresh in 5)
     if (test.limit2 >= 0) worst = std::max(worst, displacement2_since_build(state_, test, i));
+    if (packed) pack_particle(x[i], rad[i], v[i], packed + 8L * i);   // the pair kernels' records
   }
-  pack_particles(state_, begin, end, scratch_);    // 4. the records the pair kernels read
   return worst;
 }
 

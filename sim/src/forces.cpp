@@ -68,6 +68,7 @@ void pair_loop_reference(const Law& law, const State& s, const NeighborList& lis
 // adds them in list order exactly as pair_loop_reference does. So every kernel (reference,
 // generic, avx2, avx512) gives the same bits, whatever the CPU.
 constexpr int kChunk = 256;
+constexpr int kPrefetch = 64;   // pairs
 
 struct KernelInputs {
   const double* packed;       ///< per particle: x y z r vx vy vz 0 (ForceScratch::packed) [m, m/s]
@@ -78,6 +79,8 @@ struct KernelInputs {
   double k, gamma;            ///< contact law [N/m], [kg/s]
   bool attractive;
   VelGrad rate;               ///< [1/s]
+  const Vec3* force;          ///< the forces pass 2 adds to (prefetched by the AVX2 kernel)
+  long p_end;                 ///< end of the block's pairs (no prefetch past it)
 };
 
 // The kernel as plain C++ (auto-vectorised by GCC for each target below): the force on j of
@@ -186,6 +189,14 @@ __attribute__((target("avx2"))) void kernel_avx2(const KernelInputs& in, long p0
       I = tail[0]; J = tail[1];
     }
     C = tail[2];
+    // Prefetch the records of the pairs kPrefetch ahead and the forces pass 2 will add to:
+    // beyond the caches (N >~ 10^5) the loop otherwise waits on memory.
+    if (p0 + q + kPrefetch + 4 <= in.p_end)
+      for (int l = 0; l < 4; ++l) {
+        _mm_prefetch(reinterpret_cast<const char*>(P + 8L * in.partner[p0 + q + kPrefetch + l]), _MM_HINT_T0);
+        _mm_prefetch(reinterpret_cast<const char*>(P + 8L * in.pair_i[p0 + q + kPrefetch + l]), _MM_HINT_T0);
+      }
+    for (int l = 0; l < 4; ++l) _mm_prefetch(reinterpret_cast<const char*>(in.force + J[l]), _MM_HINT_T0);
     __m256d xi, yi, zi, ri, vxi, vyi, vzi, xj, yj, zj, rj, vxj, vyj, vzj, ox, oy, oz, pad;
     load4(P, I, 8, xi, yi, zi, ri);
     load4(P, J, 8, xj, yj, zj, rj);
@@ -266,11 +277,11 @@ void pair_loop_vector(PairKernel kernel, const ContactLaw& law, const State& s, 
   for (int c = 0; c < 27; ++c) {
     off[4 * c] = off3[c].x; off[4 * c + 1] = off3[c].y; off[4 * c + 2] = off3[c].z; off[4 * c + 3] = 0.0;
   }
+  const long p_begin = list.first[begin], p_end = list.first[end];
   const KernelInputs in{packed, pair_i, list.partner.data(), list.image.data(), off,
-                        law.stiffness, law.damping, law.allow_attractive, rate};
+                        law.stiffness, law.damping, law.allow_attractive, rate, f, p_end};
   const KernelFn run = kernel_of<Sheared>(kernel);
   alignas(64) double fx[kChunk], fy[kChunk], fz[kChunk];
-  const long p_begin = list.first[begin], p_end = list.first[end];
   int current = p_begin < p_end ? pair_i[p_begin] : begin;
   Vec3 fi{0, 0, 0};
   for (long p0 = p_begin; p0 < p_end; p0 += kChunk) {
@@ -403,11 +414,7 @@ void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force) {
 void pack_particles(const State& s, int begin, int end, ForceScratch& scratch) {
   if (scratch.packed.size() != 8 * static_cast<std::size_t>(s.count())) return;   // sized by partition_pairs
   double* P = scratch.packed.data();
-  for (int i = begin; i < end; ++i) {
-    double* r = P + 8L * i;
-    r[0] = s.position[i].x; r[1] = s.position[i].y; r[2] = s.position[i].z; r[3] = s.radius[i];
-    r[4] = s.velocity[i].x; r[5] = s.velocity[i].y; r[6] = s.velocity[i].z; r[7] = 0.0;
-  }
+  for (int i = begin; i < end; ++i) pack_particle(s.position[i], s.radius[i], s.velocity[i], P + 8L * i);
 }
 
 void compute_forces(const Model& model, State& s, const NeighborList& list,

@@ -87,6 +87,12 @@ void accumulate_pair_forces(const Model& model, const State& state, const Neighb
 /// accumulate_pair_forces; a no-op until partition_pairs has sized the records.
 void pack_particles(const State& state, int begin, int end, ForceScratch& scratch);
 
+/// The record of particle i (pack_particles' body, for passes that move particles anyway).
+inline void pack_particle(const Vec3& x, double r, const Vec3& v, double* record) {
+  record[0] = x.x; record[1] = x.y; record[2] = x.z; record[3] = r;
+  record[4] = v.x; record[5] = v.y; record[6] = v.z; record[7] = 0.0;
+}
+
 /// Adds to force[] the queued forces aimed at block b, from blocks 0..b-1 in order.
 void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force);
 
