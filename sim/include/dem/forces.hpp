@@ -20,7 +20,7 @@ struct SpilledForce {
   Vec3 f;   ///< [N]
 };
 
-/// The implementation of the pair loop. All give the same bits (forces.cpp explains why):
+/// The implementation of the pair loop. All give the same bits (pair_kernels.hpp explains why):
 /// `reference` is the plain scalar loop (the oracle of the others), `generic` the two-pass
 /// chunked loop for any x86-64-v2 CPU, `avx2` and `avx512` the same loop vectorised for
 /// those instruction sets (runtime dispatch: chosen by the CPU, or DEM_PAIR_KERNEL=name).
