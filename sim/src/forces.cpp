@@ -57,6 +57,15 @@ void pair_loop_reference(const Law& law, const State& s, const NeighborList& lis
 }
 
 
+// Appends a spilled force field by field (a SpilledForce built on the stack and copied made
+// the store-to-load forwarding fail: a quarter of the adding pass's time in a profile).
+inline void queue_spill(std::vector<SpilledForce>& to, int j, const Vec3& f) {
+  to.emplace_back();
+  SpilledForce& s = to.back();
+  s.j = j;
+  s.f = f;
+}
+
 // Pass 2 of a chunk: the forces in list order, as pair_loop_reference adds them. `fi` and
 // `current` carry the running sum of the pairs of particle `current` across chunks.
 inline void add_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, const double* fx, const double* fy,
@@ -71,7 +80,7 @@ inline void add_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, con
     }
     const Vec3 fj{fx[q], fy[q], fz[q]};
     if (j < end) f[j] += fj;
-    else if (fj.x != 0.0 || fj.y != 0.0 || fj.z != 0.0) spill[block_of[j]].push_back({j, fj});   // +-0: no-op
+    else if (fj.x != 0.0 || fj.y != 0.0 || fj.z != 0.0) queue_spill(spill[block_of[j]], j, fj);   // +-0: no-op
     fi -= fj;
   }
 }
