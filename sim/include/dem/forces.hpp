@@ -26,7 +26,7 @@ struct SpilledForce {
 /// those instruction sets (runtime dispatch: chosen by the CPU, or DEM_PAIR_KERNEL=name).
 enum class PairKernel { reference, generic, avx2, avx512 };
 
-/// The fastest kernel this CPU runs (avx2 where the CPU has it, else generic), or the one
+/// The fastest kernel this CPU runs (avx2 where the CPU has it, else reference), or the one
 /// named by DEM_PAIR_KERNEL (auto, avx512, avx2, generic, reference; throws
 /// std::runtime_error naming the choices if the name is unknown or the CPU lacks it).
 PairKernel best_pair_kernel();
