@@ -44,9 +44,7 @@ TEST(NeighborList, ForcesEqualAllPairsOracleOnShearedConfigurations) {
       dem::compute_forces_all_pairs(m, oracle, rate);
       const double scale = dem_test::max_force(oracle);
       ASSERT_GT(scale, 0);
-      double worst = 0;
-      for (int i = 0; i < s.count(); ++i) worst = std::max(worst, norm(s.force[i] - oracle.force[i]));
-      EXPECT_LT(worst / scale, 1e-12) << mode << " seed " << seed;
+      EXPECT_LT(dem_test::max_force_difference(s, oracle) / scale, 1e-12) << mode << " seed " << seed;
       EXPECT_GT(e.neighbor_list().builds, 2);
       EXPECT_GT(std::fabs(std::log(s.box.length.z / s.box.length0.z)), 0.05);
     }
@@ -95,8 +93,7 @@ TEST(NeighborList, BlockSplitPairLoopEqualsAllPairsOracle) {
             ASSERT_TRUE(sp.j >= scratch.bounds[to] && sp.j < scratch.bounds[to + 1]) << "bucket of the wrong block";
         }
       EXPECT_GT(spilled, 0u) << "the test must cross block boundaries";
-      double worst = 0;
-      for (int i = 0; i < t.count(); ++i) worst = std::max(worst, norm(t.force[i] - oracle.force[i]));
+      const double worst = dem_test::max_force_difference(t, oracle);
       EXPECT_LT(worst / scale, 1e-12) << blocks << " blocks, " << threads << " threads";
     }
 }
@@ -158,9 +155,7 @@ TEST(NeighborList, ThreadedStepsMatchOneThreadToRoundOff) {
     dem::Engine e2(m2, s2);
     for (int k = 0; k < 200; ++k) e2.step(rate);
     ASSERT_EQ(s2.id, s1.id);
-    double worst = 0;
-    for (int i = 0; i < s1.count(); ++i) worst = std::max(worst, norm(s1.force[i] - s2.force[i]));
-    EXPECT_LT(worst / scale, 1e-9) << threads << " threads";
+    EXPECT_LT(dem_test::max_force_difference(s1, s2) / scale, 1e-9) << threads << " threads";
   }
 }
 

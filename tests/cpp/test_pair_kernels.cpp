@@ -19,10 +19,6 @@ using dem::VelGrad;
 
 namespace {
 
-bool same_bits(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(Vec3)) == 0;
-}
-
 // A state deformed by `steps` steps of g (the list rebuilt along the way; a tilted cell flips).
 dem::State deformed_state(const dem::Model& m, const VelGrad& g, unsigned seed, int steps) {
   dem::State s = dem_test::random_state(437, 0.38, 3.0, seed);   // 437: a short last group of 4
@@ -71,15 +67,13 @@ TEST(PairKernels, EveryKernelGivesTheReferenceBitsAndTheOracleForces) {
           dem::ForceScratch rs;
           rs.kernel = PairKernel::reference;
           dem::compute_forces(m, ref, list, g, 1, blocks, rs);
-          double worst = 0;
-          for (int i = 0; i < s.count(); ++i) worst = std::max(worst, norm(ref.force[i] - oracle.force[i]));
-          EXPECT_LT(worst / scale, 1e-12) << c.name;
+          EXPECT_LT(dem_test::max_force_difference(ref, oracle) / scale, 1e-12) << c.name;
           for (PairKernel kernel : dem::supported_pair_kernels()) {
             dem::State t = s;
             dem::ForceScratch ks;
             ks.kernel = kernel;
             dem::compute_forces(m, t, list, g, 1, blocks, ks);
-            EXPECT_TRUE(same_bits(t.force, ref.force))
+            EXPECT_TRUE(dem_test::same_bits(t.force, ref.force))
                 << dem::pair_kernel_name(kernel) << " " << c.name << " seed " << seed << " blocks " << blocks
                 << (attractive ? " attractive" : "");
           }
@@ -110,7 +104,7 @@ TEST(PairKernels, RunsAreBitIdenticalForEveryKernelAcrossRebuilds) {
           EXPECT_GT(builds, 3) << "the run must rebuild the list";
           continue;
         }
-        EXPECT_TRUE(same_bits(s.position, x_ref) && same_bits(s.velocity, v_ref))
+        EXPECT_TRUE(dem_test::same_bits(s.position, x_ref) && dem_test::same_bits(s.velocity, v_ref))
             << dem::pair_kernel_name(kernel) << ", " << threads << " threads, " << c.name;
       }
   }
@@ -128,6 +122,6 @@ TEST(PairKernels, AResumedEngineFeedsTheKernelsItsParticles) {
     dem::State b = a;
     dem::Engine eb(m, b, /*forces_are_current=*/true);
     for (int k = 0; k < 50; ++k) { ea.step(g); eb.step(g); }
-    EXPECT_TRUE(same_bits(a.position, b.position) && same_bits(a.velocity, b.velocity)) << blocks;
+    EXPECT_TRUE(dem_test::same_bits(a.position, b.position) && dem_test::same_bits(a.velocity, b.velocity)) << blocks;
   }
 }

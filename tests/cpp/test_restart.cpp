@@ -12,12 +12,6 @@
 
 using dem::Vec3;
 
-namespace {
-bool bitwise_equal(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(Vec3)) == 0;
-}
-}  // namespace
-
 TEST(Restart, SplitRunEqualsStraightRunBitForBit) {
   for (int threads : {1, 2}) {
     const dem::Model m = dem_test::model_with({"integration.threads=" + std::to_string(threads)});
@@ -42,8 +36,8 @@ TEST(Restart, SplitRunEqualsStraightRunBitForBit) {
     for (int k = 0; k < 1500; ++k) e2.step(rate);
     EXPECT_GT(builds_first + e2.neighbor_list().builds, 3);
     EXPECT_EQ(c.state.step, straight.step);
-    EXPECT_TRUE(bitwise_equal(c.state.position, straight.position)) << "threads " << threads;
-    EXPECT_TRUE(bitwise_equal(c.state.velocity, straight.velocity)) << "threads " << threads;
+    EXPECT_TRUE(dem_test::same_bits(c.state.position, straight.position)) << "threads " << threads;
+    EXPECT_TRUE(dem_test::same_bits(c.state.velocity, straight.velocity)) << "threads " << threads;
     EXPECT_EQ(0, std::memcmp(&c.state.box.length, &straight.box.length, sizeof(Vec3)));
   }
 }

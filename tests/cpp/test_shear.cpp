@@ -48,13 +48,7 @@ double list_vs_oracle(const dem::Model& m, dem::State& s, const dem::NeighborLis
   dem::compute_forces_all_pairs(m, oracle, g);
   const double scale = dem_test::max_force(oracle);
   EXPECT_GT(scale, 0);
-  double worst = 0;
-  for (int i = 0; i < s.count(); ++i) worst = std::max(worst, norm(s.force[i] - oracle.force[i]));
-  return worst / scale;
-}
-
-bool bitwise_equal(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(Vec3)) == 0;
+  return dem_test::max_force_difference(s, oracle) / scale;
 }
 
 }  // namespace
@@ -196,8 +190,8 @@ TEST(Shear, SplitRunEqualsStraightRunBitForBitAcrossAFlip) {
     EXPECT_GE(flips_first, 1) << "the first half must flip";
     EXPECT_GE(e2.flips(), 1) << "the second half must flip";
     EXPECT_EQ(flips_first + e2.flips(), flips_straight);
-    EXPECT_TRUE(bitwise_equal(c.state.position, straight.position)) << "threads " << threads;
-    EXPECT_TRUE(bitwise_equal(c.state.velocity, straight.velocity)) << "threads " << threads;
+    EXPECT_TRUE(dem_test::same_bits(c.state.position, straight.position)) << "threads " << threads;
+    EXPECT_TRUE(dem_test::same_bits(c.state.velocity, straight.velocity)) << "threads " << threads;
     EXPECT_EQ(0, std::memcmp(&c.state.box.tilt, &straight.box.tilt, sizeof(Vec3)));
     EXPECT_EQ(0, std::memcmp(c.state.box.flips, straight.box.flips, sizeof straight.box.flips));
   }

@@ -1,6 +1,7 @@
 #include "test_support.hpp"
 
 #include <algorithm>
+#include <cstring>
 #include <cmath>
 
 #include "dem/io.hpp"
@@ -48,6 +49,16 @@ double max_force(const dem::State& s) {
   double f = 0;
   for (auto& v : s.force) f = std::max(f, norm(v));
   return f;
+}
+
+double max_force_difference(const dem::State& a, const dem::State& b) {
+  double worst = 0;
+  for (int i = 0; i < a.count(); ++i) worst = std::max(worst, norm(a.force[i] - b.force[i]));
+  return worst;
+}
+
+bool same_bits(const std::vector<dem::Vec3>& a, const std::vector<dem::Vec3>& b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(dem::Vec3)) == 0;
 }
 
 }  // namespace dem_test

@@ -25,4 +25,10 @@ dem::State random_state(int n, double phi, double v, unsigned seed, double rmin 
 /// The largest force magnitude of a state [N] (the scale of force comparisons).
 double max_force(const dem::State& s);
 
+/// The largest |f_a - f_b| over the particles of two states of the same particles [N].
+double max_force_difference(const dem::State& a, const dem::State& b);
+
+/// True if the two arrays hold the same bits (size and every byte).
+bool same_bits(const std::vector<dem::Vec3>& a, const std::vector<dem::Vec3>& b);
+
 }  // namespace dem_test
