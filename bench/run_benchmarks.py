@@ -183,7 +183,7 @@ def main():
             lines.append(f"| {k} | {v['particle_steps_per_s'] / 1e6:.2f} M | {v['peak_rss_mib']:.0f} | "
                          f"{v.get('ours_1thread_over_this', float('nan')):.2f} |")
     lines += ["", "## Pair kernels", "",
-              "Ours, 1 thread, the same packing and steps; the kernels give the same bits (sim/src/pair_kernels.cpp), so only the "
+              "Ours, 1 thread, the same packing and steps; the kernels give the same bits (sim/src/forces/pair_kernels.cpp), so only the "
               f"speed differs. Median of {len(next(iter(res['kernels'].values()))['runs']) if res['kernels'] else 0} "
               "interleaved runs (the machine's speed drifts).", "",
               "| kernel | particle-steps/s (median) | runs | / reference |", "|---|---|---|---|"]

@@ -72,7 +72,7 @@ def dev_eig(m):
 
 def extreme_direction(m, major):
     """Eigenvector of the largest (major) or smallest eigenvalue; None if it is degenerate
-    (gap within 1e-9 of the scale), as ours (sim/src/measure.cpp)."""
+    (gap within 1e-9 of the scale), as ours (sim/src/measure/measure.cpp)."""
     w, v = np.linalg.eigh(np.asarray(m, dtype=float))
     scale = max(abs(w[0]), abs(w[2]))
     gap = w[2] - w[1] if major else w[1] - w[0]

@@ -9,10 +9,10 @@
 #include <fstream>
 #include <random>
 
-#include "dem/checks.hpp"
-#include "dem/io.hpp"
-#include "dem/preparation.hpp"
-#include "dem/scene.hpp"
+#include "dem/io/checks.hpp"
+#include "dem/io/io.hpp"
+#include "dem/stages/preparation.hpp"
+#include "dem/io/scene.hpp"
 #include "demfit/fit.hpp"
 #include "test_support.hpp"
 

@@ -3,7 +3,7 @@
 
 #include <cmath>
 
-#include "dem/collision.hpp"
+#include "dem/stages/collision.hpp"
 #include "test_support.hpp"
 
 using dem::Vec3;

@@ -5,10 +5,10 @@
 #include <functional>
 #include <memory>
 
-#include "dem/control.hpp"
-#include "dem/engine.hpp"
-#include "dem/measure.hpp"
-#include "dem/scene.hpp"
+#include "dem/measure/control.hpp"
+#include "dem/engine/engine.hpp"
+#include "dem/measure/measure.hpp"
+#include "dem/io/scene.hpp"
 #include "test_support.hpp"
 
 using dem::Vec3;

@@ -3,8 +3,8 @@
 
 #include <cmath>
 
-#include "dem/engine.hpp"
-#include "dem/measure.hpp"
+#include "dem/engine/engine.hpp"
+#include "dem/measure/measure.hpp"
 #include "test_support.hpp"
 
 using dem::Vec3;

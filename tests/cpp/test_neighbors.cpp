@@ -5,9 +5,9 @@
 
 #include <cmath>
 
-#include "dem/engine.hpp"
-#include "dem/forces.hpp"
-#include "dem/measure.hpp"
+#include "dem/engine/engine.hpp"
+#include "dem/forces/forces.hpp"
+#include "dem/measure/measure.hpp"
 #include "test_support.hpp"
 
 using dem::Vec3;

@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "dem/engine.hpp"
-#include "dem/forces.hpp"
+#include "dem/engine/engine.hpp"
+#include "dem/forces/forces.hpp"
 #include "test_support.hpp"
 
 using dem::PairKernel;

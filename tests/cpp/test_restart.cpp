@@ -6,8 +6,8 @@
 #include <filesystem>
 #include <fstream>
 
-#include "dem/engine.hpp"
-#include "dem/io.hpp"
+#include "dem/engine/engine.hpp"
+#include "dem/io/io.hpp"
 #include "test_support.hpp"
 
 using dem::Vec3;

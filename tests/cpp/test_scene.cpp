@@ -5,8 +5,8 @@
 #include <filesystem>
 #include <fstream>
 
-#include "dem/io.hpp"
-#include "dem/scene.hpp"
+#include "dem/io/io.hpp"
+#include "dem/io/scene.hpp"
 
 namespace {
 std::string error_of(const std::string& text, const std::vector<std::string>& ov = {}) {

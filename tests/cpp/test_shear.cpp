@@ -11,13 +11,13 @@
 #include <fstream>
 #include <sstream>
 
-#include "dem/checks.hpp"
-#include "dem/engine.hpp"
-#include "dem/forces.hpp"
-#include "dem/io.hpp"
-#include "dem/measure.hpp"
-#include "dem/protocol.hpp"
-#include "dem/scene.hpp"
+#include "dem/io/checks.hpp"
+#include "dem/engine/engine.hpp"
+#include "dem/forces/forces.hpp"
+#include "dem/io/io.hpp"
+#include "dem/measure/measure.hpp"
+#include "dem/stages/protocol.hpp"
+#include "dem/io/scene.hpp"
 #include "test_support.hpp"
 
 using dem::Sym3;

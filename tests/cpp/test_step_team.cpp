@@ -7,7 +7,7 @@
 #include <thread>
 #include <vector>
 
-#include "dem/step_team.hpp"
+#include "dem/engine/step_team.hpp"
 
 TEST(StepTeam, EveryMemberRunsAndBarriersOrderTheirWrites) {
   for (int size : {1, 2, 3, 4}) {

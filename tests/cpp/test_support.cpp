@@ -4,7 +4,7 @@
 #include <cstring>
 #include <cmath>
 
-#include "dem/io.hpp"
+#include "dem/io/io.hpp"
 
 namespace dem_test {
 

@@ -4,9 +4,9 @@
 #include <string>
 #include <vector>
 
-#include "dem/model.hpp"
-#include "dem/scene.hpp"
-#include "dem/state.hpp"
+#include "dem/core/model.hpp"
+#include "dem/io/scene.hpp"
+#include "dem/core/state.hpp"
 
 namespace dem_test {
 

@@ -5,8 +5,8 @@
 #include <cstdint>
 #include <string>
 
-#include "dem/checks.hpp"
-#include "dem/io.hpp"
+#include "dem/io/checks.hpp"
+#include "dem/io/io.hpp"
 
 namespace {
 std::uint64_t fnv1a(const std::string& s) {

@@ -4,8 +4,8 @@
 #include <sstream>
 #include <string>
 
-#include "dem/checks.hpp"
-#include "dem/io.hpp"
+#include "dem/io/checks.hpp"
+#include "dem/io/io.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   std::istringstream in(std::string(reinterpret_cast<const char*>(data), size));

@@ -1,0 +1,104 @@
+// The time stepper: advances (Model, State) by one step, read as a list of named stages.
+#pragma once
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "dem/core/errors.hpp"
+#include "dem/forces/forces.hpp"
+#include "dem/engine/step_team.hpp"
+#include "dem/core/model.hpp"
+#include "dem/forces/neighbor_list.hpp"
+#include "dem/core/state.hpp"
+
+namespace dem {
+
+class Engine {
+ public:
+  /// Binds to a validated model and a state. The state must hold N >= 2 particles.
+  /// If the state's neighbour-list reference is valid (e.g. loaded from a checkpoint) the
+  /// same list is rebuilt from it, so the run continues bit for bit; otherwise a fresh list
+  /// is built (particles are wrapped and cell-sorted). Forces are then evaluated at the
+  /// current positions unless `forces_are_current` (checkpoint restart).
+  Engine(const Model& model, State& state, bool forces_are_current = false);
+
+  /// One time step of model.dt with the box true-strain rate `strain_rate` [1/s] (diagonal):
+  ///  1. kick       v += a*dt*F/m            (a = 1/2 Verlet, 1 symplectic Euler)
+  ///  2. drift      x += dt*v                (fluctuation motion)
+  ///  3. deform     L *= exp(rate*dt), x *= exp(rate*dt)   (affine motion of box and particles);
+  ///                SLLOD (model.sllod): v *= exp(-rate*dt), the -E_dot v' term of the peculiar motion
+  ///  4. neighbours rebuild the Verlet list if it may miss a contact
+  ///  5. forces     contact law over the list, then background damping
+  ///  6. kick       v += b*dt*F/m            (b = 1/2 Verlet, 0 symplectic Euler)
+  ///  7. time, step counters; sanity checks every model.check_every_steps steps
+  /// Stages 1-3 (with the displacement test of 4) run as one pass over the particles and
+  /// 5-6 as another, to read each particle's data from memory once per pass; the arithmetic
+  /// is exactly that of the list. With threads > 1 each thread runs the passes on its own
+  /// block of particles (ForceScratch), with one barrier before and one after the pair loop.
+  void step(const Vec3& strain_rate) { step(VelGrad(strain_rate)); }
+  /// The same with a velocity gradient L (upper triangular): the cell H follows dH/dt = L H
+  /// (H_new = exp(L dt) H, its diagonal from the accumulated log strain as above), particles
+  /// the affine map A = H_new H_old^-1, and SLLOD's fluctuation velocities A^-1 v' (the
+  /// exact solution of dv'/dt = -L v'). A tilt beyond half an edge is flipped to the most
+  /// orthogonal cell (Box), which rebuilds the neighbour list in the same step. A diagonal L
+  /// in an untilted box is exactly step(Vec3).
+  void step(const VelGrad& velocity_gradient);
+
+  /// Runs the sanity checks now; throws BlowUp on failure. Called by step() every
+  /// model.check_every_steps steps.
+  void check_sanity() const;
+
+  const NeighborList& neighbor_list() const { return list_; }
+  /// The pair loop's implementation (default: the fastest this CPU runs, best_pair_kernel()).
+  /// Every kernel gives the same bits; the choice is for tests and benchmarks.
+  void set_pair_kernel(PairKernel kernel) { scratch_.kernel = kernel; }
+  PairKernel pair_kernel() const { return scratch_.kernel; }
+  const Vec3& last_strain_rate() const { return rate_.diag; }
+  const VelGrad& last_velocity_gradient() const { return rate_; }
+  /// Cell flips so far (statistics; each rebuilt the list).
+  long flips() const { return flips_; }
+  int threads() const { return threads_; }
+  /// Members that ran the last step (threads(), or 1 when the adaptive choice found one
+  /// thread faster on a busy machine; the results are the same bits either way).
+  int active_threads() const { return chooser_.members(); }
+
+ private:
+  /// The map particles follow in stage 3: diagonal `factor` (orthorhombic box), or the
+  /// upper-triangular A (and A^-1 for SLLOD) stored as (xx, yy, zz, xy, xz, yz).
+  struct AffineMap {
+    Vec3 factor{1, 1, 1};
+    bool general = false;
+    double A[6] = {1, 1, 1, 0, 0, 0};
+    double A_inv[6] = {1, 1, 1, 0, 0, 0};
+  };
+  // Stages, on particle ranges [begin, end) so that the threaded step runs them per block.
+  AffineMap deform_box(const VelGrad& rate, bool* flipped);   // 3 (box): the map particles follow
+  double advance_particles(int begin, int end, const AffineMap& map, bool affine,
+                           const StalenessTest& test);   // 1-3, zeroes F; returns max |u|^2
+  void rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2);  // 4
+  void finish_forces_and_kick(int begin, int end);       // 5 (damping) and 6
+  void evaluate_forces();                                // 5 on its own (construction)
+  void step_serial(const AffineMap& map, bool affine, const StalenessTest& test);
+  void step_threaded(const AffineMap& map, bool affine, const StalenessTest& test);
+
+  const Model& model_;
+  State& state_;
+  NeighborList list_;
+  ForceScratch scratch_;
+  std::unique_ptr<StepTeam> team_;   ///< the threads of step_threaded (threads_ > 1)
+  TeamSizeChooser chooser_{1, false};   ///< team or this thread alone, step by step
+  std::vector<double> worst_displacement2_;   // per thread
+  VelGrad rate_;
+  long flips_ = 0;
+  int threads_ = 1;
+  int blocks_ = 1;                   ///< pair-loop blocks (block_count of the model's setting)
+  double skin_ = 0;
+  double kick_before_ = 0.5, kick_after_ = 0.5;
+  bool sllod_ = true;
+};
+
+/// Number of OpenMP threads a model asks for (0 = all available).
+int resolve_threads(int requested);
+
+}  // namespace dem

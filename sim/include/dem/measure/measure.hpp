@@ -1,0 +1,77 @@
+// Macroscopic measurements of a state: stress, fabric, coordination, energies, strains.
+// Definitions follow Imole et al. (KONA 2013) and Goncu et al. (2010); see docs/definitions.md.
+#pragma once
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "dem/core/model.hpp"
+#include "dem/forces/neighbor_list.hpp"
+#include "dem/core/state.hpp"
+
+namespace dem {
+
+struct Measurement {
+  std::int64_t step = 0;
+  double time = 0;                ///< [s]
+  Vec3 strain;                    ///< true box strains ln(L/L0), extension positive
+  double eps_v = 0;               ///< (eps_xx + eps_yy + eps_zz) / 3
+  double eps_d = 0;               ///< deviatoric magnitude of the strain diagonal (sheared cell: eps_d_eig)
+  double nu = 0;                  ///< volume fraction
+  Sym3 stress;                    ///< [Pa], compression positive, contact + kinetic parts
+  Sym3 stress_kinetic;            ///< the kinetic part alone [Pa]
+  double p = 0;                   ///< tr(stress)/3 [Pa]
+  double p_star = 0;              ///< 2 <r> p / k
+  double sigma_dev = 0;           ///< deviatoric magnitude of the stress diagonal [Pa] (sheared cell: sigma_dev_eig)
+  double s_dev = 0;               ///< sigma_dev / p
+  Sym3 fabric;                    ///< (1/V) sum_p V_p sum_c n n
+  double F_dev = 0;               ///< deviatoric magnitude of the fabric diagonal (sheared cell: F_dev_eig)
+  double C = 0;                   ///< 2 * contacts / N
+  double C_nonrattler = 0;        ///< 2 * contacts among non-rattlers / N_non-rattlers
+  double rattler_fraction = 0;    ///< rattlers / N (fewer than 4 contacts, removed recursively)
+  double E_kin = 0;               ///< [J], fluctuation velocities
+  double E_pot = 0;               ///< [J], elastic energy of contacts
+  double overlap_max_rel = 0;     ///< max delta / min(r_i, r_j)
+  double overlap_mean_rel = 0;    ///< mean delta / min(r_i, r_j) over contacts
+  double inertial_number = 0;     ///< |eps_dot|_max * 2<r> * sqrt(rho / p)   (0 when p <= 0)
+  long contacts = 0;
+  // Objective (frame-independent) measures, from eigenvalues (docs/simple_shear.md). For a
+  // diagonal deformation the strain ones equal the diagonal forms above to round-off; the stress
+  // and fabric ones differ from them only by the off-diagonal parts of the tensors.
+  Sym3 strain_tensor;             ///< logarithmic strain 0.5 ln(F F^T) since the stage start
+  double eps_d_eig = 0;           ///< deviatoric magnitude of the eigenvalues of strain_tensor
+  double sigma_dev_eig = 0;       ///< ... of the stress [Pa]
+  double s_dev_eig = 0;           ///< sigma_dev_eig / p
+  double F_dev_eig = 0;           ///< ... of the fabric
+  /// Angles [deg, 0..90] between principal directions: the major (most compressive) stress
+  /// direction, the major fabric direction, and the most compressive direction of the strain
+  /// rate D = sym(L). NaN where a direction is undefined (isotropic D, e.g. no rate).
+  double angle_sigma_F = NAN, angle_sigma_D = NAN, angle_F_D = NAN;
+};
+
+/// Eigenvalues (ascending) and unit eigenvectors of a symmetric tensor (Eigen's
+/// SelfAdjointEigenSolver, iterative: exact for a diagonal tensor).
+void principal(const Sym3& t, double value[3], Vec3 vector[3]);
+/// deviatoric_magnitude() of the eigenvalues: sqrt(3 J2), invariant under rotations.
+double deviatoric_magnitude_eig(const Sym3& t);
+/// The logarithmic (Hencky) strain 0.5 ln(F F^T) of the box since strains were zeroed,
+/// F = Box::deformation_gradient(); for an untilted box exactly diag(ln(L/L0)) (true_strain()).
+Sym3 log_strain_tensor(const Box& box);
+/// Angle [deg] between the axes of two unit vectors (0..90: directions, not orientations).
+double axis_angle_deg(const Vec3& a, const Vec3& b);
+
+/// Measures a state. `list` must be current for the state (it is after every Engine step).
+/// `strain_rate` [1/s] enters the dashpot forces, the inertial number (max |L_ij|) and the
+/// non-coaxiality angles. Strain columns: ln(L/L0) for an untilted box (diagonal modes, as
+/// always), the components of the log strain tensor in a sheared one.
+Measurement measure(const Model& model, const State& state, const NeighborList& list,
+                    const VelGrad& strain_rate);
+
+/// Column names of the curve CSV, in order; units are in the names (_Pa, _J, _s) or the
+/// quantity is dimensionless. Shared with yade_ref/ and the fitter.
+const std::vector<std::string>& curve_columns();
+
+/// One CSV row (no newline) in the order of curve_columns(); `stage` is appended last.
+std::string curve_row(const Measurement& m);
+
+}  // namespace dem

@@ -1,0 +1,35 @@
+// The run plan of a scene as data: which packings (ensemble members and their seeds), which
+// checkpoints, which modes, and the estimated cost of each task. workflow/Snakefile builds its
+// task graph from it (`dem info SCENE --json`), so the scene is parsed and validated in one place.
+#pragma once
+#include <string>
+
+#include "dem/core/model.hpp"
+
+namespace dem {
+
+/// Steps of one deviatoric mode run (to eps_d_max) or loading path (its stages; estimated for
+/// stops on stress, phi or a strain component).
+double mode_steps(const Model& model, const DeformationMode& mode);
+/// Estimated particle-steps of one mode or path run (N x mode_steps).
+double mode_particle_steps(const Model& model, const DeformationMode& mode);
+
+/// Estimated particle-steps of one preparation, for progress weights: the steps of its
+/// compress/expand stages (preparation_particle_steps) times 3, a rough allowance for the
+/// relaxations, whose length depends on the packing, and the list rebuilds of compression.
+double prep_particle_steps(const Model& model);
+
+/// JSON: {"packings": K, "members": [{"name": "m000", "seed": S}, ...],
+///        "series": "unloading" (protocol.modes_from),
+///        "checkpoints": [{"phi": 0.8, "stem": "unloading_phi0.800"}, ...] (descending phi),
+///        "modes": ["D2", ...], "prep_particle_steps": P, "mode_particle_steps": {"D2": M, ...},
+///        "threads": T}
+std::string plan_json(const Model& model);
+
+/// Readies DIR for the ensemble workflow: writes DIR/scene.toml (the resolved scene) unless it
+/// holds exactly this text already (then the workflow continues where it stopped). A folder
+/// with the results of another scene is refused, naming the differing lines. `force` removes
+/// the results in DIR (of this scene or another) and starts afresh. Throws std::runtime_error.
+void prepare_ensemble_folder(const std::string& dir, const std::string& resolved_scene, bool force);
+
+}  // namespace dem

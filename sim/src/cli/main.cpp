@@ -1,0 +1,499 @@
+// dem: command-line front end. Each subcommand is a small struct: its options (add) and what
+// it does (run); main parses and maps exceptions to the README's exit codes.
+#include <CLI/CLI.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <sstream>
+#include <unistd.h>
+
+#include "dem/io/checks.hpp"
+#include "dem/stages/collision.hpp"
+#include "dem/engine/engine.hpp"
+#include "dem/io/io.hpp"
+#include "dem/measure/measure.hpp"
+#include "dem/stages/plan.hpp"
+#include "dem/stages/preparation.hpp"
+#include "dem/stages/protocol.hpp"
+#include "dem/io/scene.hpp"
+#include "demfit/cli.hpp"
+#include "demfit/ensemble.hpp"
+#include "demfit/identifiability.hpp"
+#include "demfit/model_cli.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string join_args(int argc, char** argv) {
+  std::string s;
+  for (int i = 0; i < argc; ++i) s += (i ? " " : "") + std::string(argv[i]);
+  return s;
+}
+
+// Python helpers live in <repo>/demkit; find them next to the executable's source tree.
+int exec_python(const std::string& module, const std::vector<std::string>& args) {
+  const char* py = std::getenv("DEM_PYTHON");
+  std::string python = py ? py : "/usr/bin/python3";
+  std::vector<std::string> argv_s = {python, "-m", module};
+  argv_s.insert(argv_s.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (auto& a : argv_s) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  const std::string root = DEM_SOURCE_DIR;
+  const char* old = std::getenv("PYTHONPATH");
+  setenv("PYTHONPATH", (root + (old ? ":" + std::string(old) : "")).c_str(), 1);
+  execv(python.c_str(), argv.data());
+  std::cerr << "dem: cannot start " << python << " (set DEM_PYTHON to a python3 with numpy and matplotlib)\n";
+  return 1;
+}
+
+// Integration is stable for a single contact up to dt/t_c = 2/pi (refused above), but dense
+// packings went unstable at 0.48-0.52 (docs/stability.md): warn before that.
+void warn_time_step(const dem::Model& m) {
+  if (m.dt_over_tc > 0.45)
+    std::fprintf(stderr, "dem: warning: integration.dt_over_tc = %g is near the stability limit of dense packings "
+                         "(0.48-0.52 measured, docs/stability.md); expect a blow-up, or use 0.1\n", m.dt_over_tc);
+}
+
+void print_info(const dem::Model& m) {
+  warn_time_step(m);
+  const auto& p = m.protocol;
+  std::printf("particles          N = %d, r in [%g, %g] m, rho = %g kg/m^3, memory ~%.3g MB (estimate)\n", m.count,
+              m.radius_min, m.radius_max, m.density, dem::estimated_memory_bytes(m.count) / 1e6);
+  std::printf("contact            k = %g N/m, gamma = %g kg/s, gamma_b = %g kg/s, %s\n",
+              m.contact.stiffness, m.contact.damping, m.background_damping,
+              m.contact.allow_attractive ? "attractive allowed" : "clamped at zero");
+  std::printf("smallest pair      t_c = %.6g s, e = %.6g\n", m.t_contact, m.restitution);
+  std::printf("time step          dt = %.6g s (t_c / %.4g), %s\n", m.dt, 1.0 / m.dt_over_tc,
+              m.integrator == dem::Integrator::VelocityVerlet ? "velocity Verlet" : "symplectic Euler");
+  for (const auto& st : p.preparation)
+    std::printf("prep %-15s %s\n", st.name.c_str(), dem::describe(st, m.t_contact).c_str());
+  std::printf("modes              from the checkpoints %s, deviatoric rate %.4g /s (%.4g/t_c)\n", p.modes_from.c_str(),
+              p.deviatoric_rate, p.deviatoric_rate * m.t_contact);
+  for (auto& mode : p.modes) {
+    if (!mode.path.empty()) {
+      std::string stages;
+      for (const auto& s : mode.path) stages += (stages.empty() ? "" : ", ") + s.name + (s.has_servo() ? " (servo)" : "");
+      std::printf("path %-13s  %zu stages: %s; about %.3g steps\n", mode.name.c_str(), mode.path.size(), stages.c_str(),
+                  dem::mode_steps(m, mode));
+      continue;
+    }
+    if (mode.sheared())
+      std::printf("mode %-13s  velocity gradient [[%g, %g, %g], [0, %g, %g], [0, 0, %g]]: %.3g steps to eps_d = %g\n",
+                  mode.name.c_str(), mode.rate_shape.x, mode.shear_shape.x, mode.shear_shape.y, mode.rate_shape.y,
+                  mode.shear_shape.z, mode.rate_shape.z, dem::mode_steps(m, mode), p.eps_d_max);
+    else
+      std::printf("mode %-13s  rate shape (%g, %g, %g): %.3g steps to eps_d = %g\n", mode.name.c_str(),
+                  mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z, dem::mode_steps(m, mode), p.eps_d_max);
+  }
+}
+
+// A command-line value that cannot be right (exit code 2).
+struct ArgumentError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// A positive finite option value as an exact TOML number (17 significant digits).
+std::string exact_number(const char* option, double v) {
+  if (!(v > 0) || !std::isfinite(v)) throw ArgumentError(std::string(option) + " must be a positive finite number");
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
+
+// An output CSV path, checked before anything runs: not a folder, in a folder that exists.
+void check_output_file(const std::string& out, bool force) {
+  if (fs::is_directory(out)) throw ArgumentError("--out " + out + " is a folder: give a file name, e.g. " + out + "/D2.csv");
+  const fs::path parent = fs::path(out).parent_path();
+  if (!parent.empty() && !fs::is_directory(parent))
+    throw ArgumentError("--out " + out + ": the folder " + parent.string() + " does not exist: create it first");
+  if (fs::exists(out) && !force) throw std::runtime_error(out + " exists: pass --force to overwrite it");
+}
+
+// Every subcommand: `add` declares it and its options on the app, `run` does it (returns the
+// exit code; throws for the codes main maps).
+struct RunCommand {
+  CLI::App* cmd = nullptr;
+  std::string scene, out, stages = "all";
+  bool force = false, quiet = false;
+  int threads = -1;
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("run", "run a scene: preparation, checkpoints, deviatoric modes");
+    cmd->add_option("scene", scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--out", out, "results folder")->required();
+    cmd->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
+    cmd->add_option("--stages", stages, "all | prep | deviatoric (deviatoric reuses DIR/checkpoints)");
+    cmd->add_option("--threads", threads, "threads (overrides integration.threads)");
+    cmd->add_flag("--force", force, "overwrite finished results in --out");
+    cmd->add_flag("--quiet", quiet, "no progress lines on stderr");
+  }
+  int run(std::vector<std::string> overrides, const std::string& command_line) const {
+    if (threads >= 0) overrides.push_back("integration.threads=" + std::to_string(threads));
+    std::string resolved;
+    dem::Model model = dem::load_scene_file(scene, overrides, &resolved);
+    dem::RunOptions o;
+    o.out_dir = out;
+    o.stages = stages;
+    o.force = force;
+    o.quiet = quiet;
+    o.scene_toml = resolved;
+    o.command_line = command_line;
+    if (!quiet) print_info(model);
+    else warn_time_step(model);
+    dem::run_protocol(model, o);
+    return 0;
+  }
+};
+
+// K packings through the Snakemake workflow.
+struct EnsembleCommand {
+  CLI::App* cmd = nullptr;
+  std::string scene, out, profile;
+  int cores = 0;
+  bool force = false;
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("ensemble", "run an ensemble scene ([ensemble] packings = K) through the Snakemake "
+                                         "workflow (workflow/Snakefile): one task per preparation and per mode; "
+                                         "run again to continue after an interruption");
+    cmd->add_option("scene", scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--out", out, "results folder")->required();
+    cmd->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
+    cmd->add_option("--cores", cores, "single-threaded tasks at once (default: all cores; with --profile: the profile's)");
+    cmd->add_option("--profile", profile, "Snakemake profile: slurm (workflow/profiles/slurm) or a folder");
+    cmd->add_flag("--force", force, "start afresh: remove the results in --out (without it a rerun continues "
+                                    "where the last one stopped, and another scene's results are refused)");
+  }
+  int run(const std::vector<std::string>& overrides) const {
+    std::string resolved;
+    dem::load_scene_file(scene, overrides, &resolved);
+    dem::prepare_ensemble_folder(out, resolved, force);
+    std::vector<std::string> args = {out, "--dem", fs::canonical("/proc/self/exe").string()};
+    if (cores > 0) args.insert(args.end(), {"--cores", std::to_string(cores)});
+    if (!profile.empty()) args.insert(args.end(), {"--profile", profile});
+    return exec_python("demkit.ensemble", args);
+  }
+};
+
+struct InfoCommand {
+  CLI::App* cmd = nullptr;
+  std::string scene;
+  bool json = false;
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates)");
+    cmd->add_option("scene", scene, "scene TOML file")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--set", overrides, "override a scene key");
+    cmd->add_flag("--json", json, "print the run plan as JSON instead: members (seeds), checkpoints, modes, "
+                                  "estimated particle-steps per task (read by workflow/Snakefile)");
+  }
+  int run(const std::vector<std::string>& overrides) const {
+    const dem::Model model = dem::load_scene_file(scene, overrides);
+    if (json) std::printf("%s", dem::plan_json(model).c_str());
+    else print_info(model);
+    return 0;
+  }
+};
+
+struct BenchCommand {
+  CLI::App* cmd = nullptr;
+  std::string packing = std::string(DEM_SOURCE_DIR) + "/data/packings/n9261_phi0.70.txt";
+  long steps = 20000;
+  int threads = 1;
+  double rate_tc = 5e-6;
+  std::string kernel = "auto";
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("bench", "particle-steps per second on a packing under D2");
+    cmd->add_option("--kernel", kernel, "pair kernel: auto, avx512, avx2, generic or reference (the same bits)");
+    cmd->add_option("--packing", packing, "YADE-format packing")->check(CLI::ExistingFile);
+    cmd->add_option("--steps", steps, "steps to time");
+    cmd->add_option("--threads", threads, "threads");
+    cmd->add_option("--rate-tc", rate_tc, "D2 strain rate times t_c");
+    cmd->add_option("--set", overrides, "override a scene key");
+  }
+  int run(std::vector<std::string> overrides) const {
+    overrides.push_back("integration.threads=" + std::to_string(threads));
+    dem::Model model = dem::load_scene("", overrides, nullptr, "bench");
+    dem::State state = dem::read_packing(packing, model.density);
+    const dem::Vec3 rate = dem::Vec3{1, 0, -1} * (rate_tc / model.t_contact);
+    dem::Engine engine(model, state);
+    engine.set_pair_kernel(dem::pair_kernel_from_name(kernel));
+    for (int i = 0; i < 200; ++i) engine.step(rate);   // warm-up
+    const long builds0 = engine.neighbor_list().builds;
+    const auto t0 = std::chrono::steady_clock::now();
+    for (long i = 0; i < steps; ++i) engine.step(rate);
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const dem::Measurement m = dem::measure(model, state, engine.neighbor_list(), rate);
+    const double ps = static_cast<double>(steps) * state.count() / wall;
+    std::printf("packing %s\nN = %d, phi = %.4f, C = %.3f, threads = %d, steps = %ld, pair kernel %s\n",
+                packing.c_str(), state.count(), m.nu, m.C, engine.threads(), steps,
+                dem::pair_kernel_name(engine.pair_kernel()));
+    std::printf("wall %.3f s, %.3f M particle-steps/s, %.2f listed pairs per particle, %ld list rebuilds\n",
+                wall, ps / 1e6, static_cast<double>(engine.neighbor_list().pair_count()) / state.count(),
+                engine.neighbor_list().builds - builds0);
+    std::printf("particle_steps_per_s=%.6g\n", ps);
+    return 0;
+  }
+};
+
+// One deformation stage from a packing at rest (the unit of the YADE cross-check and of the
+// ensemble workflow's tasks).
+struct ModeCommand {
+  CLI::App* cmd = nullptr;
+  CLI::Option* rate_opt = nullptr;
+  CLI::Option* eps_opt = nullptr;
+  std::string scene, packing, mode = "D2", out, stage_name;
+  double rate_tc = -1, eps = -1;
+  bool force = false, quiet = false;
+  int threads = -1;
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("mode", "one deformation mode from a packing at rest, one CSV");
+    cmd->add_option("--scene", scene, "scene TOML for the physics (default: built-in defaults)")->check(CLI::ExistingFile);
+    cmd->add_option("--packing", packing, "YADE-format packing (our checkpoints/*.txt), or a checkpoint "
+                                          "(*.ckpt: bit-exact state, the curve equals `dem run`'s)")->required()->check(CLI::ExistingFile);
+    cmd->add_option("--threads", threads, "threads (overrides integration.threads)");
+    cmd->add_option("--name", stage_name, "stage name in the CSV (default: the mode's name; `dem run` uses "
+                                          "MODE_phiX.XXX)");
+    cmd->add_option("--mode", mode, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, SS_xy/xz/yz (simple shear), "
+                                    "or a [modes] name");
+    rate_opt = cmd->add_option("--rate-tc", rate_tc, "mode rate times t_c (default: protocol.deviatoric_rate_tc)");
+    eps_opt = cmd->add_option("--eps-max", eps, "stop at this eps_d (default: protocol.eps_d_max)");
+    cmd->add_option("--out", out, "output CSV")->required();
+    cmd->add_option("--set", overrides, "override a scene key");
+    cmd->add_flag("--force", force, "overwrite an existing output CSV");
+    cmd->add_flag("--quiet", quiet, "no progress lines");
+  }
+  int run(std::vector<std::string> overrides) const {
+    if (rate_opt->count()) overrides.push_back("protocol.deviatoric_rate_tc=" + exact_number("--rate-tc", rate_tc));
+    if (eps_opt->count()) overrides.push_back("protocol.eps_d_max=" + exact_number("--eps-max", eps));
+    overrides.push_back("protocol.modes=[\"" + mode + "\"]");
+    if (threads >= 0) overrides.push_back("integration.threads=" + std::to_string(threads));
+    std::string resolved;
+    dem::Model model = scene.empty() ? dem::load_scene("", overrides, &resolved, "defaults")
+                                     : dem::load_scene_file(scene, overrides, &resolved);
+    check_output_file(out, force);
+    dem::State state = fs::path(packing).extension() == ".ckpt" ? dem::read_checkpoint(packing).state
+                                                                : dem::read_packing(packing, model.density);
+    dem::check_packing(model, state, packing);
+    const auto& m = model.protocol.modes.front();
+    const dem::StageSpec spec{stage_name.empty() ? m.name : stage_name, m.rate_shape * model.protocol.deviatoric_rate,
+                              dem::StopKind::DeviatoricStrain, model.protocol.eps_d_max, {}, 0, 0,
+                              dem::mode_definition(model, m), m.shear_shape * model.protocol.deviatoric_rate};
+    if (!quiet) print_info(model);
+    else warn_time_step(model);
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto steps = m.path.empty() ? dem::run_stage(model, state, spec, out, "", nullptr, quiet)
+                                      : dem::run_path(model, state, m, spec.name, out, quiet);
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    std::fprintf(stderr, "dem mode: %lld steps of %d particles in %.2f s: %.3f M particle-steps/s -> %s\n",
+                 static_cast<long long>(steps), state.count(), wall, steps * double(state.count()) / wall / 1e6,
+                 out.c_str());
+    return 0;
+  }
+};
+
+// Two-sphere collision against the closed form.
+struct CollideCommand {
+  CLI::App* cmd = nullptr;
+  double r1 = 0.5e-3, r2 = 0.5e-3, v0 = 0.1;
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    cmd = app.add_subcommand("collide", "two-sphere head-on collision: contact time and restitution (JSON)");
+    cmd->add_option("--r1", r1, "radius of sphere 1 [m]");
+    cmd->add_option("--r2", r2, "radius of sphere 2 [m]");
+    cmd->add_option("--v0", v0, "approach speed [m/s]");
+    cmd->add_option("--set", overrides, "override a scene key (e.g. integration.dt_over_tc=0.0005)");
+  }
+  int run(std::vector<std::string> overrides) const {
+    overrides.insert(overrides.begin(), {"contact.background_damping_kg_s=0", "integration.threads=1"});
+    const dem::Model model = dem::load_scene("", overrides, nullptr, "collide");
+    for (auto [name, v] : {std::pair{"--r1", r1}, {"--r2", r2}, {"--v0", v0}})
+      if (!(v > 0) || !std::isfinite(v)) throw ArgumentError(std::string(name) + " must be a positive finite number");
+    // dt is t_c / dt_over_tc of the scene's smallest pair: a smaller sphere is resolved by fewer steps.
+    for (auto [name, r] : {std::pair{"--r1", r1}, {"--r2", r2}})
+      if (r < model.radius_min || r > model.radius_max)
+        throw ArgumentError(std::string(name) + " = " + std::to_string(r) + " m lies outside the scene's radius range [" +
+                            std::to_string(model.radius_min) + ", " + std::to_string(model.radius_max) + "] m, "
+                            "from which the time step is set: pass --set particles.radius_min_m=... and "
+                            "--set particles.radius_max_m=... to cover it");
+    const dem::CollisionResult r = dem::simulate_collision(model, r1, r2, v0);
+    if (r.steps_in_contact < 20 || r.max_overlap > model.max_overlap_fraction)
+      throw ArgumentError("the contact lasted " + std::to_string(r.steps_in_contact) + " time steps with an overlap of " +
+                          std::to_string(r.max_overlap) + " x the smaller radius: --v0 is too large for this stiffness "
+                          "(the spheres pass through each other, t_c and e are meaningless); lower --v0 so that the "
+                          "overlap stays well below the radius (and the contact spans >= 20 steps)");
+    const double m1 = dem::sphere_mass(r1, model.density), m2 = dem::sphere_mass(r2, model.density);
+    const dem::PairCollision a = dem::pair_collision(model.contact.stiffness, model.contact.damping, m1 * m2 / (m1 + m2));
+    std::printf("{\"t_contact_s\": %.12g, \"restitution\": %.12g, \"t_contact_analytic_s\": %.12g, "
+                "\"restitution_analytic\": %.12g, \"dt_s\": %.12g, \"allow_attractive\": %s}\n",
+                r.contact_time, r.restitution, a.t_contact, a.restitution, model.dt,
+                model.contact.allow_attractive ? "true" : "false");
+    return 0;
+  }
+};
+
+// Identifiability map of the single-curve fit (synthetic curves, CSV).
+struct FitMapCommand {
+  CLI::App* cmd = nullptr;
+  std::string out;
+  demfit::IdentifiabilitySetup setup;
+  std::vector<double> lengths{0.5, 1, 1.5, 2, 3, 5, 8, 13, 24}, noises{0.003, 0.01, 0.03, 0.1, 0.3}, rhos{0.0, 0.85};
+  bool force = false;
+  void add(CLI::App& app) {
+    setup.fit.correct_autocorrelation = true;   // as `dem fit` does by default
+    cmd = app.add_subcommand("fit-map", "identifiability map of the fit: seeded synthetic curves of known "
+                                        "parameters, fitted over a grid of curve lengths and noise levels (CSV)");
+    cmd->add_option("--out", out, "output CSV")->required();
+    cmd->add_option("--lengths", lengths, "curve lengths beta * eps_last [-] (3 = 95% saturation)");
+    cmd->add_option("--noises", noises, "noise standard deviation / amplitude |x_max - x0| [-]");
+    cmd->add_option("--correlations", rhos, "lag-1 autocorrelations of the noise, in [0, 1)");
+    cmd->add_option("--trials", setup.trials, "curves per cell");
+    cmd->add_option("--points-per-approach", setup.points_per_approach,
+                    "samples per approach strain 1/beta (8.3: sample_strain 0.002 at beta = 60)");
+    cmd->add_option("--beta", setup.beta, "true rate beta");
+    cmd->add_option("--x-max", setup.x_max, "true asymptote");
+    cmd->add_option("--x0", setup.x0, "true initial value");
+    cmd->add_option("--seed", setup.seed, "random seed (the same seed gives the same map)");
+    cmd->add_flag("--force", force, "overwrite an existing output CSV");
+  }
+  int run() const {
+    if (fs::exists(out) && !force) throw std::runtime_error(out + " exists: pass --force to overwrite it");
+    std::ostringstream csv;
+    csv << "# dem fit-map: fits of x = x_max - (x_max - x0) exp(-beta eps_d) to synthetic curves with "
+        << setup.points_per_approach << " points per 1/beta on (0, eps_last], Gaussian AR(1) noise, " << setup.trials
+        << " trials per cell, seed " << setup.seed << "\n# truth: x0 = " << setup.x0
+        << ", x_max = " << setup.x_max << ", beta = " << setup.beta
+        << "; errors relative to beta (rate) and to |x_max - x0| (asymptote); coverage = fraction of trials whose "
+           "95% interval (1.96 SE, SEs inflated for correlated residuals as in dem fit) holds the truth\n"
+           "length_beta_eps,noise_over_amplitude,noise_correlation,beta_rel_error_median,beta_rel_error_p90,"
+           "xmax_rel_error_median,beta_coverage,xmax_coverage,beta_reported_rel_se_median,flagged_fraction,unsaturated_fraction,converged\n";
+    for (double rho : rhos)
+      for (double noise : noises)
+        for (double length : lengths) {
+          demfit::IdentifiabilitySetup s = setup;
+          s.length = length; s.noise = noise; s.correlation = rho;
+          const demfit::IdentifiabilityCell c = demfit::identifiability_cell(s);
+          csv << length << "," << noise << "," << rho << "," << c.beta_rel_error_median << ","
+              << c.beta_rel_error_p90 << "," << c.xmax_rel_error_median << "," << c.beta_coverage << ","
+              << c.xmax_coverage << "," << c.beta_reported_rel_se_median << "," << c.flagged_fraction << ","
+              << c.unsaturated_fraction << "," << c.converged << "\n";
+        }
+    dem::write_file_atomic(out, csv.str());
+    std::fprintf(stderr, "dem fit-map: %zu cells -> %s\n", rhos.size() * noises.size() * lengths.size(), out.c_str());
+    return 0;
+  }
+};
+
+// Coverage of the ensemble fit's intervals on synthetic ensembles (CSV).
+struct EnsembleCoverageCommand {
+  CLI::App* cmd = nullptr;
+  std::string out;
+  demfit::EnsembleCoverageSetup setup;
+  std::vector<int> ks{2, 4, 8, 16, 32};
+  std::vector<double> lengths{3, 8}, rhos{0.85, 0.95};
+  bool force = false;
+  void add(CLI::App& app) {
+    cmd = app.add_subcommand("ensemble-coverage", "coverage of the ensemble fit's 95% intervals and the false-rejection "
+                                                  "rate of its D2/D3 test on synthetic ensembles of DEM-like curves (CSV)");
+    cmd->add_option("--out", out, "output CSV")->required();
+    cmd->add_option("--packings", ks, "ensemble sizes K")->delimiter(',');
+    cmd->add_option("--lengths", lengths, "curve lengths beta * eps_last")->delimiter(',');
+    cmd->add_option("--correlations", rhos, "lag-1 autocorrelations of the noise, in [0, 1)")->delimiter(',');
+    cmd->add_option("--noise", setup.noise, "AR(1) noise sd / amplitude");
+    cmd->add_option("--member-spread", setup.member_spread, "sd of the members' plateaus / amplitude");
+    cmd->add_option("--trials", setup.trials, "synthetic ensembles per cell");
+    cmd->add_option("--bootstrap", setup.bootstrap, "bootstrap resamples per trial (0: skip)");
+    cmd->add_option("--seed", setup.seed, "random seed");
+    cmd->add_flag("--force", force, "overwrite an existing output CSV");
+  }
+  int run() const {
+    if (fs::exists(out) && !force) throw std::runtime_error(out + " exists: pass --force to overwrite it");
+    dem::write_file_atomic(out, demfit::ensemble_coverage_csv(setup, ks, lengths, rhos));
+    return 0;
+  }
+};
+
+struct Commands {
+  RunCommand run;
+  EnsembleCommand ensemble;
+  InfoCommand info;
+  BenchCommand bench;
+  ModeCommand mode;
+  CollideCommand collide;
+  demfit::FitCommandOptions fit_opts;
+  CLI::App* fit = nullptr;
+  demfit::ModelCommandOptions model_opts;
+  CLI::App* model = nullptr;
+  FitMapCommand fit_map;
+  EnsembleCoverageCommand coverage;
+  CLI::App* compare = nullptr;
+  CLI::App* plot = nullptr;
+
+  void add(CLI::App& app, std::vector<std::string>& overrides) {
+    run.add(app, overrides);
+    ensemble.add(app, overrides);
+    info.add(app, overrides);
+    bench.add(app, overrides);
+    mode.add(app, overrides);
+    collide.add(app, overrides);
+    fit = app.add_subcommand("fit", "fit the anisotropy-evolution model to a run's curves");
+    demfit::add_fit_options(*fit, fit_opts);
+    model = app.add_subcommand("model", "calibrate the incremental anisotropic model on an ensemble's D2 curves "
+                                        "and isotropic branch, predict D3 (docs/model.md)");
+    demfit::add_model_options(*model, model_opts);
+    fit_map.add(app);
+    coverage.add(app);
+    compare = app.add_subcommand("compare", "compare two curve CSVs (e.g. ours vs YADE)");
+    compare->allow_extras();
+    plot = app.add_subcommand("plot", "plot a run folder's curves (PNG/SVG)");
+    plot->allow_extras();
+  }
+
+  // The parsed subcommand's exit code.
+  int dispatch(const std::vector<std::string>& overrides, const std::string& command_line) const {
+    if (*run.cmd) return run.run(overrides, command_line);
+    if (*ensemble.cmd) return ensemble.run(overrides);
+    if (*info.cmd) return info.run(overrides);
+    if (*bench.cmd) return bench.run(overrides);
+    if (*mode.cmd) return mode.run(overrides);
+    if (*collide.cmd) return collide.run(overrides);
+    if (*fit) return demfit::run_fit_command(fit_opts);
+    if (*model) return demfit::run_model_command(model_opts);
+    if (*fit_map.cmd) return fit_map.run();
+    if (*coverage.cmd) return coverage.run();
+    if (*compare) return exec_python("demkit.compare", compare->remaining());
+    if (*plot) return exec_python("demkit.plots", plot->remaining());
+    return 0;
+  }
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"dem: DEM runner, fitter and YADE cross-check for frictionless polydisperse spheres"};
+  app.require_subcommand(1);
+  std::vector<std::string> overrides;
+  Commands commands;
+  commands.add(app, overrides);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;   // --help: 0; any bad argument: 2 (README's catalogue)
+  }
+  try {
+    return commands.dispatch(overrides, join_args(argc, argv));
+  } catch (const dem::SceneError& e) {
+    std::cerr << "dem: scene error: " << e.what() << "\n";
+    return 2;
+  } catch (const ArgumentError& e) {
+    std::cerr << "dem: bad argument: " << e.what() << "\n";
+    return 2;
+  } catch (const dem::BlowUp& e) {
+    std::cerr << "dem: simulation blew up: " << e.what() << "\n";
+    return 3;
+  } catch (const std::exception& e) {
+    std::cerr << "dem: error: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,288 @@
+#include "dem/engine/engine.hpp"
+#include "dem/engine/parallel.hpp"
+#include "dem/engine/step_team.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace dem {
+
+int resolve_threads(int requested) {
+#ifdef _OPENMP
+  return requested > 0 ? requested : omp_get_max_threads();
+#else
+  (void)requested;
+  return 1;
+#endif
+}
+
+Engine::Engine(const Model& model, State& state, bool forces_are_current)
+    : model_(model), state_(state) {
+  if (state.count() < 2) throw std::invalid_argument("Engine: the state holds fewer than 2 particles");
+  threads_ = resolve_threads(model.threads);
+  blocks_ = block_count(model.blocks, threads_);
+  chooser_ = TeamSizeChooser(threads_, model.adaptive_threads);
+  skin_ = model.skin_over_rmin * model.radius_min;
+  if (model.integrator == Integrator::SymplecticEuler) { kick_before_ = 1.0; kick_after_ = 0.0; }
+  sllod_ = model.sllod;
+  if (state.list_valid && state.position_at_build.size() == state.position.size()) {
+    restore_neighbor_list(state, list_, skin_);
+  } else {
+    rebuild_neighbor_list(state, list_, skin_, true);
+  }
+  partition_pairs(list_, blocks_, scratch_);
+  pack_particles(state_, 0, state_.count(), scratch_);
+  if (!forces_are_current || state.force.size() != state.position.size()) evaluate_forces();
+}
+
+namespace {
+
+using M3 = double[3][3];
+
+void mat_mul(const M3 a, const M3 b, M3 out) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      double v = 0;
+      for (int k = 0; k < 3; ++k) v += a[i][k] * b[k][j];
+      out[i][j] = v;
+    }
+}
+
+// exp(T) of an upper-triangular T with a small norm (L dt): Taylor series to 12 terms, exact to
+// round-off for |T| < 0.5 (a nilpotent T, simple shear, ends after its first power anyway).
+void small_exp(const M3 T, M3 out) {
+  M3 term = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) out[i][j] = term[i][j];
+  for (int k = 1; k <= 12; ++k) {
+    M3 next;
+    mat_mul(term, T, next);
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) { term[i][j] = next[i][j] / k; out[i][j] += term[i][j]; }
+  }
+}
+
+// The inverse of the upper-triangular [[a, d, e], [0, b, f], [0, 0, c]].
+void upper_inverse(const M3 H, M3 out) {
+  const double a = H[0][0], b = H[1][1], c = H[2][2], d = H[0][1], e = H[0][2], f = H[1][2];
+  const double inv[3][3] = {{1 / a, -d / (a * b), (d * f - b * e) / (a * b * c)}, {0, 1 / b, -f / (b * c)}, {0, 0, 1 / c}};
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) out[i][j] = inv[i][j];
+}
+
+void to_upper6(const M3 m, double* u) {
+  u[0] = m[0][0]; u[1] = m[1][1]; u[2] = m[2][2]; u[3] = m[0][1]; u[4] = m[0][2]; u[5] = m[1][2];
+}
+
+}  // namespace
+
+Engine::AffineMap Engine::deform_box(const VelGrad& rate, bool* flipped) {
+  Box& b = state_.box;
+  *flipped = false;
+  if (b.reference.x == 0) { b.reference = b.length; b.log_strain = Vec3(0, 0, 0); }
+  const Vec3 old_length = b.length, old_tilt = b.tilt;
+  b.log_strain += rate.diag * model_.dt;
+  const Vec3 next{b.reference.x * std::exp(b.log_strain.x), b.reference.y * std::exp(b.log_strain.y),
+                  b.reference.z * std::exp(b.log_strain.z)};
+  AffineMap map;
+  map.factor = Vec3{next.x / b.length.x, next.y / b.length.y, next.z / b.length.z};
+  b.length = next;
+  if (!rate.sheared() && !b.tilted()) return map;   // the orthorhombic box of the diagonal modes
+  // Tilted cell: H_new = exp(L dt) H_old off the diagonal (the diagonal from the log strain).
+  const double dt = model_.dt;
+  const M3 T = {{rate.diag.x * dt, rate.shear.x * dt, rate.shear.y * dt},
+                {0, rate.diag.y * dt, rate.shear.z * dt},
+                {0, 0, rate.diag.z * dt}};
+  M3 phi;
+  small_exp(T, phi);
+  const M3 H_old = {{old_length.x, old_tilt.x, old_tilt.y}, {0, old_length.y, old_tilt.z}, {0, 0, old_length.z}};
+  M3 H_grown;
+  mat_mul(phi, H_old, H_grown);
+  b.tilt = Vec3{H_grown[0][1], H_grown[0][2], H_grown[1][2]};
+  const M3 H_new = {{next.x, b.tilt.x, b.tilt.y}, {0, next.y, b.tilt.z}, {0, 0, next.z}};
+  M3 inv_old, inv_new, A, A_inv;
+  upper_inverse(H_old, inv_old);
+  upper_inverse(H_new, inv_new);
+  mat_mul(H_new, inv_old, A);       // particles keep their fractional coordinates
+  mat_mul(H_old, inv_new, A_inv);   // SLLOD: v' <- exp(-L dt) v'
+  map.general = true;
+  to_upper6(A, map.A);
+  to_upper6(A_inv, map.A_inv);
+  // Flip to the most orthogonal equivalent cell: c - k b, c - k a, b - k a (the same lattice).
+  // M (H = H_unflipped M) follows each flip, so the deformation gradient stays continuous.
+  if (std::fabs(b.tilt.z) > 0.5 * b.length.y) {
+    const double k = std::round(b.tilt.z / b.length.y);
+    b.tilt.z -= k * b.length.y;
+    b.tilt.y -= k * b.tilt.x;
+    b.flips[1] -= static_cast<std::int32_t>(k) * b.flips[0];
+    b.flips[2] -= static_cast<std::int32_t>(k);
+    *flipped = true;
+  }
+  if (std::fabs(b.tilt.y) > 0.5 * b.length.x) {
+    const double k = std::round(b.tilt.y / b.length.x);
+    b.tilt.y -= k * b.length.x;
+    b.flips[1] -= static_cast<std::int32_t>(k);
+    *flipped = true;
+  }
+  if (std::fabs(b.tilt.x) > 0.5 * b.length.x) {
+    const double k = std::round(b.tilt.x / b.length.x);
+    b.tilt.x -= k * b.length.x;
+    b.flips[0] -= static_cast<std::int32_t>(k);
+    *flipped = true;
+  }
+  return map;
+}
+
+double Engine::advance_particles(int begin, int end, const AffineMap& map, bool affine,
+                                 const StalenessTest& test) {
+  const double h = kick_before_ * model_.dt, dt = model_.dt;
+  const Vec3& factor = map.factor;
+  const Vec3 shrink{1.0 / factor.x, 1.0 / factor.y, 1.0 / factor.z};
+  Vec3* x = state_.position.data();
+  Vec3* v = state_.velocity.data();
+  Vec3* f = state_.force.data();
+  const double* m = state_.mass.data();
+  double* packed = scratch_.packed.size() == 8 * static_cast<std::size_t>(state_.count()) ? scratch_.packed.data()
+                                                                                          : nullptr;
+  const double* rad = state_.radius.data();
+  double worst = 0;
+  for (int i = begin; i < end; ++i) {
+    v[i] += f[i] * (h / m[i]);                     // 1. kick
+    x[i] += v[i] * dt;                             // 2. drift
+    if (affine) {
+      if (map.general) {                           // 3. affine motion (tilted cell)
+        x[i] = upper_apply(map.A, x[i]);
+        if (sllod_) v[i] = upper_apply(map.A_inv, v[i]);
+      } else {
+        x[i] = hadamard(x[i], factor);             // 3. affine motion
+        if (sllod_) v[i] = hadamard(v[i], shrink); //    SLLOD: v' *= exp(-rate dt)
+      }
+    }
+    f[i] = Vec3{0, 0, 0};                          //    (forces are summed afresh in 5)
+    if (test.limit2 >= 0) worst = std::max(worst, displacement2_since_build(state_, test, i));
+    if (packed) pack_particle(x[i], rad[i], v[i], packed + 8L * i);   // the pair kernels' records
+  }
+  return worst;
+}
+
+void Engine::rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2) {
+  if (test.limit2 < 0 || max_displacement2 >= test.limit2) {
+    rebuild_neighbor_list(state_, list_, skin_, true);   // sorts the particles: repack them
+    partition_pairs(list_, std::max(1, blocks_), scratch_);
+    pack_particles(state_, 0, state_.count(), scratch_);
+  }
+}
+
+void Engine::finish_forces_and_kick(int begin, int end) {
+  const double gb = model_.background_damping;
+  const double h = kick_after_ * model_.dt;
+  Vec3* v = state_.velocity.data();
+  Vec3* f = state_.force.data();
+  const double* m = state_.mass.data();
+  for (int i = begin; i < end; ++i) {
+    if (gb != 0.0) f[i] -= v[i] * gb;              // 5. background damping
+    if (h != 0.0) v[i] += f[i] * (h / m[i]);       // 6. kick
+  }
+}
+
+void Engine::evaluate_forces() {
+  compute_forces(model_, state_, list_, rate_, threads_, blocks_, scratch_);
+}
+
+void Engine::step(const VelGrad& strain_rate) {
+  rate_ = strain_rate;
+  const bool affine = !strain_rate.zero();
+  bool flipped = false;
+  const AffineMap map = affine ? deform_box(strain_rate, &flipped) : AffineMap{};
+  StalenessTest test = staleness_test(state_, list_);   // box of this step, list of the last
+  if (flipped) { test.limit2 = -1; ++flips_; }        // new lattice vectors: rebuild
+  if (threads_ <= 1 && blocks_ <= 1) step_serial(map, affine, test);
+  else step_threaded(map, affine, test);
+  chooser_.step_done();
+  state_.time += model_.dt;
+  ++state_.step;
+  if (model_.check_every_steps > 0 && state_.step % model_.check_every_steps == 0) check_sanity();
+}
+
+void Engine::step_serial(const AffineMap& map, bool affine, const StalenessTest& test) {
+  const int n = state_.count();
+  const double worst = advance_particles(0, n, map, affine, test);
+  rebuild_neighbors_if_stale(test, worst);
+  partition_pairs(list_, 1, scratch_);
+  accumulate_pair_forces(model_, state_, list_, rate_, 0, scratch_, state_.force.data());
+  finish_forces_and_kick(0, n);
+}
+
+void Engine::step_threaded(const AffineMap& map, bool affine, const StalenessTest& test) {
+  partition_pairs(list_, blocks_, scratch_);
+  const int nt = chooser_.members();
+  worst_displacement2_.assign(nt, 0.0);
+  auto sync = [&] { if (nt > 1) team_->barrier(); };
+  auto body = [&](int t) {
+    // 1-3 on the blocks of the current list (any split would do: particles are independent).
+    double worst = 0;
+    for (int b = t; b < scratch_.blocks(); b += nt)
+      worst = std::max(worst, advance_particles(scratch_.bounds[b], scratch_.bounds[b + 1],
+                                                map, affine, test));
+    worst_displacement2_[t] = worst;
+    sync();
+    if (t == 0) {
+      double all = 0;
+      for (double w : worst_displacement2_) all = std::max(all, w);
+      rebuild_neighbors_if_stale(test, all);
+      partition_pairs(list_, blocks_, scratch_);
+    }
+    sync();
+    // 5: own pairs, then (after every block has queued its spills) the spills, then 6. Each
+    // block's arithmetic is the same whichever member runs it: the bits do not depend on nt.
+    Vec3* f = state_.force.data();
+    for (int b = t; b < scratch_.blocks(); b += nt)
+      accumulate_pair_forces(model_, state_, list_, rate_, b, scratch_, f);
+    sync();
+    for (int b = t; b < scratch_.blocks(); b += nt) {
+      apply_spilled_forces(b, scratch_, f);
+      finish_forces_and_kick(scratch_.bounds[b], scratch_.bounds[b + 1]);
+    }
+  };
+  if (nt == 1) { body(0); return; }
+  if (!team_ || team_->size() != nt) team_ = std::make_unique<StepTeam>(nt);
+  team_->run(body);
+}
+
+void Engine::check_sanity() const {
+  const State& s = state_;
+  const int n = s.count();
+  for (int i = 0; i < n; ++i) {
+    const Vec3& x = s.position[i];
+    const Vec3& v = s.velocity[i];
+    if (!std::isfinite(x.x + x.y + x.z + v.x + v.y + v.z)) {
+      std::ostringstream m;
+      m << "non-finite position or velocity of particle " << s.id[i] << " at step " << s.step
+        << ": the integration diverged. The packing passed its checks at start (radii within the scene's bounds, "
+        << "no coincident centres, overlaps below max_overlap_fraction), so the time step or the rate is too large: "
+        << "reduce integration.dt_over_tc (now " << model_.dt_over_tc
+        << "; dense packings are stable up to about 0.5, docs/stability.md) or the strain rate";
+      throw BlowUp(m.str());
+    }
+  }
+  // Largest overlap relative to the smaller radius, over listed pairs.
+  double worst = 0;
+  int wi = -1, wj = -1;
+  for_each_contact(s, list_, [&](int i, int j, const Vec3&, double, double delta) {
+    const double rel = delta / std::min(s.radius[i], s.radius[j]);
+    if (rel > worst) { worst = rel; wi = i; wj = j; }
+  });
+  if (worst > model_.max_overlap_fraction) {
+    std::ostringstream m;
+    m << "overlap of " << worst << " x the smaller radius between particles " << s.id[wi]
+      << " and " << s.id[wj] << " at step " << s.step << " (limit max_overlap_fraction = "
+      << model_.max_overlap_fraction << "): the packing is compressed far beyond the contact "
+      << "stiffness, or the time step (dt_over_tc = " << model_.dt_over_tc
+      << ") or strain rate is too large (dense packings are stable up to dt_over_tc of about 0.5, "
+      << "docs/stability.md)";
+    throw BlowUp(m.str());
+  }
+}
+
+}  // namespace dem

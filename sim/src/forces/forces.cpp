@@ -1,0 +1,237 @@
+#include "dem/forces/forces.hpp"
+#include "dem/engine/parallel.hpp"
+#include "forces/pair_kernels.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace dem {
+
+namespace {
+
+// One pair: the contact force on j [N] (minus it on i); false if the spheres do not touch.
+template <bool Sheared, class Law>
+inline bool contact_force(const Law& law, const Vec3& xi, const Vec3& xj_image, const Vec3& vi,
+                          const Vec3& vj, double ri, double rj, const VelGrad& rate, Vec3& f_on_j) {
+  const Vec3 d = xj_image - xi;
+  const double r2 = dot(d, d);
+  const double reach = ri + rj;
+  if (r2 >= reach * reach) return false;
+  const double r = std::sqrt(r2);
+  const double inv_r = 1.0 / r;
+  const Vec3 n = d * inv_r;                          // unit normal from i to j
+  // fluctuation + affine relative velocity (L d; a diagonal L: the component-wise product)
+  const Vec3 v_rel = (vj - vi) + (Sheared ? rate.apply(d) : hadamard(rate.diag, d));
+  const double fn = law(reach - r, -dot(v_rel, n));
+  f_on_j = n * fn;
+  return true;
+}
+
+// The reference pair loop (the simple form of the kernels below, PairKernel::reference):
+// pairs of particles [begin, end), forces on j >= end go to spill[block_of[j]].
+template <bool Sheared, class Law>
+void pair_loop_reference(const Law& law, const State& s, const NeighborList& list, const VelGrad& rate,
+                         int begin, int end, Vec3* f, std::vector<std::vector<SpilledForce>>& spill,
+                         const std::uint16_t* block_of) {
+  Vec3 off[27];
+  image_offsets(s.box, off);
+  const Vec3* x = s.position.data();
+  const Vec3* v = s.velocity.data();
+  const double* rad = s.radius.data();
+  const std::int32_t* first = list.first.data();
+  const std::int32_t* partner = list.partner.data();
+  const std::uint8_t* image = list.image.data();
+  for (int i = begin; i < end; ++i) {
+    Vec3 fi{0, 0, 0};
+    const Vec3 xi = x[i], vi = v[i];
+    const double ri = rad[i];
+    for (int p = first[i]; p < first[i + 1]; ++p) {
+      const int j = partner[p];
+      Vec3 fj;
+      if (!contact_force<Sheared>(law, xi, x[j] + off[image[p]], vi, v[j], ri, rad[j], rate, fj)) continue;
+      if (j < end) f[j] += fj; else spill[block_of[j]].push_back({j, fj});
+      fi -= fj;
+    }
+    f[i] += fi;
+  }
+}
+
+
+// Appends a spilled force field by field (a SpilledForce built on the stack and copied made
+// the store-to-load forwarding fail: a quarter of the adding pass's time in a profile).
+inline void queue_spill(std::vector<SpilledForce>& to, int j, const Vec3& f) {
+  to.emplace_back();
+  SpilledForce& s = to.back();
+  s.j = j;
+  s.f = f;
+}
+
+// Pass 2 of a chunk: the forces in list order, as pair_loop_reference adds them. `fi` and
+// `current` carry the running sum of the pairs of particle `current` across chunks.
+inline void add_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, const double* fx, const double* fy,
+                      const double* fz, int end, Vec3* f, std::vector<std::vector<SpilledForce>>& spill,
+                      const std::uint16_t* block_of, int& current, Vec3& fi) {
+  for (int q = 0; q < n; ++q) {
+    const int i = pi[q], j = pj[q];
+    if (i != current) {   // f[i] += 0 (a particle without pairs) would change nothing: skipped
+      f[current] += fi;
+      fi = Vec3{0, 0, 0};
+      current = i;
+    }
+    const Vec3 fj{fx[q], fy[q], fz[q]};
+    if (j < end) f[j] += fj;
+    else if (fj.x != 0.0 || fj.y != 0.0 || fj.z != 0.0) queue_spill(spill[block_of[j]], j, fj);   // +-0: no-op
+    fi -= fj;
+  }
+}
+
+template <bool Sheared>
+void pair_loop_vector(PairKernel kernel, const ContactLaw& law, const State& s, const NeighborList& list,
+                      const double* packed, const std::int32_t* pair_i, const VelGrad& rate, int begin, int end, Vec3* f,
+                      std::vector<std::vector<SpilledForce>>& spill, const std::uint16_t* block_of) {
+  Vec3 off3[27];
+  image_offsets(s.box, off3);
+  alignas(64) double off[27 * 4];
+  for (int c = 0; c < 27; ++c) {
+    off[4 * c] = off3[c].x; off[4 * c + 1] = off3[c].y; off[4 * c + 2] = off3[c].z; off[4 * c + 3] = 0.0;
+  }
+  const long p_begin = list.first[begin], p_end = list.first[end];
+  const kernels::KernelInputs in{packed, pair_i, list.partner.data(), list.image.data(), off,
+                        law.stiffness, law.damping, law.allow_attractive, rate, f, p_end};
+  const kernels::KernelFn run = kernels::kernel_of(kernel, Sheared);
+  constexpr int kChunk = kernels::kChunk;
+  alignas(64) double fx[kChunk], fy[kChunk], fz[kChunk];
+  int current = p_begin < p_end ? pair_i[p_begin] : begin;
+  Vec3 fi{0, 0, 0};
+  for (long p0 = p_begin; p0 < p_end; p0 += kChunk) {
+    const int n = static_cast<int>(std::min<long>(kChunk, p_end - p0));
+    run(in, p0, n, fx, fy, fz);
+    add_chunk(pair_i + p0, list.partner.data() + p0, n, fx, fy, fz, end, f, spill, block_of, current, fi);
+  }
+  if (p_begin < p_end) f[current] += fi;
+}
+
+void add_background_damping(const Model& m, State& s) {
+  const double gb = m.background_damping;
+  if (gb == 0.0) return;
+  for (int i = 0; i < s.count(); ++i) s.force[i] -= s.velocity[i] * gb;
+}
+
+}  // namespace
+
+void partition_pairs(const NeighborList& list, int blocks, ForceScratch& scratch) {
+  blocks = std::max(1, blocks);
+  if (scratch.list_builds == list.builds && scratch.blocks() == blocks) return;
+  const int n = static_cast<int>(list.first.size()) - 1;
+  const long total = list.first[n];
+  scratch.bounds.assign(blocks + 1, n);
+  scratch.bounds[0] = 0;
+  for (int b = 1; b < blocks; ++b) {
+    const long target = total * b / blocks;
+    scratch.bounds[b] = static_cast<int>(
+        std::lower_bound(list.first.begin(), list.first.end() - 1, target) - list.first.begin());
+  }
+  scratch.block_of.resize(n);
+  for (int b = 0; b < blocks; ++b)
+    std::fill(scratch.block_of.begin() + scratch.bounds[b], scratch.block_of.begin() + scratch.bounds[b + 1],
+              static_cast<std::uint16_t>(b));
+  scratch.spill.assign(blocks, std::vector<std::vector<SpilledForce>>(blocks));
+  scratch.pair_i.resize(list.partner.size());
+  scratch.packed.resize(8 * static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i)
+    std::fill(scratch.pair_i.begin() + list.first[i], scratch.pair_i.begin() + list.first[i + 1], i);
+  scratch.list_builds = list.builds;
+}
+
+// Four blocks by default: 1, 2, 3 and 4 threads sum every force in the same order.
+constexpr int kDefaultBlocks = 4;
+
+int block_count(int blocks_setting, int threads) {
+  return std::clamp(blocks_setting > 0 ? blocks_setting : std::max(kDefaultBlocks, threads), 1, 65535);
+}
+
+void accumulate_pair_forces(const Model& model, const State& state, const NeighborList& list,
+                            const VelGrad& rate, int b, ForceScratch& scratch, Vec3* force) {
+  for (auto& to : scratch.spill[b]) to.clear();
+  const int begin = scratch.bounds[b], end = scratch.bounds[b + 1];
+  auto& spill = scratch.spill[b];
+  const std::uint16_t* block_of = scratch.block_of.data();
+  if (scratch.kernel == PairKernel::reference) {
+    const LinearSpringDashpot law(model.contact);
+    if (rate.sheared()) pair_loop_reference<true>(law, state, list, rate, begin, end, force, spill, block_of);
+    else pair_loop_reference<false>(law, state, list, rate, begin, end, force, spill, block_of);
+    return;
+  }
+  const std::int32_t* pair_i = scratch.pair_i.data();
+  if (rate.sheared())
+    pair_loop_vector<true>(scratch.kernel, model.contact, state, list, scratch.packed.data(), pair_i, rate, begin, end, force, spill, block_of);
+  else
+    pair_loop_vector<false>(scratch.kernel, model.contact, state, list, scratch.packed.data(), pair_i, rate, begin, end, force, spill, block_of);
+}
+
+void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force) {
+  for (int from = 0; from < b; ++from)
+    for (const SpilledForce& s : scratch.spill[from][b]) force[s.j] += s.f;
+}
+
+void pack_particles(const State& s, int begin, int end, ForceScratch& scratch) {
+  if (scratch.packed.size() != 8 * static_cast<std::size_t>(s.count())) return;   // sized by partition_pairs
+  double* P = scratch.packed.data();
+  for (int i = begin; i < end; ++i) pack_particle(s.position[i], s.radius[i], s.velocity[i], P + 8L * i);
+}
+
+void compute_forces(const Model& model, State& s, const NeighborList& list,
+                    const VelGrad& rate, int threads, int blocks, ForceScratch& scratch) {
+  s.force.assign(s.count(), Vec3{0, 0, 0});
+  partition_pairs(list, blocks, scratch);
+  pack_particles(s, 0, s.count(), scratch);
+  Vec3* f = s.force.data();
+  if (threads <= 1) {
+    for (int b = 0; b < blocks; ++b) accumulate_pair_forces(model, s, list, rate, b, scratch, f);
+    for (int b = 1; b < blocks; ++b) apply_spilled_forces(b, scratch, f);
+  } else {
+#pragma omp parallel num_threads(threads)
+    {
+      const ThreadRank rank = this_thread_rank();
+      const int t = rank.index, nt = rank.count;
+      for (int b = t; b < blocks; b += nt) accumulate_pair_forces(model, s, list, rate, b, scratch, f);
+#pragma omp barrier
+      for (int b = t; b < blocks; b += nt) apply_spilled_forces(b, scratch, f);
+    }
+  }
+  add_background_damping(model, s);
+}
+
+Vec3 minimum_image(const Box& box, const Vec3& xi, const Vec3& xj) {
+  Vec3 d = xj - xi;
+  if (!box.tilted()) {
+    const Vec3 L = box.length;
+    for (int k = 0; k < 3; ++k) d[k] -= L[k] * std::round(d[k] / L[k]);
+    return d;
+  }
+  d -= box.lattice(0, 0, std::round(d.z / box.length.z));
+  d -= box.lattice(0, std::round(d.y / box.length.y), 0);
+  d -= box.lattice(std::round(d.x / box.length.x), 0, 0);
+  return d;
+}
+
+void compute_forces_all_pairs(const Model& model, State& s, const VelGrad& rate) {
+  const int n = s.count();
+  const LinearSpringDashpot law(model.contact);
+  s.force.assign(n, Vec3{0, 0, 0});
+  for (int i = 0; i < n; ++i)
+    for (int j = i + 1; j < n; ++j) {
+      const Vec3 d = minimum_image(s.box, s.position[i], s.position[j]);
+      Vec3 fj;
+      const bool touch = rate.sheared() ? contact_force<true>(law, s.position[i], s.position[i] + d, s.velocity[i],
+                                                              s.velocity[j], s.radius[i], s.radius[j], rate, fj)
+                                        : contact_force<false>(law, s.position[i], s.position[i] + d, s.velocity[i],
+                                                               s.velocity[j], s.radius[i], s.radius[j], rate, fj);
+      if (!touch) continue;
+      s.force[j] += fj;
+      s.force[i] -= fj;
+    }
+  add_background_damping(model, s);
+}
+
+}  // namespace dem

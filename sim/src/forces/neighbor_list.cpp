@@ -1,0 +1,254 @@
+#include "dem/forces/neighbor_list.hpp"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace dem {
+double max_radius_of(const std::vector<double>& radius);
+
+void image_offsets(const Box& box, Vec3 offsets[27]) {
+  if (box.tilted()) {
+    for (int sx = -1; sx <= 1; ++sx)
+      for (int sy = -1; sy <= 1; ++sy)
+        for (int sz = -1; sz <= 1; ++sz) offsets[(sx + 1) * 9 + (sy + 1) * 3 + (sz + 1)] = box.lattice(sx, sy, sz);
+    return;
+  }
+  for (int sx = -1; sx <= 1; ++sx)
+    for (int sy = -1; sy <= 1; ++sy)
+      for (int sz = -1; sz <= 1; ++sz)
+        offsets[(sx + 1) * 9 + (sy + 1) * 3 + (sz + 1)] =
+            Vec3(sx * box.length.x, sy * box.length.y, sz * box.length.z);
+}
+
+namespace {
+
+struct CellGrid {
+  int n[3];
+  double inv_size[3];
+  const Box* tilted = nullptr;   ///< the cell when it is tilted: cells are slabs of fractional coordinates
+  int index_of(const Vec3& x) const {
+    int c[3];
+    if (tilted) {
+      const Vec3 s = tilted->fractional(x);
+      for (int k = 0; k < 3; ++k) {
+        c[k] = static_cast<int>(std::floor(s[k] * n[k]));
+        c[k] = std::min(std::max(c[k], 0), n[k] - 1);
+      }
+    } else {
+      for (int k = 0; k < 3; ++k) {
+        c[k] = static_cast<int>(x[k] * inv_size[k]);
+        c[k] = std::min(std::max(c[k], 0), n[k] - 1);
+      }
+    }
+    return (c[0] * n[1] + c[1]) * n[2] + c[2];
+  }
+};
+
+// Perpendicular widths of the cell (the distance between opposite faces) [m]: V / |b x c| etc.
+Vec3 cell_widths(const Box& b) {
+  const double Lx = b.length.x, Ly = b.length.y, Lz = b.length.z, xy = b.tilt.x, xz = b.tilt.y, yz = b.tilt.z;
+  const double V = Lx * Ly * Lz;
+  const Vec3 bc{Ly * Lz, -xy * Lz, xy * yz - Ly * xz};
+  const Vec3 ca{0, Lz * Lx, -yz * Lx};
+  return {V / norm(bc), V / norm(ca), Lz};
+}
+
+// The grid of the box `b` (kept by pointer when tilted: b must outlive the grid).
+CellGrid make_grid(const Box& b, double cutoff) {
+  CellGrid g{};
+  const bool tilted = b.tilted();
+  const Vec3 width = tilted ? cell_widths(b) : b.length;
+  for (int k = 0; k < 3; ++k) {
+    if (width[k] < 2.0 * cutoff)
+      throw std::runtime_error(
+          std::string(tilted ? "perpendicular width of the tilted cell " : "box edge ") + std::to_string(width[k]) +
+          " m is shorter than twice the neighbour cutoff " + std::to_string(cutoff) +
+          " m: use more particles or a smaller skin");
+    g.n[k] = std::max(1, static_cast<int>(width[k] / cutoff));
+    g.inv_size[k] = g.n[k] / b.length[k];
+  }
+  if (tilted) g.tilted = &b;
+  return g;
+}
+
+// Builds the CSR list from positions x (inside [0, L)) for the box length L.
+void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, const Box& cell,
+                 NeighborList& list) {
+  const int n = static_cast<int>(x.size());
+  const double rmax = max_radius_of(radius);
+  const double cutoff = 2.0 * rmax + list.skin;
+  CellGrid g = make_grid(cell, cutoff);
+  const int ncell = g.n[0] * g.n[1] * g.n[2];
+  std::vector<std::int32_t> cell_of(n), cell_start(ncell + 1, 0), cell_members(n);
+  for (int i = 0; i < n; ++i) { cell_of[i] = g.index_of(x[i]); ++cell_start[cell_of[i] + 1]; }
+  for (int c = 0; c < ncell; ++c) cell_start[c + 1] += cell_start[c];
+  {
+    std::vector<std::int32_t> fill(cell_start.begin(), cell_start.end() - 1);
+    for (int i = 0; i < n; ++i) cell_members[fill[cell_of[i]]++] = i;
+  }
+  // With fewer than 3 cells along an axis, neighbour cells repeat: scan each distinct
+  // (cell, image) combination once by iterating over images explicitly.
+  list.first.assign(n + 1, 0);
+  list.partner.clear();
+  list.image.clear();
+  Vec3 off[27];
+  image_offsets(cell, off);
+  std::vector<std::pair<std::int32_t, std::uint8_t>> found;
+  for (int i = 0; i < n; ++i) {
+    found.clear();
+    const int ci[3] = {cell_of[i] / (g.n[1] * g.n[2]), (cell_of[i] / g.n[2]) % g.n[1],
+                       cell_of[i] % g.n[2]};
+    // Candidate (cell, shift) pairs, deduplicated for small grids.
+    int cand_cell[27], cand_img[27], ncand = 0;
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const int d[3] = {dx, dy, dz};
+          int cc[3], sh[3];
+          for (int k = 0; k < 3; ++k) {
+            int c = ci[k] + d[k];
+            sh[k] = 0;
+            if (c < 0) { c += g.n[k]; sh[k] = -1; }
+            if (c >= g.n[k]) { c -= g.n[k]; sh[k] = 1; }
+            cc[k] = c;
+          }
+          const int cell = (cc[0] * g.n[1] + cc[1]) * g.n[2] + cc[2];
+          const int img = (sh[0] + 1) * 9 + (sh[1] + 1) * 3 + (sh[2] + 1);
+          bool dup = false;
+          for (int q = 0; q < ncand; ++q) dup |= (cand_cell[q] == cell && cand_img[q] == img);
+          if (!dup) { cand_cell[ncand] = cell; cand_img[ncand] = img; ++ncand; }
+        }
+    for (int q = 0; q < ncand; ++q) {
+      const Vec3& o = off[cand_img[q]];
+      for (int m = cell_start[cand_cell[q]]; m < cell_start[cand_cell[q] + 1]; ++m) {
+        const int j = cell_members[m];
+        if (j <= i) continue;
+        const Vec3 d = x[j] + o - x[i];
+        const double reach = radius[i] + radius[j] + list.skin;
+        if (dot(d, d) < reach * reach)
+          found.emplace_back(j, static_cast<std::uint8_t>(cand_img[q]));
+      }
+    }
+    // Ascending j for a deterministic, cache-friendly order.
+    std::sort(found.begin(), found.end());
+    for (auto& f : found) { list.partner.push_back(f.first); list.image.push_back(f.second); }
+    list.first[i + 1] = static_cast<std::int32_t>(list.partner.size());
+  }
+  list.radius_max = rmax;
+}
+
+void wrap_into_box(State& s) {
+  const Vec3 L = s.box.length;
+  if (s.box.tilted()) {
+    // Subtract whole lattice vectors, c first (the only one with a z part), then b, then a.
+    const Box& b = s.box;
+    for (auto& x : s.position) {
+      const double nz = std::floor(x.z / L.z);
+      x -= b.lattice(0, 0, nz);
+      const double ny = std::floor(b.fractional(x).y);
+      x -= b.lattice(0, ny, 0);
+      const double nx = std::floor(b.fractional(x).x);
+      x -= b.lattice(nx, 0, 0);
+    }
+    return;
+  }
+  for (auto& x : s.position)
+    for (int k = 0; k < 3; ++k) {
+      x[k] -= L[k] * std::floor(x[k] / L[k]);
+      if (x[k] >= L[k]) x[k] -= L[k];   // floor round-off at the upper edge
+      if (x[k] < 0) x[k] = 0;
+    }
+}
+
+template <class T>
+void permute(std::vector<T>& v, const std::vector<std::int32_t>& order) {
+  std::vector<T> out(v.size());
+  for (std::size_t a = 0; a < order.size(); ++a) out[a] = v[order[a]];
+  v.swap(out);
+}
+
+void sort_by_cell(State& s, double cutoff) {
+  CellGrid g = make_grid(s.box, cutoff);
+  const int n = s.count();
+  std::vector<std::int32_t> key(n), order(n);
+  for (int i = 0; i < n; ++i) { key[i] = g.index_of(s.position[i]); order[i] = i; }
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return key[a] < key[b]; });
+  permute(s.position, order); permute(s.velocity, order); permute(s.force, order);
+  permute(s.radius, order); permute(s.mass, order); permute(s.id, order);
+}
+
+}  // namespace
+
+double max_radius_of(const std::vector<double>& radius) {
+  double r = 0;
+  for (double ri : radius) r = std::max(r, ri);
+  return r;
+}
+
+void rebuild_neighbor_list(State& state, NeighborList& list, double skin, bool sort) {
+  list.skin = skin;
+  wrap_into_box(state);
+  if (sort) sort_by_cell(state, 2.0 * max_radius_of(state.radius) + skin);
+  state.position_at_build = state.position;
+  state.length_at_build = state.box.length;
+  state.tilt_at_build = state.box.tilt;
+  build_pairs(state.position, state.radius, state.box, list);
+  state.list_valid = true;
+  ++list.builds;
+}
+
+void restore_neighbor_list(const State& state, NeighborList& list, double skin) {
+  list.skin = skin;
+  Box cell;
+  cell.length = state.length_at_build;
+  cell.tilt = state.tilt_at_build;
+  build_pairs(state.position_at_build, state.radius, cell, list);
+}
+
+StalenessTest staleness_test(const State& s, const NeighborList& list) {
+  StalenessTest t;
+  if (!s.list_valid || list.first.size() != s.position.size() + 1) return t;
+  const Vec3& tb = s.tilt_at_build;
+  if (s.box.tilted() || tb.x != 0 || tb.y != 0 || tb.z != 0) {
+    // back = H_b H^-1 (upper triangular); lambda_min = 1 / (largest singular value of back).
+    const Box& b = s.box;
+    const Eigen::Matrix3d H{{b.length.x, b.tilt.x, b.tilt.y}, {0, b.length.y, b.tilt.z}, {0, 0, b.length.z}};
+    const Vec3& Lb = s.length_at_build;
+    const Eigen::Matrix3d Hb{{Lb.x, tb.x, tb.y}, {0, Lb.y, tb.z}, {0, 0, Lb.z}};
+    const Eigen::Matrix3d back = Hb * H.inverse();
+    t.general = true;
+    const double U[6] = {back(0, 0), back(1, 1), back(2, 2), back(0, 1), back(0, 2), back(1, 2)};
+    std::copy(U, U + 6, t.back);
+    const Eigen::Matrix3d BtB = back.transpose() * back;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+    es.computeDirect(BtB, Eigen::EigenvaluesOnly);
+    const double sigma_max = std::sqrt(std::max(es.eigenvalues().maxCoeff(), 0.0));
+    const double squeeze = std::max(0.0, 2.0 * list.radius_max * (sigma_max - 1.0));
+    const double budget = list.skin - squeeze;
+    if (!(budget > 0)) return t;
+    t.limit2 = 0.25 * budget * budget;
+    return t;
+  }
+  t.frame = Vec3{s.length_at_build.x / s.box.length.x, s.length_at_build.y / s.box.length.y,
+                 s.length_at_build.z / s.box.length.z};
+  const double lambda_min = 1.0 / std::max({t.frame.x, t.frame.y, t.frame.z});
+  const double squeeze = std::max(0.0, 2.0 * list.radius_max * (1.0 / lambda_min - 1.0));
+  const double budget = list.skin - squeeze;
+  if (budget <= 0) return t;
+  t.limit2 = 0.25 * budget * budget;   // u_max < budget / 2
+  return t;
+}
+
+bool neighbor_list_stale(const State& s, const NeighborList& list) {
+  const StalenessTest t = staleness_test(s, list);
+  if (t.limit2 < 0) return true;
+  for (int i = 0; i < s.count(); ++i)
+    if (displacement2_since_build(s, t, i) >= t.limit2) return true;
+  return false;
+}
+
+}  // namespace dem

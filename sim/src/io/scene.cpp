@@ -1,0 +1,704 @@
+#include "dem/io/scene.hpp"
+
+#include "dem/measure/control.hpp"
+#include "dem/stages/preparation.hpp"
+#include "io/preparation_toml.hpp"
+
+#include <toml++/toml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <set>
+#include <sstream>
+
+namespace dem {
+
+namespace {
+
+// Reads typed keys from a table and remembers which keys were consumed.
+class KeyReader {
+ public:
+  KeyReader(toml::table& root, std::string origin) : root_(root), origin_(std::move(origin)) {}
+
+  template <class T>
+  void get(const std::string& section, const std::string& key, T& out) {
+    known_[section].insert(key);
+    toml::table* sec = section_table(section);
+    toml::node* node = sec ? sec->get(key) : nullptr;
+    const std::string name = section + "." + key;
+    if (!node) { set_default(section, key, out); return; }
+    if constexpr (std::is_same_v<T, bool>) {
+      if (auto v = node->value_exact<bool>()) out = *v; else type_error(name, "true or false");
+    } else if constexpr (std::is_same_v<T, std::string>) {
+      if (auto v = node->value_exact<std::string>()) out = *v; else type_error(name, "a string");
+    } else if constexpr (std::is_integral_v<T>) {
+      auto v = node->value_exact<int64_t>();
+      if (!v) type_error(name, "an integer");
+      const bool fits = std::is_signed_v<T>
+                            ? *v >= static_cast<int64_t>(std::numeric_limits<T>::min()) &&
+                                  *v <= static_cast<int64_t>(std::numeric_limits<T>::max())
+                            : *v >= 0;
+      if (!fits)
+        throw SceneError(origin_ + ": key '" + name + "' = " + std::to_string(*v) + " is out of range [" +
+                         std::to_string(std::is_signed_v<T> ? std::numeric_limits<T>::min() : 0) + ", " +
+                         std::to_string(std::is_signed_v<T> ? std::numeric_limits<T>::max()
+                                                            : std::numeric_limits<int64_t>::max()) + "]");
+      out = static_cast<T>(*v);
+    } else if constexpr (std::is_same_v<T, double>) {
+      if (auto v = node->value<double>()) out = *v; else type_error(name, "a number");
+    } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+      auto* arr = node->as_array();
+      if (!arr) type_error(name, "an array of numbers");
+      out.clear();
+      for (auto& e : *arr) {
+        auto v = e.value<double>();
+        if (!v) type_error(name, "an array of numbers");
+        out.push_back(*v);
+      }
+    } else if constexpr (std::is_same_v<T, std::vector<std::string>>) {
+      auto* arr = node->as_array();
+      if (!arr) type_error(name, "an array of strings");
+      out.clear();
+      for (auto& e : *arr) {
+        auto v = e.value<std::string>();
+        if (!v) type_error(name, "an array of strings");
+        out.push_back(*v);
+      }
+    }
+  }
+
+  // A key read elsewhere (not through get): known, never given a default.
+  void known(const std::string& section, const std::string& key) { known_[section].insert(key); }
+
+  // A key that keeps its value when absent and gets no default in the resolved scene.
+  template <class T>
+  void get_if_present(const std::string& section, const std::string& key, T& out) {
+    toml::table* sec = section_table(section);
+    if (sec && sec->get(key)) get(section, key, out);
+    else known(section, key);
+  }
+
+  // Sections whose keys are free (user-defined modes).
+  void allow_any(const std::string& section) { free_sections_.insert(section); known_[section]; }
+
+  void reject_unknown() {
+    for (auto&& [k, v] : root_) {
+      const std::string sec(k.str());
+      if (!known_.count(sec))
+        throw SceneError(origin_ + ": unknown section [" + sec + "]; known sections: " + list_sections());
+      if (free_sections_.count(sec)) continue;
+      auto* t = v.as_table();
+      if (!t) throw SceneError(origin_ + ": '" + sec + "' must be a section [" + sec + "]");
+      for (auto&& [kk, vv] : *t) {
+        const std::string key(kk.str());
+        if (!known_[sec].count(key)) {
+          std::string keys;
+          for (auto& kn : known_[sec]) keys += (keys.empty() ? "" : ", ") + kn;
+          throw SceneError(origin_ + ": unknown key '" + sec + "." + key + "'; known keys of [" +
+                           sec + "]: " + keys);
+        }
+      }
+    }
+  }
+
+ private:
+  toml::table* section_table(const std::string& section) {
+    toml::node* n = root_.get(section);
+    return n ? n->as_table() : nullptr;
+  }
+  template <class T>
+  void set_default(const std::string& section, const std::string& key, const T& value) {
+    // Record defaults so the resolved scene lists every key.
+    if (!root_.get(section)) root_.insert(section, toml::table{});
+    toml::table& t = *root_.get(section)->as_table();
+    if constexpr (std::is_same_v<T, std::vector<double>> || std::is_same_v<T, std::vector<std::string>>) {
+      toml::array a;
+      for (auto& e : value) a.push_back(e);
+      t.insert(key, a);
+    } else if constexpr (std::is_same_v<T, unsigned long long>) {
+      t.insert(key, static_cast<int64_t>(value));
+    } else if constexpr (std::is_integral_v<T> && !std::is_same_v<T, bool>) {
+      t.insert(key, static_cast<int64_t>(value));
+    } else {
+      t.insert(key, value);
+    }
+  }
+  [[noreturn]] void type_error(const std::string& name, const std::string& what) {
+    throw SceneError(origin_ + ": key '" + name + "' must be " + what);
+  }
+  std::string list_sections() const {
+    std::string s;
+    for (auto& [k, v] : known_) s += (s.empty() ? "" : ", ") + k;
+    return s;
+  }
+
+  toml::table& root_;
+  std::string origin_;
+  std::map<std::string, std::set<std::string>> known_;
+  std::set<std::string> free_sections_;
+};
+
+// End of a string starting at i (at its opening quote), or npos if it does not end.
+std::size_t string_end(const std::string& t, std::size_t i) {
+  const char q = t[i];
+  const bool multi = t.compare(i, 3, std::string(3, q)) == 0;
+  for (std::size_t k = i + (multi ? 3 : 1); k < t.size(); ++k) {
+    if (q == '"' && t[k] == '\\') { ++k; continue; }
+    if (!multi && t[k] == '\n') return std::string::npos;
+    if (multi ? t.compare(k, 3, std::string(3, q)) == 0 : t[k] == q) return k + (multi ? 2 : 0);
+  }
+  return std::string::npos;
+}
+
+// The scene text as toml++ gets it: pure ASCII. toml++ 3.3.0 reaches __builtin_unreachable
+// (undefined behaviour) on non-ASCII characters in several places, also in strings after a
+// syntax error and in its error paths (three findings of tests/fuzz/fuzz_scene). So non-ASCII
+// bytes in comments become '?' (comments carry no values), and anywhere else, strings
+// included, they are refused, as are control characters and unclosed strings.
+std::string ascii_scene(std::string t, const std::string& origin) {
+  int line = 1;
+  auto fail = [&](const std::string& what) {
+    throw SceneError(origin + ":" + std::to_string(line) + ": TOML syntax error: " + what);
+  };
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    const unsigned char c = static_cast<unsigned char>(t[i]);
+    if ((c < 0x20 && c != '\t' && c != '\n' && c != '\r') || c == 0x7f)
+      fail("a control character (byte " + std::to_string(c) + "): is this a text file?");
+    if (c == '\n') ++line;
+  }
+  line = 1;
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    const char c = t[i];
+    if (c == '\n') {
+      ++line;
+    } else if (c == '#') {
+      for (; i + 1 < t.size() && t[i + 1] != '\n'; ++i)
+        if (static_cast<unsigned char>(t[i + 1]) >= 0x80) t[i + 1] = '?';
+    } else if (c == '"' || c == '\'') {
+      const std::size_t end = string_end(t, i);
+      if (end == std::string::npos) fail("a string is not closed");
+      for (std::size_t k = i; k <= end; ++k)
+        if (static_cast<unsigned char>(t[k]) >= 0x80)
+          fail("a non-ASCII character in a string (scene values are ASCII: rename the file or folder, or link it)");
+      line += static_cast<int>(std::count(t.begin() + i, t.begin() + end, '\n'));
+      i = end;
+    } else if (static_cast<unsigned char>(c) >= 0x80) {
+      fail("a non-ASCII character outside a comment (keys and values are ASCII; write e.g. nu, sigma)");
+    }
+  }
+  return t;
+}
+
+void apply_override(toml::table& root, const std::string& ov) {
+  const auto eq = ov.find('=');
+  if (eq == std::string::npos || eq == 0)
+    throw SceneError("override '" + ov + "' must look like section.key=value");
+  const std::string key = ov.substr(0, eq);
+  std::string value = ov.substr(eq + 1);
+  ascii_scene(key + " = " + value, "override '" + ov + "'");
+  if (key.find('.') == std::string::npos)
+    throw SceneError("override '" + ov + "': name the section, e.g. contact.damping_kg_s=0");
+  toml::table parsed;
+  try {
+    parsed = toml::parse(key + " = " + value);
+  } catch (const toml::parse_error&) {
+    try {
+      parsed = toml::parse(key + " = \"" + value + "\"");
+    } catch (const toml::parse_error& e) {
+      throw SceneError("override '" + ov + "' is not valid: " + std::string(e.description()));
+    }
+  }
+  // Merge: replace the leaf, create sections as needed.
+  const std::string section = key.substr(0, key.find('.'));
+  const std::string leaf = key.substr(key.find('.') + 1);
+  if (!root.get(section)) root.insert(section, toml::table{});
+  toml::table* sec = root.get(section)->as_table();
+  if (!sec) throw SceneError("override '" + ov + "': '" + section + "' is not a section");
+  toml::node* val = parsed.get(section)->as_table()->get(leaf);
+  if (!val) throw SceneError("override '" + ov + "': nested keys are not supported");
+  sec->insert_or_assign(leaf, *val);
+}
+
+
+// One stage of a [paths] entry: an inline table (see data/scenes/paths_example.toml).
+PathStage parse_path_stage(const toml::table& t, const std::string& where,
+                           const std::map<std::string, DeformationMode>& custom) {
+  auto fail = [&](const std::string& what) { throw SceneError(where + ": " + what); };
+  static const std::set<std::string> keys = {"name", "rate", "sigma_p0", "sigma_Pa", "pressure_p0", "pressure_Pa",
+                                             "constant_volume", "until"};
+  for (auto&& [k, v] : t)
+    if (!keys.count(std::string(k.str())))
+      fail("unknown key '" + std::string(k.str()) + "'; a stage has name, rate, sigma_p0 or sigma_Pa, "
+           "pressure_p0 or pressure_Pa, constant_volume, until");
+  PathStage s;
+  if (auto n = t["name"].value<std::string>()) s.name = *n;
+  else if (t.contains("name")) fail("name must be a string");
+  // rate: [rx, ry, rz] or a mode name, "-NAME" for its reverse
+  if (const toml::node* r = t.get("rate")) {
+    if (auto name = r->value<std::string>()) {
+      const bool neg = !name->empty() && (*name)[0] == '-';
+      const std::string base = neg ? name->substr(1) : *name;
+      DeformationMode dm;
+      if (custom.count(base)) dm = custom.at(base);
+      else if (!builtin_mode(base, &dm))
+        fail("rate = \"" + *name + "\" names no mode (built in: D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, "
+             "SS_xy/xz/yz, or a [modes] entry; \"-D2\" reverses D2)");
+      s.rate_shape = neg ? dm.rate_shape * -1.0 : dm.rate_shape;
+      s.shear_shape = neg ? dm.shear_shape * -1.0 : dm.shear_shape;
+      if (s.name.empty()) s.name = *name;
+    } else if (auto* a = r->as_array(); a && a->size() == 3 && (*a)[0].value<double>() && (*a)[1].value<double>() &&
+                                        (*a)[2].value<double>()) {
+      s.rate_shape = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(), *(*a)[2].value<double>());
+    } else if (a && a->size() == 3 && (*a)[0].as_array()) {
+      // a velocity gradient [[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]], as in [modes]
+      double L[3][3];
+      for (int i = 0; i < 3; ++i) {
+        auto* row = (*a)[i].as_array();
+        if (!row || row->size() != 3)
+          fail("rate as a velocity gradient must be [[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]] (three rows of three numbers)");
+        for (int c = 0; c < 3; ++c) {
+          auto x = (*row)[c].value<double>();
+          if (!x || !std::isfinite(*x))
+            fail("rate as a velocity gradient must be [[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]] (numbers)");
+          L[i][c] = *x;
+        }
+      }
+      if (L[1][0] != 0 || L[2][0] != 0 || L[2][1] != 0)
+        fail("rate has entries below the diagonal (L_yx, L_zx or L_zy): the sheared cell is upper triangular, so "
+             "name the axes such that the flow is v_x = L_xy y + L_xz z, v_y = L_yz z (e.g. v_z = g x is v_x = g z "
+             "with x and z swapped; docs/simple_shear.md)");
+      s.rate_shape = Vec3(L[0][0], L[1][1], L[2][2]);
+      s.shear_shape = Vec3(L[0][1], L[0][2], L[1][2]);
+    } else {
+      fail("rate must be [rate_x, rate_y, rate_z] (multiples of protocol.deviatoric_rate_tc), a velocity gradient "
+           "[[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]] or a mode name");
+    }
+  }
+  const bool p0 = t.contains("sigma_p0") || t.contains("pressure_p0");
+  const bool pa = t.contains("sigma_Pa") || t.contains("pressure_Pa");
+  if (p0 && pa) fail("give targets either in multiples of p0 (*_p0) or in pascals (*_Pa), not both");
+  s.relative = !pa;
+  for (const char* key : {"sigma_p0", "sigma_Pa"}) {
+    const toml::node* n = t.get(key);
+    if (!n) continue;
+    const toml::table* st = n->as_table();
+    if (!st) fail(std::string(key) + " must be a table of axes, e.g. { x = 1.0, y = 1.0 }");
+    for (auto&& [k, v] : *st) {
+      const std::string ax(k.str());
+      auto val = v.value<double>();
+      if ((ax != "x" && ax != "y" && ax != "z") || !val)
+        fail(std::string(key) + "." + ax + ": axes are x, y, z and each target is a number");
+      (ax == "x" ? s.sigma.x : ax == "y" ? s.sigma.y : s.sigma.z) = *val;
+    }
+  }
+  for (const char* key : {"pressure_p0", "pressure_Pa"})
+    if (const toml::node* n = t.get(key)) {
+      auto v = n->value<double>();
+      if (!v) fail(std::string(key) + " must be a number");
+      s.pressure = *v;
+    }
+  if (const toml::node* n = t.get("constant_volume")) {
+    auto v = n->value_exact<bool>();
+    if (!v) fail("constant_volume must be true or false");
+    s.constant_volume = *v;
+  }
+  const toml::table* until = t.get("until") ? t.get("until")->as_table() : nullptr;
+  if (!until || until->size() != 1)
+    fail("until must be a table with one stop condition, e.g. until = { eps_d = 0.2 }; stops: eps_d (added by the "
+         "stage), time_tc (duration / t_c), eps_v, eps_xx, eps_yy, eps_zz (since the path start), p_p0, p_Pa, s_dev, phi");
+  static const std::map<std::string, PathStop> stops = {
+      {"eps_d", PathStop::EpsD},   {"time_tc", PathStop::Time}, {"eps_v", PathStop::EpsV},
+      {"eps_xx", PathStop::EpsXX}, {"eps_yy", PathStop::EpsYY}, {"eps_zz", PathStop::EpsZZ},
+      {"p_p0", PathStop::Pressure}, {"p_Pa", PathStop::Pressure}, {"s_dev", PathStop::SDev}, {"phi", PathStop::Phi}};
+  const auto first = until->begin();
+  const std::string stop(first->first.str());
+  const toml::node& uv = first->second;
+  if (!stops.count(stop))
+    fail("until." + stop + " is not a stop condition; use eps_d, time_tc, eps_v, eps_xx, eps_yy, eps_zz, p_p0, p_Pa, s_dev or phi");
+  auto value = uv.value<double>();
+  if (!value || !std::isfinite(*value)) fail("until." + stop + " must be a finite number");
+  s.stop = stops.at(stop);
+  s.until = *value;
+  s.until_relative = stop == "p_p0";
+  return s;
+}
+
+// [paths] name = [ {stage}, {stage}, ... ]
+std::map<std::string, std::vector<PathStage>> parse_paths(toml::table& root, const std::string& origin,
+                                                          const std::map<std::string, DeformationMode>& custom) {
+  std::map<std::string, std::vector<PathStage>> paths;
+  toml::table* t = root.get("paths") ? root.get("paths")->as_table() : nullptr;
+  if (!t) { root.insert("paths", toml::table{}); return paths; }
+  for (auto&& [k, v] : *t) {
+    const std::string name(k.str());
+    const toml::array* a = v.as_array();
+    if (!a) throw SceneError(origin + ": paths." + name + " must be an array of stage tables, e.g. "
+                             "[{ rate = \"D2\", until = { eps_d = 0.2 } }, { rate = \"-D2\", until = { eps_d = 0.4 } }]");
+    std::vector<PathStage> stages;
+    for (std::size_t i = 0; i < a->size(); ++i) {
+      const std::string where = origin + ": paths." + name + " stage " + std::to_string(i + 1);
+      const toml::table* st = (*a)[i].as_table();
+      if (!st) throw SceneError(where + " must be a table { rate = ..., until = { ... } }");
+      stages.push_back(parse_path_stage(*st, where, custom));
+      if (stages.back().name.empty()) stages.back().name = "s" + std::to_string(i + 1);
+    }
+    validate_path(name, stages);
+    paths[name] = stages;
+  }
+  return paths;
+}
+
+// protocol.preparation if the scene lists it (then the keys of the built-in preparation are refused).
+const toml::array* explicit_preparation(toml::table& root, const std::string& origin) {
+  const toml::table* proto = root.get("protocol") ? root.get("protocol")->as_table() : nullptr;
+  const toml::node* n = proto ? proto->get("preparation") : nullptr;
+  if (!n) return nullptr;
+  const toml::array* a = n->as_array();
+  if (!a)
+    throw SceneError(origin + ": protocol.preparation must be an array of stage tables, e.g. [{ name = \"compress\", "
+                     "kind = \"compress\", rate_tc = 1e-4, until = { phi = 0.64 } }, ...] (docs/protocol.md)");
+  for (const char* key : {"target_phi", "compress_rate_tc", "relax_ke_ratio", "relax_max_time_tc", "cycle_phi_max",
+                          "cycle_rate_tc", "checkpoints_unloading", "checkpoints_loading"})
+    if (proto->contains(key))
+      throw SceneError(origin + ": protocol." + key + " belongs to the built-in preparation, but protocol.preparation "
+                       "lists the stages: remove protocol." + key + " and give its value in the stage it belongs to");
+  return a;
+}
+
+}  // namespace
+
+bool builtin_mode(const std::string& name, DeformationMode* mode) {
+  // Simple shear SS_ij: v_i = 2 r x_j (constant volume). The factor 2 gives its stretching
+  // D = sym(L) the eigenvalues (1, 0, -1) r of D2: simple shear is D2 rotated by 45 degrees
+  // about the third axis plus a spin, at the same eps_d rate.
+  static const std::map<std::string, Vec3> shears = {{"SS_xy", {2, 0, 0}}, {"SS_xz", {0, 2, 0}}, {"SS_yz", {0, 0, 2}}};
+  if (auto sh = shears.find(name); sh != shears.end()) {
+    if (mode) { mode->name = name; mode->rate_shape = Vec3{0, 0, 0}; mode->shear_shape = sh->second; }
+    return true;
+  }
+  static const std::map<std::string, Vec3> modes = {
+      {"D2", {1, 0, -1}},          {"D3", {0.5, 0.5, -1}},      {"iso_compress", {-1, -1, -1}},
+      {"iso_expand", {1, 1, 1}},   {"uniaxial_x", {-1, 0, 0}},  {"uniaxial_y", {0, -1, 0}},
+      {"uniaxial_z", {0, 0, -1}}};
+  auto it = modes.find(name);
+  if (it == modes.end()) return false;
+  if (mode) { mode->name = name; mode->rate_shape = it->second; }
+  return true;
+}
+
+Model load_scene(const std::string& text, const std::vector<std::string>& overrides,
+                 std::string* resolved, const std::string& origin) {
+  toml::table root;
+  try {
+    root = toml::parse(ascii_scene(text, origin), origin);
+  } catch (const toml::parse_error& e) {
+    std::ostringstream m;
+    m << origin << ":" << e.source().begin.line << ": TOML syntax error: " << e.description();
+    throw SceneError(m.str());
+  }
+  for (auto& ov : overrides) apply_override(root, ov);
+
+  Model m;
+  KeyReader r(root, origin);
+  r.get("particles", "count", m.count);
+  r.get("particles", "radius_min_m", m.radius_min);
+  r.get("particles", "radius_max_m", m.radius_max);
+  r.get("particles", "density_kg_m3", m.density);
+  r.get("particles", "seed", m.seed);
+  r.get("particles", "packing_file", m.packing_file);
+  r.get("contact", "stiffness_N_m", m.contact.stiffness);
+  r.get("contact", "damping_kg_s", m.contact.damping);
+  r.get("contact", "allow_attractive", m.contact.allow_attractive);
+  r.get("contact", "background_damping_kg_s", m.background_damping);
+  std::string integrator = "velocity_verlet";
+  r.get("integration", "integrator", integrator);
+  if (integrator == "velocity_verlet") m.integrator = Integrator::VelocityVerlet;
+  else if (integrator == "symplectic_euler") m.integrator = Integrator::SymplecticEuler;
+  else throw SceneError(origin + ": integration.integrator = '" + integrator +
+                        "' is unknown; use \"velocity_verlet\" or \"symplectic_euler\"");
+  std::string kinematics = "sllod";
+  r.get("integration", "kinematics", kinematics);
+  if (kinematics == "sllod" || kinematics == "plain") m.sllod = kinematics == "sllod";
+  else throw SceneError(origin + ": integration.kinematics = '" + kinematics +
+                        "' is unknown; use \"sllod\" (default: the kinetic stress does work in a deforming box) or "
+                        "\"plain\" (the scheme of dem 0.1)");
+  r.get("integration", "dt_over_tc", m.dt_over_tc);
+  r.get("integration", "skin_over_rmin", m.skin_over_rmin);
+  r.get("integration", "threads", m.threads);
+  r.get_if_present("integration", "blocks", m.blocks);
+  r.get_if_present("integration", "adaptive_threads", m.adaptive_threads);
+  r.get("integration", "max_overlap_fraction", m.max_overlap_fraction);
+  r.get("integration", "check_every_steps", m.check_every_steps);
+
+  Protocol& p = m.protocol;
+  double compress_tc = 1e-4, cycle_tc = 2e-5, dev_tc = 5e-6, relax_max_tc = 2e5;
+  p.checkpoints_unloading = {0.80, 0.75, 0.70, 0.68};
+  std::vector<std::string> modes = {"D2", "D3"};
+  r.get("protocol", "initial_phi", p.initial_phi);
+  const toml::array* preparation = explicit_preparation(root, origin);
+  p.preparation_explicit = preparation != nullptr;
+  r.known("protocol", "preparation");
+  if (p.preparation_explicit) {
+    r.get("protocol", "modes_from", p.modes_from);
+  } else {
+    r.get_if_present("protocol", "modes_from", p.modes_from);
+    r.get("protocol", "target_phi", p.target_phi);
+    r.get("protocol", "compress_rate_tc", compress_tc);
+    r.get("protocol", "relax_ke_ratio", p.relax_ke_ratio);
+    r.get("protocol", "relax_max_time_tc", relax_max_tc);
+    r.get("protocol", "cycle_phi_max", p.cycle_phi_max);
+    r.get("protocol", "cycle_rate_tc", cycle_tc);
+    r.get("protocol", "checkpoints_unloading", p.checkpoints_unloading);
+    r.get("protocol", "checkpoints_loading", p.checkpoints_loading);
+  }
+  r.get("protocol", "modes", modes);
+  r.get("protocol", "deviatoric_rate_tc", dev_tc);
+  r.get("protocol", "eps_d_max", p.eps_d_max);
+
+  r.get("output", "sample_strain", m.output.sample_strain);
+  r.get("output", "relax_sample_steps", m.output.relax_sample_steps);
+  r.get("output", "vtk", m.output.vtk);
+  r.get("output", "vtk_per_stage", m.output.vtk_per_stage);
+  r.get("output", "progress_seconds", m.output.progress_seconds);
+  r.get("ensemble", "packings", m.ensemble_packings);
+
+  // User-defined modes: [modes] name = [rx, ry, rz] (diagonal) or a 3x3 velocity gradient
+  // [[Lxx, Lxy, Lxz], [Lyx, Lyy, Lyz], [Lzx, Lzy, Lzz]] with nothing below the diagonal.
+  r.allow_any("modes");
+  std::map<std::string, DeformationMode> custom;
+  if (auto* t = root.get("modes") ? root.get("modes")->as_table() : nullptr) {
+    for (auto&& [k, v] : *t) {
+      const std::string key(k.str());
+      DeformationMode dm;
+      dm.name = key;
+      auto* a = v.as_array();
+      auto row_of = [](const toml::node& n, double out[3]) {
+        auto* r3 = n.as_array();
+        if (!r3 || r3->size() != 3) return false;
+        for (int c = 0; c < 3; ++c) {
+          auto x = (*r3)[c].value<double>();
+          if (!x) return false;
+          out[c] = *x;
+        }
+        return true;
+      };
+      double L[3][3];
+      if (a && a->size() == 3 && (*a)[0].value<double>() && (*a)[1].value<double>() && (*a)[2].value<double>()) {
+        dm.rate_shape = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(), *(*a)[2].value<double>());
+      } else if (a && a->size() == 3 && row_of((*a)[0], L[0]) && row_of((*a)[1], L[1]) && row_of((*a)[2], L[2])) {
+        if (L[1][0] != 0 || L[2][0] != 0 || L[2][1] != 0)
+          throw SceneError(origin + ": modes." + key + " has entries below the diagonal (L_yx, L_zx or L_zy): the "
+                           "sheared cell is upper triangular (LAMMPS' convention), so name the axes such that the "
+                           "flow is v_x = L_xy y + L_xz z, v_y = L_yz z (e.g. v_z = g x is v_x = g z with x and z "
+                           "swapped); a symmetric (pure-shear) gradient is diagonal in its principal axes: give that "
+                           "diagonal [rx, ry, rz] (docs/simple_shear.md)");
+        dm.rate_shape = Vec3(L[0][0], L[1][1], L[2][2]);
+        dm.shear_shape = Vec3(L[0][1], L[0][2], L[1][2]);
+      } else {
+        throw SceneError(origin + ": modes." + key +
+                         " must be [rate_x, rate_y, rate_z] (diagonal strain-rate shape) or a velocity gradient "
+                         "[[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]] (multiples of protocol.deviatoric_rate_tc)");
+      }
+      custom[key] = dm;
+    }
+  } else {
+    root.insert("modes", toml::table{});
+  }
+  r.allow_any("paths");
+  const auto paths = parse_paths(root, origin, custom);
+  r.get("servo", "waves", p.servo.waves);
+  r.get("servo", "rate_max_tc", p.servo.rate_max_tc);
+  r.reject_unknown();
+
+  for (auto& name : modes) {
+    DeformationMode dm;
+    if (custom.count(name) && paths.count(name))
+      throw SceneError(origin + ": '" + name + "' is both a [modes] and a [paths] entry: rename one");
+    if (custom.count(name)) dm = custom[name];
+    else if (paths.count(name)) { dm.name = name; dm.path = paths.at(name); }
+    else if (!builtin_mode(name, &dm))
+      throw SceneError(origin + ": protocol.modes names '" + name + "', which is neither built in "
+                       "(D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, SS_xy/xz/yz) nor defined in [modes] or [paths]");
+    p.modes.push_back(dm);
+  }
+
+  // Rates are given as rate * t_c; t_c needs the contact parameters, so validate those first.
+  validate(m);
+  try {
+    m.finalize();
+  } catch (const std::invalid_argument& e) {
+    throw SceneError(origin + ": " + e.what());
+  }
+  auto positive = [&](double v, const char* key) {
+    if (!(v > 0) || !std::isfinite(v))
+      throw SceneError(origin + ": protocol." + key + " must be a positive number");
+  };
+  positive(compress_tc, "compress_rate_tc");
+  positive(cycle_tc, "cycle_rate_tc");
+  positive(dev_tc, "deviatoric_rate_tc");
+  positive(relax_max_tc, "relax_max_time_tc");
+  for (auto [rate_tc, key] : {std::pair{compress_tc, "compress_rate_tc"}, {cycle_tc, "cycle_rate_tc"},
+                              {dev_tc, "deviatoric_rate_tc"}})
+    if (rate_tc > 1e-2) {
+      char b[300];
+      std::snprintf(b, sizeof b, "%s: protocol.%s = %g deforms the box by %.3g%% per contact time: far from "
+                    "quasi-static; use rates below 1e-3 (typical: 1e-6 to 1e-4)", origin.c_str(), key, rate_tc,
+                    100 * rate_tc);
+      throw SceneError(b);
+    }
+  p.compress_rate = compress_tc / m.t_contact;
+  p.cycle_rate = cycle_tc / m.t_contact;
+  p.deviatoric_rate = dev_tc / m.t_contact;
+  p.relax_max_time = relax_max_tc * m.t_contact;
+  if (p.servo.rate_max_tc == 0) p.servo.rate_max_tc = 2 * dev_tc;
+  if (!(p.servo.rate_max_tc > 0) || !std::isfinite(p.servo.rate_max_tc))
+    throw SceneError(origin + ": servo.rate_max_tc must be a positive number (0: twice protocol.deviatoric_rate_tc)");
+  if (!(p.servo.waves >= 0.1) || !std::isfinite(p.servo.waves))
+    throw SceneError(origin + ": servo.waves must be >= 0.1 (the servo time in elastic-wave crossings of the box; "
+                     "shorter makes the servo fight the packing's own dynamics)");
+  p.servo.rate_max = p.servo.rate_max_tc / m.t_contact;
+  for (auto& mode : p.modes)
+    for (auto& st : mode.path)
+      if (st.stop == PathStop::Time) st.until *= m.t_contact;   // time_tc -> seconds
+  p.preparation = preparation ? parse_preparation(*preparation, m.t_contact, origin) : default_preparation(p);
+  validate_preparation(p, m.t_contact, origin);
+  if (resolved) {
+    std::ostringstream o;
+    o << root;
+    *resolved = o.str();
+  }
+  return m;
+}
+
+Model load_scene_file(const std::string& path, const std::vector<std::string>& overrides,
+                      std::string* resolved) {
+  std::ifstream in(path);
+  if (!in) throw SceneError("cannot read scene file '" + path + "'");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) throw SceneError("cannot read scene file '" + path + "'");
+  toml::table parsed;
+  try {
+    parsed = toml::parse(ascii_scene(ss.str(), path), path);
+  } catch (const toml::parse_error&) {
+    return load_scene(ss.str(), overrides, resolved, path);   // reports the syntax error
+  }
+  const bool no_keys = std::all_of(parsed.begin(), parsed.end(), [](const auto& kv) {
+    const toml::table* t = kv.second.as_table();
+    return t && t->empty();
+  });
+  if (no_keys)
+    throw SceneError(path + ": the scene file is empty (no keys): it would silently run the built-in N = 9261 paper "
+                     "scene for hours; start from a scene in data/scenes/ (quickstart.toml, paper_n9261.toml) "
+                     "and change what you need");
+  return load_scene(ss.str(), overrides, resolved, path);
+}
+
+namespace {
+
+[[noreturn]] void fail(const std::string& msg) { throw SceneError(msg); }
+bool finite_positive(double v) { return v > 0 && std::isfinite(v); }
+std::string g(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%g", v);
+  return b;
+}
+
+void validate_particles_and_contact(const Model& m) {
+  if (m.count < 2) fail("particles.count must be at least 2");
+  if (!finite_positive(m.radius_min)) fail("particles.radius_min_m must be positive and finite");
+  if (!(m.radius_max >= m.radius_min) || !std::isfinite(m.radius_max))
+    fail("particles.radius_max_m must be at least particles.radius_min_m, and finite");
+  if (!finite_positive(m.density)) fail("particles.density_kg_m3 must be positive and finite");
+  if (!finite_positive(m.contact.stiffness)) fail("contact.stiffness_N_m must be positive and finite");
+  if (!(m.contact.damping >= 0) || !std::isfinite(m.contact.damping))
+    fail("contact.damping_kg_s must be zero or positive and finite");
+  if (!(m.background_damping >= 0) || !std::isfinite(m.background_damping))
+    fail("contact.background_damping_kg_s must be zero or positive and finite");
+}
+
+void validate_integration(const Model& m) {
+  // Linear spring: both integrators are stable for omega_0 dt < 2, i.e. dt/t_c < 2/pi.
+  const double dt_limit = 2.0 / M_PI;
+  if (!finite_positive(m.dt_over_tc)) fail("integration.dt_over_tc must be positive");
+  if (m.dt_over_tc >= dt_limit)
+    fail("integration.dt_over_tc = " + std::to_string(m.dt_over_tc) + " is beyond the stability "
+         "limit 2/pi = 0.637 of the integrator for a single contact (omega_0 dt < 2); "
+         "dense packings need far less: use 0.02 (t_c/50)");
+  if (!(m.skin_over_rmin > 0 && m.skin_over_rmin <= 4)) fail("integration.skin_over_rmin must be in (0, 4]");
+  if (m.threads < 0) fail("integration.threads must be >= 0 (0 = all cores)");
+  if (m.blocks < 0 || m.blocks > 4096)
+    fail("integration.blocks must be in [0, 4096] (0: max(4, threads); N: the same results for any thread count)");
+  if (!(m.max_overlap_fraction > 0 && m.max_overlap_fraction <= 2))
+    fail("integration.max_overlap_fraction must be in (0, 2]");
+  if (m.check_every_steps < 1) fail("integration.check_every_steps must be >= 1");
+}
+
+// Checkpoint lists: inside [target_phi, cycle_phi_max], no NaN, no two with the same file name.
+void validate_checkpoints(const Protocol& p, const std::vector<double>& phis, const std::string& key) {
+  std::set<std::string> names;
+  for (double phi : phis) {
+    if (!(phi >= p.target_phi && phi <= p.cycle_phi_max))
+      fail("protocol." + key + " value " + g(phi) + " lies outside [target_phi, cycle_phi_max] = [" +
+           g(p.target_phi) + ", " + g(p.cycle_phi_max) + "]");
+    if (!names.insert(fmt_phi(phi)).second)
+      fail("protocol." + key + " lists " + g(phi) + " twice, or two values that round to the same file name " +
+           fmt_phi(phi) + " (3 decimals): keep one of them");
+  }
+}
+
+void validate_modes_and_strain(const Protocol& p) {
+  std::set<std::string> modes;
+  for (const auto& mode : p.modes)
+    if (!modes.insert(mode.name).second) fail("protocol.modes lists '" + mode.name + "' twice: keep one");
+  if (!(p.eps_d_max > 0 && p.eps_d_max <= 2)) fail("protocol.eps_d_max must be in (0, 2]");
+}
+
+void validate_protocol(const Model& m) {
+  const Protocol& p = m.protocol;
+  if (!(p.initial_phi > 0 && p.initial_phi <= 0.45))
+    fail("protocol.initial_phi must be in (0, 0.45]: random placement cannot go denser");
+  if (p.preparation_explicit) {   // its stages are checked by validate_preparation
+    validate_modes_and_strain(p);
+    return;
+  }
+  // Soft spheres can be pushed past jamming, but at phi near 1 overlaps are of the order of
+  // the radius and the linear contact law is meaningless.
+  const double phi_limit = 0.9;
+  for (double phi : {p.target_phi, p.cycle_phi_max})
+    if (!(phi > 0 && phi < phi_limit))
+      fail("volume fraction " + g(phi) + " in [protocol] is beyond what these soft "
+           "spheres can pack without overlaps of the order of their radius; keep phi below 0.9");
+  if (!(p.target_phi > p.initial_phi)) fail("protocol.target_phi must exceed protocol.initial_phi");
+  if (!(p.cycle_phi_max >= p.target_phi)) fail("protocol.cycle_phi_max must be >= protocol.target_phi");
+  validate_checkpoints(p, p.checkpoints_unloading, "checkpoints_unloading");
+  validate_checkpoints(p, p.checkpoints_loading, "checkpoints_loading");
+  if (!finite_positive(p.relax_ke_ratio)) fail("protocol.relax_ke_ratio must be positive and finite");
+  validate_modes_and_strain(p);
+}
+
+void validate_output(const Model& m) {
+  if (!finite_positive(m.output.sample_strain)) fail("output.sample_strain must be positive and finite");
+  if (m.output.relax_sample_steps < 1) fail("output.relax_sample_steps must be >= 1");
+  if (m.output.vtk_per_stage < 0) fail("output.vtk_per_stage must be >= 0");
+  if (!(m.output.progress_seconds >= 0) || !std::isfinite(m.output.progress_seconds))
+    fail("output.progress_seconds must be zero or positive and finite (use --quiet for no progress lines)");
+}
+
+}  // namespace
+
+void validate(const Model& m) {
+  validate_particles_and_contact(m);
+  validate_integration(m);
+  validate_protocol(m);
+  validate_output(m);
+  if (m.ensemble_packings < 1 || m.ensemble_packings > 10000)
+    fail("ensemble.packings must be in [1, 10000] (independent packings of the scene)");
+  if (m.ensemble_packings > 1 && !m.packing_file.empty())
+    fail("ensemble.packings = " + std::to_string(m.ensemble_packings) + " with particles.packing_file: every "
+         "member would start from the same packing; an ensemble needs random placements (packing_file = \"\")");
+}
+
+}  // namespace dem

@@ -1,0 +1,211 @@
+#include "dem/measure/measure.hpp"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "dem/contact/contact_law.hpp"
+
+namespace dem {
+
+namespace {
+Eigen::Matrix3d to_matrix(const Sym3& t) {
+  Eigen::Matrix3d m;
+  m << t.xx, t.xy, t.xz, t.xy, t.yy, t.yz, t.xz, t.yz, t.zz;
+  return m;
+}
+Sym3 from_matrix(const Eigen::Matrix3d& m) {
+  return {m(0, 0), m(1, 1), m(2, 2), 0.5 * (m(0, 1) + m(1, 0)), 0.5 * (m(0, 2) + m(2, 0)), 0.5 * (m(1, 2) + m(2, 1))};
+}
+// The eigenvector of a distinct extreme eigenvalue (largest if `major`, else smallest); false
+// when it is degenerate (within 1e-9 of the tensor's scale): no direction.
+bool extreme_direction(const Sym3& t, bool major, Vec3* dir) {
+  double val[3];
+  Vec3 vec[3];
+  principal(t, val, vec);
+  const double scale = std::max(std::fabs(val[0]), std::fabs(val[2]));
+  const double gap = major ? val[2] - val[1] : val[1] - val[0];
+  if (!(scale > 0) || !(gap > 1e-9 * scale)) return false;
+  *dir = major ? vec[2] : vec[0];
+  return true;
+}
+}  // namespace
+
+void principal(const Sym3& t, double value[3], Vec3 vector[3]) {
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(to_matrix(t));
+  for (int k = 0; k < 3; ++k) {
+    value[k] = es.eigenvalues()(k);
+    vector[k] = Vec3{es.eigenvectors()(0, k), es.eigenvectors()(1, k), es.eigenvectors()(2, k)};
+  }
+}
+
+double deviatoric_magnitude_eig(const Sym3& t) {
+  double val[3];
+  Vec3 vec[3];
+  principal(t, val, vec);
+  return deviatoric_magnitude(val[0], val[1], val[2]);
+}
+
+Sym3 log_strain_tensor(const Box& box) {
+  if (!box.sheared()) {
+    const Vec3 e = box.true_strain();
+    return {e.x, e.y, e.z, 0, 0, 0};
+  }
+  double F[3][3];
+  box.deformation_gradient(F);
+  Eigen::Matrix3d f;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) f(i, j) = F[i][j];
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(f * f.transpose());
+  const Eigen::Vector3d half_log = es.eigenvalues().array().log() * 0.5;
+  return from_matrix(es.eigenvectors() * half_log.asDiagonal() * es.eigenvectors().transpose());
+}
+
+double axis_angle_deg(const Vec3& a, const Vec3& b) {
+  const double c = std::min(1.0, std::fabs(dot(a, b)) / (norm(a) * norm(b)));
+  return std::acos(c) * 180.0 / M_PI;
+}
+
+Measurement measure(const Model& model, const State& s, const NeighborList& list,
+                    const VelGrad& rate) {
+  Measurement m;
+  const int n = s.count();
+  const double V = s.box.volume();
+  const LinearSpringDashpot law(model.contact);
+  m.step = s.step;
+  m.time = s.time;
+  m.strain_tensor = log_strain_tensor(s.box);
+  m.strain = s.box.sheared() ? Vec3{m.strain_tensor.xx, m.strain_tensor.yy, m.strain_tensor.zz} : s.box.true_strain();
+  m.eps_v = (m.strain.x + m.strain.y + m.strain.z) / 3.0;
+  m.eps_d = deviatoric_magnitude(m.strain.x, m.strain.y, m.strain.z);
+  m.nu = s.volume_fraction();
+
+  std::vector<int> degree(n, 0);
+  std::vector<std::pair<int, int>> pairs;
+  Sym3 contact_stress, fabric;
+  double overlap_sum = 0;
+  for_each_contact(s, list, [&](int i, int j, const Vec3& d, double r, double delta) {
+    const Vec3 nrm = d * (1.0 / r);
+    const Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + rate.apply(d);
+    const double fn = law(delta, -dot(v_rel, nrm));
+    contact_stress.add_outer(d, nrm, fn);   // branch (x) force on j, repulsion positive
+    const double vi = 4.0 / 3.0 * M_PI * s.radius[i] * s.radius[i] * s.radius[i];
+    const double vj = 4.0 / 3.0 * M_PI * s.radius[j] * s.radius[j] * s.radius[j];
+    fabric.add_outer(nrm, nrm, vi + vj);
+    m.E_pot += law.energy(delta);
+    const double rel = delta / std::min(s.radius[i], s.radius[j]);
+    m.overlap_max_rel = std::max(m.overlap_max_rel, rel);
+    overlap_sum += rel;
+    ++degree[i]; ++degree[j];
+    pairs.emplace_back(i, j);
+  });
+  m.contacts = static_cast<long>(pairs.size());
+  m.overlap_mean_rel = m.contacts ? overlap_sum / m.contacts : 0.0;
+  for (int i = 0; i < n; ++i) {
+    m.stress_kinetic.add_outer(s.velocity[i], s.velocity[i], s.mass[i]);
+    m.E_kin += 0.5 * s.mass[i] * dot(s.velocity[i], s.velocity[i]);
+  }
+  m.stress_kinetic = m.stress_kinetic * (1.0 / V);
+  m.stress = contact_stress * (1.0 / V);
+  m.stress += m.stress_kinetic;
+  m.fabric = fabric * (1.0 / V);
+  m.p = m.stress.trace() / 3.0;
+  double rsum = 0;
+  for (double r : s.radius) rsum += r;
+  m.p_star = 2.0 * (rsum / n) * m.p / model.contact.stiffness;
+  m.sigma_dev = deviatoric_magnitude(m.stress.xx, m.stress.yy, m.stress.zz);
+  m.s_dev = m.p > 0 ? m.sigma_dev / m.p : 0.0;
+  m.F_dev = deviatoric_magnitude(m.fabric.xx, m.fabric.yy, m.fabric.zz);
+  m.C = 2.0 * m.contacts / n;
+
+  // Rattlers: remove particles with fewer than 4 contacts, recursively.
+  std::vector<char> rattler(n, 0);
+  {
+    std::vector<int> start(n + 1, 0), adj(2 * pairs.size());
+    for (auto& pr : pairs) { ++start[pr.first + 1]; ++start[pr.second + 1]; }
+    for (int i = 0; i < n; ++i) start[i + 1] += start[i];
+    std::vector<int> fill(start.begin(), start.end() - 1);
+    for (auto& pr : pairs) { adj[fill[pr.first]++] = pr.second; adj[fill[pr.second]++] = pr.first; }
+    std::vector<int> queue;
+    for (int i = 0; i < n; ++i)
+      if (degree[i] < 4) { rattler[i] = 1; queue.push_back(i); }
+    while (!queue.empty()) {
+      const int i = queue.back();
+      queue.pop_back();
+      for (int a = start[i]; a < start[i + 1]; ++a) {
+        const int j = adj[a];
+        if (!rattler[j] && --degree[j] < 4) { rattler[j] = 1; queue.push_back(j); }
+      }
+    }
+  }
+  long n_rattlers = 0, contacts_nr = 0;
+  for (int i = 0; i < n; ++i) n_rattlers += rattler[i];
+  for (auto& pr : pairs) contacts_nr += (!rattler[pr.first] && !rattler[pr.second]);
+  m.rattler_fraction = static_cast<double>(n_rattlers) / n;
+  m.C_nonrattler = n_rattlers < n ? 2.0 * contacts_nr / (n - n_rattlers) : 0.0;
+
+  // Objective measures and non-coaxiality.
+  m.eps_d_eig = deviatoric_magnitude_eig(m.strain_tensor);
+  m.sigma_dev_eig = deviatoric_magnitude_eig(m.stress);
+  m.s_dev_eig = m.p > 0 ? m.sigma_dev_eig / m.p : 0.0;
+  m.F_dev_eig = deviatoric_magnitude_eig(m.fabric);
+  {
+    const Sym3 D{rate.diag.x, rate.diag.y, rate.diag.z, 0.5 * rate.shear.x, 0.5 * rate.shear.y, 0.5 * rate.shear.z};
+    Vec3 ns, nf, nd;
+    const bool has_s = extreme_direction(m.stress, true, &ns);
+    const bool has_f = extreme_direction(m.fabric, true, &nf);
+    const bool has_d = extreme_direction(D, false, &nd);
+    if (has_s && has_f) m.angle_sigma_F = axis_angle_deg(ns, nf);
+    if (has_s && has_d) m.angle_sigma_D = axis_angle_deg(ns, nd);
+    if (has_f && has_d) m.angle_F_D = axis_angle_deg(nf, nd);
+  }
+
+  // In a sheared cell (or under a shear rate) the diagonal forms depend on the frame: the curve's
+  // eps_d, sigma_dev, s_dev, F_dev are the objective ones there, so that everything keyed to
+  // them (stops, sampling, dem fit, ensembles) works for simple shear. Diagonal runs: unchanged.
+  if (s.box.sheared() || rate.sheared()) {
+    m.eps_d = m.eps_d_eig;
+    m.sigma_dev = m.sigma_dev_eig;
+    m.s_dev = m.s_dev_eig;
+    m.F_dev = m.F_dev_eig;
+  }
+
+  const double rate_max = std::max({std::fabs(rate.diag.x), std::fabs(rate.diag.y), std::fabs(rate.diag.z),
+                                    std::fabs(rate.shear.x), std::fabs(rate.shear.y), std::fabs(rate.shear.z)});
+  m.inertial_number = m.p > 0 ? rate_max * 2.0 * (rsum / n) * std::sqrt(model.density / m.p) : 0.0;
+  return m;
+}
+
+const std::vector<std::string>& curve_columns() {
+  static const std::vector<std::string> cols = {
+      "step", "time_s", "eps_xx", "eps_yy", "eps_zz", "eps_v", "eps_d", "nu", "p_Pa", "p_star",
+      "sigma_xx_Pa", "sigma_yy_Pa", "sigma_zz_Pa", "sigma_xy_Pa", "sigma_xz_Pa", "sigma_yz_Pa",
+      "sigma_dev_Pa", "s_dev", "F_xx", "F_yy", "F_zz", "F_xy", "F_xz", "F_yz", "F_dev", "C",
+      "C_nonrattler", "rattler_fraction", "E_kin_J", "overlap_max_rel", "overlap_mean_rel",
+      "E_pot_J", "p_kin_Pa", "inertial_number", "contacts", "eps_xy", "eps_xz", "eps_yz", "eps_d_eig",
+      "sigma_dev_eig_Pa", "s_dev_eig", "F_dev_eig", "angle_sigma_F_deg", "angle_sigma_D_deg", "angle_F_D_deg"};
+  return cols;
+}
+
+std::string curve_row(const Measurement& m) {
+  char buf[2048];
+  const auto& S = m.stress;
+  const auto& F = m.fabric;
+  std::snprintf(buf, sizeof buf,
+                "%lld,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,"
+                "%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,"
+                "%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,"
+                "%.10g,%.10g,%.10g,%ld,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g",
+                static_cast<long long>(m.step), m.time, m.strain.x, m.strain.y, m.strain.z, m.eps_v,
+                m.eps_d, m.nu, m.p, m.p_star, S.xx, S.yy, S.zz, S.xy, S.xz, S.yz, m.sigma_dev,
+                m.s_dev, F.xx, F.yy, F.zz, F.xy, F.xz, F.yz, m.F_dev, m.C, m.C_nonrattler,
+                m.rattler_fraction, m.E_kin, m.overlap_max_rel, m.overlap_mean_rel, m.E_pot,
+                m.stress_kinetic.trace() / 3.0, m.inertial_number, m.contacts, m.strain_tensor.xy,
+                m.strain_tensor.xz, m.strain_tensor.yz, m.eps_d_eig, m.sigma_dev_eig, m.s_dev_eig, m.F_dev_eig,
+                m.angle_sigma_F, m.angle_sigma_D, m.angle_F_D);
+  return buf;
+}
+
+}  // namespace dem

@@ -1,0 +1,57 @@
+#include "dem/stages/curve_file.hpp"
+
+#include <filesystem>
+#include <sstream>
+#include <stdexcept>
+
+#include "dem/measure/measure.hpp"
+
+namespace dem {
+
+std::string curve_preamble(const Model& m, const std::string& stage, const Physics& physics,
+                           const std::string& definition) {
+  std::ostringstream o;
+  o << "# dem curve: stage=" << stage << "\n"
+    << "# units: SI; *_Pa pascal, *_J joule, time_s second; other columns dimensionless\n"
+    << "# strains: true (log) box strains ln(L/L0) since the stage start, extension positive\n"
+    << "# eps_v=(eps_xx+eps_yy+eps_zz)/3; eps_d, sigma_dev, F_dev = sqrt(((a-b)^2+(b-c)^2+(c-a)^2)/2) of the diagonal\n"
+    << "# stress: compression positive, contact + kinetic (fluctuation) parts; p=tr/3; p_star=2<r>p/k; s_dev=sigma_dev/p\n"
+    << "# fabric: F=(1/V) sum_p V_p sum_c n(x)n; C=2*contacts/N; rattlers: <4 contacts, removed recursively\n"
+    << "# overlap_*_rel: overlap / smaller radius of the pair; inertial_number=max|rate| 2<r> sqrt(rho/p)\n"
+    << "# t_c=" << m.t_contact << " s, dt=" << m.dt << " s, k=" << m.contact.stiffness
+    << " N/m, gamma=" << m.contact.damping << " kg/s, gamma_b=" << m.background_damping << " kg/s\n"
+    << "# physics: " << physics_line(physics) << "\n";
+  if (definition.find("shear_shape=") != std::string::npos)
+    o << "# sheared cell: strains are the log strain 0.5 ln(F F^T) (eps_xy, eps_xz, eps_yz its shear components); "
+         "eps_d, sigma_dev, s_dev, F_dev are the eigenvalue (objective) forms, equal to the *_eig columns\n";
+  if (!definition.empty()) o << "# definition: " << definition << "\n";
+  return o.str();
+}
+
+CurveFile::CurveFile(const std::string& path, const std::string& preamble, const std::vector<std::string>& extra)
+    : path_(path), part_(path + ".part"), out_(part_, std::ios::trunc) {
+  if (!out_) throw std::runtime_error("cannot write " + part_ + ": check that the folder exists and is writable");
+  std::string h;
+  for (auto& c : curve_columns()) h += (h.empty() ? "" : ",") + c;
+  for (auto& c : extra) h += "," + c;
+  out_ << preamble << h << ",stage\n";
+  check("(header)");
+}
+
+void CurveFile::row(const std::string& row, const std::string& stage) { out_ << row << "," << stage << "\n"; }
+
+void CurveFile::check(const std::string& stage) {
+  if (!out_)
+    throw std::runtime_error("writing " + part_ + " failed (disk full?): stage " + stage + " stopped; " + path_ +
+                             " was not written (only the incomplete .part is left); free space and run again");
+}
+
+void CurveFile::commit(const std::string& stage) {
+  out_.flush();
+  check(stage);
+  out_.close();
+  check(stage);
+  std::filesystem::rename(part_, path_);
+}
+
+}  // namespace dem

@@ -1,0 +1,317 @@
+// Loading paths: stages in order from one state, each with its control (prescribed strain
+// rate, stress servo) and stop condition, written as one curve.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+
+#include <Eigen/Dense>
+
+#include "dem/io/checks.hpp"
+#include "dem/measure/control.hpp"
+#include "dem/stages/curve_file.hpp"
+#include "dem/io/io.hpp"
+#include "dem/measure/measure.hpp"
+#include "dem/stages/protocol.hpp"
+#include "stages/stage_common.hpp"
+
+namespace dem {
+
+const std::vector<std::string>& path_columns() {
+  static const std::vector<std::string> cols = {"rate_xx_1_s",  "rate_yy_1_s",  "rate_zz_1_s", "target_xx_Pa",
+                                                "target_yy_Pa", "target_zz_Pa", "target_p_Pa", "control_error_rel",
+                                                "eps_d_accumulated"};
+  return cols;
+}
+
+namespace {
+
+// A path with a shear stage also writes the shear rates (L_xy, L_xz, L_yz) after the usual
+// columns; a diagonal path's columns are unchanged.
+bool path_sheared(const DeformationMode& mode) {
+  for (const PathStage& s : mode.path)
+    if (s.sheared()) return true;
+  return false;
+}
+
+std::vector<std::string> columns_of(bool sheared) {
+  std::vector<std::string> c = path_columns();
+  if (sheared) c.insert(c.end(), {"rate_xy_1_s", "rate_xz_1_s", "rate_yz_1_s"});
+  return c;
+}
+
+// F (row-major) of the box since strains were zeroed, as an Eigen matrix.
+Eigen::Matrix3d deformation(const Box& box) {
+  double F[3][3];
+  box.deformation_gradient(F);
+  Eigen::Matrix3d f;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) f(i, j) = F[i][j];
+  return f;
+}
+
+// eps_d (eigenvalues) of the log strain 0.5 ln(G G^T) of the deformation G = F F0^-1 since F0.
+// From the path start (F0 = I) the curve's own eps_d, so that a constant-volume shear path gives
+// the shear mode's curve bit for bit.
+double stage_eps_d(const Box& box, const Eigen::Matrix3d& F0_inverse) {
+  if (F0_inverse == Eigen::Matrix3d::Identity()) return deviatoric_magnitude_eig(log_strain_tensor(box));
+  const Eigen::Matrix3d g = deformation(box) * F0_inverse;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(g * g.transpose());
+  const Eigen::Vector3d e = es.eigenvalues().array().log() * 0.5;
+  return deviatoric_magnitude(e(0), e(1), e(2));
+}
+
+// eps_d rate (eigenvalues of the stretching D = sym L) of a velocity gradient [1/s].
+double stretching_eps_d(const VelGrad& L) {
+  return deviatoric_magnitude_eig(
+      Sym3{L.diag.x, L.diag.y, L.diag.z, 0.5 * L.shear.x, 0.5 * L.shear.y, 0.5 * L.shear.z});
+}
+
+// A stage with its relative targets resolved to pascals and its time stop in seconds.
+PathStage resolve(const PathStage& s, double p0) {
+  PathStage r = s;
+  if (s.relative) { r.sigma = s.sigma * p0; r.pressure = s.pressure * p0; }
+  if (s.until_relative) r.until = s.until * p0;
+  return r;
+}
+
+// The stop value of a stage now: strain stops from the box, p and s_dev from the last response.
+struct StopProbe {
+  const PathStage& stage;
+  Vec3 strain0;       // true strain (since the path start) at the stage start
+  double time0;
+  // Under shear (this stage's rate or the cell since the path start) strains are tensors: eps_d is
+  // that of the log strain of the deformation this stage adds (F F0^-1), components those of the
+  // log strain since the path start (the curve's columns). Diagonal paths: the old arithmetic.
+  bool tensor = false;
+  Eigen::Matrix3d F0_inverse = Eigen::Matrix3d::Identity();
+
+  bool landable() const {   // linear in the step's rate scale, so the last step can land on it
+    return !stage.has_servo() && (stage.stop == PathStop::EpsD || stage.stop == PathStop::Time ||
+                                  stage.stop == PathStop::EpsV || stage.stop == PathStop::EpsXX ||
+                                  stage.stop == PathStop::EpsYY || stage.stop == PathStop::EpsZZ);
+  }
+  double value(const State& s, const AxisResponse& r) const {
+    const Vec3 e = s.box.true_strain();
+    if (tensor && (stage.stop == PathStop::EpsD || stage.stop == PathStop::EpsXX || stage.stop == PathStop::EpsYY ||
+                   stage.stop == PathStop::EpsZZ || stage.stop == PathStop::SDev)) {
+      if (stage.stop == PathStop::EpsD) return stage_eps_d(s.box, F0_inverse);
+      if (stage.stop == PathStop::SDev) {
+        const double p = r.p();
+        return p > 0 ? deviatoric_magnitude_eig(r.stress) / p : 0.0;
+      }
+      const Sym3 t = log_strain_tensor(s.box);
+      return stage.stop == PathStop::EpsXX ? t.xx : stage.stop == PathStop::EpsYY ? t.yy : t.zz;
+    }
+    switch (stage.stop) {
+      case PathStop::EpsD: return deviatoric_magnitude(e.x - strain0.x, e.y - strain0.y, e.z - strain0.z);
+      case PathStop::Time: return s.time - time0;
+      case PathStop::EpsV: return (e.x + e.y + e.z) / 3.0;
+      case PathStop::EpsXX: return e.x;
+      case PathStop::EpsYY: return e.y;
+      case PathStop::EpsZZ: return e.z;
+      case PathStop::Pressure: return r.p();
+      case PathStop::SDev: {
+        const double p = r.p();
+        return p > 0 ? deviatoric_magnitude(r.stress.xx, r.stress.yy, r.stress.zz) / p : 0.0;
+      }
+      case PathStop::Phi: return s.volume_fraction();
+    }
+    return 0;
+  }
+  double target() const { return stage.until; }
+  // Change of value() in one full step of prescribed rate `rate` [1/s] (landable stops only).
+  double increment(const VelGrad& L, double dt) const {
+    const Vec3& rate = L.diag;
+    switch (stage.stop) {
+      case PathStop::EpsD: return (tensor ? stretching_eps_d(L) : deviatoric_magnitude(rate.x, rate.y, rate.z)) * dt;
+      case PathStop::Time: return dt;
+      case PathStop::EpsV: return std::fabs(rate.x + rate.y + rate.z) / 3.0 * dt;
+      case PathStop::EpsXX: return std::fabs(rate.x) * dt;
+      case PathStop::EpsYY: return std::fabs(rate.y) * dt;
+      case PathStop::EpsZZ: return std::fabs(rate.z) * dt;
+      default: return 0;
+    }
+  }
+  // Reached: eps_d and time grow from 0 to the target; the others cross it from their start value.
+  bool reached(double x, double x_start) const {
+    if (stage.stop == PathStop::EpsD || stage.stop == PathStop::Time) return x >= stage.until;
+    return (x - stage.until) * (x_start - stage.until) <= 0;
+  }
+};
+
+std::string extra_row(const VelGrad& L, const Servo& servo, const Sym3& stress, double accumulated, bool sheared) {
+  char b[500];
+  const Vec3 t = servo.sigma_target();
+  const Vec3& rate = L.diag;
+  int n = std::snprintf(b, sizeof b, ",%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g", rate.x, rate.y, rate.z,
+                        t.x, t.y, t.z, servo.pressure_target(), servo.relative_error(stress), accumulated);
+  if (sheared) std::snprintf(b + n, sizeof b - n, ",%.10g,%.10g,%.10g", L.shear.x, L.shear.y, L.shear.z);
+  return b;
+}
+
+// Everything one stage of a path needs from the path.
+struct PathRun {
+  const Model& model;
+  State& state;
+  Engine& engine;
+  CurveFile& csv;
+  const std::string& label;
+  bool quiet;
+  double e_floor;
+  double prev_ekin;
+  double max_inertial = 0;
+  State last_good;
+  std::int64_t steps = 0;
+  double accumulated = 0;   // eps_d travelled along the whole path (sum of |d eps_d| per step)
+  bool sheared = false;     // the path has a shear stage (extra columns)
+};
+
+// Runs one stage to its stop condition, writing rows; returns nothing, throws on failure.
+void run_path_stage(PathRun& run, const PathStage& stage) {
+  const Model& model = run.model;
+  State& state = run.state;
+  const double dt = model.dt;
+  // Rates re-based so opposite stages cancel exactly; strains keep counting from the path start.
+  state.box.reference = state.box.length;
+  state.box.log_strain = Vec3{0, 0, 0};
+  const VelGrad prescribed = stage.gradient_shape() * model.protocol.deviatoric_rate;
+  Servo servo(stage, prescribed, model.protocol.servo);
+  const bool needs_response = servo.active() || stage.stop == PathStop::Pressure || stage.stop == PathStop::SDev;
+  AxisResponse resp = axis_response(model, state, run.engine.neighbor_list(), prescribed);
+  servo.start(resp, model, state);
+  const std::int64_t every = servo.active() ? std::max<std::int64_t>(1, std::llround(servo.tau() / (20 * dt)))
+                                            : (needs_response ? 50 : 0);
+  VelGrad rate = servo.update(resp, 0);
+  StopProbe probe{stage, state.box.true_strain(), state.time};
+  if (stage.sheared() || state.box.sheared()) {
+    probe.tensor = true;
+    probe.F0_inverse = deformation(state.box).inverse();
+  }
+  const double x_start = probe.value(state, resp);
+  double increment = probe.landable() ? probe.increment(prescribed, dt) : 0;
+  // Strains under shear are not linear in time: land with the last full step's increment (as a
+  // sheared mode does), except eps_v (ln det F, linear) and time.
+  const bool nonlinear_stop = probe.tensor && stage.stop != PathStop::EpsV && stage.stop != PathStop::Time;
+  // The sampling variable: the stop value itself for an eps_d stop without servo (as run_stage),
+  // else the strain travelled (deviatoric or volumetric, whichever moved more), plus a row every
+  // relax_sample_steps steps in a stage without prescribed rate.
+  const bool sample_on_x = stage.stop == PathStop::EpsD && !servo.active();
+  const bool time_rows = prescribed.zero();   // a servo-only stage
+  double travel = 0, last_sample = sample_on_x ? x_start : 0.0;
+  const double rate_floor = std::min(model.protocol.servo.rate_max, model.protocol.deviatoric_rate);
+  const double time_limit = 4.0 / rate_floor;
+  Vec3 e_prev = state.box.true_strain();
+  std::int64_t stage_steps = 0;
+  auto wall0 = std::chrono::steady_clock::now(), last_progress = wall0;
+  Measurement last_m;
+  bool done = false;
+  while (!done) {
+    double scale = 1.0;
+    if (increment > 0) {
+      const double remaining = std::fabs(probe.target() - probe.value(state, resp));
+      if (remaining < increment) scale = remaining / increment;
+    }
+    const double x_before = increment > 0 && nonlinear_stop ? probe.value(state, resp) : 0.0;
+    run.engine.step(rate * scale);
+    ++run.steps;
+    ++stage_steps;
+    if (increment > 0 && nonlinear_stop && scale == 1.0)
+      increment = std::max(std::fabs(probe.value(state, resp) - x_before), 1e-3 * probe.increment(prescribed, dt));
+    const Vec3 e = state.box.true_strain();
+    const Vec3 de = e - e_prev;
+    e_prev = e;
+    // Under a shear rate the box lengths do not show the shear: the eps_d travelled in the step is
+    // that of the stretching D = sym L applied (equal to the diagonal form for a diagonal rate).
+    const double dd = rate.sheared() ? stretching_eps_d(rate * scale) * dt : deviatoric_magnitude(de.x, de.y, de.z);
+    travel += std::max(dd, std::fabs(de.x + de.y + de.z) / 3.0);
+    run.accumulated += dd;
+    if (every > 0 && stage_steps % every == 0) {
+      resp = axis_response(model, state, run.engine.neighbor_list(), rate);
+      if (servo.active()) rate = servo.update(resp, every * dt);
+    }
+    const double x = probe.value(state, resp);
+    if (increment > 0) done = scale < 1.0;
+    else done = (every == 0 || stage_steps % every == 0 || !needs_response) && probe.reached(x, x_start);
+    const double sx = sample_on_x ? x : travel;
+    bool sample = std::fabs(sx - last_sample) >= model.output.sample_strain * (1 - 1e-9) ||
+                  (time_rows && stage_steps % model.output.relax_sample_steps == 0);
+    if (!done && (travel > 4 || state.time - probe.time0 > time_limit) && stage.stop != PathStop::Time)
+      throw std::runtime_error("path " + run.label + ", stage '" + stage.name + "': its stop condition was not met after "
+                               "a strain of " + std::to_string(travel) + " (or 4 / rate limit in time): the target "
+                               "may be beyond what this packing reaches (e.g. an s_dev above its critical state); "
+                               "change the stop condition");
+    if (sample || done) {
+      run.engine.check_sanity();
+      last_m = measure(model, state, run.engine.neighbor_list(), servo.active() ? rate : prescribed);
+      check_kinetic_energy(model, state, last_m, run.e_floor, run.prev_ekin);
+      run.prev_ekin = last_m.E_kin;
+      run.max_inertial = std::max(run.max_inertial, last_m.inertial_number);
+      run.csv.row(curve_row(last_m) + extra_row(rate, servo, last_m.stress, run.accumulated, run.sheared),
+                  stage.name);
+      run.csv.check(stage.name);
+      last_sample = sample_on_x ? probe.value(state, resp) : travel;
+      run.last_good = state;
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (!run.quiet && (std::chrono::duration<double>(now - last_progress).count() >= model.output.progress_seconds || done)) {
+      last_progress = now;
+      char line[400];
+      std::snprintf(line, sizeof line, "[%s/%s] step %lld  eps_d %.4f  eps_v %.4f  p %.3e Pa  s_dev %.4f  error %.2g%s\n",
+                    run.label.c_str(), stage.name.c_str(), static_cast<long long>(stage_steps), last_m.eps_d,
+                    last_m.eps_v, last_m.p, last_m.s_dev, servo.relative_error(last_m.stress), done ? "  (stage done)" : "");
+      std::cerr << line << std::flush;
+    }
+  }
+}
+
+}  // namespace
+
+std::int64_t run_path(const Model& model, State& state, const DeformationMode& mode, const std::string& label,
+                      const std::string& csv_path, bool quiet, const std::string& failed_checkpoint) {
+  // Strains from the path start.
+  state.box.zero_strain();
+  state.box.reference = state.box.length;
+  state.box.log_strain = Vec3{0, 0, 0};
+  Engine engine(model, state);
+  const bool sheared = path_sheared(mode);
+  CurveFile csv(csv_path, curve_preamble(model, label, shear_physics(model), mode_definition(model, mode)),
+                columns_of(sheared));
+  // p0: the pressure of the first row (the dashpots see the first stage's prescribed rate).
+  const VelGrad rate0 = mode.path.front().gradient_shape() * model.protocol.deviatoric_rate;
+  const double p0 = axis_response(model, state, engine.neighbor_list(), rate0).p();
+  for (const PathStage& st : mode.path)
+    if ((st.relative && st.has_servo()) || st.until_relative)
+      if (!(p0 > 0))
+        throw std::runtime_error("path " + label + ": targets are multiples of p0, the pressure at the path start, "
+                                 "but it is " + std::to_string(p0) + " Pa (no contacts): give targets in Pa (*_Pa)");
+  PathRun run{model, state, engine, csv, label, quiet, energy_floor(model, state), 0, 0, state, 0};
+  run.sheared = sheared;
+  // The first row: the start state, with the first stage's name.
+  const Measurement m0 = measure(model, state, engine.neighbor_list(), rate0);
+  run.prev_ekin = m0.E_kin;
+  {
+    const PathStage first = resolve(mode.path.front(), p0);
+    Servo servo(first, rate0, model.protocol.servo);
+    csv.row(curve_row(m0) + extra_row(rate0, servo, m0.stress, 0.0, sheared), first.name);
+  }
+  try {
+    for (const PathStage& st : mode.path) run_path_stage(run, resolve(st, p0));
+  } catch (const BlowUp& e) {
+    csv.abandon();
+    const std::string failed = failed_checkpoint.empty() ? csv_path + ".failed.ckpt" : failed_checkpoint;
+    write_checkpoint(failed, Checkpoint{"", "last good state of path " + label, run.last_good});
+    throw BlowUp(std::string(e.what()) + "\n     the last good state of path " + label + " was saved as " + failed);
+  } catch (...) {
+    csv.abandon();
+    throw;
+  }
+  csv.commit(label);
+  if (run.max_inertial > kQuasiStaticInertial)
+    std::cerr << "dem: warning: path " << label << " reached an inertial number of " << run.max_inertial << " (> "
+              << kQuasiStaticInertial << "): not quasi-static; lower protocol.deviatoric_rate_tc or servo.rate_max_tc\n";
+  return run.steps;
+}
+
+}  // namespace dem

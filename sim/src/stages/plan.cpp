@@ -1,0 +1,132 @@
+#include "dem/stages/plan.hpp"
+#include "dem/stages/preparation.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <stdexcept>
+#include <sstream>
+#include <vector>
+
+#include "dem/io/io.hpp"
+#include "dem/measure/measure.hpp"
+#include "dem/stages/protocol.hpp"
+
+namespace dem {
+
+namespace {
+
+// Steps of one path stage: exact for eps_d and time stops without servo; otherwise an estimate
+// (a strain stop taken from 0, a stress or phi stop as eps_d_max of shear).
+double path_stage_steps(const Model& m, const PathStage& s) {
+  const Vec3& r = s.rate_shape;
+  const double unit = m.protocol.deviatoric_rate * m.dt;   // strain per step of a unit rate shape
+  const Vec3& g = s.shear_shape;
+  const double dev = s.sheared() ? deviatoric_magnitude_eig(Sym3{r.x, r.y, r.z, 0.5 * g.x, 0.5 * g.y, 0.5 * g.z})
+                                 : deviatoric_magnitude(r.x, r.y, r.z);
+  const double comp[3] = {r.x, r.y, r.z};
+  switch (s.stop) {
+    case PathStop::EpsD: return s.until / (std::max(dev, 1e-3) * unit);
+    case PathStop::Time: return s.until / m.dt;
+    case PathStop::EpsV: return std::fabs(s.until) / (std::max(std::fabs(r.x + r.y + r.z) / 3, 1e-3) * unit);
+    case PathStop::EpsXX: case PathStop::EpsYY: case PathStop::EpsZZ: {
+      const int a = s.stop == PathStop::EpsXX ? 0 : s.stop == PathStop::EpsYY ? 1 : 2;
+      return std::fabs(s.until) / (std::max(std::fabs(comp[a]), 1e-3) * unit);
+    }
+    default: return m.protocol.eps_d_max / (std::max(dev, 1.0) * unit);
+  }
+}
+
+}  // namespace
+
+double mode_steps(const Model& m, const DeformationMode& mode) {
+  if (!mode.path.empty()) {
+    double steps = 0;
+    for (const auto& s : mode.path) steps += path_stage_steps(m, s);
+    return steps;
+  }
+  const Vec3& r = mode.rate_shape;
+  const Vec3& g = mode.shear_shape;
+  // A shear: the eps_d rate of D = sym(L) (the log strain's eps_d grows a little slower at large
+  // shear: an estimate).
+  const double dev = mode.sheared() ? deviatoric_magnitude_eig(Sym3{r.x, r.y, r.z, 0.5 * g.x, 0.5 * g.y, 0.5 * g.z})
+                                    : deviatoric_magnitude(r.x, r.y, r.z);
+  const double per_step = (dev > 0 ? dev : std::fabs(r.x + r.y + r.z) / 3) * m.protocol.deviatoric_rate * m.dt;
+  return m.protocol.eps_d_max / per_step;
+}
+
+double mode_particle_steps(const Model& m, const DeformationMode& mode) { return m.count * mode_steps(m, mode); }
+
+double prep_particle_steps(const Model& m) {
+  return 3.0 * preparation_particle_steps(m);
+}
+
+std::string plan_json(const Model& m) {
+  std::ostringstream o;
+  o.precision(17);
+  o << "{\n  \"packings\": " << m.ensemble_packings << ",\n  \"members\": [";
+  for (int k = 0; k < m.ensemble_packings; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "m%03d", k);
+    o << (k ? ", " : "") << "{\"name\": \"" << name << "\", \"seed\": " << member_seed(m.seed, k) << "}";
+  }
+  const std::vector<double> phis = mode_checkpoints(m.protocol);
+  o << "],\n  \"series\": \"" << m.protocol.modes_from << "\",\n  \"checkpoints\": [";
+  for (std::size_t i = 0; i < phis.size(); ++i)
+    o << (i ? ", " : "") << "{\"phi\": " << phis[i] << ", \"stem\": \"" << checkpoint_stem(m.protocol.modes_from, phis[i])
+      << "\"}";
+  o << "],\n  \"modes\": [";
+  for (std::size_t i = 0; i < m.protocol.modes.size(); ++i) o << (i ? ", " : "") << "\"" << m.protocol.modes[i].name << "\"";
+  o << "],\n  \"prep_particle_steps\": " << prep_particle_steps(m) << ",\n  \"mode_particle_steps\": {";
+  for (std::size_t i = 0; i < m.protocol.modes.size(); ++i)
+    o << (i ? ", " : "") << "\"" << m.protocol.modes[i].name << "\": " << mode_particle_steps(m, m.protocol.modes[i]);
+  o << "},\n  \"threads\": " << m.threads << "\n}\n";
+  return o.str();
+}
+
+namespace {
+
+std::vector<std::string> lines_of(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string ln; std::getline(in, ln);) out.push_back(ln);
+  return out;
+}
+
+// The first lines of `a` that `b` lacks (a short hint of what differs).
+std::string differing_lines(const std::string& a, const std::string& b) {
+  const auto la = lines_of(a), lb = lines_of(b);
+  std::string d;
+  int shown = 0;
+  for (const auto& ln : la)
+    if (std::find(lb.begin(), lb.end(), ln) == lb.end() && shown++ < 4) d += "\n    " + ln;
+  return d;
+}
+
+}  // namespace
+
+void prepare_ensemble_folder(const std::string& dir_name, const std::string& resolved, bool force) {
+  namespace fs = std::filesystem;
+  const fs::path dir(dir_name), scene = dir / "scene.toml";
+  if (fs::exists(scene)) {
+    std::ifstream in(scene);
+    std::stringstream old;
+    old << in.rdbuf();
+    if (old.str() == resolved && !force) return;   // the same ensemble: continue where it stopped
+    if (!force)
+      throw std::runtime_error(dir_name + " holds the results of another scene (its scene.toml differs in:" +
+                               differing_lines(old.str(), resolved) +
+                               "\n  ); choose another --out, or pass --force to remove those results");
+    for (const char* sub : {"members", "ensemble", "fit", "plots", "logs", ".snakemake"}) fs::remove_all(dir / sub);
+    for (const char* f : {"scene.toml", "manifest.json", ".dem-ensemble.lock"}) fs::remove(dir / f);
+  } else if (fs::exists(dir) && !fs::is_empty(dir) && !force) {
+    throw std::runtime_error(dir_name + " exists and is not an ensemble folder (no scene.toml): choose another --out");
+  }
+  fs::create_directories(dir);
+  write_file_atomic(scene.string(), resolved);
+}
+
+}  // namespace dem
