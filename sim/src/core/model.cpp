@@ -77,6 +77,13 @@ double State::kinetic_energy() const {
   return e;
 }
 
+double State::rotational_energy() const {
+  double e = 0;
+  for (std::size_t i = 0; i < angular_velocity.size(); ++i)
+    e += 0.5 * (0.4 * mass[i] * radius[i] * radius[i]) * dot(angular_velocity[i], angular_velocity[i]);
+  return e;
+}
+
 void State::resize(int n) {
   position.assign(n, Vec3{});
   velocity.assign(n, Vec3{});
@@ -87,6 +94,10 @@ void State::resize(int n) {
   for (int i = 0; i < n; ++i) id[i] = i;
   position_at_build.clear();
   list_valid = false;
+  angular_velocity.clear();
+  torque.clear();
+  history = ContactHistory{};
+  friction_dissipated = 0;
 }
 
 std::string fmt_phi(double phi) {

@@ -26,8 +26,10 @@ Engine::Engine(const Model& model, State& state, bool forces_are_current)
   skin_ = model.skin_over_rmin * model.radius_min;
   if (model.integrator == Integrator::SymplecticEuler) { kick_before_ = 1.0; kick_after_ = 0.0; }
   sllod_ = model.sllod;
+  contact::prepare_state(model.contact, state);   // rotations and history only if the model needs them
   if (state.list_valid && state.position_at_build.size() == state.position.size()) {
     restore_neighbor_list(state, list_, skin_);
+    place_history(state, list_);   // a checkpoint's records, keyed by ids, into this list's order
   } else {
     rebuild_neighbor_list(state, list_, skin_, true);
   }
@@ -147,6 +149,7 @@ double Engine::advance_particles(int begin, int end, const AffineMap& map, bool 
                                                                                           : nullptr;
   const double* rad = state_.radius.data();
   double worst = 0;
+  if (state_.rotations()) kick_rotations(begin, end, h);   // 1. kick (angular velocities)
   for (int i = begin; i < end; ++i) {
     v[i] += f[i] * (h / m[i]);                     // 1. kick
     x[i] += v[i] * dt;                             // 2. drift
@@ -174,6 +177,15 @@ void Engine::rebuild_neighbors_if_stale(const StalenessTest& test, double max_di
   }
 }
 
+void Engine::kick_rotations(int begin, int end, double h) {
+  if (h == 0.0) return;
+  Vec3* w = state_.angular_velocity.data();
+  const Vec3* t = state_.torque.data();
+  const double* m = state_.mass.data();
+  const double* r = state_.radius.data();
+  for (int i = begin; i < end; ++i) w[i] += t[i] * (h / (0.4 * m[i] * r[i] * r[i]));   // I = 2/5 m r^2
+}
+
 void Engine::finish_forces_and_kick(int begin, int end) {
   const double gb = model_.background_damping;
   const double h = kick_after_ * model_.dt;
@@ -184,6 +196,7 @@ void Engine::finish_forces_and_kick(int begin, int end) {
     if (gb != 0.0) f[i] -= v[i] * gb;              // 5. background damping
     if (h != 0.0) v[i] += f[i] * (h / m[i]);       // 6. kick
   }
+  if (state_.rotations()) kick_rotations(begin, end, h);
 }
 
 void Engine::evaluate_forces() {
@@ -199,6 +212,7 @@ void Engine::step(const VelGrad& strain_rate) {
   if (flipped) { test.limit2 = -1; ++flips_; }        // new lattice vectors: rebuild
   if (threads_ <= 1 && blocks_ <= 1) step_serial(map, affine, test);
   else step_threaded(map, affine, test);
+  end_pair_loop(state_, scratch_);   // the blocks' dissipation, in block order
   chooser_.step_done();
   state_.time += model_.dt;
   ++state_.step;
@@ -210,6 +224,7 @@ void Engine::step_serial(const AffineMap& map, bool affine, const StalenessTest&
   const double worst = advance_particles(0, n, map, affine, test);
   rebuild_neighbors_if_stale(test, worst);
   partition_pairs(list_, 1, scratch_);
+  begin_pair_loop(model_, state_, list_, scratch_);
   accumulate_pair_forces(model_, state_, list_, rate_, 0, scratch_, state_.force.data());
   finish_forces_and_kick(0, n);
 }
@@ -232,6 +247,7 @@ void Engine::step_threaded(const AffineMap& map, bool affine, const StalenessTes
       for (double w : worst_displacement2_) all = std::max(all, w);
       rebuild_neighbors_if_stale(test, all);
       partition_pairs(list_, blocks_, scratch_);
+      begin_pair_loop(model_, state_, list_, scratch_);
     }
     sync();
     // 5: own pairs, then (after every block has queued its spills) the spills, then 6. Each
@@ -241,7 +257,7 @@ void Engine::step_threaded(const AffineMap& map, bool affine, const StalenessTes
       accumulate_pair_forces(model_, state_, list_, rate_, b, scratch_, f);
     sync();
     for (int b = t; b < scratch_.blocks(); b += nt) {
-      apply_spilled_forces(b, scratch_, f);
+      apply_spilled_forces(b, scratch_, f, state_.rotations() ? state_.torque.data() : nullptr);
       finish_forces_and_kick(scratch_.bounds[b], scratch_.bounds[b + 1]);
     }
   };

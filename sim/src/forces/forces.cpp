@@ -4,33 +4,66 @@
 
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 
 namespace dem {
 
 namespace {
 
-// One pair: the contact force on j [N] (minus it on i); false if the spheres do not touch.
-template <bool Sheared, class Law>
-inline bool contact_force(const Law& law, const Vec3& xi, const Vec3& xj_image, const Vec3& vi,
+using contact::NormalGeometry;
+using contact::Separation;
+
+// One pair of a model without history: the contact force on j [N] (minus it on i); false if the
+// spheres do not touch. The arithmetic is the contact model's body (T = double), the one the
+// vector kernels run on lanes of pairs.
+template <bool Sheared, class CM>
+inline bool contact_force(const CM& cm, const Vec3& xi, const Vec3& xj_image, const Vec3& vi,
                           const Vec3& vj, double ri, double rj, const VelGrad& rate, Vec3& f_on_j) {
-  const Vec3 d = xj_image - xi;
-  const double r2 = dot(d, d);
-  const double reach = ri + rj;
-  if (r2 >= reach * reach) return false;
-  const double r = std::sqrt(r2);
-  const double inv_r = 1.0 / r;
-  const Vec3 n = d * inv_r;                          // unit normal from i to j
-  // fluctuation + affine relative velocity (L d; a diagonal L: the component-wise product)
-  const Vec3 v_rel = (vj - vi) + (Sheared ? rate.apply(d) : hadamard(rate.diag, d));
-  const double fn = law(reach - r, -dot(v_rel, n));
-  f_on_j = n * fn;
+  const Separation<double> sep = contact::separation(xi.x, xi.y, xi.z, ri, xj_image.x, xj_image.y, xj_image.z, rj);
+  if (!contact::touching(sep)) return false;
+  double vx, vy, vz;
+  contact::relative_velocity<Sheared>(sep, vj.x - vi.x, vj.y - vi.y, vj.z - vi.z, rate, vx, vy, vz);
+  const NormalGeometry<double> g = contact::normal_geometry(sep, vx, vy, vz);
+  const double fn = cm.normal_force(g);
+  f_on_j = Vec3{g.nx, g.ny, g.nz} * fn;
+  return true;
+}
+
+// Where a rotating model's pair sends its force and torques.
+struct PairSums {
+  Vec3 fj, ti, tj;   // force on j [N], torques on i and j [N m]
+};
+
+// One pair of a model with history (friction): force on j, torques, and the history advanced
+// by one step of dt; false (history zeroed) if the spheres do not touch.
+template <bool Sheared, class CM>
+inline bool contact_force_history(const CM& cm, const Vec3& xi, const Vec3& xj_image, const Vec3& vi,
+                                  const Vec3& vj, const Vec3& wi, const Vec3& wj, double ri, double rj,
+                                  const VelGrad& rate, double dt, double* h, double* dissipated, PairSums& out) {
+  const Separation<double> sep = contact::separation(xi.x, xi.y, xi.z, ri, xj_image.x, xj_image.y, xj_image.z, rj);
+  if (!contact::touching(sep)) {
+    for (int k = 0; k < CM::history; ++k) h[k] = 0.0;   // the contact ended: its springs with it
+    return false;
+  }
+  double vx, vy, vz;
+  contact::relative_velocity<Sheared>(sep, vj.x - vi.x, vj.y - vi.y, vj.z - vi.z, rate, vx, vy, vz);
+  const NormalGeometry<double> g = contact::normal_geometry(sep, vx, vy, vz);
+  const double fn = cm.normal_force(g);
+  const Vec3 n{g.nx, g.ny, g.nz};
+  const double ai = ri - 0.5 * g.delta, aj = rj - 0.5 * g.delta;   // lever arms to the overlap's middle
+  const Vec3 v_contact = Vec3{vx, vy, vz} - cross(wi * ai + wj * aj, n);
+  const Vec3 ft = cm.tangential.update(contact::TangentialInput{n, v_contact, fn}, dt, h, dissipated);
+  const Vec3 nxf = cross(n, ft);
+  out.fj = n * fn + ft;
+  out.ti = nxf * (-ai);   // (a_i n) x (-f_j)
+  out.tj = nxf * (-aj);   // (-a_j n) x f_j
   return true;
 }
 
 // The reference pair loop (the simple form of the kernels below, PairKernel::reference):
 // pairs of particles [begin, end), forces on j >= end go to spill[block_of[j]].
-template <bool Sheared, class Law>
-void pair_loop_reference(const Law& law, const State& s, const NeighborList& list, const VelGrad& rate,
+template <bool Sheared, class CM>
+void pair_loop_reference(const CM& cm, const State& s, const NeighborList& list, const VelGrad& rate,
                          int begin, int end, Vec3* f, std::vector<std::vector<SpilledForce>>& spill,
                          const std::uint16_t* block_of) {
   Vec3 off[27];
@@ -48,7 +81,7 @@ void pair_loop_reference(const Law& law, const State& s, const NeighborList& lis
     for (int p = first[i]; p < first[i + 1]; ++p) {
       const int j = partner[p];
       Vec3 fj;
-      if (!contact_force<Sheared>(law, xi, x[j] + off[image[p]], vi, v[j], ri, rad[j], rate, fj)) continue;
+      if (!contact_force<Sheared>(cm, xi, x[j] + off[image[p]], vi, v[j], ri, rad[j], rate, fj)) continue;
       if (j < end) f[j] += fj; else spill[block_of[j]].push_back({j, fj});
       fi -= fj;
     }
@@ -56,6 +89,39 @@ void pair_loop_reference(const Law& law, const State& s, const NeighborList& lis
   }
 }
 
+// The pair loop of a model with history (scalar; friction): forces and torques, spilled like
+// the forces, history advanced in place (each pair belongs to one block: no races).
+template <bool Sheared, class CM>
+void pair_loop_history(const CM& cm, State& s, const NeighborList& list, const VelGrad& rate, double dt,
+                       int begin, int end, Vec3* f, std::vector<std::vector<SpilledForce>>& spill,
+                       std::vector<std::vector<SpilledForce>>& spill_torque, const std::uint16_t* block_of,
+                       double* dissipated) {
+  Vec3 off[27];
+  image_offsets(s.box, off);
+  const Vec3* x = s.position.data();
+  const Vec3* v = s.velocity.data();
+  const Vec3* w = s.angular_velocity.data();
+  Vec3* tq = s.torque.data();
+  const double* rad = s.radius.data();
+  double* H = s.history.values.data();
+  constexpr int kw = CM::history;
+  for (int i = begin; i < end; ++i) {
+    Vec3 fi{0, 0, 0}, ti{0, 0, 0};
+    for (int p = list.first[i]; p < list.first[i + 1]; ++p) {
+      const int j = list.partner[p];
+      PairSums c;
+      if (!contact_force_history<Sheared>(cm, x[i], x[j] + off[list.image[p]], v[i], v[j], w[i], w[j], rad[i], rad[j],
+                                          rate, dt, H + static_cast<long>(kw) * p, dissipated, c))
+        continue;
+      if (j < end) { f[j] += c.fj; tq[j] += c.tj; }
+      else { spill[block_of[j]].push_back({j, c.fj}); spill_torque[block_of[j]].push_back({j, c.tj}); }
+      fi -= c.fj;
+      ti += c.ti;
+    }
+    f[i] += fi;
+    tq[i] += ti;
+  }
+}
 
 // Appends a spilled force field by field (a SpilledForce built on the stack and copied made
 // the store-to-load forwarding fail: a quarter of the adding pass's time in a profile).
@@ -97,7 +163,7 @@ void pair_loop_vector(PairKernel kernel, const ContactLaw& law, const State& s, 
   }
   const long p_begin = list.first[begin], p_end = list.first[end];
   const kernels::KernelInputs in{packed, pair_i, list.partner.data(), list.image.data(), off,
-                        law.stiffness, law.damping, law.allow_attractive, rate, f, p_end};
+                                 contact::frictionless(law), rate, f, p_end};
   const kernels::KernelFn run = kernels::kernel_of(kernel, Sheared);
   constexpr int kChunk = kernels::kChunk;
   alignas(64) double fx[kChunk], fy[kChunk], fz[kChunk];
@@ -150,28 +216,61 @@ int block_count(int blocks_setting, int threads) {
   return std::clamp(blocks_setting > 0 ? blocks_setting : std::max(kDefaultBlocks, threads), 1, 65535);
 }
 
-void accumulate_pair_forces(const Model& model, const State& state, const NeighborList& list,
+void accumulate_pair_forces(const Model& model, State& state, const NeighborList& list,
                             const VelGrad& rate, int b, ForceScratch& scratch, Vec3* force) {
   for (auto& to : scratch.spill[b]) to.clear();
   const int begin = scratch.bounds[b], end = scratch.bounds[b + 1];
   auto& spill = scratch.spill[b];
   const std::uint16_t* block_of = scratch.block_of.data();
-  if (scratch.kernel == PairKernel::reference) {
-    const LinearSpringDashpot law(model.contact);
-    if (rate.sheared()) pair_loop_reference<true>(law, state, list, rate, begin, end, force, spill, block_of);
-    else pair_loop_reference<false>(law, state, list, rate, begin, end, force, spill, block_of);
-    return;
-  }
-  const std::int32_t* pair_i = scratch.pair_i.data();
-  if (rate.sheared())
-    pair_loop_vector<true>(scratch.kernel, model.contact, state, list, scratch.packed.data(), pair_i, rate, begin, end, force, spill, block_of);
-  else
-    pair_loop_vector<false>(scratch.kernel, model.contact, state, list, scratch.packed.data(), pair_i, rate, begin, end, force, spill, block_of);
+  contact::with_contact_model(model.contact, [&](const auto& cm) {
+    using CM = std::decay_t<decltype(cm)>;
+    if constexpr (CM::history > 0) {
+      for (auto& to : scratch.spill_torque[b]) to.clear();
+      scratch.dissipated[b] = 0.0;
+      if (rate.sheared())
+        pair_loop_history<true>(cm, state, list, rate, model.dt, begin, end, force, spill, scratch.spill_torque[b],
+                                block_of, &scratch.dissipated[b]);
+      else
+        pair_loop_history<false>(cm, state, list, rate, model.dt, begin, end, force, spill, scratch.spill_torque[b],
+                                 block_of, &scratch.dissipated[b]);
+    } else if (scratch.kernel == PairKernel::reference) {
+      if (rate.sheared()) pair_loop_reference<true>(cm, state, list, rate, begin, end, force, spill, block_of);
+      else pair_loop_reference<false>(cm, state, list, rate, begin, end, force, spill, block_of);
+    } else {
+      const std::int32_t* pair_i = scratch.pair_i.data();
+      if (rate.sheared())
+        pair_loop_vector<true>(scratch.kernel, model.contact, state, list, scratch.packed.data(), pair_i, rate, begin,
+                               end, force, spill, block_of);
+      else
+        pair_loop_vector<false>(scratch.kernel, model.contact, state, list, scratch.packed.data(), pair_i, rate, begin,
+                                end, force, spill, block_of);
+    }
+  });
 }
 
-void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force) {
+void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force, Vec3* torque) {
   for (int from = 0; from < b; ++from)
     for (const SpilledForce& s : scratch.spill[from][b]) force[s.j] += s.f;
+  if (torque && !scratch.spill_torque.empty())
+    for (int from = 0; from < b; ++from)
+      for (const SpilledForce& s : scratch.spill_torque[from][b]) torque[s.j] += s.f;
+}
+
+void begin_pair_loop(const Model& model, State& s, const NeighborList& list, ForceScratch& scratch) {
+  if (!s.rotations()) return;
+  const int blocks = scratch.blocks();
+  if (static_cast<int>(scratch.spill_torque.size()) != blocks)
+    scratch.spill_torque.assign(blocks, std::vector<std::vector<SpilledForce>>(blocks));
+  scratch.dissipated.assign(blocks, 0.0);
+  std::fill(s.torque.begin(), s.torque.end(), Vec3{0, 0, 0});
+  const std::size_t want = list.partner.size() * static_cast<std::size_t>(s.history.width);
+  if (s.history.values.size() != want) place_history(s, list);   // e.g. a fresh state
+  (void)model;
+}
+
+void end_pair_loop(State& s, const ForceScratch& scratch) {
+  if (!s.rotations()) return;
+  for (double d : scratch.dissipated) s.friction_dissipated += d;
 }
 
 void pack_particles(const State& s, int begin, int end, ForceScratch& scratch) {
@@ -185,20 +284,23 @@ void compute_forces(const Model& model, State& s, const NeighborList& list,
   s.force.assign(s.count(), Vec3{0, 0, 0});
   partition_pairs(list, blocks, scratch);
   pack_particles(s, 0, s.count(), scratch);
+  begin_pair_loop(model, s, list, scratch);
   Vec3* f = s.force.data();
+  Vec3* t = s.rotations() ? s.torque.data() : nullptr;
   if (threads <= 1) {
     for (int b = 0; b < blocks; ++b) accumulate_pair_forces(model, s, list, rate, b, scratch, f);
-    for (int b = 1; b < blocks; ++b) apply_spilled_forces(b, scratch, f);
+    for (int b = 1; b < blocks; ++b) apply_spilled_forces(b, scratch, f, t);
   } else {
 #pragma omp parallel num_threads(threads)
     {
       const ThreadRank rank = this_thread_rank();
-      const int t = rank.index, nt = rank.count;
-      for (int b = t; b < blocks; b += nt) accumulate_pair_forces(model, s, list, rate, b, scratch, f);
+      const int th = rank.index, nt = rank.count;
+      for (int b = th; b < blocks; b += nt) accumulate_pair_forces(model, s, list, rate, b, scratch, f);
 #pragma omp barrier
-      for (int b = t; b < blocks; b += nt) apply_spilled_forces(b, scratch, f);
+      for (int b = th; b < blocks; b += nt) apply_spilled_forces(b, scratch, f, t);
     }
   }
+  end_pair_loop(s, scratch);
   add_background_damping(model, s);
 }
 
@@ -215,23 +317,66 @@ Vec3 minimum_image(const Box& box, const Vec3& xi, const Vec3& xj) {
   return d;
 }
 
-void compute_forces_all_pairs(const Model& model, State& s, const VelGrad& rate) {
+void compute_forces_all_pairs(const Model& model, State& s, const VelGrad& rate, PairHistoryMap* history) {
   const int n = s.count();
-  const LinearSpringDashpot law(model.contact);
   s.force.assign(n, Vec3{0, 0, 0});
-  for (int i = 0; i < n; ++i)
-    for (int j = i + 1; j < n; ++j) {
-      const Vec3 d = minimum_image(s.box, s.position[i], s.position[j]);
-      Vec3 fj;
-      const bool touch = rate.sheared() ? contact_force<true>(law, s.position[i], s.position[i] + d, s.velocity[i],
-                                                              s.velocity[j], s.radius[i], s.radius[j], rate, fj)
-                                        : contact_force<false>(law, s.position[i], s.position[i] + d, s.velocity[i],
-                                                               s.velocity[j], s.radius[i], s.radius[j], rate, fj);
-      if (!touch) continue;
-      s.force[j] += fj;
-      s.force[i] -= fj;
-    }
+  if (s.rotations()) s.torque.assign(n, Vec3{0, 0, 0});
+  contact::with_contact_model(model.contact, [&](const auto& cm) {
+    using CM = std::decay_t<decltype(cm)>;
+    for (int i = 0; i < n; ++i)
+      for (int j = i + 1; j < n; ++j) {
+        const Vec3 xj = s.position[i] + minimum_image(s.box, s.position[i], s.position[j]);
+        if constexpr (CM::history > 0) {
+          // the record in the orientation (smaller id, larger id); this loop's pair is (i, j)
+          const bool swapped = s.id[i] > s.id[j];
+          const auto key = std::make_pair(std::min(s.id[i], s.id[j]), std::max(s.id[i], s.id[j]));
+          std::vector<double> h(CM::history, 0.0);
+          if (const auto it = history->find(key); it != history->end()) h = it->second;
+          auto flip = [&] {
+            if (swapped) for (int k = 0; k < CM::history; ++k) if ((s.history.odd >> k) & 1u) h[k] = -h[k];
+          };
+          flip();
+          double dissipated = 0;
+          PairSums c;
+          const bool touch = rate.sheared()
+              ? contact_force_history<true>(cm, s.position[i], xj, s.velocity[i], s.velocity[j], s.angular_velocity[i],
+                                            s.angular_velocity[j], s.radius[i], s.radius[j], rate, model.dt, h.data(),
+                                            &dissipated, c)
+              : contact_force_history<false>(cm, s.position[i], xj, s.velocity[i], s.velocity[j], s.angular_velocity[i],
+                                             s.angular_velocity[j], s.radius[i], s.radius[j], rate, model.dt, h.data(),
+                                             &dissipated, c);
+          flip();
+          if (!touch) { history->erase(key); continue; }
+          (*history)[key] = h;
+          s.friction_dissipated += dissipated;
+          s.force[j] += c.fj; s.force[i] -= c.fj;
+          s.torque[i] += c.ti; s.torque[j] += c.tj;
+        } else {
+          Vec3 fj;
+          const bool touch = rate.sheared()
+              ? contact_force<true>(cm, s.position[i], xj, s.velocity[i], s.velocity[j], s.radius[i], s.radius[j], rate, fj)
+              : contact_force<false>(cm, s.position[i], xj, s.velocity[i], s.velocity[j], s.radius[i], s.radius[j], rate, fj);
+          if (!touch) continue;
+          s.force[j] += fj;
+          s.force[i] -= fj;
+        }
+      }
+  });
   add_background_damping(model, s);
+}
+
+PairHistoryMap history_by_ids(const State& s) {
+  PairHistoryMap out;
+  const int w = s.history.width;
+  for (std::size_t r = 0; r < s.history.ids.size() / 2 && w > 0; ++r) {
+    const double* v = s.history.values.data() + r * w;
+    if (!std::any_of(v, v + w, [](double x) { return x != 0.0; })) continue;
+    const std::int32_t a = s.history.ids[2 * r], b = s.history.ids[2 * r + 1];
+    std::vector<double> h(v, v + w);
+    if (a > b) for (int k = 0; k < w; ++k) if ((s.history.odd >> k) & 1u) h[k] = -h[k];
+    out[{std::min(a, b), std::max(a, b)}] = h;
+  }
+  return out;
 }
 
 }  // namespace dem

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
 
 namespace dem {
 double max_radius_of(const std::vector<double>& radius);
@@ -179,6 +180,7 @@ void sort_by_cell(State& s, double cutoff) {
   std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return key[a] < key[b]; });
   permute(s.position, order); permute(s.velocity, order); permute(s.force, order);
   permute(s.radius, order); permute(s.mass, order); permute(s.id, order);
+  if (s.rotations()) { permute(s.angular_velocity, order); permute(s.torque, order); }
 }
 
 }  // namespace
@@ -189,7 +191,53 @@ double max_radius_of(const std::vector<double>& radius) {
   return r;
 }
 
-void rebuild_neighbor_list(State& state, NeighborList& list, double skin, bool sort) {
+namespace {
+
+std::uint64_t pair_key(std::int32_t a, std::int32_t b) {
+  const auto lo = static_cast<std::uint32_t>(std::min(a, b)), hi = static_cast<std::uint32_t>(std::max(a, b));
+  return (static_cast<std::uint64_t>(lo) << 32) | hi;
+}
+
+}  // namespace
+
+void place_history(State& s, const NeighborList& list) {
+  State::ContactHistory& h = s.history;
+  const int w = h.width;
+  if (w == 0) return;
+  const std::size_t records = h.ids.size() / 2;
+  if (h.values.size() != records * w) throw std::logic_error("place_history: history ids and values disagree");
+  // Records that hold anything, by their pair (zero records are what a new pair gets anyway).
+  std::unordered_map<std::uint64_t, std::size_t> where;
+  where.reserve(records);
+  for (std::size_t r = 0; r < records; ++r) {
+    const double* v = h.values.data() + r * w;
+    if (std::any_of(v, v + w, [](double x) { return x != 0.0; })) where.emplace(pair_key(h.ids[2 * r], h.ids[2 * r + 1]), r);
+  }
+  const std::size_t pairs = list.partner.size();
+  std::vector<double> values(pairs * w, 0.0);
+  std::vector<std::int32_t> ids(2 * pairs);
+  const int n = static_cast<int>(list.first.size()) - 1;
+  for (int i = 0; i < n; ++i)
+    for (int p = list.first[i]; p < list.first[i + 1]; ++p) {
+      const std::int32_t a = s.id[i], b = s.id[list.partner[p]];
+      ids[2 * p] = a; ids[2 * p + 1] = b;
+      if (where.empty()) continue;
+      const auto it = where.find(pair_key(a, b));
+      if (it == where.end()) continue;
+      const std::size_t r = it->second;
+      const bool swapped = h.ids[2 * r] != a;
+      for (int k = 0; k < w; ++k) {
+        const double v = h.values[r * w + k];
+        values[p * w + k] = (swapped && ((h.odd >> k) & 1u)) ? -v : v;
+      }
+    }
+  h.values.swap(values);
+  h.ids.swap(ids);
+}
+
+namespace {
+
+void build(State& state, NeighborList& list, double skin, bool sort) {
   list.skin = skin;
   wrap_into_box(state);
   if (sort) sort_by_cell(state, 2.0 * max_radius_of(state.radius) + skin);
@@ -199,6 +247,13 @@ void rebuild_neighbor_list(State& state, NeighborList& list, double skin, bool s
   build_pairs(state.position, state.radius, state.box, list);
   state.list_valid = true;
   ++list.builds;
+}
+
+}  // namespace
+
+void rebuild_neighbor_list(State& state, NeighborList& list, double skin, bool sort) {
+  build(state, list, skin, sort);   // the history keeps its old order (keyed by ids) meanwhile
+  place_history(state, list);
 }
 
 void restore_neighbor_list(const State& state, NeighborList& list, double skin) {

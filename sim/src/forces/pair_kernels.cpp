@@ -19,8 +19,12 @@ namespace {
 
 constexpr int kPrefetch = 64;   // pairs ahead whose records the AVX2 kernel prefetches
 
+using contact::NormalGeometry;
+using contact::Separation;
+using lanes::L4;
+
 // The kernel as plain C++ (auto-vectorised by GCC for each target below): the force on j of
-// pairs p0 .. p0+n-1 into fx, fy, fz [N].
+// pairs p0 .. p0+n-1 into fx, fy, fz [N]. The arithmetic is the contact model's body.
 template <bool Sheared>
 __attribute__((always_inline)) inline void kernel_body(const KernelInputs& in, long p0, int n,
                                                         double* __restrict fx, double* __restrict fy,
@@ -30,40 +34,22 @@ __attribute__((always_inline)) inline void kernel_body(const KernelInputs& in, l
   const std::int32_t* __restrict pi = in.pair_i + p0;
   const std::int32_t* __restrict pj = in.partner + p0;
   const std::uint8_t* __restrict img = in.image + p0;
-  const double k = in.k, gamma = in.gamma;
-  const bool attractive = in.attractive;
-  const double Lxx = in.rate.diag.x, Lyy = in.rate.diag.y, Lzz = in.rate.diag.z;
-  const double Lxy = in.rate.shear.x, Lxz = in.rate.shear.y, Lyz = in.rate.shear.z;
+  const contact::Frictionless model = in.model;
+  const VelGrad rate = in.rate;
 #pragma omp simd
   for (int q = 0; q < n; ++q) {
     const long i8 = 8L * pi[q], j8 = 8L * pj[q], c4 = 4L * img[q];
-    const double dx = (P[j8] + off[c4]) - P[i8];
-    const double dy = (P[j8 + 1] + off[c4 + 1]) - P[i8 + 1];
-    const double dz = (P[j8 + 2] + off[c4 + 2]) - P[i8 + 2];
-    const double r2 = dx * dx + dy * dy + dz * dz;
-    const double reach = P[i8 + 3] + P[j8 + 3];
-    const bool touch = r2 < reach * reach;
-    const double r = std::sqrt(r2);
-    const double inv_r = 1.0 / r;
-    const double nx = dx * inv_r, ny = dy * inv_r, nz = dz * inv_r;
-    double ax, ay, az;   // L d
-    if (Sheared) {
-      ax = Lxx * dx + Lxy * dy + Lxz * dz;
-      ay = Lyy * dy + Lyz * dz;
-      az = Lzz * dz;
-    } else {
-      ax = Lxx * dx; ay = Lyy * dy; az = Lzz * dz;
-    }
-    const double vx = (P[j8 + 4] - P[i8 + 4]) + ax;
-    const double vy = (P[j8 + 5] - P[i8 + 5]) + ay;
-    const double vz = (P[j8 + 6] - P[i8 + 6]) + az;
-    const double ddelta = -(vx * nx + vy * ny + vz * nz);
-    const double f = k * (reach - r) + gamma * ddelta;
-    const bool keep = (f > 0.0) | attractive;
-    const double fn = keep ? f : 0.0;
-    fx[q] = touch ? nx * fn : -0.0;
-    fy[q] = touch ? ny * fn : -0.0;
-    fz[q] = touch ? nz * fn : -0.0;
+    const Separation<double> sep = contact::separation(P[i8], P[i8 + 1], P[i8 + 2], P[i8 + 3], P[j8] + off[c4],
+                                                       P[j8 + 1] + off[c4 + 1], P[j8 + 2] + off[c4 + 2], P[j8 + 3]);
+    const bool touch = contact::touching(sep);
+    double vx, vy, vz;
+    contact::relative_velocity<Sheared>(sep, P[j8 + 4] - P[i8 + 4], P[j8 + 5] - P[i8 + 5], P[j8 + 6] - P[i8 + 6], rate,
+                                        vx, vy, vz);
+    const NormalGeometry<double> g = contact::normal_geometry(sep, vx, vy, vz);
+    const double fn = model.normal_force(g);
+    fx[q] = touch ? g.nx * fn : -0.0;
+    fy[q] = touch ? g.ny * fn : -0.0;
+    fz[q] = touch ? g.nz * fn : -0.0;
   }
 }
 
@@ -99,17 +85,16 @@ DEM_AVX2 void load4(const double* base, const std::int32_t* idx, int stride, __m
   d = _mm256_unpackhi_pd(t2, t3);
 }
 
+DEM_AVX2 L4 lanes_of(__m256d v) { return L4{reinterpret_cast<L4::V&>(v)}; }
+DEM_AVX2 __m256d reg(L4 v) { return reinterpret_cast<__m256d&>(v.v); }
+
 template <bool Sheared>
 __attribute__((target("avx2"))) void kernel_avx2(const KernelInputs& in, long p0, int n, double* fx, double* fy,
                                                    double* fz) {
   const double* P = in.packed;
-  const __m256d k = _mm256_set1_pd(in.k), gamma = _mm256_set1_pd(in.gamma);
-  const __m256d keep_all = _mm256_castsi256_pd(_mm256_set1_epi64x(in.attractive ? -1 : 0));
-  const __m256d zero = _mm256_setzero_pd(), minus_zero = _mm256_set1_pd(-0.0), one = _mm256_set1_pd(1.0);
-  const __m256d Lxx = _mm256_set1_pd(in.rate.diag.x), Lyy = _mm256_set1_pd(in.rate.diag.y),
-                Lzz = _mm256_set1_pd(in.rate.diag.z);
-  const __m256d Lxy = _mm256_set1_pd(in.rate.shear.x), Lxz = _mm256_set1_pd(in.rate.shear.y),
-                Lyz = _mm256_set1_pd(in.rate.shear.z);
+  const __m256d minus_zero = _mm256_set1_pd(-0.0);
+  const L4 lane_minus_zero = lanes_of(minus_zero);
+  const contact::Frictionless model = in.model;
   for (int q = 0; q < n; q += 4) {
     std::int32_t tail[3][4];
     const std::int32_t *I = in.pair_i + p0 + q, *J = in.partner + p0 + q, *C;
@@ -135,40 +120,25 @@ __attribute__((target("avx2"))) void kernel_avx2(const KernelInputs& in, long p0
     load4(P, I, 8, xi, yi, zi, ri);
     load4(P, J, 8, xj, yj, zj, rj);
     load4(in.off, C, 4, ox, oy, oz, pad);
-    const __m256d dx = _mm256_sub_pd(_mm256_add_pd(xj, ox), xi);
-    const __m256d dy = _mm256_sub_pd(_mm256_add_pd(yj, oy), yi);
-    const __m256d dz = _mm256_sub_pd(_mm256_add_pd(zj, oz), zi);
-    const __m256d r2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz));
-    const __m256d reach = _mm256_add_pd(ri, rj);
-    const __m256d touch = _mm256_cmp_pd(r2, _mm256_mul_pd(reach, reach), _CMP_LT_OQ);
-    if (_mm256_movemask_pd(touch) == 0) {
+    // From here on the arithmetic is the model's (lanes of four pairs).
+    const Separation<L4> sep = contact::separation(
+        lanes_of(xi), lanes_of(yi), lanes_of(zi), lanes_of(ri), lanes_of(xj) + lanes_of(ox), lanes_of(yj) + lanes_of(oy),
+        lanes_of(zj) + lanes_of(oz), lanes_of(rj));
+    const auto touch = contact::touching(sep);
+    if (_mm256_movemask_pd(reinterpret_cast<const __m256d&>(touch)) == 0) {
       _mm256_store_pd(fx + q, minus_zero); _mm256_store_pd(fy + q, minus_zero); _mm256_store_pd(fz + q, minus_zero);
       continue;
     }
     load4(P + 4, I, 8, vxi, vyi, vzi, pad);
     load4(P + 4, J, 8, vxj, vyj, vzj, pad);
-    const __m256d r = _mm256_sqrt_pd(r2);
-    const __m256d inv_r = _mm256_div_pd(one, r);
-    const __m256d nx = _mm256_mul_pd(dx, inv_r), ny = _mm256_mul_pd(dy, inv_r), nz = _mm256_mul_pd(dz, inv_r);
-    __m256d ax, ay, az;
-    if (Sheared) {
-      ax = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(Lxx, dx), _mm256_mul_pd(Lxy, dy)), _mm256_mul_pd(Lxz, dz));
-      ay = _mm256_add_pd(_mm256_mul_pd(Lyy, dy), _mm256_mul_pd(Lyz, dz));
-      az = _mm256_mul_pd(Lzz, dz);
-    } else {
-      ax = _mm256_mul_pd(Lxx, dx); ay = _mm256_mul_pd(Lyy, dy); az = _mm256_mul_pd(Lzz, dz);
-    }
-    const __m256d vx = _mm256_add_pd(_mm256_sub_pd(vxj, vxi), ax);
-    const __m256d vy = _mm256_add_pd(_mm256_sub_pd(vyj, vyi), ay);
-    const __m256d vz = _mm256_add_pd(_mm256_sub_pd(vzj, vzi), az);
-    const __m256d dot = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(vx, nx), _mm256_mul_pd(vy, ny)), _mm256_mul_pd(vz, nz));
-    const __m256d ddelta = _mm256_xor_pd(dot, minus_zero);   // -dot, exactly
-    const __m256d f = _mm256_add_pd(_mm256_mul_pd(k, _mm256_sub_pd(reach, r)), _mm256_mul_pd(gamma, ddelta));
-    const __m256d keep = _mm256_or_pd(_mm256_cmp_pd(f, zero, _CMP_GT_OQ), keep_all);
-    const __m256d fn = _mm256_blendv_pd(zero, f, keep);
-    _mm256_store_pd(fx + q, _mm256_blendv_pd(minus_zero, _mm256_mul_pd(nx, fn), touch));
-    _mm256_store_pd(fy + q, _mm256_blendv_pd(minus_zero, _mm256_mul_pd(ny, fn), touch));
-    _mm256_store_pd(fz + q, _mm256_blendv_pd(minus_zero, _mm256_mul_pd(nz, fn), touch));
+    L4 vx, vy, vz;
+    contact::relative_velocity<Sheared>(sep, lanes_of(vxj) - lanes_of(vxi), lanes_of(vyj) - lanes_of(vyi),
+                                        lanes_of(vzj) - lanes_of(vzi), in.rate, vx, vy, vz);
+    const NormalGeometry<L4> g = contact::normal_geometry(sep, vx, vy, vz);
+    const L4 fn = model.normal_force(g);
+    _mm256_store_pd(fx + q, reg(lanes::select(touch, g.nx * fn, lane_minus_zero)));
+    _mm256_store_pd(fy + q, reg(lanes::select(touch, g.ny * fn, lane_minus_zero)));
+    _mm256_store_pd(fz + q, reg(lanes::select(touch, g.nz * fn, lane_minus_zero)));
   }
 }
 #undef DEM_AVX2

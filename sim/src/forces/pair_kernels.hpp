@@ -10,7 +10,9 @@ namespace dem::kernels {
 // every pair of the chunk, without branches, into three small arrays (L1-resident): the same
 // IEEE operations in the same order as contact_force (no FMA contraction: pair_kernels.cpp
 // is compiled with -ffp-contract=off), so every lane gives the bits of the scalar code; a pair
-// out of contact gets -0.0, which added to anything leaves it unchanged. (2) A scalar pass
+// out of contact gets -0.0, which added to anything leaves it unchanged. The arithmetic is not
+// spelled out here: every kernel calls the contact model's one body (contact/contact_model.hpp,
+// templated on the lane type), and keeps only its loads, transposes and prefetches. (2) A scalar pass
 // adds them in list order exactly as pair_loop_reference does. So every kernel (reference,
 // generic, avx2, avx512) gives the same bits, whatever the CPU.
 constexpr int kChunk = 256;
@@ -21,8 +23,7 @@ struct KernelInputs {
   const std::int32_t* partner;
   const std::uint8_t* image;
   const double* off;          ///< 27 image offsets, x y z 0 each [m]
-  double k, gamma;            ///< contact law [N/m], [kg/s]
-  bool attractive;
+  contact::Frictionless model;   ///< the contact model (its normal_force is the body of every kernel)
   VelGrad rate;               ///< [1/s]
   const Vec3* force;          ///< the forces pass 2 adds to (prefetched by the AVX2 kernel)
   long p_end;                 ///< end of the block's pairs (no prefetch past it)

@@ -121,7 +121,7 @@ std::string physics_list(const std::vector<double>& v) {
 }
 
 Physics material_physics(const Model& m) {
-  return {{"particles.radius_min_m", num(m.radius_min)},
+  Physics p = {{"particles.radius_min_m", num(m.radius_min)},
           {"particles.radius_max_m", num(m.radius_max)},
           {"particles.density_kg_m3", num(m.density)},
           {"contact.stiffness_N_m", num(m.contact.stiffness)},
@@ -131,6 +131,13 @@ Physics material_physics(const Model& m) {
           {"integration.integrator", m.integrator == Integrator::VelocityVerlet ? "velocity_verlet" : "symplectic_euler"},
           {"integration.dt_over_tc", num(m.dt_over_tc)},
           {"integration.kinematics", m.sllod ? "sllod" : "plain"}};
+  if (m.contact.frictional()) {   // a frictionless record keeps its old keys (and hash)
+    p.push_back({"contact.tangential", "cundall_strack"});
+    p.push_back({"contact.friction", num(m.contact.friction)});
+    p.push_back({"contact.tangential_stiffness_ratio", num(m.contact.tangential_stiffness_ratio)});
+    p.push_back({"contact.tangential_damping_kg_s", num(m.contact.tangential_damping)});
+  }
+  return p;
 }
 
 namespace {

@@ -191,11 +191,15 @@ State random_packing(const Model& m, double phi) {
 // byte before it. Version 2 (the same without the checksum) is still read. Version 4
 // ("DEMCKPT4"): version 3 with the sheared cell after the list flag (tilt, tilt0, flips,
 // tilt_at_build), written only for a state whose cell has a tilt or was sheared since its
-// strains were zeroed: every diagonal run still writes the bytes of version 3.
+// strains were zeroed: every diagonal run still writes the bytes of version 3. Version 5
+// ("DEMCKPT5"): version 4 plus the rotations and the per-contact history of a frictional state
+// (angular velocities, torques, history width, odd mask, records, their pair ids, the energy
+// dissipated by friction), written only for such a state: frictionless runs keep 3 or 4.
 namespace {
 const char kMagic[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '3'};
 const char kMagicV4[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '4'};
 const char kMagicV2[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '2'};
+const char kMagicV5[8] = {'D', 'E', 'M', 'C', 'K', 'P', 'T', '5'};
 
 std::uint64_t fnv1a(const char* data, std::size_t n) {
   std::uint64_t h = 14695981039346656037ULL;
@@ -235,8 +239,9 @@ void write_checkpoint(const std::string& path, const Checkpoint& c) {
   Writer w;
   const State& st = c.state;
   const Vec3& tb = st.tilt_at_build;
-  const bool v4 = st.box.sheared() || tb.x != 0 || tb.y != 0 || tb.z != 0;
-  w.buf.append(v4 ? kMagicV4 : kMagic, 8);
+  const bool v5 = st.rotations() || st.history.width > 0;
+  const bool v4 = v5 || st.box.sheared() || tb.x != 0 || tb.y != 0 || tb.z != 0;
+  w.buf.append(v5 ? kMagicV5 : v4 ? kMagicV4 : kMagic, 8);
   w.str(c.scene_toml);
   w.str(c.label);
   const State& s = c.state;
@@ -247,6 +252,12 @@ void write_checkpoint(const std::string& path, const Checkpoint& c) {
     w.pod(s.box.tilt); w.pod(s.box.tilt0);
     for (int k = 0; k < 3; ++k) w.pod(s.box.flips[k]);
     w.pod(s.tilt_at_build);
+  }
+  if (v5) {
+    w.vec(s.angular_velocity); w.vec(s.torque);
+    w.pod<std::int32_t>(s.history.width); w.pod<std::uint32_t>(s.history.odd);
+    w.vec(s.history.values); w.vec(s.history.ids);
+    w.pod(s.friction_dissipated);
   }
   w.buf.append("END!", 4);
   w.pod(fnv1a(w.buf.data(), w.buf.size()));
@@ -262,14 +273,15 @@ Checkpoint read_checkpoint(const std::string& path) {
 }
 
 Checkpoint parse_checkpoint(const std::string& buf, const std::string& path) {
-  const bool v4 = buf.size() >= 8 && std::memcmp(buf.data(), kMagicV4, 8) == 0;
+  const bool v5 = buf.size() >= 8 && std::memcmp(buf.data(), kMagicV5, 8) == 0;
+  const bool v4 = v5 || (buf.size() >= 8 && std::memcmp(buf.data(), kMagicV4, 8) == 0);
   const bool v3 = v4 || (buf.size() >= 8 && std::memcmp(buf.data(), kMagic, 8) == 0);   // v3 and up: checksum
   const bool v2 = buf.size() >= 8 && std::memcmp(buf.data(), kMagicV2, 8) == 0;
   if (!v3 && !v2) {
     if (buf.size() >= 7 && std::memcmp(buf.data(), kMagic, 7) == 0)
       throw std::runtime_error(path + ": checkpoint format version '" + std::string(1, buf[7]) +
-                               "' is not readable by this dem (versions 2, 3 and 4 are): rerun the preparation");
-    throw std::runtime_error(path + ": not a dem checkpoint (wrong magic; version 3 or 4 expected)");
+                               "' is not readable by this dem (versions 2 to 5 are): rerun the preparation");
+    throw std::runtime_error(path + ": not a dem checkpoint (wrong magic; version 3, 4 or 5 expected)");
   }
   if (v3) {
     if (buf.size() < 8 + 12) throw std::runtime_error(path + ": checkpoint is truncated");
@@ -295,6 +307,22 @@ Checkpoint parse_checkpoint(const std::string& buf, const std::string& path) {
     s.box.tilt = r.pod<Vec3>(); s.box.tilt0 = r.pod<Vec3>();
     for (int k = 0; k < 3; ++k) s.box.flips[k] = r.pod<std::int32_t>();
     s.tilt_at_build = r.pod<Vec3>();
+  }
+  if (v5) {
+    s.angular_velocity = r.vec<Vec3>(); s.torque = r.vec<Vec3>();
+    s.history.width = r.pod<std::int32_t>(); s.history.odd = r.pod<std::uint32_t>();
+    s.history.values = r.vec<double>(); s.history.ids = r.vec<std::int32_t>();
+    s.friction_dissipated = r.pod<double>();
+    const std::size_t n = s.position.size();
+    if ((s.angular_velocity.size() != n && !s.angular_velocity.empty()) || s.torque.size() != s.angular_velocity.size() ||
+        s.history.width < 0 || s.history.width > 64 || s.history.ids.size() % 2 != 0 ||
+        s.history.values.size() != s.history.ids.size() / 2 * static_cast<std::size_t>(s.history.width) ||
+        !std::isfinite(s.friction_dissipated))
+      throw std::runtime_error(path + ": checkpoint is corrupt (rotations or contact history do not fit the particles)");
+    for (double v : s.history.values)
+      if (!std::isfinite(v)) throw std::runtime_error(path + ": checkpoint is corrupt (non-finite contact history)");
+    for (const Vec3& w : s.angular_velocity)
+      if (!std::isfinite(w.x + w.y + w.z)) throw std::runtime_error(path + ": checkpoint is corrupt (non-finite angular velocity)");
   }
   r.need(4);
   if (body.compare(r.pos, 4, "END!") != 0 || r.pos + 4 != body.size())

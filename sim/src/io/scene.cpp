@@ -388,6 +388,37 @@ bool builtin_mode(const std::string& name, DeformationMode* mode) {
   return true;
 }
 
+// The tangential sub-model's keys. Absent from a frictionless scene's resolved text (so its
+// outputs keep their bytes); a frictional scene lists all of them. `friction` alone (> 0)
+// selects cundall_strack.
+static void read_tangential(KeyReader& r, ContactLaw& c, const std::string& origin) {
+  std::string name;
+  r.get_if_present("contact", "friction", c.friction);
+  r.get_if_present("contact", "tangential", name);
+  if (name.empty()) name = c.friction != 0 ? "cundall_strack" : "none";
+  if (name == "none") {
+    if (c.friction != 0)
+      throw SceneError(origin + ": contact.friction = " + std::to_string(c.friction) + " needs a tangential model: "
+                       "set contact.tangential = \"cundall_strack\" (or remove contact.friction)");
+    for (const char* key : {"tangential_stiffness_ratio", "tangential_damping_kg_s"}) {
+      double unused = 0;
+      r.get_if_present("contact", key, unused);
+      if (unused != 0)
+        throw SceneError(origin + ": contact." + key + " is a key of the tangential model, but contact.tangential "
+                         "is \"none\": set contact.tangential = \"cundall_strack\" and contact.friction");
+    }
+    return;
+  }
+  if (name != "cundall_strack")
+    throw SceneError(origin + ": contact.tangential = '" + name + "' is unknown; use \"none\" (frictionless) or "
+                     "\"cundall_strack\" (linear tangential spring with a Coulomb limit, docs/contact_models.md)");
+  c.tangential = TangentialModel::CundallStrack;
+  r.get("contact", "tangential", name);   // listed in the resolved scene
+  r.get("contact", "friction", c.friction);
+  r.get("contact", "tangential_stiffness_ratio", c.tangential_stiffness_ratio);
+  r.get("contact", "tangential_damping_kg_s", c.tangential_damping);
+}
+
 Model load_scene(const std::string& text, const std::vector<std::string>& overrides,
                  std::string* resolved, const std::string& origin) {
   toml::table root;
@@ -412,6 +443,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   r.get("contact", "damping_kg_s", m.contact.damping);
   r.get("contact", "allow_attractive", m.contact.allow_attractive);
   r.get("contact", "background_damping_kg_s", m.background_damping);
+  read_tangential(r, m.contact, origin);
   std::string integrator = "velocity_verlet";
   r.get("integration", "integrator", integrator);
   if (integrator == "velocity_verlet") m.integrator = Integrator::VelocityVerlet;
@@ -606,6 +638,17 @@ std::string g(double v) {
   return b;
 }
 
+void validate_tangential(const ContactLaw& c) {
+  if (!c.frictional()) return;
+  if (!(c.friction >= 0) || !std::isfinite(c.friction))
+    fail("contact.friction must be zero or positive and finite (the Coulomb coefficient mu, e.g. 0.5)");
+  if (!finite_positive(c.tangential_stiffness_ratio) || c.tangential_stiffness_ratio > 10)
+    fail("contact.tangential_stiffness_ratio (k_t/k) must be in (0, 10]; 2/7 = 0.2857 gives the tangential "
+         "oscillation the normal one's period");
+  if (!(c.tangential_damping >= 0) || !std::isfinite(c.tangential_damping))
+    fail("contact.tangential_damping_kg_s must be zero or positive and finite");
+}
+
 void validate_particles_and_contact(const Model& m) {
   if (m.count < 2) fail("particles.count must be at least 2");
   if (!finite_positive(m.radius_min)) fail("particles.radius_min_m must be positive and finite");
@@ -617,6 +660,7 @@ void validate_particles_and_contact(const Model& m) {
     fail("contact.damping_kg_s must be zero or positive and finite");
   if (!(m.background_damping >= 0) || !std::isfinite(m.background_damping))
     fail("contact.background_damping_kg_s must be zero or positive and finite");
+  validate_tangential(m.contact);
 }
 
 void validate_integration(const Model& m) {

@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "dem/contact/contact_law.hpp"
+#include "dem/contact/contact_forces.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/core/errors.hpp"
 
@@ -13,15 +13,17 @@ namespace dem {
 
 AxisResponse axis_response(const Model& model, const State& s, const NeighborList& list, const VelGrad& rate) {
   AxisResponse r;
-  const LinearSpringDashpot law(model.contact);
-  const double k = model.contact.stiffness;
+  const double k = model.contact.stiffness;   // the normal sub-model's tangent stiffness
   Sym3 contact;
   double M[3][3] = {}, S[3][3] = {};
   const bool sheared = rate.sheared() || s.box.sheared();
-  for_each_contact(s, list, [&](int i, int j, const Vec3& d, double dist, double delta) {
-    const Vec3 n = d * (1.0 / dist);
-    const Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + rate.apply(d);
-    contact.add_outer(d, n, law(delta, -dot(v_rel, n)));
+  const bool frictional = model.contact.frictional();
+  contact::for_each_contact_force(model, s, list, rate, [&](const contact::ContactForce& c) {
+    const Vec3& n = c.n;
+    const Vec3& d = c.d;
+    const double dist = c.r;
+    contact.add_outer(d, n, c.fn);
+    if (frictional) contact.add_outer(d, c.ft, 1.0);   // symmetric part of d (x) f_t
     const double n2[3] = {n.x * n.x, n.y * n.y, n.z * n.z};
     const double w = k * dist * dist;
     for (int a = 0; a < 3; ++a)

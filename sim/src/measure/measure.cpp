@@ -6,7 +6,7 @@
 #include <cmath>
 #include <cstdio>
 
-#include "dem/contact/contact_law.hpp"
+#include "dem/contact/contact_forces.hpp"
 
 namespace dem {
 
@@ -73,7 +73,6 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
   Measurement m;
   const int n = s.count();
   const double V = s.box.volume();
-  const LinearSpringDashpot law(model.contact);
   m.step = s.step;
   m.time = s.time;
   m.strain_tensor = log_strain_tensor(s.box);
@@ -86,15 +85,28 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
   std::vector<std::pair<int, int>> pairs;
   Sym3 contact_stress, fabric;
   double overlap_sum = 0;
-  for_each_contact(s, list, [&](int i, int j, const Vec3& d, double r, double delta) {
-    const Vec3 nrm = d * (1.0 / r);
-    const Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + rate.apply(d);
-    const double fn = law(delta, -dot(v_rel, nrm));
-    contact_stress.add_outer(d, nrm, fn);   // branch (x) force on j, repulsion positive
+  // The tangential forces' stress, kept apart: its antisymmetric part is a check (zero in
+  // equilibrium: the torques balance), its symmetric part joins the stress.
+  double tangential[3][3] = {};
+  long sliding = 0;
+  m.frictional = model.contact.frictional();
+  contact::for_each_contact_force(model, s, list, rate, [&](const contact::ContactForce& c) {
+    const int i = c.i, j = c.j;
+    const Vec3& d = c.d;
+    const Vec3& nrm = c.n;
+    const double delta = c.delta;
+    contact_stress.add_outer(d, nrm, c.fn);   // branch (x) force on j, repulsion positive
+    if (m.frictional) {
+      const double dv[3] = {d.x, d.y, d.z}, fv[3] = {c.ft.x, c.ft.y, c.ft.z};
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) tangential[a][b] += dv[a] * fv[b];   // d (x) f on j, as the normal part
+      sliding += c.sliding;
+      m.E_t += c.energy - 0.5 * model.contact.stiffness * delta * delta;
+    }
     const double vi = 4.0 / 3.0 * M_PI * s.radius[i] * s.radius[i] * s.radius[i];
     const double vj = 4.0 / 3.0 * M_PI * s.radius[j] * s.radius[j] * s.radius[j];
     fabric.add_outer(nrm, nrm, vi + vj);
-    m.E_pot += law.energy(delta);
+    m.E_pot += c.energy;
     const double rel = delta / std::min(s.radius[i], s.radius[j]);
     m.overlap_max_rel = std::max(m.overlap_max_rel, rel);
     overlap_sum += rel;
@@ -109,6 +121,20 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
   }
   m.stress_kinetic = m.stress_kinetic * (1.0 / V);
   m.stress = contact_stress * (1.0 / V);
+  if (m.frictional) {
+    const double t = 1.0 / V;
+    m.stress += Sym3{tangential[0][0] * t, tangential[1][1] * t, tangential[2][2] * t,
+                     0.5 * (tangential[0][1] + tangential[1][0]) * t, 0.5 * (tangential[0][2] + tangential[2][0]) * t,
+                     0.5 * (tangential[1][2] + tangential[2][1]) * t};
+    m.stress_antisym = Vec3{0.5 * (tangential[0][1] - tangential[1][0]) * t, 0.5 * (tangential[0][2] - tangential[2][0]) * t,
+                            0.5 * (tangential[1][2] - tangential[2][1]) * t};
+    m.sliding_fraction = m.contacts ? static_cast<double>(sliding) / m.contacts : 0.0;
+    m.E_rot = s.rotational_energy();
+    double w_sum = 0;
+    for (const Vec3& w : s.angular_velocity) w_sum += norm(w);
+    m.omega_mean = n ? w_sum / n : 0.0;
+    m.W_friction = s.friction_dissipated;
+  }
   m.stress += m.stress_kinetic;
   m.fabric = fabric * (1.0 / V);
   m.p = m.stress.trace() / 3.0;
@@ -189,6 +215,20 @@ const std::vector<std::string>& curve_columns() {
   return cols;
 }
 
+const std::vector<std::string>& friction_columns() {
+  static const std::vector<std::string> cols = {"sliding_fraction", "E_rot_J", "omega_mean_rad_s", "E_t_J",
+                                                "W_friction_J", "sigma_antisym_rel"};
+  return cols;
+}
+
+std::string friction_row(const Measurement& m) {
+  char buf[512];
+  const double a = norm(m.stress_antisym);
+  std::snprintf(buf, sizeof buf, ",%.10g,%.10g,%.10g,%.10g,%.10g,%.10g", m.sliding_fraction, m.E_rot, m.omega_mean,
+                m.E_t, m.W_friction, m.p > 0 ? a / m.p : 0.0);
+  return buf;
+}
+
 std::string curve_row(const Measurement& m) {
   char buf[2048];
   const auto& S = m.stress;
@@ -205,7 +245,7 @@ std::string curve_row(const Measurement& m) {
                 m.stress_kinetic.trace() / 3.0, m.inertial_number, m.contacts, m.strain_tensor.xy,
                 m.strain_tensor.xz, m.strain_tensor.yz, m.eps_d_eig, m.sigma_dev_eig, m.s_dev_eig, m.F_dev_eig,
                 m.angle_sigma_F, m.angle_sigma_D, m.angle_F_D);
-  return buf;
+  return m.frictional ? std::string(buf) + friction_row(m) : std::string(buf);
 }
 
 }  // namespace dem

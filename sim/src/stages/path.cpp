@@ -276,8 +276,9 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
   state.box.log_strain = Vec3{0, 0, 0};
   Engine engine(model, state);
   const bool sheared = path_sheared(mode);
-  CurveFile csv(csv_path, curve_preamble(model, label, shear_physics(model), mode_definition(model, mode)),
-                columns_of(sheared));
+  std::vector<std::string> extra = columns_of(sheared);
+  if (model.contact.frictional()) extra.insert(extra.begin(), friction_columns().begin(), friction_columns().end());
+  CurveFile csv(csv_path, curve_preamble(model, label, shear_physics(model), mode_definition(model, mode)), extra);
   // p0: the pressure of the first row (the dashpots see the first stage's prescribed rate).
   const VelGrad rate0 = mode.path.front().gradient_shape() * model.protocol.deviatoric_rate;
   const double p0 = axis_response(model, state, engine.neighbor_list(), rate0).p();

@@ -12,7 +12,7 @@
 #include <sstream>
 
 #include "dem/io/checks.hpp"
-#include "dem/contact/contact_law.hpp"
+#include "dem/contact/contact_forces.hpp"
 #include "dem/stages/curve_file.hpp"
 #include "dem/engine/engine.hpp"
 #include "dem/io/io.hpp"
@@ -33,9 +33,8 @@ std::vector<int> contact_counts(const State& s, const NeighborList& list) {
 }
 
 double potential_energy(const Model& m, const State& s, const NeighborList& list) {
-  const LinearSpringDashpot law(m.contact);
   double e = 0;
-  for_each_contact(s, list, [&](int, int, const Vec3&, double, double delta) { e += law.energy(delta); });
+  contact::for_each_contact_force(m, s, list, VelGrad{}, [&](const contact::ContactForce& c) { e += c.energy; });
   return e;
 }
 
@@ -175,7 +174,8 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   const VelGrad& grad = progress.grad;
   const bool shear = spec.stop == StopKind::DeviatoricStrain;
   CurveFile csv(csv_path, curve_preamble(model, spec.name, shear ? shear_physics(model) : preparation_physics(model),
-                                         spec.definition));
+                                         spec.definition),
+                model.contact.frictional() ? friction_columns() : std::vector<std::string>{});
 
   Measurement last_m = measure(model, state, engine.neighbor_list(), grad);
   auto write_row = [&](const Measurement& m) { csv.row(curve_row(m), spec.name); };

@@ -17,7 +17,15 @@ enum class Integrator {
   SymplecticEuler,    ///< v += a dt; x += v dt  (what YADE's NewtonIntegrator does)
 };
 
-/// Linear spring-dashpot normal contact, f_n = k*delta + gamma*d(delta)/dt  [N], repulsive positive.
+/// The tangential sub-model of the contact (contact/tangential.hpp).
+enum class TangentialModel {
+  None,            ///< frictionless (default): no tangential force, no rotations
+  CundallStrack,   ///< linear tangential spring + optional dashpot, Coulomb limit mu
+};
+
+/// The contact model's parameters as the scene gives them (`[contact]`); contact/contact_model.hpp
+/// composes the sub-models from them. Normal: linear spring-dashpot,
+/// f_n = k*delta + gamma*d(delta)/dt  [N], repulsive positive.
 struct ContactLaw {
   double stiffness = 1e8;       ///< k [N/m = kg/s^2], > 0
   double damping = 1.0;         ///< gamma [kg/s], >= 0; constant, not mass-scaled
@@ -26,6 +34,12 @@ struct ContactLaw {
   /// Law2_ScGeom_ViscElPhys_Basic does (docs/yade.md). If true the force may turn attractive
   /// (the textbook linear spring-dashpot, which the analytic t_c and e describe exactly).
   bool allow_attractive = false;
+  TangentialModel tangential = TangentialModel::None;
+  double friction = 0.0;                    ///< Coulomb coefficient mu (cundall_strack), >= 0
+  double tangential_stiffness_ratio = 2.0 / 7.0;   ///< k_t / k (cundall_strack), > 0
+  double tangential_damping = 0.0;          ///< gamma_t [kg/s] (cundall_strack), >= 0
+  /// The model needs angular velocities, torques and per-contact history.
+  bool frictional() const { return tangential != TangentialModel::None; }
 };
 
 /// What ends a stage of a loading path (PathStage::stop).

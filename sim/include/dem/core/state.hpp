@@ -65,6 +65,23 @@ struct State {
   std::vector<double> mass;       ///< [kg]
   std::vector<std::int32_t> id;   ///< original particle index, stable across re-sorting
 
+  // Rotations: sized N only when the contact model needs them (friction); empty otherwise, so
+  // a frictionless state keeps 3 degrees of freedom per particle. Moment of inertia 2/5 m r^2.
+  std::vector<Vec3> angular_velocity;   ///< [rad/s]
+  std::vector<Vec3> torque;             ///< of the last evaluation [N m]
+
+  /// Per-contact history (tangential springs...), one record of `width` doubles per listed
+  /// pair in neighbour-list order, so the pair loop reads it contiguously. Carried across list
+  /// rebuilds, re-sorts and cell flips by the pair's particle ids (rebuild_neighbor_list);
+  /// written to checkpoints. Entries whose bit is set in `odd` change sign when i and j swap.
+  struct ContactHistory {
+    int width = 0;
+    unsigned odd = 0;
+    std::vector<double> values;        ///< width doubles per record
+    std::vector<std::int32_t> ids;     ///< (id_i, id_j) of each record's pair, in its orientation
+  } history;
+  double friction_dissipated = 0;  ///< energy the Coulomb limit removed from the springs [J], cumulative
+
   Box box;
   double time = 0;                ///< simulated time [s]
   std::int64_t step = 0;
@@ -80,6 +97,8 @@ struct State {
   double particle_volume() const;        ///< sum of sphere volumes [m^3]
   double volume_fraction() const { return particle_volume() / box.volume(); }
   double kinetic_energy() const;         ///< of fluctuation velocities [J]
+  double rotational_energy() const;      ///< sum I w^2 / 2 [J] (0 without rotations)
+  bool rotations() const { return !angular_velocity.empty(); }
   void resize(int n);
 };
 

@@ -78,6 +78,7 @@ class Engine {
                            const StalenessTest& test);   // 1-3, zeroes F; returns max |u|^2
   void rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2);  // 4
   void finish_forces_and_kick(int begin, int end);       // 5 (damping) and 6
+  void kick_rotations(int begin, int end, double h);     // 1 and 6 for angular velocities (friction)
   void evaluate_forces();                                // 5 on its own (construction)
   void step_serial(const AffineMap& map, bool affine, const StalenessTest& test);
   void step_threaded(const AffineMap& map, bool affine, const StalenessTest& test);

@@ -3,11 +3,12 @@
 #pragma once
 #include <cstddef>
 #include <cstdint>
+#include <map>
 #include <new>
 #include <string>
 #include <vector>
 
-#include "dem/contact/contact_law.hpp"
+#include "dem/contact/contact_model.hpp"
 #include "dem/forces/neighbor_list.hpp"
 #include "dem/core/state.hpp"
 
@@ -59,6 +60,10 @@ struct ForceScratch {
   std::vector<int> bounds;                                    ///< size blocks + 1
   std::vector<std::uint16_t> block_of;                        ///< block of each particle
   std::vector<std::vector<std::vector<SpilledForce>>> spill;  ///< [from block][to block]
+  /// Torques owed to particles of later blocks (rotating models only; SpilledForce::f is the
+  /// torque [N m]), and the energy each block's Coulomb limits removed this step [J].
+  std::vector<std::vector<std::vector<SpilledForce>>> spill_torque;
+  std::vector<double> dissipated;
   std::vector<std::int32_t> pair_i;                           ///< i of each listed pair
   /// One 64-byte record per particle for the vectorised kernels: x y z [m] r [m] vx vy vz
   /// [m/s] 0 (pack_particles fills it; sized by partition_pairs).
@@ -79,7 +84,10 @@ void partition_pairs(const NeighborList& list, int blocks, ForceScratch& scratch
 /// Adds the contact forces of the pairs of block b to force (which must hold the values to
 /// add to, normally zero), queueing forces on later blocks in scratch.spill[b].
 /// Safe to call concurrently for different blocks.
-void accumulate_pair_forces(const Model& model, const State& state, const NeighborList& list,
+/// With a rotating model (friction) it also adds torques to state.torque, advances the
+/// per-contact history of the block's pairs (state.history, in list order) and puts the energy
+/// its Coulomb limits removed in scratch.dissipated[b].
+void accumulate_pair_forces(const Model& model, State& state, const NeighborList& list,
                             const VelGrad& strain_rate, int b, ForceScratch& scratch, Vec3* force);
 
 /// Copies positions, radii and velocities of particles [begin, end) into scratch.packed (the
@@ -93,8 +101,15 @@ inline void pack_particle(const Vec3& x, double r, const Vec3& v, double* record
   record[4] = v.x; record[5] = v.y; record[6] = v.z; record[7] = 0.0;
 }
 
-/// Adds to force[] the queued forces aimed at block b, from blocks 0..b-1 in order.
-void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force);
+/// Adds to force[] the queued forces aimed at block b, from blocks 0..b-1 in order (and the
+/// queued torques to torque[], when not null).
+void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force, Vec3* torque = nullptr);
+
+/// Zeroes state.torque (rotating models) and sizes the history to the list (a fresh list
+/// build already did); adds the blocks' dissipated energy, in block order, to
+/// state.friction_dissipated. The engine calls these around its pair loop.
+void begin_pair_loop(const Model& model, State& state, const NeighborList& list, ForceScratch& scratch);
+void end_pair_loop(State& state, const ForceScratch& scratch);
 
 /// Computes state.force for the current positions and fluctuation velocities:
 ///  - every listed pair in contact: normal force from the contact law, equal and opposite;
@@ -111,7 +126,16 @@ void compute_forces(const Model& model, State& state, const NeighborList& list,
 /// found by rounding the fractional coordinates of the separation, z, then y, then x (exact
 /// for the upper-triangular cell while contacts are shorter than half of every edge).
 /// O(N^2); for tests.
-void compute_forces_all_pairs(const Model& model, State& state, const VelGrad& strain_rate);
+/// With a rotating model the oracle also gives torques and advances the history, which it
+/// keeps in `history` keyed by the pair's particle ids (id_i, id_j) with i < j by id; it must
+/// then be given (tests pass the list's history converted with history_by_ids()).
+using PairHistoryMap = std::map<std::pair<std::int32_t, std::int32_t>, std::vector<double>>;
+void compute_forces_all_pairs(const Model& model, State& state, const VelGrad& strain_rate,
+                              PairHistoryMap* history = nullptr);
+
+/// The state's history records with any non-zero entry, keyed by (smaller id, larger id),
+/// odd entries in that orientation (for comparisons with the oracle).
+PairHistoryMap history_by_ids(const State& state);
 
 /// The minimum-image separation x_j - x_i of the oracle [m].
 Vec3 minimum_image(const Box& box, const Vec3& xi, const Vec3& xj);

@@ -43,6 +43,13 @@ void image_offsets(const Box& box, Vec3 offsets[27]);
 /// twice the list cutoff 2*r_max + skin along any axis (too few particles for the box).
 void rebuild_neighbor_list(State& state, NeighborList& list, double skin, bool sort_by_cell);
 
+/// Puts the state's per-contact history (State::ContactHistory: records keyed by the pair's
+/// particle ids, in any order) into the order of `list`: a listed pair gets the record of the
+/// same two particles (odd entries negated if they are listed the other way round), every other
+/// pair zeros. Called by rebuild_neighbor_list (rebuilds, re-sorts, flips) and by the engine
+/// after a checkpoint. A no-op when the history has width 0.
+void place_history(State& state, const NeighborList& list);
+
 /// Rebuilds the list from the state's stored build reference without moving or sorting
 /// particles (used when continuing from a checkpoint, to get exactly the same list).
 void restore_neighbor_list(const State& state, NeighborList& list, double skin);
@@ -77,8 +84,10 @@ bool neighbor_list_stale(const State& state, const NeighborList& list);
 /// Calls visit(i, j, d, r, delta) for every listed pair in contact, in list order: d is the
 /// branch vector from i to the listed image of j [m], r = |d| [m], delta = r_i + r_j - r > 0
 /// the overlap [m]. The one loop behind measurements, checks and output (not the force loop).
+/// The same with the pair's index p in the list first: visit(p, i, j, d, r, delta) (p indexes
+/// per-pair arrays such as State::history).
 template <class Visit>
-void for_each_contact(const State& s, const NeighborList& list, Visit&& visit) {
+void for_each_listed_contact(const State& s, const NeighborList& list, Visit&& visit) {
   Vec3 off[27];
   image_offsets(s.box, off);
   for (int i = 0; i < s.count(); ++i)
@@ -89,8 +98,15 @@ void for_each_contact(const State& s, const NeighborList& list, Visit&& visit) {
       const double r2 = dot(d, d);
       if (r2 >= reach * reach) continue;
       const double r = std::sqrt(r2);
-      visit(i, j, d, r, reach - r);
+      visit(static_cast<long>(p), i, j, d, r, reach - r);
     }
+}
+
+template <class Visit>
+void for_each_contact(const State& s, const NeighborList& list, Visit&& visit) {
+  for_each_listed_contact(s, list, [&](long, int i, int j, const Vec3& d, double r, double delta) {
+    visit(i, j, d, r, delta);
+  });
 }
 
 }  // namespace dem

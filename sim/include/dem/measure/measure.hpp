@@ -35,6 +35,14 @@ struct Measurement {
   double overlap_mean_rel = 0;    ///< mean delta / min(r_i, r_j) over contacts
   double inertial_number = 0;     ///< |eps_dot|_max * 2<r> * sqrt(rho / p)   (0 when p <= 0)
   long contacts = 0;
+  // With friction (friction_columns(), after the usual columns):
+  bool frictional = false;
+  double sliding_fraction = 0;    ///< contacts at the Coulomb limit / contacts
+  double E_rot = 0;               ///< rotational kinetic energy sum I w^2/2 [J]
+  double omega_mean = 0;          ///< mean |w| [rad/s]
+  double E_t = 0;                 ///< elastic energy of the tangential springs [J] (part of E_pot)
+  double W_friction = 0;          ///< energy dissipated by Coulomb sliding since the state began [J]
+  Vec3 stress_antisym;            ///< antisymmetric part of the contact stress (xy, xz, yz) [Pa]
   // Objective (frame-independent) measures, from eigenvalues (docs/simple_shear.md). For a
   // diagonal deformation the strain ones equal the diagonal forms above to round-off; the stress
   // and fabric ones differ from them only by the off-diagonal parts of the tensors.
@@ -73,5 +81,10 @@ const std::vector<std::string>& curve_columns();
 
 /// One CSV row (no newline) in the order of curve_columns(); `stage` is appended last.
 std::string curve_row(const Measurement& m);
+
+/// The columns a frictional curve adds after curve_columns() (curve_row appends their values
+/// when m.frictional): sliding_fraction, E_rot_J, omega_mean_rad_s, E_t_J, W_friction_J,
+/// sigma_antisym_rel (|antisymmetric stress| / p: the torque-balance check).
+const std::vector<std::string>& friction_columns();
 
 }  // namespace dem

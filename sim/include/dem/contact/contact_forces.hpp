@@ -1,0 +1,60 @@
+// Contact forces for the consumers outside the pair loop (stress, energy, the servo's response,
+// VTK): the same model body, evaluated at the state's current velocities, reading the history
+// the pair loop stored and never changing it (LAMMPS PR #1631: a diagnostic that mutates the
+// history changes trajectories).
+#pragma once
+#include <type_traits>
+
+#include "dem/contact/contact_model.hpp"
+#include "dem/forces/neighbor_list.hpp"
+
+namespace dem::contact {
+
+/// One contact as a consumer sees it.
+struct ContactForce {
+  long p;          ///< index in the list (and in State::history)
+  int i, j;        ///< particles (j: the listed image)
+  Vec3 d;          ///< branch vector i -> j [m]
+  double r;        ///< |d| [m]
+  double delta;    ///< overlap [m]
+  Vec3 n;          ///< unit normal d / r
+  double fn;       ///< normal force on j along n [N] (repulsion positive)
+  Vec3 ft;         ///< tangential force on j [N] (zero without friction)
+  bool sliding;    ///< at the Coulomb limit at the last step (friction)
+  double energy;   ///< elastic energy of the contact [J] (normal spring + tangential spring)
+};
+
+/// Calls visit(const ContactForce&) for every listed pair in contact, in list order. The
+/// normal force is the model's at the current velocities (fluctuation + rate L applied to the
+/// branch vector); the tangential force is that of the stored spring (plus its dashpot at the
+/// current velocities), capped at the Coulomb limit as in the pair loop.
+template <class Visit>
+void for_each_contact_force(const Model& model, const State& s, const NeighborList& list, const VelGrad& rate,
+                            Visit&& visit) {
+  with_contact_model(model.contact, [&](const auto& cm) {
+    using CM = std::decay_t<decltype(cm)>;
+    const bool with_history = CM::history > 0 && s.history.values.size() == list.partner.size() * CM::history;
+    for_each_listed_contact(s, list, [&](long p, int i, int j, const Vec3& d, double r, double delta) {
+      ContactForce c{p, i, j, d, r, delta, d * (1.0 / r), 0.0, Vec3{0, 0, 0}, false, 0.0};
+      const Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + rate.apply(d);
+      const NormalGeometry<double> g{r, c.n.x, c.n.y, c.n.z, delta, -dot(v_rel, c.n), v_rel.x, v_rel.y, v_rel.z};
+      c.fn = cm.normal_force(g);
+      if constexpr (CM::history > 0) {
+        static const double kZero[CM::history] = {};
+        const double* h = with_history ? s.history.values.data() + p * CM::history : kZero;
+        const double ai = s.radius[i] - 0.5 * delta, aj = s.radius[j] - 0.5 * delta;
+        const Vec3 wi = s.rotations() ? s.angular_velocity[i] : Vec3{0, 0, 0};
+        const Vec3 wj = s.rotations() ? s.angular_velocity[j] : Vec3{0, 0, 0};
+        const Vec3 v_contact = v_rel - cross(wi * ai + wj * aj, c.n);
+        c.ft = cm.tangential.force(TangentialInput{c.n, v_contact, c.fn}, h);
+        c.sliding = h[3] != 0.0;
+        c.energy = cm.energy(delta, h);
+      } else {
+        c.energy = cm.energy(delta, nullptr);
+      }
+      visit(static_cast<const ContactForce&>(c));
+    });
+  });
+}
+
+}  // namespace dem::contact

@@ -1,0 +1,84 @@
+// The contact model: sub-models composed at compile time in a fixed order,
+//   normal -> damping -> (no-tension clamp) -> tangential [-> rolling -> adhesion: issue 20],
+// over one geometry per pair (geometry.hpp), the way MercuryDPM's Species mixins and LAMMPS'
+// GranularModel sub-models are organised. An empty sub-model (NoTangential) costs nothing: the
+// frictionless model is exactly the old linear spring-dashpot, bit for bit, and keeps 3 degrees
+// of freedom per particle. `with_contact_model` turns the scene's ContactLaw into the concrete
+// type once per pair loop (or measurement), so the loops are compiled for each model.
+//
+// Where a new sub-model goes (ARCHITECTURE.md): a struct in its own header beside these
+// (force templated on the lane type if it should run in the vector kernels; `history` and
+// `rotations` constants), a template slot or a type here, a case in with_contact_model, its
+// keys in io/scene.cpp and io/checks.cpp (physics record), and its tests.
+#pragma once
+#include <type_traits>
+
+#include "dem/contact/geometry.hpp"
+#include "dem/contact/normal_linear.hpp"
+#include "dem/contact/tangential.hpp"
+#include "dem/core/model.hpp"
+#include "dem/core/state.hpp"
+
+namespace dem::contact {
+
+template <class Normal, class Damping, class Tangential>
+struct ContactModel {
+  Normal normal;
+  Damping damping;
+  Tangential tangential;
+  bool attractive = false;   ///< false: the normal force is clamped at zero (no tension)
+
+  static constexpr int history = Tangential::history;
+  static constexpr bool rotations = Tangential::rotations;
+  /// Runs in the vector kernels (no history to read and write per pair).
+  static constexpr bool vectorised = history == 0;
+
+  /// The normal force magnitude [N], repulsion positive: spring + dashpot, clamped at zero
+  /// unless `attractive`. One body for one pair (T = double) and for lanes of pairs.
+  template <class T>
+  __attribute__((always_inline)) T normal_force(const NormalGeometry<T>& g) const {
+    const T f = normal.force(g) + damping.force(g);
+    const auto keep = lanes::greater(f, lanes::splat<T>(0.0)) | lanes::mask_of<T>(attractive);
+    return lanes::select(keep, f, lanes::splat<T>(0.0));
+  }
+  /// Elastic energy stored in a contact of overlap delta [m] and history h [J].
+  double energy(double delta, const double* h) const {
+    if constexpr (history > 0) return normal.energy(delta) + tangential.energy(h);
+    else { (void)h; return normal.energy(delta); }
+  }
+  double normal_stiffness() const { return normal.stiffness(); }
+};
+
+using Frictionless = ContactModel<LinearSpring, LinearDashpot, NoTangential>;
+using Frictional = ContactModel<LinearSpring, LinearDashpot, CundallStrack>;
+
+inline Frictionless frictionless(const ContactLaw& law) {
+  return {LinearSpring{law.stiffness}, LinearDashpot{law.damping}, NoTangential{}, law.allow_attractive};
+}
+inline Frictional frictional(const ContactLaw& law) {
+  return {LinearSpring{law.stiffness}, LinearDashpot{law.damping},
+          CundallStrack{law.tangential_stiffness_ratio * law.stiffness, law.tangential_damping, law.friction},
+          law.allow_attractive};
+}
+
+/// Calls f(model) with the concrete contact model of the scene's law.
+template <class F>
+decltype(auto) with_contact_model(const ContactLaw& law, F&& f) {
+  switch (law.tangential) {
+    case TangentialModel::CundallStrack: return f(frictional(law));
+    case TangentialModel::None: break;
+  }
+  return f(frictionless(law));
+}
+
+/// Doubles of per-contact history of the scene's model (0: none), and which of them change
+/// sign when the pair's particles swap roles (bit k: entry k).
+int history_width(const ContactLaw& law);
+unsigned history_odd_mask(const ContactLaw& law);
+
+/// Gives the state what the model needs and nothing more: angular velocities and torques
+/// (zero) for a frictional model, none for a frictionless one; a history of the model's width
+/// (a history of another width is dropped).
+void prepare_state(const ContactLaw& law, State& state);
+
+}  // namespace dem::contact

@@ -1,0 +1,67 @@
+// The geometry of one pair, computed once and read by every sub-model (contact_model.hpp).
+#pragma once
+#include "dem/contact/lanes.hpp"
+#include "dem/core/vec3.hpp"
+
+namespace dem::contact {
+
+/// Where j's image is relative to i: the branch vector d = x_j + image - x_i [m], |d|^2 and
+/// the reach r_i + r_j [m]. In contact when |d|^2 < reach^2 (`touching`).
+template <class T>
+struct Separation {
+  T dx, dy, dz, r2, reach;
+};
+
+template <class T>
+__attribute__((always_inline)) inline Separation<T> separation(T xi, T yi, T zi, T ri, T xj, T yj, T zj, T rj) {
+  const T dx = xj - xi, dy = yj - yi, dz = zj - zi;
+  return {dx, dy, dz, dx * dx + dy * dy + dz * dz, ri + rj};
+}
+
+template <class T>
+__attribute__((always_inline)) inline lanes::Mask<T> touching(const Separation<T>& s) {
+  return lanes::less(s.r2, s.reach * s.reach);
+}
+
+/// The normal part of a contact: unit normal n from i to j, distance r [m], overlap
+/// delta = r_i + r_j - r [m] (> 0 in contact), overlap rate ddelta = -(v_rel . n) [m/s]
+/// (> 0 approaching), with v_rel the full relative velocity of the centres (fluctuation plus
+/// the affine flow L d of the deforming cell).
+template <class T>
+struct NormalGeometry {
+  T r, nx, ny, nz, delta, ddelta;
+  T vx, vy, vz;   ///< v_rel [m/s]
+};
+
+/// Relative velocity of the centres: (v_j - v_i) + L d, with L upper triangular (`Sheared`) or
+/// diagonal (L d is then the component-wise product). Rates in 1/s as scalars.
+template <bool Sheared, class T>
+__attribute__((always_inline)) inline void relative_velocity(const Separation<T>& s, T dvx, T dvy, T dvz,
+                                                             const VelGrad& L, T& vx, T& vy, T& vz) {
+  using lanes::splat;
+  T ax, ay, az;
+  if (Sheared) {
+    ax = splat<T>(L.diag.x) * s.dx + splat<T>(L.shear.x) * s.dy + splat<T>(L.shear.y) * s.dz;
+    ay = splat<T>(L.diag.y) * s.dy + splat<T>(L.shear.z) * s.dz;
+    az = splat<T>(L.diag.z) * s.dz;
+  } else {
+    ax = splat<T>(L.diag.x) * s.dx;
+    ay = splat<T>(L.diag.y) * s.dy;
+    az = splat<T>(L.diag.z) * s.dz;
+  }
+  vx = dvx + ax; vy = dvy + ay; vz = dvz + az;
+}
+
+template <class T>
+__attribute__((always_inline)) inline NormalGeometry<T> normal_geometry(const Separation<T>& s, T vx, T vy, T vz) {
+  NormalGeometry<T> g;
+  g.r = lanes::sqrt(s.r2);
+  const T inv_r = lanes::splat<T>(1.0) / g.r;
+  g.nx = s.dx * inv_r; g.ny = s.dy * inv_r; g.nz = s.dz * inv_r;
+  g.delta = s.reach - g.r;
+  g.ddelta = -(vx * g.nx + vy * g.ny + vz * g.nz);
+  g.vx = vx; g.vy = vy; g.vz = vz;
+  return g;
+}
+
+}  // namespace dem::contact

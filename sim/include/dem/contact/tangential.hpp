@@ -1,0 +1,89 @@
+// Tangential sub-models: none (frictionless: no history, no rotations, 3 degrees of freedom per
+// particle) and Cundall-Strack sliding friction (a linear tangential spring with an optional
+// dashpot and a Coulomb limit; its spring is per-contact history). docs/contact_models.md has
+// the equations and sources.
+#pragma once
+#include <cmath>
+
+#include "dem/core/vec3.hpp"
+
+namespace dem::contact {
+
+/// What a tangential sub-model sees of a contact (scalar: frictional contacts run on the
+/// reference loop): unit normal n (i to j), the relative velocity of the contact points
+/// v_c = (v_j - v_i) + L d - (a_i w_i + a_j w_j) x n [m/s] (a = r - delta/2, the lever arms
+/// to the middle of the overlap), and the normal force fn >= 0 [N] after the clamp.
+struct TangentialInput {
+  Vec3 n;
+  Vec3 v_contact;
+  double fn;
+};
+
+/// Frictionless: no tangential force.
+struct NoTangential {
+  static constexpr int history = 0;          ///< doubles of per-contact history
+  static constexpr bool rotations = false;   ///< needs angular velocities and torques
+};
+
+/// Cundall-Strack (1979) sliding friction as in Luding (2008), eqs. 17-21, and LAMMPS'
+/// `tangential linear_history`: the spring is stored as a displacement xi [m]; each step it is
+/// first rotated into the current tangent plane keeping its length (xi - (xi.n)n, rescaled to
+/// |xi|: objective, the spring's energy is unchanged by a rigid rotation of the pair), then
+/// advanced by v_t dt. The trial force f* = -k_t xi - gamma_t v_t [N on j]; if
+/// |f*| > mu fn the force is f* scaled to mu fn (sliding) and the spring is reset to the cone,
+/// xi = -(f + gamma_t v_t)/k_t. History: xi (3 doubles, odd under i <-> j) and a slip flag.
+/// Scene keys: contact.tangential = "cundall_strack", contact.friction (mu),
+/// contact.tangential_stiffness_ratio (k_t/k), contact.tangential_damping_kg_s (gamma_t).
+struct CundallStrack {
+  double kt;        ///< [N/m]
+  double gamma_t;   ///< [kg/s]
+  double mu;        ///< Coulomb coefficient
+  static constexpr int history = 4;          ///< xi_x, xi_y, xi_z [m], slipping (0/1)
+  static constexpr bool rotations = true;
+  static constexpr unsigned odd_mask = 0x7;  ///< history entries that change sign when i and j swap
+
+  static Vec3 tangent_part(const Vec3& v, const Vec3& n) { return v - n * dot(v, n); }
+
+  /// The spring rotated into the tangent plane of n, length kept.
+  static Vec3 rotate_spring(const Vec3& xi, const Vec3& n) {
+    const double len2 = dot(xi, xi);
+    if (len2 == 0.0) return xi;
+    const Vec3 p = tangent_part(xi, n);
+    const double p2 = dot(p, p);
+    return p2 > 0.0 ? p * std::sqrt(len2 / p2) : Vec3{0, 0, 0};
+  }
+
+  /// One step of the contact: updates h (xi, slip) and returns the tangential force on j [N];
+  /// `dissipated` gains the elastic energy the Coulomb limit removed from the spring [J].
+  Vec3 update(const TangentialInput& c, double dt, double* h, double* dissipated) const {
+    const Vec3 vt = tangent_part(c.v_contact, c.n);
+    Vec3 xi = rotate_spring(Vec3{h[0], h[1], h[2]}, c.n) + vt * dt;
+    Vec3 f = xi * (-kt) - vt * gamma_t;
+    const double limit = mu * c.fn, f2 = dot(f, f);
+    h[3] = 0.0;
+    if (f2 > limit * limit) {
+      const double e_trial = 0.5 * kt * dot(xi, xi);
+      f = f * (limit / std::sqrt(f2));
+      xi = (f + vt * gamma_t) * (-1.0 / kt);
+      *dissipated += e_trial - 0.5 * kt * dot(xi, xi);
+      h[3] = 1.0;
+    }
+    h[0] = xi.x; h[1] = xi.y; h[2] = xi.z;
+    return f;
+  }
+
+  /// The force the stored spring exerts now, without changing it (measurements: never mutate
+  /// the history in a diagnostic).
+  Vec3 force(const TangentialInput& c, const double* h) const {
+    const Vec3 vt = tangent_part(c.v_contact, c.n);
+    Vec3 f = Vec3{h[0], h[1], h[2]} * (-kt) - vt * gamma_t;
+    const double limit = mu * c.fn, f2 = dot(f, f);
+    if (f2 > limit * limit) f = f * (limit / std::sqrt(f2));
+    return f;
+  }
+
+  double energy(const double* h) const { return 0.5 * kt * (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]); }
+  double stiffness() const { return kt; }
+};
+
+}  // namespace dem::contact
