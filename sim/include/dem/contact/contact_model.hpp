@@ -57,7 +57,8 @@ inline Frictionless frictionless(const ContactLaw& law) {
 }
 inline Frictional frictional(const ContactLaw& law) {
   return {LinearSpring{law.stiffness}, LinearDashpot{law.damping},
-          CundallStrack{law.tangential_stiffness_ratio * law.stiffness, law.tangential_damping, law.friction},
+          CundallStrack{law.tangential_stiffness_ratio * law.stiffness, law.tangential_damping, law.friction,
+                        law.objective_spring},
           law.allow_attractive};
 }
 

@@ -32,12 +32,14 @@ struct NoTangential {
 /// advanced by v_t dt. The trial force f* = -k_t xi - gamma_t v_t [N on j]; if
 /// |f*| > mu fn the force is f* scaled to mu fn (sliding) and the spring is reset to the cone,
 /// xi = -(f + gamma_t v_t)/k_t. History: xi (3 doubles, odd under i <-> j) and a slip flag.
+/// The energy lost to sliding is accumulated (W_friction); the tangential dashpot's is not.
 /// Scene keys: contact.tangential = "cundall_strack", contact.friction (mu),
 /// contact.tangential_stiffness_ratio (k_t/k), contact.tangential_damping_kg_s (gamma_t).
 struct CundallStrack {
   double kt;        ///< [N/m]
   double gamma_t;   ///< [kg/s]
   double mu;        ///< Coulomb coefficient
+  bool objective = true;   ///< false: no rotation of the spring (the tests' mutation check)
   static constexpr int history = 4;          ///< xi_x, xi_y, xi_z [m], slipping (0/1)
   static constexpr bool rotations = true;
   static constexpr unsigned odd_mask = 0x7;  ///< history entries that change sign when i and j swap
@@ -53,19 +55,23 @@ struct CundallStrack {
     return p2 > 0.0 ? p * std::sqrt(len2 / p2) : Vec3{0, 0, 0};
   }
 
-  /// One step of the contact: updates h (xi, slip) and returns the tangential force on j [N];
-  /// `dissipated` gains the elastic energy the Coulomb limit removed from the spring [J].
+  /// One step of the contact: updates h (xi, slip) and returns the tangential force on j [N].
+  /// `dissipated` gains the energy lost to sliding [J]: the work the contact's motion did on the
+  /// spring over the step (trapezoid of the spring force along the increment v_t dt, second
+  /// order like the integrator) minus the change of the spring's energy; zero while sticking.
   Vec3 update(const TangentialInput& c, double dt, double* h, double* dissipated) const {
     const Vec3 vt = tangent_part(c.v_contact, c.n);
-    Vec3 xi = rotate_spring(Vec3{h[0], h[1], h[2]}, c.n) + vt * dt;
+    const Vec3 old{h[0], h[1], h[2]};
+    const Vec3 start = objective ? rotate_spring(old, c.n) : old;
+    const Vec3 step = vt * dt;
+    Vec3 xi = start + step;
     Vec3 f = xi * (-kt) - vt * gamma_t;
     const double limit = mu * c.fn, f2 = dot(f, f);
     h[3] = 0.0;
     if (f2 > limit * limit) {
-      const double e_trial = 0.5 * kt * dot(xi, xi);
       f = f * (limit / std::sqrt(f2));
       xi = (f + vt * gamma_t) * (-1.0 / kt);
-      *dissipated += e_trial - 0.5 * kt * dot(xi, xi);
+      *dissipated += 0.5 * kt * (dot(start + xi, step) - dot(xi, xi) + dot(start, start));
       h[3] = 1.0;
     }
     h[0] = xi.x; h[1] = xi.y; h[2] = xi.z;

@@ -38,6 +38,9 @@ struct ContactLaw {
   double friction = 0.0;                    ///< Coulomb coefficient mu (cundall_strack), >= 0
   double tangential_stiffness_ratio = 2.0 / 7.0;   ///< k_t / k (cundall_strack), > 0
   double tangential_damping = 0.0;          ///< gamma_t [kg/s] (cundall_strack), >= 0
+  /// Not a scene key: the tests' mutation check. false drops the rotation of the spring into
+  /// the tangent plane (not objective), which the energy-balance test must catch.
+  bool objective_spring = true;
   /// The model needs angular velocities, torques and per-contact history.
   bool frictional() const { return tangential != TangentialModel::None; }
 };

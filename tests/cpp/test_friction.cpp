@@ -1,0 +1,326 @@
+// Friction (Cundall-Strack on the contact-model wing), each against an independent truth:
+// rigid-body impact theory, energy conservation, the all-pairs oracle, the frictionless law.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+
+#include "dem/engine/engine.hpp"
+#include "dem/forces/forces.hpp"
+#include "dem/io/io.hpp"
+#include "dem/measure/measure.hpp"
+#include "dem/stages/collision.hpp"
+#include "test_support.hpp"
+
+using dem::Vec3;
+using dem::VelGrad;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Chung & Ooi (2011) Test 4 adapted to two spheres: mu = 0.092, |v| = 3.9 m/s.
+dem::Model impact_model(double mu, double r_min, double r_max, const std::vector<std::string>& more = {}) {
+  std::vector<std::string> o = {"contact.friction=" + std::to_string(mu), "contact.background_damping_kg_s=0",
+                                "particles.radius_min_m=" + std::to_string(r_min),
+                                "particles.radius_max_m=" + std::to_string(r_max)};
+  o.insert(o.end(), more.begin(), more.end());
+  return dem_test::model_with(o);
+}
+
+// Rigid-body theory with I = 2/5 m R^2 for two spheres (relative velocities): the tangential
+// compliance of the contact point is 7/2 that of the centres for any size ratio.
+struct Theory {
+  bool sliding;
+  double e_t;         // v_t after / before, centres
+  double omega[2];    // |w| of each sphere after [rad/s]
+};
+Theory theory(double mu, double e_n, double theta, double v, double r1, double r2, double m1, double m2) {
+  const double mr = m1 * m2 / (m1 + m2), vn = v * std::cos(theta), vt = v * std::sin(theta);
+  Theory t;
+  t.sliding = std::tan(theta) > 3.5 * mu * (1 + e_n);
+  const double Jt = t.sliding ? mu * (1 + e_n) * mr * vn : (2.0 / 7.0) * mr * vt;   // rolling: v_c -> 0
+  t.e_t = 1.0 - Jt / (mr * vt);
+  t.omega[0] = 2.5 * Jt / (m1 * r1);
+  t.omega[1] = 2.5 * Jt / (m2 * r2);
+  return t;
+}
+
+void expect_impacts_follow_rigid_body_theory(double r1, double r2, bool print) {
+  const double mu = 0.092, v = 3.9;
+  const dem::Model m = impact_model(mu, std::min(r1, r2), std::max(r1, r2));
+  const double m1 = dem::sphere_mass(r1, m.density), m2 = dem::sphere_mass(r2, m.density);
+  if (print) std::printf("theta_deg  e_n     e_t     e_t_theory  w0_rad_s  w0_theory  w1_rad_s  w1_theory  regime\n");
+  for (int deg = 5; deg <= 85; deg += 5) {
+    const double theta = deg * kPi / 180.0;
+    const dem::ObliqueResult r = dem::simulate_oblique_collision(m, r1, r2, v, theta);
+    const Theory t = theory(mu, r.normal_restitution, theta, v, r1, r2, m1, m2);
+    const double w0 = r.omega[0].y, w1 = r.omega[1].y;   // spin about y (normal z, slip along x)
+    if (print)
+      std::printf("%9d  %.4f  %.4f  %.4f      %8.1f  %8.1f   %8.1f  %8.1f   %s\n", deg, r.normal_restitution,
+                  r.tangential_restitution, t.e_t, w0, t.omega[0], w1, t.omega[1], t.sliding ? "sliding" : "sticking");
+    // Both spheres spin the same way (the friction on each opposes its own slip).
+    EXPECT_GT(w0 * w1, 0.0) << deg;
+    if (std::tan(theta) > 1.3 * 3.5 * mu * (1 + r.normal_restitution)) {   // well inside gross sliding
+      EXPECT_NEAR(r.tangential_restitution, t.e_t, 0.01) << deg << " deg";
+      EXPECT_NEAR(std::fabs(w0), t.omega[0], 0.01 * t.omega[0]) << deg << " deg";
+      EXPECT_NEAR(std::fabs(w1), t.omega[1], 0.01 * t.omega[1]) << deg << " deg";
+    } else if (deg <= 10) {
+      // Maw's regime without slip: with k_t/k = 2/7 the tangential oscillation of the contact
+      // point (stiffness k_t, effective mass 2/7 m_r) has the normal one's period, so over the
+      // contact it turns once: v_c reverses fully, twice the rigid (rolling) impulse. Then
+      // e_t = 1 - 2 (2/7) = 3/7 and each spin is twice the rolling one.
+      EXPECT_NEAR(r.tangential_restitution, 3.0 / 7.0, 0.01) << deg;
+      EXPECT_NEAR(std::fabs(w0), 2 * t.omega[0], 0.02 * t.omega[0]) << deg;
+      EXPECT_NEAR(std::fabs(w1), 2 * t.omega[1], 0.02 * t.omega[1]) << deg;
+    }
+  }
+}
+
+}  // namespace
+
+TEST(Friction, ObliqueImpactsOfEqualSpheresFollowRigidBodyTheory) {
+  expect_impacts_follow_rigid_body_theory(1e-3, 1e-3, true);
+}
+
+// Size ratio w = 3 (LAMMPS PR #4244 reports unphysical sticking of the project-and-rescale
+// spring at large size ratios): the same closed forms hold in relative velocities.
+TEST(Friction, ObliqueImpactsAtSizeRatioThreeFollowRigidBodyTheory) {
+  expect_impacts_follow_rigid_body_theory(0.5e-3, 1.5e-3, true);
+}
+
+// The same impact with one sphere an image across the boundary of a sheared cell gives the same
+// impulses once the image's affine velocity is part of the relative velocity.
+TEST(Friction, ImpactAcrossASheredBoundaryGivesTheSameImpulses) {
+  const dem::Model m = impact_model(0.3, 1e-3, 1e-3);
+  for (double deg : {20.0, 60.0}) {
+    const double theta = deg * kPi / 180.0;
+    const dem::ObliqueResult plain = dem::simulate_oblique_collision(m, 1e-3, 1e-3, 3.9, theta);
+    const dem::ObliqueResult across = dem::simulate_oblique_collision(m, 1e-3, 1e-3, 3.9, theta, true, 200.0);
+    EXPECT_NEAR(across.normal_impulse, plain.normal_impulse, 2e-3 * plain.normal_impulse) << deg;
+    EXPECT_NEAR(across.tangential_impulse, plain.tangential_impulse, 2e-3 * std::fabs(plain.tangential_impulse)) << deg;
+    EXPECT_NEAR(across.omega[0].y, plain.omega[0].y, 2e-3 * std::fabs(plain.omega[0].y)) << deg;
+  }
+}
+
+// mu = 0 with the frictional model: zero tangential force, so the trajectory is the frictionless
+// law's, bit for bit (the frictional loop adds the same normal forces in the same order).
+TEST(Friction, ZeroFrictionCoefficientGivesTheFrictionlessBits) {
+  const dem::Model smooth = dem_test::model_with({"integration.threads=1"});
+  const dem::Model rough = dem_test::model_with({"integration.threads=1", "contact.tangential=cundall_strack",
+                                                 "contact.friction=0"});
+  dem::State a = dem_test::random_state(300, 0.38, 1.0, 3), b = a;
+  const VelGrad rate = Vec3(1, 0, -1) * (2e-3 / smooth.t_contact);
+  dem::Engine ea(smooth, a), eb(rough, b);
+  ea.set_pair_kernel(dem::PairKernel::reference);
+  for (int k = 0; k < 2000; ++k) { ea.step(rate); eb.step(rate); }
+  EXPECT_GT(eb.neighbor_list().builds, 2);
+  EXPECT_TRUE(b.rotations());
+  EXPECT_FALSE(a.rotations());
+  EXPECT_TRUE(dem_test::same_bits(a.position, b.position));
+  EXPECT_TRUE(dem_test::same_bits(a.velocity, b.velocity));
+}
+
+namespace {
+
+// Energy balance with friction and damping off: the change of E_kin + E_rot + E_springs plus the
+// energy the Coulomb limit dissipated equals the work of the stress, -int V sigma^T : L dt.
+struct FrictionBalance {
+  double error = 0, work = 0, dissipated = 0, scale = 0;
+};
+
+FrictionBalance friction_balance(double dt_over_tc, double time, const VelGrad& shape, bool objective = true,
+                                 double mu = 0.5, double rate_tc = 1e-2) {
+  dem::Model m = dem_test::model_with({"contact.damping_kg_s=0", "contact.background_damping_kg_s=0",
+                                       "contact.tangential=cundall_strack", "contact.friction=" + std::to_string(mu),
+                                       "integration.threads=1",
+                                       "integration.dt_over_tc=" + std::to_string(dt_over_tc)});
+  m.contact.objective_spring = objective;
+  dem::State s = dem_test::random_state(300, 0.36, 2.0, 11);
+  const VelGrad rate = shape * (rate_tc / m.t_contact);   // fast: contacts rotate and slide
+  dem::Engine e(m, s);
+  auto energy = [&]() {
+    const auto q = dem::measure(m, s, e.neighbor_list(), rate);
+    return q.E_kin + q.E_rot + q.E_pot + s.friction_dissipated;
+  };
+  // -V sigma^T : L for an upper-triangular L (contact + kinetic stress; the antisymmetric part
+  // of d (x) f_t enters with the transpose).
+  auto power = [&]() {
+    const auto q = dem::measure(m, s, e.neighbor_list(), rate);
+    const dem::Sym3& t = q.stress;
+    const Vec3& a = q.stress_antisym;
+    return -s.box.volume() * (t.xx * rate.diag.x + t.yy * rate.diag.y + t.zz * rate.diag.z +
+                              (t.xy - a.x) * rate.shear.x + (t.xz - a.y) * rate.shear.y + (t.yz - a.z) * rate.shear.z);
+  };
+  FrictionBalance b;
+  const double e0 = energy();
+  const long steps = std::lround(time / m.dt);
+  double p0 = power();
+  for (long k = 0; k < steps; ++k) {
+    e.step(rate);
+    const double p1 = power();
+    b.work += 0.5 * (p0 + p1) * m.dt;
+    p0 = p1;
+  }
+  b.dissipated = s.friction_dissipated;
+  b.error = energy() - e0 - b.work;
+  b.scale = std::fabs(b.work) + b.dissipated;
+  return b;
+}
+
+}  // namespace
+
+TEST(Friction, EnergyBalanceIsSecondOrderInD2AndSimpleShear) {
+  // Measured (300 spheres, mu = 0.5, rate 1e-3/t_c, 16 t_c): the error falls 2.9-3.7 times per
+  // halving of dt from t_c/25 to t_c/200 (frictionless, the same harness: 2.7-4.5).
+  for (const VelGrad& shape : {VelGrad{Vec3{1, 0, -1}, Vec3{0, 0, 0}}, VelGrad{Vec3{0, 0, 0}, Vec3{0, 1, 0}}}) {
+    const double T = 400 * 0.04 * dem_test::model_with({}).t_contact;
+    const FrictionBalance coarse = friction_balance(0.02, T, shape, true, 0.5, 1e-3);
+    const FrictionBalance fine = friction_balance(0.01, T, shape, true, 0.5, 1e-3);
+    std::printf("shear %g: work %.4g J, friction %.4g J, error %.3g J (t_c/50) %.3g J (t_c/100)\n", shape.shear.y,
+                coarse.work, coarse.dissipated, coarse.error, fine.error);
+    EXPECT_GT(coarse.dissipated, 0.3 * coarse.scale);   // friction did real work
+    EXPECT_LT(std::fabs(fine.error), 2e-3 * fine.scale);
+    EXPECT_GT(std::fabs(coarse.error) / std::fabs(fine.error), 2.5);   // second order: about 4
+  }
+}
+
+// Mutation check: a spring that is not rotated with the contact (not objective) keeps a
+// normal component that does work; the balance must see it (fast shear: contacts turn).
+TEST(Friction, EnergyBalanceCatchesANonObjectiveSpringRotation) {
+  const VelGrad shape{Vec3{0, 0, 0}, Vec3{0, 1, 0}};
+  const double T = 400 * 0.04 * dem_test::model_with({}).t_contact;
+  const FrictionBalance good = friction_balance(0.01, T, shape, true);
+  const FrictionBalance bad = friction_balance(0.01, T, shape, false);
+  std::printf("objective %.3g J, not objective %.3g J (scale %.3g J)\n", good.error, bad.error, good.scale);
+  EXPECT_GT(std::fabs(bad.error), 10 * std::fabs(good.error));
+}
+
+// The list with its history against the all-pairs oracle, on states along a sheared run
+// (rebuilds, re-sorts and cell flips): the same forces, torques and updated springs.
+TEST(Friction, ListWithHistoryEqualsTheAllPairsOracleAcrossRebuildsAndFlips) {
+  const dem::Model m = dem_test::model_with({"contact.friction=0.5", "integration.threads=1"});
+  dem::State s = dem_test::random_state(400, 0.38, 0.5, 17);
+  const VelGrad rate{Vec3{0, 0, 0}, Vec3{0, 0.4 / (3000 * m.dt), 0}};   // gamma = 0.4 per 3000 steps
+  dem::Engine e(m, s);
+  int checked = 0;
+  for (int k = 1; k <= 6000; ++k) {
+    e.step(rate);
+    if (k % 1000 != 0) continue;
+    dem::State a = s, b = s;
+    dem::ForceScratch scratch;
+    dem::compute_forces(m, a, e.neighbor_list(), rate, 1, 1, scratch);
+    dem::PairHistoryMap oracle = dem::history_by_ids(s);
+    dem::compute_forces_all_pairs(m, b, rate, &oracle);
+    const double fscale = dem_test::max_force(a);
+    ASSERT_GT(fscale, 0);
+    EXPECT_LT(dem_test::max_force_difference(a, b), 1e-9 * fscale) << "step " << k;
+    double tscale = 0, tdiff = 0;
+    for (int i = 0; i < s.count(); ++i) {
+      tscale = std::max(tscale, norm(a.torque[i]));
+      tdiff = std::max(tdiff, norm(a.torque[i] - b.torque[i]));
+    }
+    EXPECT_LT(tdiff, 1e-9 * tscale) << "step " << k;
+    const dem::PairHistoryMap listed = dem::history_by_ids(a);
+    ASSERT_EQ(listed.size(), oracle.size()) << "step " << k;
+    ASSERT_GT(listed.size(), 8u);
+    double xscale = 0, xdiff = 0;
+    for (const auto& [key, h] : listed) {
+      const auto it = oracle.find(key);
+      ASSERT_NE(it, oracle.end());
+      for (int c = 0; c < 3; ++c) {
+        xscale = std::max(xscale, std::fabs(h[c]));
+        xdiff = std::max(xdiff, std::fabs(h[c] - it->second[c]));
+      }
+      EXPECT_EQ(h[3], it->second[3]);   // slip flags
+    }
+    EXPECT_LT(xdiff, 1e-9 * xscale) << "step " << k;
+    ++checked;
+  }
+  EXPECT_EQ(checked, 6);
+  EXPECT_GE(e.flips(), 1);
+  EXPECT_GT(e.neighbor_list().builds, 10);
+}
+
+// The springs are carried by the pair's ids: a run rebuilding its list every few steps (thin
+// skin) and one rebuilding rarely (thick skin) hold the same springs after the same steps.
+TEST(Friction, SpringsDoNotDependOnHowOftenTheListIsRebuilt) {
+  const VelGrad shape{Vec3{0, 0, 0}, Vec3{0, 1, 0}};
+  auto run = [&](double skin, long* builds) {
+    const dem::Model m = dem_test::model_with({"contact.friction=0.5", "integration.threads=1",
+                                               "integration.skin_over_rmin=" + std::to_string(skin)});
+    dem::State s = dem_test::random_state(300, 0.36, 2.0, 23);
+    dem::Engine e(m, s);
+    for (int k = 0; k < 1500; ++k) e.step(shape * (0.3 / (1500 * m.dt)));
+    *builds = e.neighbor_list().builds;
+    return dem::history_by_ids(s);
+  };
+  long thin_builds = 0, thick_builds = 0;
+  const dem::PairHistoryMap thin = run(0.05, &thin_builds), thick = run(1.5, &thick_builds);
+  EXPECT_GT(thin_builds, 5 * thick_builds);
+  ASSERT_GT(thin.size(), 8u);
+  EXPECT_EQ(thin.size(), thick.size());
+  double scale = 0, diff = 0;
+  for (const auto& [key, h] : thin) {
+    const auto it = thick.find(key);
+    ASSERT_NE(it, thick.end());
+    for (int c = 0; c < 3; ++c) { scale = std::max(scale, std::fabs(h[c])); diff = std::max(diff, std::fabs(h[c] - it->second[c])); }
+  }
+  EXPECT_LT(diff, 1e-6 * scale);   // other summation orders only (chaos grows from 1e-16)
+}
+
+TEST(Friction, SplitRunEqualsStraightRunBitForBit) {
+  for (int threads : {1, 2}) {
+    const dem::Model m = dem_test::model_with({"contact.friction=0.5", "integration.threads=" + std::to_string(threads)});
+    const VelGrad rate{Vec3{0, 0, 0}, Vec3{0, 0.3 / (3000 * m.dt), 0}};
+    dem::State straight = dem_test::random_state(300, 0.38, 1.0, 29);
+    dem::State split = straight;
+    {
+      dem::Engine e(m, straight);
+      for (int k = 0; k < 3000; ++k) e.step(rate);
+    }
+    const std::string path = (std::filesystem::temp_directory_path() / "dem_friction_split.ckpt").string();
+    {
+      dem::Engine e(m, split);
+      for (int k = 0; k < 1500; ++k) e.step(rate);
+      dem::write_checkpoint(path, dem::Checkpoint{"", "mid", split});
+    }
+    dem::Checkpoint c = dem::read_checkpoint(path);
+    std::remove(path.c_str());
+    EXPECT_EQ(c.state.history.width, 4);
+    dem::Engine e2(m, c.state, /*forces_are_current=*/true);
+    for (int k = 0; k < 1500; ++k) e2.step(rate);
+    EXPECT_TRUE(dem_test::same_bits(c.state.position, straight.position)) << threads;
+    EXPECT_TRUE(dem_test::same_bits(c.state.angular_velocity, straight.angular_velocity)) << threads;
+    EXPECT_EQ(c.state.history.values.size(), straight.history.values.size());
+    EXPECT_EQ(0, std::memcmp(c.state.history.values.data(), straight.history.values.data(),
+                             straight.history.values.size() * sizeof(double)));
+    EXPECT_EQ(c.state.friction_dissipated, straight.friction_dissipated);
+  }
+}
+
+TEST(Friction, ThreadsGiveTheSameBits) {
+  std::vector<Vec3> ref;
+  for (int threads : {1, 2, 3}) {
+    const dem::Model m = dem_test::model_with({"contact.friction=0.5", "integration.threads=" + std::to_string(threads)});
+    dem::State s = dem_test::random_state(300, 0.38, 1.0, 31);
+    dem::Engine e(m, s);
+    for (int k = 0; k < 1500; ++k) e.step(VelGrad{Vec3{1, 0, -1} * (2e-3 / m.t_contact), Vec3{0, 0, 0}});
+    if (ref.empty()) ref = s.angular_velocity;
+    else EXPECT_TRUE(dem_test::same_bits(ref, s.angular_velocity)) << threads;
+  }
+}
+
+TEST(Friction, SceneKeysComposeAndBadValuesAreRefused) {
+  const dem::Model m = dem_test::model_with({"contact.friction=0.5"});
+  EXPECT_EQ(m.contact.tangential, dem::TangentialModel::CundallStrack);
+  EXPECT_NEAR(m.contact.tangential_stiffness_ratio, 2.0 / 7.0, 1e-15);
+  EXPECT_FALSE(dem_test::model_with({}).contact.frictional());
+  EXPECT_THROW(dem_test::model_with({"contact.friction=-0.1"}), dem::SceneError);
+  EXPECT_THROW(dem_test::model_with({"contact.friction=0.5", "contact.tangential=\"none\""}), dem::SceneError);
+  EXPECT_THROW(dem_test::model_with({"contact.tangential=\"mindlin\""}), dem::SceneError);
+  EXPECT_THROW(dem_test::model_with({"contact.tangential_stiffness_ratio=0.5"}), dem::SceneError);
+  EXPECT_THROW(dem_test::model_with({"contact.friction=0.5", "contact.tangential_stiffness_ratio=0"}), dem::SceneError);
+}
