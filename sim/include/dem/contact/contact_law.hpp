@@ -1,6 +1,7 @@
 // Contact-force functors plugged into the single pair loop (forces.hpp).
-// To add a contact law: write a functor with the same call signature, then template the
-// pair loop on it (see ARCHITECTURE.md).
+// To add a contact law: write a functor with the same call signature and an energy(); the
+// reference pair loop is already templated on it, the callers that construct
+// LinearSpringDashpot select it (ARCHITECTURE.md, "Where a new thing goes").
 #pragma once
 #include "dem/core/model.hpp"
 
