@@ -41,8 +41,9 @@ struct Checkpoint {
   State state;
 };
 void write_checkpoint(const std::string& path, const Checkpoint& ckpt);
-/// Format version 3: a FNV-1a 64 checksum over the whole file (version 2, without it, is still
-/// read). Throws std::runtime_error if the file is not a checkpoint of version 2 or 3, is
+/// Format version 3: a FNV-1a 64 checksum over the whole file; version 4 (written only for a
+/// sheared state) adds the tilted cell; version 2, without the checksum, is still read.
+/// Throws std::runtime_error if the file is not a checkpoint of version 2, 3 or 4, is
 /// truncated, fails its checksum, or holds an invalid state (validate_state: ids a
 /// permutation, radii and masses finite and positive, positions finite, box positive).
 Checkpoint read_checkpoint(const std::string& path);

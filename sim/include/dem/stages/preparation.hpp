@@ -2,7 +2,7 @@
 // cycle list made from the scene's protocol keys, the `protocol.preparation` spelling of the
 // same thing, their checks, and the record of them that goes into the physics of every output.
 //
-// Scene spelling (one stage per line: TOML inline tables cannot span lines; docs/protocol.md):
+// Scene spelling (one stage per line: TOML inline tables cannot span lines; docs/control.md, "The preparation as a stage list"):
 //   [protocol]
 //   preparation = [
 //     { name = "compress", kind = "compress", rate_tc = 1e-4, until = { phi = 0.64 } },
