@@ -68,6 +68,14 @@ void print_info(const dem::Model& m) {
               m.contact.stiffness, m.contact.damping, m.background_damping,
               m.contact.allow_attractive ? "attractive allowed" : "clamped at zero");
   std::printf("smallest pair      t_c = %.6g s, e = %.6g\n", m.t_contact, m.restitution);
+  if (m.contact.frictional()) {
+    // The contact point's tangential oscillation: stiffness k_t, effective mass 2/7 m_r.
+    const double mr = 0.5 * dem::sphere_mass(m.radius_min, m.density), kt = m.contact.tangential_stiffness_ratio * m.contact.stiffness;
+    std::printf("friction           Cundall-Strack, mu = %g, k_t = %g N/m (k_t/k = %g), gamma_t = %g kg/s; tangential "
+                "half-period pi sqrt(2 m_r/(7 k_t)) = %.6g s; rotations on (6 degrees of freedom)\n",
+                m.contact.friction, kt, m.contact.tangential_stiffness_ratio, m.contact.tangential_damping,
+                M_PI * std::sqrt(2.0 * mr / (7.0 * kt)));
+  }
   std::printf("time step          dt = %.6g s (t_c / %.4g), %s\n", m.dt, 1.0 / m.dt_over_tc,
               m.integrator == dem::Integrator::VelocityVerlet ? "velocity Verlet" : "symplectic Euler");
   for (const auto& st : p.preparation)

@@ -22,7 +22,7 @@ inline bool contact_force(const CM& cm, const Vec3& xi, const Vec3& xj_image, co
   const Separation<double> sep = contact::separation(xi.x, xi.y, xi.z, ri, xj_image.x, xj_image.y, xj_image.z, rj);
   if (!contact::touching(sep)) return false;
   double vx, vy, vz;
-  contact::relative_velocity<Sheared>(sep, vj.x - vi.x, vj.y - vi.y, vj.z - vi.z, rate, vx, vy, vz);
+  contact::relative_velocity<Sheared>(sep, vj.x - vi.x, vj.y - vi.y, vj.z - vi.z, contact::rate_lanes<double>(rate), vx, vy, vz);
   const NormalGeometry<double> g = contact::normal_geometry(sep, vx, vy, vz);
   const double fn = cm.normal_force(g);
   f_on_j = Vec3{g.nx, g.ny, g.nz} * fn;
@@ -46,7 +46,7 @@ inline bool contact_force_history(const CM& cm, const Vec3& xi, const Vec3& xj_i
     return false;
   }
   double vx, vy, vz;
-  contact::relative_velocity<Sheared>(sep, vj.x - vi.x, vj.y - vi.y, vj.z - vi.z, rate, vx, vy, vz);
+  contact::relative_velocity<Sheared>(sep, vj.x - vi.x, vj.y - vi.y, vj.z - vi.z, contact::rate_lanes<double>(rate), vx, vy, vz);
   const NormalGeometry<double> g = contact::normal_geometry(sep, vx, vy, vz);
   const double fn = cm.normal_force(g);
   const Vec3 n{g.nx, g.ny, g.nz};

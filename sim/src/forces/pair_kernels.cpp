@@ -34,8 +34,8 @@ __attribute__((always_inline)) inline void kernel_body(const KernelInputs& in, l
   const std::int32_t* __restrict pi = in.pair_i + p0;
   const std::int32_t* __restrict pj = in.partner + p0;
   const std::uint8_t* __restrict img = in.image + p0;
-  const contact::Frictionless model = in.model;
-  const VelGrad rate = in.rate;
+  const auto model = in.model.bind<double>();
+  const auto rate = contact::rate_lanes<double>(in.rate);
 #pragma omp simd
   for (int q = 0; q < n; ++q) {
     const long i8 = 8L * pi[q], j8 = 8L * pj[q], c4 = 4L * img[q];
@@ -94,7 +94,8 @@ __attribute__((target("avx2"))) void kernel_avx2(const KernelInputs& in, long p0
   const double* P = in.packed;
   const __m256d minus_zero = _mm256_set1_pd(-0.0);
   const L4 lane_minus_zero = lanes_of(minus_zero);
-  const contact::Frictionless model = in.model;
+  const auto model = in.model.bind<L4>();                   // parameters in lanes, once
+  const auto rate = contact::rate_lanes<L4>(in.rate);
   for (int q = 0; q < n; q += 4) {
     std::int32_t tail[3][4];
     const std::int32_t *I = in.pair_i + p0 + q, *J = in.partner + p0 + q, *C;
@@ -133,7 +134,7 @@ __attribute__((target("avx2"))) void kernel_avx2(const KernelInputs& in, long p0
     load4(P + 4, J, 8, vxj, vyj, vzj, pad);
     L4 vx, vy, vz;
     contact::relative_velocity<Sheared>(sep, lanes_of(vxj) - lanes_of(vxi), lanes_of(vyj) - lanes_of(vyi),
-                                        lanes_of(vzj) - lanes_of(vzi), in.rate, vx, vy, vz);
+                                        lanes_of(vzj) - lanes_of(vzi), rate, vx, vy, vz);
     const NormalGeometry<L4> g = contact::normal_geometry(sep, vx, vy, vz);
     const L4 fn = model.normal_force(g);
     _mm256_store_pd(fx + q, reg(lanes::select(touch, g.nx * fn, lane_minus_zero)));

@@ -33,13 +33,26 @@ struct ContactModel {
   /// Runs in the vector kernels (no history to read and write per pair).
   static constexpr bool vectorised = history == 0;
 
-  /// The normal force magnitude [N], repulsion positive: spring + dashpot, clamped at zero
-  /// unless `attractive`. One body for one pair (T = double) and for lanes of pairs.
+  /// The model with its parameters in lanes of T: a kernel binds it once before its loop.
   template <class T>
-  __attribute__((always_inline)) T normal_force(const NormalGeometry<T>& g) const {
-    const T f = normal.force(g) + damping.force(g);
-    const auto keep = lanes::greater(f, lanes::splat<T>(0.0)) | lanes::mask_of<T>(attractive);
-    return lanes::select(keep, f, lanes::splat<T>(0.0));
+  struct Bound {
+    typename Normal::template Bound<T> normal;
+    typename Damping::template Bound<T> damping;
+    lanes::Mask<T> attractive;
+    T zero;
+    /// The normal force magnitude [N], repulsion positive: spring + dashpot, clamped at zero
+    /// unless `attractive`. One body for one pair (T = double) and for lanes of pairs.
+    __attribute__((always_inline)) T normal_force(const NormalGeometry<T>& g) const {
+      const T f = normal.force(g) + damping.force(g);
+      return lanes::select(lanes::greater(f, zero) | attractive, f, zero);
+    }
+  };
+  template <class T> Bound<T> bind() const {
+    return {normal.template bind<T>(), damping.template bind<T>(), lanes::mask_of<T>(attractive), lanes::splat<T>(0.0)};
+  }
+  /// The same for one pair.
+  __attribute__((always_inline)) double normal_force(const NormalGeometry<double>& g) const {
+    return bind<double>().normal_force(g);
   }
   /// Elastic energy stored in a contact of overlap delta [m] and history h [J].
   double energy(double delta, const double* h) const {

@@ -33,21 +33,31 @@ struct NormalGeometry {
   T vx, vy, vz;   ///< v_rel [m/s]
 };
 
+/// The velocity gradient L [1/s] in lanes (bound once, outside a kernel's loop).
+template <class T>
+struct RateLanes {
+  T xx, yy, zz, xy, xz, yz;
+};
+template <class T> RateLanes<T> rate_lanes(const VelGrad& L) {
+  using lanes::splat;
+  return {splat<T>(L.diag.x), splat<T>(L.diag.y), splat<T>(L.diag.z),
+          splat<T>(L.shear.x), splat<T>(L.shear.y), splat<T>(L.shear.z)};
+}
+
 /// Relative velocity of the centres: (v_j - v_i) + L d, with L upper triangular (`Sheared`) or
-/// diagonal (L d is then the component-wise product). Rates in 1/s as scalars.
+/// diagonal (L d is then the component-wise product).
 template <bool Sheared, class T>
 __attribute__((always_inline)) inline void relative_velocity(const Separation<T>& s, T dvx, T dvy, T dvz,
-                                                             const VelGrad& L, T& vx, T& vy, T& vz) {
-  using lanes::splat;
+                                                             const RateLanes<T>& L, T& vx, T& vy, T& vz) {
   T ax, ay, az;
   if (Sheared) {
-    ax = splat<T>(L.diag.x) * s.dx + splat<T>(L.shear.x) * s.dy + splat<T>(L.shear.y) * s.dz;
-    ay = splat<T>(L.diag.y) * s.dy + splat<T>(L.shear.z) * s.dz;
-    az = splat<T>(L.diag.z) * s.dz;
+    ax = L.xx * s.dx + L.xy * s.dy + L.xz * s.dz;
+    ay = L.yy * s.dy + L.yz * s.dz;
+    az = L.zz * s.dz;
   } else {
-    ax = splat<T>(L.diag.x) * s.dx;
-    ay = splat<T>(L.diag.y) * s.dy;
-    az = splat<T>(L.diag.z) * s.dz;
+    ax = L.xx * s.dx;
+    ay = L.yy * s.dy;
+    az = L.zz * s.dz;
   }
   vx = dvx + ax; vy = dvy + ay; vz = dvz + az;
 }

@@ -10,9 +10,12 @@ namespace dem::contact {
 /// Scene key: contact.stiffness_N_m.
 struct LinearSpring {
   double k;
-  template <class T> __attribute__((always_inline)) T force(const NormalGeometry<T>& g) const {
-    return lanes::splat<T>(k) * g.delta;
-  }
+  /// The sub-model with its parameters in lanes (bound once, outside a kernel's loop).
+  template <class T> struct Bound {
+    T k;
+    __attribute__((always_inline)) T force(const NormalGeometry<T>& g) const { return k * g.delta; }
+  };
+  template <class T> Bound<T> bind() const { return {lanes::splat<T>(k)}; }
   double energy(double delta) const { return 0.5 * k * delta * delta; }
   double stiffness() const { return k; }
 };
@@ -22,9 +25,11 @@ struct LinearSpring {
 /// (pair_collision in model.hpp).
 struct LinearDashpot {
   double gamma;
-  template <class T> __attribute__((always_inline)) T force(const NormalGeometry<T>& g) const {
-    return lanes::splat<T>(gamma) * g.ddelta;
-  }
+  template <class T> struct Bound {
+    T gamma;
+    __attribute__((always_inline)) T force(const NormalGeometry<T>& g) const { return gamma * g.ddelta; }
+  };
+  template <class T> Bound<T> bind() const { return {lanes::splat<T>(gamma)}; }
 };
 
 }  // namespace dem::contact
