@@ -318,6 +318,10 @@ TEST(Friction, SceneKeysComposeAndBadValuesAreRefused) {
   EXPECT_EQ(m.contact.tangential, dem::TangentialModel::CundallStrack);
   EXPECT_NEAR(m.contact.tangential_stiffness_ratio, 2.0 / 7.0, 1e-15);
   EXPECT_FALSE(dem_test::model_with({}).contact.frictional());
+  std::string resolved;   // a frictionless scene's resolved text (stored with every result) is unchanged
+  dem::load_scene("[particles]\ncount = 100\n", {}, &resolved);
+  EXPECT_EQ(resolved.find("friction"), std::string::npos);
+  EXPECT_EQ(resolved.find("tangential"), std::string::npos);
   EXPECT_THROW(dem_test::model_with({"contact.friction=-0.1"}), dem::SceneError);
   EXPECT_THROW(dem_test::model_with({"contact.friction=0.5", "contact.tangential=\"none\""}), dem::SceneError);
   EXPECT_THROW(dem_test::model_with({"contact.tangential=\"mindlin\""}), dem::SceneError);

@@ -395,6 +395,7 @@ static void read_tangential(KeyReader& r, ContactLaw& c, const std::string& orig
   std::string name;
   r.get_if_present("contact", "friction", c.friction);
   r.get_if_present("contact", "tangential", name);
+  const bool explicit_none = name == "none";
   if (name.empty()) name = c.friction != 0 ? "cundall_strack" : "none";
   if (name == "none") {
     if (c.friction != 0)
@@ -403,7 +404,7 @@ static void read_tangential(KeyReader& r, ContactLaw& c, const std::string& orig
     for (const char* key : {"tangential_stiffness_ratio", "tangential_damping_kg_s"}) {
       double unused = 0;
       r.get_if_present("contact", key, unused);
-      if (unused != 0)
+      if (unused != 0 && !explicit_none)   // "none" said outright switches friction off, keys and all
         throw SceneError(origin + ": contact." + key + " is a key of the tangential model, but contact.tangential "
                          "is \"none\": set contact.tangential = \"cundall_strack\" and contact.friction");
     }
