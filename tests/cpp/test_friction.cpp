@@ -10,6 +10,7 @@
 #include "dem/engine/engine.hpp"
 #include "dem/forces/forces.hpp"
 #include "dem/io/io.hpp"
+#include "dem/measure/control.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/stages/collision.hpp"
 #include "test_support.hpp"
@@ -327,4 +328,38 @@ TEST(Friction, SceneKeysComposeAndBadValuesAreRefused) {
   EXPECT_THROW(dem_test::model_with({"contact.tangential=\"mindlin\""}), dem::SceneError);
   EXPECT_THROW(dem_test::model_with({"contact.tangential_stiffness_ratio=0.5"}), dem::SceneError);
   EXPECT_THROW(dem_test::model_with({"contact.friction=0.5", "contact.tangential_stiffness_ratio=0"}), dem::SceneError);
+}
+
+// The servo's affine stiffness with friction: a sticking spring adds k_t l^2 (delta_ab n_a^2 -
+// n_a^2 n_b^2) / V to M. Checked against the stress change that one engine step of a tiny strain
+// causes beyond the same step without strain (the free motion cancels).
+TEST(Friction, AffineStiffnessOfAStickingContactMatchesTheStressChange) {
+  const dem::Model m = dem_test::model_with({"contact.friction=0.5", "contact.damping_kg_s=0",
+                                             "contact.background_damping_kg_s=0"});
+  const Vec3 n{0.6, 0.8, 0.0};
+  const double l = 1.99e-3;
+  dem::State s = dem_test::make_state(Vec3{10e-3, 10e-3, 10e-3}, {Vec3{4e-3, 4e-3, 5e-3}, Vec3{4e-3, 4e-3, 5e-3} + n * l},
+                                      {1e-3, 1e-3});
+  dem::State still = s;
+  dem::Engine e(m, s), e0(m, still);
+  const double strain = 1e-9, rate = strain / m.dt;   // extension along x in one step
+  const dem::AxisResponse r0 = dem::axis_response(m, s, e.neighbor_list(), Vec3{0, 0, 0});
+  e.step(Vec3{rate, 0, 0});
+  e0.step(Vec3{0, 0, 0});
+  const dem::AxisResponse r1 = dem::axis_response(m, s, e.neighbor_list(), Vec3{0, 0, 0});
+  const dem::AxisResponse rs = dem::axis_response(m, still, e0.neighbor_list(), Vec3{0, 0, 0});
+  const double V = s.box.volume(), k = m.contact.stiffness, kt = k * m.contact.tangential_stiffness_ratio;
+  const double n2[3] = {n.x * n.x, n.y * n.y, n.z * n.z};
+  // sigma V changes by -M V strain; the volume change itself divides the stress by (1 + strain)
+  const double sv[3] = {r1.stress.xx * V - rs.stress.xx * still.box.volume(), r1.stress.yy * V - rs.stress.yy * still.box.volume(),
+                        r1.stress.zz * V - rs.stress.zz * still.box.volume()};
+  for (int a = 0; a < 3; ++a) {
+    const double closed = l * l * (k * n2[a] * n2[0] + kt * ((a == 0 ? n2[a] : 0.0) - n2[a] * n2[0])) / V;
+    EXPECT_NEAR(r0.M[a][0], closed, 1e-9 * std::fabs(closed) + 1e-6) << a;
+    // per unit compressive strain, less the pre-stress term f_a delta(d_a) that M leaves out
+    const double geometric = a == 0 ? r0.stress.xx * V * strain : 0.0;
+    const double fd = -(sv[a] - geometric) / (V * strain);
+    EXPECT_NEAR(fd, closed, 1e-2 * std::fabs(r0.M[0][0])) << a;
+  }
+  EXPECT_GT(std::fabs(r0.M[1][0] - l * l * k * n2[1] * n2[0] / V), 0.1 * std::fabs(r0.M[1][0]));   // friction matters
 }

@@ -282,6 +282,17 @@ void Engine::check_sanity() const {
       throw BlowUp(m.str());
     }
   }
+  for (int i = 0; i < static_cast<int>(s.angular_velocity.size()); ++i) {
+    const Vec3& w = s.angular_velocity[i];
+    if (!std::isfinite(w.x + w.y + w.z)) {
+      std::ostringstream m;
+      m << "non-finite angular velocity of particle " << s.id[i] << " at step " << s.step
+        << ": the rotations diverged; the tangential spring may be too stiff for the time step (contact.tangential_"
+           "stiffness_ratio = " << model_.contact.tangential_stiffness_ratio << ": keep it near 2/7, or reduce "
+           "integration.dt_over_tc = " << model_.dt_over_tc << ")";
+      throw BlowUp(m.str());
+    }
+  }
   // Largest overlap relative to the smaller radius, over listed pairs.
   double worst = 0;
   int wi = -1, wj = -1;

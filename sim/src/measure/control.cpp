@@ -18,6 +18,7 @@ AxisResponse axis_response(const Model& model, const State& s, const NeighborLis
   double M[3][3] = {}, S[3][3] = {};
   const bool sheared = rate.sheared() || s.box.sheared();
   const bool frictional = model.contact.frictional();
+  const double kt = model.contact.tangential_stiffness_ratio * k;   // the tangential sub-model's
   contact::for_each_contact_force(model, s, list, rate, [&](const contact::ContactForce& c) {
     const Vec3& n = c.n;
     const Vec3& d = c.d;
@@ -28,6 +29,11 @@ AxisResponse axis_response(const Model& model, const State& s, const NeighborLis
     const double w = k * dist * dist;
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b) M[a][b] += w * n2[a] * n2[b];
+    if (frictional && !c.sliding) {   // a sticking spring resists the tangential part of l (eps . n)
+      const double wt = kt * dist * dist;
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) M[a][b] += wt * ((a == b ? n2[a] : 0.0) - n2[a] * n2[b]);
+    }
     if (sheared) {
       const double nn[3] = {n.x * n.y, n.x * n.z, n.y * n.z};
       for (int a = 0; a < 3; ++a)
