@@ -2,6 +2,7 @@
 // rigid-body impact theory, energy conservation, the all-pairs oracle, the frictionless law.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -362,4 +363,125 @@ TEST(Friction, AffineStiffnessOfAStickingContactMatchesTheStressChange) {
     EXPECT_NEAR(fd, closed, 1e-2 * std::fabs(r0.M[0][0])) << a;
   }
   EXPECT_GT(std::fabs(r0.M[1][0] - l * l * k * n2[1] * n2[0] / V), 0.1 * std::fabs(r0.M[1][0]));   // friction matters
+}
+
+namespace {
+
+// Four equal spheres in a ring along x (each pressed by both neighbours: no net force), spins
+// alternating +-w0 about z: every contact rolls (the contact points do not slip: a_i w_i + a_j w_j
+// = 0) with relative spin 2 w0. Returns the state after `steps` steps and records w_0(t).
+struct Ring {
+  dem::Model m;
+  dem::State s;
+  double a_red, fn, I;
+};
+Ring make_ring(double w0, double mu_r) {
+  Ring g{dem_test::model_with({"contact.friction=0.5", "contact.damping_kg_s=0", "contact.background_damping_kg_s=0",
+                               "contact.rolling_friction=" + std::to_string(mu_r)}), {}, 0, 0, 0};
+  const double r = 1e-3, delta = 1e-5, pitch = 2 * r - delta;
+  std::vector<Vec3> x;
+  for (int k = 0; k < 4; ++k) x.push_back(Vec3{(k + 0.5) * pitch, 5e-3, 5e-3});
+  g.s = dem_test::make_state(Vec3{4 * pitch, 10e-3, 10e-3}, x, {r, r, r, r});
+  g.s.angular_velocity.assign(4, Vec3{0, 0, 0});
+  g.s.torque.assign(4, Vec3{0, 0, 0});
+  for (int k = 0; k < 4; ++k) g.s.angular_velocity[k] = Vec3{0, 0, (k % 2 ? -1.0 : 1.0) * w0};
+  const double a = r - delta / 2;
+  g.a_red = a * a / (2 * a);
+  g.fn = g.m.contact.stiffness * delta;
+  g.I = 0.4 * g.s.mass[0] * r * r;
+  return g;
+}
+double spin_of_id0(const dem::State& s) {
+  for (int i = 0; i < s.count(); ++i) if (s.id[i] == 0) return s.angular_velocity[i].z;
+  return NAN;
+}
+
+}  // namespace
+
+// Elastic rolling: per contact the spring k_r acts on a' times the relative rotation 2 phi, so
+// I phi'' = -2 k_r a'^2 (2 phi): w_0 = w0 cos(Omega t), Omega^2 = 4 k_r a'^2 / I; energy kept.
+TEST(Rolling, ElasticRollingOscillatesAtTheSpringsFrequencyAndKeepsEnergy) {
+  Ring g = make_ring(1e4, 1.0);
+  dem::Engine e(g.m, g.s);
+  const double kr = g.m.contact.rolling_stiffness_ratio * g.m.contact.stiffness;
+  const double omega = std::sqrt(4 * kr * g.a_red * g.a_red / g.I);
+  auto energy = [&] {
+    const auto q = dem::measure(g.m, g.s, e.neighbor_list(), Vec3{0, 0, 0});
+    return q.E_rot + q.E_pot + q.E_kin;
+  };
+  const double e0 = energy();
+  double prev = spin_of_id0(g.s), t_zero = -1, worst = 0;
+  for (int k = 0; k < 2000 && t_zero < 0; ++k) {
+    const double t0 = g.s.time;
+    e.step(Vec3{0, 0, 0});
+    const double now = spin_of_id0(g.s);
+    if (prev > 0 && now <= 0) t_zero = t0 + (g.s.time - t0) * prev / (prev - now);
+    prev = now;
+    worst = std::max(worst, std::fabs(energy() - e0));
+  }
+  ASSERT_GT(t_zero, 0);
+  EXPECT_NEAR(t_zero, 0.5 * kPi / omega, 5e-3 * 0.5 * kPi / omega);   // a quarter period
+  EXPECT_LT(worst, 2e-3 * e0);
+}
+
+// At the limit the rolling torque is mu_r a' f_n per contact: the spin decays at the constant
+// rate 2 mu_r a' f_n / I (rolling friction) until the spring can hold it.
+TEST(Rolling, TheRollingTorqueLimitDeceleratesTheSpinAtTheClosedFormRate) {
+  const double w0 = 1e6, mu_r = 0.1;
+  Ring g = make_ring(w0, mu_r);
+  dem::Engine e(g.m, g.s);
+  const double rate = 2 * mu_r * g.a_red * g.fn / g.I;   // [rad/s^2]
+  const double t_stop = w0 / rate;
+  double w_a = NAN, w_b = NAN, t_a = 0.25 * t_stop, t_b = 0.75 * t_stop;
+  while (g.s.time < t_b) {
+    e.step(Vec3{0, 0, 0});
+    if (std::isnan(w_a) && g.s.time >= t_a) { w_a = spin_of_id0(g.s); t_a = g.s.time; }
+  }
+  w_b = spin_of_id0(g.s);
+  t_b = g.s.time;
+  EXPECT_NEAR((w_a - w_b) / (t_b - t_a), rate, 1e-2 * rate);
+  // The spin energy lost is what the limit dissipated (no damping anywhere else).
+  const auto q = dem::measure(g.m, g.s, e.neighbor_list(), Vec3{0, 0, 0});
+  const double e_rot0 = 4 * 0.5 * g.I * w0 * w0;
+  EXPECT_NEAR(q.W_friction, e_rot0 - q.E_rot - q.E_t - q.E_kin, 1e-3 * e_rot0);
+  EXPECT_GT(q.W_friction, 0.5 * e_rot0);
+}
+
+// Constructing an engine evaluates the forces of the state as it is: the springs are not
+// advanced (no time passes) and nothing is dissipated.
+TEST(Friction, ConstructingAnEngineDoesNotAdvanceTheSprings) {
+  const dem::Model m = dem_test::model_with({"contact.friction=0.5", "contact.rolling_friction=0.1"});
+  dem::State s = dem_test::random_state(300, 0.38, 1.0, 41);
+  { dem::Engine e(m, s); for (int k = 0; k < 500; ++k) e.step(Vec3{1, 0, -1} * (1e-3 / m.t_contact)); }
+  const std::vector<double> springs = s.history.values;
+  const double w = s.friction_dissipated;
+  ASSERT_GT(std::count_if(springs.begin(), springs.end(), [](double v) { return v != 0.0; }), 10);
+  dem::Engine again(m, s);
+  EXPECT_EQ(s.history.values, springs);
+  EXPECT_EQ(s.friction_dissipated, w);
+}
+
+TEST(Rolling, KeysNeedFrictionAndAreRecorded) {
+  const dem::Model m = dem_test::model_with({"contact.friction=0.5", "contact.rolling_friction=0.1"});
+  EXPECT_TRUE(m.contact.rolling());
+  EXPECT_EQ(dem::contact::history_width(m.contact), 7);
+  EXPECT_THROW(dem_test::model_with({"contact.rolling_friction=0.1"}), dem::SceneError);
+  EXPECT_THROW(dem_test::model_with({"contact.friction=0.5", "contact.rolling_friction=-1"}), dem::SceneError);
+}
+
+// Rolling springs are history too: a split run equals the straight one bit for bit.
+TEST(Rolling, SplitRunWithRollingEqualsStraightRunBitForBit) {
+  const dem::Model m = dem_test::model_with({"contact.friction=0.5", "contact.rolling_friction=0.1", "integration.threads=2"});
+  const VelGrad rate{Vec3{0, 0, 0}, Vec3{0, 0.3 / (3000 * m.dt), 0}};
+  dem::State straight = dem_test::random_state(300, 0.38, 1.0, 37), split = straight;
+  { dem::Engine e(m, straight); for (int k = 0; k < 2000; ++k) e.step(rate); }
+  const std::string path = (std::filesystem::temp_directory_path() / "dem_rolling_split.ckpt").string();
+  { dem::Engine e(m, split); for (int k = 0; k < 1000; ++k) e.step(rate); dem::write_checkpoint(path, dem::Checkpoint{"", "mid", split}); }
+  dem::Checkpoint c = dem::read_checkpoint(path);
+  std::remove(path.c_str());
+  dem::Engine e2(m, c.state, true);
+  for (int k = 0; k < 1000; ++k) e2.step(rate);
+  EXPECT_TRUE(dem_test::same_bits(c.state.angular_velocity, straight.angular_velocity));
+  EXPECT_EQ(0, std::memcmp(c.state.history.values.data(), straight.history.values.data(),
+                           straight.history.values.size() * sizeof(double)));
 }

@@ -200,7 +200,19 @@ void Engine::finish_forces_and_kick(int begin, int end) {
 }
 
 void Engine::evaluate_forces() {
-  compute_forces(model_, state_, list_, rate_, threads_, blocks_, scratch_);
+  if (!state_.rotations()) {
+    compute_forces(model_, state_, list_, rate_, threads_, blocks_, scratch_);
+    return;
+  }
+  // The forces of the state as it is: the stored springs, not advanced (no time passes here;
+  // the pair loop would add v_t dt), and no energy dissipated.
+  Model at_rest = model_;
+  at_rest.dt = 0.0;
+  const std::vector<double> springs = state_.history.values;
+  const double dissipated = state_.friction_dissipated;
+  compute_forces(at_rest, state_, list_, rate_, threads_, blocks_, scratch_);
+  state_.history.values = springs;
+  state_.friction_dissipated = dissipated;
 }
 
 void Engine::step(const VelGrad& strain_rate) {

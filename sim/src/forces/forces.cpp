@@ -57,6 +57,12 @@ inline bool contact_force_history(const CM& cm, const Vec3& xi, const Vec3& xj_i
   out.fj = n * fn + ft;
   out.ti = nxf * (-ai);   // (a_i n) x (-f_j)
   out.tj = nxf * (-aj);   // (-a_j n) x f_j
+  if constexpr (CM::RollingModel::history > 0) {   // a couple: torques only
+    const Vec3 tr = cm.rolling.update(contact::RollingInput{n, wi, wj, ai * aj / (ai + aj), fn}, dt,
+                                      h + CM::rolling_offset, dissipated);
+    out.ti += tr;
+    out.tj -= tr;
+  }
   return true;
 }
 

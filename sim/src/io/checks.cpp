@@ -136,6 +136,11 @@ Physics material_physics(const Model& m) {
     p.push_back({"contact.friction", num(m.contact.friction)});
     p.push_back({"contact.tangential_stiffness_ratio", num(m.contact.tangential_stiffness_ratio)});
     p.push_back({"contact.tangential_damping_kg_s", num(m.contact.tangential_damping)});
+    if (m.contact.rolling()) {
+      p.push_back({"contact.rolling_friction", num(m.contact.rolling_friction)});
+      p.push_back({"contact.rolling_stiffness_ratio", num(m.contact.rolling_stiffness_ratio)});
+      p.push_back({"contact.rolling_damping_kg_s", num(m.contact.rolling_damping)});
+    }
   }
   return p;
 }

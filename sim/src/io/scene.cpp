@@ -401,7 +401,8 @@ static void read_tangential(KeyReader& r, ContactLaw& c, const std::string& orig
     if (c.friction != 0)
       throw SceneError(origin + ": contact.friction = " + std::to_string(c.friction) + " needs a tangential model: "
                        "set contact.tangential = \"cundall_strack\" (or remove contact.friction)");
-    for (const char* key : {"tangential_stiffness_ratio", "tangential_damping_kg_s"}) {
+    for (const char* key : {"tangential_stiffness_ratio", "tangential_damping_kg_s", "rolling_friction",
+                            "rolling_stiffness_ratio", "rolling_damping_kg_s"}) {
       double unused = 0;
       r.get_if_present("contact", key, unused);
       if (unused != 0 && !explicit_none)   // "none" said outright switches friction off, keys and all
@@ -418,6 +419,14 @@ static void read_tangential(KeyReader& r, ContactLaw& c, const std::string& orig
   r.get("contact", "friction", c.friction);
   r.get("contact", "tangential_stiffness_ratio", c.tangential_stiffness_ratio);
   r.get("contact", "tangential_damping_kg_s", c.tangential_damping);
+  r.get_if_present("contact", "rolling_friction", c.rolling_friction);
+  if (c.rolling_friction != 0) {
+    r.get("contact", "rolling_stiffness_ratio", c.rolling_stiffness_ratio);
+    r.get("contact", "rolling_damping_kg_s", c.rolling_damping);
+  } else {
+    r.get_if_present("contact", "rolling_stiffness_ratio", c.rolling_stiffness_ratio);
+    r.get_if_present("contact", "rolling_damping_kg_s", c.rolling_damping);
+  }
 }
 
 Model load_scene(const std::string& text, const std::vector<std::string>& overrides,
@@ -648,6 +657,12 @@ void validate_tangential(const ContactLaw& c) {
          "oscillation the normal one's period");
   if (!(c.tangential_damping >= 0) || !std::isfinite(c.tangential_damping))
     fail("contact.tangential_damping_kg_s must be zero or positive and finite");
+  if (!(c.rolling_friction >= 0) || !std::isfinite(c.rolling_friction))
+    fail("contact.rolling_friction must be zero (off) or positive and finite (mu_r: rolling torque <= mu_r a' f_n)");
+  if (!finite_positive(c.rolling_stiffness_ratio) || c.rolling_stiffness_ratio > 10)
+    fail("contact.rolling_stiffness_ratio (k_r/k) must be in (0, 10]");
+  if (!(c.rolling_damping >= 0) || !std::isfinite(c.rolling_damping))
+    fail("contact.rolling_damping_kg_s must be zero or positive and finite");
 }
 
 void validate_particles_and_contact(const Model& m) {

@@ -23,9 +23,11 @@ std::string curve_preamble(const Model& m, const std::string& stage, const Physi
     << "# physics: " << physics_line(physics) << "\n";
   if (m.contact.frictional())
     o << "# friction: Cundall-Strack, mu=" << m.contact.friction << ", k_t=" << m.contact.tangential_stiffness_ratio * m.contact.stiffness
-      << " N/m, gamma_t=" << m.contact.tangential_damping << " kg/s; stress includes d(x)f_t (symmetric part); "
+      << " N/m, gamma_t=" << m.contact.tangential_damping << " kg/s"
+      << (m.contact.rolling() ? "; rolling resistance mu_r=" + std::to_string(m.contact.rolling_friction) : std::string())
+      << "; stress includes d(x)f_t (symmetric part); "
          "sliding_fraction: contacts at the Coulomb limit; E_rot_J=sum I w^2/2; omega_mean_rad_s=mean |w|; "
-         "E_t_J: tangential springs (part of E_pot_J); W_friction_J: energy lost to sliding since the state began; "
+         "E_t_J: tangential (and rolling) springs (part of E_pot_J); W_friction_J: energy lost to sliding (and rolling) since the state began; "
          "sigma_antisym_rel=|antisymmetric contact stress|/p (torque balance: small when quasi-static)\n";
   if (definition.find("shear_shape=") != std::string::npos)
     o << "# sheared cell: strains are the log strain 0.5 ln(F F^T) (eps_xy, eps_xz, eps_yz its shear components); "

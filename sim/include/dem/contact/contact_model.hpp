@@ -15,20 +15,25 @@
 
 #include "dem/contact/geometry.hpp"
 #include "dem/contact/normal_linear.hpp"
+#include "dem/contact/rolling.hpp"
 #include "dem/contact/tangential.hpp"
 #include "dem/core/model.hpp"
 #include "dem/core/state.hpp"
 
 namespace dem::contact {
 
-template <class Normal, class Damping, class Tangential>
+template <class Normal, class Damping, class Tangential, class Rolling = NoRolling>
 struct ContactModel {
   Normal normal;
   Damping damping;
   Tangential tangential;
   bool attractive = false;   ///< false: the normal force is clamped at zero (no tension)
+  Rolling rolling{};
 
-  static constexpr int history = Tangential::history;
+  using RollingModel = Rolling;
+  /// History doubles per contact: the tangential sub-model's, then the rolling one's.
+  static constexpr int history = Tangential::history + Rolling::history;
+  static constexpr int rolling_offset = Tangential::history;
   static constexpr bool rotations = Tangential::rotations;
   /// Runs in the vector kernels (no history to read and write per pair).
   static constexpr bool vectorised = history == 0;
@@ -56,7 +61,8 @@ struct ContactModel {
   }
   /// Elastic energy stored in a contact of overlap delta [m] and history h [J].
   double energy(double delta, const double* h) const {
-    if constexpr (history > 0) return normal.energy(delta) + tangential.energy(h);
+    if constexpr (Rolling::history > 0) return normal.energy(delta) + tangential.energy(h) + rolling.energy(h + rolling_offset);
+    else if constexpr (history > 0) return normal.energy(delta) + tangential.energy(h);
     else { (void)h; return normal.energy(delta); }
   }
   double normal_stiffness() const { return normal.stiffness(); }
@@ -64,6 +70,7 @@ struct ContactModel {
 
 using Frictionless = ContactModel<LinearSpring, LinearDashpot, NoTangential>;
 using Frictional = ContactModel<LinearSpring, LinearDashpot, CundallStrack>;
+using FrictionalRolling = ContactModel<LinearSpring, LinearDashpot, CundallStrack, RollingSpring>;
 
 inline Frictionless frictionless(const ContactLaw& law) {
   return {LinearSpring{law.stiffness}, LinearDashpot{law.damping}, NoTangential{}, law.allow_attractive};
@@ -75,11 +82,19 @@ inline Frictional frictional(const ContactLaw& law) {
           law.allow_attractive};
 }
 
+inline FrictionalRolling frictional_rolling(const ContactLaw& law) {
+  const Frictional base = frictional(law);
+  return {base.normal, base.damping, base.tangential, base.attractive,
+          RollingSpring{law.rolling_stiffness_ratio * law.stiffness, law.rolling_damping, law.rolling_friction}};
+}
+
 /// Calls f(model) with the concrete contact model of the scene's law.
 template <class F>
 decltype(auto) with_contact_model(const ContactLaw& law, F&& f) {
   switch (law.tangential) {
-    case TangentialModel::CundallStrack: return f(frictional(law));
+    case TangentialModel::CundallStrack:
+      if (law.rolling()) return f(frictional_rolling(law));
+      return f(frictional(law));
     case TangentialModel::None: break;
   }
   return f(frictionless(law));

@@ -41,6 +41,11 @@ struct ContactLaw {
   /// Not a scene key: the tests' mutation check. false drops the rotation of the spring into
   /// the tangent plane (not objective), which the energy-balance test must catch.
   bool objective_spring = true;
+  /// Rolling resistance (contact/rolling.hpp; needs the tangential model's rotations):
+  double rolling_friction = 0.0;            ///< mu_r: rolling torque <= mu_r a' f_n; 0: off
+  double rolling_stiffness_ratio = 2.0 / 7.0;   ///< k_r / k, > 0
+  double rolling_damping = 0.0;             ///< gamma_r [kg/s], >= 0
+  bool rolling() const { return frictional() && rolling_friction > 0; }
   /// The model needs angular velocities, torques and per-contact history.
   bool frictional() const { return tangential != TangentialModel::None; }
 };
