@@ -14,6 +14,7 @@
 #include "dem/measure/control.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/stages/collision.hpp"
+#include "dem/contact/normal_luding.hpp"
 #include "test_support.hpp"
 
 using dem::Vec3;
@@ -484,4 +485,78 @@ TEST(Rolling, SplitRunWithRollingEqualsStraightRunBitForBit) {
   EXPECT_TRUE(dem_test::same_bits(c.state.angular_velocity, straight.angular_velocity));
   EXPECT_EQ(0, std::memcmp(c.state.history.values.data(), straight.history.values.data(),
                            straight.history.values.size() * sizeof(double)));
+}
+
+namespace {
+
+// Luding's law without damping, integrated by hand over an impact: loading along k1 to
+// delta_max = v sqrt(m_r/k1), unloading along k2 (delta - delta0) to the adhesive limit at
+// delta_c = k2 delta0 / (k2 + kc), then along -kc delta to zero. e^2 = energy out / energy in.
+double luding_restitution(double k1, double kp, double kc, double phi_f, double a12, double m_r, double v) {
+  const dem::contact::LudingNormal law{k1, kp, kc, phi_f};
+  const double dmax = v * std::sqrt(m_r / k1);
+  const double k2 = law.k2_of(dmax, a12), d0 = (1 - k1 / k2) * dmax, dc = k2 * d0 / (k2 + kc);
+  const double out = 0.5 * k2 * ((dmax - d0) * (dmax - d0) - (dc - d0) * (dc - d0)) - 0.5 * kc * dc * dc;
+  return out > 0 ? std::sqrt(out / (0.5 * k1 * dmax * dmax)) : 0.0;
+}
+
+}  // namespace
+
+// The sub-model against its piecewise definition: virgin loading, unloading to the plastic
+// overlap, reloading on the same line, the adhesive limit, k2 saturating at kp.
+TEST(Luding, ForceOverlapLoopFollowsThePiecewiseLaw) {
+  const double k1 = 1e8, kp = 5e8, kc = 0.5e8, phi = 0.001, a12 = 2.5e-4;
+  const dem::contact::LudingNormal law{k1, kp, kc, phi};
+  const double dstar = kp / (kp - k1) * phi * 2 * a12;
+  double h = 0;
+  const double d1 = 0.4 * dstar;
+  EXPECT_DOUBLE_EQ(law.update(d1, a12, &h), k1 * d1);            // loading
+  EXPECT_DOUBLE_EQ(h, d1);
+  const double k2 = k1 + (kp - k1) * 0.4, d0 = (1 - k1 / k2) * d1;
+  EXPECT_NEAR(law.update(0.5 * (d0 + d1), a12, &h), k2 * 0.5 * (d1 - d0), 1e-9 * k1 * d1);   // unloading line
+  EXPECT_NEAR(law.update(d0, a12, &h), 0.0, 1e-9 * k1 * d1);     // zero force at the plastic overlap
+  EXPECT_NEAR(law.update(0.9 * d1, a12, &h), k2 * (0.9 * d1 - d0), 1e-9 * k1 * d1);   // reloading: the same line
+  EXPECT_DOUBLE_EQ(h, d1);                                       // delta_max unchanged off the virgin branch
+  EXPECT_DOUBLE_EQ(law.update(1.2 * d1, a12, &h), k1 * 1.2 * d1);   // back on k1 beyond delta_max
+  // Deep unloading hits the adhesive limit -kc delta, and delta_max moves so that the k2-line
+  // passes through the point reached.
+  double hh = d1;
+  const double small = 0.1 * d0;
+  EXPECT_DOUBLE_EQ(law.update(small, a12, &hh), -kc * small);
+  EXPECT_NEAR(hh, (k2 + kc) / (k2 - k1) * small, 1e-12 * d1);
+  // Beyond delta* the unloading stiffness is kp.
+  EXPECT_DOUBLE_EQ(law.k2_of(2 * dstar, a12), kp);
+}
+
+// Two-sphere impacts through the engine against the hand-integrated law: e = sqrt(k1/k2) without
+// adhesion (below and above delta*), lower with adhesion, sticking when adhesion wins.
+TEST(Luding, RestitutionOfImpactsMatchesTheClosedFormAndAdhesionSticks) {
+  const double r = 0.5e-3, k1 = 1e8, kp = 5e8, phi = 0.001;
+  auto model = [&](double kc) {
+    return dem_test::model_with({"contact.normal=luding", "contact.damping_kg_s=0", "contact.background_damping_kg_s=0",
+                                 "contact.luding_kp_N_m=5e8", "contact.luding_kc_N_m=" + std::to_string(kc),
+                                 "contact.luding_plasticity_depth=0.001", "contact.allow_attractive=true"});
+  };
+  const double m_r = 0.5 * dem::sphere_mass(r, 2000.0), a12 = r / 2;
+  std::printf("kc/k1   v_m_s   e       e_theory\n");
+  for (double kc : {0.0, 0.1 * k1})
+    for (double v : {1.0, 4.0, 10.0, 30.0}) {
+      const dem::Model m = model(kc);
+      const double e = dem::simulate_collision(m, r, r, v).restitution;
+      const double theory = luding_restitution(k1, kp, kc, phi, a12, m_r, v);
+      std::printf("%5.2f  %6.1f  %.4f  %.4f\n", kc / k1, v, e, theory);
+      ASSERT_GT(theory, 0.2);
+      EXPECT_NEAR(e, theory, 5e-3 * theory) << kc << " " << v;
+    }
+  // kc = k1 at an impact beyond delta*: the adhesive branch takes more than the elastic return.
+  ASSERT_EQ(luding_restitution(k1, kp, k1, phi, a12, m_r, 30.0), 0.0);
+  const dem::Model m = model(k1);
+  dem::State s = dem_test::make_state(Vec3{20e-3, 20e-3, 20e-3}, {Vec3{5e-3, 10e-3, 10e-3}, Vec3{5e-3 + 2 * r + 1e-7, 10e-3, 10e-3}},
+                                      {r, r});
+  s.velocity[0] = Vec3{15.0, 0, 0};
+  s.velocity[1] = Vec3{-15.0, 0, 0};
+  dem::Engine e(m, s);
+  for (int k = 0; k < 20000; ++k) e.step(Vec3{0, 0, 0});   // ~100 contact times
+  const double gap = norm(dem::minimum_image(s.box, s.position[0], s.position[1])) - 2 * r;
+  EXPECT_LT(gap, 0.0) << "the pair should stick";
 }

@@ -68,6 +68,14 @@ void print_info(const dem::Model& m) {
               m.contact.stiffness, m.contact.damping, m.background_damping,
               m.contact.allow_attractive ? "attractive allowed" : "clamped at zero");
   std::printf("smallest pair      t_c = %.6g s, e = %.6g\n", m.t_contact, m.restitution);
+  if (m.contact.normal == dem::NormalModel::Luding)
+    std::printf("normal law         Luding elasto-plastic adhesive: k1 = %g, kp = %g, kc = %g N/m, phi_f = %g "
+                "(t_c and dt from kp); no-slip restitution sqrt(k1/k2) from 1 (small impacts) to sqrt(k1/kp) = %.4g\n",
+                m.contact.stiffness, m.contact.luding_kp, m.contact.luding_kc, m.contact.luding_plasticity_depth,
+                std::sqrt(m.contact.stiffness / m.contact.luding_kp));
+  if (m.contact.rolling())
+    std::printf("rolling            mu_r = %g, k_r/k = %g, gamma_r = %g kg/s (torque <= mu_r a' f_n)\n",
+                m.contact.rolling_friction, m.contact.rolling_stiffness_ratio, m.contact.rolling_damping);
   if (m.contact.frictional()) {
     // The contact point's tangential oscillation: stiffness k_t, effective mass 2/7 m_r.
     const double mr = 0.5 * dem::sphere_mass(m.radius_min, m.density), kt = m.contact.tangential_stiffness_ratio * m.contact.stiffness;

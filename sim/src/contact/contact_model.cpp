@@ -9,7 +9,7 @@ int history_width(const ContactLaw& law) {
 }
 
 unsigned history_odd_mask(const ContactLaw& law) {
-  return law.tangential == TangentialModel::CundallStrack ? CundallStrack::odd_mask : 0u;
+  return with_contact_model(law, [](const auto& cm) { return std::decay_t<decltype(cm)>::odd_mask; });
 }
 
 void prepare_state(const ContactLaw& law, State& s) {

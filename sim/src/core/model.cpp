@@ -34,7 +34,7 @@ unsigned long long member_seed(unsigned long long seed, int k) {
 
 void Model::finalize() {
   const double m = sphere_mass(radius_min, density);
-  const PairCollision c = pair_collision(contact.stiffness, contact.damping, 0.5 * m);
+  const PairCollision c = pair_collision(contact.time_step_stiffness(), contact.damping, 0.5 * m);
   t_contact = c.t_contact;
   restitution = c.restitution;
   dt = dt_over_tc * t_contact;

@@ -48,20 +48,26 @@ inline bool contact_force_history(const CM& cm, const Vec3& xi, const Vec3& xj_i
   double vx, vy, vz;
   contact::relative_velocity<Sheared>(sep, vj.x - vi.x, vj.y - vi.y, vj.z - vi.z, contact::rate_lanes<double>(rate), vx, vy, vz);
   const NormalGeometry<double> g = contact::normal_geometry(sep, vx, vy, vz);
-  const double fn = cm.normal_force(g);
+  const double fn = cm.normal_force(g, ri * rj / (ri + rj), h, true);
   const Vec3 n{g.nx, g.ny, g.nz};
+  out.fj = n * fn;
+  if constexpr (CM::rotations) {
   const double ai = ri - 0.5 * g.delta, aj = rj - 0.5 * g.delta;   // lever arms to the overlap's middle
   const Vec3 v_contact = Vec3{vx, vy, vz} - cross(wi * ai + wj * aj, n);
-  const Vec3 ft = cm.tangential.update(contact::TangentialInput{n, v_contact, fn}, dt, h, dissipated);
+  const Vec3 ft = cm.tangential.update(contact::TangentialInput{n, v_contact, std::max(fn, 0.0)}, dt,
+                                       h + CM::tangential_offset, dissipated);
   const Vec3 nxf = cross(n, ft);
-  out.fj = n * fn + ft;
+  out.fj += ft;
   out.ti = nxf * (-ai);   // (a_i n) x (-f_j)
   out.tj = nxf * (-aj);   // (-a_j n) x f_j
   if constexpr (CM::RollingModel::history > 0) {   // a couple: torques only
-    const Vec3 tr = cm.rolling.update(contact::RollingInput{n, wi, wj, ai * aj / (ai + aj), fn}, dt,
+    const Vec3 tr = cm.rolling.update(contact::RollingInput{n, wi, wj, ai * aj / (ai + aj), std::max(fn, 0.0)}, dt,
                                       h + CM::rolling_offset, dissipated);
     out.ti += tr;
     out.tj -= tr;
+  }
+  } else {
+    (void)wi; (void)wj; (void)dissipated;
   }
   return true;
 }
@@ -106,6 +112,8 @@ void pair_loop_history(const CM& cm, State& s, const NeighborList& list, const V
   image_offsets(s.box, off);
   const Vec3* x = s.position.data();
   const Vec3* v = s.velocity.data();
+  static const Vec3 kNoSpin{0, 0, 0};
+  const bool spin = CM::rotations;
   const Vec3* w = s.angular_velocity.data();
   Vec3* tq = s.torque.data();
   const double* rad = s.radius.data();
@@ -116,16 +124,22 @@ void pair_loop_history(const CM& cm, State& s, const NeighborList& list, const V
     for (int p = list.first[i]; p < list.first[i + 1]; ++p) {
       const int j = list.partner[p];
       PairSums c;
-      if (!contact_force_history<Sheared>(cm, x[i], x[j] + off[list.image[p]], v[i], v[j], w[i], w[j], rad[i], rad[j],
-                                          rate, dt, H + static_cast<long>(kw) * p, dissipated, c))
+      if (!contact_force_history<Sheared>(cm, x[i], x[j] + off[list.image[p]], v[i], v[j], spin ? w[i] : kNoSpin,
+                                          spin ? w[j] : kNoSpin, rad[i], rad[j], rate, dt,
+                                          H + static_cast<long>(kw) * p, dissipated, c))
         continue;
-      if (j < end) { f[j] += c.fj; tq[j] += c.tj; }
-      else { spill[block_of[j]].push_back({j, c.fj}); spill_torque[block_of[j]].push_back({j, c.tj}); }
+      if (j < end) {
+        f[j] += c.fj;
+        if (spin) tq[j] += c.tj;
+      } else {
+        spill[block_of[j]].push_back({j, c.fj});
+        if (spin) spill_torque[block_of[j]].push_back({j, c.tj});
+      }
       fi -= c.fj;
       ti += c.ti;
     }
     f[i] += fi;
-    tq[i] += ti;
+    if (spin) tq[i] += ti;
   }
 }
 
@@ -263,7 +277,7 @@ void apply_spilled_forces(int b, const ForceScratch& scratch, Vec3* force, Vec3*
 }
 
 void begin_pair_loop(const Model& model, State& s, const NeighborList& list, ForceScratch& scratch) {
-  if (!s.rotations()) return;
+  if (!s.rotations() && s.history.width == 0) return;
   const int blocks = scratch.blocks();
   if (static_cast<int>(scratch.spill_torque.size()) != blocks)
     scratch.spill_torque.assign(blocks, std::vector<std::vector<SpilledForce>>(blocks));
@@ -275,7 +289,7 @@ void begin_pair_loop(const Model& model, State& s, const NeighborList& list, For
 }
 
 void end_pair_loop(State& s, const ForceScratch& scratch) {
-  if (!s.rotations()) return;
+  if (!s.rotations() && s.history.width == 0) return;
   for (double d : scratch.dissipated) s.friction_dissipated += d;
 }
 
@@ -344,19 +358,19 @@ void compute_forces_all_pairs(const Model& model, State& s, const VelGrad& rate,
           flip();
           double dissipated = 0;
           PairSums c;
+          const Vec3 wi = s.rotations() ? s.angular_velocity[i] : Vec3{0, 0, 0};
+          const Vec3 wj = s.rotations() ? s.angular_velocity[j] : Vec3{0, 0, 0};
           const bool touch = rate.sheared()
-              ? contact_force_history<true>(cm, s.position[i], xj, s.velocity[i], s.velocity[j], s.angular_velocity[i],
-                                            s.angular_velocity[j], s.radius[i], s.radius[j], rate, model.dt, h.data(),
-                                            &dissipated, c)
-              : contact_force_history<false>(cm, s.position[i], xj, s.velocity[i], s.velocity[j], s.angular_velocity[i],
-                                             s.angular_velocity[j], s.radius[i], s.radius[j], rate, model.dt, h.data(),
-                                             &dissipated, c);
+              ? contact_force_history<true>(cm, s.position[i], xj, s.velocity[i], s.velocity[j], wi, wj, s.radius[i],
+                                            s.radius[j], rate, model.dt, h.data(), &dissipated, c)
+              : contact_force_history<false>(cm, s.position[i], xj, s.velocity[i], s.velocity[j], wi, wj, s.radius[i],
+                                             s.radius[j], rate, model.dt, h.data(), &dissipated, c);
           flip();
           if (!touch) { history->erase(key); continue; }
           (*history)[key] = h;
           s.friction_dissipated += dissipated;
           s.force[j] += c.fj; s.force[i] -= c.fj;
-          s.torque[i] += c.ti; s.torque[j] += c.tj;
+          if (s.rotations()) { s.torque[i] += c.ti; s.torque[j] += c.tj; }
         } else {
           Vec3 fj;
           const bool touch = rate.sheared()

@@ -131,6 +131,12 @@ Physics material_physics(const Model& m) {
           {"integration.integrator", m.integrator == Integrator::VelocityVerlet ? "velocity_verlet" : "symplectic_euler"},
           {"integration.dt_over_tc", num(m.dt_over_tc)},
           {"integration.kinematics", m.sllod ? "sllod" : "plain"}};
+  if (m.contact.normal == NormalModel::Luding) {   // a linear record keeps its old keys (and hash)
+    p.push_back({"contact.normal", "luding"});
+    p.push_back({"contact.luding_kp_N_m", num(m.contact.luding_kp)});
+    p.push_back({"contact.luding_kc_N_m", num(m.contact.luding_kc)});
+    p.push_back({"contact.luding_plasticity_depth", num(m.contact.luding_plasticity_depth)});
+  }
   if (m.contact.frictional()) {   // a frictionless record keeps its old keys (and hash)
     p.push_back({"contact.tangential", "cundall_strack"});
     p.push_back({"contact.friction", num(m.contact.friction)});

@@ -391,6 +391,31 @@ bool builtin_mode(const std::string& name, DeformationMode* mode) {
 // The tangential sub-model's keys. Absent from a frictionless scene's resolved text (so its
 // outputs keep their bytes); a frictional scene lists all of them. `friction` alone (> 0)
 // selects cundall_strack.
+// The normal sub-model: "linear" (default; no key in a linear scene's resolved text) or "luding".
+static void read_normal(KeyReader& r, ContactLaw& c, const std::string& origin) {
+  std::string name;
+  r.get_if_present("contact", "normal", name);
+  if (name.empty() || name == "linear") {
+    for (const char* key : {"luding_kp_N_m", "luding_kc_N_m", "luding_plasticity_depth"}) {
+      double unused = 0;
+      r.get_if_present("contact", key, unused);
+      if (unused != 0)
+        throw SceneError(origin + ": contact." + key + " belongs to Luding's law: set contact.normal = \"luding\"");
+    }
+    return;
+  }
+  if (name != "luding")
+    throw SceneError(origin + ": contact.normal = '" + name + "' is unknown; use \"linear\" (spring-dashpot) or "
+                     "\"luding\" (elasto-plastic adhesive, docs/contact_models.md)");
+  c.normal = NormalModel::Luding;
+  c.luding_kp = 5 * c.stiffness;
+  c.luding_kc = 0;
+  c.luding_plasticity_depth = 0.05;
+  r.get("contact", "luding_kp_N_m", c.luding_kp);
+  r.get("contact", "luding_kc_N_m", c.luding_kc);
+  r.get("contact", "luding_plasticity_depth", c.luding_plasticity_depth);
+}
+
 static void read_tangential(KeyReader& r, ContactLaw& c, const std::string& origin) {
   std::string name;
   r.get_if_present("contact", "friction", c.friction);
@@ -453,6 +478,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   r.get("contact", "damping_kg_s", m.contact.damping);
   r.get("contact", "allow_attractive", m.contact.allow_attractive);
   r.get("contact", "background_damping_kg_s", m.background_damping);
+  read_normal(r, m.contact, origin);
   read_tangential(r, m.contact, origin);
   std::string integrator = "velocity_verlet";
   r.get("integration", "integrator", integrator);
@@ -648,7 +674,19 @@ std::string g(double v) {
   return b;
 }
 
+void validate_normal(const ContactLaw& c) {
+  if (c.normal != NormalModel::Luding) return;
+  if (!(c.luding_kp > c.stiffness) || !std::isfinite(c.luding_kp))
+    fail("contact.luding_kp_N_m must exceed contact.stiffness_N_m (k1, the loading stiffness) and be finite, "
+         "e.g. 5 k1");
+  if (!(c.luding_kc >= 0) || !std::isfinite(c.luding_kc))
+    fail("contact.luding_kc_N_m must be zero (no adhesion) or positive and finite");
+  if (!(c.luding_plasticity_depth > 0 && c.luding_plasticity_depth <= 1))
+    fail("contact.luding_plasticity_depth (phi_f) must be in (0, 1], e.g. 0.05");
+}
+
 void validate_tangential(const ContactLaw& c) {
+  validate_normal(c);
   if (!c.frictional()) return;
   if (!(c.friction >= 0) || !std::isfinite(c.friction))
     fail("contact.friction must be zero or positive and finite (the Coulomb coefficient mu, e.g. 0.5)");

@@ -101,7 +101,7 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
       for (int a = 0; a < 3; ++a)
         for (int b = 0; b < 3; ++b) tangential[a][b] += dv[a] * fv[b];   // d (x) f on j, as the normal part
       sliding += c.sliding;
-      m.E_t += c.energy - 0.5 * model.contact.stiffness * delta * delta;
+      m.E_t += c.spring_energy;
     }
     const double vi = 4.0 / 3.0 * M_PI * s.radius[i] * s.radius[i] * s.radius[i];
     const double vj = 4.0 / 3.0 * M_PI * s.radius[j] * s.radius[j] * s.radius[j];

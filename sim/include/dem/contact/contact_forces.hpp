@@ -21,7 +21,8 @@ struct ContactForce {
   double fn;       ///< normal force on j along n [N] (repulsion positive)
   Vec3 ft;         ///< tangential force on j [N] (zero without friction)
   bool sliding;    ///< at the Coulomb limit at the last step (friction)
-  double energy;   ///< elastic energy of the contact [J] (normal spring + tangential spring)
+  double energy;   ///< elastic energy of the contact [J] (normal spring + tangential and rolling springs)
+  double spring_energy;   ///< the tangential and rolling springs' part of it [J]
 };
 
 /// Calls visit(const ContactForce&) for every listed pair in contact, in list order. The
@@ -35,22 +36,28 @@ void for_each_contact_force(const Model& model, const State& s, const NeighborLi
     using CM = std::decay_t<decltype(cm)>;
     const bool with_history = CM::history > 0 && s.history.values.size() == list.partner.size() * CM::history;
     for_each_listed_contact(s, list, [&](long p, int i, int j, const Vec3& d, double r, double delta) {
-      ContactForce c{p, i, j, d, r, delta, d * (1.0 / r), 0.0, Vec3{0, 0, 0}, false, 0.0};
+      ContactForce c{p, i, j, d, r, delta, d * (1.0 / r), 0.0, Vec3{0, 0, 0}, false, 0.0, 0.0};
       const Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + rate.apply(d);
       const NormalGeometry<double> g{r, c.n.x, c.n.y, c.n.z, delta, -dot(v_rel, c.n), v_rel.x, v_rel.y, v_rel.z};
-      c.fn = cm.normal_force(g);
       if constexpr (CM::history > 0) {
-        static const double kZero[CM::history] = {};
-        const double* h = with_history ? s.history.values.data() + p * CM::history : kZero;
-        const double ai = s.radius[i] - 0.5 * delta, aj = s.radius[j] - 0.5 * delta;
-        const Vec3 wi = s.rotations() ? s.angular_velocity[i] : Vec3{0, 0, 0};
-        const Vec3 wj = s.rotations() ? s.angular_velocity[j] : Vec3{0, 0, 0};
-        const Vec3 v_contact = v_rel - cross(wi * ai + wj * aj, c.n);
-        c.ft = cm.tangential.force(TangentialInput{c.n, v_contact, c.fn}, h);
-        c.sliding = h[3] != 0.0;
-        c.energy = cm.energy(delta, h);
+        static double kZero[CM::history] = {};
+        const double a12 = s.radius[i] * s.radius[j] / (s.radius[i] + s.radius[j]);
+        double* h = with_history ? const_cast<double*>(s.history.values.data()) + p * CM::history : kZero;
+        c.fn = cm.normal_force(g, a12, h, false);   // read only (advance = false)
+        if constexpr (CM::rotations) {
+          const double ai = s.radius[i] - 0.5 * delta, aj = s.radius[j] - 0.5 * delta;
+          const Vec3 wi = s.rotations() ? s.angular_velocity[i] : Vec3{0, 0, 0};
+          const Vec3 wj = s.rotations() ? s.angular_velocity[j] : Vec3{0, 0, 0};
+          const Vec3 v_contact = v_rel - cross(wi * ai + wj * aj, c.n);
+          const double* ht = h + CM::tangential_offset;
+          c.ft = cm.tangential.force(TangentialInput{c.n, v_contact, std::max(c.fn, 0.0)}, ht);
+          c.sliding = ht[3] != 0.0;
+        }
+        c.energy = cm.energy(delta, a12, h);
+        c.spring_energy = c.energy - cm.normal_energy(delta, a12, h);
       } else {
-        c.energy = cm.energy(delta, nullptr);
+        c.fn = cm.normal_force(g);
+        c.energy = cm.energy(delta, 0.0, nullptr);
       }
       visit(static_cast<const ContactForce&>(c));
     });

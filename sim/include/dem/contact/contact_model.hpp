@@ -15,6 +15,7 @@
 
 #include "dem/contact/geometry.hpp"
 #include "dem/contact/normal_linear.hpp"
+#include "dem/contact/normal_luding.hpp"
 #include "dem/contact/rolling.hpp"
 #include "dem/contact/tangential.hpp"
 #include "dem/core/model.hpp"
@@ -22,21 +23,33 @@
 
 namespace dem::contact {
 
+/// History doubles of a sub-model (0 for those that declare none).
+template <class S, class = void> struct HistoryOf { static constexpr int value = 0; };
+template <class S> struct HistoryOf<S, std::void_t<decltype(S::history)>> { static constexpr int value = S::history; };
+
 template <class Normal, class Damping, class Tangential, class Rolling = NoRolling>
 struct ContactModel {
   Normal normal;
   Damping damping;
   Tangential tangential;
-  bool attractive = false;   ///< false: the normal force is clamped at zero (no tension)
+  bool attractive = false;   ///< false: the normal force is clamped at zero (no tension); history normals: no clamp
   Rolling rolling{};
 
   using RollingModel = Rolling;
-  /// History doubles per contact: the tangential sub-model's, then the rolling one's.
-  static constexpr int history = Tangential::history + Rolling::history;
-  static constexpr int rolling_offset = Tangential::history;
+  /// History doubles per contact, in this order: the normal sub-model's, the tangential one's,
+  /// the rolling one's.
+  static constexpr int normal_history = HistoryOf<Normal>::value;
+  static constexpr int tangential_offset = normal_history;
+  static constexpr int rolling_offset = normal_history + Tangential::history;
+  static constexpr int history = normal_history + Tangential::history + Rolling::history;
   static constexpr bool rotations = Tangential::rotations;
   /// Runs in the vector kernels (no history to read and write per pair).
   static constexpr bool vectorised = history == 0;
+  /// History entries that change sign when i and j swap (the tangential spring's).
+  static constexpr unsigned odd_mask = [] {
+    if constexpr (Tangential::history > 0) return Tangential::odd_mask << tangential_offset;
+    else return 0u;
+  }();
 
   /// The model with its parameters in lanes of T: a kernel binds it once before its loop.
   template <class T>
@@ -55,22 +68,38 @@ struct ContactModel {
   template <class T> Bound<T> bind() const {
     return {normal.template bind<T>(), damping.template bind<T>(), lanes::mask_of<T>(attractive), lanes::splat<T>(0.0)};
   }
-  /// The same for one pair.
-  __attribute__((always_inline)) double normal_force(const NormalGeometry<double>& g) const {
-    return bind<double>().normal_force(g);
+  /// The normal force of one pair [N] (a12 = r_i r_j/(r_i + r_j) [m], h the contact's history):
+  /// `advance` updates a history normal's state (the pair loop), otherwise it is only read.
+  __attribute__((always_inline)) double normal_force(const NormalGeometry<double>& g, double a12 = 0,
+                                                     double* h = nullptr, bool advance = false) const {
+    if constexpr (normal_history > 0) {
+      const double f = advance ? normal.update(g.delta, a12, h) : normal.force(g.delta, a12, h);
+      return f + damping.template bind<double>().force(g);
+    } else {
+      (void)a12; (void)h; (void)advance;
+      return bind<double>().normal_force(g);
+    }
+  }
+  /// Elastic energy of the normal sub-model alone [J].
+  double normal_energy(double delta, double a12, const double* h) const {
+    if constexpr (normal_history > 0) return normal.energy(delta, a12, h);
+    else { (void)a12; (void)h; return normal.energy(delta); }
   }
   /// Elastic energy stored in a contact of overlap delta [m] and history h [J].
-  double energy(double delta, const double* h) const {
-    if constexpr (Rolling::history > 0) return normal.energy(delta) + tangential.energy(h) + rolling.energy(h + rolling_offset);
-    else if constexpr (history > 0) return normal.energy(delta) + tangential.energy(h);
-    else { (void)h; return normal.energy(delta); }
+  double energy(double delta, double a12, const double* h) const {
+    double e = normal_energy(delta, a12, h);
+    if constexpr (Tangential::history > 0) e += tangential.energy(h + tangential_offset);
+    if constexpr (Rolling::history > 0) e += rolling.energy(h + rolling_offset);
+    return e;
   }
   double normal_stiffness() const { return normal.stiffness(); }
 };
 
-using Frictionless = ContactModel<LinearSpring, LinearDashpot, NoTangential>;
-using Frictional = ContactModel<LinearSpring, LinearDashpot, CundallStrack>;
-using FrictionalRolling = ContactModel<LinearSpring, LinearDashpot, CundallStrack, RollingSpring>;
+template <class Normal, class Tangential, class Rolling = NoRolling>
+using Model3 = ContactModel<Normal, LinearDashpot, Tangential, Rolling>;
+using Frictionless = Model3<LinearSpring, NoTangential>;
+using Frictional = Model3<LinearSpring, CundallStrack>;
+using FrictionalRolling = Model3<LinearSpring, CundallStrack, RollingSpring>;
 
 inline Frictionless frictionless(const ContactLaw& law) {
   return {LinearSpring{law.stiffness}, LinearDashpot{law.damping}, NoTangential{}, law.allow_attractive};
@@ -81,22 +110,27 @@ inline Frictional frictional(const ContactLaw& law) {
                         law.objective_spring},
           law.allow_attractive};
 }
-
 inline FrictionalRolling frictional_rolling(const ContactLaw& law) {
   const Frictional base = frictional(law);
   return {base.normal, base.damping, base.tangential, base.attractive,
           RollingSpring{law.rolling_stiffness_ratio * law.stiffness, law.rolling_damping, law.rolling_friction}};
 }
 
-/// Calls f(model) with the concrete contact model of the scene's law.
+/// Calls f(model) with the concrete contact model of the scene's law: the normal sub-model
+/// (linear or Luding's), the tangential one (none or Cundall-Strack), rolling (off or on).
 template <class F>
 decltype(auto) with_contact_model(const ContactLaw& law, F&& f) {
-  switch (law.tangential) {
-    case TangentialModel::CundallStrack:
-      if (law.rolling()) return f(frictional_rolling(law));
-      return f(frictional(law));
-    case TangentialModel::None: break;
+  if (law.normal == NormalModel::Luding) {
+    const LudingNormal n{law.stiffness, law.luding_kp, law.luding_kc, law.luding_plasticity_depth};
+    const Frictional base = frictional(law);
+    if (law.rolling())
+      return f(Model3<LudingNormal, CundallStrack, RollingSpring>{n, base.damping, base.tangential, false,
+                                                                  frictional_rolling(law).rolling});
+    if (law.frictional()) return f(Model3<LudingNormal, CundallStrack>{n, base.damping, base.tangential, false});
+    return f(Model3<LudingNormal, NoTangential>{n, base.damping, NoTangential{}, false});
   }
+  if (law.rolling()) return f(frictional_rolling(law));
+  if (law.frictional()) return f(frictional(law));
   return f(frictionless(law));
 }
 

@@ -10,6 +10,7 @@ namespace dem::contact {
 /// Scene key: contact.stiffness_N_m.
 struct LinearSpring {
   double k;
+  static constexpr int history = 0;
   /// The sub-model with its parameters in lanes (bound once, outside a kernel's loop).
   template <class T> struct Bound {
     T k;

@@ -17,6 +17,12 @@ enum class Integrator {
   SymplecticEuler,    ///< v += a dt; x += v dt  (what YADE's NewtonIntegrator does)
 };
 
+/// The normal sub-model of the contact (contact/normal_linear.hpp, contact/normal_luding.hpp).
+enum class NormalModel {
+  Linear,   ///< linear spring-dashpot (default)
+  Luding,   ///< Luding's elasto-plastic adhesive law (k1 = stiffness, kp, kc, plasticity depth)
+};
+
 /// The tangential sub-model of the contact (contact/tangential.hpp).
 enum class TangentialModel {
   None,            ///< frictionless (default): no tangential force, no rotations
@@ -34,6 +40,12 @@ struct ContactLaw {
   /// Law2_ScGeom_ViscElPhys_Basic does (docs/yade.md). If true the force may turn attractive
   /// (the textbook linear spring-dashpot, which the analytic t_c and e describe exactly).
   bool allow_attractive = false;
+  NormalModel normal = NormalModel::Linear;
+  double luding_kp = 0;                     ///< [N/m] un-/reloading limit stiffness kp > k1 (luding)
+  double luding_kc = 0;                     ///< [N/m] adhesive stiffness kc >= 0 (luding)
+  double luding_plasticity_depth = 0;       ///< phi_f (luding), > 0
+  /// The stiffness that sets t_c and dt: k, or kp for Luding's law (its fastest branch).
+  double time_step_stiffness() const { return normal == NormalModel::Luding ? luding_kp : stiffness; }
   TangentialModel tangential = TangentialModel::None;
   double friction = 0.0;                    ///< Coulomb coefficient mu (cundall_strack), >= 0
   double tangential_stiffness_ratio = 2.0 / 7.0;   ///< k_t / k (cundall_strack), > 0
