@@ -229,6 +229,7 @@ int run_fit_command(const FitCommandOptions& o) {
   Table params({"mode", "nu", "quantity", "x0", "se_x0", "x_max", "se_x_max", "beta", "se_beta",
                 "corr_xmax_beta", "initial_slope", "se_initial_slope", "eps_95", "r_squared", "rmse", "n",
                 "eps_last", "gsl_max_rel_diff", "residual_autocorr", "se_inflation", "warnings"});
+  std::vector<SummaryRow> summary;
   FitsByModeQuantity by_mode_q;
   int warnings = 0, usable = 0;
   for (auto& c : curves) {
@@ -263,17 +264,25 @@ int run_fit_command(const FitCommandOptions& o) {
                         num(r.beta), num(r.se_beta), num(r.corr[1][2], 3), num(r.initial_slope),
                         num(r.se_initial_slope), num(r.eps_95), num(r.r_squared, 5), num(r.rmse), std::to_string(r.n),
                         num(r.e_last, 4), num(gsl_gap, 2), num(r.residual_autocorrelation, 3), num(r.se_inflation, 3), w});
+        summary.push_back({c.mode, c.phi, q, 0, r.x_max, r.se_x_max, r.beta, r.se_beta, r.initial_slope,
+                           r.se_initial_slope, r.r_squared, r.warnings, true});
         by_mode_q[{c.mode, q}].emplace_back(c.phi, r);
         ++usable;
       } catch (const std::exception& ex) {
         std::cerr << "dem fit: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << ex.what() << "\n";
         params.add_row({c.mode, num(c.phi, 4), q, "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan",
                         "nan", "nan", "nan", "0", "nan", "nan", "nan", "nan", std::string("not fitted: ") + ex.what()});
+        SummaryRow nf;
+        nf.mode = c.mode; nf.nu = c.phi; nf.quantity = q; nf.fitted = false;
+        nf.warnings = {std::string("not fitted: ") + ex.what()};
+        summary.push_back(nf);
         ++warnings;
       }
     }
   }
-  write_table_all(params, (out / "parameters").string(), "Fitted saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d)");
+  write_fit_tables(params, summary, (out / "parameters").string(),
+                   "Fitted saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d); standard errors from the "
+                   "curve's residuals (inflated for their autocorrelation)");
 
   // D2 vs D3 from the same volume fraction.
   Table shared({"nu", "quantity", "mode_a", "mode_b", "f_statistic", "p_value", "max_gap", "same_path",
