@@ -202,6 +202,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
       model.output.vtk_per_stage < 0 ? auto_vtk_per_stage(state.count()) : model.output.vtk_per_stage;
   const double vtk_dx = vtk_frames > 0 ? (x_end - x_start) / (vtk_frames + 1) : 0;
   double next_vtk_x = x_start + vtk_dx;
+  int vtk_taken = 0;   // snapshots between start and end (the end one follows the loop)
   const double sample_dx = spec.stop == StopKind::VolumeFractionUp || spec.stop == StopKind::VolumeFractionDown
                                ? 3.0 * model.output.sample_strain   // ln(phi) changes 3x the axis strain
                                : model.output.sample_strain;
@@ -243,9 +244,11 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
           scale = 1.0;   // only one event per step
         }
         if (std::fabs(x - last_sample_x) >= sample_dx * (1 - 1e-9)) sample = true;
-        if (vtk_dx != 0 && ((vtk_dx > 0 && x >= next_vtk_x) || (vtk_dx < 0 && x <= next_vtk_x))) {
+        if (vtk_dx != 0 && !done && vtk_taken < vtk_frames &&
+            ((vtk_dx > 0 && x >= next_vtk_x) || (vtk_dx < 0 && x <= next_vtk_x))) {
           vtk.snapshot(state, engine.neighbor_list());
           next_vtk_x += vtk_dx;
+          ++vtk_taken;
         }
       }
       if (sample || done) {
