@@ -16,6 +16,7 @@ least 90 % of each curve's range (a curve that stopped early is compared over it
 which is not a comparison of the two curves).
 """
 import argparse
+import os
 import json
 import sys
 
@@ -113,15 +114,18 @@ def overlay(a, b, labels, path):
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="dem compare", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("first")
-    ap.add_argument("second")
-    ap.add_argument("--labels", default="ours,yade")
-    ap.add_argument("--plot", help="write an overlay plot (PNG, and SVG beside it)")
-    ap.add_argument("--json", help="write the differences as JSON")
-    ap.add_argument("--tol-p", type=float, default=0.03)
-    ap.add_argument("--tol-s-dev", type=float, default=0.15)
-    ap.add_argument("--tol-f-dev", type=float, default=0.25)
-    ap.add_argument("--tol-c", type=float, default=0.15)
+    ap.add_argument("first", help="curve CSV (ours: deviatoric/MODE_phiX.csv, or `dem mode --out`)")
+    ap.add_argument("second", help="curve CSV with the same columns (e.g. yade_ref/run_mode.py's)")
+    ap.add_argument("--labels", default=None,
+                    help="legend labels of the two curves, comma-separated (default: the file names)")
+    ap.add_argument("--plot", metavar="OUT.png", help="write an overlay plot (PNG, and SVG beside it)")
+    ap.add_argument("--json", metavar="OUT.json", help="write the differences as JSON")
+    ap.add_argument("--tol-p", type=float, default=0.03, help="largest difference of p relative to its mean (default: %(default)s)")
+    ap.add_argument("--tol-s-dev", type=float, default=0.15,
+                    help="RMS difference of s_dev relative to its plateau (default: %(default)s)")
+    ap.add_argument("--tol-f-dev", type=float, default=0.25,
+                    help="RMS difference of F_dev relative to its plateau (default: %(default)s)")
+    ap.add_argument("--tol-c", type=float, default=0.15, help="RMS difference of C (default: %(default)s)")
     ap.add_argument("--tol-eps-v", type=float, default=5e-4,
                     help="RMS |d eps_v| (dilatancy of stress-controlled tests; 0 for both at constant volume)")
     ap.add_argument("--min-coverage", type=float, default=0.9,
@@ -147,7 +151,10 @@ def main(argv=None):
     print(f"{'coverage':8s} {'':12s} {'':12s} {'min':>10s} {c['value']:10.4g} {c['tolerance']:10.4g}  "
           f"{'yes' if c['ok'] else 'NO (the curves cover different eps_d ranges)'}")
     if a.plot:
-        overlay(ca, cb, a.labels.split(","), a.plot)
+        labels = a.labels.split(",") if a.labels else [os.path.basename(a.first), os.path.basename(a.second)]
+        if labels[0] == labels[1]:
+            labels = [a.first, a.second]
+        overlay(ca, cb, labels, a.plot)
     if a.json:
         with open(a.json, "w") as fh:
             json.dump(res, fh, indent=2)

@@ -201,8 +201,8 @@ def plot_fits(run, outdir):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="dem plot", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("run_dir")
-    ap.add_argument("--fits", action="store_true", help="also plot the fits of RUN_DIR/fit")
+    ap.add_argument("run_dir", help="a `dem run` folder (deviatoric/, prep/; figures go to RUN_DIR/plots)")
+    ap.add_argument("--fits", action="store_true", help="also plot the fits of RUN_DIR/fit (`dem fit` writes them)")
     a = ap.parse_args(argv)
     if not os.path.isdir(a.run_dir):
         print(f"dem plot: {a.run_dir} is not a folder", file=sys.stderr)
