@@ -72,6 +72,23 @@ def compare(a, b, npoints=200):
     return res, grid
 
 
+def finite_or_null(obj):
+    """obj with every non-finite float (and numpy number) replaced by None, for strict JSON."""
+    if isinstance(obj, dict):
+        return {k: finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite_or_null(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return finite_or_null(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
 def verdict(res, tol):
     checks = {
         "p_Pa": ("max_rel", tol["p"]),
@@ -157,7 +174,7 @@ def main(argv=None):
         overlay(ca, cb, labels, a.plot)
     if a.json:
         with open(a.json, "w") as fh:
-            json.dump(res, fh, indent=2)
+            json.dump(finite_or_null(res), fh, indent=2, allow_nan=False)   # NaN/inf: null (valid JSON)
     return 0 if all(x["ok"] for x in v.values()) else 4
 
 

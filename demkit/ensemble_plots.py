@@ -7,7 +7,6 @@
 
     python3 -m demkit.ensemble_plots DIR
 """
-import csv
 import glob
 import os
 import re
@@ -20,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from demkit.curves import read_curve  # noqa: E402
-from demkit.figures import legend_if_any, plot_parameters as parameters_figure, save  # noqa: E402
+from demkit.figures import legend_if_any, plot_parameters as parameters_figure, read_rows, save  # noqa: E402
 from demkit.plots import LABELS, law, paren  # noqa: E402
 
 NAME_RE = re.compile(r"([A-Za-z0-9_]+)_phi([0-9.]+)\.csv$")
@@ -33,13 +32,6 @@ def ensemble_curves(run):
         if m:
             out.append((m.group(1), float(m.group(2)), read_curve(f)))
     return out
-
-
-def read_rows(path):
-    if not os.path.exists(path):
-        return []
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
 
 
 def plot_bands(run, outdir, curves):

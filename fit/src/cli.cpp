@@ -13,6 +13,8 @@
 #include <regex>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "demfit/fit.hpp"
 #include "demfit/table.hpp"
 
@@ -55,10 +57,15 @@ std::vector<fs::path> curve_files(const fs::path& run) {
   std::vector<fs::path> files;
   if (fs::exists(run / "manifest.json")) {
     std::ifstream in(run / "manifest.json");
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    const std::regex entry(R"re("file": "(deviatoric/[^"]+)")re");
-    for (std::sregex_iterator it(text.begin(), text.end(), entry), end; it != end; ++it) {
-      const fs::path f = run / (*it)[1].str();
+    const nlohmann::json manifest = nlohmann::json::parse(in, nullptr, false);
+    if (manifest.is_discarded() || !manifest.contains("outputs") || !manifest["outputs"].is_array())
+      throw std::runtime_error((run / "manifest.json").string() + " is not a manifest of `dem run` (no \"outputs\" "
+                               "list): rerun the run, or remove it to fit every deviatoric/*.csv");
+    for (const auto& o : manifest["outputs"]) {
+      if (!o.is_object() || !o.contains("file") || !o["file"].is_string()) continue;
+      const std::string file = o["file"].get<std::string>();
+      if (file.rfind("deviatoric/", 0) != 0) continue;
+      const fs::path f = run / file;
       if (fs::exists(f)) files.push_back(f);
       else std::cerr << "dem fit: warning: " << f.string() << " is listed in manifest.json but missing (run not finished?)\n";
     }

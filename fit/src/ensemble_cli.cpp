@@ -12,6 +12,8 @@
 #include <set>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "demfit/cli.hpp"
 #include "demfit/ensemble.hpp"
 #include "demfit/table.hpp"
@@ -24,11 +26,13 @@ namespace {
 
 std::string num(double v, int prec = 6) { return table_number(v, prec); }
 
-// Value of "key": "..." in a flat JSON object (our own status files).
+// The string value of `key` in a task's status JSON (demkit.task); "" when absent, not a string,
+// or the file is not JSON.
 std::string json_field(const std::string& text, const std::string& key) {
-  const std::regex re("\"" + key + "\"\\s*:\\s*\"((?:[^\"\\\\]|\\\\.)*)\"");
-  std::smatch m;
-  return std::regex_search(text, m, re) ? m[1].str() : "";
+  const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) return "";
+  const auto it = j.find(key);
+  return it != j.end() && it->is_string() ? it->get<std::string>() : "";
 }
 
 struct MemberStatus { std::string member, status, message; };

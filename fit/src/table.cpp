@@ -1,5 +1,7 @@
 #include "demfit/table.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <array>
 #include <cctype>
@@ -38,17 +40,23 @@ void write_part(const std::string& path, const std::string& s) {
 void commit_part(const std::string& path) {
   if (std::rename((path + ".part").c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + path + ".part");
 }
-std::string json_str(const std::string& s) {
-  std::string o = "\"";
-  for (char c : s) { if (c == '"' || c == '\\') o += '\\'; o += c; }
-  return o + "\"";
-}
-bool is_number(const std::string& s) {
-  if (s.empty()) return false;
+}  // namespace
+
+nlohmann::ordered_json json_cell(const std::string& cell) {
+  if (cell.empty()) return cell;
+  const char* b = cell.c_str();
   char* end = nullptr;
-  std::strtod(s.c_str(), &end);
-  return end && *end == 0 && s != "nan";
+  const long long i = std::strtoll(b, &end, 10);
+  if (end && *end == 0 && end != b && cell.find_first_not_of("+-0123456789") == std::string::npos) return i;
+  const double v = std::strtod(b, &end);
+  if (end && *end == 0 && end != b) {
+    if (std::isfinite(v)) return v;
+    return nullptr;
+  }
+  return cell;
 }
+
+namespace {
 std::string tex_escape(const std::string& s) {
   std::string o;
   for (char c : s) {
@@ -115,18 +123,22 @@ std::string csv_text(const Table& t) {
   }
   return csv.str();
 }
+// The table as JSON (nlohmann-json): a cell that is a whole number is written as a number, an
+// integer when it is one; NaN and infinities (not JSON numbers) as null; any other text as a string.
 std::string json_text(const Table& t, const std::string& caption) {
-  std::ostringstream js;
-  js << "{\n  \"caption\": " << json_str(caption) << ",\n  \"rows\": [";
-  for (std::size_t i = 0; i < t.rows.size(); ++i) {
-    js << (i ? ",\n    {" : "\n    {");
-    for (std::size_t k = 0; k < t.header.size(); ++k)
-      js << (k ? ", " : "") << json_str(t.header[k]) << ": "
-         << (is_number(t.rows[i][k]) ? t.rows[i][k] : (t.rows[i][k] == "nan" ? "null" : json_str(t.rows[i][k])));
-    js << "}";
+  nlohmann::ordered_json js;
+  js["caption"] = caption;
+  js["null"] = "not a finite number (NaN or infinite)";
+  js["rows"] = nlohmann::ordered_json::array();
+  for (const auto& r : t.rows) {
+    nlohmann::ordered_json row = nlohmann::ordered_json::object();
+    for (std::size_t k = 0; k < t.header.size(); ++k) {
+      const std::string& cell = k < r.size() ? r[k] : std::string();
+      row[t.header[k]] = json_cell(cell);
+    }
+    js["rows"].push_back(std::move(row));
   }
-  js << "\n  ]\n}\n";
-  return js.str();
+  return js.dump(2) + "\n";
 }
 void write_all_or_none(const std::vector<std::pair<std::string, std::string>>& files) {
   for (const auto& [path, text] : files) write_part(path, text);

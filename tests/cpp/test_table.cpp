@@ -115,3 +115,43 @@ TEST(SummaryTable, LatexIsBooktabsWithAlignedColumns) {
   }
   EXPECT_EQ(depth, 0);
 }
+
+#include <cstdio>
+#include <unistd.h>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+TEST(TableJson, NonFiniteValuesAreNullAndTheFileIsValidJson) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("dem_table_json_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  demfit::Table t({"mode", "n", "x", "se", "lo", "note"});
+  t.add_row({"D2", "201", "0.196534", "nan", "-inf", "a \"quoted\" note, with a comma"});
+  t.add_row({"D3", "-3", "1e-300", "inf", demfit::table_number(std::nan("")), ""});
+  demfit::write_table_all(t, (dir / "t").string(), "caption with \"quotes\" and \\ backslash");
+  std::ifstream in(dir / "t.json");
+  const nlohmann::json j = nlohmann::json::parse(in);   // throws on invalid JSON (bare inf/nan)
+  EXPECT_EQ(j["caption"], "caption with \"quotes\" and \\ backslash");
+  ASSERT_EQ(j["rows"].size(), 2u);
+  const auto& a = j["rows"][0];
+  EXPECT_TRUE(a["n"].is_number_integer());
+  EXPECT_EQ(a["n"], 201);
+  EXPECT_DOUBLE_EQ(a["x"].get<double>(), 0.196534);
+  EXPECT_TRUE(a["se"].is_null());
+  EXPECT_TRUE(a["lo"].is_null());
+  EXPECT_EQ(a["note"], "a \"quoted\" note, with a comma");
+  const auto& b = j["rows"][1];
+  EXPECT_EQ(b["n"], -3);
+  EXPECT_DOUBLE_EQ(b["x"].get<double>(), 1e-300);
+  EXPECT_TRUE(b["se"].is_null());
+  EXPECT_TRUE(b["lo"].is_null());
+  EXPECT_EQ(b["note"], "");
+  // the CSV beside it keeps the text cells as they are (quoted where needed)
+  std::ifstream csv(dir / "t.csv");
+  std::string header, row;
+  std::getline(csv, header);
+  std::getline(csv, row);
+  EXPECT_EQ(row, "D2,201,0.196534,nan,-inf,\"a \"\"quoted\"\" note, with a comma\"");
+  fs::remove_all(dir);
+}

@@ -2,6 +2,8 @@
 // result tables as CSV, JSON, Markdown and LaTeX.
 #pragma once
 #include <istream>
+
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 #include <vector>
 
@@ -26,6 +28,9 @@ Table read_table(const std::string& path);
 Table parse_table(std::istream& in, const std::string& source);
 /// A number for a table cell: %.{prec}g, "nan" for non-finite values.
 std::string table_number(double v, int prec = 6);
+/// A table cell as JSON: an integer, a finite number, null for NaN or an infinity (JSON has no
+/// such numbers), else the text.
+nlohmann::ordered_json json_cell(const std::string& cell);
 /// Writes text to path atomically (path.part, then rename). Throws std::runtime_error.
 void write_text_file(const std::string& path, const std::string& content);
 /// Writes stem.csv, stem.json, stem.md, stem.tex atomically, all four or none. Throws
