@@ -35,22 +35,27 @@ def ensemble_curves(run):
 
 
 def plot_bands(run, outdir, curves):
+    """Mean and 95 % band of every (mode, nu), one panel per mode side by side (D2 | D3), sharing y."""
     nus = sorted({nu for _, nu, _ in curves})
+    modes = sorted({mode for mode, _, _ in curves})
     cmap = plt.get_cmap("viridis")
     written = []
     for q in ("s_dev", "F_dev", "p_star", "C"):
-        fig, ax = plt.subplots(figsize=(6.4, 4.4))
-        for mode, nu, c in curves:
-            color = cmap(0.85 * nus.index(nu) / max(1, len(nus) - 1))   # stop before viridis' pale yellow
-            ax.fill_between(c["eps_d"], c[q + "_lo95"], c[q + "_hi95"], color=color, alpha=0.25, lw=0)
-            ax.plot(c["eps_d"], c[q + "_mean"], "-" if mode == "D2" else "--", color=color, lw=1.3,
-                    label=f"{mode} ν={nu:.3f}")
+        fig, axes = plt.subplots(1, len(modes), figsize=(4.2 * len(modes) + 0.6, 3.8), sharey=True, squeeze=False)
+        for ax, mode in zip(axes[0], modes):
+            for m, nu, c in curves:
+                if m != mode:
+                    continue
+                color = cmap(0.85 * nus.index(nu) / max(1, len(nus) - 1))   # stop before viridis' pale yellow
+                ax.fill_between(c["eps_d"], c[q + "_lo95"], c[q + "_hi95"], color=color, alpha=0.25, lw=0)
+                ax.plot(c["eps_d"], c[q + "_mean"], "-", color=color, lw=1.3, label=f"ν = {nu:.3f}")
+            ax.set_title(mode, fontsize=10)
+            ax.set_xlabel(r"deviatoric strain $\varepsilon_d$")
+            ax.grid(alpha=0.3)
+            legend_if_any(ax, fontsize=7)
+        axes[0, 0].set_ylabel(LABELS[q])
         k = int(curves[0][2]["n_packings"][0])
-        ax.set_title(f"mean of {k} packings, 95 % confidence band", fontsize=9)
-        ax.set_xlabel(r"deviatoric strain $\varepsilon_d$")
-        ax.set_ylabel(LABELS[q])
-        ax.grid(alpha=0.3)
-        legend_if_any(ax, fontsize=7, ncol=2)
+        fig.suptitle(f"mean of {k} packings with its 95 % confidence band", fontsize=9)
         fig.tight_layout()
         stem = os.path.join(outdir, f"ensemble_{q}")
         save(fig, stem, run)

@@ -49,6 +49,17 @@ def held_constant(v, scale=1.0):
     return v.size == 0 or not np.all(np.isfinite(v)) or np.ptp(v) <= 1e-9 * max(scale, np.max(np.abs(v)), 1e-300)
 
 
+def shear_plane(c):
+    """('xz', 'zz') for a curve sheared in xz (its largest off-diagonal log strain), None for none."""
+    best = None
+    for ij, n in (("xy", "yy"), ("xz", "zz"), ("yz", "zz")):
+        col = c.get(f"eps_{ij}")
+        if col is not None and f"sigma_{ij}_Pa" in c and np.size(col) and np.nanmax(np.abs(col)) > 1e-6:
+            if best is None or np.nanmax(np.abs(col)) > np.nanmax(np.abs(c[f"eps_{best[0]}"])):
+                best = (ij, n)
+    return best
+
+
 def plot_path(mode, nu, c, outdir, run=None):
     """One loading path, 2 x 2 (one journal column wide at 7 in): s_dev (and the signed ratio
     (sigma_xx - sigma_zz)/p), F_dev, eps_v and the servo's relative error against the eps_d
@@ -74,7 +85,14 @@ def plot_path(mode, nu, c, outdir, run=None):
     for ax, (kind, lab) in zip(axes.flat, panels):
         if kind == "s":
             ax.plot(x, c["s_dev"], "-", lw=1.2, label=r"$s_\mathrm{dev}$")
-            ax.plot(x, (c["sigma_xx_Pa"] - c["sigma_zz_Pa"]) / c["p_Pa"], "--", lw=1.0, label=r"$(\sigma_{xx}-\sigma_{zz})/p$")
+            shear = shear_plane(c)
+            if shear:   # simple shear: the friction-like ratio tau / sigma_n of the sheared plane
+                ij, n = shear
+                ax.plot(x, c[f"sigma_{ij}_Pa"] / c[f"sigma_{n}_Pa"], "--", lw=1.0,
+                        label=rf"$\tau_{{{ij}}}/\sigma_{{{n}}}$")
+            else:
+                ax.plot(x, (c["sigma_xx_Pa"] - c["sigma_zz_Pa"]) / c["p_Pa"], "--", lw=1.0,
+                        label=r"$(\sigma_{xx}-\sigma_{zz})/p$")
             ax.axhline(0, color="0.6", lw=0.8)
             ax.set_ylabel("stress ratio", fontsize=9)
             ax.legend(fontsize=7)
@@ -118,16 +136,21 @@ def plot_deviatoric(run, outdir):
         return []
     nus = sorted({c[1] for c in curves})
     cmap = plt.get_cmap("viridis")
+    modes = sorted({c[0] for c in curves})
     for q in ("s_dev", "F_dev", "p_star", "C"):
-        fig, ax = plt.subplots(figsize=(6, 4.2))
-        for mode, nu, c in curves:
-            color = cmap(nus.index(nu) / max(1, len(nus) - 1))
-            ax.plot(c["eps_d"], c[q], ("-" if mode == "D2" else "--"), color=color, lw=1.3,
-                    label=f"{mode} ν={nu:.3f}")
-        ax.set_xlabel(r"deviatoric strain $\varepsilon_d$")
-        ax.set_ylabel(LABELS[q])
-        ax.grid(alpha=0.3)
-        legend_if_any(ax, fontsize=7, ncol=2)
+        # one panel per mode, side by side (D2 | D3), sharing y
+        fig, axes = plt.subplots(1, len(modes), figsize=(4.2 * len(modes) + 0.6, 3.8), sharey=True, squeeze=False)
+        for ax, mode in zip(axes[0], modes):
+            for m, nu, c in curves:
+                if m != mode:
+                    continue
+                color = cmap(0.85 * nus.index(nu) / max(1, len(nus) - 1))
+                ax.plot(c["eps_d"], c[q], "-", color=color, lw=1.2, label=f"ν = {nu:.3f}")
+            ax.set_title(mode, fontsize=10)
+            ax.set_xlabel(r"deviatoric strain $\varepsilon_d$")
+            ax.grid(alpha=0.3)
+            legend_if_any(ax, fontsize=7)
+        axes[0, 0].set_ylabel(LABELS[q])
         fig.tight_layout()
         stem = os.path.join(outdir, f"deviatoric_{q}")
         save(fig, stem, run)
