@@ -152,17 +152,30 @@ def plot_parameters(outdir, rows, laws, run, interval, note=""):
     nrows = (len(panels) + 1) // 2 if ncols == 2 else 1
     fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.4 * nrows), squeeze=False)
     colours = {"D2": "#1f77b4", "D3": "#d62728"}
+    undetermined = False
     for ax, (q, par, sel) in zip(axes.flat, panels):
+        # A value whose interval is far wider than the value and the spread of the values is not determined:
+        # a hollow marker without its bar, so it does not set the scale of the panel.
+        allv = np.array([_num(r, par) for r in sel])
+        span = np.ptp(allv) if np.ptp(allv) > 0 else max(abs(np.mean(allv)), 1e-12)
+        shown = []
         for mode, marker, dx in (("D2", "o", -0.0008), ("D3", "s", 0.0008)):
             ms = [r for r in sel if r["mode"] == mode]
             if not ms:
                 continue
             nu = np.array([_num(r, "nu") for r in ms])
             v = np.array([_num(r, par) for r in ms])
-            lohi = np.array([interval(r, par) for r in ms])
+            lohi = np.array([interval(r, par) for r in ms], dtype=float)
+            ok = np.isfinite(lohi).all(axis=1) & (0.5 * (lohi[:, 1] - lohi[:, 0]) <= 3 * np.maximum(np.abs(v), span))
+            colour = colours.get(mode, "k")
             err = [np.nan_to_num(v - lohi[:, 0]), np.nan_to_num(lohi[:, 1] - v)]
-            ax.errorbar(nu + dx, v, yerr=err, fmt=marker, ms=4, capsize=2.5, color=colours.get(mode, "k"),
+            ax.errorbar(nu[ok] + dx, v[ok], yerr=[err[0][ok], err[1][ok]], fmt=marker, ms=4, capsize=2.5, color=colour,
                         label=mode)
+            if np.any(~ok):
+                undetermined = True
+                ax.plot(nu[~ok] + dx, v[~ok], marker, ms=5, mfc="white", color=colour,
+                        label=None if np.any(ok) else mode)
+            shown += list(v) + list(lohi[ok].ravel())
             law = [lw for lw in laws if lw["mode"] == mode and lw["quantity"] == q and lw["parameter"] == par]
             if law:
                 lw = law[0]
@@ -170,9 +183,13 @@ def plot_parameters(outdir, rows, laws, run, interval, note=""):
                 g = np.linspace(nu.min(), nu.max(), 50)
                 y = a + b * (g - ref)
                 band = 1.96 * np.sqrt(sa ** 2 + ((g - ref) * sb) ** 2)
-                ax.plot(g, y, "-", lw=1, color=colours.get(mode, "k"), alpha=0.8)
-                if np.all(np.isfinite(band)):
-                    ax.fill_between(g, y - band, y + band, color=colours.get(mode, "k"), alpha=0.12, lw=0)
+                ax.plot(g, y, "-", lw=1, color=colour, alpha=0.8)
+                if np.all(np.isfinite(band)) and np.all(band <= 4 * span):
+                    ax.fill_between(g, y - band, y + band, color=colour, alpha=0.12, lw=0)
+        shown = np.array([y for y in shown if np.isfinite(y)])
+        if shown.size:
+            pad = 0.08 * max(np.ptp(shown), 1e-12)
+            ax.set_ylim(shown.min() - pad, shown.max() + pad)
         ax.set_xlabel(r"volume fraction $\nu$")
         ax.set_ylabel(parameter_label(par, q))
         ax.grid(alpha=0.3)
@@ -180,6 +197,8 @@ def plot_parameters(outdir, rows, laws, run, interval, note=""):
     for ax in list(axes.flat)[len(panels):]:
         ax.set_visible(False)
     text = "bars: " + note + "; lines: linear ν-laws (fit/nu_laws.csv) with 95 % bands"
+    if undetermined:
+        text += "\nhollow: not determined (95 % interval beyond 3x the value and the spread of the values; see fit/parameters.md)"
     if left_out:
         text += "\nnot drawn (fitted at fewer than two ν): " + ", ".join(left_out)
     fig.suptitle(text, fontsize=8)

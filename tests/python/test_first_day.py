@@ -91,3 +91,13 @@ def test_slurm_profile_without_a_controller_is_refused_naming_slurm_conf(run_fol
     assert "SLURM_CONF=" + str(tmp_path / "missing" / "slurm.conf") in p.stderr
     assert 'eval "$(bash scripts/slurm-local.sh start' in p.stderr
     assert not (tmp_path / "ens" / "members").exists()          # no task was started
+
+
+def test_compare_json_is_valid_for_non_finite_values():
+    import json
+    import numpy as np
+    from demkit.compare import finite_or_null
+    obj = {"a": float("nan"), "b": np.float64(1.5), "c": [np.inf, -np.inf, 2], "d": np.array([np.nan, 3.0]),
+           "e": np.bool_(True), "f": {"g": np.int64(7)}}
+    text = json.dumps(finite_or_null(obj), allow_nan=False)      # raises on a bare NaN
+    assert json.loads(text) == {"a": None, "b": 1.5, "c": [None, None, 2], "d": [None, 3.0], "e": True, "f": {"g": 7}}
