@@ -91,3 +91,31 @@ def test_path_figure_is_2x2_and_leaves_out_constant_quantities(tmp_path):
     assert rev["axes"] == 2 and rev["empty"] == 0
     assert "constant volume" in rev["title"] and "no servo" in rev["title"]
     assert "constant volume" not in mixed["title"]
+
+
+def test_compare_overlay_leaves_out_round_off_and_labels_by_file(tmp_path):
+    from demkit import compare
+    e = np.linspace(0, 0.2, 41)
+    rng = np.random.default_rng(3)
+    files = []
+    for k in range(2):
+        d = tmp_path / f"m00{k}" / "deviatoric"
+        d.mkdir(parents=True)
+        f = d / "D2_phi0.700.csv"
+        cols = {"eps_d": e, "p_Pa": 1e6 * (1 + 0.01 * k + 0.1 * e), "s_dev": 0.2 * np.tanh(30 * e) + 0.01 * k,
+                "F_dev": 0.1 * np.tanh(20 * e), "C": 6 + e, "eps_v": rng.normal(0, 1e-17, e.size)}
+        with open(f, "w") as fh:
+            fh.write("# synthetic\n" + ",".join(cols) + "\n")
+            for i in range(e.size):
+                fh.write(",".join(repr(float(v[i])) for v in cols.values()) + "\n")
+        files.append(f)
+    figures.SAVED.clear()
+    out = tmp_path / "overlay.png"
+    compare.main([str(files[0]), str(files[1]), "--plot", str(out)])
+    fig = figures.SAVED[-1]
+    assert fig["axes"] == 4 and fig["empty"] == 0, fig          # p, s_dev, F_dev, C; eps_v is round-off
+    assert "constant volume" in fig["title"]
+    assert out.exists() and out.with_suffix(".svg").exists()
+    assert png_text(out)["Software"].startswith("dem-toolkit")
+    assert compare.short_labels(str(files[0]), str(files[1])) == ["m000/deviatoric/D2_phi0.700.csv",
+                                                                   "m001/deviatoric/D2_phi0.700.csv"]
