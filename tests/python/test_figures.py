@@ -8,7 +8,6 @@ import struct
 
 import numpy as np
 
-from conftest import run_dem
 from demkit import figures, plots
 
 
@@ -26,9 +25,13 @@ def png_text(path):
     return out
 
 
-def test_every_figure_carries_version_and_scene_hash(small_run):
+def test_figures_carry_version_and_scene_hash_and_no_panel_is_empty(small_run, tmp_path, capsys):
     run = small_run["dir"]
-    run_dem("plot", run, "--fits", check=True)
+    figures.SAVED.clear()
+    assert plots.main([str(run), "--fits"]) == 0        # what `dem plot RUN --fits` runs
+    assert figures.SAVED and all(f["empty"] == 0 for f in figures.SAVED), figures.SAVED
+    params = [f for f in figures.SAVED if f["stem"].endswith("fit_parameters")]
+    assert params and params[0]["axes"] >= 2
     scene = hashlib.sha256((run / "scene.toml").read_bytes()).hexdigest()[:16]
     pngs = sorted((run / "plots").glob("*.png"))
     assert len(pngs) >= 8
@@ -40,15 +43,6 @@ def test_every_figure_carries_version_and_scene_hash(small_run):
         svg = png.with_suffix(".svg").read_text()
         assert f"<dc:source>scene sha256:{scene}" in svg, png.name
         assert "dem-toolkit" in svg
-
-
-def test_no_empty_panels_and_parameters_need_two_volume_fractions(small_run, tmp_path, capsys):
-    run = small_run["dir"]
-    figures.SAVED.clear()
-    assert plots.main([str(run), "--fits"]) == 0
-    assert figures.SAVED and all(f["empty"] == 0 for f in figures.SAVED), figures.SAVED
-    params = [f for f in figures.SAVED if f["stem"].endswith("fit_parameters")]
-    assert params and params[0]["axes"] >= 2
     # one volume fraction: the parameters cannot be drawn against nu, and are not drawn at all
     one = tmp_path / "one"
     (one / "deviatoric").mkdir(parents=True)
@@ -64,6 +58,7 @@ def test_no_empty_panels_and_parameters_need_two_volume_fractions(small_run, tmp
         w.writeheader()
         w.writerows(rows)
     figures.SAVED.clear()
+    capsys.readouterr()
     assert plots.main([str(one), "--fits"]) == 0
     assert not (one / "plots" / "fit_parameters.png").exists()
     assert "fewer than two volume fractions" in capsys.readouterr().err
