@@ -16,6 +16,7 @@ least 90 % of each curve's range (a curve that stopped early is compared over it
 which is not a comparison of the two curves).
 """
 import argparse
+import os
 import json
 import sys
 
@@ -71,6 +72,23 @@ def compare(a, b, npoints=200):
     return res, grid
 
 
+def finite_or_null(obj):
+    """obj with every non-finite float (and numpy number) replaced by None, for strict JSON."""
+    if isinstance(obj, dict):
+        return {k: finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite_or_null(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return finite_or_null(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
 def verdict(res, tol):
     checks = {
         "p_Pa": ("max_rel", tol["p"]),
@@ -89,39 +107,73 @@ def verdict(res, tol):
     return out
 
 
+OVERLAY_LABELS = {"p_Pa": "pressure $p$ [Pa]", "s_dev": r"$s_\mathrm{dev} = \sigma_\mathrm{dev}/p$",
+                  "F_dev": r"$F_\mathrm{dev}$", "C": "coordination number $C$",
+                  "eps_v": r"volumetric strain $\varepsilon_v$"}
+
+
 def overlay(a, b, labels, path):
+    """Both curves against eps_d, one panel per quantity (2 x 2 or 2 x 3); a quantity both hold
+    constant (eps_v at constant volume: round-off) is left out and the title says so."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(2, 3, figsize=(13, 6), sharex=True)
-    axes.flat[len(QUANTITIES)].set_visible(False)
-    for ax, q in zip(axes.flat, QUANTITIES):
-        ax.plot(a["eps_d"], a[q], "-", label=labels[0])
-        ax.plot(b["eps_d"], b[q], "--", label=labels[1])
-        ax.set_ylabel(q)
+    from demkit.figures import save
+    shown, constant = [], []
+    for q in QUANTITIES:
+        va, vb = np.asarray(a[q], float), np.asarray(b[q], float)
+        scale = max(np.max(np.abs(va)), np.max(np.abs(vb)), 1e-300)
+        if q == "eps_v" and np.ptp(va) <= 1e-9 and np.ptp(vb) <= 1e-9:
+            constant.append(r"$\varepsilon_v$ = 0 in both (constant volume)")
+        elif np.ptp(va) <= 1e-12 * scale and np.ptp(vb) <= 1e-12 * scale:
+            constant.append(f"{q} constant in both")
+        else:
+            shown.append(q)
+    ncols = 2 if len(shown) <= 4 else 3
+    nrows = (len(shown) + ncols - 1) // ncols
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.6 * ncols, 2.8 * nrows + 0.6), sharex=True, squeeze=False)
+    for ax, q in zip(axes.flat, shown):
+        ax.plot(a["eps_d"], a[q], "-", lw=1.1, color="#1f77b4", label=labels[0])
+        ax.plot(b["eps_d"], b[q], "--", lw=1.1, color="#d62728", label=labels[1])
+        ax.set_ylabel(OVERLAY_LABELS.get(q, q), fontsize=9)
         ax.grid(alpha=0.3)
-    for ax in axes[1]:
-        ax.set_xlabel(r"$\varepsilon_d$")
-    axes[0, 0].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    if path.endswith(".png"):
-        fig.savefig(path[:-4] + ".svg")
-    plt.close(fig)
+    for ax in list(axes.flat)[len(shown):]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel(r"deviatoric strain $\varepsilon_d$")
+    handles, labs = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labs, loc="lower center", ncol=2, fontsize=8, frameon=False)
+    if constant:
+        fig.suptitle("; ".join(constant), fontsize=8)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    stem = path[:-4] if path.endswith(".png") else path
+    save(fig, stem)
+
+
+def short_labels(first, second):
+    """The two file names, or their paths below the common folder when the names are equal."""
+    a, b = os.path.basename(first), os.path.basename(second)
+    if a != b:
+        return [a, b]
+    common = os.path.commonpath([os.path.abspath(first), os.path.abspath(second)])
+    return [os.path.relpath(os.path.abspath(first), common), os.path.relpath(os.path.abspath(second), common)]
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="dem compare", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("first")
-    ap.add_argument("second")
-    ap.add_argument("--labels", default="ours,yade")
-    ap.add_argument("--plot", help="write an overlay plot (PNG, and SVG beside it)")
-    ap.add_argument("--json", help="write the differences as JSON")
-    ap.add_argument("--tol-p", type=float, default=0.03)
-    ap.add_argument("--tol-s-dev", type=float, default=0.15)
-    ap.add_argument("--tol-f-dev", type=float, default=0.25)
-    ap.add_argument("--tol-c", type=float, default=0.15)
+    ap.add_argument("first", help="curve CSV (ours: deviatoric/MODE_phiX.csv, or `dem mode --out`)")
+    ap.add_argument("second", help="curve CSV with the same columns (e.g. yade_ref/run_mode.py's)")
+    ap.add_argument("--labels", default=None,
+                    help="legend labels of the two curves, comma-separated (default: the file names)")
+    ap.add_argument("--plot", metavar="OUT.png", help="write an overlay plot (OUT.png and OUT.svg)")
+    ap.add_argument("--json", metavar="OUT.json", help="write the differences as JSON")
+    ap.add_argument("--tol-p", type=float, default=0.03, help="largest difference of p relative to its mean (default: %(default)s)")
+    ap.add_argument("--tol-s-dev", type=float, default=0.15,
+                    help="RMS difference of s_dev relative to its plateau (default: %(default)s)")
+    ap.add_argument("--tol-f-dev", type=float, default=0.25,
+                    help="RMS difference of F_dev relative to its plateau (default: %(default)s)")
+    ap.add_argument("--tol-c", type=float, default=0.15, help="RMS difference of C (default: %(default)s)")
     ap.add_argument("--tol-eps-v", type=float, default=5e-4,
                     help="RMS |d eps_v| (dilatancy of stress-controlled tests; 0 for both at constant volume)")
     ap.add_argument("--min-coverage", type=float, default=0.9,
@@ -147,10 +199,10 @@ def main(argv=None):
     print(f"{'coverage':8s} {'':12s} {'':12s} {'min':>10s} {c['value']:10.4g} {c['tolerance']:10.4g}  "
           f"{'yes' if c['ok'] else 'NO (the curves cover different eps_d ranges)'}")
     if a.plot:
-        overlay(ca, cb, a.labels.split(","), a.plot)
+        overlay(ca, cb, a.labels.split(",") if a.labels else short_labels(a.first, a.second), a.plot)
     if a.json:
         with open(a.json, "w") as fh:
-            json.dump(res, fh, indent=2)
+            json.dump(finite_or_null(res), fh, indent=2, allow_nan=False)   # NaN/inf: null (valid JSON)
     return 0 if all(x["ok"] for x in v.values()) else 4
 
 

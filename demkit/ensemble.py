@@ -102,6 +102,39 @@ def snakemake_command(out, dem, cores, profile, extra):
     return cmd + list(extra)
 
 
+SLURM_HINT = ("on a cluster, run `dem ensemble` where `sinfo` works (a login node), or point SLURM_CONF at the "
+              "cluster's slurm.conf; to try Slurm on this machine (as root): "
+              "eval \"$(bash scripts/slurm-local.sh start /tmp/slurm)\" (it starts a one-node Slurm and sets SLURM_CONF)")
+
+
+def slurm_preflight(timeout=20):
+    """None when sbatch is installed and a Slurm controller answers (`sinfo`), else the reason,
+    naming SLURM_CONF and how to set it."""
+    if shutil.which("sbatch") is None:
+        return "sbatch is not installed (Debian package slurm-wlm; scripts/install-deps.sh installs it); " + SLURM_HINT
+    conf = os.environ.get("SLURM_CONF")
+    where = f"SLURM_CONF={conf}" if conf else "SLURM_CONF is not set (so Slurm looks for /etc/slurm/slurm.conf, then DNS)"
+    if conf and not os.path.isfile(conf):
+        return f"{where}, but there is no such file; " + SLURM_HINT
+    try:
+        r = subprocess.run(["sinfo", "-h", "-o", "%P"], capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return f"no Slurm controller answered within {timeout} s ({where}); " + SLURM_HINT
+    err = " ".join(r.stderr.split())
+    if r.returncode != 0 or not r.stdout.strip():
+        return f"no Slurm controller reachable ({where}; sinfo: {err[:200] or 'no partitions'}); " + SLURM_HINT
+    return None
+
+
+def uses_slurm(profile):
+    path = profile if os.sep in profile else os.path.join(PROFILES, profile)
+    try:
+        with open(os.path.join(path, "config.yaml")) as fh:
+            return "sbatch" in fh.read() or "slurm" in profile
+    except OSError:
+        return "slurm" in profile
+
+
 def hold_folder_lock(out, dem):
     """Hold DIR/.dem-ensemble.lock for the life of this process (the kernel drops it when the
     process dies, however it dies). Holding it proves no other `dem ensemble` works on DIR, so a
@@ -134,6 +167,11 @@ def main(argv=None):
     out = os.path.abspath(a.out)
     dem = os.path.abspath(a.dem)
     plan = load_plan(dem, out)
+    if a.profile and uses_slurm(a.profile):
+        why = slurm_preflight()
+        if why:
+            sys.stderr.write(f"dem ensemble: --profile {a.profile}: {why}\n")
+            return 2
     lock = hold_folder_lock(out, dem)  # noqa: F841 (held until exit)
     os.makedirs(os.path.join(out, "logs", "slurm"), exist_ok=True)   # sbatch --output needs the folder
     log_path = os.path.join(out, "logs", "snakemake.log")

@@ -7,7 +7,6 @@
 
     python3 -m demkit.ensemble_plots DIR
 """
-import csv
 import glob
 import os
 import re
@@ -20,7 +19,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from demkit.curves import read_curve  # noqa: E402
-from demkit.plots import LABELS, law, save  # noqa: E402
+from demkit.figures import legend_if_any, plot_parameters as parameters_figure, read_rows, save  # noqa: E402
+from demkit.plots import LABELS, law, paren  # noqa: E402
 
 NAME_RE = re.compile(r"([A-Za-z0-9_]+)_phi([0-9.]+)\.csv$")
 
@@ -34,33 +34,31 @@ def ensemble_curves(run):
     return out
 
 
-def read_rows(path):
-    if not os.path.exists(path):
-        return []
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
-
-
 def plot_bands(run, outdir, curves):
+    """Mean and 95 % band of every (mode, nu), one panel per mode side by side (D2 | D3), sharing y."""
     nus = sorted({nu for _, nu, _ in curves})
+    modes = sorted({mode for mode, _, _ in curves})
     cmap = plt.get_cmap("viridis")
     written = []
     for q in ("s_dev", "F_dev", "p_star", "C"):
-        fig, ax = plt.subplots(figsize=(6.4, 4.4))
-        for mode, nu, c in curves:
-            color = cmap(0.85 * nus.index(nu) / max(1, len(nus) - 1))   # stop before viridis' pale yellow
-            ax.fill_between(c["eps_d"], c[q + "_lo95"], c[q + "_hi95"], color=color, alpha=0.25, lw=0)
-            ax.plot(c["eps_d"], c[q + "_mean"], "-" if mode == "D2" else "--", color=color, lw=1.3,
-                    label=f"{mode} ν={nu:.3f}")
+        fig, axes = plt.subplots(1, len(modes), figsize=(4.2 * len(modes) + 0.6, 3.8), sharey=True, squeeze=False)
+        for ax, mode in zip(axes[0], modes):
+            for m, nu, c in curves:
+                if m != mode:
+                    continue
+                color = cmap(0.85 * nus.index(nu) / max(1, len(nus) - 1))   # stop before viridis' pale yellow
+                ax.fill_between(c["eps_d"], c[q + "_lo95"], c[q + "_hi95"], color=color, alpha=0.25, lw=0)
+                ax.plot(c["eps_d"], c[q + "_mean"], "-", color=color, lw=1.3, label=f"ν = {nu:.3f}")
+            ax.set_title(mode, fontsize=10)
+            ax.set_xlabel(r"deviatoric strain $\varepsilon_d$")
+            ax.grid(alpha=0.3)
+            legend_if_any(ax, fontsize=7)
+        axes[0, 0].set_ylabel(LABELS[q])
         k = int(curves[0][2]["n_packings"][0])
-        ax.set_title(f"mean of {k} packings, 95 % confidence band", fontsize=9)
-        ax.set_xlabel(r"deviatoric strain $\varepsilon_d$")
-        ax.set_ylabel(LABELS[q])
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=2)
+        fig.suptitle(f"mean of {k} packings with its 95 % confidence band", fontsize=9)
         fig.tight_layout()
         stem = os.path.join(outdir, f"ensemble_{q}")
-        save(fig, stem)
+        save(fig, stem, run)
         written.append(stem + ".png")
     return written
 
@@ -87,39 +85,26 @@ def plot_fit_cells(run, outdir, curves, rows):
             if r and r[0]["x_max"] != "nan":
                 p = [float(r[0][n]) for n in ("x0", "x_max", "beta")]
                 ax.plot(e, law(*p, e), "r--", lw=1.2,
-                        label=f"fit: $x_{{max}}$={p[1]:.3g} [{float(r[0]['x_max_lo95']):.3g}, {float(r[0]['x_max_hi95']):.3g}], "
-                              f"β={p[2]:.3g} [{float(r[0]['beta_lo95']):.3g}, {float(r[0]['beta_hi95']):.3g}]")
+                        label=f"fit: $x_\\mathrm{{max}}$ = {paren(p[1], float(r[0]['se_x_max']))}, "
+                              f"$\\beta$ = {paren(p[2], float(r[0]['se_beta']))} (jackknife SE)")
             ax.set_xlabel(r"$\varepsilon_d$"); ax.set_ylabel(LABELS[q]); ax.grid(alpha=0.3); ax.legend(fontsize=7)
         fig.suptitle(f"{mode}, ν = {nu:.3f}")
         fig.tight_layout()
         stem = os.path.join(outdir, f"fit_{mode}_phi{nu:.3f}")
-        save(fig, stem)
+        save(fig, stem, run)
         written.append(stem + ".png")
     return written
 
 
-def plot_parameters(outdir, rows):
+def plot_parameters(outdir, rows, run=None):
     if not rows:
         return []
-    fig, axes = plt.subplots(2, 2, figsize=(9, 6))
-    for k, q in enumerate(("s_dev", "F_dev")):
-        for j, par in enumerate(("x_max", "beta")):
-            ax = axes[j, k]
-            for mode, marker, dx in (("D2", "o", -0.001), ("D3", "s", 0.001)):
-                sel = [r for r in rows if r["mode"] == mode and r["quantity"] == q and r[par] != "nan"]
-                if not sel:
-                    continue
-                nu = np.array([float(r["nu"]) for r in sel]) + dx
-                v = np.array([float(r[par]) for r in sel])
-                lo = np.array([float(r[par + "_lo95"]) for r in sel])
-                hi = np.array([float(r[par + "_hi95"]) for r in sel])
-                ax.errorbar(nu, v, yerr=[np.nan_to_num(v - lo), np.nan_to_num(hi - v)], fmt=marker, capsize=3, label=mode)
-            ax.set_xlabel("ν"); ax.set_ylabel(f"{par} of {q}"); ax.grid(alpha=0.3); ax.legend(fontsize=8)
-    fig.suptitle("fitted to the ensemble mean; bars: 95 % intervals between packings", fontsize=9)
-    fig.tight_layout()
-    stem = os.path.join(outdir, "fit_parameters")
-    save(fig, stem)
-    return [stem + ".png"]
+    laws = read_rows(os.path.join(run, "fit", "nu_laws.csv")) if run else []
+
+    def interval(r, par):
+        return float(r[par + "_lo95"]), float(r[par + "_hi95"])
+    return parameters_figure(outdir, rows, laws, run, interval,
+                             "95 % intervals between packings (fit to the ensemble mean)")
 
 
 def plot_isotropic(run, outdir):
@@ -138,7 +123,7 @@ def plot_isotropic(run, outdir):
         a.grid(alpha=0.3)
     fig.tight_layout()
     stem = os.path.join(outdir, "isotropic")
-    save(fig, stem)
+    save(fig, stem, run)
     return [stem + ".png"]
 
 
@@ -155,7 +140,7 @@ def main(argv=None):
     written = []
     if curves:
         written += plot_bands(run, outdir, curves) + plot_fit_cells(run, outdir, curves, rows)
-    written += plot_parameters(outdir, rows) + plot_isotropic(run, outdir)
+    written += plot_parameters(outdir, rows, run) + plot_isotropic(run, outdir)
     print(f"dem plot: {len(written)} figures in {outdir}", file=sys.stderr)
     return 0
 

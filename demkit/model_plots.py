@@ -24,7 +24,7 @@ from demkit.curves import read_curve  # noqa: E402
 from demkit.plots import LABELS, save as save_fig  # noqa: E402
 
 def save(fig, stem):
-    save_fig(fig, stem)
+    save_fig(fig, stem, os.path.dirname(os.path.dirname(stem)))   # DIR/model/x: provenance of DIR
     return [stem + ".png", stem + ".svg"]
 
 

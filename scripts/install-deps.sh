@@ -21,7 +21,9 @@ fi
 pkgs=(build-essential cmake pkg-config
       libeigen3-dev libceres-dev libgoogle-glog-dev libgsl-dev
       libtomlplusplus-dev libcli11-dev libgtest-dev
+      nlohmann-json3-dev
       python3 python3-pytest python3-numpy python3-matplotlib
+      python3-vtk9 xvfb xauth
       snakemake slurm-wlm munge)
 [ "$want_yade" = 1 ] && pkgs+=(yade)
 [ "$want_bench" = 1 ] && pkgs+=(lammps liggghts openmpi-bin time)

@@ -13,6 +13,8 @@
 #include <regex>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "demfit/fit.hpp"
 #include "demfit/table.hpp"
 
@@ -55,10 +57,15 @@ std::vector<fs::path> curve_files(const fs::path& run) {
   std::vector<fs::path> files;
   if (fs::exists(run / "manifest.json")) {
     std::ifstream in(run / "manifest.json");
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    const std::regex entry(R"re("file": "(deviatoric/[^"]+)")re");
-    for (std::sregex_iterator it(text.begin(), text.end(), entry), end; it != end; ++it) {
-      const fs::path f = run / (*it)[1].str();
+    const nlohmann::json manifest = nlohmann::json::parse(in, nullptr, false);
+    if (manifest.is_discarded() || !manifest.contains("outputs") || !manifest["outputs"].is_array())
+      throw std::runtime_error((run / "manifest.json").string() + " is not a manifest of `dem run` (no \"outputs\" "
+                               "list): rerun the run, or remove it to fit every deviatoric/*.csv");
+    for (const auto& o : manifest["outputs"]) {
+      if (!o.is_object() || !o.contains("file") || !o["file"].is_string()) continue;
+      const std::string file = o["file"].get<std::string>();
+      if (file.rfind("deviatoric/", 0) != 0) continue;
+      const fs::path f = run / file;
       if (fs::exists(f)) files.push_back(f);
       else std::cerr << "dem fit: warning: " << f.string() << " is listed in manifest.json but missing (run not finished?)\n";
     }
@@ -229,6 +236,7 @@ int run_fit_command(const FitCommandOptions& o) {
   Table params({"mode", "nu", "quantity", "x0", "se_x0", "x_max", "se_x_max", "beta", "se_beta",
                 "corr_xmax_beta", "initial_slope", "se_initial_slope", "eps_95", "r_squared", "rmse", "n",
                 "eps_last", "gsl_max_rel_diff", "residual_autocorr", "se_inflation", "warnings"});
+  std::vector<SummaryRow> summary;
   FitsByModeQuantity by_mode_q;
   int warnings = 0, usable = 0;
   for (auto& c : curves) {
@@ -263,17 +271,25 @@ int run_fit_command(const FitCommandOptions& o) {
                         num(r.beta), num(r.se_beta), num(r.corr[1][2], 3), num(r.initial_slope),
                         num(r.se_initial_slope), num(r.eps_95), num(r.r_squared, 5), num(r.rmse), std::to_string(r.n),
                         num(r.e_last, 4), num(gsl_gap, 2), num(r.residual_autocorrelation, 3), num(r.se_inflation, 3), w});
+        summary.push_back({c.mode, c.phi, q, 0, r.x_max, r.se_x_max, r.beta, r.se_beta, r.initial_slope,
+                           r.se_initial_slope, r.r_squared, r.warnings, true});
         by_mode_q[{c.mode, q}].emplace_back(c.phi, r);
         ++usable;
       } catch (const std::exception& ex) {
         std::cerr << "dem fit: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << ex.what() << "\n";
         params.add_row({c.mode, num(c.phi, 4), q, "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan",
                         "nan", "nan", "nan", "0", "nan", "nan", "nan", "nan", std::string("not fitted: ") + ex.what()});
+        SummaryRow nf;
+        nf.mode = c.mode; nf.nu = c.phi; nf.quantity = q; nf.fitted = false;
+        nf.warnings = {std::string("not fitted: ") + ex.what()};
+        summary.push_back(nf);
         ++warnings;
       }
     }
   }
-  write_table_all(params, (out / "parameters").string(), "Fitted saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d)");
+  write_fit_tables(params, summary, (out / "parameters").string(),
+                   "Fitted saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d); standard errors from the "
+                   "curve's residuals (inflated for their autocorrelation)");
 
   // D2 vs D3 from the same volume fraction.
   Table shared({"nu", "quantity", "mode_a", "mode_b", "f_statistic", "p_value", "max_gap", "same_path",

@@ -12,6 +12,8 @@
 #include <set>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "demfit/cli.hpp"
 #include "demfit/ensemble.hpp"
 #include "demfit/table.hpp"
@@ -24,11 +26,13 @@ namespace {
 
 std::string num(double v, int prec = 6) { return table_number(v, prec); }
 
-// Value of "key": "..." in a flat JSON object (our own status files).
+// The string value of `key` in a task's status JSON (demkit.task); "" when absent, not a string,
+// or the file is not JSON.
 std::string json_field(const std::string& text, const std::string& key) {
-  const std::regex re("\"" + key + "\"\\s*:\\s*\"((?:[^\"\\\\]|\\\\.)*)\"");
-  std::smatch m;
-  return std::regex_search(text, m, re) ? m[1].str() : "";
+  const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) return "";
+  const auto it = j.find(key);
+  return it != j.end() && it->is_string() ? it->get<std::string>() : "";
 }
 
 struct MemberStatus { std::string member, status, message; };
@@ -211,6 +215,7 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
   eo.fit.window_max = o.window_max;
   eo.fit.loss = o.loss == "huber" ? Loss::Huber : o.loss == "cauchy" ? Loss::Cauchy : Loss::None;
   Table params = parameter_table();
+  std::vector<SummaryRow> summary;
   FitsByModeQuantity by_mode_q;
   std::map<std::tuple<std::string, double, std::string>, EnsembleFit> fits;
   std::map<std::pair<std::string, double>, std::vector<std::string>> fitted_members;
@@ -234,16 +239,26 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
           ++warnings;
         }
         params.add_row(parameter_row(c, q, f, w));
+        std::vector<std::string> notes;
+        for (const auto& e : c.excluded) notes.push_back("member " + e.member + " left out: " + e.status);
+        notes.insert(notes.end(), f.fit.warnings.begin(), f.fit.warnings.end());
+        summary.push_back({c.mode, c.nu, q, f.packings, f.fit.x_max, f.fit.se_x_max, f.fit.beta, f.fit.se_beta,
+                           f.fit.initial_slope, f.fit.se_initial_slope, f.fit.r_squared, notes, true});
         by_mode_q[{c.mode, q}].emplace_back(c.nu, f.fit);
         fits[{c.mode, c.nu, q}] = f;
         ++fitted;
       } catch (const std::exception& ex) {
         std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": not fitted: " << ex.what() << "\n";
+        SummaryRow nf;
+        nf.mode = c.mode; nf.nu = c.nu; nf.quantity = q; nf.packings = static_cast<int>(c.members.size());
+        nf.fitted = false;
+        nf.warnings = {std::string("not fitted: ") + ex.what()};
+        summary.push_back(nf);
         ++warnings;
       }
     }
   }
-  write_table_all(params, (out / "parameters").string(),
+  write_fit_tables(params, summary, (out / "parameters").string(),
                   "Saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d) fitted to the ensemble mean; "
                   "standard errors and 95% intervals (t, packings - 1 dof) from the jackknife over packings");
 

@@ -1,5 +1,10 @@
 #include "demfit/table.hpp"
 
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -35,17 +40,23 @@ void write_part(const std::string& path, const std::string& s) {
 void commit_part(const std::string& path) {
   if (std::rename((path + ".part").c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + path + ".part");
 }
-std::string json_str(const std::string& s) {
-  std::string o = "\"";
-  for (char c : s) { if (c == '"' || c == '\\') o += '\\'; o += c; }
-  return o + "\"";
-}
-bool is_number(const std::string& s) {
-  if (s.empty()) return false;
+}  // namespace
+
+nlohmann::ordered_json json_cell(const std::string& cell) {
+  if (cell.empty()) return cell;
+  const char* b = cell.c_str();
   char* end = nullptr;
-  std::strtod(s.c_str(), &end);
-  return end && *end == 0 && s != "nan";
+  const long long i = std::strtoll(b, &end, 10);
+  if (end && *end == 0 && end != b && cell.find_first_not_of("+-0123456789") == std::string::npos) return i;
+  const double v = std::strtod(b, &end);
+  if (end && *end == 0 && end != b) {
+    if (std::isfinite(v)) return v;
+    return nullptr;
+  }
+  return cell;
 }
+
+namespace {
 std::string tex_escape(const std::string& s) {
   std::string o;
   for (char c : s) {
@@ -93,8 +104,9 @@ Table parse_table(std::istream& in, const std::string& path) {
   return t;
 }
 
-void write_table_all(const Table& t, const std::string& stem, const std::string& caption) {
-  std::ostringstream csv, js, md, tex;
+namespace {
+std::string csv_text(const Table& t) {
+  std::ostringstream csv;
   for (std::size_t k = 0; k < t.header.size(); ++k) csv << (k ? "," : "") << t.header[k];
   csv << "\n";
   for (auto& r : t.rows) {
@@ -109,15 +121,33 @@ void write_table_all(const Table& t, const std::string& stem, const std::string&
     }
     csv << "\n";
   }
-  js << "{\n  \"caption\": " << json_str(caption) << ",\n  \"rows\": [";
-  for (std::size_t i = 0; i < t.rows.size(); ++i) {
-    js << (i ? ",\n    {" : "\n    {");
-    for (std::size_t k = 0; k < t.header.size(); ++k)
-      js << (k ? ", " : "") << json_str(t.header[k]) << ": "
-         << (is_number(t.rows[i][k]) ? t.rows[i][k] : (t.rows[i][k] == "nan" ? "null" : json_str(t.rows[i][k])));
-    js << "}";
+  return csv.str();
+}
+// The table as JSON (nlohmann-json): a cell that is a whole number is written as a number, an
+// integer when it is one; NaN and infinities (not JSON numbers) as null; any other text as a string.
+std::string json_text(const Table& t, const std::string& caption) {
+  nlohmann::ordered_json js;
+  js["caption"] = caption;
+  js["null"] = "not a finite number (NaN or infinite)";
+  js["rows"] = nlohmann::ordered_json::array();
+  for (const auto& r : t.rows) {
+    nlohmann::ordered_json row = nlohmann::ordered_json::object();
+    for (std::size_t k = 0; k < t.header.size(); ++k) {
+      const std::string& cell = k < r.size() ? r[k] : std::string();
+      row[t.header[k]] = json_cell(cell);
+    }
+    js["rows"].push_back(std::move(row));
   }
-  js << "\n  ]\n}\n";
+  return js.dump(2) + "\n";
+}
+void write_all_or_none(const std::vector<std::pair<std::string, std::string>>& files) {
+  for (const auto& [path, text] : files) write_part(path, text);
+  for (const auto& [path, text] : files) commit_part(path);
+}
+}  // namespace
+
+void write_table_all(const Table& t, const std::string& stem, const std::string& caption) {
+  std::ostringstream md, tex;
   md << "<!-- " << caption << " -->\n|";
   for (auto& h : t.header) md << " " << h << " |";
   md << "\n|";
@@ -128,18 +158,263 @@ void write_table_all(const Table& t, const std::string& stem, const std::string&
     for (auto& c : r) md << " " << c << " |";
     md << "\n";
   }
-  tex << "% " << caption << "\n\\begin{tabular}{" << std::string(t.header.size(), 'l') << "}\n\\hline\n";
+  tex << "% " << caption << " (needs \\usepackage{booktabs})\n\\begin{tabular}{" << std::string(t.header.size(), 'l')
+      << "}\n\\toprule\n";
   for (std::size_t k = 0; k < t.header.size(); ++k) tex << (k ? " & " : "") << tex_escape(t.header[k]);
-  tex << " \\\\\n\\hline\n";
+  tex << " \\\\\n\\midrule\n";
   for (auto& r : t.rows) {
     for (std::size_t k = 0; k < r.size(); ++k) tex << (k ? " & " : "") << tex_escape(r[k]);
     tex << " \\\\\n";
   }
-  tex << "\\hline\n\\end{tabular}\n";
+  tex << "\\bottomrule\n\\end{tabular}\n";
   // All four or none: renamed into place only once every one is written.
-  const std::pair<const char*, std::string> files[] = {{".csv", csv.str()}, {".json", js.str()}, {".md", md.str()}, {".tex", tex.str()}};
-  for (const auto& [ext, text] : files) write_part(stem + ext, text);
-  for (const auto& [ext, text] : files) commit_part(stem + ext);
+  write_all_or_none({{stem + ".csv", csv_text(t)}, {stem + ".json", json_text(t, caption)}, {stem + ".md", md.str()},
+                     {stem + ".tex", tex.str()}});
+}
+
+// ---- Tables for people -------------------------------------------------------------------
+
+namespace {
+// The integer n with its decimal point `decimals` digits from the right (negative: n * 10^-decimals).
+std::string fixed_from_int(long long n, int decimals) {
+  const bool neg = n < 0;
+  const unsigned long long a = neg ? 0ULL - static_cast<unsigned long long>(n) : static_cast<unsigned long long>(n);
+  std::string d = std::to_string(a);
+  if (decimals > 0) {
+    if (static_cast<int>(d.size()) <= decimals) d = std::string(decimals + 1 - d.size(), '0') + d;
+    d.insert(d.size() - decimals, ".");
+  } else if (decimals < 0 && a != 0) {
+    d += std::string(-decimals, '0');
+  }
+  return (neg && a != 0 ? "-" : "") + d;
+}
+double pow10i(int k) {
+  double r = 1;
+  for (int i = 0; i < std::abs(k); ++i) r *= 10;
+  return k < 0 ? 1 / r : r;
+}
+std::string sig3(double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.3g", v);
+  return b;
+}
+}  // namespace
+
+Rounded round_to_error(double v, double e) {
+  Rounded r;
+  if (!std::isfinite(v)) { r.value = "nan"; return r; }
+  if (!(std::isfinite(e) && e > 0)) { r.value = sig3(v); return r; }
+  const double av = std::fabs(v);
+  if (av >= 1e5 || (av < 1e-3 && e < 1e-3)) {
+    r.exponent = static_cast<int>(std::floor(std::log10(std::max(av, e))));
+    v /= pow10i(r.exponent);
+    e /= pow10i(r.exponent);
+  }
+  int d = static_cast<int>(std::floor(std::log10(e)));
+  double lead = e / pow10i(d);
+  if (lead >= 10) { ++d; lead /= 10; }
+  if (lead < 1) { --d; lead *= 10; }
+  const int sig = lead < 2 ? 2 : 1;   // first digit 1: two significant digits
+  const int place = d - sig + 1;      // power of ten of the last digit kept
+  const double scale = place < 0 ? pow10i(-place) : 1 / pow10i(place);
+  const double nv = std::round(v * scale), ne = std::round(e * scale);
+  if (std::fabs(nv) > 1e15) {         // an error far below the value's precision: no rounding to speak of
+    r.value = table_number(v, 15);
+    r.error_abs = table_number(e, 2);
+    r.error = r.error_abs;
+    return r;
+  }
+  const long long N = static_cast<long long>(nv), U = static_cast<long long>(ne);
+  r.value = fixed_from_int(N, -place);
+  r.error = place < 0 ? std::to_string(U) : fixed_from_int(U, -place);
+  r.error_abs = fixed_from_int(U, -place);
+  return r;
+}
+
+std::string format_paren(double value, double error) {
+  const Rounded r = round_to_error(value, error);
+  std::string s = r.value;
+  if (!r.error.empty()) s += "(" + r.error + ")";
+  if (r.exponent) s += "e" + std::to_string(r.exponent);
+  return s;
+}
+
+std::string format_pm(double value, double error) {
+  const Rounded r = round_to_error(value, error);
+  if (r.error.empty()) return r.exponent ? r.value + "e" + std::to_string(r.exponent) : r.value;
+  const std::string s = r.value + " \u00b1 " + r.error_abs;
+  return r.exponent ? "(" + s + ")e" + std::to_string(r.exponent) : s;
+}
+
+namespace {
+std::string tex_text(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    switch (c) {
+      case '_': case '%': case '&': case '#': case '$': case '{': case '}': o += '\\'; o += c; break;
+      case '~': o += "\\textasciitilde{}"; break;
+      case '^': o += "\\textasciicircum{}"; break;
+      case '\\': o += "\\textbackslash{}"; break;
+      case '<': o += "$<$"; break;
+      case '>': o += "$>$"; break;
+      default: o += c;
+    }
+  }
+  return o;
+}
+std::string mark_name(std::size_t k) {
+  std::string s;
+  for (++k; k > 0; k = (k - 1) / 26) s.insert(s.begin(), static_cast<char>('a' + (k - 1) % 26));
+  return s;
+}
+// Distinct warning texts in order of appearance, and each row's marks.
+struct Notes {
+  std::vector<std::string> texts;
+  std::vector<std::vector<std::string>> marks;
+};
+Notes notes_of(const std::vector<SummaryRow>& rows) {
+  Notes n;
+  for (const auto& r : rows) {
+    std::vector<std::string> m;
+    for (const auto& w : r.warnings) {
+      auto it = std::find(n.texts.begin(), n.texts.end(), w);
+      if (it == n.texts.end()) { n.texts.push_back(w); it = n.texts.end() - 1; }
+      const std::string name = mark_name(static_cast<std::size_t>(it - n.texts.begin()));
+      if (std::find(m.begin(), m.end(), name) == m.end()) m.push_back(name);
+    }
+    n.marks.push_back(m);
+  }
+  return n;
+}
+std::string joined(const std::vector<std::string>& v, const std::string& sep) {
+  std::string s;
+  for (const auto& x : v) s += (s.empty() ? "" : sep) + x;
+  return s;
+}
+std::string nu_text(double nu) { return table_number(nu, 4); }
+std::string r2_text(double r2) {
+  if (!std::isfinite(r2)) return "nan";
+  char b[32];
+  std::snprintf(b, sizeof b, "%.3f", r2);
+  return b;
+}
+int packings_of(const SummaryRow& r) { return r.packings > 0 ? r.packings : 1; }
+const char* kExplainMd =
+    "Each value is rounded to its standard error, given in parentheses in units of the last digit "
+    "(0.197(2) = 0.197 \u00b1 0.002; the error to one significant digit, two when it starts with 1). "
+    "K: packings averaged (1: a single run). Initial slope: dx/d\u03b5<sub>d</sub> at \u03b5<sub>d</sub> = 0 "
+    "(G/p for s<sub>dev</sub>). Every digit and every diagnostic: parameters.csv / parameters.json.";
+std::string md_quantity(const std::string& q) {
+  const auto u = q.find('_');
+  return u == std::string::npos ? q : q.substr(0, u) + "<sub>" + q.substr(u + 1) + "</sub>";
+}
+std::string tex_quantity(const std::string& q) {
+  const auto u = q.find('_');
+  return u == std::string::npos ? "$" + tex_text(q) + "$" : "$" + q.substr(0, u) + "_\\mathrm{" + q.substr(u + 1) + "}$";
+}
+// siunitx table-format of an S column from its cells ("0.197(2)", "-1.23(4)e-5", "{---}").
+std::string table_format(const std::vector<std::string>& cells) {
+  bool neg = false, expo_neg = false;
+  int ints = 1, decs = 0, unc = 0, expo = 0;
+  for (const auto& c : cells) {
+    if (c.empty() || c[0] == '{') continue;
+    std::size_t i = 0;
+    if (c[i] == '-') { neg = true; ++i; }
+    int n = 0;
+    while (i < c.size() && std::isdigit(static_cast<unsigned char>(c[i]))) { ++n; ++i; }
+    ints = std::max(ints, n);
+    if (i < c.size() && c[i] == '.') {
+      ++i; n = 0;
+      while (i < c.size() && std::isdigit(static_cast<unsigned char>(c[i]))) { ++n; ++i; }
+      decs = std::max(decs, n);
+    }
+    if (i < c.size() && c[i] == '(') {
+      ++i; n = 0;
+      while (i < c.size() && c[i] != ')') { ++n; ++i; }
+      unc = std::max(unc, n);
+      ++i;
+    }
+    if (i < c.size() && c[i] == 'e') {
+      ++i;
+      if (i < c.size() && c[i] == '-') { expo_neg = true; ++i; }
+      expo = std::max(expo, static_cast<int>(c.size() - i));
+    }
+  }
+  std::string f = (neg ? "-" : "") + std::to_string(ints) + "." + std::to_string(decs);
+  if (unc) f += "(" + std::to_string(unc) + ")";
+  if (expo) f += std::string("e") + (expo_neg ? "-" : "") + std::to_string(expo);
+  return f;
+}
+}  // namespace
+
+std::string summary_markdown(const std::vector<SummaryRow>& rows, const std::string& caption) {
+  const Notes n = notes_of(rows);
+  std::ostringstream md;
+  md << "**" << caption << "**\n\n";
+  md << "| mode | \u03bd | quantity | K | x<sub>max</sub> | \u03b2 | initial slope | R\u00b2 |\n";
+  md << "|:--|--:|:--|--:|--:|--:|--:|--:|\n";
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const auto& r = rows[i];
+    std::string q = md_quantity(r.quantity);
+    if (!n.marks[i].empty()) q += " <sup>" + joined(n.marks[i], ",") + "</sup>";
+    md << "| " << r.mode << " | " << nu_text(r.nu) << " | " << q << " | " << packings_of(r) << " | ";
+    if (r.fitted)
+      md << format_paren(r.x_max, r.se_x_max) << " | " << format_paren(r.beta, r.se_beta) << " | "
+         << format_paren(r.slope, r.se_slope) << " | " << r2_text(r.r_squared) << " |\n";
+    else
+      md << "not fitted | | | |\n";
+  }
+  md << "\n" << kExplainMd << "\n";
+  if (!n.texts.empty()) md << "\n";
+  for (std::size_t k = 0; k < n.texts.size(); ++k) md << "<sup>" << mark_name(k) << "</sup> " << n.texts[k] << "  \n";
+  return md.str();
+}
+
+std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string& caption) {
+  const Notes n = notes_of(rows);
+  std::vector<std::array<std::string, 5>> cells;   // nu, x_max, beta, slope, R^2 (S columns)
+  for (const auto& r : rows) {
+    if (r.fitted)
+      cells.push_back({nu_text(r.nu), format_paren(r.x_max, r.se_x_max), format_paren(r.beta, r.se_beta),
+                       format_paren(r.slope, r.se_slope), r2_text(r.r_squared)});
+    else
+      cells.push_back({nu_text(r.nu), "{---}", "{---}", "{---}", "{---}"});
+  }
+  std::vector<std::string> fmt;
+  for (int k = 0; k < 5; ++k) {
+    std::vector<std::string> col;
+    for (const auto& c : cells) col.push_back(c[k] == "nan" ? "{---}" : c[k]);
+    fmt.push_back(table_format(col));
+  }
+  std::ostringstream tex;
+  tex << "% " << tex_text(caption) << "\n% needs \\usepackage{booktabs} and \\usepackage{siunitx}; values rounded to "
+      << "their standard errors, given in parentheses in units of the last digit\n";
+  tex << "\\begin{tabular}{l S[table-format=" << fmt[0] << "] l r S[table-format=" << fmt[1] << "] S[table-format="
+      << fmt[2] << "] S[table-format=" << fmt[3] << "] S[table-format=" << fmt[4] << "]}\n\\toprule\n";
+  tex << "Mode & {$\\nu$} & Quantity & {$K$} & {$x_\\mathrm{max}$} & {$\\beta$} & "
+         "{$\\left.\\mathrm{d}x/\\mathrm{d}\\varepsilon_\\mathrm{d}\\right|_0$} & {$R^2$} \\\\\n\\midrule\n";
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const auto& r = rows[i];
+    std::string q = tex_quantity(r.quantity);
+    if (!n.marks[i].empty()) q += "\\textsuperscript{" + joined(n.marks[i], ",") + "}";
+    auto cell = [](const std::string& c) { return c == "nan" ? std::string("{---}") : c; };
+    tex << tex_text(r.mode) << " & " << cells[i][0] << " & " << q << " & " << packings_of(r) << " & " << cell(cells[i][1])
+        << " & " << cell(cells[i][2]) << " & " << cell(cells[i][3]) << " & " << cell(cells[i][4]) << " \\\\\n";
+  }
+  tex << "\\bottomrule\n\\end{tabular}\n";
+  if (!n.texts.empty()) {
+    tex << "\n\\par\\smallskip{\\footnotesize\n";
+    for (std::size_t k = 0; k < n.texts.size(); ++k)
+      tex << "\\textsuperscript{" << mark_name(k) << "}~" << tex_text(n.texts[k]) << "\\par\n";
+    tex << "}\n";
+  }
+  return tex.str();
+}
+
+void write_fit_tables(const Table& t, const std::vector<SummaryRow>& rows, const std::string& stem,
+                      const std::string& caption) {
+  write_all_or_none({{stem + ".csv", csv_text(t)}, {stem + ".json", json_text(t, caption)},
+                     {stem + ".md", summary_markdown(rows, caption)}, {stem + ".tex", summary_latex(rows, caption)}});
 }
 
 std::string table_number(double v, int prec) {

@@ -117,8 +117,10 @@ def test_fit_tables_carry_errors_between_packings(tiny):
     assert len(shared) == 2 and all(s["packings"] == "3" for s in shared)
     with open(run / "ensemble" / "members.csv", newline="") as fh:
         assert [m["status"] for m in csv.DictReader(fh)] == ["complete"] * 6
-    for png in ("ensemble_s_dev", "fit_D2_phi0.740", "fit_parameters", "isotropic"):
+    for png in ("ensemble_s_dev", "fit_D2_phi0.740", "isotropic"):
         assert (run / "plots" / f"{png}.png").stat().st_size > 1000
+    # one volume fraction: no parameters-against-nu figure (it would be empty panels), a note instead
+    assert not (run / "plots" / "fit_parameters.png").exists()
     assert "done in" in tiny["stderr"] and "% of the work" in tiny["stderr"]
 
 

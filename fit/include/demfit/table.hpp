@@ -2,6 +2,8 @@
 // result tables as CSV, JSON, Markdown and LaTeX.
 #pragma once
 #include <istream>
+
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 #include <vector>
 
@@ -26,10 +28,52 @@ Table read_table(const std::string& path);
 Table parse_table(std::istream& in, const std::string& source);
 /// A number for a table cell: %.{prec}g, "nan" for non-finite values.
 std::string table_number(double v, int prec = 6);
+/// A table cell as JSON: an integer, a finite number, null for NaN or an infinity (JSON has no
+/// such numbers), else the text.
+nlohmann::ordered_json json_cell(const std::string& cell);
 /// Writes text to path atomically (path.part, then rename). Throws std::runtime_error.
 void write_text_file(const std::string& path, const std::string& content);
 /// Writes stem.csv, stem.json, stem.md, stem.tex atomically, all four or none. Throws
 /// std::runtime_error when a write fails (full disk): then only *.part files are left.
 void write_table_all(const Table& t, const std::string& stem, const std::string& caption);
+
+// ---- Tables for people -------------------------------------------------------------------
+// A value rounded to its standard error. The rule: the error keeps one significant digit, two
+// when its first digit is 1 (0.0014 would otherwise become 0.001, 30 % off); the value is
+// rounded to the same decimal place. 0.196534 +- 0.00231554 -> 0.197(2); 12.7865 +- 1.282 ->
+// 12.8(13); 1234.5 +- 23 -> 1230(20). Magnitudes >= 1e5 or both below 1e-3 go to scientific
+// notation (1.23(2)e-5). A non-finite or non-positive error gives the value to 3 significant
+// digits and an empty error.
+struct Rounded {
+  std::string value;      ///< "0.197" (mantissa when exponent != 0)
+  std::string error;      ///< in the units of the value's last digit: "2"; "" when there is none
+  std::string error_abs;  ///< the error as a number in the value's units: "0.002"
+  int exponent = 0;       ///< power of ten (scientific notation), 0 for plain
+};
+Rounded round_to_error(double value, double error);
+/// "0.197(2)", "1.23(2)e-5"; "nan" for a non-finite value; the value alone when no error.
+std::string format_paren(double value, double error);
+/// "0.197 ± 0.002" (UTF-8 ±), "(1.23 ± 0.02)e-5".
+std::string format_pm(double value, double error);
+
+/// One row of a fit's table for people.
+struct SummaryRow {
+  std::string mode;
+  double nu = 0;
+  std::string quantity;            ///< curve column: s_dev, F_dev
+  int packings = 0;                ///< K; 0 for a single run (printed "1")
+  double x_max = 0, se_x_max = 0, beta = 0, se_beta = 0, slope = 0, se_slope = 0, r_squared = 0;
+  std::vector<std::string> warnings;   ///< full texts: become footnote marks
+  bool fitted = true;              ///< false: "not fitted" (the reason is the warning)
+};
+/// The Markdown and LaTeX (booktabs + siunitx S columns) texts of a fit's short table:
+/// columns mode, nu, quantity, K, x_max, beta, initial slope, R^2; each warning text gets one
+/// footnote mark (a, b, ...) on the quantity cell and is listed once below the table.
+std::string summary_markdown(const std::vector<SummaryRow>& rows, const std::string& caption);
+std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string& caption);
+/// Writes stem.csv and stem.json (the full machine table t) and stem.md, stem.tex (the short
+/// table of `rows`), all four or none, atomically.
+void write_fit_tables(const Table& t, const std::vector<SummaryRow>& rows, const std::string& stem,
+                      const std::string& caption);
 
 }  // namespace demfit

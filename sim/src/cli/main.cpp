@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <iostream>
 #include <sstream>
+#include <thread>
 #include <unistd.h>
 
 #include "dem/io/checks.hpp"
@@ -108,6 +109,65 @@ void print_info(const dem::Model& m) {
   }
 }
 
+// The wall time of the scene's run from a short timed probe: about a second of D2 steps with the
+// scene's physics and threads on the stored dense packing (N = 9261, phi = 0.70), scaled to the
+// scene's mean radius; particle-steps from the run plan (the preparation's is a rough allowance).
+void print_wall_time_estimate(const dem::Model& scene_model) {
+  // An ensemble runs single-threaded tasks, one per core: probe one thread, divide by the cores.
+  const bool ensemble = scene_model.ensemble_packings > 1;
+  const int cores = ensemble ? std::max(1u, std::thread::hardware_concurrency()) : 1;
+  dem::Model m = scene_model;
+  if (ensemble) m.threads = 1;
+  const std::string packing = std::string(DEM_SOURCE_DIR) + "/data/packings/n9261_phi0.70.txt";
+  if (!fs::exists(packing)) {
+    std::printf("wall time          (no estimate: %s is missing)\n", packing.c_str());
+    return;
+  }
+  dem::State s = dem::read_packing(packing, m.density);
+  double rsum = 0;
+  for (double r : s.radius) rsum += r;
+  const double scale = 0.5 * (m.radius_min + m.radius_max) / (rsum / s.count());
+  for (auto& x : s.position) x *= scale;
+  for (auto& r : s.radius) r *= scale;
+  for (auto* v : {&s.box.length, &s.box.length0, &s.box.reference}) *v *= scale;
+  for (int i = 0; i < s.count(); ++i) s.mass[i] = m.density * 4.0 / 3.0 * M_PI * std::pow(s.radius[i], 3);
+  s.list_valid = false;
+  const dem::Vec3 rate = dem::Vec3{1, 0, -1} * (m.protocol.deviatoric_rate > 0 ? m.protocol.deviatoric_rate : 1e-5 / m.t_contact);
+  dem::Engine engine(m, s);
+  for (int i = 0; i < 30; ++i) engine.step(rate);   // warm-up, first list build
+  long steps = 0;
+  const auto t0 = std::chrono::steady_clock::now();
+  double wall = 0;
+  while (wall < 1.0 || steps < 20) {
+    for (int i = 0; i < 10; ++i) engine.step(rate);
+    steps += 10;
+    wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+  const double speed = steps * double(s.count()) / wall;
+  const double per_member = dem::prep_particle_steps(m) + [&] {
+    double t = 0;
+    for (const auto& mode : m.protocol.modes) t += dem::mode_particle_steps(m, mode);
+    return t * dem::mode_checkpoints(m.protocol).size();
+  }();
+  const double total = per_member * std::max(1, m.ensemble_packings);
+  const double seconds = total / speed / cores;
+  auto hms = [](double sec) {
+    char b[64];
+    if (sec < 120) std::snprintf(b, sizeof b, "%.0f s", sec);
+    else if (sec < 7200) std::snprintf(b, sizeof b, "%.0f min", sec / 60);
+    else std::snprintf(b, sizeof b, "%.1f h", sec / 3600);
+    return std::string(b);
+  };
+  std::printf("wall time          about %s for %.3g particle-steps%s at %.3g M particle-steps/s (probe: %ld D2 steps "
+              "on a dense packing of %d, %d thread%s; this machine now; the preparation's relaxations vary, so "
+              "allow a factor 2)\n",
+              hms(seconds).c_str(), total,
+              ensemble ? (" (" + std::to_string(m.ensemble_packings) + " packings, one single-threaded task per core on " +
+                          std::to_string(cores) + " cores)").c_str()
+                       : "",
+              speed / 1e6, steps, s.count(), engine.threads(), engine.threads() == 1 ? "" : "s");
+}
+
 // A command-line value that cannot be right (exit code 2).
 struct ArgumentError : std::runtime_error {
   using std::runtime_error::runtime_error;
@@ -197,18 +257,22 @@ struct EnsembleCommand {
 struct InfoCommand {
   CLI::App* cmd = nullptr;
   std::string scene;
-  bool json = false;
+  bool json = false, no_probe = false;
   void add(CLI::App& app, std::vector<std::string>& overrides) {
     cmd = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates)");
     cmd->add_option("scene", scene, "scene TOML file")->required()->check(CLI::ExistingFile);
     cmd->add_option("--set", overrides, "override a scene key");
     cmd->add_flag("--json", json, "print the run plan as JSON instead: members (seeds), checkpoints, modes, "
                                   "estimated particle-steps per task (read by workflow/Snakefile)");
+    cmd->add_flag("--no-probe", no_probe, "no wall-time estimate (it times about a second of steps on a dense packing)");
   }
   int run(const std::vector<std::string>& overrides) const {
     const dem::Model model = dem::load_scene_file(scene, overrides);
     if (json) std::printf("%s", dem::plan_json(model).c_str());
-    else print_info(model);
+    else {
+      print_info(model);
+      if (!no_probe) print_wall_time_estimate(model);
+    }
     return 0;
   }
 };
@@ -254,6 +318,15 @@ struct BenchCommand {
   }
 };
 
+// RUN/scene.toml when `packing` is RUN/checkpoints/FILE (the resolved scene of the run that
+// wrote it: `dem run` and the ensemble members), else "".
+std::string run_folder_scene(const std::string& packing) {
+  const fs::path p = fs::absolute(packing);
+  if (p.parent_path().filename() != "checkpoints") return "";
+  const fs::path s = p.parent_path().parent_path() / "scene.toml";
+  return fs::is_regular_file(s) ? s.string() : "";
+}
+
 // One deformation stage from a packing at rest (the unit of the YADE cross-check and of the
 // ensemble workflow's tasks).
 struct ModeCommand {
@@ -266,7 +339,9 @@ struct ModeCommand {
   int threads = -1;
   void add(CLI::App& app, std::vector<std::string>& overrides) {
     cmd = app.add_subcommand("mode", "one deformation mode from a packing at rest, one CSV");
-    cmd->add_option("--scene", scene, "scene TOML for the physics (default: built-in defaults)")->check(CLI::ExistingFile);
+    cmd->add_option("--scene", scene, "scene TOML for the physics (default: RUN/scene.toml when the packing is "
+                                      "RUN/checkpoints/*, else the built-in defaults, listed on stderr)")
+        ->check(CLI::ExistingFile);
     cmd->add_option("--packing", packing, "YADE-format packing (our checkpoints/*.txt), or a checkpoint "
                                           "(*.ckpt: bit-exact state, the curve equals `dem run`'s)")->required()->check(CLI::ExistingFile);
     cmd->add_option("--threads", threads, "threads (overrides integration.threads)");
@@ -287,8 +362,22 @@ struct ModeCommand {
     overrides.push_back("protocol.modes=[\"" + mode + "\"]");
     if (threads >= 0) overrides.push_back("integration.threads=" + std::to_string(threads));
     std::string resolved;
-    dem::Model model = scene.empty() ? dem::load_scene("", overrides, &resolved, "defaults")
-                                     : dem::load_scene_file(scene, overrides, &resolved);
+    const std::string physics_scene = scene.empty() ? run_folder_scene(packing) : scene;
+    dem::Model model = physics_scene.empty() ? dem::load_scene("", overrides, &resolved, "defaults")
+                                             : dem::load_scene_file(physics_scene, overrides, &resolved);
+    if (scene.empty() && !physics_scene.empty())
+      std::fprintf(stderr, "dem mode: physics from %s (the run that made the packing; --scene FILE for another)\n",
+                   physics_scene.c_str());
+    else if (scene.empty())
+      std::fprintf(stderr,
+                   "dem mode: no --scene, and %s is not in a run folder's checkpoints/ with a scene.toml: built-in "
+                   "defaults: r in [%g, %g] m, rho = %g kg/m^3, k = %g N/m, gamma = %g kg/s, gamma_b = %g kg/s, "
+                   "dt = t_c/%.4g, %s, deviatoric rate %g/t_c (`dem info` on a scene shows its values; give the "
+                   "scene that made the packing with --scene)\n",
+                   packing.c_str(), model.radius_min, model.radius_max, model.density, model.contact.stiffness,
+                   model.contact.damping, model.background_damping, 1.0 / model.dt_over_tc,
+                   model.integrator == dem::Integrator::VelocityVerlet ? "velocity Verlet" : "symplectic Euler",
+                   model.protocol.deviatoric_rate * model.t_contact);
     check_output_file(out, force);
     dem::State state = fs::path(packing).extension() == ".ckpt" ? dem::read_checkpoint(packing).state
                                                                 : dem::read_packing(packing, model.density);
@@ -460,10 +549,15 @@ struct Commands {
     demfit::add_model_options(*model, model_opts);
     fit_map.add(app);
     coverage.add(app);
-    compare = app.add_subcommand("compare", "compare two curve CSVs (e.g. ours vs YADE)");
+    // compare and plot are demkit's (argparse): their options, --help included, go to it.
+    compare = app.add_subcommand("compare", "compare two curve CSVs (e.g. ours vs YADE): differences and a verdict "
+                                            "against tolerances, --plot overlay; `dem compare --help` for the options");
     compare->allow_extras();
-    plot = app.add_subcommand("plot", "plot a run folder's curves (PNG/SVG)");
+    compare->set_help_flag();
+    plot = app.add_subcommand("plot", "plot a run folder's curves (PNG/SVG in DIR/plots); `dem plot --help` for "
+                                      "the options");
     plot->allow_extras();
+    plot->set_help_flag();
   }
 
   // The parsed subcommand's exit code.

@@ -332,42 +332,4 @@ Checkpoint parse_checkpoint(const std::string& buf, const std::string& path) {
   return c;
 }
 
-// ---- VTK ----
-void write_vtu(const std::string& path, const State& s, const std::vector<int>& contacts) {
-  std::ostringstream o;
-  o.precision(9);
-  const int n = s.count();
-  o << "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
-    << "<UnstructuredGrid><Piece NumberOfPoints=\"" << n << "\" NumberOfCells=\"0\">\n"
-    << "<Points><DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n";
-  for (int i = 0; i < n; ++i) {
-    Vec3 x = s.position[i];
-    for (int k = 0; k < 3; ++k) x[k] -= s.box.length[k] * std::floor(x[k] / s.box.length[k]);
-    o << x.x << " " << x.y << " " << x.z << "\n";
-  }
-  o << "</DataArray></Points>\n<PointData Scalars=\"radius_m\" Vectors=\"velocity_m_s\">\n"
-    << "<DataArray type=\"Float64\" Name=\"radius_m\" format=\"ascii\">\n";
-  for (int i = 0; i < n; ++i) o << s.radius[i] << "\n";
-  o << "</DataArray>\n<DataArray type=\"Float64\" Name=\"velocity_m_s\" NumberOfComponents=\"3\" format=\"ascii\">\n";
-  for (int i = 0; i < n; ++i) o << s.velocity[i].x << " " << s.velocity[i].y << " " << s.velocity[i].z << "\n";
-  o << "</DataArray>\n<DataArray type=\"Int32\" Name=\"contacts\" format=\"ascii\">\n";
-  for (int i = 0; i < n; ++i) o << (i < static_cast<int>(contacts.size()) ? contacts[i] : 0) << "\n";
-  o << "</DataArray>\n<DataArray type=\"Int32\" Name=\"id\" format=\"ascii\">\n";
-  for (int i = 0; i < n; ++i) o << s.id[i] << "\n";
-  o << "</DataArray>\n</PointData>\n<Cells><DataArray type=\"Int32\" Name=\"connectivity\" format=\"ascii\"></DataArray>"
-    << "<DataArray type=\"Int32\" Name=\"offsets\" format=\"ascii\"></DataArray>"
-    << "<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\"></DataArray></Cells>\n"
-    << "</Piece></UnstructuredGrid></VTKFile>\n";
-  write_file_atomic(path, o.str());
-}
-
-void write_pvd(const std::string& path, const std::vector<std::pair<double, std::string>>& files) {
-  std::ostringstream o;
-  o.precision(12);
-  o << "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n";
-  for (auto& f : files) o << "<DataSet timestep=\"" << f.first << "\" file=\"" << f.second << "\"/>\n";
-  o << "</Collection>\n</VTKFile>\n";
-  write_file_atomic(path, o.str());
-}
-
 }  // namespace dem

@@ -780,7 +780,8 @@ void validate_protocol(const Model& m) {
 void validate_output(const Model& m) {
   if (!finite_positive(m.output.sample_strain)) fail("output.sample_strain must be positive and finite");
   if (m.output.relax_sample_steps < 1) fail("output.relax_sample_steps must be >= 1");
-  if (m.output.vtk_per_stage < 0) fail("output.vtk_per_stage must be >= 0");
+  if (m.output.vtk_per_stage < -1)
+    fail("output.vtk_per_stage must be >= 0, or -1 (auto: 20 snapshots per stage up to 2000 particles, fewer above)");
   if (!(m.output.progress_seconds >= 0) || !std::isfinite(m.output.progress_seconds))
     fail("output.progress_seconds must be zero or positive and finite (use --quiet for no progress lines)");
 }

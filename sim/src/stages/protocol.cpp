@@ -16,6 +16,7 @@
 #include "dem/stages/curve_file.hpp"
 #include "dem/engine/engine.hpp"
 #include "dem/io/io.hpp"
+#include "dem/io/vtk.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/io/scene.hpp"
 #include "stages/stage_common.hpp"
@@ -106,19 +107,29 @@ struct StageProgress {
   }
 };
 
-// VTK snapshots of a stage: NAME_NNNN.vtu and the NAME.pvd series (nothing without a vtk folder).
+// VTK snapshots of a stage (dem/io/vtk.hpp): NAME_NNNN.vtu (particles), NAME_contacts_NNNN.vtu
+// (the contact network), NAME_cell_NNNN.vtu (the periodic cell) and their .pvd series
+// (nothing without a vtk folder).
 struct VtkSeries {
   const Model& model;
   const std::string& dir;
   const std::string& name;
-  std::vector<std::pair<double, std::string>> files;
+  std::vector<std::pair<double, std::string>> files, contact_files, cell_files;
   void snapshot(const State& state, const NeighborList& list) {
     if (!model.output.vtk || dir.empty()) return;
-    char file[256];
-    std::snprintf(file, sizeof file, "%s_%04zu.vtu", name.c_str(), files.size());
-    write_vtu(dir + "/" + file, state, contact_counts(state, list));
-    files.emplace_back(state.time, file);
+    char index[32];
+    std::snprintf(index, sizeof index, "%04zu", files.size());
+    const std::string particles = name + "_" + index + ".vtu", contacts = name + "_contacts_" + index + ".vtu",
+                      cell = name + "_cell_" + index + ".vtu";
+    write_vtk_particles(dir + "/" + particles, state, wrapped_positions(state), contact_counts(state, list));
+    write_vtk_contacts(dir + "/" + contacts, contact_network(model, state, list));
+    write_vtk_cell(dir + "/" + cell, state.box);
+    files.emplace_back(state.time, particles);
+    contact_files.emplace_back(state.time, contacts);
+    cell_files.emplace_back(state.time, cell);
     write_pvd(dir + "/" + name + ".pvd", files);
+    write_pvd(dir + "/" + name + "_contacts.pvd", contact_files);
+    write_pvd(dir + "/" + name + "_cell.pvd", cell_files);
   }
 };
 
@@ -182,13 +193,16 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
   write_row(last_m);
   State last_good = state;
   double last_sample_x = progress.value(state);
-  VtkSeries vtk{model, vtk_dir, spec.name, {}};
+  VtkSeries vtk{model, vtk_dir, spec.name, {}, {}, {}};
   vtk.snapshot(state, engine.neighbor_list());
 
   const double x_start = progress.value(state);
   const double x_end = spec.stop == StopKind::Relaxed ? state.time + spec.max_time : progress.events.back();
-  const double vtk_dx = model.output.vtk_per_stage > 0 ? (x_end - x_start) / (model.output.vtk_per_stage + 1) : 0;
+  const int vtk_frames =
+      model.output.vtk_per_stage < 0 ? auto_vtk_per_stage(state.count()) : model.output.vtk_per_stage;
+  const double vtk_dx = vtk_frames > 0 ? (x_end - x_start) / (vtk_frames + 1) : 0;
   double next_vtk_x = x_start + vtk_dx;
+  int vtk_taken = 0;   // snapshots between start and end (the end one follows the loop)
   const double sample_dx = spec.stop == StopKind::VolumeFractionUp || spec.stop == StopKind::VolumeFractionDown
                                ? 3.0 * model.output.sample_strain   // ln(phi) changes 3x the axis strain
                                : model.output.sample_strain;
@@ -230,9 +244,11 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
           scale = 1.0;   // only one event per step
         }
         if (std::fabs(x - last_sample_x) >= sample_dx * (1 - 1e-9)) sample = true;
-        if (vtk_dx > 0 && ((vtk_dx > 0 && x >= next_vtk_x) || (vtk_dx < 0 && x <= next_vtk_x))) {
+        if (vtk_dx != 0 && !done && vtk_taken < vtk_frames &&
+            ((vtk_dx > 0 && x >= next_vtk_x) || (vtk_dx < 0 && x <= next_vtk_x))) {
           vtk.snapshot(state, engine.neighbor_list());
           next_vtk_x += vtk_dx;
+          ++vtk_taken;
         }
       }
       if (sample || done) {

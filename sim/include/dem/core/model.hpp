@@ -166,7 +166,7 @@ struct Protocol {
 struct OutputOptions {
   double sample_strain = 2e-3;       ///< a curve row every this much strain change (eps_d or eps_v)
   long relax_sample_steps = 2000;    ///< a row every this many steps while relaxing
-  int vtk_per_stage = 0;             ///< VTK snapshots per stage (0: only at stage ends if vtk on)
+  int vtk_per_stage = -1;            ///< VTK snapshots per stage besides start and end (-1: auto_vtk_per_stage, 20 for small scenes)
   bool vtk = true;                   ///< write VTK snapshots (.vtu + .pvd)
   double progress_seconds = 2.0;     ///< wall seconds between progress lines on stderr
 };

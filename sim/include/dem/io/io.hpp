@@ -50,9 +50,8 @@ Checkpoint read_checkpoint(const std::string& path);
 /// The same from the file's bytes; `origin` names it in messages.
 Checkpoint parse_checkpoint(const std::string& bytes, const std::string& origin);
 
-/// VTK XML unstructured-grid snapshot (points with radius, velocity, contact count, id).
-void write_vtu(const std::string& path, const State& state, const std::vector<int>& contacts);
-/// ParaView collection index of (time [s], file) pairs.
+/// ParaView collection index of (time [s], file) pairs (written by vtk.cpp, beside the
+/// snapshots of dem/io/vtk.hpp).
 void write_pvd(const std::string& path, const std::vector<std::pair<double, std::string>>& files);
 
 }  // namespace dem
