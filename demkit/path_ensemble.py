@@ -62,7 +62,8 @@ def write_atomic(path, text):
     """Write, flush, fsync, rename: a reader never sees half a file; errors propagate."""
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = path + ".part"
-    with open(tmp, "w") as fh:
+    from demkit.task import open_exclusive
+    with open_exclusive(tmp) as fh:   # never follows a planted link
         fh.write(text)
         fh.flush()
         os.fsync(fh.fileno())

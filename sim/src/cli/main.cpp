@@ -2,12 +2,15 @@
 // it does (run); main parses and maps exceptions to the README's exit codes.
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <sstream>
+#include <thread>
 #include <unistd.h>
 
 #include "dem/io/checks.hpp"
@@ -57,6 +60,12 @@ void warn_time_step(const dem::Model& m) {
   if (m.dt_over_tc > 0.45)
     std::fprintf(stderr, "dem: warning: integration.dt_over_tc = %g is near the stability limit of dense packings "
                          "(0.48-0.52 measured, docs/stability.md); expect a blow-up, or use 0.1\n", m.dt_over_tc);
+  // The pair loop's blocks fix the summation order; their default is max(4, threads).
+  const int threads = m.threads > 0 ? m.threads : static_cast<int>(std::thread::hardware_concurrency());
+  if (m.blocks == 0 && threads > 4)
+    std::fprintf(stderr, "dem: note: %d threads run %d blocks of the pair loop, another summation order than 1-4 "
+                         "threads (4 blocks): the curves differ from theirs in the last bits and then chaotically; "
+                         "--set integration.blocks=4 gives the bits of 1-4 threads\n", threads, threads);
 }
 
 void print_info(const dem::Model& m) {
@@ -127,12 +136,13 @@ struct RunCommand {
     cmd->add_option("--out", out, "results folder")->required();
     cmd->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
     cmd->add_option("--stages", stages, "all | prep | deviatoric (deviatoric reuses DIR/checkpoints)");
-    cmd->add_option("--threads", threads, "threads (overrides integration.threads)");
+    cmd->add_option("--threads", threads, "threads, 1 or more (overrides integration.threads; its 0 means all cores)")
+        ->check(CLI::Range(1, 4096));
     cmd->add_flag("--force", force, "overwrite finished results in --out");
     cmd->add_flag("--quiet", quiet, "no progress lines on stderr");
   }
   int run(std::vector<std::string> overrides, const std::string& command_line) const {
-    if (threads >= 0) overrides.push_back("integration.threads=" + std::to_string(threads));
+    if (threads >= 1) overrides.push_back("integration.threads=" + std::to_string(threads));
     std::string resolved;
     dem::Model model = dem::load_scene_file(scene, overrides, &resolved);
     dem::RunOptions o;
@@ -209,7 +219,7 @@ struct BenchCommand {
     cmd->add_option("--kernel", kernel, "pair kernel: auto, avx512, avx2, generic or reference (the same bits)");
     cmd->add_option("--packing", packing, "YADE-format packing")->check(CLI::ExistingFile);
     cmd->add_option("--steps", steps, "steps to time");
-    cmd->add_option("--threads", threads, "threads");
+    cmd->add_option("--threads", threads, "threads, 1 or more")->check(CLI::Range(1, 4096));
     cmd->add_option("--rate-tc", rate_tc, "D2 strain rate times t_c");
     cmd->add_option("--set", overrides, "override a scene key");
   }
@@ -253,7 +263,8 @@ struct ModeCommand {
     cmd->add_option("--scene", scene, "scene TOML for the physics (default: built-in defaults)")->check(CLI::ExistingFile);
     cmd->add_option("--packing", packing, "YADE-format packing (our checkpoints/*.txt), or a checkpoint "
                                           "(*.ckpt: bit-exact state, the curve equals `dem run`'s)")->required()->check(CLI::ExistingFile);
-    cmd->add_option("--threads", threads, "threads (overrides integration.threads)");
+    cmd->add_option("--threads", threads, "threads, 1 or more (overrides integration.threads; its 0 means all cores)")
+        ->check(CLI::Range(1, 4096));
     cmd->add_option("--name", stage_name, "stage name in the CSV (default: the mode's name; `dem run` uses "
                                           "MODE_phiX.XXX)");
     cmd->add_option("--mode", mode, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, SS_xy/xz/yz (simple shear), "
@@ -266,10 +277,15 @@ struct ModeCommand {
     cmd->add_flag("--quiet", quiet, "no progress lines");
   }
   int run(std::vector<std::string> overrides) const {
+    if (!stage_name.empty() && (stage_name.size() > 64 || !std::all_of(stage_name.begin(), stage_name.end(), [](char c) {
+          return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
+        })))
+      throw ArgumentError("--name '" + stage_name + "' must be 1-64 letters, digits, _, - or . (it is written into the "
+                          "curve's stage column), e.g. D2_phi0.800");
     if (rate_opt->count()) overrides.push_back("protocol.deviatoric_rate_tc=" + exact_number("--rate-tc", rate_tc));
     if (eps_opt->count()) overrides.push_back("protocol.eps_d_max=" + exact_number("--eps-max", eps));
     overrides.push_back("protocol.modes=[\"" + mode + "\"]");
-    if (threads >= 0) overrides.push_back("integration.threads=" + std::to_string(threads));
+    if (threads >= 1) overrides.push_back("integration.threads=" + std::to_string(threads));
     std::string resolved;
     dem::Model model = scene.empty() ? dem::load_scene("", overrides, &resolved, "defaults")
                                      : dem::load_scene_file(scene, overrides, &resolved);

@@ -73,6 +73,14 @@ PathStage resolve(const PathStage& s, double p0) {
   PathStage r = s;
   if (s.relative) { r.sigma = s.sigma * p0; r.pressure = s.pressure * p0; }
   if (s.until_relative) r.until = s.until * p0;
+  // Presence is the key's (finite at parse); after scaling by p0 every present target must still be finite.
+  const double given[4] = {s.sigma.x, s.sigma.y, s.sigma.z, s.pressure}, scaled[4] = {r.sigma.x, r.sigma.y, r.sigma.z, r.pressure};
+  for (int k = 0; k < 4; ++k)
+    if (std::isfinite(given[k]) && !std::isfinite(scaled[k]))
+      throw SceneError("path stage '" + s.name + "': a stress target of " + std::to_string(given[k]) + " p0 is not a "
+                       "finite pressure (p0 = " + std::to_string(p0) + " Pa): give a target of the order of 1");
+  if (!std::isfinite(r.until))
+    throw SceneError("path stage '" + s.name + "': its stop value times p0 is not finite: give a value of the order of 1");
   return r;
 }
 
