@@ -27,6 +27,8 @@ void add_fit_options(CLI::App& app, FitCommandOptions& o) {
   app.add_option("--loss", o.loss, "robust loss: none | huber | cauchy")->check(CLI::IsMember({"none", "huber", "cauchy"}));
   app.add_option("--gap-tolerance", o.gap_tolerance, "D2/D3 'same path' tolerance on the fitted curves");
   app.add_flag("--no-plots", o.no_plots, "skip plots");
+  app.add_flag("--partial", o.partial, "an ensemble folder whose tasks are not all finished: fit what is there "
+                                       "(without it an incomplete ensemble is refused; the tables then say so)");
   app.add_flag("--independent-errors", o.independent_errors,
                "treat curve points as independent (no inflation of standard errors for correlated residuals)");
   app.add_flag("--force", o.force, "overwrite RUN_DIR/fit");

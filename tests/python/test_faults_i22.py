@@ -181,3 +181,119 @@ def test_absurd_packing_line_is_refused(tmp_path):
     p = run_dem("run", scene(tmp_path), "--out", tmp_path / "r", "--quiet", "--set", f'particles.packing_file="{f}"',
                 timeout=30)
     assert p.returncode == 1 and "bytes" in p.stderr, p.stderr
+
+
+# ---- ensembles: 1, 2, 5, 9, 10 --------------------------------------------------------------
+
+ENS = TINY.replace("deviatoric_rate_tc = 2e-4", "deviatoric_rate_tc = 2e-3").replace(
+    "checkpoints_unloading = [0.72, 0.69]", "checkpoints_unloading = [0.69]") + "[ensemble]\npackings = 2\n"
+
+
+def ensemble(scene_file, out, *extra, check=False, env=None):
+    return run_dem("ensemble", scene_file, "--out", out, "--cores", "2", *extra, check=check, timeout=600, env=env)
+
+
+@pytest.fixture(scope="module")
+def ens(tmp_path_factory):
+    """A finished 2-packing ensemble, D2 from one checkpoint at a rate far from quasi-static."""
+    d = tmp_path_factory.mktemp("i22ens")
+    s = d / "ens.toml"
+    s.write_text(ENS)
+    p = ensemble(s, d / "run", check=True)
+    return {"dir": d / "run", "scene": s, "stderr": p.stderr}
+
+
+def copy_ens(ens, dst):
+    shutil.copytree(ens["dir"], dst, ignore=shutil.ignore_patterns(".dem-ensemble.lock"))
+    return dst
+
+
+def fit_rows(run):
+    import csv
+    with open(run / "fit" / "parameters.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_resumed_ensemble_never_reports_partial_results_as_done(ens, tmp_path):
+    run = copy_ens(ens, tmp_path / "run")
+    for f in ("D2_phi0.690.json", "D2_phi0.690.csv"):
+        (run / "members" / "m001" / "deviatoric" / f).unlink()
+    # something else wrote fit tables into the partial folder (a `dem fit --partial`, a copy): newest of all
+    (run / "fit" / "parameters.csv").write_text((ens["dir"] / "fit" / "parameters.csv").read_text())
+    p = ensemble(ens["scene"], run)
+    assert p.returncode == 0, p.stderr
+    assert (run / "members" / "m001" / "deviatoric" / "D2_phi0.690.json").exists(), p.stderr
+    assert all(r["packings"] == "2" for r in fit_rows(run))
+    assert (run / "ensemble" / "D2_phi0.690.csv").read_bytes() == (ens["dir"] / "ensemble" / "D2_phi0.690.csv").read_bytes()
+    # a member whose preparation is gone entirely
+    shutil.rmtree(run / "members" / "m000")
+    p = ensemble(ens["scene"], run)
+    assert p.returncode == 0 and "done in" in p.stderr, p.stderr
+    assert (run / "members" / "m000" / "prep.json").exists() and all(r["packings"] == "2" for r in fit_rows(run))
+
+
+def test_fit_of_a_half_finished_ensemble_is_refused_or_marked(ens, tmp_path):
+    run = copy_ens(ens, tmp_path / "run")
+    before = (run / "fit" / "parameters.csv").read_bytes()
+    (run / "members" / "m001" / "deviatoric" / "D2_phi0.690.json").unlink()
+    p = run_dem("fit", run, "--force", "--no-plots")
+    assert p.returncode == 1 and "incomplete" in p.stderr and "dem ensemble" in p.stderr, p.stderr
+    assert (run / "fit" / "parameters.csv").read_bytes() == before   # nothing lost
+    p = run_dem("fit", run, "--force", "--no-plots", "--partial")
+    assert p.returncode == 0 and "incomplete" in p.stderr, p.stderr
+    assert all("ensemble incomplete" in r["warnings"] for r in fit_rows(run))
+    # a whole member missing (never prepared)
+    shutil.rmtree(run / "members" / "m001")
+    p = run_dem("fit", run, "--force", "--no-plots")
+    assert p.returncode == 1 and "incomplete" in p.stderr, p.stderr
+
+
+def test_far_from_quasi_static_is_said_where_it_is_read(ens):
+    assert "inertial number" in ens["stderr"], ens["stderr"]
+    assert all("inertial number" in r["warnings"] for r in fit_rows(ens["dir"]))
+
+
+def test_force_does_not_break_a_running_ensemble(ens, tmp_path):
+    out = tmp_path / "run"
+    first = subprocess.Popen([DEM, "ensemble", str(ens["scene"]), "--out", str(out), "--cores", "1"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while time.time() < deadline and not (out / "logs").is_dir():
+        time.sleep(0.1)
+    p = ensemble(ens["scene"], out, "--force")
+    assert p.returncode == 1 and "another `dem ensemble` is running" in p.stderr, p.stderr
+    _, err = first.communicate(timeout=600)
+    assert first.returncode == 0, err
+    assert all(r["packings"] == "2" for r in fit_rows(out))
+
+
+def test_all_preparations_blowing_up_is_named_with_exit_3(tmp_path):
+    s = tmp_path / "bad.toml"
+    s.write_text(ENS.replace("threads = 1", "threads = 1\nmax_overlap_fraction = 1e-3"))
+    p = ensemble(s, tmp_path / "run")
+    assert p.returncode == 3, p.stderr
+    assert "every preparation blew up" in p.stderr and "--force" in p.stderr, p.stderr
+    assert "run the same command again to continue" not in p.stderr
+
+
+def test_slurm_without_a_controller_is_named(ens, tmp_path):
+    env = dict(os.environ, SLURM_CONF=str(tmp_path / "no-such-slurm.conf"))
+    p = ensemble(ens["scene"], tmp_path / "run", "--profile", "slurm", env=env)
+    assert p.returncode == 1 and "Slurm" in p.stderr and "without --profile slurm" in p.stderr, p.stderr
+    assert "run the same command again" not in p.stderr
+    assert not (tmp_path / "run" / "members").exists()
+
+
+def test_full_disk_during_the_preparations_is_named(ens, tmp_path):
+    if os.geteuid() != 0:
+        pytest.skip("mounting a small tmpfs needs root: the full-disk tests run as root in CI")
+    d = tmp_path / "disk"
+    d.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=200k", "tmpfs", str(d)]).returncode != 0:
+        pytest.skip("cannot mount a tmpfs here")
+    try:
+        p = ensemble(ens["scene"], d / "run")
+        assert p.returncode == 1, p.stderr
+        assert "is full" in p.stderr and "Free space" in p.stderr, p.stderr
+    finally:
+        subprocess.run(["umount", "-l", str(d)])

@@ -180,7 +180,8 @@ struct EnsembleCommand {
   int run(const std::vector<std::string>& overrides) const {
     std::string resolved;
     dem::load_scene_file(scene, overrides, &resolved);
-    dem::prepare_ensemble_folder(out, resolved, force);
+    const int lock = dem::prepare_ensemble_folder(out, resolved, force);
+    setenv("DEM_ENSEMBLE_LOCK_FD", std::to_string(lock).c_str(), 1);   // held across exec by the driver
     std::vector<std::string> args = {out, "--dem", fs::canonical("/proc/self/exe").string()};
     if (cores > 0) args.insert(args.end(), {"--cores", std::to_string(cores)});
     if (!profile.empty()) args.insert(args.end(), {"--profile", profile});
@@ -474,7 +475,19 @@ struct Commands {
     if (*bench.cmd) return bench.run(overrides);
     if (*mode.cmd) return mode.run(overrides);
     if (*collide.cmd) return collide.run(overrides);
-    if (*fit) return demfit::run_fit_command(fit_opts);
+    if (*fit) {
+      // An ensemble folder: the tasks its scene plans, so that an incomplete one is never fitted silently.
+      demfit::FitCommandOptions o = fit_opts;
+      const fs::path dir(o.run_dir);
+      if (fs::is_directory(dir / "members")) {
+        try {
+          o.planned_tasks = dem::planned_task_files(dem::load_scene_file((dir / "scene.toml").string(), {}));
+        } catch (const std::exception& e) {
+          o.plan_error = e.what();
+        }
+      }
+      return demfit::run_fit_command(o);
+    }
     if (*model) return demfit::run_model_command(model_opts);
     if (*fit_map.cmd) return fit_map.run();
     if (*coverage.cmd) return coverage.run();

@@ -11,6 +11,12 @@
 #include <sstream>
 #include <vector>
 
+#include <cerrno>
+#include <cstring>
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
 #include "dem/io/io.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/stages/protocol.hpp"
@@ -83,8 +89,25 @@ std::string plan_json(const Model& m) {
   o << "],\n  \"prep_particle_steps\": " << prep_particle_steps(m) << ",\n  \"mode_particle_steps\": {";
   for (std::size_t i = 0; i < m.protocol.modes.size(); ++i)
     o << (i ? ", " : "") << "\"" << m.protocol.modes[i].name << "\": " << mode_particle_steps(m, m.protocol.modes[i]);
-  o << "},\n  \"threads\": " << m.threads << "\n}\n";
+  o << "},\n  \"tasks\": [";
+  const auto tasks = planned_task_files(m);
+  for (std::size_t i = 0; i < tasks.size(); ++i) o << (i ? ", " : "") << "\"" << tasks[i] << "\"";
+  o << "],\n  \"threads\": " << m.threads << "\n}\n";
   return o.str();
+}
+
+std::vector<std::string> planned_task_files(const Model& m) {
+  std::vector<std::string> files;
+  const std::vector<double> phis = mode_checkpoints(m.protocol);
+  for (int k = 0; k < m.ensemble_packings; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "m%03d", k);
+    files.push_back(std::string("members/") + name + "/prep.json");
+    for (double phi : phis)
+      for (const auto& mode : m.protocol.modes)
+        files.push_back(std::string("members/") + name + "/deviatoric/" + mode.name + "_" + fmt_phi(phi) + ".json");
+  }
+  return files;
 }
 
 namespace {
@@ -108,25 +131,47 @@ std::string differing_lines(const std::string& a, const std::string& b) {
 
 }  // namespace
 
-void prepare_ensemble_folder(const std::string& dir_name, const std::string& resolved, bool force) {
+namespace {
+
+// The folder's lock, held by the `dem ensemble` working on it (the kernel drops it when the
+// process dies): refused at once if another one holds it.
+int lock_ensemble_folder(const std::filesystem::path& dir) {
+  const std::string path = (dir / ".dem-ensemble.lock").string();
+  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_NOFOLLOW, 0644);   // no O_CLOEXEC: the driver inherits it
+  if (fd < 0) throw std::runtime_error("cannot open " + path + " (" + std::strerror(errno) + ")");
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    ::close(fd);
+    throw std::runtime_error("another `dem ensemble` is running on " + dir.string() + " (it holds " + path +
+                             "); nothing was changed, --force or not: wait for it to finish, or stop it first");
+  }
+  return fd;
+}
+
+}  // namespace
+
+int prepare_ensemble_folder(const std::string& dir_name, const std::string& resolved, bool force) {
   namespace fs = std::filesystem;
   const fs::path dir(dir_name), scene = dir / "scene.toml";
+  int lock = -1;
   if (fs::exists(scene)) {
+    lock = lock_ensemble_folder(dir);
     std::ifstream in(scene);
     std::stringstream old;
     old << in.rdbuf();
-    if (old.str() == resolved && !force) return;   // the same ensemble: continue where it stopped
+    if (old.str() == resolved && !force) return lock;   // the same ensemble: continue where it stopped
     if (!force)
       throw std::runtime_error(dir_name + " holds the results of another scene (its scene.toml differs in:" +
                                differing_lines(old.str(), resolved) +
                                "\n  ); choose another --out, or pass --force to remove those results");
     for (const char* sub : {"members", "ensemble", "fit", "plots", "logs", ".snakemake"}) fs::remove_all(dir / sub);
-    for (const char* f : {"scene.toml", "manifest.json", ".dem-ensemble.lock"}) fs::remove(dir / f);
+    for (const char* f : {"scene.toml", "manifest.json"}) fs::remove(dir / f);   // not the lock: it is held
   } else if (fs::exists(dir) && !fs::is_empty(dir) && !force) {
     throw std::runtime_error(dir_name + " exists and is not an ensemble folder (no scene.toml): choose another --out");
   }
   fs::create_directories(dir);
+  if (lock < 0) lock = lock_ensemble_folder(dir);
   write_file_atomic(scene.string(), resolved);
+  return lock;
 }
 
 }  // namespace dem

@@ -3,6 +3,7 @@
 // task graph from it (`dem info SCENE --json`), so the scene is parsed and validated in one place.
 #pragma once
 #include <string>
+#include <vector>
 
 #include "dem/core/model.hpp"
 
@@ -26,10 +27,17 @@ double prep_particle_steps(const Model& model);
 ///        "threads": T}
 std::string plan_json(const Model& model);
 
+/// The status file of every task of the ensemble workflow for this scene, relative to the
+/// ensemble folder: members/mKKK/prep.json and members/mKKK/deviatoric/MODE_phiX.json.
+std::vector<std::string> planned_task_files(const Model& model);
+
 /// Readies DIR for the ensemble workflow: writes DIR/scene.toml (the resolved scene) unless it
 /// holds exactly this text already (then the workflow continues where it stopped). A folder
 /// with the results of another scene is refused, naming the differing lines. `force` removes
 /// the results in DIR (of this scene or another) and starts afresh. Throws std::runtime_error.
-void prepare_ensemble_folder(const std::string& dir, const std::string& resolved_scene, bool force);
+/// First takes DIR/.dem-ensemble.lock (flock, exclusive, not waiting): a folder another
+/// `dem ensemble` works on is refused, --force or not. Returns the lock's file descriptor (held
+/// open, inherited by the workflow driver, which checks it).
+int prepare_ensemble_folder(const std::string& dir, const std::string& resolved_scene, bool force);
 
 }  // namespace dem
