@@ -391,6 +391,14 @@ int run(const ModelCommandOptions& o) {
         for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
         cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
       }
+      if (K < 4) {   // as `dem fit` says for its fits
+        double worst = 1;
+        for (std::size_t i = 0; i < cal.value.size(); ++i)
+          if (cal.se_jackknife[i] > 0 && cal.se_cov[i] > 0) worst = std::max(worst, cal.se_cov[i] / cal.se_jackknife[i]);
+        cal.warnings.push_back("only " + std::to_string(K) + " packings: a jackknife over fewer than 4 packings is itself "
+                               "very uncertain (here up to " + num(worst, 3) + "x below the covariance errors) and its "
+                               "intervals under-cover; set [ensemble] packings >= 4 for errors between packings");
+      }
     }
   }
 

@@ -297,3 +297,34 @@ def test_full_disk_during_the_preparations_is_named(ens, tmp_path):
         assert "is full" in p.stderr and "Free space" in p.stderr, p.stderr
     finally:
         subprocess.run(["umount", "-l", str(d)])
+
+
+# ---- 4: dem model never invents nu-slopes, warns at small K, refuses NaN rows -----------------
+
+def test_model_on_one_volume_fraction_and_two_packings_says_so(ens, tmp_path):
+    run = copy_ens(ens, tmp_path / "run")
+    p = subprocess.run([DEM, "model", run, "--no-plots", "--out", tmp_path / "model"], capture_output=True, text=True,
+                       timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert "one start volume fraction" in p.stderr and "only 2 packings" in p.stderr, p.stderr
+    import csv
+    with open(tmp_path / "model" / "parameters.csv", newline="") as fh:
+        params = {r["parameter"]: r for r in csv.DictReader(fh)}
+    for name, r in params.items():
+        if name.endswith("_b"):
+            assert r["se"] == "nan" and r["lo95"] == "nan", (name, r)
+
+
+def test_model_refuses_nan_rows_by_name(ens, tmp_path):
+    run = copy_ens(ens, tmp_path / "run")
+    f = run / "ensemble" / "D2_phi0.690.csv"
+    lines = f.read_text().splitlines()
+    head = [i for i, ln in enumerate(lines) if ln.startswith("eps_d,")][0]
+    cols = lines[head].split(",")
+    row = lines[head + 3].split(",")
+    row[cols.index("s_dev_mean")] = "nan"
+    lines[head + 3] = ",".join(row)
+    f.write_text("\n".join(lines) + "\n")
+    p = subprocess.run([DEM, "model", run, "--no-plots", "--out", tmp_path / "model"], capture_output=True, text=True,
+                       timeout=300)
+    assert p.returncode == 2 and "s_dev_mean is not a finite number" in p.stderr, (p.returncode, p.stderr)
