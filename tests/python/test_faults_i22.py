@@ -328,3 +328,117 @@ def test_model_refuses_nan_rows_by_name(ens, tmp_path):
     p = subprocess.run([DEM, "model", run, "--no-plots", "--out", tmp_path / "model"], capture_output=True, text=True,
                        timeout=300)
     assert p.returncode == 2 and "s_dev_mean is not a finite number" in p.stderr, (p.returncode, p.stderr)
+
+
+# ---- 11: a stop that never comes ends in the stop error ---------------------------------------
+
+def test_stop_that_never_comes_gives_the_stop_error(prepared, tmp_path):
+    s = prepared / "tiny.toml"
+    txt = s.read_text().replace('modes = ["D2"]', 'modes = ["P"]') + \
+        '[paths]\nP = [ { rate = "D2", until = { s_dev = 5 } } ]\n'
+    (tmp_path / "p.toml").write_text(txt)
+    ck = prepared / "run" / "checkpoints" / "unloading_phi0.690.ckpt"
+    p = run_dem("mode", "--scene", tmp_path / "p.toml", "--packing", ck, "--mode", "P", "--out", tmp_path / "p.csv",
+                "--quiet", timeout=300)
+    assert p.returncode == 1 and "stop condition was not met" in p.stderr, p.stderr
+    assert not (tmp_path / "p.csv").exists()
+
+
+# ---- 12: absurd rates are bounded before running, and dem info gives the steps --------------
+
+@pytest.mark.parametrize("override", [
+    'protocol.preparation=[{ name = "c", kind = "compress", rate_tc = 1e-300, until = { phi = 0.72 }, checkpoints = [0.70], checkpoint_name = "loading" }]',
+    'protocol.preparation=[{ name = "c", kind = "compress", rate_tc = 1e-320, until = { phi = 0.72 }, checkpoints = [0.70], checkpoint_name = "loading" }]',
+    "protocol.compress_rate_tc=1e-300",
+    "protocol.deviatoric_rate_tc=1e-300",
+    "protocol.relax_max_time_tc=1e300",
+])
+def test_absurd_work_is_refused_with_a_step_estimate(tmp_path, override):
+    s = scene(tmp_path)
+    if override.startswith("protocol.preparation"):
+        txt = s.read_text()
+        for k in ("target_phi", "compress_rate_tc", "cycle_rate_tc", "cycle_phi_max", "checkpoints_unloading",
+                  "relax_max_time_tc"):
+            txt = "\n".join(ln for ln in txt.splitlines() if not ln.startswith(k)) + "\n"
+        s.write_text(txt.replace("[protocol]", "[protocol]\nmodes_from = \"loading\"", 1))
+    p = run_dem("info", s, "--set", override, timeout=30)
+    assert p.returncode == 2 and "steps" in p.stderr, (override, p.stderr)
+    p = run_dem("run", s, "--out", tmp_path / "r", "--set", override, timeout=30)
+    assert p.returncode == 2 and not (tmp_path / "r").exists(), p.stderr
+
+
+def test_info_gives_the_steps_of_every_preparation_stage(tmp_path):
+    p = run_dem("info", scene(tmp_path), check=True)
+    prep = [ln for ln in p.stdout.splitlines() if ln.startswith("prep ")]
+    assert prep and all("steps" in ln for ln in prep), p.stdout
+
+
+# ---- 13: a sheared (version-4) packing_file runs, without the .txt export, saying so --------
+
+def test_sheared_packing_file_runs_without_txt_checkpoints(prepared, tmp_path):
+    ck = prepared / "run" / "checkpoints" / "unloading_phi0.690.ckpt"
+    # a sheared state: the last good state of a simple shear stopped by a tight overlap limit
+    from demkit.curves import read_curve
+    free = tmp_path / "free.csv"
+    run_dem("mode", "--scene", prepared / "tiny.toml", "--packing", ck, "--mode", "SS_xz", "--eps-max", "0.05",
+            "--out", free, "--quiet", check=True)
+    ov = read_curve(free)["overlap_max_rel"]
+    limit = ov[0] + 0.5 * (ov.max() - ov[0])
+    over = tmp_path / "ss.csv"
+    p = run_dem("mode", "--scene", prepared / "tiny.toml", "--packing", ck, "--mode", "SS_xz", "--eps-max", "0.05",
+                "--out", over, "--quiet", "--set", f"integration.max_overlap_fraction={limit:.6g}",
+                "--set", "integration.check_every_steps=1", timeout=300)
+    sheared = str(over) + ".failed.ckpt"
+    if p.returncode != 3 or open(sheared, "rb").read(8) != b"DEMCKPT4":
+        pytest.skip(f"could not make a sheared checkpoint here: {p.stderr[-300:]}")
+    out = tmp_path / "run"
+    p = run_dem("run", scene(tmp_path), "--out", out, "--quiet", "--set", f'particles.packing_file="{sheared}"',
+                timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert "tilted" in p.stderr and ".txt" in p.stderr, p.stderr
+    assert (out / "checkpoints" / "unloading_phi0.690.ckpt").exists()
+    assert not (out / "checkpoints" / "unloading_phi0.690.txt").exists()
+    assert (out / "deviatoric" / "D2_phi0.690.csv").exists()
+
+
+# ---- 14: checkpoints do not depend on the thread count; --threads must be >= 1 ----------------
+
+def test_checkpoints_are_the_same_bytes_for_any_thread_count(tmp_path):
+    s = scene(tmp_path)
+    for t in ("1", "2"):
+        run_dem("run", s, "--out", tmp_path / f"t{t}", "--stages", "prep", "--quiet", "--threads", t, check=True)
+    for f in sorted((tmp_path / "t1").glob("**/*.ckpt")):
+        other = tmp_path / "t2" / f.relative_to(tmp_path / "t1")
+        assert f.read_bytes() == other.read_bytes(), f
+
+
+def test_resumed_with_another_thread_count_gives_the_same_checkpoints(tmp_path):
+    s = scene(tmp_path)
+    ref = tmp_path / "ref"
+    run_dem("run", s, "--out", ref, "--stages", "prep", "--quiet", "--threads", "1", check=True)
+    out = tmp_path / "resumed"
+    shutil.copytree(ref, out)
+    m = json.loads((out / "manifest.json").read_text())
+    m["complete"] = False
+    (out / "manifest.json").write_text(json.dumps(m))
+    for f in ("prep/after_cycle_unloading.ckpt", "checkpoints/unloading_phi0.690.ckpt", "checkpoints/unloading_phi0.720.ckpt"):
+        (out / f).unlink()
+    p = run_dem("run", s, "--out", out, "--stages", "prep", "--quiet", "--threads", "2")
+    assert p.returncode == 0, p.stderr
+    for f in sorted(ref.glob("**/*.ckpt")):
+        assert f.read_bytes() == (out / f.relative_to(ref)).read_bytes(), f
+
+
+@pytest.mark.parametrize("threads", ["0", "-1", "-8"])
+def test_threads_below_one_are_refused(tmp_path, threads):
+    for cmd in (["run", scene(tmp_path), "--out", tmp_path / "r"], ["bench", "--steps", "1"]):
+        p = run_dem(*cmd, "--threads", threads, timeout=30)
+        assert p.returncode == 2 and "--threads" in p.stderr, p.stderr
+    assert not (tmp_path / "r").exists()
+
+
+def test_more_than_four_threads_say_their_bits_differ(tmp_path):
+    p = run_dem("info", scene(tmp_path), "--set", "integration.threads=8", check=True)
+    assert "integration.blocks=4" in p.stderr, p.stderr
+    p = run_dem("info", scene(tmp_path), "--set", "integration.threads=8", "--set", "integration.blocks=4", check=True)
+    assert "blocks" not in p.stderr

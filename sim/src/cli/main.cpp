@@ -79,8 +79,11 @@ void print_info(const dem::Model& m) {
   std::printf("smallest pair      t_c = %.6g s, e = %.6g\n", m.t_contact, m.restitution);
   std::printf("time step          dt = %.6g s (t_c / %.4g), %s\n", m.dt, 1.0 / m.dt_over_tc,
               m.integrator == dem::Integrator::VelocityVerlet ? "velocity Verlet" : "symplectic Euler");
-  for (const auto& st : p.preparation)
-    std::printf("prep %-15s %s\n", st.name.c_str(), dem::describe(st, m.t_contact).c_str());
+  const std::vector<double> prep_steps = dem::preparation_stage_steps(m);
+  for (std::size_t i = 0; i < p.preparation.size(); ++i)
+    std::printf("prep %-15s %s: %s%.3g steps\n", p.preparation[i].name.c_str(),
+                dem::describe(p.preparation[i], m.t_contact).c_str(),
+                p.preparation[i].kind == dem::PrepStage::Kind::Relax ? "at most " : "", prep_steps[i]);
   std::printf("modes              from the checkpoints %s, deviatoric rate %.4g /s (%.4g/t_c)\n", p.modes_from.c_str(),
               p.deviatoric_rate, p.deviatoric_rate * m.t_contact);
   for (auto& mode : p.modes) {

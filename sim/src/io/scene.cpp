@@ -2,6 +2,7 @@
 
 #include "dem/io/io.hpp"
 #include "dem/measure/control.hpp"
+#include "dem/stages/plan.hpp"
 #include "dem/stages/preparation.hpp"
 #include "io/preparation_toml.hpp"
 
@@ -621,6 +622,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
       if (st.stop == PathStop::Time) st.until *= m.t_contact;   // time_tc -> seconds
   p.preparation = preparation ? parse_preparation(*preparation, m.t_contact, origin) : default_preparation(p);
   validate_preparation(p, m.t_contact, origin);
+  check_work(m, origin);
   if (resolved) {
     std::ostringstream o;
     o << root;

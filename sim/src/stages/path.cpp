@@ -222,7 +222,18 @@ void run_path_stage(PathRun& run, const PathStage& stage) {
       if (remaining < increment) scale = remaining / increment;
     }
     const double x_before = increment > 0 && nonlinear_stop ? probe.value(state, resp) : 0.0;
-    run.engine.step(rate * scale);
+    try {
+      run.engine.step(rate * scale);
+    } catch (const BlowUp&) {
+      throw;
+    } catch (const std::runtime_error& e) {
+      // The box got too thin for the neighbour grid before the stop came: that is the stop
+      // condition not met (the documented error), the geometry only its symptom.
+      throw std::runtime_error("path " + run.label + ", stage '" + stage.name + "': its stop condition was not met after "
+                               "a strain of " + std::to_string(travel) + ", when the box could deform no further (" +
+                               e.what() + "): the target may be beyond what this packing reaches (e.g. an s_dev above "
+                               "its critical state); change the stop condition");
+    }
     ++run.steps;
     ++stage_steps;
     if (increment > 0 && nonlinear_stop && scale == 1.0)

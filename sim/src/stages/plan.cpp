@@ -17,6 +17,7 @@
 #include <sys/file.h>
 #include <unistd.h>
 
+#include "dem/core/errors.hpp"
 #include "dem/io/io.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/stages/protocol.hpp"
@@ -94,6 +95,40 @@ std::string plan_json(const Model& m) {
   for (std::size_t i = 0; i < tasks.size(); ++i) o << (i ? ", " : "") << "\"" << tasks[i] << "\"";
   o << "],\n  \"threads\": " << m.threads << "\n}\n";
   return o.str();
+}
+
+std::vector<double> preparation_stage_steps(const Model& m) {
+  std::vector<double> steps;
+  double phi = m.protocol.initial_phi;
+  for (const auto& s : m.protocol.preparation) {
+    if (s.kind == PrepStage::Kind::Relax) {
+      steps.push_back(s.max_time / m.dt);
+      continue;
+    }
+    const bool runs = s.kind == PrepStage::Kind::Compress ? s.phi > phi : s.phi < phi;
+    steps.push_back(runs ? std::fabs(std::log(s.phi / phi)) / (3 * s.rate * m.dt) : 0.0);
+    phi = s.phi;
+  }
+  return steps;
+}
+
+void check_work(const Model& m, const std::string& origin) {
+  auto refuse = [&](const std::string& what, double steps, const std::string& fix) {
+    if (std::isfinite(steps) && steps <= kMaxSteps) return;
+    const double ps = steps * m.count;
+    char b[600];
+    std::snprintf(b, sizeof b, "%s: %s would take about %.3g time steps (%.3g particle-steps at N = %d, about %.3g "
+                  "years at 25 M particle-steps/s), beyond the bound of %.0e steps: %s", origin.c_str(), what.c_str(),
+                  steps, ps, m.count, ps / 25e6 / 3.15e7, kMaxSteps, fix.c_str());
+    throw SceneError(b);
+  };
+  const auto prep = preparation_stage_steps(m);
+  for (std::size_t i = 0; i < prep.size(); ++i)
+    refuse("preparation stage '" + m.protocol.preparation[i].name + "'", prep[i],
+           "raise its rate_tc (typical 1e-5 to 1e-3) or shorten its max_time_tc");
+  for (const auto& mode : m.protocol.modes)
+    refuse(std::string(mode.path.empty() ? "mode '" : "path '") + mode.name + "'", mode_steps(m, mode),
+           "raise protocol.deviatoric_rate_tc (typical 1e-6 to 1e-4), or the rate entries of the mode");
 }
 
 std::vector<std::string> planned_task_files(const Model& m) {

@@ -20,6 +20,16 @@ double mode_particle_steps(const Model& model, const DeformationMode& mode);
 /// relaxations, whose length depends on the packing, and the list rebuilds of compression.
 double prep_particle_steps(const Model& model);
 
+/// Steps of each preparation stage, in order: compress/expand exact for the volume fraction
+/// (ln phi moves by 3 rate dt per step), a relaxation at most its max_time_tc.
+std::vector<double> preparation_stage_steps(const Model& model);
+
+/// Bounds the work before anything runs, as memory is bounded: a stage or mode of more than
+/// kMaxSteps time steps (or not finite, e.g. a rate of 1e-300) is refused with its step
+/// estimate (SceneError naming it). The particle count is bounded by the memory check.
+constexpr double kMaxSteps = 1e11;   // N = 1000: 1e14 particle-steps, about 50 days at 25 M/s
+void check_work(const Model& model, const std::string& origin);
+
 /// JSON: {"packings": K, "members": [{"name": "m000", "seed": S}, ...],
 ///        "series": "unloading" (protocol.modes_from),
 ///        "checkpoints": [{"phi": 0.8, "stem": "unloading_phi0.800"}, ...] (descending phi),
