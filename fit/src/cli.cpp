@@ -53,7 +53,7 @@ struct Curve { std::string mode; double phi; Table t; };
 // other physics, in the folder), or every deviatoric/MODE_phiX.XXX.csv when there is no
 // manifest (a folder of curves assembled by hand).
 std::vector<fs::path> curve_files(const fs::path& run) {
-  const std::regex name_re(R"(([A-Za-z0-9_]+)_phi([0-9.]+)\.csv)");
+  const std::regex name_re(R"(([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv)");
   std::vector<fs::path> files;
   if (fs::exists(run / "manifest.json")) {
     std::ifstream in(run / "manifest.json");
@@ -203,7 +203,7 @@ int run_fit_command(const FitCommandOptions& o) {
   fo.correct_autocorrelation = !o.independent_errors;
 
   // Curves named MODE_phiX.XXX.csv
-  const std::regex name_re(R"(([A-Za-z0-9_]+)_phi([0-9.]+)\.csv)");
+  const std::regex name_re(R"(([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv)");
   std::vector<Curve> curves;
   for (const auto& f : curve_files(run)) {
     std::smatch m;

@@ -51,7 +51,7 @@ std::string read_text(const fs::path& f) {
 }
 
 std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run) {
-  const std::regex name_re(R"(([A-Za-z0-9_]+)_(phi([0-9.]+))\.json)");
+  const std::regex name_re(R"(([A-Za-z0-9_-]+)_(phi([0-9.]+))\.json)");
   std::map<std::pair<std::string, double>, Cell> cells;
   std::set<std::pair<std::string, double>> path_cells;   // loading paths: not averaged
   std::vector<fs::path> member_dirs;

@@ -33,7 +33,7 @@ struct CurveFile { std::string mode, tag; double nu; fs::path path; };
 
 // The MODE_phiX.XXX.csv files of a folder, by mode then nu.
 std::vector<CurveFile> curves_in(const fs::path& dir) {
-  static const std::regex re(R"(([A-Za-z0-9_]+)_(phi([0-9.]+))\.csv)");
+  static const std::regex re(R"(([A-Za-z0-9_-]+)_(phi([0-9.]+))\.csv)");
   std::vector<CurveFile> out;
   for (auto& e : fs::directory_iterator(dir)) {
     std::smatch m;

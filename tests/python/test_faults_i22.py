@@ -168,6 +168,9 @@ def test_device_and_fifo_inputs_are_refused(prepared, tmp_path):
         p = run_dem("mode", "--packing", f + ".ckpt" if False else f, "--mode", "D2", "--out", tmp_path / "m.csv",
                     timeout=30)
         assert p.returncode != 0
+    # the curve readers: the fitter's and Python's (dem compare, dem plot)
+    p = run_dem("compare", fifo, "/dev/zero", timeout=30)
+    assert p.returncode == 1 and "not a regular file" in p.stderr, p.stderr
     # a checkpoint path that is a FIFO
     fifo2 = tmp_path / "x.ckpt"
     os.mkfifo(fifo2)
@@ -442,3 +445,31 @@ def test_more_than_four_threads_say_their_bits_differ(tmp_path):
     assert "integration.blocks=4" in p.stderr, p.stderr
     p = run_dem("info", scene(tmp_path), "--set", "integration.threads=8", "--set", "integration.blocks=4", check=True)
     assert "blocks" not in p.stderr
+
+
+# ---- and keep it so: the README's exit-code table, walked ------------------------------------
+
+def test_every_exit_code_of_the_readme_table_is_what_dem_returns(prepared, tmp_path):
+    import re
+    text = open(os.path.join(ROOT, "README.md")).read()
+    table = text[text.index("**Errors.**"):text.index("Checkpoints (format version")]
+    codes = sorted(int(c) for c in re.findall(r"^\| (\d) \|", table, re.M))
+    assert codes == [0, 1, 2, 3, 4], codes
+    s = scene(tmp_path)
+    ck = prepared / "run" / "checkpoints" / "unloading_phi0.690.ckpt"
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    for f, rate in ((a, "2e-4"), (b, "2e-3")):
+        run_dem("mode", "--scene", prepared / "tiny.toml", "--packing", ck, "--mode", "D2", "--eps-max", "0.01",
+                "--rate-tc", rate, "--out", f, "--quiet", check=True)
+    cases = {
+        0: ["info", s],
+        1: ["run", s, "--out", tmp_path / "r1", "--quiet", "--set", 'particles.packing_file="/dev/zero"'],
+        2: ["run", s, "--out", tmp_path / "r2", "--quiet", "--set", "contact.no_such_key=1"],
+        3: ["run", s, "--out", tmp_path / "r3", "--quiet", "--set", "integration.max_overlap_fraction=1e-3"],
+        4: ["compare", a, b],
+    }
+    for code in codes:
+        p = run_dem(*cases[code], timeout=300)
+        assert p.returncode == code, (code, p.stderr[-2000:])
+        if code:
+            assert (p.stderr + p.stdout).strip(), code   # every error is said

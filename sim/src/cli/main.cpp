@@ -482,7 +482,10 @@ struct Commands {
       // An ensemble folder: the tasks its scene plans, so that an incomplete one is never fitted silently.
       demfit::FitCommandOptions o = fit_opts;
       const fs::path dir(o.run_dir);
-      if (fs::is_directory(dir / "members")) {
+      if (fs::is_directory(dir / "members") && !fs::exists(dir / "scene.toml")) {
+        std::cerr << "dem fit: warning: " << dir.string() << " has members/ but no scene.toml (assembled by hand?): "
+                  << "whether every planned task finished cannot be checked\n";
+      } else if (fs::is_directory(dir / "members")) {
         try {
           o.planned_tasks = dem::planned_task_files(dem::load_scene_file((dir / "scene.toml").string(), {}));
         } catch (const std::exception& e) {
