@@ -204,10 +204,10 @@ def check_slurm():
         sys.exit("dem ensemble: --profile slurm, but Slurm's commands (sbatch, sinfo) are not installed: install "
                  "slurm-client (scripts/install-deps.sh), or run without --profile slurm (this machine's cores)")
     try:
-        r = subprocess.run(["sinfo", "-h", "-o", "%P"], capture_output=True, text=True, timeout=30)
+        r = subprocess.run(["sinfo", "-h", "-o", "%P"], capture_output=True, text=True, timeout=10)
         ok, why = r.returncode == 0, (r.stderr or r.stdout).strip()
     except subprocess.TimeoutExpired:
-        ok, why = False, "sinfo did not answer within 30 s"
+        ok, why = False, "sinfo did not answer within 10 s"
     if not ok:
         sys.exit(f"dem ensemble: --profile slurm, but no Slurm controller answers ({why.splitlines()[-1] if why else 'sinfo failed'}): "
                  "start the cluster's slurmctld or point SLURM_CONF at a running one (a throwaway one: "
