@@ -3,6 +3,8 @@
 A curve file has '#' comment lines (units, definitions), one header line, then rows.
 """
 import csv
+import os
+import stat
 import numpy as np
 
 # Columns every curve file carries (same names in our runner and in yade_ref/).
@@ -23,7 +25,13 @@ def read_curve(path):
     Raises CurveError naming the file and the problem.
     """
     try:
-        with open(path, newline="") as fh:
+        # a regular file only: a device (/dev/zero) or a FIFO would never end (opened without blocking)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            raise CurveError(f"{path} is not a regular file (a device, FIFO or folder): give a curve CSV")
+        os.set_blocking(fd, True)
+        with open(fd, newline="") as fh:
             lines = [ln for ln in fh if ln.strip() and not ln.startswith("#")]
     except OSError as e:
         raise CurveError(f"cannot read curve file {path}: {e.strerror}") from None

@@ -36,7 +36,7 @@ def task_weights(plan):
     for m in plan["members"]:
         w[f"members/{m['name']}/prep.json"] = plan["prep_particle_steps"]
         for c in plan["checkpoints"]:
-            phi = c["stem"].split("_", 1)[1]
+            phi = c["stem"].rsplit("_", 1)[1]   # the series may hold '_' (cycle_unloading_phi0.800)
             for mode in plan["modes"]:
                 w[f"members/{m['name']}/deviatoric/{mode}_{phi}.json"] = plan["mode_particle_steps"][mode]
     return w
@@ -139,7 +139,12 @@ def hold_folder_lock(out, dem):
     """Hold DIR/.dem-ensemble.lock for the life of this process (the kernel drops it when the
     process dies, however it dies). Holding it proves no other `dem ensemble` works on DIR, so a
     Snakemake lock left behind by a killed run is stale and can be removed."""
-    fh = open(os.path.join(out, ".dem-ensemble.lock"), "w")
+    inherited = os.environ.pop("DEM_ENSEMBLE_LOCK_FD", "")
+    if inherited:   # `dem ensemble` took the lock before it touched DIR and passed it on
+        fh = os.fdopen(int(inherited), "r+")
+    else:
+        fd = os.open(os.path.join(out, ".dem-ensemble.lock"), os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+        fh = os.fdopen(fd, "r+")
     try:
         fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
@@ -178,6 +183,17 @@ def main(argv=None):
     env = dict(os.environ)
     env["PYTHONPATH"] = REPO + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     env.setdefault("OMP_WAIT_POLICY", "passive")   # single-threaded tasks: never spin on shared cores
+    tasks = plan.get("tasks") or list(task_weights(plan))
+    missing = missing_tasks(out, tasks)
+    stale = os.path.join(out, "fit", "parameters.csv")
+    if missing and os.path.exists(stale):
+        # fit tables written while tasks were missing (`dem fit --partial`, a copy, an older plan):
+        # they must not stand for the ensemble; the reduce writes them again once every task is done
+        sys.stderr.write(f"dem ensemble: {len(missing)} of {len(tasks)} tasks have no result yet, so the fit tables "
+                         f"in {out}/fit are of a partial ensemble: they are redone when every task is finished\n")
+        os.unlink(stale)
+    if a.profile and "slurm" in os.path.basename(os.path.normpath(a.profile)):
+        check_slurm()
     prog = Progress(out, task_weights(plan))
     sys.stderr.write(f"dem ensemble: {plan['packings']} packings x {len(plan['checkpoints'])} volume fractions x "
                      f"{len(plan['modes'])} modes = {len(prog.weights)} tasks + reduce, "
@@ -202,16 +218,90 @@ def main(argv=None):
             return 130
     prog.show(final=True)
     if proc.returncode != 0:
-        sys.stderr.write(f"dem ensemble: Snakemake failed (exit {proc.returncode}); the end of {log_path}:\n")
-        with open(log_path) as fh:
-            tail = fh.readlines()[-25:]
-        sys.stderr.write("".join("    " + ln for ln in tail))
-        sys.stderr.write("dem ensemble: finished tasks are kept; run the same command again to continue\n")
+        return explain_failure(out, plan, log_path, proc.returncode, a.profile)
+    missing = missing_tasks(out, tasks)
+    if missing or not os.path.exists(stale):
+        what = (f"{len(missing)} of {len(tasks)} planned tasks have no result ({', '.join(missing[:3])}"
+                f"{', ...' if len(missing) > 3 else ''})") if missing else "the reduce wrote no fit/parameters.csv"
+        sys.stderr.write(f"dem ensemble: Snakemake ended without error, but the ensemble is incomplete: {what}; "
+                         f"nothing is reported as done: run the same command again to continue (logs: {out}/logs)\n")
         return 1
     report_members(out)
     sys.stderr.write(f"dem ensemble: done in {fmt_time(time.time() - prog.t0)}: averages in {out}/ensemble, "
                      f"fit tables in {out}/fit, plots in {out}/plots\n")
     return 0
+
+
+def missing_tasks(out, tasks):
+    return [t for t in tasks if not os.path.exists(os.path.join(out, t))]
+
+
+def check_slurm():
+    """--profile slurm: a controller must answer before any job is submitted."""
+    if shutil.which("sbatch") is None or shutil.which("sinfo") is None:
+        sys.exit("dem ensemble: --profile slurm, but Slurm's commands (sbatch, sinfo) are not installed: install "
+                 "slurm-client (scripts/install-deps.sh), or run without --profile slurm (this machine's cores)")
+    try:
+        r = subprocess.run(["sinfo", "-h", "-o", "%P"], capture_output=True, text=True, timeout=10)
+        ok, why = r.returncode == 0, (r.stderr or r.stdout).strip()
+    except subprocess.TimeoutExpired:
+        ok, why = False, "sinfo did not answer within 10 s"
+    if not ok:
+        sys.exit(f"dem ensemble: --profile slurm, but no Slurm controller answers ({why.splitlines()[-1] if why else 'sinfo failed'}): "
+                 "start the cluster's slurmctld or point SLURM_CONF at a running one (a throwaway one: "
+                 "bash scripts/slurm-local.sh start /tmp/slurm), or run without --profile slurm; nothing was submitted")
+
+
+def read_status(path):
+    try:
+        with open(path) as fh:
+            return json.load(fh)
+    except (OSError, ValueError):
+        return None
+
+
+def free_bytes(path):
+    try:
+        st = os.statvfs(path)
+        return st.f_bavail * st.f_frsize
+    except OSError:
+        return -1
+
+
+def explain_failure(out, plan, log_path, code, profile):
+    """The cause of a failed workflow, and its fix, with the README's exit code."""
+    try:
+        with open(log_path, errors="replace") as fh:
+            tail = fh.readlines()[-25:]
+    except OSError:
+        tail = []
+    text = "".join(tail)
+    preps = {m["name"]: read_status(os.path.join(out, "members", m["name"], "prep.json")) for m in plan["members"]}
+    blown = {k: v for k, v in preps.items() if v and v.get("status") == "blew_up"}
+    free = free_bytes(out)
+    if preps and len(blown) == len(preps):
+        first = next(iter(blown.values())).get("message", "")
+        sys.stderr.write(f"dem ensemble: every preparation blew up ({len(blown)} of {len(preps)} members; "
+                         f"{next(iter(blown))}: {first}): no packing to shear. The scene is unstable, and a rerun "
+                         "fails the same way: fix it (e.g. a smaller integration.dt_over_tc or slower rates; "
+                         "`dem run SCENE --out DIR --set ensemble.packings=1` shows it on one packing), then run "
+                         "`dem ensemble` with --force\n")
+        return 3
+    if (0 <= free < 1 << 20) or "No space left" in text or "disk full" in text:
+        sys.stderr.write(f"dem ensemble: the disk holding {out} is full ({max(free, 0)} bytes free): tasks could not "
+                         "write their results (only *.part files are left). Free space, then run the same command "
+                         "again to continue (finished tasks are kept)\n")
+        return 1
+    if profile and ("sbatch" in text or "slurm" in text.lower()) and ("rror" in text or "failed" in text):
+        line = next((ln.strip() for ln in reversed(tail) if "sbatch" in ln or "slurm" in ln.lower()), "")
+        sys.stderr.write(f"dem ensemble: Slurm refused or lost the jobs ({line}): check the cluster (`sinfo`, "
+                         "`squeue`; is slurmctld running, is SLURM_CONF right?), then run the same command again to "
+                         "continue, or run without --profile slurm\n")
+        return 1
+    sys.stderr.write(f"dem ensemble: Snakemake failed (exit {code}); the end of {log_path}:\n")
+    sys.stderr.write("".join("    " + ln for ln in tail))
+    sys.stderr.write("dem ensemble: finished tasks are kept; run the same command again to continue\n")
+    return 1
 
 
 def report_members(out):
@@ -223,6 +313,8 @@ def report_members(out):
             st = json.load(fh)
         if st.get("status") not in (None, "complete"):
             bad.append(f"{os.path.relpath(f, out)}: {st['status']}: {st.get('message') or st.get('reason', '')}")
+        elif st.get("warning"):   # e.g. far from quasi-static: said here, not only in logs/
+            bad.append(f"{os.path.relpath(f, out)}: {st['warning']}")
     for b in bad:
         sys.stderr.write(f"dem ensemble: warning: {b}\n")
 

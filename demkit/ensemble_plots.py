@@ -22,7 +22,7 @@ from demkit.curves import read_curve  # noqa: E402
 from demkit.figures import legend_if_any, plot_parameters as parameters_figure, read_rows, save  # noqa: E402
 from demkit.plots import LABELS, law, paren  # noqa: E402
 
-NAME_RE = re.compile(r"([A-Za-z0-9_]+)_phi([0-9.]+)\.csv$")
+NAME_RE = re.compile(r"([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv$")
 
 
 def ensemble_curves(run):

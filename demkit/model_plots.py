@@ -100,7 +100,7 @@ def plot_dem_paths(out):
     files = sorted(glob.glob(os.path.join(out, "curves", "paths", "*_phi*.csv")))
     groups = {}
     for f in files:
-        m = re.search(r"([A-Za-z0-9_]+)_phi([0-9.]+)\.csv$", os.path.basename(f))
+        m = re.search(r"([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv$", os.path.basename(f))
         if m:
             groups.setdefault(m.group(1), []).append((float(m.group(2)), f))
     written = []

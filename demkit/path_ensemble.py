@@ -38,7 +38,7 @@ import numpy as np
 from scipy import stats
 
 QUANTITIES = ("nu", "eps_v", "p_star", "s_dev_signed", "F_dev_signed", "s_dev", "F_dev", "eps_zz", "sigma_r_p0")
-NAME_RE = re.compile(r"([A-Za-z0-9_]+)_phi([0-9.]+)\.csv$")
+NAME_RE = re.compile(r"([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv$")
 
 
 def read_csv(path):
@@ -62,7 +62,8 @@ def write_atomic(path, text):
     """Write, flush, fsync, rename: a reader never sees half a file; errors propagate."""
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = path + ".part"
-    with open(tmp, "w") as fh:
+    from demkit.task import open_exclusive
+    with open_exclusive(tmp) as fh:   # never follows a planted link
         fh.write(text)
         fh.flush()
         os.fsync(fh.fileno())

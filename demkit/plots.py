@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 from demkit.curves import read_curve, CurveError  # noqa: E402
 from demkit.figures import legend_if_any, plot_parameters, read_rows, save  # noqa: E402
 
-NAME_RE = re.compile(r"([A-Za-z0-9_]+)_phi([0-9.]+)\.csv$")
+NAME_RE = re.compile(r"([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv$")
 LABELS = {"s_dev": r"$s_\mathrm{dev} = \sigma_\mathrm{dev}/p$", "F_dev": r"$F_\mathrm{dev}$",
           "p_star": r"$p^* = 2\langle r\rangle p/k$", "C": "coordination number C"}
 

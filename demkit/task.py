@@ -17,10 +17,21 @@ import sys
 import time
 
 
+def open_exclusive(tmp):
+    """A temporary file created exclusively: whatever is at `tmp` (a stale .part, a planted
+    symbolic link) is unlinked first, and O_EXCL | O_NOFOLLOW never follow a link."""
+    try:
+        os.unlink(tmp)
+    except FileNotFoundError:
+        pass
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    return os.fdopen(fd, "w")
+
+
 def write_json_atomic(path, obj):
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     tmp = path + ".part"
-    with open(tmp, "w") as fh:
+    with open_exclusive(tmp) as fh:
         json.dump(obj, fh, indent=1)
         fh.write("\n")
         fh.flush()
@@ -59,17 +70,32 @@ def main(argv=None):
             return 0
     os.makedirs(os.path.dirname(a.log) or ".", exist_ok=True)
     t0 = time.time()
-    with open(a.log, "w") as log:
-        rc = subprocess.run(cmd, stderr=log, stdout=log).returncode
+    # The command's output is kept in memory too: on a full disk the log may stay empty, and the
+    # cause must still reach the workflow's log and the driver.
+    r = subprocess.run(cmd, stderr=subprocess.STDOUT, stdout=subprocess.PIPE)
+    rc = r.returncode
+    output = r.stdout.decode(errors="replace")
+    log_error = ""
+    try:
+        with open(a.log, "w") as log:
+            log.write(output)
+    except OSError as e:
+        log_error = f"; the log could not be written ({e.strerror})"
     wall = time.time() - t0
     if rc not in (0, 3):
-        sys.stderr.write(f"demkit.task: {' '.join(cmd)} exited {rc}: {last_error_line(a.log)} (log: {a.log})\n")
+        lines = [ln.strip() for ln in output.splitlines() if ln.strip()]
+        last = next((ln for ln in reversed(lines) if ln.startswith("dem")), lines[-1] if lines else "")
+        sys.stderr.write(f"demkit.task: {' '.join(cmd)} exited {rc}: {last} (log: {a.log}{log_error})\n")
         return rc
     if a.status:
         status = {"status": "complete" if rc == 0 else "blew_up", "exit_code": rc, "wall_s": round(wall, 3),
                   "command": cmd, "host": os.uname().nodename}
         if rc == 3:
-            status["message"] = last_error_line(a.log)
+            lines = [ln.strip() for ln in output.splitlines() if ln.strip()]
+            status["message"] = next((ln for ln in reversed(lines) if ln.startswith("dem")), lines[-1] if lines else "")
+        warnings = [ln.strip() for ln in output.splitlines() if "warning:" in ln][:20]
+        if warnings:   # e.g. far from quasi-static: read by the driver and by the fit tables
+            status["warning"] = " | ".join(warnings)
         write_json_atomic(a.status, status)
     return 0
 

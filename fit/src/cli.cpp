@@ -29,6 +29,8 @@ void add_fit_options(CLI::App& app, FitCommandOptions& o) {
   app.add_option("--loss", o.loss, "robust loss: none | huber | cauchy")->check(CLI::IsMember({"none", "huber", "cauchy"}));
   app.add_option("--gap-tolerance", o.gap_tolerance, "D2/D3 'same path' tolerance on the fitted curves");
   app.add_flag("--no-plots", o.no_plots, "skip plots");
+  app.add_flag("--partial", o.partial, "an ensemble folder whose tasks are not all finished: fit what is there "
+                                       "(without it an incomplete ensemble is refused; the tables then say so)");
   app.add_flag("--independent-errors", o.independent_errors,
                "treat curve points as independent (no inflation of standard errors for correlated residuals)");
   app.add_flag("--force", o.force, "overwrite RUN_DIR/fit");
@@ -53,7 +55,7 @@ struct Curve { std::string mode; double phi; Table t; };
 // other physics, in the folder), or every deviatoric/MODE_phiX.XXX.csv when there is no
 // manifest (a folder of curves assembled by hand).
 std::vector<fs::path> curve_files(const fs::path& run) {
-  const std::regex name_re(R"(([A-Za-z0-9_]+)_phi([0-9.]+)\.csv)");
+  const std::regex name_re(R"(([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv)");
   std::vector<fs::path> files;
   if (fs::exists(run / "manifest.json")) {
     std::ifstream in(run / "manifest.json");
@@ -208,7 +210,7 @@ int run_fit_command(const FitCommandOptions& o) {
   fo.correct_autocorrelation = !o.independent_errors;
 
   // Curves named MODE_phiX.XXX.csv
-  const std::regex name_re(R"(([A-Za-z0-9_]+)_phi([0-9.]+)\.csv)");
+  const std::regex name_re(R"(([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv)");
   std::vector<Curve> curves;
   for (const auto& f : curve_files(run)) {
     std::smatch m;

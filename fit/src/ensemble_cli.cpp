@@ -44,10 +44,18 @@ struct Cell {
   std::vector<std::string> members;
   std::vector<Table> curves;
   std::vector<MemberStatus> excluded;
+  std::vector<std::string> warnings;   // the runner's warnings of used members (e.g. far from quasi-static)
 };
 
+std::string read_text(const fs::path& f) {
+  std::ifstream in(f);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
 std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run) {
-  const std::regex name_re(R"(([A-Za-z0-9_]+)_(phi([0-9.]+))\.json)");
+  const std::regex name_re(R"(([A-Za-z0-9_-]+)_(phi([0-9.]+))\.json)");
   std::map<std::pair<std::string, double>, Cell> cells;
   std::set<std::pair<std::string, double>> path_cells;   // loading paths: not averaged
   std::vector<fs::path> member_dirs;
@@ -57,6 +65,7 @@ std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run
   for (const auto& md : member_dirs) {
     const std::string member = md.filename().string();
     if (!fs::is_directory(md / "deviatoric")) continue;
+    const std::string prep_warning = fs::exists(md / "prep.json") ? json_field(read_text(md / "prep.json"), "warning") : "";
     std::vector<fs::path> files;
     for (auto& f : fs::directory_iterator(md / "deviatoric")) files.push_back(f.path());
     std::sort(files.begin(), files.end());
@@ -81,6 +90,8 @@ std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run
         }
         c.members.push_back(member);
         c.curves.push_back(std::move(t));
+        for (const std::string& w : {prep_warning, json_field(ss.str(), "warning")})
+          if (!w.empty()) c.warnings.push_back("member " + member + ": " + w);
       } else {
         std::string why = json_field(ss.str(), "message");
         if (why.empty()) why = json_field(ss.str(), "reason");
@@ -200,6 +211,32 @@ void write_members_table(const std::map<std::pair<std::string, double>, Cell>& c
 
 int run_ensemble_fit_command(const FitCommandOptions& o) {
   const fs::path run(o.run_dir), out = run / "fit", ens = run / "ensemble";
+  // Complete or not: every task the scene plans must have left its status file.
+  if (!o.plan_error.empty()) {
+    std::cerr << "dem fit: " << run.string() << " looks like an ensemble folder (members/), but its scene.toml cannot "
+              << "be read, so it is unknown which tasks it should hold: " << o.plan_error
+              << "\n  (run `dem ensemble SCENE --out " << run.string() << "` to write it)\n";
+    return 1;
+  }
+  std::vector<std::string> missing;
+  for (const auto& t : o.planned_tasks)
+    if (!fs::exists(run / t)) missing.push_back(t);
+  std::string incomplete;
+  if (!missing.empty()) {
+    incomplete = "ensemble incomplete: " + std::to_string(missing.size()) + " of " +
+                 std::to_string(o.planned_tasks.size()) + " planned tasks have no result";
+    std::string list;
+    for (std::size_t k = 0; k < missing.size() && k < 4; ++k) list += (k ? ", " : "") + missing[k];
+    if (missing.size() > 4) list += ", ...";
+    if (!o.partial) {
+      std::cerr << "dem fit: " << run.string() << ": " << incomplete << " (" << list << "): nothing fitted; finish it "
+                << "with `dem ensemble " << (run / "scene.toml").string() << " --out " << run.string()
+                << "` (it continues where it stopped), or pass --partial to fit what is there\n";
+      return 1;
+    }
+    std::cerr << "dem fit: warning: " << incomplete << " (" << list << "); fitting what is there (--partial): the "
+              << "tables say so in their warnings\n";
+  }
   auto cells = collect_cells(run);
   if (cells.empty()) {
     std::cerr << "dem fit: no finished mode runs under " << (run / "members") << " (is the ensemble workflow finished?)\n";
@@ -224,12 +261,15 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
     for (const auto& e : c.excluded)
       std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << ": member " << e.member
                 << " left out (" << e.status << (e.message.empty() ? "" : ": " + e.message) << ")\n";
+    for (const auto& mw : c.warnings)
+      std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << ": " << mw << "\n";
     if (c.members.empty()) continue;
     const auto grid = common_grid(c);
     write_ensemble_csv(c, grid, (ens / (c.mode + "_" + c.tag + ".csv")).string());
     fitted_members[key] = c.members;
     for (const char* q : {"s_dev", "F_dev"}) {
-      std::string w;
+      std::string w = incomplete.empty() ? "" : incomplete + " (--partial)";
+      for (const auto& mw : c.warnings) w += (w.empty() ? "" : "; ") + mw;
       for (const auto& e : c.excluded) w += (w.empty() ? "" : "; ") + ("member " + e.member + " left out: " + e.status);
       try {
         const EnsembleFit f = fit_ensemble(grid, member_values(c, grid, q), eo);

@@ -33,7 +33,7 @@ struct CurveFile { std::string mode, tag; double nu; fs::path path; };
 
 // The MODE_phiX.XXX.csv files of a folder, by mode then nu.
 std::vector<CurveFile> curves_in(const fs::path& dir) {
-  static const std::regex re(R"(([A-Za-z0-9_]+)_(phi([0-9.]+))\.csv)");
+  static const std::regex re(R"(([A-Za-z0-9_-]+)_(phi([0-9.]+))\.csv)");
   std::vector<CurveFile> out;
   for (auto& e : fs::directory_iterator(dir)) {
     std::smatch m;
@@ -390,6 +390,14 @@ int run(const ModelCommandOptions& o) {
         for (const auto& e : est) mean += e[i] / K;
         for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
         cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
+      }
+      if (K < 4) {   // as `dem fit` says for its fits
+        double worst = 1;
+        for (std::size_t i = 0; i < cal.value.size(); ++i)
+          if (cal.se_jackknife[i] > 0 && cal.se_cov[i] > 0) worst = std::max(worst, cal.se_cov[i] / cal.se_jackknife[i]);
+        cal.warnings.push_back("only " + std::to_string(K) + " packings: a jackknife over fewer than 4 packings is itself "
+                               "very uncertain (here up to " + num(worst, 3) + "x below the covariance errors) and its "
+                               "intervals under-cover; set [ensemble] packings >= 4 for errors between packings");
       }
     }
   }

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <set>
 #include <limits>
 #include <mutex>
 #include <numeric>
@@ -88,7 +89,19 @@ struct PathResidual {
   }
 };
 
+// Every value the model integrates from or is fitted to must be a number: a NaN row (a hand-edited
+// or truncated ensemble curve) is refused by name, never integrated.
+void check_finite(const std::string& source, const std::vector<std::pair<const char*, const std::vector<double>*>>& cols) {
+  for (const auto& [name, v] : cols)
+    for (std::size_t i = 0; i < v->size(); ++i)
+      if (!std::isfinite((*v)[i]))
+        throw std::invalid_argument("model calibration: " + source + ": " + name + " is not a finite number at data row " +
+                                    std::to_string(i + 1) + ": rewrite the ensemble curves with `dem fit DIR --force`");
+}
+
 void check_path(const PathData& d) {
+  check_finite(d.source, {{"eps_d_accumulated", &d.acc}, {"p_star", &d.p}, {"eps_v", &d.ev}, {"s_dev_signed", &d.s},
+                          {"F_dev_signed", &d.F}});
   if (d.acc.size() < 6)
     throw std::invalid_argument("model calibration: " + d.source + " has " + std::to_string(d.acc.size()) +
                                 " rows; need at least 6");
@@ -117,6 +130,7 @@ CurveData truncated(const CurveData& c, double eps_max) {
 }
 
 void check_curve(const CurveData& c) {
+  check_finite(c.source, {{"eps_d", &c.eps}, {"p_star_mean", &c.p}, {"s_dev_mean", &c.s}, {"F_dev_mean", &c.F}});
   if (c.eps.size() < 6)
     throw std::invalid_argument("model calibration: " + c.source + " has " + std::to_string(c.eps.size()) +
                                 " rows in the fitted range; need at least 6 (widen --eps-max or sample the runs more finely)");
@@ -203,6 +217,12 @@ CurveData read_curve(const std::string& path, const std::string& mode, double nu
   }
   const auto& nu_col = t.column("nu_mean");
   if (!nu_col.empty() && std::isfinite(nu_col.front())) c.nu = nu_col.front();
+  for (const auto& [name, v] : {std::pair<const char*, const std::vector<double>*>{"eps_d", &c.eps}, {"p_star_mean", &c.p},
+                                {"s_dev_mean", &c.s}, {"F_dev_mean", &c.F}})
+    for (std::size_t i = 0; i < v->size(); ++i)
+      if (!std::isfinite((*v)[i]))
+        throw std::runtime_error(path + ": " + name + " is not a finite number at data row " + std::to_string(i + 1) +
+                                 ": rewrite the ensemble curves with `dem fit DIR --force`");
   return c;
 }
 
@@ -371,6 +391,17 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     problem.SetParameterUpperBound(shear.data(), i, std::log(5e3));
   }
 
+  // One start volume fraction: (nu - nu_ref) is zero on every curve, so the nu-slopes (*_b) are not
+  // determined by the data: held at 0, quoted without errors, and said.
+  std::set<long long> nus_seen;
+  for (const auto& c : curves) nus_seen.insert(std::llround(c.nu * 1e6));
+  for (const auto& d : paths) nus_seen.insert(std::llround(d.nu * 1e6));
+  const bool one_nu = nus_seen.size() < 2;
+  if (one_nu) {
+    for (int i = 1; i < kNumShear; i += 2) shear[i] = 0.0;
+    problem.SetManifold(shear.data(), new ceres::SubsetManifold(kNumShear, {1, 3, 5, 7, 9, 11}));
+  }
+
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
   so.max_num_iterations = o.max_iterations;
@@ -426,6 +457,13 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   } else {
     cal.warnings.push_back("covariance could not be computed (rank-deficient Jacobian): some parameters are not "
                            "determined by these curves");
+  }
+  if (one_nu) {
+    for (int i = 1; i < kNumShear; i += 2) cal.se_cov[kNumIso + i] = kNaN;
+    cal.warnings.push_back("one start volume fraction (nu = " + std::to_string(curves.empty() ? paths.front().nu : curves.front().nu) +
+                           "): the nu-slopes (*_b) are not determined by the data; held at 0 without standard errors, "
+                           "so the laws hold at this nu only. Calibrate on ensembles from several checkpoints "
+                           "(protocol.checkpoints_unloading)");
   }
   for (int i : {kNuC, kNuCC})
     if (o.fit_isotropic && isob[i] >= numin * (1 - 2e-6)) {

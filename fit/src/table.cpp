@@ -12,6 +12,12 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <cerrno>
+#include <cstring>
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 namespace demfit {
 
 namespace {
@@ -26,16 +32,24 @@ std::vector<std::string> split(const std::string& line) {
 // Every write and the close are checked: on a full disk only path.part is left.
 void write_part(const std::string& path, const std::string& s) {
   const std::string tmp = path + ".part";
-  {
-    std::ofstream o(tmp, std::ios::trunc);
-    if (!o) throw std::runtime_error("cannot write " + tmp);
-    o << s;
-    o.flush();
-    o.close();
-    if (!o)
-      throw std::runtime_error("writing " + tmp + " failed (disk full?): " + path + " was not written (only the "
-                               "incomplete .part is left); free space and run again");
+  // Created exclusively: a stale .part or a planted link is unlinked, never followed.
+  if (::unlink(tmp.c_str()) != 0 && errno != ENOENT) throw std::runtime_error("cannot remove the old " + tmp);
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
+  if (fd < 0) throw std::runtime_error("cannot write " + tmp + " (" + std::strerror(errno) + ")");
+  const char* p = s.data();
+  std::size_t left = s.size();
+  int err = 0;
+  while (left > 0) {
+    const ssize_t w = ::write(fd, p, left);
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) { err = w < 0 ? errno : ENOSPC; break; }
+    p += w;
+    left -= static_cast<std::size_t>(w);
   }
+  if (::close(fd) != 0 && !err) err = errno;
+  if (err)
+    throw std::runtime_error("writing " + tmp + " failed (" + std::strerror(err) + (err == ENOSPC ? ": disk full" : "") +
+                             "): " + path + " was not written (only the incomplete .part is left); free space and run again");
 }
 void commit_part(const std::string& path) {
   if (std::rename((path + ".part").c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + path + ".part");
@@ -74,6 +88,13 @@ const std::vector<double>& Table::column(const std::string& name) const {
 }
 
 Table read_table(const std::string& path) {
+  // A regular file only: a device (/dev/zero) or a FIFO would never end (opened without blocking).
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) throw std::runtime_error("cannot read " + path + " (" + std::strerror(errno) + ")");
+  struct stat st {};
+  const bool regular = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode);
+  ::close(fd);
+  if (!regular) throw std::runtime_error(path + " is not a regular file (a device, FIFO or folder): give a curve CSV");
   std::ifstream in(path);
   if (!in) throw std::runtime_error("cannot read " + path);
   return parse_table(in, path);

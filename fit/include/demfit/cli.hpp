@@ -20,6 +20,11 @@ struct FitCommandOptions {
   bool no_plots = false;             ///< skip the matplotlib plots
   bool independent_errors = false;   ///< no standard-error inflation for correlated residuals
   bool force = false;                ///< overwrite an existing RUN_DIR/fit
+  bool partial = false;              ///< fit an incomplete ensemble (its tables say so)
+  /// An ensemble folder: the status file of every task its scene plans (relative to RUN_DIR;
+  /// set by the caller from RUN_DIR/scene.toml). A missing one makes the ensemble incomplete.
+  std::vector<std::string> planned_tasks;
+  std::string plan_error;            ///< why the plan could not be read (the ensemble is then refused)
 };
 
 void add_fit_options(CLI::App& app, FitCommandOptions& o);

@@ -2,6 +2,8 @@
 // it does (run); main parses and maps exceptions to the README's exit codes.
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -58,6 +60,12 @@ void warn_time_step(const dem::Model& m) {
   if (m.dt_over_tc > 0.45)
     std::fprintf(stderr, "dem: warning: integration.dt_over_tc = %g is near the stability limit of dense packings "
                          "(0.48-0.52 measured, docs/stability.md); expect a blow-up, or use 0.1\n", m.dt_over_tc);
+  // The pair loop's blocks fix the summation order; their default is max(4, threads).
+  const int threads = m.threads > 0 ? m.threads : static_cast<int>(std::thread::hardware_concurrency());
+  if (m.blocks == 0 && threads > 4)
+    std::fprintf(stderr, "dem: note: %d threads run %d blocks of the pair loop, another summation order than 1-4 "
+                         "threads (4 blocks): the curves differ from theirs in the last bits and then chaotically; "
+                         "--set integration.blocks=4 gives the bits of 1-4 threads\n", threads, threads);
 }
 
 void print_info(const dem::Model& m) {
@@ -87,8 +95,11 @@ void print_info(const dem::Model& m) {
   }
   std::printf("time step          dt = %.6g s (t_c / %.4g), %s\n", m.dt, 1.0 / m.dt_over_tc,
               m.integrator == dem::Integrator::VelocityVerlet ? "velocity Verlet" : "symplectic Euler");
-  for (const auto& st : p.preparation)
-    std::printf("prep %-15s %s\n", st.name.c_str(), dem::describe(st, m.t_contact).c_str());
+  const std::vector<double> prep_steps = dem::preparation_stage_steps(m);
+  for (std::size_t i = 0; i < p.preparation.size(); ++i)
+    std::printf("prep %-15s %s: %s%.3g steps\n", p.preparation[i].name.c_str(),
+                dem::describe(p.preparation[i], m.t_contact).c_str(),
+                p.preparation[i].kind == dem::PrepStage::Kind::Relax ? "at most " : "", prep_steps[i]);
   std::printf("modes              from the checkpoints %s, deviatoric rate %.4g /s (%.4g/t_c)\n", p.modes_from.c_str(),
               p.deviatoric_rate, p.deviatoric_rate * m.t_contact);
   for (auto& mode : p.modes) {
@@ -203,12 +214,13 @@ struct RunCommand {
     cmd->add_option("--out", out, "results folder")->required();
     cmd->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
     cmd->add_option("--stages", stages, "all | prep | deviatoric (deviatoric reuses DIR/checkpoints)");
-    cmd->add_option("--threads", threads, "threads (overrides integration.threads)");
+    cmd->add_option("--threads", threads, "threads, 1 or more (overrides integration.threads; its 0 means all cores)")
+        ->check(CLI::Range(1, 4096));
     cmd->add_flag("--force", force, "overwrite finished results in --out");
     cmd->add_flag("--quiet", quiet, "no progress lines on stderr");
   }
   int run(std::vector<std::string> overrides, const std::string& command_line) const {
-    if (threads >= 0) overrides.push_back("integration.threads=" + std::to_string(threads));
+    if (threads >= 1) overrides.push_back("integration.threads=" + std::to_string(threads));
     std::string resolved;
     dem::Model model = dem::load_scene_file(scene, overrides, &resolved);
     dem::RunOptions o;
@@ -246,7 +258,8 @@ struct EnsembleCommand {
   int run(const std::vector<std::string>& overrides) const {
     std::string resolved;
     dem::load_scene_file(scene, overrides, &resolved);
-    dem::prepare_ensemble_folder(out, resolved, force);
+    const int lock = dem::prepare_ensemble_folder(out, resolved, force);
+    setenv("DEM_ENSEMBLE_LOCK_FD", std::to_string(lock).c_str(), 1);   // held across exec by the driver
     std::vector<std::string> args = {out, "--dem", fs::canonical("/proc/self/exe").string()};
     if (cores > 0) args.insert(args.end(), {"--cores", std::to_string(cores)});
     if (!profile.empty()) args.insert(args.end(), {"--profile", profile});
@@ -289,7 +302,7 @@ struct BenchCommand {
     cmd->add_option("--kernel", kernel, "pair kernel: auto, avx512, avx2, generic or reference (the same bits)");
     cmd->add_option("--packing", packing, "YADE-format packing")->check(CLI::ExistingFile);
     cmd->add_option("--steps", steps, "steps to time");
-    cmd->add_option("--threads", threads, "threads");
+    cmd->add_option("--threads", threads, "threads, 1 or more")->check(CLI::Range(1, 4096));
     cmd->add_option("--rate-tc", rate_tc, "D2 strain rate times t_c");
     cmd->add_option("--set", overrides, "override a scene key");
   }
@@ -344,7 +357,8 @@ struct ModeCommand {
         ->check(CLI::ExistingFile);
     cmd->add_option("--packing", packing, "YADE-format packing (our checkpoints/*.txt), or a checkpoint "
                                           "(*.ckpt: bit-exact state, the curve equals `dem run`'s)")->required()->check(CLI::ExistingFile);
-    cmd->add_option("--threads", threads, "threads (overrides integration.threads)");
+    cmd->add_option("--threads", threads, "threads, 1 or more (overrides integration.threads; its 0 means all cores)")
+        ->check(CLI::Range(1, 4096));
     cmd->add_option("--name", stage_name, "stage name in the CSV (default: the mode's name; `dem run` uses "
                                           "MODE_phiX.XXX)");
     cmd->add_option("--mode", mode, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, SS_xy/xz/yz (simple shear), "
@@ -357,10 +371,15 @@ struct ModeCommand {
     cmd->add_flag("--quiet", quiet, "no progress lines");
   }
   int run(std::vector<std::string> overrides) const {
+    if (!stage_name.empty() && (stage_name.size() > 64 || !std::all_of(stage_name.begin(), stage_name.end(), [](char c) {
+          return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
+        })))
+      throw ArgumentError("--name '" + stage_name + "' must be 1-64 letters, digits, _, - or . (it is written into the "
+                          "curve's stage column), e.g. D2_phi0.800");
     if (rate_opt->count()) overrides.push_back("protocol.deviatoric_rate_tc=" + exact_number("--rate-tc", rate_tc));
     if (eps_opt->count()) overrides.push_back("protocol.eps_d_max=" + exact_number("--eps-max", eps));
     overrides.push_back("protocol.modes=[\"" + mode + "\"]");
-    if (threads >= 0) overrides.push_back("integration.threads=" + std::to_string(threads));
+    if (threads >= 1) overrides.push_back("integration.threads=" + std::to_string(threads));
     std::string resolved;
     const std::string physics_scene = scene.empty() ? run_folder_scene(packing) : scene;
     dem::Model model = physics_scene.empty() ? dem::load_scene("", overrides, &resolved, "defaults")
@@ -568,7 +587,22 @@ struct Commands {
     if (*bench.cmd) return bench.run(overrides);
     if (*mode.cmd) return mode.run(overrides);
     if (*collide.cmd) return collide.run(overrides);
-    if (*fit) return demfit::run_fit_command(fit_opts);
+    if (*fit) {
+      // An ensemble folder: the tasks its scene plans, so that an incomplete one is never fitted silently.
+      demfit::FitCommandOptions o = fit_opts;
+      const fs::path dir(o.run_dir);
+      if (fs::is_directory(dir / "members") && !fs::exists(dir / "scene.toml")) {
+        std::cerr << "dem fit: warning: " << dir.string() << " has members/ but no scene.toml (assembled by hand?): "
+                  << "whether every planned task finished cannot be checked\n";
+      } else if (fs::is_directory(dir / "members")) {
+        try {
+          o.planned_tasks = dem::planned_task_files(dem::load_scene_file((dir / "scene.toml").string(), {}));
+        } catch (const std::exception& e) {
+          o.plan_error = e.what();
+        }
+      }
+      return demfit::run_fit_command(o);
+    }
     if (*model) return demfit::run_model_command(model_opts);
     if (*fit_map.cmd) return fit_map.run();
     if (*coverage.cmd) return coverage.run();

@@ -12,27 +12,83 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <cerrno>
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 namespace dem {
+
+int create_exclusive(const std::string& path) {
+  if (::unlink(path.c_str()) != 0 && errno != ENOENT)
+    throw std::runtime_error("cannot remove the old " + path + " (" + std::strerror(errno) + ")");
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
+  if (fd < 0)
+    throw std::runtime_error("cannot create " + path + " (" + std::strerror(errno) +
+                             "): check that the folder exists and is writable");
+  return fd;
+}
 
 void write_file_atomic(const std::string& path, const std::string& content) {
   const std::string tmp = path + ".part";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw std::runtime_error("cannot open " + tmp + " for writing");
-    out.write(content.data(), static_cast<std::streamsize>(content.size()));
-    out.flush();
-    out.close();
-    if (!out)
-      throw std::runtime_error("writing " + tmp + " failed (disk full?): " + path + " was not written; free space and "
-                               "run the command again (the incomplete " + tmp + " is left behind)");
+  const int fd = create_exclusive(tmp);
+  const char* p = content.data();
+  std::size_t left = content.size();
+  int err = 0;
+  while (left > 0) {
+    const ssize_t w = ::write(fd, p, left);
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) { err = w < 0 ? errno : ENOSPC; break; }
+    p += w;
+    left -= static_cast<std::size_t>(w);
   }
+  if (::close(fd) != 0 && !err) err = errno;
+  if (err)
+    throw std::runtime_error("writing " + tmp + " failed (" + std::strerror(err) + (err == ENOSPC ? ": disk full" : "") +
+                             "): " + path + " was not written; free space and run the command again (the incomplete " +
+                             tmp + " is left behind)");
   if (std::rename(tmp.c_str(), path.c_str()) != 0)
     throw std::runtime_error("cannot rename " + tmp + " to " + path);
 }
 
+std::string read_regular_file(const std::string& path, const std::string& what, std::size_t max_bytes) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) throw std::runtime_error("cannot read " + what + " '" + path + "' (" + std::strerror(errno) + ")");
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(fd);
+    throw std::runtime_error(what + " '" + path + "' is not a regular file (a device, FIFO, socket or folder): give "
+                             "the path of a " + what + " on disk");
+  }
+  if (static_cast<std::uintmax_t>(st.st_size) > max_bytes) {
+    ::close(fd);
+    throw std::runtime_error(what + " '" + path + "' is " + std::to_string(st.st_size) + " bytes, more than the " +
+                             std::to_string(max_bytes) + " a " + what + " can be: is it the right file?");
+  }
+  std::string buf;
+  buf.reserve(static_cast<std::size_t>(st.st_size));
+  char chunk[1 << 16];
+  for (;;) {
+    const ssize_t r = ::read(fd, chunk, sizeof chunk);
+    if (r < 0 && errno == EINTR) continue;
+    if (r < 0) {
+      const int e = errno;
+      ::close(fd);
+      throw std::runtime_error("reading " + what + " '" + path + "' failed (" + std::strerror(e) + ")");
+    }
+    if (r == 0) break;
+    buf.append(chunk, static_cast<std::size_t>(r));
+    if (buf.size() > max_bytes) {   // it grew while we read it
+      ::close(fd);
+      throw std::runtime_error(what + " '" + path + "' grows beyond " + std::to_string(max_bytes) + " bytes while read");
+    }
+  }
+  ::close(fd);
+  return buf;
+}
+
 State read_packing(const std::string& path, double density) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error("cannot read packing file '" + path + "'");
+  std::istringstream in(read_regular_file(path, "packing file"));
   return parse_packing(in, density, path);
 }
 
@@ -58,6 +114,9 @@ State parse_packing(std::istream& in, double density, const std::string& path) {
   int lineno = 0;
   while (std::getline(in, line)) {
     ++lineno;
+    if (line.size() > 4096)
+      packing_error(path, lineno, "a line of " + std::to_string(line.size()) + " bytes: a packing line is 'x y z r' "
+                    "(is this a packing file?)");
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
     if (line.rfind("##PERIODIC::", 0) == 0) {
       double L[3];
@@ -265,11 +324,7 @@ void write_checkpoint(const std::string& path, const Checkpoint& c) {
 }
 
 Checkpoint read_checkpoint(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error("cannot read checkpoint '" + path + "'");
-  std::string buf((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad()) throw std::runtime_error("reading checkpoint '" + path + "' failed (I/O error)");
-  return parse_checkpoint(buf, path);
+  return parse_checkpoint(read_regular_file(path, "checkpoint"), path);
 }
 
 Checkpoint parse_checkpoint(const std::string& buf, const std::string& path) {

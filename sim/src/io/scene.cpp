@@ -1,6 +1,8 @@
 #include "dem/io/scene.hpp"
 
+#include "dem/io/io.hpp"
 #include "dem/measure/control.hpp"
+#include "dem/stages/plan.hpp"
 #include "dem/stages/preparation.hpp"
 #include "io/preparation_toml.hpp"
 
@@ -222,6 +224,23 @@ void apply_override(toml::table& root, const std::string& ov) {
 }
 
 
+// A name that becomes part of a file name (a curve MODE_phiX.csv, a task of the ensemble) or of a
+// CSV cell: letters, digits, _ and - only, as the preparation's stage names.
+bool file_safe_name(const std::string& s) {
+  return !s.empty() && s.size() <= 64 && std::all_of(s.begin(), s.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+  });
+}
+
+void check_entry_name(const std::string& origin, const std::string& section, const std::string& name) {
+  if (!file_safe_name(name))
+    throw SceneError(origin + ": " + section + " name '" + name + "' must be 1-64 letters, digits, _ or - (it becomes "
+                     "part of file names, deviatoric/NAME_phi0.800.csv, and of the ensemble's task names): rename it, e.g. my_path_1");
+  if (section == "[paths]" && builtin_mode(name, nullptr))
+    throw SceneError(origin + ": " + section + " name '" + name + "' is a built-in mode (D2, D3, iso_compress, "
+                     "iso_expand, uniaxial_x/y/z, SS_xy/xz/yz): protocol.modes and rate = \"...\" could not tell them apart; rename it");
+}
+
 // One stage of a [paths] entry: an inline table (see data/scenes/paths_example.toml).
 PathStage parse_path_stage(const toml::table& t, const std::string& where,
                            const std::map<std::string, DeformationMode>& custom) {
@@ -232,9 +251,21 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
     if (!keys.count(std::string(k.str())))
       fail("unknown key '" + std::string(k.str()) + "'; a stage has name, rate, sigma_p0 or sigma_Pa, "
            "pressure_p0 or pressure_Pa, constant_volume, until");
+  // A stress target is present (the key is there) and then must be a positive finite number;
+  // in multiples of p0 at most 1e6 (so that the target in pascals, p0 times it, stays finite).
+  auto check_target = [&](const std::string& key, double v, bool relative) {
+    if (!std::isfinite(v) || !(v > 0))
+      fail(key + " = " + std::to_string(v) + ": a stress target must be a positive finite number (compression); "
+           "leave the key out for a strain-controlled axis");
+    if (relative && v > 1e6)
+      fail(key + " = " + std::to_string(v) + " is more than 1e6 times the starting pressure p0: no element test; give "
+           "a target of the order of 1 (or in pascals, *_Pa)");
+  };
   PathStage s;
   if (auto n = t["name"].value<std::string>()) s.name = *n;
   else if (t.contains("name")) fail("name must be a string");
+  if (t.contains("name") && !file_safe_name(s.name))
+    fail("name '" + s.name + "' must be 1-64 letters, digits, _ or - (it is written into the curve's stage column)");
   // rate: [rx, ry, rz] or a mode name, "-NAME" for its reverse
   if (const toml::node* r = t.get("rate")) {
     if (auto name = r->value<std::string>()) {
@@ -251,6 +282,8 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
     } else if (auto* a = r->as_array(); a && a->size() == 3 && (*a)[0].value<double>() && (*a)[1].value<double>() &&
                                         (*a)[2].value<double>()) {
       s.rate_shape = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(), *(*a)[2].value<double>());
+      if (!std::isfinite(s.rate_shape.x) || !std::isfinite(s.rate_shape.y) || !std::isfinite(s.rate_shape.z))
+        fail("rate = [rate_x, rate_y, rate_z] must be finite numbers (nan and inf are no rates)");
     } else if (a && a->size() == 3 && (*a)[0].as_array()) {
       // a velocity gradient [[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]], as in [modes]
       double L[3][3];
@@ -290,6 +323,7 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
       auto val = v.value<double>();
       if ((ax != "x" && ax != "y" && ax != "z") || !val)
         fail(std::string(key) + "." + ax + ": axes are x, y, z and each target is a number");
+      check_target(std::string(key) + "." + ax, *val, key[6] == 'p');
       (ax == "x" ? s.sigma.x : ax == "y" ? s.sigma.y : s.sigma.z) = *val;
     }
   }
@@ -297,6 +331,7 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
     if (const toml::node* n = t.get(key)) {
       auto v = n->value<double>();
       if (!v) fail(std::string(key) + " must be a number");
+      check_target(key, *v, key[9] == 'p');
       s.pressure = *v;
     }
   if (const toml::node* n = t.get("constant_volume")) {
@@ -319,6 +354,8 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
     fail("until." + stop + " is not a stop condition; use eps_d, time_tc, eps_v, eps_xx, eps_yy, eps_zz, p_p0, p_Pa, s_dev or phi");
   auto value = uv.value<double>();
   if (!value || !std::isfinite(*value)) fail("until." + stop + " must be a finite number");
+  if (stop == "p_p0" && std::fabs(*value) > 1e6)
+    fail("until.p_p0 = " + std::to_string(*value) + " is more than 1e6 times the starting pressure: give a value of the order of 1");
   s.stop = stops.at(stop);
   s.until = *value;
   s.until_relative = stop == "p_p0";
@@ -333,6 +370,7 @@ std::map<std::string, std::vector<PathStage>> parse_paths(toml::table& root, con
   if (!t) { root.insert("paths", toml::table{}); return paths; }
   for (auto&& [k, v] : *t) {
     const std::string name(k.str());
+    check_entry_name(origin, "[paths]", name);
     const toml::array* a = v.as_array();
     if (!a) throw SceneError(origin + ": paths." + name + " must be an array of stage tables, e.g. "
                              "[{ rate = \"D2\", until = { eps_d = 0.2 } }, { rate = \"-D2\", until = { eps_d = 0.4 } }]");
@@ -539,6 +577,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   if (auto* t = root.get("modes") ? root.get("modes")->as_table() : nullptr) {
     for (auto&& [k, v] : *t) {
       const std::string key(k.str());
+      check_entry_name(origin, "[modes]", key);
       DeformationMode dm;
       dm.name = key;
       auto* a = v.as_array();
@@ -547,7 +586,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
         if (!r3 || r3->size() != 3) return false;
         for (int c = 0; c < 3; ++c) {
           auto x = (*r3)[c].value<double>();
-          if (!x) return false;
+          if (!x || !std::isfinite(*x)) return false;
           out[c] = *x;
         }
         return true;
@@ -555,6 +594,8 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
       double L[3][3];
       if (a && a->size() == 3 && (*a)[0].value<double>() && (*a)[1].value<double>() && (*a)[2].value<double>()) {
         dm.rate_shape = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(), *(*a)[2].value<double>());
+        if (!std::isfinite(dm.rate_shape.x) || !std::isfinite(dm.rate_shape.y) || !std::isfinite(dm.rate_shape.z))
+          throw SceneError(origin + ": modes." + key + " must be finite numbers (nan and inf are no rates)");
       } else if (a && a->size() == 3 && row_of((*a)[0], L[0]) && row_of((*a)[1], L[1]) && row_of((*a)[2], L[2])) {
         if (L[1][0] != 0 || L[2][0] != 0 || L[2][1] != 0)
           throw SceneError(origin + ": modes." + key + " has entries below the diagonal (L_yx, L_zx or L_zy): the "
@@ -616,6 +657,23 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
                     100 * rate_tc);
       throw SceneError(b);
     }
+  // A mode's or path stage's rate shape multiplies the deviatoric rate: bound the product the same way.
+  for (const auto& mode : p.modes) {
+    std::vector<std::pair<std::string, std::pair<Vec3, Vec3>>> shapes;
+    if (mode.path.empty()) shapes.push_back({"modes." + mode.name, {mode.rate_shape, mode.shear_shape}});
+    for (const auto& st : mode.path) shapes.push_back({"paths." + mode.name + " stage '" + st.name + "'", {st.rate_shape, st.shear_shape}});
+    for (const auto& [where, sh] : shapes) {
+      const double peak = std::max({std::fabs(sh.first.x), std::fabs(sh.first.y), std::fabs(sh.first.z),
+                                    std::fabs(sh.second.x), std::fabs(sh.second.y), std::fabs(sh.second.z)});
+      if (peak * dev_tc > 1e-2) {
+        char b[400];
+        std::snprintf(b, sizeof b, "%s: %s: a rate entry of %g times protocol.deviatoric_rate_tc = %g deforms the box "
+                      "by %.3g%% per contact time: far from quasi-static; keep the rate entries of the order of 1",
+                      origin.c_str(), where.c_str(), peak, dev_tc, 100 * peak * dev_tc);
+        throw SceneError(b);
+      }
+    }
+  }
   p.compress_rate = compress_tc / m.t_contact;
   p.cycle_rate = cycle_tc / m.t_contact;
   p.deviatoric_rate = dev_tc / m.t_contact;
@@ -632,6 +690,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
       if (st.stop == PathStop::Time) st.until *= m.t_contact;   // time_tc -> seconds
   p.preparation = preparation ? parse_preparation(*preparation, m.t_contact, origin) : default_preparation(p);
   validate_preparation(p, m.t_contact, origin);
+  check_work(m, origin);
   if (resolved) {
     std::ostringstream o;
     o << root;
@@ -642,11 +701,12 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
 
 Model load_scene_file(const std::string& path, const std::vector<std::string>& overrides,
                       std::string* resolved) {
-  std::ifstream in(path);
-  if (!in) throw SceneError("cannot read scene file '" + path + "'");
   std::stringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) throw SceneError("cannot read scene file '" + path + "'");
+  try {
+    ss << read_regular_file(path, "scene file", std::size_t(1) << 24);
+  } catch (const std::runtime_error& e) {
+    throw SceneError(e.what());
+  }
   toml::table parsed;
   try {
     parsed = toml::parse(ascii_scene(ss.str(), path), path);

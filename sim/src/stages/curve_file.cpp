@@ -4,7 +4,10 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "dem/io/io.hpp"
 #include "dem/measure/measure.hpp"
+
+#include <unistd.h>
 
 namespace dem {
 
@@ -37,7 +40,9 @@ std::string curve_preamble(const Model& m, const std::string& stage, const Physi
 }
 
 CurveFile::CurveFile(const std::string& path, const std::string& preamble, const std::vector<std::string>& extra)
-    : path_(path), part_(path + ".part"), out_(part_, std::ios::trunc) {
+    : path_(path), part_(path + ".part") {
+  ::close(create_exclusive(part_));   // never follows a planted link; the file is ours and empty
+  out_.open(part_, std::ios::out | std::ios::in);
   if (!out_) throw std::runtime_error("cannot write " + part_ + ": check that the folder exists and is writable");
   std::string h;
   for (auto& c : curve_columns()) h += (h.empty() ? "" : ",") + c;

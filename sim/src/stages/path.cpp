@@ -73,6 +73,14 @@ PathStage resolve(const PathStage& s, double p0) {
   PathStage r = s;
   if (s.relative) { r.sigma = s.sigma * p0; r.pressure = s.pressure * p0; }
   if (s.until_relative) r.until = s.until * p0;
+  // Presence is the key's (finite at parse); after scaling by p0 every present target must still be finite.
+  const double given[4] = {s.sigma.x, s.sigma.y, s.sigma.z, s.pressure}, scaled[4] = {r.sigma.x, r.sigma.y, r.sigma.z, r.pressure};
+  for (int k = 0; k < 4; ++k)
+    if (std::isfinite(given[k]) && !std::isfinite(scaled[k]))
+      throw SceneError("path stage '" + s.name + "': a stress target of " + std::to_string(given[k]) + " p0 is not a "
+                       "finite pressure (p0 = " + std::to_string(p0) + " Pa): give a target of the order of 1");
+  if (!std::isfinite(r.until))
+    throw SceneError("path stage '" + s.name + "': its stop value times p0 is not finite: give a value of the order of 1");
   return r;
 }
 
@@ -214,7 +222,18 @@ void run_path_stage(PathRun& run, const PathStage& stage) {
       if (remaining < increment) scale = remaining / increment;
     }
     const double x_before = increment > 0 && nonlinear_stop ? probe.value(state, resp) : 0.0;
-    run.engine.step(rate * scale);
+    try {
+      run.engine.step(rate * scale);
+    } catch (const BlowUp&) {
+      throw;
+    } catch (const std::runtime_error& e) {
+      // The box got too thin for the neighbour grid before the stop came: that is the stop
+      // condition not met (the documented error), the geometry only its symptom.
+      throw std::runtime_error("path " + run.label + ", stage '" + stage.name + "': its stop condition was not met after "
+                               "a strain of " + std::to_string(travel) + ", when the box could deform no further (" +
+                               e.what() + "): the target may be beyond what this packing reaches (e.g. an s_dev above "
+                               "its critical state); change the stop condition");
+    }
     ++run.steps;
     ++stage_steps;
     if (increment > 0 && nonlinear_stop && scale == 1.0)

@@ -11,6 +11,13 @@
 #include <sstream>
 #include <vector>
 
+#include <cerrno>
+#include <cstring>
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include "dem/core/errors.hpp"
 #include "dem/io/io.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/stages/protocol.hpp"
@@ -83,8 +90,59 @@ std::string plan_json(const Model& m) {
   o << "],\n  \"prep_particle_steps\": " << prep_particle_steps(m) << ",\n  \"mode_particle_steps\": {";
   for (std::size_t i = 0; i < m.protocol.modes.size(); ++i)
     o << (i ? ", " : "") << "\"" << m.protocol.modes[i].name << "\": " << mode_particle_steps(m, m.protocol.modes[i]);
-  o << "},\n  \"threads\": " << m.threads << "\n}\n";
+  o << "},\n  \"tasks\": [";
+  const auto tasks = planned_task_files(m);
+  for (std::size_t i = 0; i < tasks.size(); ++i) o << (i ? ", " : "") << "\"" << tasks[i] << "\"";
+  o << "],\n  \"threads\": " << m.threads << "\n}\n";
   return o.str();
+}
+
+std::vector<double> preparation_stage_steps(const Model& m) {
+  std::vector<double> steps;
+  double phi = m.protocol.initial_phi;
+  for (const auto& s : m.protocol.preparation) {
+    if (s.kind == PrepStage::Kind::Relax) {
+      steps.push_back(s.max_time / m.dt);
+      continue;
+    }
+    const bool runs = s.kind == PrepStage::Kind::Compress ? s.phi > phi : s.phi < phi;
+    steps.push_back(runs ? std::fabs(std::log(s.phi / phi)) / (3 * s.rate * m.dt) : 0.0);
+    phi = s.phi;
+  }
+  return steps;
+}
+
+void check_work(const Model& m, const std::string& origin) {
+  auto refuse = [&](const std::string& what, double steps, const std::string& fix) {
+    if (std::isfinite(steps) && steps <= kMaxSteps) return;
+    const double ps = steps * m.count;
+    char b[600];
+    std::snprintf(b, sizeof b, "%s: %s would take about %.3g time steps (%.3g particle-steps at N = %d, about %.3g "
+                  "years at 25 M particle-steps/s), beyond the bound of %.0e steps: %s", origin.c_str(), what.c_str(),
+                  steps, ps, m.count, ps / 25e6 / 3.15e7, kMaxSteps, fix.c_str());
+    throw SceneError(b);
+  };
+  const auto prep = preparation_stage_steps(m);
+  for (std::size_t i = 0; i < prep.size(); ++i)
+    refuse("preparation stage '" + m.protocol.preparation[i].name + "'", prep[i],
+           "raise its rate_tc (typical 1e-5 to 1e-3) or shorten its max_time_tc");
+  for (const auto& mode : m.protocol.modes)
+    refuse(std::string(mode.path.empty() ? "mode '" : "path '") + mode.name + "'", mode_steps(m, mode),
+           "raise protocol.deviatoric_rate_tc (typical 1e-6 to 1e-4), or the rate entries of the mode");
+}
+
+std::vector<std::string> planned_task_files(const Model& m) {
+  std::vector<std::string> files;
+  const std::vector<double> phis = mode_checkpoints(m.protocol);
+  for (int k = 0; k < m.ensemble_packings; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "m%03d", k);
+    files.push_back(std::string("members/") + name + "/prep.json");
+    for (double phi : phis)
+      for (const auto& mode : m.protocol.modes)
+        files.push_back(std::string("members/") + name + "/deviatoric/" + mode.name + "_" + fmt_phi(phi) + ".json");
+  }
+  return files;
 }
 
 namespace {
@@ -108,25 +166,47 @@ std::string differing_lines(const std::string& a, const std::string& b) {
 
 }  // namespace
 
-void prepare_ensemble_folder(const std::string& dir_name, const std::string& resolved, bool force) {
+namespace {
+
+// The folder's lock, held by the `dem ensemble` working on it (the kernel drops it when the
+// process dies): refused at once if another one holds it.
+int lock_ensemble_folder(const std::filesystem::path& dir) {
+  const std::string path = (dir / ".dem-ensemble.lock").string();
+  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_NOFOLLOW, 0644);   // no O_CLOEXEC: the driver inherits it
+  if (fd < 0) throw std::runtime_error("cannot open " + path + " (" + std::strerror(errno) + ")");
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    ::close(fd);
+    throw std::runtime_error("another `dem ensemble` is running on " + dir.string() + " (it holds " + path +
+                             "); nothing was changed, --force or not: wait for it to finish, or stop it first");
+  }
+  return fd;
+}
+
+}  // namespace
+
+int prepare_ensemble_folder(const std::string& dir_name, const std::string& resolved, bool force) {
   namespace fs = std::filesystem;
   const fs::path dir(dir_name), scene = dir / "scene.toml";
+  int lock = -1;
   if (fs::exists(scene)) {
+    lock = lock_ensemble_folder(dir);
     std::ifstream in(scene);
     std::stringstream old;
     old << in.rdbuf();
-    if (old.str() == resolved && !force) return;   // the same ensemble: continue where it stopped
+    if (old.str() == resolved && !force) return lock;   // the same ensemble: continue where it stopped
     if (!force)
       throw std::runtime_error(dir_name + " holds the results of another scene (its scene.toml differs in:" +
                                differing_lines(old.str(), resolved) +
                                "\n  ); choose another --out, or pass --force to remove those results");
     for (const char* sub : {"members", "ensemble", "fit", "plots", "logs", ".snakemake"}) fs::remove_all(dir / sub);
-    for (const char* f : {"scene.toml", "manifest.json", ".dem-ensemble.lock"}) fs::remove(dir / f);
+    for (const char* f : {"scene.toml", "manifest.json"}) fs::remove(dir / f);   // not the lock: it is held
   } else if (fs::exists(dir) && !fs::is_empty(dir) && !force) {
     throw std::runtime_error(dir_name + " exists and is not an ensemble folder (no scene.toml): choose another --out");
   }
   fs::create_directories(dir);
+  if (lock < 0) lock = lock_ensemble_folder(dir);
   write_file_atomic(scene.string(), resolved);
+  return lock;
 }
 
 }  // namespace dem

@@ -13,6 +13,18 @@ namespace dem {
 /// Writes `content` to `path` atomically. Throws std::runtime_error on I/O failure.
 void write_file_atomic(const std::string& path, const std::string& content);
 
+/// Creates PATH (a temporary `*.part`) for writing, exclusively: whatever is there (a stale
+/// .part, a planted symbolic link) is unlinked first, and the new file is opened with
+/// O_CREAT | O_EXCL | O_NOFOLLOW, so a write never follows a link to another file. Returns the
+/// file descriptor; throws std::runtime_error naming the file.
+int create_exclusive(const std::string& path);
+
+/// The whole of an input file, refused unless it is a regular file (not a device such as
+/// /dev/zero, a FIFO or a socket: opened without blocking, then checked) of at most max_bytes.
+/// `what` names it in the error ("packing file", "checkpoint").
+std::string read_regular_file(const std::string& path, const std::string& what,
+                              std::size_t max_bytes = std::size_t(1) << 34);
+
 /// Reads a packing in YADE's text format: a line "##PERIODIC:: Lx Ly Lz" [m], then one line
 /// "x y z r" [m] per sphere ('#' lines are comments). Masses from `density` [kg/m^3].
 /// Throws std::runtime_error naming the line when the format is wrong, a radius is not
