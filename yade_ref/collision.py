@@ -31,6 +31,8 @@ ap.add_argument("--angle-deg", type=float, default=-1.0, help="oblique impact: a
 ap.add_argument("--friction", type=float, default=0.0, help="Coulomb coefficient mu (frictionAngle = atan(mu))")
 ap.add_argument("--kt-ratio", type=float, default=2.0 / 7.0, help="pair k_t / k")
 ap.add_argument("--gamma-t", type=float, default=0.0, help="pair tangential damping [kg/s]")
+ap.add_argument("--dt", type=float, default=0.0, help="time step [s] (default: dt-over-tc x t_c of this pair; ours takes "
+                "t_c of the scene's smallest pair: pass ours' dt_s to match)")
 a = ap.parse_args(sys.argv[1:])
 
 m1 = 4 / 3 * math.pi * a.r1 ** 3 * a.density
@@ -61,7 +63,7 @@ def oblique():
                  InteractionLoop([Ig2_Sphere_Sphere_ScGeom()], [Ip2_ViscElMat_ViscElMat_ViscElPhys()],
                                  [Law2_ScGeom_ViscElPhys_Basic()]),
                  NewtonIntegrator(damping=0)]
-    O.dt = a.dt_over_tc * tc
+    O.dt = a.dt if a.dt > 0 else a.dt_over_tc * tc
     b0, b1 = O.bodies[i0], O.bodies[i1]
     checked = False
 

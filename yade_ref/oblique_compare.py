@@ -25,9 +25,9 @@ def ours(angle, mu, kt_ratio, dt_over_tc, r2):
     return json.loads(out)
 
 
-def yade(angle, mu, kt_ratio, dt_over_tc, r2):
+def yade(angle, mu, kt_ratio, dt, r2):
     p = subprocess.run(["yade", "-n", "-x", "-j1", os.path.join(ROOT, "yade_ref", "collision.py"), "--angle-deg", str(angle),
-                        "--r2", str(r2), "--friction", str(mu), "--kt-ratio", str(kt_ratio), "--dt-over-tc", str(dt_over_tc)],
+                        "--r2", str(r2), "--friction", str(mu), "--kt-ratio", str(kt_ratio), "--dt", repr(dt)],
                        check=True, capture_output=True, text=True, cwd=ROOT)
     return json.loads([ln for ln in p.stdout.splitlines() if ln.startswith("{")][-1])
 
@@ -43,7 +43,8 @@ def main():
     a = ap.parse_args()
     rows = []
     for ang in [float(x) for x in a.angles.split(",")]:
-        o, y = ours(ang, a.mu, a.kt_ratio, a.dt_over_tc, a.r2), yade(ang, a.mu, a.kt_ratio, a.dt_over_tc, a.r2)
+        o = ours(ang, a.mu, a.kt_ratio, a.dt_over_tc, a.r2)
+        y = yade(ang, a.mu, a.kt_ratio, o["dt_s"], a.r2)      # ours' dt (t_c of the scene's smallest pair)
         en = o["normal_restitution"]
         t = math.tan(math.radians(ang))
         sliding = t > 3.5 * a.mu * (1 + en)
