@@ -89,7 +89,7 @@ def section(mode, label):
     for q in PLATEAUS:
         v = np.array([r[q] for r in po])
         m, sd = v.mean(), v.std(ddof=1)
-        z = (py[q] - m) / sd if sd > 0 and np.isfinite(py[q]) else float("nan")
+        z = (py[q] - m) / sd if sd > 1e-12 * max(abs(m), 1e-12) and abs(sd) > 1e-15 and np.isfinite(py[q]) else float("nan")
         lines.append(f"| {q} | {m:.5g} | {sd:.2g} | {py[q]:.5g} | {z:+.1f} |")
     overlay(ours[0], yade, ["ours", "YADE"], os.path.join(REF, f"overlay_{mode}.png"))
     return lines + [""]
