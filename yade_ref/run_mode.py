@@ -15,6 +15,27 @@
 # affine stiffness of p to an isotropic strain, |u| <= servo-rate-factor x rate. Not our PI law
 # (docs/control.md): a second, independent control of the same test.
 #
+# Friction (--friction MU, as ours' contact.friction = MU, cundall_strack; docs/yade.md "Friction"):
+# ViscElMat ks = 2 k_t, cs = 2 gamma_t (--kt-ratio, --gamma-t; pair values checked at run time like
+# kn, cn), frictionAngle = atan(mu), rotations free (I = 2/5 m r^2, utils.sphere). The stress takes the
+# tangential force (i.phys.shearForce: YADE stores the elastic shear force, not a displacement; its
+# viscous part is not stored, so --gamma-t > 0 leaves it out of the stress), its symmetric part joins
+# sigma and its antisymmetric part is reported; the extra columns are ours' friction_columns():
+# sliding_fraction (|F_s| >= tan(phi) F_n (1 - 1e-9)), E_rot_J (sum 1/2 I w^2), omega_mean_rad_s (mean |w|),
+# E_t_J (sum |F_s|^2 / (2 k_s)), W_friction_J (nan: Law2_ScGeom_ViscElPhys_Basic does not track it),
+# sigma_antisym_rel; E_pot_J holds the normal plus the tangential spring energy, as ours.
+#
+# YADE 2023.02a's Law2_ScGeom_ViscElPhys_Basic adds the periodic shift velocity with the wrong sign
+# (relative velocity (v1 + w1 x c1) - (v2 + w2 x c2) + shiftVel, where the image of 2 moves at
+# v2 + shiftVel): a pair across the boundary of a deforming cell slips at 2 x velGrad.hSize.cellDist
+# (17 m/s here, against ~0.4 m/s of real slip), so its tangential spring runs to the Coulomb limit
+# at once (docs/yade.md "Friction": 56x the shear force of the same pair inside the cell). Frictional
+# runs in a deforming periodic cell therefore use --law frictphys: FrictMat per body with
+# young = k / r (Ip2_FrictMat_FrictMat_FrictPhys's series kn = 2 E1 r1 E2 r2 / (E1 r1 + E2 r2) = k for
+# every pair) and poisson = k_t / k (ks = k_t), Law2_ScGeom_FrictPhys_CundallStrack() with O.trackEnergy (traceEnergy=False: it then adds to O.energy),
+# whose shear increment (ScGeom::getIncidentVel) adds the shift velocity correctly. That law has no
+# normal dashpot: --gamma 0, and ours contact.damping_kg_s = 0. W_friction_J = O.energy['plastDissip'].
+#
 # Physics set to match ours (see docs/yade.md for every choice):
 #  - ViscElMat with kn = 2k, cn = 2*gamma per material: two equal materials combine in series
 #    into a pair kn = k, cn = gamma (checked at start, the script stops if not);
@@ -45,7 +66,8 @@ import numpy as np
 
 from yade import O, Vector3, Matrix3, ViscElMat, ForceResetter, InsertionSortCollider, Bo1_Sphere_Aabb, \
     InteractionLoop, Ig2_Sphere_Sphere_ScGeom, Ip2_ViscElMat_ViscElMat_ViscElPhys, \
-    Law2_ScGeom_ViscElPhys_Basic, NewtonIntegrator, PyRunner, PeriTriaxController, utils
+    Law2_ScGeom_ViscElPhys_Basic, NewtonIntegrator, PyRunner, PeriTriaxController, utils, FrictMat, \
+    Ip2_FrictMat_FrictMat_FrictPhys, Law2_ScGeom_FrictPhys_CundallStrack
 
 MODES = {"D2": (1.0, 0.0, -1.0), "D3": (0.5, 0.5, -1.0), "iso_compress": (-1.0, -1.0, -1.0),
          "iso_expand": (1.0, 1.0, 1.0), "uniaxial_x": (-1.0, 0.0, 0.0), "uniaxial_y": (0.0, -1.0, 0.0),
@@ -59,6 +81,7 @@ COLUMNS = ["step", "time_s", "eps_xx", "eps_yy", "eps_zz", "eps_v", "eps_d", "nu
            "E_pot_J", "p_kin_Pa", "inertial_number", "contacts", "eps_xy", "eps_xz", "eps_yz", "eps_d_eig",
            "sigma_dev_eig_Pa", "s_dev_eig", "F_dev_eig", "angle_sigma_F_deg", "angle_sigma_D_deg", "angle_F_D_deg",
            "stage"]
+FRICTION_COLUMNS = ["sliding_fraction", "E_rot_J", "omega_mean_rad_s", "E_t_J", "W_friction_J", "sigma_antisym_rel"]
 
 
 def dev(a, b, c):
@@ -120,6 +143,14 @@ def parse():
     ap.add_argument("--servo-every", type=int, default=10, help="steps between updates of the isobaric servo")
     ap.add_argument("--servo-rate-factor", type=float, default=2.0,
                     help="PeriTriaxController maxStrainRate of the stress axes, in multiples of the rate")
+    ap.add_argument("--friction", type=float, default=0.0,
+                    help="Coulomb coefficient mu (ours: contact.friction); ViscElMat frictionAngle = atan(mu), rotations free")
+    ap.add_argument("--kt-ratio", type=float, default=2.0 / 7.0, help="pair k_t / k (ours: contact.tangential_stiffness_ratio)")
+    ap.add_argument("--gamma-t", type=float, default=0.0, help="pair tangential damping [kg/s] (ours: contact.tangential_damping_kg_s)")
+    ap.add_argument("--law", default="viscel", choices=["viscel", "frictphys"],
+                    help="viscel: ViscElMat + Law2_ScGeom_ViscElPhys_Basic (normal dashpot; its shift velocity has the wrong "
+                         "sign: wrong for friction across the boundary of a deforming cell); frictphys: FrictMat per body + "
+                         "Law2_ScGeom_FrictPhys_CundallStrack (no dashpot: needs --gamma 0)")
     return ap.parse_args(sys.argv[1:])
 
 
@@ -146,6 +177,7 @@ def read_packing(path):
 
 def main():
     a = parse()
+    globals()["ARGS"] = a
     cell, spheres = read_packing(a.packing)
     rmin = a.r_min if a.r_min > 0 else min(s[3] for s in spheres)
     m_small = 4.0 / 3.0 * math.pi * rmin ** 3 * a.density
@@ -179,14 +211,35 @@ def main():
     O.reset()
     O.periodic = True
     O.cell.setBox(*cell)
-    mat = O.materials.append(ViscElMat(kn=2 * a.k, cn=2 * a.gamma, ks=0, cs=0, frictionAngle=0, density=a.density))
+    frict = a.friction > 0
+    kt = a.kt_ratio * a.k if frict else 0.0
+    gamma_t = a.gamma_t if frict else 0.0
+    frictphys = a.law == "frictphys"
+    if frictphys and (a.gamma != 0 or gamma_t != 0 or a.kt_ratio <= 0):
+        sys.exit("run_mode.py: --law frictphys has no dashpots: pass --gamma 0 (and ours contact.damping_kg_s=0), --gamma-t 0")
+    if frict and not frictphys and a.mode in list(MODES) + list(SHEARS):
+        sys.stderr.write("run_mode.py: warning: --law viscel with friction in a deforming periodic cell: YADE 2023.02a's "
+                         "ViscEl law adds the periodic shift velocity with the wrong sign (docs/yade.md, Friction); "
+                         "use --law frictphys --gamma 0\n")
+    if not frictphys:
+        mat = O.materials.append(ViscElMat(kn=2 * a.k, cn=2 * a.gamma, ks=2 * kt, cs=2 * gamma_t,
+                                           frictionAngle=math.atan(a.friction) if frict else 0, density=a.density))
     for x, y, z, r in spheres:
+        if frictphys:                           # E r = k for every body: the pair kn = k, ks = poisson k
+            mat = O.materials.append(FrictMat(young=a.k / r, poisson=kt / a.k if frict else 0.0,
+                                              frictionAngle=math.atan(a.friction) if frict else 0, density=a.density))
         b = utils.sphere((x, y, z), r, material=mat)
-        b.state.blockedDOFs = "XYZ"
+        if not frict:
+            b.state.blockedDOFs = "XYZ"         # frictionless: no torques, 3 degrees of freedom as ours
         O.bodies.append(b)
-    engines = [ForceResetter(), InsertionSortCollider([Bo1_Sphere_Aabb()]),
-               InteractionLoop([Ig2_Sphere_Sphere_ScGeom()], [Ip2_ViscElMat_ViscElMat_ViscElPhys()],
-                               [Law2_ScGeom_ViscElPhys_Basic()])]
+    if frictphys:
+        loop = InteractionLoop([Ig2_Sphere_Sphere_ScGeom()], [Ip2_FrictMat_FrictMat_FrictPhys()],
+                               [Law2_ScGeom_FrictPhys_CundallStrack()])
+        O.trackEnergy = True
+    else:
+        loop = InteractionLoop([Ig2_Sphere_Sphere_ScGeom()], [Ip2_ViscElMat_ViscElMat_ViscElPhys()],
+                               [Law2_ScGeom_ViscElPhys_Basic()])
+    engines = [ForceResetter(), InsertionSortCollider([Bo1_Sphere_Aabb()]), loop]
     if a.gamma_b > 0:
         engines.append(PyRunner(iterPeriod=1, command="background_damping()"))
     engines.append(NewtonIntegrator(damping=0))
@@ -221,6 +274,9 @@ def main():
         deg = [0] * len(O.bodies)
         pairs = []
         epot = 0.0
+        e_t = 0.0
+        n_slide = 0
+        tsig = [[0.0] * 3 for _ in range(3)]       # branch (x) tangential force on id2
         omax = osum = 0.0
         H = O.cell.hSize
         for i in O.interactions:
@@ -240,6 +296,15 @@ def main():
                     sig[p][q] += 0.5 * (branch[p] * f[q] + branch[q] * f[p])
                     fab[p][q] += (v1 + v2) * n[p] * n[q]
             epot += 0.5 * a.k * pen * pen
+            if frict:
+                fs = i.phys.shearForce             # elastic shear force on id2 (after the Coulomb cap)
+                for p in range(3):
+                    for q in range(3):
+                        tsig[p][q] += branch[p] * fs[q]
+                fs2 = fs.dot(fs)
+                e_t += 0.5 * fs2 / kt
+                if fs2 > 0 and math.sqrt(fs2) >= i.phys.tangensOfFrictionAngle * f.norm() * (1 - 1e-9):
+                    n_slide += 1
             rel = pen / min(b1.shape.radius, b2.shape.radius)
             omax = max(omax, rel)
             osum += rel
@@ -254,7 +319,7 @@ def main():
                 for q in range(3):
                     kin[p][q] += b.state.mass * v[p] * v[q]
             ekin += 0.5 * b.state.mass * v.dot(v)
-        S = [[(sig[p][q] + kin[p][q]) / V for q in range(3)] for p in range(3)]
+        S = [[(sig[p][q] + 0.5 * (tsig[p][q] + tsig[q][p]) + kin[p][q]) / V for q in range(3)] for p in range(3)]
         F = [[fab[p][q] / V for q in range(3)] for p in range(3)]
         n = len(O.bodies)
         # rattlers: fewer than 4 contacts, removed recursively
@@ -292,12 +357,24 @@ def main():
                2 * mean_r * p / a.k, S[0][0], S[1][1], S[2][2], S[0][1], S[0][2], S[1][2], sdev,
                sdev / p if p > 0 else 0.0, F[0][0], F[1][1], F[2][2], F[0][1], F[0][2], F[1][2],
                fdev, 2 * len(pairs) / n, 2 * cnr / (n - nr) if nr < n else 0.0,
-               nr / n, ekin, omax, osum / len(pairs) if pairs else 0.0, epot,
+               nr / n, ekin, omax, osum / len(pairs) if pairs else 0.0, epot + e_t,
                (kin[0][0] + kin[1][1] + kin[2][2]) / 3 / V,
                rmax_rate * 2 * mean_r * math.sqrt(a.density / p) if p > 0 else 0.0, len(pairs),
                float(eps_t[0, 1]), float(eps_t[0, 2]), float(eps_t[1, 2]), eps_d_eig, sdev_eig,
                sdev_eig / p if p > 0 else 0.0, fdev_eig, axis_angle_deg(s_dir, f_dir),
                axis_angle_deg(s_dir, d_dir), axis_angle_deg(f_dir, d_dir)]
+        if frict:
+            e_rot = 0.0
+            w_sum = 0.0
+            for b in O.bodies:
+                w = b.state.angVel
+                e_rot += 0.5 * b.state.inertia[0] * w.dot(w)
+                w_sum += w.norm()
+            anti = [0.5 * (tsig[0][1] - tsig[1][0]) / V, 0.5 * (tsig[0][2] - tsig[2][0]) / V,
+                    0.5 * (tsig[1][2] - tsig[2][1]) / V]
+            w_fric = float(dict(O.energy.items()).get("plastDissip", 0.0)) if frictphys else float("nan")
+            row += [n_slide / len(pairs) if pairs else 0.0, e_rot, w_sum / n, e_t, w_fric,
+                    math.sqrt(sum(x * x for x in anti)) / p if p > 0 else 0.0]
         return ["%.10g" % v if isinstance(v, float) else str(v) for v in row] + [a.mode]
 
     globals()["background_damping"] = background_damping
@@ -317,6 +394,7 @@ def main():
     O.run(1, True)
     O.dt = dt
     first = measure()
+    check_pairs()
     if sheared and (a.side_stress_p0 > 0 or a.isobaric_p0 > 0):
         sys.exit("run_mode.py: simple shear runs at constant volume (no --side-stress-p0 / --isobaric-p0)")
     if a.side_stress_p0 > 0:
@@ -363,7 +441,14 @@ def main():
         O.engines = O.engines[:-1] + [PyRunner(iterPeriod=a.servo_every, command="isobaric_servo()")] + O.engines[-1:]
         out.write(f"# isobaric servo (Python): p = {a.isobaric_p0} x p0 = {p_goal:.8g} Pa (contact stress), dead-beat over "
                   f"{a.servo_every} steps, low-pass 0.25, |u| <= {a.servo_rate_factor} x rate\n")
-    out.write(",".join(COLUMNS) + "\n")
+    if frict:
+        if frictphys:
+            out.write(f"# friction: mu={a.friction} (frictionAngle=atan(mu)), k_t={kt:.8g} N/m, no dashpots; FrictMat per body "
+                      "(young = k/r, poisson = k_t/k) + Law2_ScGeom_FrictPhys_CundallStrack; W_friction_J = O.energy['plastDissip']\n")
+        else:
+            out.write(f"# friction: mu={a.friction} (frictionAngle=atan(mu)), k_t={kt:.8g} N/m, gamma_t={gamma_t} kg/s "
+                      "(ViscElMat ks, cs = 2x the pair values); W_friction_J not tracked by YADE's ViscEl law (nan)\n")
+    out.write(",".join(COLUMNS[:-1] + (FRICTION_COLUMNS if frict else []) + COLUMNS[-1:]) + "\n")
     out.write(",".join(first) + "\n")
     done = 0
     wall = 0.0
@@ -385,11 +470,25 @@ def main():
         T = O.cell.trsf
         sys.stderr.write(f"run_mode.py: trsf = {[[T[p, q] for q in range(3)] for p in range(3)]}, "
                          f"hSize = {[[O.cell.hSize[p, q] for q in range(3)] for p in range(3)]}\n")
-    # Sanity: pair parameters as intended.
+    check_pairs()
+
+
+def check_pairs():
+    """Sanity: pair parameters as intended (at the start and at the end of the run)."""
+    a = ARGS
+    frict = a.friction > 0
+    kt = a.kt_ratio * a.k if frict else 0.0
+    gamma_t = a.gamma_t if frict else 0.0
     for i in O.interactions:
         if i.isReal:
-            if abs(i.phys.kn - a.k) > 1e-6 * a.k or abs(i.phys.cn - a.gamma) > 1e-6 * max(a.gamma, 1e-30):
-                sys.exit(f"run_mode.py: pair kn={i.phys.kn}, cn={i.phys.cn} differ from k={a.k}, gamma={a.gamma}")
+            cn = getattr(i.phys, "cn", 0.0)       # FrictPhys: no dashpots
+            cs = getattr(i.phys, "cs", 0.0)
+            if abs(i.phys.kn - a.k) > 1e-6 * a.k or abs(cn - a.gamma) > 1e-6 * max(a.gamma, 1e-30):
+                sys.exit(f"run_mode.py: pair kn={i.phys.kn}, cn={cn} differ from k={a.k}, gamma={a.gamma}")
+            if frict and (abs(i.phys.ks - kt) > 1e-6 * kt or abs(cs - gamma_t) > 1e-6 * max(gamma_t, 1e-30)
+                          or abs(i.phys.tangensOfFrictionAngle - a.friction) > 1e-9 * a.friction):
+                sys.exit(f"run_mode.py: pair ks={i.phys.ks}, cs={cs}, tan(phi)={i.phys.tangensOfFrictionAngle} "
+                         f"differ from k_t={kt}, gamma_t={gamma_t}, mu={a.friction}")
             break
 
 

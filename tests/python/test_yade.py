@@ -1,4 +1,6 @@
 """YADE cross-checks: live runs (YADE is installed by scripts/setup.sh) and stored references."""
+import glob
+import itertools
 import json
 import os
 import shutil
@@ -165,3 +167,89 @@ def test_compare_reads_sheared_curves_and_writes_json(tmp_path):
     assert (p.returncode == 0) == all(v["ok"] for v in res["verdict"].values())
     p = run_dem("compare", a, b, "--json", out, "--tol-p", 1e-9)       # a failing verdict is written too
     assert p.returncode == 4 and json.loads(out.read_text())["verdict"]["p_Pa"]["ok"] is False
+
+
+FRIC = os.path.join(ROOT, "data", "yade_friction")
+
+
+@needs_yade
+@pytest.mark.parametrize("angle,r2", [(30, 5e-4), (80, 5e-4), (45, 1.5e-3)])
+def test_oblique_impact_with_friction_yade_equals_ours(angle, r2):
+    # Two spheres meet at `angle` from the line of centres, mu = 0.5, k_t = 2/7 k: ViscElMat with
+    # ks = 2 k_t, frictionAngle = atan(mu) in YADE (a free pair: no periodic shift velocity), `dem collide
+    # --angle-deg` in ours, the same dt and leapfrog. Measured when written: the same e_n, e_t and spins to
+    # 12 digits at 10-80 deg and w = 1, 3 (data/yade_friction/oblique*.csv). 30 and 45 deg stick (Maw's
+    # regime, e_t near 3/7 at k_t/k = 2/7), 80 deg slides (e_t = 1 - mu (1 + e_n) / tan(theta)).
+    ours = json.loads(run_dem("collide", "--angle-deg", angle, "--r2", r2, "--set", "contact.friction=0.5",
+                              "--set", "integration.integrator=symplectic_euler", "--set", "integration.dt_over_tc=0.002",
+                              check=True).stdout)
+    p = run_yade("collision.py", "--angle-deg", angle, "--r2", r2, "--friction", 0.5, "--dt", repr(ours["dt_s"]))
+    yade = json.loads([ln for ln in p.stdout.splitlines() if ln.startswith("{")][-1])
+    assert yade["pair_checked"]
+    for k in ("normal_restitution", "tangential_restitution", "omega0_y_rad_s", "omega1_y_rad_s", "tangential_impulse_Ns"):
+        assert abs(yade[k] / ours[k] - 1) < 1e-8, (k, yade[k], ours[k])
+    e_n, e_t = ours["normal_restitution"], ours["tangential_restitution"]
+    t = np.tan(np.radians(angle))
+    if t > 3.5 * 0.5 * (1 + e_n):                       # gross sliding: rigid-body theory (finite stiffness: 0.1 %)
+        assert abs(e_t - (1 - 0.5 * (1 + e_n) / t)) < 2e-3
+    else:
+        assert 0.3 < e_t < 0.75 and ours["omega1_y_rad_s"] > 0
+
+
+# `dem compare`'s checked measures, and YADE's distance allowed in units of the largest ours-ours distance:
+# about 1.2x the ratio measured when stored (data/yade_friction/summary.md). Below 1.5: within our chaos
+# floor (D2: p, F_dev, C, sliding fraction; triax: F_dev, sliding fraction). Above: the systematic
+# offsets docs/yade.md reports (YADE's s_dev +0.8 % in D2, p +0.5 % and s_dev +1.6 % under constant side
+# stress, where our dt-perturbed runs barely separate), pinned so that a change in either code shows.
+CHECKED = [("p_Pa", "max_rel"), ("s_dev", "rms_rel"), ("F_dev", "rms_rel"), ("C", "rms_abs"), ("sliding_fraction", "rms_abs")]
+MARGIN = {"D2": {"p_Pa": 1.5, "s_dev": 2.4, "F_dev": 1.5, "C": 1.6, "sliding_fraction": 1.5},
+          "triax": {"p_Pa": 35, "s_dev": 20, "F_dev": 1.7, "C": 2.3, "sliding_fraction": 1.8, "eps_v": 24}}
+
+
+def _distances(a, b):
+    res, grid = compare(a, b)
+    d = np.interp(grid, b["eps_d"], b["sliding_fraction"]) - np.interp(grid, a["eps_d"], a["sliding_fraction"])
+    res["sliding_fraction"] = {"rms_abs": float(np.sqrt(np.mean(d * d)))}
+    return res
+
+
+def _floor(mode):
+    ours = [read_curve(f) for f in [os.path.join(FRIC, f"ours_{mode}_dt0.04.csv")] +
+            sorted(glob.glob(os.path.join(FRIC, f"perturbed_{mode}_dt*.csv")))]
+    return ours, read_curve(os.path.join(FRIC, f"yade_{mode}_phi0.700.csv"))
+
+
+@pytest.mark.parametrize("mode", ["D2", "triax"])
+def test_stored_friction_reference_against_our_floor(mode):
+    # data/yade_friction (docs/yade.md, "Friction"): the stored YADE curve of the frictional packing against
+    # the stored spread of our own dt-perturbed runs. The same packing as loaded; then YADE's distance to
+    # our run is within the largest ours-ours distance, times a margin for a floor of 6 runs.
+    ours, yade = _floor(mode)
+    assert len(ours) >= 5
+    assert abs(ours[0]["E_pot_J"][0] / yade["E_pot_J"][0] - 1) < 1e-9
+    assert abs(ours[0]["p_Pa"][0] / yade["p_Pa"][0] - 1) < 1e-5
+    assert ours[0]["C"][0] == yade["C"][0]
+    checked = CHECKED + ([("eps_v", "rms_abs")] if mode == "triax" else [])
+    pairs = [_distances(a, b) for a, b in itertools.permutations(ours, 2)]
+    floor = {q: max(r[q][k] for r in pairs) for q, k in checked}
+    res = _distances(ours[0], yade)
+    for q, k in checked:
+        assert res[q][k] < MARGIN[mode][q] * floor[q], (q, res[q][k], floor[q])
+    # and within `dem compare`'s default tolerances (docs/yade.md)
+    assert res["p_Pa"]["max_rel"] < 0.03 and res["s_dev"]["rms_rel"] < 0.15 and res["F_dev"]["rms_rel"] < 0.25
+    assert res["C"]["rms_abs"] < 0.15 and res["eps_v"]["rms_abs"] < 5e-4
+    if mode == "D2":
+        assert abs(yade["eps_v"]).max() < 1e-6          # constant volume (YADE's linear cell update: 1.5e-7)
+    else:                                                # the frictional packing compacts under side stress
+        assert ours[0]["eps_v"][-1] < -0.01 and yade["eps_v"][-1] < -0.01
+
+
+def test_current_runner_reproduces_stored_frictional_curve(tmp_path):
+    # The floor above was measured on curves of ours stored with the friction engine of the time: the current
+    # engine gives the same rows, bit for bit, on the first eps_d = 0.01 of D2 (1444 steps, about a second).
+    ours = tmp_path / "ours.csv"
+    run_dem("mode", "--scene", os.path.join(FRIC, "scene.toml"), "--packing", os.path.join(FRIC, "packing_phi0.700.txt"),
+            "--mode", "D2", "--rate-tc", 1e-4, "--eps-max", 0.01, "--quiet", "--out", ours, check=True)
+    a, b = read_curve(ours), read_curve(os.path.join(FRIC, "ours_D2_dt0.04.csv"))
+    for q in ("p_Pa", "s_dev", "F_dev", "C", "sliding_fraction", "E_rot_J", "E_t_J", "W_friction_J"):
+        assert np.array_equal(a[q][:5], b[q][:5]), q

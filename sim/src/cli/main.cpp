@@ -421,12 +421,16 @@ struct ModeCommand {
 // Two-sphere collision against the closed form.
 struct CollideCommand {
   CLI::App* cmd = nullptr;
-  double r1 = 0.5e-3, r2 = 0.5e-3, v0 = 0.1;
+  double r1 = 0.5e-3, r2 = 0.5e-3, v0 = 0.1, angle_deg = -1;
   void add(CLI::App& app, std::vector<std::string>& overrides) {
-    cmd = app.add_subcommand("collide", "two-sphere head-on collision: contact time and restitution (JSON)");
+    cmd = app.add_subcommand("collide", "two-sphere head-on collision: contact time and restitution (JSON); "
+                                        "--angle-deg: an oblique impact (friction: --set contact.friction=MU)");
     cmd->add_option("--r1", r1, "radius of sphere 1 [m]");
     cmd->add_option("--r2", r2, "radius of sphere 2 [m]");
     cmd->add_option("--v0", v0, "approach speed [m/s]");
+    cmd->add_option("--angle-deg", angle_deg,
+                    "oblique impact: angle of the relative velocity from the line of centres [deg], in [0, 90); "
+                    "prints the normal and tangential restitution, the spins and the impulses (yade_ref/collision.py)");
     cmd->add_option("--set", overrides, "override a scene key (e.g. integration.dt_over_tc=0.0005)");
   }
   int run(std::vector<std::string> overrides) const {
@@ -441,6 +445,7 @@ struct CollideCommand {
                             std::to_string(model.radius_min) + ", " + std::to_string(model.radius_max) + "] m, "
                             "from which the time step is set: pass --set particles.radius_min_m=... and "
                             "--set particles.radius_max_m=... to cover it");
+    if (cmd->count("--angle-deg") > 0) return oblique(model);
     const dem::CollisionResult r = dem::simulate_collision(model, r1, r2, v0);
     if (r.steps_in_contact < 20 || r.max_overlap > model.max_overlap_fraction)
       throw ArgumentError("the contact lasted " + std::to_string(r.steps_in_contact) + " time steps with an overlap of " +
@@ -453,6 +458,18 @@ struct CollideCommand {
                 "\"restitution_analytic\": %.12g, \"dt_s\": %.12g, \"allow_attractive\": %s}\n",
                 r.contact_time, r.restitution, a.t_contact, a.restitution, model.dt,
                 model.contact.allow_attractive ? "true" : "false");
+    return 0;
+  }
+  // Oblique impact (dem::simulate_oblique_collision): line of centres z (0 -> 1), initial
+  // tangential direction x, spins about y; the same JSON keys as yade_ref/collision.py --angle-deg.
+  int oblique(const dem::Model& model) const {
+    if (!(angle_deg >= 0 && angle_deg < 90)) throw ArgumentError("--angle-deg must lie in [0, 90)");
+    const dem::ObliqueResult r = dem::simulate_oblique_collision(model, r1, r2, v0, angle_deg * M_PI / 180.0);
+    std::printf("{\"angle_deg\": %.12g, \"normal_restitution\": %.12g, \"tangential_restitution\": %.12g, "
+                "\"omega0_y_rad_s\": %.12g, \"omega1_y_rad_s\": %.12g, \"normal_impulse_Ns\": %.12g, "
+                "\"tangential_impulse_Ns\": %.12g, \"friction\": %.12g, \"dt_s\": %.12g}\n",
+                angle_deg, r.normal_restitution, r.tangential_restitution, r.omega[0].y, r.omega[1].y, r.normal_impulse,
+                r.tangential_impulse, model.contact.frictional() ? model.contact.friction : 0.0, model.dt);
     return 0;
   }
 };
