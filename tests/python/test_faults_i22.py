@@ -282,7 +282,8 @@ def test_all_preparations_blowing_up_is_named_with_exit_3(tmp_path):
 def test_slurm_without_a_controller_is_named(ens, tmp_path):
     env = dict(os.environ, SLURM_CONF=str(tmp_path / "no-such-slurm.conf"))
     p = ensemble(ens["scene"], tmp_path / "run", "--profile", "slurm", env=env)
-    assert p.returncode == 1 and "Slurm" in p.stderr and "without --profile slurm" in p.stderr, p.stderr
+    # The preflight (before any task): exit 2 naming SLURM_CONF and how to get a controller.
+    assert p.returncode == 2 and "SLURM_CONF" in p.stderr and "slurm-local.sh" in p.stderr, p.stderr
     assert "run the same command again" not in p.stderr
     assert not (tmp_path / "run" / "members").exists()
 
