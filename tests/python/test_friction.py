@@ -18,7 +18,7 @@ FRICTION_COLUMNS = ["sliding_fraction", "E_rot_J", "omega_mean_rad_s", "E_t_J", 
 def rough_and_smooth(tmp_path_factory):
     d = tmp_path_factory.mktemp("friction")
     rough, smooth = d / "rough", d / "smooth"
-    run_dem("run", SCENE, "--out", rough, "--quiet", *SMALL, check=True)
+    run_dem("run", SCENE, "--out", rough, "--quiet", *SMALL, "--set", "output.vtk=true", check=True)
     run_dem("run", SCENE, "--out", smooth, "--quiet", *SMALL, "--set", "contact.friction=0",
             "--set", 'contact.tangential="none"', check=True)
     return rough, smooth
@@ -79,3 +79,11 @@ def test_friction_keys_are_checked():
     assert bad.returncode == 2 and "cundall_strack" in bad.stderr
     ok = run_dem("info", SCENE, check=True)
     assert "Cundall-Strack" in ok.stdout
+
+
+def test_the_vtk_contact_network_carries_the_tangential_forces(rough_and_smooth):
+    rough, _ = rough_and_smooth
+    nets = sorted((rough / "vtk").glob("D2_phi0.720_contacts_*.vtu"))
+    assert nets, sorted(p.name for p in (rough / "vtk").iterdir())[:10]
+    head = nets[-1].read_bytes().split(b"<AppendedData")[0].decode()
+    assert 'Name="tangential_force_N"' in head and 'Name="sliding"' in head
