@@ -662,7 +662,7 @@ PYBIND11_MODULE(_core, m) {
       .def("__getitem__", [](const dem::Measurement& me, const std::string& k) {
         py::dict d = columns_dict(me);
         if (!d.contains(k)) throw py::key_error(k);
-        return d[py::str(k)];
+        return py::object(d[py::str(k)]);
       })
       .def("keys", [](const dem::Measurement& me) { return columns_dict(me).attr("keys")(); })
       .def_property_readonly("stress", [](const dem::Measurement& me) { return sym3(me.stress); },
