@@ -358,7 +358,7 @@ def test_the_gil_is_released_while_stepping(tiny):
 def test_fit_is_a_structured_result(tiny):
     e = np.linspace(0, 0.3, 60)
     y = 0.3 - 0.3 * np.exp(-20 * e)
-    assert demtk.saturating(0.0, 0.3, 20.0, 0.1) == pytest.approx(y[20], rel=1e-12)
+    assert demtk.saturating(0.0, 0.3, 20.0, e[20]) == pytest.approx(y[20], rel=1e-12)
     r = demtk.fit_saturating(e, y)
     assert r.ok and r.x_max == pytest.approx(0.3, rel=1e-6) and r.beta == pytest.approx(20, rel=1e-6)
     assert r.corr.shape == (3, 3) and isinstance(r.warnings, list)
@@ -373,7 +373,7 @@ def test_read_curve_as_pandas(tiny, tmp_path):
     scene = demtk.load_scene(tiny["scene"])
     demtk.run_mode(scene, demtk.read_checkpoint(tiny["ckpt"]).state, "D2", str(out))
     df = demtk.read_curve(out)
-    assert list(df.columns) == demtk.curve_columns()
+    assert list(df.columns) == demtk.curve_columns() + ["stage"]
     assert df["step"].dtype == np.int64 and df["stage"].iloc[0] == "D2"
     assert any(c.startswith("# physics:") for c in df.attrs["comments"])
     rec = demtk.read_curve(out, frame=False)
@@ -381,7 +381,7 @@ def test_read_curve_as_pandas(tiny, tmp_path):
     st = demtk.read_checkpoint(tiny["ckpt"]).state
     st.zero_strain()
     m = demtk.Engine(scene, st).measure(scene.velocity_gradient("D2"))
-    assert list(m.keys()) == demtk.curve_columns()[:-1]
+    assert list(m.keys()) == demtk.curve_columns()
     assert m.stress.shape == (3, 3) and m["p_Pa"] == pytest.approx(np.trace(m.stress) / 3, rel=1e-12)
     assert m["F_xy"] == m.fabric[0, 1]
 
