@@ -256,6 +256,8 @@ struct PyEngine {
   throw py::error_already_set();
 }
 
+constexpr long kSignalCheckSteps = 5000;
+
 // Steps n times with the GIL released; a callback (with the GIL) every `every` steps may stop
 // the run by returning True or calling engine.stop(). Returns the steps taken.
 long run_steps(PyEngine& pe, py::object self, long n, const dem::VelGrad& L, const py::object& callback, long every,
@@ -272,6 +274,7 @@ long run_steps(PyEngine& pe, py::object self, long n, const dem::VelGrad& L, con
     while (done < n && !pe.stop_requested) {
       long chunk = n - done;
       if (has_cb && every > 0) chunk = std::min(chunk, every - (done % every));
+      chunk = std::min(chunk, kSignalCheckSteps);   // Ctrl-C is seen between chunks
       bool call = false;
       {
         py::gil_scoped_release release;
@@ -286,7 +289,7 @@ long run_steps(PyEngine& pe, py::object self, long n, const dem::VelGrad& L, con
         } else {
           for (long k = 0; k < chunk; ++k) pe.engine->step(L);
           done += chunk;
-          call = has_cb;
+          call = has_cb && every > 0 && done % every == 0;
         }
       }
       if (call) {

@@ -408,3 +408,19 @@ def test_notebook_executes(tmp_path):
         os.environ["PYTHONPATH"] = env_path
     outputs = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
     assert "chosen rate" in outputs
+
+
+# ---- inside YADE -------------------------------------------------------------------------------
+
+@pytest.mark.skipif(not __import__("shutil").which("yade"), reason="yade is not installed")
+def test_inside_yade_a_state_from_o_bodies_runs_dem_mode_bit_for_bit(tiny, tmp_path):
+    cli = tmp_path / "cli.csv"
+    run_dem("mode", "--scene", tiny["scene"], "--packing", tiny["txt"], "--mode", "D2", "--threads", 1,
+            "--out", cli, "--quiet", check=True)
+    ours = tmp_path / "yade.csv"
+    env = dict(os.environ, PYTHONPATH=os.path.join(ROOT, "build", "python"))
+    p = subprocess.run(["yade", "-n", "-x", "-j1", os.path.join(ROOT, "yade_ref", "demtk_in_yade.py"),
+                        "--packing", str(tiny["txt"]), "--scene", str(tiny["scene"]), "--mode", "D2",
+                        "--out", str(ours), "--back"], capture_output=True, text=True, timeout=600, env=env)
+    assert p.returncode == 0 and "handed back to O.bodies" in p.stdout, p.stdout[-2000:] + p.stderr[-2000:]
+    assert ours.read_bytes() == cli.read_bytes()
