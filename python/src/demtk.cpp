@@ -261,11 +261,12 @@ constexpr long kSignalCheckSteps = 5000;
 // Steps n times with the GIL released; a callback (with the GIL) every `every` steps may stop
 // the run by returning True or calling engine.stop(). Returns the steps taken.
 long run_steps(PyEngine& pe, py::object self, long n, const dem::VelGrad& L, const py::object& callback, long every,
-               double every_strain) {
+               double every_strain, bool keep_last_good) {
   pe.ensure();
   pe.stop_requested = false;
   pe.last_rate = L;
-  dem::State last_good = *pe.state;
+  dem::State last_good;
+  if (keep_last_good) last_good = *pe.state;
   const bool has_cb = !callback.is_none();
   if (has_cb && every <= 0 && every_strain <= 0) throw py::value_error("callback: give every > 0 steps or every_strain > 0");
   long done = 0;
@@ -297,11 +298,11 @@ long run_steps(PyEngine& pe, py::object self, long n, const dem::VelGrad& L, con
         py::object r = callback(self);
         if (!r.is_none() && r.cast<bool>()) pe.stop_requested = true;
         pe.ensure();   // the callback may have set positions
-        last_good = *pe.state;
+        if (keep_last_good) last_good = *pe.state;
       } else if (PyErr_CheckSignals() != 0) throw py::error_already_set();
     }
   } catch (const dem::BlowUp& e) {
-    raise_blow_up(e, &last_good);
+    raise_blow_up(e, keep_last_good ? &last_good : nullptr);
   }
   return done;
 }
@@ -689,16 +690,17 @@ PYBIND11_MODULE(_core, m) {
            py::arg("scene"), py::arg("state"), py::arg("forces_are_current") = false,
            "Binds to the state: a valid neighbour-list reference (checkpoint) is restored, else a fresh list is built "
            "(rows wrapped and re-sorted). Forces are evaluated unless forces_are_current.")
-      .def("step", [](py::object self, long n, py::object L, py::object callback, long every, double every_strain) {
+      .def("step", [](py::object self, long n, py::object L, py::object callback, long every, double every_strain,
+                      bool keep_last_good) {
             PyEngine& pe = self.cast<PyEngine&>();
-            return run_steps(pe, self, n, to_velgrad(L), callback, every, every_strain);
+            return run_steps(pe, self, n, to_velgrad(L), callback, every, every_strain, keep_last_good);
           }, py::arg("n") = 1, py::arg("velocity_gradient") = py::none(), py::arg("callback") = py::none(),
-          py::arg("every") = 0, py::arg("every_strain") = 0.0,
+          py::arg("every") = 0, py::arg("every_strain") = 0.0, py::arg("keep_last_good") = true,
           "Runs n steps of dt with the velocity gradient [1/s] (3 numbers: the diagonal, or a 3x3 upper-triangular "
           "matrix; None: a fixed box), the GIL released. callback(engine) runs every `every` steps (or whenever "
           "eps_d of the box changed by every_strain); returning True or calling engine.stop() ends the run. "
           "Returns the steps taken. A blow-up raises demtk.BlowUp with .last_good_state (the state at the "
-          "last callback, or at the call).")
+          "last callback, or at the call; keep_last_good=False skips that copy, for loops of short calls).")
       .def("stop", [](PyEngine& pe) { pe.stop_requested = true; }, "ends the running step() after the current callback")
       .def("measure", [](PyEngine& pe, py::object L) {
             pe.ensure();
