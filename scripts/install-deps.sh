@@ -24,6 +24,7 @@ pkgs=(build-essential cmake pkg-config
       nlohmann-json3-dev
       python3 python3-pytest python3-numpy python3-matplotlib
       python3-vtk9 xvfb xauth
+      python3-dev pybind11-dev python3-pandas python3-nbformat python3-nbclient python3-ipykernel
       snakemake slurm-wlm munge)
 [ "$want_yade" = 1 ] && pkgs+=(yade)
 [ "$want_bench" = 1 ] && pkgs+=(lammps liggghts openmpi-bin time)

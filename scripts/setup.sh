@@ -7,3 +7,7 @@ bash scripts/install-deps.sh "$@"
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j"$(nproc)"
 echo "setup.sh: built build/dem ($(build/dem --help | head -1))" >&2
+if [ -d build/python/demtk ]; then
+  PYTHONPATH="$PWD/build/python" /usr/bin/python3 -c "import demtk" &&
+    echo "setup.sh: built the Python module demtk: PYTHONPATH=$PWD/build/python /usr/bin/python3 -c 'import demtk' (docs/python.md)" >&2
+fi

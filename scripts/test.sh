@@ -5,6 +5,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 cmake --build build -j"$(nproc)" >/dev/null
 (cd build && ctest --output-on-failure)
+# build/python: the Python module demtk (docs/python.md), for the tests and the notebook's kernel.
+export PYTHONPATH="$PWD/build/python${PYTHONPATH:+:$PYTHONPATH}"
 # Passive OpenMP waiting: the pipeline tests start multi-threaded runs, and spinning threads on a
 # machine busy with other jobs run up to 35x slower (docs/benchmarks.md).
 OMP_WAIT_POLICY=passive /usr/bin/python3 -m pytest -q tests/python "$@"

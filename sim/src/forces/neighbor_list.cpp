@@ -169,7 +169,7 @@ template <class T>
 void permute(std::vector<T>& v, const std::vector<std::int32_t>& order) {
   std::vector<T> out(v.size());
   for (std::size_t a = 0; a < order.size(); ++a) out[a] = v[order[a]];
-  v.swap(out);
+  std::copy(out.begin(), out.end(), v.begin());   // in place: the buffer stays (demtk's numpy views alias it)
 }
 
 void sort_by_cell(State& s, double cutoff) {
