@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "dem/contact/contact_law.hpp"
+#include "dem/contact/contact_forces.hpp"
 #include "dem/core/errors.hpp"
 #include "dem/core/model.hpp"
 #include "dem/core/state.hpp"
@@ -311,18 +311,15 @@ py::dict contacts(PyEngine& pe) {
   pe.ensure();
   const dem::State& s = *pe.state;
   const auto& list = pe.engine->neighbor_list();
-  const dem::LinearSpringDashpot law(pe.scene.model->contact);
   const dem::VelGrad& L = pe.last_rate;
   std::vector<int> ii, jj;
   std::vector<dem::Vec3> branch, normal, force;
   std::vector<double> overlap, fn;
-  dem::for_each_contact(s, list, [&](int i, int j, const dem::Vec3& d, double r, double delta) {
-    const dem::Vec3 n = d * (1.0 / r);
-    const dem::Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + L.apply(d);
-    const double f = law(delta, -dot(v_rel, n));
-    ii.push_back(i); jj.push_back(j);
-    branch.push_back(d); normal.push_back(n); force.push_back(n * f);
-    overlap.push_back(delta); fn.push_back(f);
+  // The model's forces (normal + tangential with friction) at the state's velocities and springs.
+  dem::contact::for_each_contact_force(*pe.scene.model, s, list, L, [&](const dem::contact::ContactForce& c) {
+    ii.push_back(c.i); jj.push_back(c.j);
+    branch.push_back(c.d); normal.push_back(c.n); force.push_back(c.n * c.fn + c.ft);
+    overlap.push_back(c.delta); fn.push_back(c.fn);
   });
   const py::ssize_t c = static_cast<py::ssize_t>(ii.size());
   auto ids = [&](const std::vector<int>& idx) {
