@@ -592,6 +592,11 @@ PYBIND11_MODULE(_core, m) {
                              "(N, 3) fluctuation velocities (relative to the affine flow) [m/s], writable view")
       .def_property_readonly("forces", [](py::object self) { return view(self.cast<PyState&>().s->force, self, false); },
                              "(N, 3) total force of the last evaluation [N], read-only view")
+      .def_property_readonly("angular_velocities", [](py::object self) { return view(self.cast<PyState&>().s->angular_velocity, self, true); },
+                             "(N, 3) [rad/s], writable view; (0, 3) unless the contact model rotates (friction), "
+                             "sized when an Engine is built on the state: take the view after that")
+      .def_property_readonly("torques", [](py::object self) { return view(self.cast<PyState&>().s->torque, self, false); },
+                             "(N, 3) torque of the last evaluation [N m], read-only view; (0, 3) without rotations")
       .def_property_readonly("radii", [](py::object self) { return view(self.cast<PyState&>().s->radius, self, false); },
                              "(N) [m], read-only view")
       .def_property_readonly("masses", [](py::object self) { return view(self.cast<PyState&>().s->mass, self, false); },

@@ -87,3 +87,20 @@ def test_the_vtk_contact_network_carries_the_tangential_forces(rough_and_smooth)
     assert nets, sorted(p.name for p in (rough / "vtk").iterdir())[:10]
     head = nets[-1].read_bytes().split(b"<AppendedData")[0].decode()
     assert 'Name="tangential_force_N"' in head and 'Name="sliding"' in head
+
+
+def test_python_views_of_the_spins_and_the_frictional_contact_forces(rough_and_smooth):
+    import sys
+    sys.path.insert(0, os.path.join(ROOT, "build", "python"))
+    import demtk
+    rough, _ = rough_and_smooth
+    scene = demtk.load_scene(str(rough / "scene.toml"), set={"integration.threads": 1})
+    state = demtk.read_checkpoint(str(rough / "checkpoints" / "unloading_phi0.720.ckpt")).state
+    eng = demtk.Engine(scene, state)
+    w = state.angular_velocities
+    assert w.shape == (state.count, 3) and np.isfinite(w).all() and np.abs(w).max() > 0
+    eng.step(10)
+    assert np.shares_memory(w, state.angular_velocities)
+    c = eng.contacts()
+    tangential = c["force"] - c["normal"] * c["force_normal"][:, None]
+    assert np.abs(tangential).max() > 1e-3 * np.abs(c["force_normal"]).max()   # friction carries load
