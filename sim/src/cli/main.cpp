@@ -632,7 +632,7 @@ struct Commands {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"dem: DEM runner, fitter and YADE cross-check for frictionless polydisperse spheres"};
+  CLI::App app{"dem: DEM runner, fitter and YADE cross-check for polydisperse spheres (frictionless, frictional, adhesive)"};
   app.require_subcommand(1);
   std::vector<std::string> overrides;
   Commands commands;
