@@ -61,6 +61,34 @@ neigh_modify delay 0 every 1 check yes
 """ + _motion(dt, rate, gamma_b, steps)
 
 
+def lammps_friction_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4, mu=0.5, kt_ratio=2 / 7):
+    # As lammps_deck, with Cundall-Strack friction as ours' contact.friction = mu:
+    # `tangential linear_history k_t x_gamma_t mu_s` takes k_t itself [N/m] (ours: k_t =
+    # contact.tangential_stiffness_ratio x k), x_gamma_t the tangential damping as a multiple of
+    # the normal eta_n (0: no tangential dashpot, ours' default tangential_damping_kg_s = 0) and
+    # mu_s the Coulomb coefficient, the critical force mu_s |F_n| (F_n: spring + dashpot). The
+    # spring xi is rotated into the tangent plane keeping its length and reset to the cone on
+    # slip, as ours (Luding 2008, eqs. 17-20). atom_style sphere gives I = 2/5 m r^2; fix
+    # nve/sphere integrates the rotations. The thermo line every 1000 steps (total kinetic and
+    # rotational energy [J], the virial pressure and its diagonal [Pa]) is the parity check.
+    return f"""units si
+atom_style sphere
+atom_modify map array
+boundary p p p
+newton off
+comm_modify vel yes
+read_data {data}
+pair_style granular
+pair_coeff * * hooke {k} {gamma} tangential linear_history {kt_ratio * k!r} 0 {mu} damping velocity
+neighbor {skin} bin
+neigh_modify delay 0 every 1 check yes
+compute erot all erotate/sphere
+compute prs all pressure NULL virial
+thermo_style custom step ke c_erot c_prs c_prs[1] c_prs[2] c_prs[3]
+thermo_modify format float %.10g
+""" + _motion(dt, rate, gamma_b, steps)
+
+
 def liggghts_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4):
     # gran model hooke/stiffness: kn, gamman given directly; absolute_damping on: gamman is
     # the damping coefficient itself (not times the effective mass); limitForce on: no

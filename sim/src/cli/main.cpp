@@ -326,6 +326,12 @@ struct BenchCommand {
     std::printf("wall %.3f s, %.3f M particle-steps/s, %.2f listed pairs per particle, %ld list rebuilds\n",
                 wall, ps / 1e6, static_cast<double>(engine.neighbor_list().pair_count()) / state.count(),
                 engine.neighbor_list().builds - builds0);
+    // The state after warm-up + timed steps, for physics parity with the other codes' decks
+    // (bench/run_benchmarks.py --parity): contact + kinetic stress, energies, sliding.
+    std::printf("after %ld steps: p_Pa=%.8g sxx_Pa=%.8g syy_Pa=%.8g szz_Pa=%.8g E_kin_J=%.8g E_rot_J=%.8g "
+                "sliding_fraction=%.6g contacts=%ld\n",
+                steps + 200, m.p, m.stress.xx, m.stress.yy, m.stress.zz, m.E_kin, m.E_rot, m.sliding_fraction,
+                m.contacts);
     std::printf("particle_steps_per_s=%.6g\n", ps);
     return 0;
   }
