@@ -1,0 +1,129 @@
+"""A small frictional study end to end: two ensembles (mu = 0 and mu = 0.5) of the same tiny scene
+through `dem ensemble` (prep, D2 and isobaric D2 per packing, the reduce), then
+demkit.friction_study's per-packing quantities against what friction must do: jam lower, raise
+the stress ratio, slide some contacts, and leave mu = 0 on the frictionless code path."""
+import csv
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import ROOT, run_dem
+from demkit.curves import read_curve
+from demkit import friction_study
+
+TINY = """
+[particles]
+count = 250
+seed = 11
+[contact]
+friction = 0.5
+[protocol]
+target_phi = 0.55
+compress_rate_tc = 2e-4
+cycle_rate_tc = 2e-4
+cycle_phi_max = 0.80
+checkpoints_unloading = [0.72]
+modes = ["D2", "isobaric_D2"]
+deviatoric_rate_tc = 6e-5
+eps_d_max = 0.08
+[paths]
+isobaric_D2 = [ { rate = "D2", pressure_p0 = 1.0, until = { eps_d = 0.08 } } ]
+[integration]
+dt_over_tc = 0.2
+[output]
+sample_strain = 0.004
+vtk = false
+[ensemble]
+packings = 3
+"""
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fstudy")
+    scene = d / "tiny.toml"
+    scene.write_text(TINY)
+    folders = {}
+    for mu in ("0", "0.5"):
+        out = d / f"mu{mu}"
+        run_dem("ensemble", scene, "--out", out, "--cores", "2", "--set", f"contact.friction={mu}",
+                check=True, timeout=900)
+        folders[mu] = out
+    p = subprocess.run(["/usr/bin/python3", "-m",
+                        "demkit.friction_study", "--out", str(d / "study"), str(folders["0"]), str(folders["0.5"])],
+                       capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert p.returncode == 0, p.stderr
+    with open(d / "study" / "summary.csv") as fh:
+        rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+    return {"dir": d, "folders": folders, "rows": rows}
+
+
+def value(rows, mu, mode, quantity, nu="0.720"):
+    for r in rows:
+        if float(r["mu"]) == mu and r["mode"] == mode and r["quantity"] == quantity and r["nu"] == (
+                "" if mode == "isotropic" else nu):
+            return float(r["mean"]), float(r["se"]), int(r["packings"])
+    raise AssertionError(f"no row mu={mu} {mode} {quantity}")
+
+
+def test_mu_zero_runs_the_frictionless_code_path(study):
+    """--set contact.friction=0 resolves to the frictionless scene: no friction columns, no keys."""
+    smooth = study["folders"]["0"]
+    text = (smooth / "scene.toml").read_text()
+    assert "tangential" not in text and "friction" not in text
+    c = read_curve(str(smooth / "members" / "m000" / "deviatoric" / "D2_phi0.720.csv"))
+    assert "sliding_fraction" not in c
+    rough = read_curve(str(study["folders"]["0.5"] / "members" / "m000" / "deviatoric" / "D2_phi0.720.csv"))
+    assert rough["sliding_fraction"].max() > 0   # some contacts reach the Coulomb limit under shear
+    assert np.all(rough["sliding_fraction"] <= 1)
+
+
+def test_friction_jams_lower_and_raises_the_stress_ratio(study):
+    rows = study["rows"]
+    nu0, se0, k0 = value(rows, 0.0, "isotropic", "nu_J")
+    nu5, se5, k5 = value(rows, 0.5, "isotropic", "nu_J")
+    assert k0 == k5 == 3
+    assert 0.6 < nu0 < 0.70                      # frictionless polydisperse spheres jam near 0.65 (docs/friction.md)
+    assert nu5 < nu0 - 0.02, (nu0, nu5)         # frictional ones markedly lower
+    s0 = value(rows, 0.0, "D2", "s_peak")[0]
+    s5 = value(rows, 0.5, "D2", "s_peak")[0]
+    assert s5 > 1.5 * s0, (s0, s5)               # friction at least 1.5x the frictionless stress ratio
+    c0 = value(rows, 0.0, "isotropic", "C_star_nr")[0]
+    c5 = value(rows, 0.5, "isotropic", "C_star_nr")[0]
+    assert c5 < c0                               # fewer contacts needed at jamming with friction
+
+
+def test_the_isobaric_path_holds_the_pressure_and_reports_dilatancy(study):
+    for mu in ("0", "0.5"):
+        c = read_curve(str(study["folders"][mu] / "members" / "m000" / "deviatoric" / "isobaric_D2_phi0.720.csv"))
+        p = c["p_Pa"]
+        assert np.max(np.abs(p[1:] / p[0] - 1)) < 0.05   # the servo holds p within 5 %
+    d, se, k = value(study["rows"], 0.5, "isobaric_D2", "dilatancy_max")
+    assert np.isfinite(d) and np.isfinite(se) and k == 3
+
+
+def test_the_reduce_averages_the_frictional_columns(study):
+    ens = read_curve(str(study["folders"]["0.5"] / "ensemble" / "D2_phi0.720.csv"))
+    assert "sliding_fraction_mean" in ens and "W_friction_J_mean" in ens
+    assert np.all(np.diff(ens["W_friction_J_mean"]) >= -1e-12 * max(1.0, ens["W_friction_J_mean"].max()))
+
+
+def test_the_study_table_rounds_to_errors(study):
+    md = (study["dir"] / "study" / "summary.md").read_text()
+    assert "±" in md and "nu_J" in md
+    assert os.path.isfile(study["dir"] / "study" / "jamming_vs_mu.png")
+
+
+def test_round_to_error_rule():
+    assert friction_study.round_to_error(0.196534, 0.00231554) == "0.197 ± 0.002"
+    assert friction_study.round_to_error(0.196534, 0.00131554) == "0.1965 ± 0.0013"
+    assert friction_study.round_to_error(12.34, 3.2) == "12 ± 3"
+
+
+def test_folders_are_checked(tmp_path):
+    p = subprocess.run(["/usr/bin/python3", "-m", "demkit.friction_study", "--out", str(tmp_path / "o"),
+                        str(tmp_path)], capture_output=True, text=True, cwd=ROOT)
+    assert p.returncode != 0 and "not an ensemble folder" in p.stderr
