@@ -186,6 +186,36 @@ def write_tables(rows, out):
     os.replace(tmp, os.path.join(out, "summary.md"))
 
 
+HEADLINE = [("isotropic", "nu_J", r"ν_J"), ("D2", "s_peak", "s_peak D2"), ("D2", "s_cs", "s_cs D2"),
+            ("D3", "s_cs", "s_cs D3"), ("D2", "F_cs", "F_cs D2"), ("isobaric_D2", "s_cs", "s_cs isobaric"),
+            ("isobaric_D2", "dilatancy_max", "max dε_vol/dε_d"), ("isobaric_D2", "nu_cs", "ν_cs (isobaric)")]
+
+
+def write_headline(rows, out):
+    """headline.md: one table per volume fraction, one row per mu, the quantities of HEADLINE
+    (mean ± SE over the packings, rounded to the error)."""
+    nus = sorted({r["nu"] for r in rows if r["nu"]})
+    mus = sorted({r["mu"] for r in rows})
+    find = {(r["mu"], r["mode"], r["nu"], r["quantity"]): r for r in rows}
+    lines = []
+    for nu in nus:
+        lines += [f"**ν = {nu}** (K = packings per cell)", "",
+                  "| μ | K | " + " | ".join(h[2] for h in HEADLINE) + " |", "|---" * (len(HEADLINE) + 2) + "|"]
+        for mu in mus:
+            cells, ks = [], set()
+            for mode, q, _ in HEADLINE:
+                r = find.get((mu, mode, "" if mode == "isotropic" else nu, q))
+                cells.append(round_to_error(r["mean"], r["se"]) if r else "–")
+                if r and mode != "isotropic":
+                    ks.add(r["packings"])
+            lines.append(f"| {mu:g} | {','.join(map(str, sorted(ks)))} | " + " | ".join(cells) + " |")
+        lines.append("")
+    tmp = os.path.join(out, "headline.md.part")
+    with open(tmp, "w") as fh:
+        fh.write("\n".join(lines))
+    os.replace(tmp, os.path.join(out, "headline.md"))
+
+
 def series(rows, mode, nu, quantity):
     sel = sorted((r for r in rows if r["mode"] == mode and r["nu"] == nu and r["quantity"] == quantity),
                  key=lambda r: r["mu"])
@@ -307,6 +337,7 @@ def main(argv=None):
     if len(set(mus)) != len(mus):
         sys.exit(f"friction_study: two folders have the same friction coefficient ({sorted(mus)}): give one per mu")
     write_tables(rows, a.out)
+    write_headline(rows, a.out)
     tmp = os.path.join(a.out, "summary.json.part")
     with open(tmp, "w") as fh:
         json.dump({"folders": {f"{friction_of(f):g}": os.path.abspath(f) for f in a.folders},

@@ -101,10 +101,12 @@ def main(argv=None):
         c_all, se_all = extrapolate(pts, "C")
         summary.append({"run": run, "mu": pts[0]["mu"], "C_star_nr": c_nr, "se_C_star_nr": se_nr,
                         "C_star": c_all, "se_C_star": se_all, "points": pts})
-    stars = np.array([s["C_star_nr"] for s in summary if math.isfinite(s["C_star_nr"])])
-    pooled = {"mean": float(stars.mean()) if len(stars) else math.nan,
-              "se_between_packings": float(stars.std(ddof=1) / math.sqrt(len(stars))) if len(stars) > 1 else math.nan,
-              "packings": int(len(stars))}
+    pooled = {}
+    for mu in sorted({s["mu"] for s in summary}):
+        stars = np.array([s["C_star_nr"] for s in summary if s["mu"] == mu and math.isfinite(s["C_star_nr"])])
+        pooled[f"{mu:g}"] = {"mean": float(stars.mean()) if len(stars) else math.nan,
+                             "se_between_packings": float(stars.std(ddof=1) / math.sqrt(len(stars)))
+                             if len(stars) > 1 else math.nan, "packings": int(len(stars))}
     tmp = os.path.join(a.out, "isostatic.json.part")
     with open(tmp, "w") as fh:
         json.dump({"runs": summary, "C_star_nr": pooled, "p_star_max": P_MAX},
@@ -119,13 +121,15 @@ def main(argv=None):
     for s in summary:
         lines.append(f"| {os.path.basename(s['run'])} | {s['mu']:g} | {s['C_star_nr']:.3f} ± {s['se_C_star_nr']:.3f} | "
                      f"{s['C_star']:.3f} ± {s['se_C_star']:.3f} |")
-    lines.append(f"\nPooled C*_nr over {pooled['packings']} packings: {pooled['mean']:.3f} ± "
-                 f"{pooled['se_between_packings']:.3f} (SE between packings)")
+    lines += ["", "| mu | packings | C*_nr (mean ± SE between packings) | isostatic limit |", "|---|---|---|---|"]
+    for mu, v in pooled.items():
+        lines.append(f"| {mu} | {v['packings']} | {v['mean']:.3f} ± {v['se_between_packings']:.3f} | "
+                     f"{'6 (2d)' if float(mu) == 0 else 'between 6 and 4 (d + 1, mu -> inf)'} |")
     tmp = os.path.join(a.out, "isostatic.md.part")
     with open(tmp, "w") as fh:
         fh.write("\n".join(lines) + "\n")
     os.replace(tmp, os.path.join(a.out, "isostatic.md"))
-    print("\n".join(lines[-3:]), file=sys.stderr)
+    print("\n".join(lines[-2 - len(pooled):]), file=sys.stderr)
 
 
 if __name__ == "__main__":
