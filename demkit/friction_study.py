@@ -322,12 +322,53 @@ def plot_curves(folders, out, nu="0.740", quantity="s_dev"):
     figures.save(fig, os.path.join(out, f"{quantity}_curves_phi{nu}"), folders[0])
 
 
+KEEP = ["step", "eps_d", "eps_v", "nu", "p_star", "s_dev", "F_dev", "C", "C_nonrattler", "rattler_fraction",
+        "E_kin_J", "E_pot_J", "sliding_fraction", "n_packings"]
+
+
+def trim_csv(src, dst):
+    """src -> dst with the comment lines and only the KEEP columns (and their _mean/_sd/_se/_lo95/
+    _hi95 in ensemble files): what this study and `dem model` read, a fraction of the bytes."""
+    with open(src, newline="") as fh:
+        lines = fh.read().splitlines()
+    comments = [ln for ln in lines if ln.startswith("#")]
+    rows = list(csv.reader(ln for ln in lines if ln and not ln.startswith("#")))
+    keep = [k for k, name in enumerate(rows[0]) if name in KEEP or name.rsplit("_", 1)[0] in KEEP]
+    os.makedirs(os.path.dirname(dst), exist_ok=True)
+    with open(dst + ".part", "w", newline="") as fh:
+        fh.write("\n".join(comments + [f"# trimmed copy of {os.path.relpath(src)} (columns {', '.join(rows[0][k] for k in keep)})"]) + "\n")
+        csv.writer(fh, lineterminator="\n").writerows([[r[k] for k in keep] for r in rows])
+    os.replace(dst + ".part", dst)
+
+
+def store(folder, dst):
+    """A trimmed copy of one ensemble folder for data/: scene, ensemble means, fit tables, and per
+    member the isotropic unloading branch and the mode curves (the checkpoints and plots stay out)."""
+    import shutil
+    os.makedirs(dst, exist_ok=True)
+    shutil.copy(os.path.join(folder, "scene.toml"), dst)
+    for sub in ("fit",):
+        if os.path.isdir(os.path.join(folder, sub)):
+            shutil.copytree(os.path.join(folder, sub), os.path.join(dst, sub), dirs_exist_ok=True)
+    for f in glob.glob(os.path.join(folder, "ensemble", "*")):
+        name = os.path.basename(f)
+        if name.endswith(".csv") and not name.startswith("members"):
+            trim_csv(f, os.path.join(dst, "ensemble", name))
+        elif name.startswith("members"):
+            shutil.copy(f, os.path.join(dst, "ensemble", name))
+    for m in glob.glob(os.path.join(folder, "members", "m*")):
+        b = os.path.basename(m)
+        for f in glob.glob(os.path.join(m, "prep", "cycle_unloading.csv")) + glob.glob(os.path.join(m, "deviatoric", "*.csv")):
+            trim_csv(f, os.path.join(dst, "members", b, os.path.basename(os.path.dirname(f)), os.path.basename(f)))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("folders", nargs="+", help="ensemble folders (dem ensemble --out), one per friction coefficient")
     ap.add_argument("--out", required=True, help="folder for summary.{csv,md,json} and the figures")
     ap.add_argument("--no-plots", action="store_true")
+    ap.add_argument("--store", metavar="DIR", help="also copy each folder, trimmed, to DIR/mu_MU (for data/)")
     a = ap.parse_args(argv)
     for f in a.folders:
         if not os.path.isfile(os.path.join(f, "scene.toml")):
@@ -338,6 +379,9 @@ def main(argv=None):
         sys.exit(f"friction_study: two folders have the same friction coefficient ({sorted(mus)}): give one per mu")
     write_tables(rows, a.out)
     write_headline(rows, a.out)
+    if a.store:
+        for f in a.folders:
+            store(f, os.path.join(a.store, f"mu_{friction_of(f):g}"))
     tmp = os.path.join(a.out, "summary.json.part")
     with open(tmp, "w") as fh:
         json.dump({"folders": {f"{friction_of(f):g}": os.path.abspath(f) for f in a.folders},
