@@ -100,21 +100,25 @@ TEST(ModelSelection, FewerThanThreePackingsKeepTheSimpleLawAndSaySo) {
 TEST(ModelSelection, ASaturatingTruthKeepsTheSimpleLawAtAboutTheNominalRate) {
   demfit::PeakSelectionSetup s;
   s.truth = {0.0, 0.17, 60.0, 0.0, 0.2};   // the saturating law (A = 0), D2-like s_dev of frictionless spheres
-  s.trials = trials(120);
+  s.trials = trials(80);
+  s.points = 100;
   s.seed = 21;
   for (int k : {4, 8}) {
     s.packings = k;
     const auto c = demfit::peak_selection_experiment(s);
     std::printf("saturating truth, K = %d: peak law chosen in %.3f of %d trials (nominal %.2f); x_max coverage %.3f\n", k,
                 c.chose_peak, s.trials, s.alpha, c.sat_xmax_coverage);
-    // Nominal 0.01; with 120 trials 0.05 is far above what a calibrated test gives (binomial p < 0.002).
-    EXPECT_LE(c.chose_peak, 0.05) << "K = " << k;
+    // Nominal 0.01: 4 of 80 or more happens to a calibrated test with probability 0.001.
+    EXPECT_LE(c.chose_peak, 0.04) << "K = " << k;
+    // The saturating law's own intervals are untouched by the second model.
+    EXPECT_GE(c.sat_xmax_coverage, 0.85) << "K = " << k;
   }
 }
 
 TEST(ModelSelection, APeakedTruthPicksThePeakLawAndItsIntervalsCoverTheTruth) {
   demfit::PeakSelectionSetup s;   // peak 0.55 at eps_d = 0.04, softening to 0.40 (frictional-like s_dev)
-  s.trials = trials(120);
+  s.trials = trials(80);
+  s.points = 100;
   s.seed = 5;
   for (int k : {4, 8}) {
     s.packings = k;
@@ -122,11 +126,12 @@ TEST(ModelSelection, APeakedTruthPicksThePeakLawAndItsIntervalsCoverTheTruth) {
     std::printf("peaked truth, K = %d: peak law chosen in %.3f of %d trials; coverage x_cs %.3f, x_peak %.3f, eps_peak "
                 "%.3f; saturating x_max vs the true x_cs %.3f\n",
                 k, c.chose_peak, s.trials, c.xcs_coverage, c.xpeak_coverage, c.epspeak_coverage, c.sat_xmax_coverage);
-    EXPECT_GE(c.chose_peak, 0.9) << "K = " << k;
-    // Nominal 0.95; 120 trials give a binomial SE of 0.02.
+    // Power: every K = 8 ensemble in the measurement (docs/model_selection.md); K = 4 pays t_3.
+    EXPECT_GE(c.chose_peak, k == 8 ? 0.9 : 0.3) << "K = " << k;
+    // Nominal 0.95; 80 trials give a binomial SE of 0.024.
     for (double cov : {c.xcs_coverage, c.xpeak_coverage, c.epspeak_coverage}) {
-      EXPECT_GE(cov, 0.88) << "K = " << k;
-      EXPECT_LE(cov, 0.995) << "K = " << k;
+      EXPECT_GE(cov, 0.87) << "K = " << k;
+      EXPECT_LE(cov, 1.0) << "K = " << k;
     }
     // What the second model fixes: the saturating law's plateau is not the critical state.
     EXPECT_LT(c.sat_xmax_coverage, 0.5) << "K = " << k;
