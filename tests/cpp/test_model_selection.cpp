@@ -54,7 +54,7 @@ TEST(PeakLaw, PeakStrainValueAndSlopeMatchANumericalSearch) {
     const double e = 0.4 * i / 400000.0, v = demfit::peak_law(p, e);
     if (v > best) { best = v; at = e; }
   }
-  EXPECT_NEAR(s.x_peak, best, 1e-12);
+  EXPECT_NEAR(s.x_peak, best, 1e-10);   // the grid's maximum is below the true one by O(step^2)
   EXPECT_NEAR(s.eps_peak, at, 2e-6);
   const double h = 1e-7;
   EXPECT_NEAR(s.initial_slope, (demfit::peak_law(p, h) - demfit::peak_law(p, 0)) / h, 1e-4 * std::fabs(s.initial_slope));
@@ -92,7 +92,7 @@ TEST(ModelSelection, FewerThanThreePackingsKeepTheSimpleLawAndSaySo) {
     m[0].push_back(demfit::peak_law({0.0, 0.4, 60.0, 0.25, 0.15}, e.back()));
     m[1].push_back(m[0].back() + 0.001 * std::sin(i));
   }
-  const auto c = demfit::choose_model(demfit::fit_peak_ensemble(e, m));
+  const auto c = demfit::choose_model(e, m, demfit::fit_ensemble(e, m), demfit::fit_peak_ensemble(e, m));
   EXPECT_EQ(c.model, "saturating");
   EXPECT_NE(c.reason.find("fewer than 3 packings"), std::string::npos);
 }
@@ -100,16 +100,16 @@ TEST(ModelSelection, FewerThanThreePackingsKeepTheSimpleLawAndSaySo) {
 TEST(ModelSelection, ASaturatingTruthKeepsTheSimpleLawAtAboutTheNominalRate) {
   demfit::PeakSelectionSetup s;
   s.truth = {0.0, 0.17, 60.0, 0.0, 0.2};   // the saturating law (A = 0), D2-like s_dev of frictionless spheres
-  s.trials = trials(80);
+  s.trials = trials(60);
   s.points = 100;
   s.seed = 21;
-  for (int k : {4, 8}) {
+  for (int k : {8}) {
     s.packings = k;
     const auto c = demfit::peak_selection_experiment(s);
     std::printf("saturating truth, K = %d: peak law chosen in %.3f of %d trials (nominal %.2f); x_max coverage %.3f\n", k,
                 c.chose_peak, s.trials, s.alpha, c.sat_xmax_coverage);
-    // Nominal 0.01: 4 of 80 or more happens to a calibrated test with probability 0.001.
-    EXPECT_LE(c.chose_peak, 0.04) << "K = " << k;
+    // Nominal 0.01: 4 of 60 or more happens to a calibrated test with probability 0.003.
+    EXPECT_LE(c.chose_peak, 0.05) << "K = " << k;
     // The saturating law's own intervals are untouched by the second model.
     EXPECT_GE(c.sat_xmax_coverage, 0.85) << "K = " << k;
   }
@@ -117,20 +117,19 @@ TEST(ModelSelection, ASaturatingTruthKeepsTheSimpleLawAtAboutTheNominalRate) {
 
 TEST(ModelSelection, APeakedTruthPicksThePeakLawAndItsIntervalsCoverTheTruth) {
   demfit::PeakSelectionSetup s;   // peak 0.55 at eps_d = 0.04, softening to 0.40 (frictional-like s_dev)
-  s.trials = trials(80);
-  s.points = 100;
+  s.trials = trials(60);   // 200 strains to eps_d = 0.4: the peak at 0.04 is sampled by 20 points
   s.seed = 5;
-  for (int k : {4, 8}) {
+  for (int k : {8}) {
     s.packings = k;
     const auto c = demfit::peak_selection_experiment(s);
     std::printf("peaked truth, K = %d: peak law chosen in %.3f of %d trials; coverage x_cs %.3f, x_peak %.3f, eps_peak "
                 "%.3f; saturating x_max vs the true x_cs %.3f\n",
                 k, c.chose_peak, s.trials, c.xcs_coverage, c.xpeak_coverage, c.epspeak_coverage, c.sat_xmax_coverage);
-    // Power: every K = 8 ensemble in the measurement (docs/model_selection.md); K = 4 pays t_3.
-    EXPECT_GE(c.chose_peak, k == 8 ? 0.9 : 0.3) << "K = " << k;
-    // Nominal 0.95; 80 trials give a binomial SE of 0.024.
+    // Power: 0.995 in the 200-trial measurement (docs/model_selection.md; K = 4: 0.5, not tested).
+    EXPECT_GE(c.chose_peak, 0.9) << "K = " << k;
+    // Nominal 0.95; 60 trials give a binomial SE of 0.028.
     for (double cov : {c.xcs_coverage, c.xpeak_coverage, c.epspeak_coverage}) {
-      EXPECT_GE(cov, 0.87) << "K = " << k;
+      EXPECT_GE(cov, 0.85) << "K = " << k;
       EXPECT_LE(cov, 1.0) << "K = " << k;
     }
     // What the second model fixes: the saturating law's plateau is not the critical state.
