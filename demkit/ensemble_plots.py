@@ -77,8 +77,9 @@ def peak_law(x0, x_cs, beta, A, gamma, e):
 def plot_peak_law(ax, e, row):
     """The chosen peak law of a fit-table row, its peak and critical state."""
     p = [float(row[n]) for n in ("pk_x0", "pk_x_cs", "pk_beta", "pk_A", "pk_gamma")]
-    label = (f"peak law (chosen, p = {float(row['selection_p']):.1g}): $x_\\mathrm{{cs}}$ = "
-             f"{paren(p[1], float(row['se_pk_x_cs']))}")
+    cs = (f"$x_\\mathrm{{cs}}$ = {paren(p[1], float(row['se_pk_x_cs']))}" if row.get("x_crit", "nan") != "nan"
+          else "critical state beyond the data")
+    label = f"peak law ({row['model']}, chosen, p = {float(row['selection_p']):.1g}): {cs}"
     if row.get("x_peak", "nan") != "nan":
         label += (f", peak {paren(float(row['x_peak']), float(row['se_x_peak']))} at "
                   f"{paren(float(row['eps_peak']), float(row['se_eps_peak']))}")
@@ -105,7 +106,7 @@ def plot_fit_cells(run, outdir, curves, rows):
                 ax.plot(e, law(*p, e), "r--", lw=1.2,
                         label=f"fit: $x_\\mathrm{{max}}$ = {paren(p[1], float(r[0]['se_x_max']))}, "
                               f"$\\beta$ = {paren(p[2], float(r[0]['se_beta']))} (jackknife SE)")
-            if r and r[0].get("model") == "peak":
+            if r and r[0].get("model") in ("peak", "two-rate"):
                 plot_peak_law(ax, e, r[0])
             ax.set_xlabel(r"$\varepsilon_d$"); ax.set_ylabel(LABELS[q]); ax.grid(alpha=0.3); ax.legend(fontsize=7)
         fig.suptitle(f"{mode}, ν = {nu:.3f}")

@@ -223,12 +223,14 @@ Choice choose(const std::vector<double>& grid, const std::vector<std::vector<dou
 }
 
 std::vector<std::string> choice_cells(const EnsembleFit& f, const Choice& c) {
-  const bool peak = c.choice.model == "peak";
+  const bool peak = c.choice.model != "saturating";
   const auto& v = c.peak.value;
   const auto& se = c.peak.se;
   std::vector<std::string> cells = {c.choice.model, num(c.choice.t, 4), num(c.choice.p_value, 3), num(c.choice.shown),
                                     num(c.choice.se_shown), num(c.choice.mse_saturating), num(c.choice.mse_peak)};
-  if (peak)
+  if (peak && !c.peak.fit.critical_state_reached)   // the softening continues beyond the data: no critical state
+    for (int k = 0; k < 4; ++k) cells.push_back("nan");
+  else if (peak)
     for (double x : {v[kPkXcs], se[kPkXcs], c.peak.lo[kPkXcs], c.peak.hi[kPkXcs]}) cells.push_back(num(x));
   else
     for (double x : {f.fit.x_max, f.fit.se_x_max, f.lo[1], f.hi[1]}) cells.push_back(num(x));
@@ -344,18 +346,20 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
         const auto extra = choice_cells(f, ch);
         row.insert(row.end(), extra.begin(), extra.end());
         params.add_row(row);
-        if (ch.choice.model == "peak")
+        if (ch.choice.model != "saturating")
           std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": " << ch.choice.reason << "\n";
         std::vector<std::string> notes;
         for (const auto& e : c.excluded) notes.push_back("member " + e.member + " left out: " + e.status);
         notes.insert(notes.end(), f.fit.warnings.begin(), f.fit.warnings.end());
-        if (ch.choice.model == "peak") notes.insert(notes.end(), ch.peak.warnings.begin(), ch.peak.warnings.end());
+        const bool larger = ch.choice.model != "saturating";
+        if (larger) notes.insert(notes.end(), ch.peak.warnings.begin(), ch.peak.warnings.end());
         SummaryRow sr = summary_row(c.mode, c.nu, q, f.packings, f.fit.x_max, f.fit.se_x_max, f.fit.beta, f.fit.se_beta,
                                     f.fit.initial_slope, f.fit.se_initial_slope, f.fit.r_squared, notes);
         sr.model = ch.choice.model;
         sr.selection_p = ch.choice.p_value;
-        sr.x_crit = ch.choice.model == "peak" ? ch.peak.value[kPkXcs] : f.fit.x_max;
-        sr.se_x_crit = ch.choice.model == "peak" ? ch.peak.se[kPkXcs] : f.fit.se_x_max;
+        const bool reached = !larger || ch.peak.fit.critical_state_reached;
+        sr.x_crit = !reached ? std::nan("") : larger ? ch.peak.value[kPkXcs] : f.fit.x_max;
+        sr.se_x_crit = !reached ? std::nan("") : larger ? ch.peak.se[kPkXcs] : f.fit.se_x_max;
         sr.x_peak = ch.peak.value[kPkXpeak];
         sr.se_x_peak = ch.peak.se[kPkXpeak];
         sr.eps_peak = ch.peak.value[kPkEpsPeak];

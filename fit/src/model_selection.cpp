@@ -153,7 +153,7 @@ ModelChoice choose_model(const std::vector<double>& grid, const std::vector<std:
                            " of the transient (t = " + fmt(c.t) + ", p = " + fmt(c.p_value);
   c.reason = c.p_value < alpha ? "the peak law: " + what + " < " + fmt(alpha) + ")"
                                : "the saturating law suffices: " + what + " >= " + fmt(alpha) + ")";
-  if (c.p_value < alpha) c.model = "peak";
+  if (c.p_value < alpha) c.model = pk.fit.shape.has_peak ? "peak" : "two-rate";
   return c;
 }
 
@@ -189,7 +189,7 @@ PeakSelectionCell peak_selection_experiment(const PeakSelectionSetup& s) {
       const EnsembleFit sat = fit_ensemble(e, members, eo);
       const ModelChoice mc = choose_model(e, members, sat, pk, eo.fit, s.alpha);
       if (pk.fit.ok) ++c.converged;
-      peak += mc.model == "peak";
+      peak += mc.model != "saturating";
       cx += inside(s.truth[1], pk.lo[kPkXcs], pk.hi[kPkXcs]);
       cp += inside(truth.x_peak, pk.lo[kPkXpeak], pk.hi[kPkXpeak]);
       ce += inside(truth.eps_peak, pk.lo[kPkEpsPeak], pk.hi[kPkEpsPeak]);

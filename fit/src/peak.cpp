@@ -163,7 +163,8 @@ PeakFit fit_peak(const std::vector<double>& e_in, const std::vector<double>& y_i
   if (ratio_bound)
     r.warnings.push_back("peak law: gamma/beta = " + fmt(r.p[4]) + " on its bound [" + fmt(kPeakRatioMin) + ", " +
                          fmt(kPeakRatioMax) + "]: the two stages are not separated by the data");
-  if (std::log(20.0) / r.gamma > r.e_last)
+  r.critical_state_reached = std::log(20.0) / r.gamma <= r.e_last;
+  if (!r.critical_state_reached)
     r.warnings.push_back("peak law: the softening (rate gamma = " + fmt(r.gamma) + ") is 95% complete only at eps_d = " +
                          fmt(std::log(20.0) / r.gamma) + ", beyond the data (" + fmt(r.e_last) +
                          "): x_cs is an extrapolation");

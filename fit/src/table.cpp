@@ -370,7 +370,8 @@ std::string table_format(const std::vector<std::string>& cells) {
 
 namespace {
 bool any_peak(const std::vector<SummaryRow>& rows) {
-  return std::any_of(rows.begin(), rows.end(), [](const SummaryRow& r) { return r.fitted && r.model == "peak"; });
+  return std::any_of(rows.begin(), rows.end(),
+                     [](const SummaryRow& r) { return r.fitted && !r.model.empty() && r.model != "saturating"; });
 }
 bool any_model(const std::vector<SummaryRow>& rows) {
   return std::any_of(rows.begin(), rows.end(), [](const SummaryRow& r) { return !r.model.empty(); });
@@ -391,8 +392,10 @@ std::array<std::string, 4> model_cells(const SummaryRow& r, bool tex) {
     const std::string c = format_paren(v, e);
     return c == "nan" ? std::string(tex ? "{---}" : "") : c;
   };
+  // The larger model whose softening continues beyond the data has no critical state to show.
+  const std::string crit = std::isfinite(r.x_crit) ? cell(r.x_crit, r.se_x_crit) : (tex ? "{---}" : "beyond the data");
   return {m, peak ? cell(r.x_peak, r.se_x_peak) : (tex ? "{---}" : ""), peak ? cell(r.eps_peak, r.se_eps_peak) : (tex ? "{---}" : ""),
-          cell(r.x_crit, r.se_x_crit)};
+          crit};
 }
 const char* kModelMd =
     "Model: the saturating law or the peak-and-soften law, chosen per curve by whether packings left out of the fit "
@@ -436,7 +439,9 @@ std::string summary_markdown(const std::vector<SummaryRow>& rows, const std::str
   if (any_model(rows))
     md << "\n" << kModelMd
        << (extra ? " x<sub>max</sub>, \u03b2, initial slope: the saturating law; x<sub>peak</sub>, \u03b5<sub>peak</sub>: "
-                   "the peak law's maximum and where; x<sub>cs</sub>: the critical state of the chosen model."
+                   "the peak law's maximum and where (model \u201ctwo-rate\u201d: the peak law without a peak, a slow second "
+                   "stage); x<sub>cs</sub>: the critical state of the chosen model (\u201cbeyond the data\u201d where its softening "
+                   "is not 95 % complete within them)."
                  : " The saturating law was chosen for every curve.")
        << "\n";
   if (!n.texts.empty()) md << "\n";

@@ -53,7 +53,9 @@ PeakEnsembleFit fit_peak_ensemble(const std::vector<double>& grid, const std::ve
                                   const EnsembleFitOptions& options = {});
 
 struct ModelChoice {
-  std::string model = "saturating";   ///< "saturating" or "peak"
+  /// "saturating", or the peak law named by its fitted shape: "peak" (it passes beyond x_cs and
+  /// returns within the data) or "two-rate" (a monotone approach with a slow second stage)
+  std::string model = "saturating";
   double mse_saturating = NAN, mse_peak = NAN;   ///< held-out mean squared error, mean over packings
   double shown = NAN, se_shown = NAN; ///< mean of z_k and its corrected SE
   double t = NAN, p_value = NAN;      ///< shown / se_shown; upper tail of t_{K-1}

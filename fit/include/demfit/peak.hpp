@@ -55,6 +55,7 @@ PeakShape peak_shape(const PeakParams& p, double e_first, double e_last);
 struct PeakFit {
   bool ok = false;                ///< the optimiser converged
   bool on_bound = false;          ///< beta or gamma/beta on a bound (said in warnings)
+  bool critical_state_reached = false;   ///< the softening is 95 % complete within the data (ln 20/gamma <= e_last)
   PeakParams p{};
   double gamma = 0;               ///< r beta
   PeakShape shape;
