@@ -134,7 +134,9 @@ def test_fit_tables_append_the_chosen_model(tiny):
     assert header.index("warnings") == 27 and header[28] == "model" and header[-1] == "peak_warnings"
     for r in rows:
         assert r["model"] in ("saturating", "peak", "two-rate"), r["model"]
-        assert 0 <= float(r["selection_p"]) <= 1, r["selection_reason"]
+        p = float(r["selection_p"])
+        # no test where a fit failed (here: ill-conditioned saturating fits of the short tiny curves), said so
+        assert 0 <= p <= 1 or (np.isnan(p) and "failed" in r["selection_reason"]), r["selection_reason"]
         if r["model"] == "saturating":
             assert r["x_crit"] == r["x_max"] and r["x_crit_lo95"] == r["x_max_lo95"]
         else:
