@@ -108,7 +108,10 @@ def plot_fit_cells(run, outdir, curves, rows):
                               f"$\\beta$ = {paren(p[2], float(r[0]['se_beta']))} (jackknife SE)")
             if r and r[0].get("model") in ("peak", "two-rate"):
                 plot_peak_law(ax, e, r[0])
-            ax.set_xlabel(r"$\varepsilon_d$"); ax.set_ylabel(LABELS[q]); ax.grid(alpha=0.3); ax.legend(fontsize=7)
+            ax.set_xlabel(r"$\varepsilon_d$"); ax.set_ylabel(LABELS[q]); ax.grid(alpha=0.3)
+            # the peak law's long label: smaller, and where the curves leave room (below the rise)
+            peak = bool(r) and r[0].get("model") in ("peak", "two-rate")
+            ax.legend(fontsize=5.5 if peak else 7, loc="lower right" if peak else "best")
         fig.suptitle(f"{mode}, ν = {nu:.3f}")
         fig.tight_layout()
         stem = os.path.join(outdir, f"fit_{mode}_phi{nu:.3f}")
