@@ -68,6 +68,25 @@ def member_curve(run, member, mode, nu, q):
     return read_curve(f) if os.path.exists(f) else None
 
 
+def peak_law(x0, x_cs, beta, A, gamma, e):
+    """The peak-and-soften law (fit/include/demfit/peak.hpp, docs/model_selection.md)."""
+    e = np.asarray(e, dtype=float)
+    return x_cs - (x_cs - x0) * np.exp(-beta * e) + A * (np.exp(-gamma * e) - np.exp(-beta * e))
+
+
+def plot_peak_law(ax, e, row):
+    """The chosen peak law of a fit-table row, its peak and critical state."""
+    p = [float(row[n]) for n in ("pk_x0", "pk_x_cs", "pk_beta", "pk_A", "pk_gamma")]
+    cs = (f"$x_\\mathrm{{cs}}$ = {paren(p[1], float(row['se_pk_x_cs']))}" if row.get("x_crit", "nan") != "nan"
+          else "critical state beyond the data")
+    label = f"peak law ({row['model']}, chosen, p = {float(row['selection_p']):.1g}): {cs}"
+    if row.get("x_peak", "nan") != "nan":
+        label += (f", peak {paren(float(row['x_peak']), float(row['se_x_peak']))} at "
+                  f"{paren(float(row['eps_peak']), float(row['se_eps_peak']))}")
+        ax.plot([float(row["eps_peak"])], [float(row["x_peak"])], "kv", ms=5)
+    ax.plot(e, peak_law(*p, e), "k-", lw=1.2, label=label)
+
+
 def plot_fit_cells(run, outdir, curves, rows):
     members = sorted(os.path.basename(d) for d in glob.glob(os.path.join(run, "members", "m*")))
     written = []
@@ -87,7 +106,12 @@ def plot_fit_cells(run, outdir, curves, rows):
                 ax.plot(e, law(*p, e), "r--", lw=1.2,
                         label=f"fit: $x_\\mathrm{{max}}$ = {paren(p[1], float(r[0]['se_x_max']))}, "
                               f"$\\beta$ = {paren(p[2], float(r[0]['se_beta']))} (jackknife SE)")
-            ax.set_xlabel(r"$\varepsilon_d$"); ax.set_ylabel(LABELS[q]); ax.grid(alpha=0.3); ax.legend(fontsize=7)
+            if r and r[0].get("model") in ("peak", "two-rate"):
+                plot_peak_law(ax, e, r[0])
+            ax.set_xlabel(r"$\varepsilon_d$"); ax.set_ylabel(LABELS[q]); ax.grid(alpha=0.3)
+            # the peak law's long label: smaller, and where the curves leave room (below the rise)
+            peak = bool(r) and r[0].get("model") in ("peak", "two-rate")
+            ax.legend(fontsize=5.5 if peak else 7, loc="lower right" if peak else "best")
         fig.suptitle(f"{mode}, ν = {nu:.3f}")
         fig.tight_layout()
         stem = os.path.join(outdir, f"fit_{mode}_phi{nu:.3f}")

@@ -273,8 +273,8 @@ int run_fit_command(const FitCommandOptions& o) {
                         num(r.beta), num(r.se_beta), num(r.corr[1][2], 3), num(r.initial_slope),
                         num(r.se_initial_slope), num(r.eps_95), num(r.r_squared, 5), num(r.rmse), std::to_string(r.n),
                         num(r.e_last, 4), num(gsl_gap, 2), num(r.residual_autocorrelation, 3), num(r.se_inflation, 3), w});
-        summary.push_back({c.mode, c.phi, q, 0, r.x_max, r.se_x_max, r.beta, r.se_beta, r.initial_slope,
-                           r.se_initial_slope, r.r_squared, r.warnings, true});
+        summary.push_back(summary_row(c.mode, c.phi, q, 0, r.x_max, r.se_x_max, r.beta, r.se_beta, r.initial_slope,
+                                      r.se_initial_slope, r.r_squared, r.warnings));
         by_mode_q[{c.mode, q}].emplace_back(c.phi, r);
         ++usable;
       } catch (const std::exception& ex) {

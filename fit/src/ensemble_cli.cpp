@@ -16,6 +16,7 @@
 
 #include "demfit/cli.hpp"
 #include "demfit/ensemble.hpp"
+#include "demfit/model_selection.hpp"
 #include "demfit/table.hpp"
 
 namespace fs = std::filesystem;
@@ -186,7 +187,68 @@ Table parameter_table() {
   return Table({"mode", "nu", "quantity", "packings", "x0", "se_x0", "x_max", "se_x_max", "x_max_lo95", "x_max_hi95",
                 "beta", "se_beta", "beta_lo95", "beta_hi95", "corr_xmax_beta", "initial_slope", "se_initial_slope",
                 "eps_95", "r_squared", "rmse", "n", "eps_last", "error_method", "bootstrap_se_x_max",
-                "bootstrap_se_beta", "member_sd_x_max", "member_sd_beta", "warnings"});
+                "bootstrap_se_beta", "member_sd_x_max", "member_sd_beta", "warnings",
+                // appended: the model chosen per curve and the peak-and-soften law (docs/model_selection.md)
+                "model", "selection_t", "selection_p", "transient_shown", "se_transient_shown",
+                "heldout_mse_saturating", "heldout_mse_peak", "x_crit", "se_x_crit", "x_crit_lo95", "x_crit_hi95",
+                "pk_x0", "se_pk_x0", "pk_x_cs", "se_pk_x_cs", "pk_beta", "se_pk_beta", "pk_A", "se_pk_A", "pk_gamma",
+                "se_pk_gamma", "x_peak", "se_x_peak", "x_peak_lo95", "x_peak_hi95", "eps_peak", "se_eps_peak",
+                "eps_peak_lo95", "eps_peak_hi95", "pk_initial_slope", "se_pk_initial_slope", "pk_r_squared", "pk_rmse",
+                "selection_reason", "peak_warnings"});
+}
+
+// The peak law and the choice between the laws for one curve (the peak fit may fail: then the
+// saturating law is kept and the reason says why).
+struct Choice {
+  PeakEnsembleFit peak;
+  ModelChoice choice;
+  bool peak_fitted = false;
+};
+Choice choose(const std::vector<double>& grid, const std::vector<std::vector<double>>& values, const EnsembleFit& f,
+              const EnsembleFitOptions& eo) {
+  Choice c;
+  c.peak.value.fill(std::nan("")); c.peak.se.fill(std::nan("")); c.peak.lo.fill(std::nan("")); c.peak.hi.fill(std::nan(""));
+  if (f.packings < 2) {
+    c.choice.reason = "one packing: no model selection (the saturating law is kept)";
+    return c;
+  }
+  try {
+    c.peak = fit_peak_ensemble(grid, values, eo);
+    c.peak_fitted = true;
+    c.choice = choose_model(grid, values, f, c.peak, eo.fit);
+  } catch (const std::exception& ex) {
+    c.choice.reason = std::string("the peak law could not be fitted (") + ex.what() + "): the saturating law is kept";
+  }
+  return c;
+}
+
+std::vector<std::string> choice_cells(const EnsembleFit& f, const Choice& c) {
+  const bool peak = c.choice.model != "saturating";
+  const auto& v = c.peak.value;
+  const auto& se = c.peak.se;
+  std::vector<std::string> cells = {c.choice.model, num(c.choice.t, 4), num(c.choice.p_value, 3), num(c.choice.shown),
+                                    num(c.choice.se_shown), num(c.choice.mse_saturating), num(c.choice.mse_peak)};
+  if (peak && !c.peak.fit.critical_state_reached)   // the softening continues beyond the data: no critical state
+    for (int k = 0; k < 4; ++k) cells.push_back("nan");
+  else if (peak)
+    for (double x : {v[kPkXcs], se[kPkXcs], c.peak.lo[kPkXcs], c.peak.hi[kPkXcs]}) cells.push_back(num(x));
+  else
+    for (double x : {f.fit.x_max, f.fit.se_x_max, f.lo[1], f.hi[1]}) cells.push_back(num(x));
+  for (int a : {kPkX0, kPkXcs, kPkBeta, kPkA, kPkGamma}) {
+    cells.push_back(num(v[a]));
+    cells.push_back(num(se[a]));
+  }
+  for (int a : {kPkXpeak, kPkEpsPeak})
+    for (double x : {v[a], se[a], c.peak.lo[a], c.peak.hi[a]}) cells.push_back(num(x));
+  cells.push_back(num(v[kPkSlope]));
+  cells.push_back(num(se[kPkSlope]));
+  cells.push_back(num(c.peak_fitted ? c.peak.fit.r_squared : std::nan(""), 5));
+  cells.push_back(num(c.peak_fitted ? c.peak.fit.rmse : std::nan("")));
+  cells.push_back(c.choice.reason);
+  std::string w;
+  for (const auto& s : c.peak.warnings) w += (w.empty() ? "" : "; ") + s;
+  cells.push_back(w);
+  return cells;
 }
 
 std::vector<std::string> parameter_row(const Cell& c, const std::string& q, const EnsembleFit& f, const std::string& w) {
@@ -272,18 +334,37 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
       for (const auto& mw : c.warnings) w += (w.empty() ? "" : "; ") + mw;
       for (const auto& e : c.excluded) w += (w.empty() ? "" : "; ") + ("member " + e.member + " left out: " + e.status);
       try {
-        const EnsembleFit f = fit_ensemble(grid, member_values(c, grid, q), eo);
+        const auto values = member_values(c, grid, q);
+        const EnsembleFit f = fit_ensemble(grid, values, eo);
+        const Choice ch = choose(grid, values, f, eo);
         for (const auto& s : f.fit.warnings) {
           w += (w.empty() ? "" : "; ") + s;
           std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": " << s << "\n";
           ++warnings;
         }
-        params.add_row(parameter_row(c, q, f, w));
+        auto row = parameter_row(c, q, f, w);
+        const auto extra = choice_cells(f, ch);
+        row.insert(row.end(), extra.begin(), extra.end());
+        params.add_row(row);
+        if (ch.choice.model != "saturating")
+          std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": " << ch.choice.reason << "\n";
         std::vector<std::string> notes;
         for (const auto& e : c.excluded) notes.push_back("member " + e.member + " left out: " + e.status);
         notes.insert(notes.end(), f.fit.warnings.begin(), f.fit.warnings.end());
-        summary.push_back({c.mode, c.nu, q, f.packings, f.fit.x_max, f.fit.se_x_max, f.fit.beta, f.fit.se_beta,
-                           f.fit.initial_slope, f.fit.se_initial_slope, f.fit.r_squared, notes, true});
+        const bool larger = ch.choice.model != "saturating";
+        if (larger) notes.insert(notes.end(), ch.peak.warnings.begin(), ch.peak.warnings.end());
+        SummaryRow sr = summary_row(c.mode, c.nu, q, f.packings, f.fit.x_max, f.fit.se_x_max, f.fit.beta, f.fit.se_beta,
+                                    f.fit.initial_slope, f.fit.se_initial_slope, f.fit.r_squared, notes);
+        sr.model = ch.choice.model;
+        sr.selection_p = ch.choice.p_value;
+        const bool reached = !larger || ch.peak.fit.critical_state_reached;
+        sr.x_crit = !reached ? std::nan("") : larger ? ch.peak.value[kPkXcs] : f.fit.x_max;
+        sr.se_x_crit = !reached ? std::nan("") : larger ? ch.peak.se[kPkXcs] : f.fit.se_x_max;
+        sr.x_peak = ch.peak.value[kPkXpeak];
+        sr.se_x_peak = ch.peak.se[kPkXpeak];
+        sr.eps_peak = ch.peak.value[kPkEpsPeak];
+        sr.se_eps_peak = ch.peak.se[kPkEpsPeak];
+        summary.push_back(sr);
         by_mode_q[{c.mode, q}].emplace_back(c.nu, f.fit);
         fits[{c.mode, c.nu, q}] = f;
         ++fitted;
@@ -300,7 +381,8 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
   }
   write_fit_tables(params, summary, (out / "parameters").string(),
                   "Saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d) fitted to the ensemble mean; "
-                  "standard errors and 95% intervals (t, packings - 1 dof) from the jackknife over packings");
+                  "standard errors and 95% intervals (t, packings - 1 dof) from the jackknife over packings; per curve "
+                  "the model chosen between it and the peak-and-soften law (docs/model_selection.md)");
 
   // D2 vs D3 from the same checkpoints, paired by member.
   Table shared({"nu", "quantity", "mode_a", "mode_b", "packings", "diff_x0", "se_diff_x0", "diff_x_max",

@@ -368,12 +368,59 @@ std::string table_format(const std::vector<std::string>& cells) {
 }
 }  // namespace
 
+namespace {
+bool any_peak(const std::vector<SummaryRow>& rows) {
+  return std::any_of(rows.begin(), rows.end(),
+                     [](const SummaryRow& r) { return r.fitted && !r.model.empty() && r.model != "saturating"; });
+}
+bool any_model(const std::vector<SummaryRow>& rows) {
+  return std::any_of(rows.begin(), rows.end(), [](const SummaryRow& r) { return !r.model.empty(); });
+}
+std::string p_text(double p) {
+  if (!std::isfinite(p)) return "";
+  char b[32];
+  std::snprintf(b, sizeof b, p < 1e-3 ? "%.0e" : "%.3f", p);
+  return b;
+}
+// The four cells of the chosen model (model with p, x_peak, eps_peak, x_cs); Markdown or LaTeX.
+std::array<std::string, 4> model_cells(const SummaryRow& r, bool tex) {
+  if (!r.fitted) return {"", tex ? "{---}" : "", tex ? "{---}" : "", tex ? "{---}" : ""};
+  const bool peak = r.model == "peak";
+  const std::string p = p_text(r.selection_p);
+  const std::string m = r.model.empty() ? "" : r.model + (p.empty() ? "" : " (p = " + p + ")");
+  auto cell = [&](double v, double e) {
+    const std::string c = format_paren(v, e);
+    return c == "nan" ? std::string(tex ? "{---}" : "") : c;
+  };
+  // The larger model whose softening continues beyond the data has no critical state to show.
+  const std::string crit = std::isfinite(r.x_crit) ? cell(r.x_crit, r.se_x_crit) : (tex ? "{---}" : "beyond the data");
+  return {m, peak ? cell(r.x_peak, r.se_x_peak) : (tex ? "{---}" : ""), peak ? cell(r.eps_peak, r.se_eps_peak) : (tex ? "{---}" : ""),
+          crit};
+}
+const char* kModelMd =
+    "Model: the saturating law or the peak-and-soften law, chosen per curve by whether packings left out of the fit "
+    "show the peak law's transient (one-sided t, K \u2212 1 dof; the peak law when p < 0.01; docs/model_selection.md).";
+}  // namespace
+
+SummaryRow summary_row(const std::string& mode, double nu, const std::string& quantity, int packings, double x_max,
+                       double se_x_max, double beta, double se_beta, double slope, double se_slope, double r_squared,
+                       const std::vector<std::string>& warnings) {
+  SummaryRow r;
+  r.mode = mode; r.nu = nu; r.quantity = quantity; r.packings = packings;
+  r.x_max = x_max; r.se_x_max = se_x_max; r.beta = beta; r.se_beta = se_beta;
+  r.slope = slope; r.se_slope = se_slope; r.r_squared = r_squared;
+  r.warnings = warnings;
+  return r;
+}
+
 std::string summary_markdown(const std::vector<SummaryRow>& rows, const std::string& caption) {
   const Notes n = notes_of(rows);
+  const bool extra = any_peak(rows);
   std::ostringstream md;
   md << "**" << caption << "**\n\n";
-  md << "| mode | \u03bd | quantity | K | x<sub>max</sub> | \u03b2 | initial slope | R\u00b2 |\n";
-  md << "|:--|--:|:--|--:|--:|--:|--:|--:|\n";
+  md << "| mode | \u03bd | quantity | K | x<sub>max</sub> | \u03b2 | initial slope | R\u00b2 |";
+  if (extra) md << " model | x<sub>peak</sub> | \u03b5<sub>peak</sub> | x<sub>cs</sub> |";
+  md << "\n|:--|--:|:--|--:|--:|--:|--:|--:|" << (extra ? ":--|--:|--:|--:|" : "") << "\n";
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const auto& r = rows[i];
     std::string q = md_quantity(r.quantity);
@@ -381,11 +428,22 @@ std::string summary_markdown(const std::vector<SummaryRow>& rows, const std::str
     md << "| " << r.mode << " | " << nu_text(r.nu) << " | " << q << " | " << packings_of(r) << " | ";
     if (r.fitted)
       md << format_paren(r.x_max, r.se_x_max) << " | " << format_paren(r.beta, r.se_beta) << " | "
-         << format_paren(r.slope, r.se_slope) << " | " << r2_text(r.r_squared) << " |\n";
+         << format_paren(r.slope, r.se_slope) << " | " << r2_text(r.r_squared) << " |";
     else
-      md << "not fitted | | | |\n";
+      md << "not fitted | | | |";
+    if (extra)
+      for (const auto& c : model_cells(r, false)) md << " " << c << " |";
+    md << "\n";
   }
   md << "\n" << kExplainMd << "\n";
+  if (any_model(rows))
+    md << "\n" << kModelMd
+       << (extra ? " x<sub>max</sub>, \u03b2, initial slope: the saturating law; x<sub>peak</sub>, \u03b5<sub>peak</sub>: "
+                   "the peak law's maximum and where (model \u201ctwo-rate\u201d: the peak law without a peak, a slow second "
+                   "stage); x<sub>cs</sub>: the critical state of the chosen model (\u201cbeyond the data\u201d where its softening "
+                   "is not 95 % complete within them)."
+                 : " The saturating law was chosen for every curve.")
+       << "\n";
   if (!n.texts.empty()) md << "\n";
   for (std::size_t k = 0; k < n.texts.size(); ++k) md << "<sup>" << mark_name(k) << "</sup> " << n.texts[k] << "  \n";
   return md.str();
@@ -401,26 +459,40 @@ std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string
     else
       cells.push_back({nu_text(r.nu), "{---}", "{---}", "{---}", "{---}"});
   }
+  const bool extra = any_peak(rows);
+  std::vector<std::array<std::string, 4>> mcells;
+  for (const auto& r : rows) mcells.push_back(model_cells(r, true));
   std::vector<std::string> fmt;
   for (int k = 0; k < 5; ++k) {
     std::vector<std::string> col;
     for (const auto& c : cells) col.push_back(c[k] == "nan" ? "{---}" : c[k]);
     fmt.push_back(table_format(col));
   }
+  for (int k = 1; k < 4; ++k) {
+    std::vector<std::string> col;
+    for (const auto& c : mcells) col.push_back(c[k]);
+    fmt.push_back(table_format(col));
+  }
   std::ostringstream tex;
   tex << "% " << tex_text(caption) << "\n% needs \\usepackage{booktabs} and \\usepackage{siunitx}; values rounded to "
       << "their standard errors, given in parentheses in units of the last digit\n";
   tex << "\\begin{tabular}{l S[table-format=" << fmt[0] << "] l r S[table-format=" << fmt[1] << "] S[table-format="
-      << fmt[2] << "] S[table-format=" << fmt[3] << "] S[table-format=" << fmt[4] << "]}\n\\toprule\n";
+      << fmt[2] << "] S[table-format=" << fmt[3] << "] S[table-format=" << fmt[4] << "]";
+  if (extra) tex << " l S[table-format=" << fmt[5] << "] S[table-format=" << fmt[6] << "] S[table-format=" << fmt[7] << "]";
+  tex << "}\n\\toprule\n";
   tex << "Mode & {$\\nu$} & Quantity & {$K$} & {$x_\\mathrm{max}$} & {$\\beta$} & "
-         "{$\\left.\\mathrm{d}x/\\mathrm{d}\\varepsilon_\\mathrm{d}\\right|_0$} & {$R^2$} \\\\\n\\midrule\n";
+         "{$\\left.\\mathrm{d}x/\\mathrm{d}\\varepsilon_\\mathrm{d}\\right|_0$} & {$R^2$}";
+  if (extra) tex << " & Model & {$x_\\mathrm{peak}$} & {$\\varepsilon_\\mathrm{peak}$} & {$x_\\mathrm{cs}$}";
+  tex << " \\\\\n\\midrule\n";
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const auto& r = rows[i];
     std::string q = tex_quantity(r.quantity);
     if (!n.marks[i].empty()) q += "\\textsuperscript{" + joined(n.marks[i], ",") + "}";
     auto cell = [](const std::string& c) { return c == "nan" ? std::string("{---}") : c; };
     tex << tex_text(r.mode) << " & " << cells[i][0] << " & " << q << " & " << packings_of(r) << " & " << cell(cells[i][1])
-        << " & " << cell(cells[i][2]) << " & " << cell(cells[i][3]) << " & " << cell(cells[i][4]) << " \\\\\n";
+        << " & " << cell(cells[i][2]) << " & " << cell(cells[i][3]) << " & " << cell(cells[i][4]);
+    if (extra) tex << " & " << tex_text(mcells[i][0]) << " & " << mcells[i][1] << " & " << mcells[i][2] << " & " << mcells[i][3];
+    tex << " \\\\\n";
   }
   tex << "\\bottomrule\n\\end{tabular}\n";
   if (!n.texts.empty()) {

@@ -155,3 +155,44 @@ TEST(TableJson, NonFiniteValuesAreNullAndTheFileIsValidJson) {
   EXPECT_EQ(row, "D2,201,0.196534,nan,-inf,\"a \"\"quoted\"\" note, with a comma\"");
   fs::remove_all(dir);
 }
+
+namespace {
+std::vector<demfit::SummaryRow> rows_with_models(bool with_peak) {
+  auto r = rows();
+  r[0].model = "saturating";
+  r[0].selection_p = 0.4;
+  r[0].x_crit = r[0].x_max;
+  r[0].se_x_crit = r[0].se_x_max;
+  r[1].model = with_peak ? "peak" : "saturating";
+  r[1].selection_p = with_peak ? 0.0021 : 0.2;
+  r[1].x_peak = 0.5512; r[1].se_x_peak = 0.0043;
+  r[1].eps_peak = 0.0412; r[1].se_eps_peak = 0.0021;
+  r[1].x_crit = 0.4013; r[1].se_x_crit = 0.0062;
+  return r;
+}
+}  // namespace
+
+TEST(SummaryTable, ThePeakLawAddsFourColumnsOnlyWhereSomeCurveChoseIt) {
+  const std::string md = demfit::summary_markdown(rows_with_models(true), "caption");
+  std::istringstream in(md);
+  for (std::string line; std::getline(in, line);)
+    if (!line.empty() && line[0] == '|') EXPECT_EQ(count(line, "|") - 1, 12) << line;
+  // the peak row: its peak, strain at the peak and critical state rounded to their errors
+  EXPECT_NE(md.find("| peak (p = 0.002) | 0.551(4) | 0.041(2) | 0.401(6) |"), std::string::npos) << md;
+  // a saturating row: no peak, the critical state is x_max
+  EXPECT_NE(md.find("| saturating (p = 0.400) |  |  | 0.2125(13) |"), std::string::npos) << md;
+  const std::string tex = demfit::summary_latex(rows_with_models(true), "caption");
+  const auto body = tex.substr(tex.find("\\midrule") + 8, tex.find("\\bottomrule") - tex.find("\\midrule") - 8);
+  std::istringstream tin(body);
+  for (std::string line; std::getline(tin, line);)
+    if (!line.empty()) EXPECT_EQ(count(line, "&") - count(line, "\\&"), 11) << line;
+  EXPECT_NE(tex.find("peak (p = 0.002) & 0.551(4) & 0.041(2) & 0.401(6)"), std::string::npos) << tex;
+  // the saturating law everywhere: the eight columns and one sentence saying so
+  const std::string plain = demfit::summary_markdown(rows_with_models(false), "caption");
+  std::istringstream pin(plain);
+  for (std::string line; std::getline(pin, line);)
+    if (!line.empty() && line[0] == '|') EXPECT_EQ(count(line, "|") - 1, 8) << line;
+  EXPECT_NE(plain.find("The saturating law was chosen for every curve."), std::string::npos) << plain;
+  // without a choice (a single run) the table is as before
+  EXPECT_EQ(demfit::summary_markdown(rows(), "c").find("Model:"), std::string::npos);
+}

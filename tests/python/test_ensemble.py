@@ -124,6 +124,27 @@ def test_fit_tables_carry_errors_between_packings(tiny):
     assert "done in" in tiny["stderr"] and "% of the work" in tiny["stderr"]
 
 
+def test_fit_tables_append_the_chosen_model(tiny):
+    """docs/model_selection.md: the earlier columns first and unchanged in order, the model columns after."""
+    run = tiny["dir"]
+    with open(run / "fit" / "parameters.csv", newline="") as fh:
+        header = next(csv.reader(fh))
+        fh.seek(0)
+        rows = list(csv.DictReader(fh))
+    assert header.index("warnings") == 27 and header[28] == "model" and header[-1] == "peak_warnings"
+    for r in rows:
+        assert r["model"] in ("saturating", "peak", "two-rate"), r["model"]
+        p = float(r["selection_p"])
+        # no test where a fit failed (here: ill-conditioned saturating fits of the short tiny curves), said so
+        assert 0 <= p <= 1 or (np.isnan(p) and "failed" in r["selection_reason"]), r["selection_reason"]
+        if r["model"] == "saturating":
+            assert r["x_crit"] == r["x_max"] and r["x_crit_lo95"] == r["x_max_lo95"]
+        else:
+            assert float(r["selection_p"]) < 0.01
+    md = (run / "fit" / "parameters.md").read_text()
+    assert "Model:" in md
+
+
 def finished_tasks(out, stage):
     """Status files of the tasks Snakemake had registered as finished. A status file written in the
     instant before a kill still carries Snakemake's "incomplete" marker: that task was running, and

@@ -1,6 +1,7 @@
 // Small CSV table: read the runner's curves ('#' comment lines, one header line) and write
 // result tables as CSV, JSON, Markdown and LaTeX.
 #pragma once
+#include <cmath>
 #include <istream>
 
 #include <nlohmann/json_fwd.hpp>
@@ -65,10 +66,22 @@ struct SummaryRow {
   double x_max = 0, se_x_max = 0, beta = 0, se_beta = 0, slope = 0, se_slope = 0, r_squared = 0;
   std::vector<std::string> warnings;   ///< full texts: become footnote marks
   bool fitted = true;              ///< false: "not fitted" (the reason is the warning)
+  /// The model chosen for the curve ("saturating", "peak"; "" where no choice was made, e.g. a
+  /// single run) and, for the peak law, its peak and critical state (docs/model_selection.md).
+  std::string model;
+  double selection_p = NAN;        ///< p-value of the test that chose it
+  double x_crit = NAN, se_x_crit = NAN;   ///< critical state of the chosen model (x_max or x_cs)
+  double x_peak = NAN, se_x_peak = NAN, eps_peak = NAN, se_eps_peak = NAN;
 };
+/// The row of a saturating fit (the model fields left empty).
+SummaryRow summary_row(const std::string& mode, double nu, const std::string& quantity, int packings, double x_max,
+                       double se_x_max, double beta, double se_beta, double slope, double se_slope, double r_squared,
+                       const std::vector<std::string>& warnings);
 /// The Markdown and LaTeX (booktabs + siunitx S columns) texts of a fit's short table:
-/// columns mode, nu, quantity, K, x_max, beta, initial slope, R^2; each warning text gets one
-/// footnote mark (a, b, ...) on the quantity cell and is listed once below the table.
+/// columns mode, nu, quantity, K, x_max, beta, initial slope, R^2 (the saturating law); when
+/// some row chose the peak law, four more: model (with the test's p), x_peak, eps_peak and the
+/// critical state x_cs of the chosen model. Each warning text gets one footnote mark (a, b, ...)
+/// on the quantity cell and is listed once below the table.
 std::string summary_markdown(const std::vector<SummaryRow>& rows, const std::string& caption);
 std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string& caption);
 /// Writes stem.csv and stem.json (the full machine table t) and stem.md, stem.tex (the short
