@@ -7,9 +7,12 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <string>
+#include <vector>
 
 #include "dem/engine/engine.hpp"
 #include "dem/forces/forces.hpp"
+#include "dem/io/checks.hpp"
 #include "dem/io/io.hpp"
 #include "dem/measure/control.hpp"
 #include "dem/measure/measure.hpp"
@@ -203,12 +206,19 @@ TEST(Friction, EnergyBalanceCatchesANonObjectiveSpringRotation) {
 
 // The list with its history against the all-pairs oracle, on states along a sheared run
 // (rebuilds, re-sorts and cell flips): the same forces, torques and updated springs.
-TEST(Friction, ListWithHistoryEqualsTheAllPairsOracleAcrossRebuildsAndFlips) {
-  const dem::Model m = dem_test::model_with({"contact.friction=0.5", "integration.threads=1"});
+// With rolling and twisting on as well, every history entry is compared: the odd/even rule of
+// place_history and history_by_ids (tangential spring odd, rolling and twisting springs even
+// under i <-> j) is what makes the list (rows in cell order) and the oracle (pairs oriented by
+// id) agree on the pairs whose two orientations differ.
+// wrong_bits: a mutation check, history entries wrongly declared odd in the conversion to the
+// oracle's orientation, which must make the torques disagree.
+static void expect_list_with_history_equals_oracle(const std::vector<std::string>& keys, unsigned wrong_bits = 0) {
+  const dem::Model m = dem_test::model_with(keys);
   dem::State s = dem_test::random_state(400, 0.38, 0.5, 17);
   const VelGrad rate{Vec3{0, 0, 0}, Vec3{0, 0.4 / (3000 * m.dt), 0}};   // gamma = 0.4 per 3000 steps
   dem::Engine e(m, s);
   int checked = 0;
+  double wrong_tdiff = 0;
   for (int k = 1; k <= 6000; ++k) {
     e.step(rate);
     if (k % 1000 != 0) continue;
@@ -226,6 +236,13 @@ TEST(Friction, ListWithHistoryEqualsTheAllPairsOracleAcrossRebuildsAndFlips) {
       tdiff = std::max(tdiff, norm(a.torque[i] - b.torque[i]));
     }
     EXPECT_LT(tdiff, 1e-9 * tscale) << "step " << k;
+    if (wrong_bits != 0) {
+      dem::State w = s, c = s;
+      w.history.odd |= wrong_bits;
+      dem::PairHistoryMap wrong = dem::history_by_ids(w);
+      dem::compute_forces_all_pairs(m, c, rate, &wrong);
+      for (int i = 0; i < s.count(); ++i) wrong_tdiff = std::max(wrong_tdiff, norm(a.torque[i] - c.torque[i]) / tscale);
+    }
     const dem::PairHistoryMap listed = dem::history_by_ids(a);
     ASSERT_EQ(listed.size(), oracle.size()) << "step " << k;
     ASSERT_GT(listed.size(), 8u);
@@ -233,7 +250,8 @@ TEST(Friction, ListWithHistoryEqualsTheAllPairsOracleAcrossRebuildsAndFlips) {
     for (const auto& [key, h] : listed) {
       const auto it = oracle.find(key);
       ASSERT_NE(it, oracle.end());
-      for (int c = 0; c < 3; ++c) {
+      for (int c = 0; c < static_cast<int>(h.size()); ++c) {
+        if (c == 3) continue;
         xscale = std::max(xscale, std::fabs(h[c]));
         xdiff = std::max(xdiff, std::fabs(h[c] - it->second[c]));
       }
@@ -245,6 +263,17 @@ TEST(Friction, ListWithHistoryEqualsTheAllPairsOracleAcrossRebuildsAndFlips) {
   EXPECT_EQ(checked, 6);
   EXPECT_GE(e.flips(), 1);
   EXPECT_GT(e.neighbor_list().builds, 10);
+  if (wrong_bits != 0) EXPECT_GT(wrong_tdiff, 1e-3) << "a wrong odd mask should change the oracle's torques";
+}
+
+TEST(Friction, ListWithHistoryEqualsTheAllPairsOracleAcrossRebuildsAndFlips) {
+  expect_list_with_history_equals_oracle({"contact.friction=0.5", "integration.threads=1"});
+}
+
+TEST(Twisting, ListWithRollingAndTwistingHistoryEqualsTheAllPairsOracle) {
+  // The twist spring is entry 7 (after xi_t, slip, xi_r): declaring it odd must be caught.
+  expect_list_with_history_equals_oracle({"contact.friction=0.5", "contact.rolling_friction=0.1",
+                                          "contact.twisting_friction=0.1", "integration.threads=1"}, 1u << 7);
 }
 
 // The springs are carried by the pair's ids: a run rebuilding its list every few steps (thin
@@ -489,15 +518,168 @@ TEST(Rolling, SplitRunWithRollingEqualsStraightRunBitForBit) {
 
 namespace {
 
-// Luding's law without damping, integrated by hand over an impact: loading along k1 to
-// delta_max = v sqrt(m_r/k1), unloading along k2 (delta - delta0) to the adhesive limit at
-// delta_c = k2 delta0 / (k2 + kc), then along -kc delta to zero. e^2 = energy out / energy in.
+// The ring of four spheres along x again, now spinning about x (the contact normals) with
+// alternating signs: every contact twists at relative spin 2 w0 about its normal; neither the
+// tangential spring (the contact points do not move: the spins are along n) nor the rolling
+// spring ((w_i - w_j) x n = 0) is loaded.
+Ring make_twist_ring(double w0, double mu_o, double gamma_o) {
+  Ring g = make_ring(0.0, 0.0);
+  g.m = dem_test::model_with({"contact.friction=0.5", "contact.damping_kg_s=0", "contact.background_damping_kg_s=0",
+                              "contact.twisting_friction=" + std::to_string(mu_o),
+                              "contact.twisting_damping_kg_s=" + std::to_string(gamma_o)});
+  for (int k = 0; k < 4; ++k) g.s.angular_velocity[k] = Vec3{(k % 2 ? -1.0 : 1.0) * w0, 0, 0};
+  return g;
+}
+double twist_of_id0(const dem::State& s) {
+  for (int i = 0; i < s.count(); ++i) if (s.id[i] == 0) return s.angular_velocity[i].x;
+  return NAN;
+}
+
+}  // namespace
+
+// Elastic twisting: per contact the spring k_o acts on a' times the relative twist 2 phi, two
+// contacts per sphere: I phi'' = -4 k_o a'^2 phi, w_0 = w0 cos(Omega t), Omega^2 = 4 k_o a'^2/I;
+// the energy E_rot + E_pot (the twist springs are in E_t, part of E_pot) is kept.
+TEST(Twisting, ElasticTwistOscillatesAtTheSpringsFrequencyAndKeepsEnergy) {
+  Ring g = make_twist_ring(1e4, 1.0, 0.0);
+  dem::Engine e(g.m, g.s);
+  const double ko = g.m.contact.twisting_stiffness_ratio * g.m.contact.stiffness;
+  const double omega = std::sqrt(4 * ko * g.a_red * g.a_red / g.I);
+  auto energy = [&] {
+    const auto q = dem::measure(g.m, g.s, e.neighbor_list(), Vec3{0, 0, 0});
+    return q.E_rot + q.E_pot + q.E_kin;
+  };
+  const double e0 = energy();
+  double prev = twist_of_id0(g.s), t_zero = -1, worst = 0, e_t_max = 0;
+  for (int k = 0; k < 2000 && t_zero < 0; ++k) {
+    const double t0 = g.s.time;
+    e.step(Vec3{0, 0, 0});
+    const double now = twist_of_id0(g.s);
+    if (prev > 0 && now <= 0) t_zero = t0 + (g.s.time - t0) * prev / (prev - now);
+    prev = now;
+    worst = std::max(worst, std::fabs(energy() - e0));
+    e_t_max = std::max(e_t_max, dem::measure(g.m, g.s, e.neighbor_list(), Vec3{0, 0, 0}).E_t);
+  }
+  ASSERT_GT(t_zero, 0);
+  EXPECT_NEAR(t_zero, 0.5 * kPi / omega, 5e-3 * 0.5 * kPi / omega);   // a quarter period
+  EXPECT_LT(worst, 2e-3 * e0);
+  EXPECT_GT(e_t_max, 0.9 * 4 * 0.5 * g.I * 1e4 * 1e4);   // at the quarter period the springs hold the spin energy
+  for (const Vec3& w : g.s.angular_velocity) {   // only twist
+    EXPECT_EQ(w.y, 0.0);
+    EXPECT_EQ(w.z, 0.0);
+  }
+}
+
+// With the twisting dashpot: phi'' + 2 eta phi' + Omega^2 phi = 0, eta = 2 gamma_o a'^2/I, so
+// w_0(t) = w0 exp(-eta t) (cos(w_d t) - eta/w_d sin(w_d t)), w_d^2 = Omega^2 - eta^2.
+TEST(Twisting, DampedTwistFollowsTheSpringDashpotClosedForm) {
+  Ring probe = make_twist_ring(1e4, 1.0, 0.0);
+  const double ko = probe.m.contact.twisting_stiffness_ratio * probe.m.contact.stiffness;
+  const double omega = std::sqrt(4 * ko * probe.a_red * probe.a_red / probe.I);
+  const double eta = 0.2 * omega, gamma_o = eta * probe.I / (2 * probe.a_red * probe.a_red);
+  Ring g = make_twist_ring(1e4, 1.0, gamma_o);
+  dem::Engine e(g.m, g.s);
+  const double wd = std::sqrt(omega * omega - eta * eta), w0 = 1e4;
+  double worst = 0;
+  while (g.s.time < 3 * kPi / wd) {
+    e.step(Vec3{0, 0, 0});
+    const double t = g.s.time;
+    const double closed = w0 * std::exp(-eta * t) * (std::cos(wd * t) - eta / wd * std::sin(wd * t));
+    worst = std::max(worst, std::fabs(twist_of_id0(g.s) - closed));
+  }
+  EXPECT_LT(worst, 1e-2 * w0);
+  // 1.5 periods at zeta = 0.2: |w| = w0 exp(-3 pi eta/w_d) = 0.146 w0 (without the dashpot: w0)
+  EXPECT_LT(std::fabs(twist_of_id0(g.s)), 0.2 * w0);
+}
+
+// At the limit the twisting torque is mu_o a' f_n per contact: the spin decays at the constant
+// rate 2 mu_o a' f_n / I, and the spin energy lost is W_friction.
+TEST(Twisting, TheTwistingTorqueLimitDeceleratesTheSpinAtTheClosedFormRate) {
+  const double w0 = 1e6, mu_o = 0.1;
+  Ring g = make_twist_ring(w0, mu_o, 0.0);
+  dem::Engine e(g.m, g.s);
+  const double rate = 2 * mu_o * g.a_red * g.fn / g.I;
+  const double t_stop = w0 / rate;
+  double w_a = NAN, t_a = 0.25 * t_stop, t_b = 0.75 * t_stop;
+  while (g.s.time < t_b) {
+    e.step(Vec3{0, 0, 0});
+    if (std::isnan(w_a) && g.s.time >= t_a) { w_a = twist_of_id0(g.s); t_a = g.s.time; }
+  }
+  const double w_b = twist_of_id0(g.s);
+  t_b = g.s.time;
+  EXPECT_NEAR((w_a - w_b) / (t_b - t_a), rate, 1e-2 * rate);
+  const auto q = dem::measure(g.m, g.s, e.neighbor_list(), Vec3{0, 0, 0});
+  const double e_rot0 = 4 * 0.5 * g.I * w0 * w0;
+  EXPECT_NEAR(q.W_friction, e_rot0 - q.E_rot - q.E_t - q.E_kin, 1e-3 * e_rot0);
+  EXPECT_GT(q.W_friction, 0.5 * e_rot0);
+}
+
+TEST(Twisting, KeysNeedFrictionAreRecordedAndOffByDefault) {
+  EXPECT_FALSE(dem_test::model_with({"contact.friction=0.5"}).contact.twisting());
+  const dem::Model m = dem_test::model_with({"contact.friction=0.5", "contact.twisting_friction=0.1"});
+  EXPECT_TRUE(m.contact.twisting());
+  EXPECT_EQ(dem::contact::history_width(m.contact), 8);   // xi_t, slip, xi_r, xi_o
+  EXPECT_EQ(dem::contact::history_odd_mask(m.contact), 0x7u);   // only the tangential spring is odd
+  const dem::Model both = dem_test::model_with({"contact.friction=0.5", "contact.rolling_friction=0.1",
+                                                "contact.twisting_friction=0.1", "contact.normal=luding"});
+  EXPECT_EQ(dem::contact::history_width(both.contact), 9);   // + delta_max first
+  EXPECT_EQ(dem::contact::history_odd_mask(both.contact), 0x7u << 1);
+  bool recorded = false;
+  for (const auto& kv : dem::material_physics(m)) recorded |= kv.first == "contact.twisting_friction";
+  EXPECT_TRUE(recorded);
+  EXPECT_THROW(dem_test::model_with({"contact.twisting_friction=0.1"}), dem::SceneError);
+  EXPECT_THROW(dem_test::model_with({"contact.friction=0.5", "contact.twisting_friction=-1"}), dem::SceneError);
+  EXPECT_THROW(dem_test::model_with({"contact.friction=0.5", "contact.twisting_friction=0.1",
+                                     "contact.twisting_stiffness_ratio=0"}), dem::SceneError);
+}
+
+// Twisting springs are history: a split run equals the straight one bit for bit.
+TEST(Twisting, SplitRunWithRollingAndTwistingEqualsStraightRunBitForBit) {
+  const dem::Model m = dem_test::model_with({"contact.friction=0.5", "contact.rolling_friction=0.1",
+                                             "contact.twisting_friction=0.1", "integration.threads=2"});
+  const VelGrad rate{Vec3{0, 0, 0}, Vec3{0, 0.3 / (3000 * m.dt), 0}};
+  dem::State straight = dem_test::random_state(300, 0.38, 1.0, 43), split = straight;
+  { dem::Engine e(m, straight); for (int k = 0; k < 2000; ++k) e.step(rate); }
+  const std::string path = (std::filesystem::temp_directory_path() / "dem_twisting_split.ckpt").string();
+  { dem::Engine e(m, split); for (int k = 0; k < 1000; ++k) e.step(rate); dem::write_checkpoint(path, dem::Checkpoint{"", "mid", split}); }
+  dem::Checkpoint c = dem::read_checkpoint(path);
+  std::remove(path.c_str());
+  EXPECT_EQ(c.state.history.width, 8);
+  dem::Engine e2(m, c.state, true);
+  for (int k = 0; k < 1000; ++k) e2.step(rate);
+  EXPECT_TRUE(dem_test::same_bits(c.state.angular_velocity, straight.angular_velocity));
+  ASSERT_EQ(c.state.history.values.size(), straight.history.values.size());
+  EXPECT_EQ(0, std::memcmp(c.state.history.values.data(), straight.history.values.data(),
+                           straight.history.values.size() * sizeof(double)));
+  long twisted = 0;
+  for (std::size_t r = 7; r < straight.history.values.size(); r += 8) twisted += straight.history.values[r] != 0.0;
+  EXPECT_GT(twisted, 10);   // the twist springs were loaded
+  EXPECT_EQ(c.state.friction_dissipated, straight.friction_dissipated);
+}
+
+namespace {
+
+// Luding's law without damping, integrated by hand over an impact (written from the law's
+// definition, not from normal_luding.hpp): loading along k1 to delta_max, beyond
+// delta* = kp/(kp - k1) phi_f 2 a12 along the elastic limit branch kp (delta - phi_f 2 a12);
+// delta_max from the kinetic energy m_r v^2/2; unloading along k2 (delta - delta0) to the
+// adhesive limit at delta_c = k2 delta0 / (k2 + kc), then along -kc delta to zero.
+// e^2 = energy out / energy in; 0 when the adhesive well holds the pair.
 double luding_restitution(double k1, double kp, double kc, double phi_f, double a12, double m_r, double v) {
-  const dem::contact::LudingNormal law{k1, kp, kc, phi_f};
-  const double dmax = v * std::sqrt(m_r / k1);
-  const double k2 = law.k2_of(dmax, a12), d0 = (1 - k1 / k2) * dmax, dc = k2 * d0 / (k2 + kc);
+  const double d0s = phi_f * 2 * a12, ds = kp / (kp - k1) * d0s, in = 0.5 * m_r * v * v;
+  double dmax, k2, d0;
+  if (in <= 0.5 * k1 * ds * ds) {
+    dmax = std::sqrt(2 * in / k1);
+    k2 = k1 + (kp - k1) * dmax / ds;
+    d0 = (1 - k1 / k2) * dmax;
+  } else {
+    dmax = d0s + std::sqrt((ds - d0s) * (ds - d0s) + (2 * in - k1 * ds * ds) / kp);
+    k2 = kp;
+    d0 = d0s;
+  }
+  const double dc = k2 * d0 / (k2 + kc);
   const double out = 0.5 * k2 * ((dmax - d0) * (dmax - d0) - (dc - d0) * (dc - d0)) - 0.5 * kc * dc * dc;
-  return out > 0 ? std::sqrt(out / (0.5 * k1 * dmax * dmax)) : 0.0;
+  return out > 0 ? std::sqrt(out / in) : 0.0;
 }
 
 }  // namespace
@@ -523,13 +705,32 @@ TEST(Luding, ForceOverlapLoopFollowsThePiecewiseLaw) {
   double hh = d1;
   const double small = 0.1 * d0;
   EXPECT_DOUBLE_EQ(law.update(small, a12, &hh), -kc * small);
-  EXPECT_NEAR(hh, (k2 + kc) / (k2 - k1) * small, 1e-12 * d1);
-  // Beyond delta* the unloading stiffness is kp.
+  const double k2h = k1 + (kp - k1) * hh / dstar;   // the new delta_max's own k2-line through the point
+  EXPECT_NEAR(k2h * (small - (1 - k1 / k2h) * hh), -kc * small, 1e-9 * kc * small);
+  EXPECT_LT(hh, d1);
+  EXPECT_NEAR(law.force(small, a12, &hh), -kc * small, 1e-9 * kc * small);   // a consumer sees the same force
+  EXPECT_NEAR(law.update(0.8 * small, a12, &hh), -kc * 0.8 * small, 1e-9 * kc * small);   // further: still -kc delta
+  const double k2r = k1 + (kp - k1) * hh / dstar;   // reloading from there: along that line
+  EXPECT_NEAR(law.update(2 * small, a12, &hh), k2r * (2 * small - (1 - k1 / k2r) * hh), 1e-9 * k1 * d1);
+  // Beyond delta* the unloading stiffness is kp, and the contact is elastic on the limit branch
+  // kp (delta - phi_f 2 a12): above the k1-line, the same force on loading and unloading, the
+  // plastic overlap held at phi_f 2 a12 (MercuryDPM and YADE: the "fluid" branch).
   EXPECT_DOUBLE_EQ(law.k2_of(2 * dstar, a12), kp);
+  double hl = 0;
+  const double dp = phi * 2 * a12, up = kp * (1.5 * dstar - dp);
+  EXPECT_NEAR(law.update(1.5 * dstar, a12, &hl), up, 1e-12 * up);
+  EXPECT_GT(up, 1.1 * k1 * 1.5 * dstar);
+  EXPECT_NEAR(hl, dstar, 1e-15);
+  EXPECT_NEAR(law.update(1.2 * dstar, a12, &hl), kp * (1.2 * dstar - dp), 1e-12 * up);
+  EXPECT_NEAR(law.update(1.5 * dstar, a12, &hl), up, 1e-12 * up);
+  EXPECT_NEAR(law.update(0.5 * (dstar + dp), a12, &hl), kp * 0.5 * (dstar - dp), 1e-12 * up);   // below delta*: the same line
+  EXPECT_NEAR(law.force(3 * dstar, a12, &hl), kp * (3 * dstar - dp), 1e-12 * up);   // read-only: the same value
+  EXPECT_NEAR(hl, dstar, 1e-15);
 }
 
 // Two-sphere impacts through the engine against the hand-integrated law: e = sqrt(k1/k2) without
-// adhesion (below and above delta*), lower with adhesion, sticking when adhesion wins.
+// adhesion below delta*, rising again beyond it (the elastic limit branch), lower with adhesion,
+// sticking when adhesion wins.
 TEST(Luding, RestitutionOfImpactsMatchesTheClosedFormAndAdhesionSticks) {
   const double r = 0.5e-3, k1 = 1e8, kp = 5e8, phi = 0.001;
   auto model = [&](double kc) {
@@ -548,13 +749,17 @@ TEST(Luding, RestitutionOfImpactsMatchesTheClosedFormAndAdhesionSticks) {
       ASSERT_GT(theory, 0.2);
       EXPECT_NEAR(e, theory, 5e-3 * theory) << kc << " " << v;
     }
-  // kc = k1 at an impact beyond delta*: the adhesive branch takes more than the elastic return.
-  ASSERT_EQ(luding_restitution(k1, kp, k1, phi, a12, m_r, 30.0), 0.0);
-  const dem::Model m = model(k1);
+  // kc = 5 k1 at 4 m/s: the adhesive branch takes more than the elastic return (the pair
+  // sticks), while at 30 m/s the elastic limit branch beyond delta* throws it apart again.
+  ASSERT_EQ(luding_restitution(k1, kp, 5 * k1, phi, a12, m_r, 4.0), 0.0);
+  ASSERT_GT(luding_restitution(k1, kp, 5 * k1, phi, a12, m_r, 30.0), 0.5);
+  EXPECT_NEAR(dem::simulate_collision(model(5 * k1), r, r, 30.0).restitution,
+              luding_restitution(k1, kp, 5 * k1, phi, a12, m_r, 30.0), 5e-3);
+  const dem::Model m = model(5 * k1);
   dem::State s = dem_test::make_state(Vec3{20e-3, 20e-3, 20e-3}, {Vec3{5e-3, 10e-3, 10e-3}, Vec3{5e-3 + 2 * r + 1e-7, 10e-3, 10e-3}},
                                       {r, r});
-  s.velocity[0] = Vec3{15.0, 0, 0};
-  s.velocity[1] = Vec3{-15.0, 0, 0};
+  s.velocity[0] = Vec3{2.0, 0, 0};
+  s.velocity[1] = Vec3{-2.0, 0, 0};
   dem::Engine e(m, s);
   for (int k = 0; k < 20000; ++k) e.step(Vec3{0, 0, 0});   // ~100 contact times
   const double gap = norm(dem::minimum_image(s.box, s.position[0], s.position[1])) - 2 * r;

@@ -68,6 +68,20 @@ void warn_time_step(const dem::Model& m) {
                          "--set integration.blocks=4 gives the bits of 1-4 threads\n", threads, threads);
 }
 
+std::string g_text(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", v);
+  return b;
+}
+
+// What bounds the tension of a contact: the no-tension clamp, nothing, or Luding's adhesive limit.
+std::string tension_limit(const dem::ContactLaw& c) {
+  if (c.normal == dem::NormalModel::Luding)
+    return c.luding_kc > 0 ? "tension limited by Luding's adhesive branch -kc delta (kc = " + g_text(c.luding_kc) + " N/m)"
+                           : "no tension (Luding's law with kc = 0)";
+  return c.allow_attractive ? "attractive allowed" : "clamped at zero";
+}
+
 void print_info(const dem::Model& m) {
   warn_time_step(m);
   const auto& p = m.protocol;
@@ -75,16 +89,20 @@ void print_info(const dem::Model& m) {
               m.radius_min, m.radius_max, m.density, dem::estimated_memory_bytes(m.count) / 1e6);
   std::printf("contact            k = %g N/m, gamma = %g kg/s, gamma_b = %g kg/s, %s\n",
               m.contact.stiffness, m.contact.damping, m.background_damping,
-              m.contact.allow_attractive ? "attractive allowed" : "clamped at zero");
+              tension_limit(m.contact).c_str());
   std::printf("smallest pair      t_c = %.6g s, e = %.6g\n", m.t_contact, m.restitution);
   if (m.contact.normal == dem::NormalModel::Luding)
     std::printf("normal law         Luding elasto-plastic adhesive: k1 = %g, kp = %g, kc = %g N/m, phi_f = %g "
-                "(t_c and dt from kp); no-slip restitution sqrt(k1/k2) from 1 (small impacts) to sqrt(k1/kp) = %.4g\n",
+                "(t_c and dt from kp); restitution without adhesion sqrt(k1/k2): from 1 (small impacts) down to "
+                "sqrt(k1/kp) = %.4g at delta_max = delta*, then back towards 1 (elastic limit branch kp)\n",
                 m.contact.stiffness, m.contact.luding_kp, m.contact.luding_kc, m.contact.luding_plasticity_depth,
                 std::sqrt(m.contact.stiffness / m.contact.luding_kp));
   if (m.contact.rolling())
     std::printf("rolling            mu_r = %g, k_r/k = %g, gamma_r = %g kg/s (torque <= mu_r a' f_n)\n",
                 m.contact.rolling_friction, m.contact.rolling_stiffness_ratio, m.contact.rolling_damping);
+  if (m.contact.twisting())
+    std::printf("twisting           mu_o = %g, k_o/k = %g, gamma_o = %g kg/s (torque about n <= mu_o a' f_n)\n",
+                m.contact.twisting_friction, m.contact.twisting_stiffness_ratio, m.contact.twisting_damping);
   if (m.contact.frictional()) {
     // The contact point's tangential oscillation: stiffness k_t, effective mass 2/7 m_r.
     const double mr = 0.5 * dem::sphere_mass(m.radius_min, m.density), kt = m.contact.tangential_stiffness_ratio * m.contact.stiffness;

@@ -147,6 +147,11 @@ Physics material_physics(const Model& m) {
       p.push_back({"contact.rolling_stiffness_ratio", num(m.contact.rolling_stiffness_ratio)});
       p.push_back({"contact.rolling_damping_kg_s", num(m.contact.rolling_damping)});
     }
+    if (m.contact.twisting()) {
+      p.push_back({"contact.twisting_friction", num(m.contact.twisting_friction)});
+      p.push_back({"contact.twisting_stiffness_ratio", num(m.contact.twisting_stiffness_ratio)});
+      p.push_back({"contact.twisting_damping_kg_s", num(m.contact.twisting_damping)});
+    }
   }
   return p;
 }

@@ -465,7 +465,8 @@ static void read_tangential(KeyReader& r, ContactLaw& c, const std::string& orig
       throw SceneError(origin + ": contact.friction = " + std::to_string(c.friction) + " needs a tangential model: "
                        "set contact.tangential = \"cundall_strack\" (or remove contact.friction)");
     for (const char* key : {"tangential_stiffness_ratio", "tangential_damping_kg_s", "rolling_friction",
-                            "rolling_stiffness_ratio", "rolling_damping_kg_s"}) {
+                            "rolling_stiffness_ratio", "rolling_damping_kg_s", "twisting_friction",
+                            "twisting_stiffness_ratio", "twisting_damping_kg_s"}) {
       double unused = 0;
       r.get_if_present("contact", key, unused);
       if (unused != 0 && !explicit_none)   // "none" said outright switches friction off, keys and all
@@ -489,6 +490,14 @@ static void read_tangential(KeyReader& r, ContactLaw& c, const std::string& orig
   } else {
     r.get_if_present("contact", "rolling_stiffness_ratio", c.rolling_stiffness_ratio);
     r.get_if_present("contact", "rolling_damping_kg_s", c.rolling_damping);
+  }
+  r.get_if_present("contact", "twisting_friction", c.twisting_friction);
+  if (c.twisting_friction != 0) {
+    r.get("contact", "twisting_stiffness_ratio", c.twisting_stiffness_ratio);
+    r.get("contact", "twisting_damping_kg_s", c.twisting_damping);
+  } else {
+    r.get_if_present("contact", "twisting_stiffness_ratio", c.twisting_stiffness_ratio);
+    r.get_if_present("contact", "twisting_damping_kg_s", c.twisting_damping);
   }
 }
 
@@ -761,6 +770,12 @@ void validate_tangential(const ContactLaw& c) {
     fail("contact.rolling_stiffness_ratio (k_r/k) must be in (0, 10]");
   if (!(c.rolling_damping >= 0) || !std::isfinite(c.rolling_damping))
     fail("contact.rolling_damping_kg_s must be zero or positive and finite");
+  if (!(c.twisting_friction >= 0) || !std::isfinite(c.twisting_friction))
+    fail("contact.twisting_friction must be zero (off) or positive and finite (mu_o: twisting torque <= mu_o a' f_n)");
+  if (!finite_positive(c.twisting_stiffness_ratio) || c.twisting_stiffness_ratio > 10)
+    fail("contact.twisting_stiffness_ratio (k_o/k) must be in (0, 10]");
+  if (!(c.twisting_damping >= 0) || !std::isfinite(c.twisting_damping))
+    fail("contact.twisting_damping_kg_s must be zero or positive and finite");
 }
 
 void validate_particles_and_contact(const Model& m) {

@@ -15,7 +15,7 @@ std::string curve_preamble(const Model& m, const std::string& stage, const Physi
                            const std::string& definition) {
   std::ostringstream o;
   o << "# dem curve: stage=" << stage << "\n"
-    << "# units: SI; *_Pa pascal, *_J joule, time_s second; other columns dimensionless\n"
+    << "# units: SI; *_Pa pascal, *_J joule, time_s second, *_1_s per second, *_deg degree, *_rad_s radian per second; other columns dimensionless\n"
     << "# strains: true (log) box strains ln(L/L0) since the stage start, extension positive\n"
     << "# eps_v=(eps_xx+eps_yy+eps_zz)/3; eps_d, sigma_dev, F_dev = sqrt(((a-b)^2+(b-c)^2+(c-a)^2)/2) of the diagonal\n"
     << "# stress: compression positive, contact + kinetic (fluctuation) parts; p=tr/3; p_star=2<r>p/k; s_dev=sigma_dev/p\n"
@@ -28,9 +28,10 @@ std::string curve_preamble(const Model& m, const std::string& stage, const Physi
     o << "# friction: Cundall-Strack, mu=" << m.contact.friction << ", k_t=" << m.contact.tangential_stiffness_ratio * m.contact.stiffness
       << " N/m, gamma_t=" << m.contact.tangential_damping << " kg/s"
       << (m.contact.rolling() ? "; rolling resistance mu_r=" + std::to_string(m.contact.rolling_friction) : std::string())
+      << (m.contact.twisting() ? "; twisting resistance mu_o=" + std::to_string(m.contact.twisting_friction) : std::string())
       << "; stress includes d(x)f_t (symmetric part); "
          "sliding_fraction: contacts at the Coulomb limit; E_rot_J=sum I w^2/2; omega_mean_rad_s=mean |w|; "
-         "E_t_J: tangential (and rolling) springs (part of E_pot_J); W_friction_J: energy lost to sliding (and rolling) since the state began; "
+         "E_t_J: tangential (and rolling, twisting) springs (part of E_pot_J); W_friction_J: energy lost to sliding (and rolling, twisting) since the state began; "
          "sigma_antisym_rel=|antisymmetric contact stress|/p (torque balance: small when quasi-static)\n";
   if (definition.find("shear_shape=") != std::string::npos)
     o << "# sheared cell: strains are the log strain 0.5 ln(F F^T) (eps_xy, eps_xz, eps_yz its shear components); "

@@ -1,5 +1,5 @@
 // The contact model: sub-models composed at compile time in a fixed order,
-//   normal -> damping -> (no-tension clamp) -> tangential [-> rolling -> adhesion: issue 20],
+//   normal -> damping -> (no-tension clamp) -> tangential -> rolling (and twisting),
 // over one geometry per pair (geometry.hpp), the way MercuryDPM's Species mixins and LAMMPS'
 // GranularModel sub-models are organised. An empty sub-model (NoTangential) costs nothing: the
 // frictionless model is exactly the old linear spring-dashpot, bit for bit, and keeps 3 degrees
@@ -115,19 +115,33 @@ inline FrictionalRolling frictional_rolling(const ContactLaw& law) {
   return {base.normal, base.damping, base.tangential, base.attractive,
           RollingSpring{law.rolling_stiffness_ratio * law.stiffness, law.rolling_damping, law.rolling_friction}};
 }
+/// Rolling (mu_r may be 0: off) and twisting resistance.
+inline RollingTwisting rolling_twisting(const ContactLaw& law) {
+  return {frictional_rolling(law).rolling,
+          TwistingSpring{law.twisting_stiffness_ratio * law.stiffness, law.twisting_damping, law.twisting_friction}};
+}
 
 /// Calls f(model) with the concrete contact model of the scene's law: the normal sub-model
-/// (linear or Luding's), the tangential one (none or Cundall-Strack), rolling (off or on).
+/// (linear or Luding's), the tangential one (none or Cundall-Strack), rolling (off, on, or
+/// rolling with twisting).
 template <class F>
 decltype(auto) with_contact_model(const ContactLaw& law, F&& f) {
   if (law.normal == NormalModel::Luding) {
     const LudingNormal n{law.stiffness, law.luding_kp, law.luding_kc, law.luding_plasticity_depth};
     const Frictional base = frictional(law);
+    if (law.twisting())
+      return f(Model3<LudingNormal, CundallStrack, RollingTwisting>{n, base.damping, base.tangential, false,
+                                                                    rolling_twisting(law)});
     if (law.rolling())
       return f(Model3<LudingNormal, CundallStrack, RollingSpring>{n, base.damping, base.tangential, false,
                                                                   frictional_rolling(law).rolling});
     if (law.frictional()) return f(Model3<LudingNormal, CundallStrack>{n, base.damping, base.tangential, false});
     return f(Model3<LudingNormal, NoTangential>{n, base.damping, NoTangential{}, false});
+  }
+  if (law.twisting()) {
+    const Frictional base = frictional(law);
+    return f(Model3<LinearSpring, CundallStrack, RollingTwisting>{base.normal, base.damping, base.tangential,
+                                                                  base.attractive, rolling_twisting(law)});
   }
   if (law.rolling()) return f(frictional_rolling(law));
   if (law.frictional()) return f(frictional(law));

@@ -1,6 +1,8 @@
-// Rolling sub-models: none, and rolling resistance as a spring-dashpot-slider on the relative
+// Rolling sub-models: none; rolling resistance as a spring-dashpot-slider on the relative
 // rolling displacement (Luding 2008, Granular Matter 10:235, sec. 2.3; LAMMPS `rolling sds`,
-// MercuryDPM's rolling friction). A couple: no net force, equal and opposite torques.
+// MercuryDPM's rolling friction); and rolling plus twisting (torsion) resistance, the same
+// spring-dashpot-slider on the relative spin about the normal (Luding 2008, sec. 2.3; LAMMPS
+// `twisting sds`, MercuryDPM's torsion friction). Couples: no net force, equal and opposite torques.
 #pragma once
 #include <cmath>
 
@@ -53,6 +55,53 @@ struct RollingSpring {
     return cross(c.n, f) * (-c.a_red);
   }
   double energy(const double* h) const { return 0.5 * kr * (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]); }
+};
+
+/// Twisting (torsion) resistance: twist velocity v_o = a' (w_i - w_j) . n [m/s] (even under
+/// i <-> j: n and the spins both swap), a scalar spring xi_o [m] advanced by v_o dt (it needs no
+/// rotation: it lies along n), the twisting "force" f_o = -k_o xi_o - gamma_o v_o [N], capped at
+/// mu_o fn (the spring reset to the cone); torques tau_i = a' f_o n, tau_j = -a' f_o n
+/// (|tau| <= mu_o a' fn). Energy k_o xi_o^2 / 2. History: xi_o (1 double, even under i <-> j).
+/// Scene keys: contact.twisting_friction (mu_o), contact.twisting_stiffness_ratio (k_o/k),
+/// contact.twisting_damping_kg_s (gamma_o).
+struct TwistingSpring {
+  double ko;        ///< [N/m]
+  double gamma_o;   ///< [kg/s]
+  double mu_o;      ///< twisting friction coefficient (torque <= mu_o a' fn)
+  static constexpr int history = 1;
+
+  /// One step: updates h[0] and returns the twisting force f_o [N] (torque on i: a' f_o n).
+  double update(const RollingInput& c, double dt, double* h, double* dissipated) const {
+    const double vo = c.a_red * dot(c.wi - c.wj, c.n);
+    const double start = h[0], step = vo * dt;
+    double xi = start + step;
+    double f = -ko * xi - gamma_o * vo;
+    const double limit = mu_o * c.fn;
+    if (std::fabs(f) > limit) {
+      f = std::copysign(limit, f);
+      xi = -(f + gamma_o * vo) / ko;
+      *dissipated += 0.5 * ko * ((start + xi) * step - xi * xi + start * start);
+    }
+    h[0] = xi;
+    return f;
+  }
+  double energy(const double* h) const { return 0.5 * ko * h[0] * h[0]; }
+};
+
+/// Rolling and twisting resistance together (the rolling part may be off: mu_r = 0 caps its
+/// torque at zero). History: xi_r (3 doubles), then xi_o (1), all even under i <-> j.
+struct RollingTwisting {
+  RollingSpring rolling;
+  TwistingSpring twisting;
+  static constexpr int history = RollingSpring::history + TwistingSpring::history;
+
+  /// One step: both springs; returns the torque on i [N m] (on j: its negative).
+  Vec3 update(const RollingInput& c, double dt, double* h, double* dissipated) const {
+    const Vec3 tr = rolling.update(c, dt, h, dissipated);
+    const double fo = twisting.update(c, dt, h + RollingSpring::history, dissipated);
+    return tr + c.n * (c.a_red * fo);
+  }
+  double energy(const double* h) const { return rolling.energy(h) + twisting.energy(h + RollingSpring::history); }
 };
 
 }  // namespace dem::contact

@@ -58,6 +58,11 @@ struct ContactLaw {
   double rolling_stiffness_ratio = 2.0 / 7.0;   ///< k_r / k, > 0
   double rolling_damping = 0.0;             ///< gamma_r [kg/s], >= 0
   bool rolling() const { return frictional() && rolling_friction > 0; }
+  /// Twisting (torsion) resistance (contact/rolling.hpp, RollingTwisting; needs the tangential model):
+  double twisting_friction = 0.0;           ///< mu_o: twisting torque <= mu_o a' f_n; 0: off
+  double twisting_stiffness_ratio = 2.0 / 7.0;   ///< k_o / k, > 0
+  double twisting_damping = 0.0;            ///< gamma_o [kg/s], >= 0
+  bool twisting() const { return frictional() && twisting_friction > 0; }
   /// The model needs angular velocities, torques and per-contact history.
   bool frictional() const { return tangential != TangentialModel::None; }
 };
