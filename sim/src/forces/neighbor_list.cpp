@@ -76,66 +76,110 @@ CellGrid make_grid(const Box& b, double cutoff) {
   return g;
 }
 
-// Builds the CSR list from positions x (inside [0, L)) for the box length L.
-void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, const Box& cell,
-                 NeighborList& list) {
+// The linked cells of one build: the cell of each particle and the members of each cell
+// (particle indices, ascending within a cell: a counting sort, stable in i).
+struct CellLists {
+  std::vector<std::int32_t> cell_of, cell_start, cell_members;
+};
+
+CellLists bin_particles(const CellGrid& g, const std::vector<Vec3>& x) {
   const int n = static_cast<int>(x.size());
-  const double rmax = max_radius_of(radius);
-  const double cutoff = 2.0 * rmax + list.skin;
-  CellGrid g = make_grid(cell, cutoff);
   const int ncell = g.n[0] * g.n[1] * g.n[2];
-  std::vector<std::int32_t> cell_of(n), cell_start(ncell + 1, 0), cell_members(n);
-  for (int i = 0; i < n; ++i) { cell_of[i] = g.index_of(x[i]); ++cell_start[cell_of[i] + 1]; }
-  for (int c = 0; c < ncell; ++c) cell_start[c + 1] += cell_start[c];
-  {
-    std::vector<std::int32_t> fill(cell_start.begin(), cell_start.end() - 1);
-    for (int i = 0; i < n; ++i) cell_members[fill[cell_of[i]]++] = i;
-  }
-  // With fewer than 3 cells along an axis, neighbour cells repeat: scan each distinct
-  // (cell, image) combination once by iterating over images explicitly.
-  list.first.assign(n + 1, 0);
-  list.partner.clear();
-  list.image.clear();
-  Vec3 off[27];
-  image_offsets(cell, off);
-  std::vector<std::pair<std::int32_t, std::uint8_t>> found;
-  for (int i = 0; i < n; ++i) {
-    found.clear();
-    const int ci[3] = {cell_of[i] / (g.n[1] * g.n[2]), (cell_of[i] / g.n[2]) % g.n[1],
-                       cell_of[i] % g.n[2]};
-    // Candidate (cell, shift) pairs, deduplicated for small grids.
-    int cand_cell[27], cand_img[27], ncand = 0;
+  CellLists c;
+  c.cell_of.resize(n);
+  c.cell_start.assign(ncell + 1, 0);
+  c.cell_members.resize(n);
+  for (int i = 0; i < n; ++i) { c.cell_of[i] = g.index_of(x[i]); ++c.cell_start[c.cell_of[i] + 1]; }
+  for (int k = 0; k < ncell; ++k) c.cell_start[k + 1] += c.cell_start[k];
+  std::vector<std::int32_t> fill(c.cell_start.begin(), c.cell_start.end() - 1);
+  for (int i = 0; i < n; ++i) c.cell_members[fill[c.cell_of[i]]++] = i;
+  return c;
+}
+
+// The 27-cell stencil of every cell as (neighbour cell, periodic image) entries. With fewer
+// than 3 cells along an axis neighbour cells repeat: each distinct (cell, image) once.
+struct Stencils {
+  std::vector<std::int32_t> start, cell;
+  std::vector<std::uint8_t> image;
+};
+
+Stencils make_stencils(const CellGrid& g) {
+  const int ncell = g.n[0] * g.n[1] * g.n[2];
+  const bool small = g.n[0] < 3 || g.n[1] < 3 || g.n[2] < 3;
+  Stencils st;
+  st.start.assign(ncell + 1, 0);
+  st.cell.reserve(27L * ncell);
+  st.image.reserve(27L * ncell);
+  for (int c = 0; c < ncell; ++c) {
+    const int ci[3] = {c / (g.n[1] * g.n[2]), (c / g.n[2]) % g.n[1], c % g.n[2]};
+    const std::size_t first = st.cell.size();
     for (int dx = -1; dx <= 1; ++dx)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dz = -1; dz <= 1; ++dz) {
           const int d[3] = {dx, dy, dz};
           int cc[3], sh[3];
           for (int k = 0; k < 3; ++k) {
-            int c = ci[k] + d[k];
+            int v = ci[k] + d[k];
             sh[k] = 0;
-            if (c < 0) { c += g.n[k]; sh[k] = -1; }
-            if (c >= g.n[k]) { c -= g.n[k]; sh[k] = 1; }
-            cc[k] = c;
+            if (v < 0) { v += g.n[k]; sh[k] = -1; }
+            if (v >= g.n[k]) { v -= g.n[k]; sh[k] = 1; }
+            cc[k] = v;
           }
           const int cell = (cc[0] * g.n[1] + cc[1]) * g.n[2] + cc[2];
           const int img = (sh[0] + 1) * 9 + (sh[1] + 1) * 3 + (sh[2] + 1);
           bool dup = false;
-          for (int q = 0; q < ncand; ++q) dup |= (cand_cell[q] == cell && cand_img[q] == img);
-          if (!dup) { cand_cell[ncand] = cell; cand_img[ncand] = img; ++ncand; }
+          if (small)
+            for (std::size_t q = first; q < st.cell.size(); ++q) dup |= (st.cell[q] == cell && st.image[q] == img);
+          if (!dup) { st.cell.push_back(cell); st.image.push_back(static_cast<std::uint8_t>(img)); }
         }
-    for (int q = 0; q < ncand; ++q) {
-      const Vec3& o = off[cand_img[q]];
-      for (int m = cell_start[cand_cell[q]]; m < cell_start[cand_cell[q] + 1]; ++m) {
-        const int j = cell_members[m];
-        if (j <= i) continue;
-        const Vec3 d = x[j] + o - x[i];
-        const double reach = radius[i] + radius[j] + list.skin;
-        if (dot(d, d) < reach * reach)
-          found.emplace_back(j, static_cast<std::uint8_t>(cand_img[q]));
-      }
+    st.start[c + 1] = static_cast<std::int32_t>(st.cell.size());
+  }
+  return st;
+}
+
+// The listed partners of particle i (j > i, within r_i + r_j + skin), ascending in (j, image),
+// appended to partner/image. The same pairs in the same order as a scan of all 27 cells.
+void search_row(int i, const std::vector<Vec3>& x, const std::vector<double>& radius, double skin,
+                const CellLists& cl, const Stencils& st, const Vec3 off[27],
+                std::vector<std::pair<std::int32_t, std::uint8_t>>& found) {
+  found.clear();
+  const int c = cl.cell_of[i];
+  const Vec3 xi = x[i];
+  const double ri = radius[i];
+  for (int q = st.start[c]; q < st.start[c + 1]; ++q) {
+    const Vec3& o = off[st.image[q]];
+    const std::int32_t* m0 = cl.cell_members.data() + cl.cell_start[st.cell[q]];
+    const std::int32_t* m1 = cl.cell_members.data() + cl.cell_start[st.cell[q] + 1];
+    if (m0 == m1 || m1[-1] <= i) continue;             // members ascend: none with j > i
+    for (const std::int32_t* m = std::upper_bound(m0, m1, i); m < m1; ++m) {
+      const int j = *m;
+      const Vec3 d = x[j] + o - xi;
+      const double reach = ri + radius[j] + skin;   // the operations of the oracle's cutoff, in order
+      if (dot(d, d) < reach * reach) found.emplace_back(j, st.image[q]);
     }
-    // Ascending j for a deterministic, cache-friendly order.
-    std::sort(found.begin(), found.end());
+  }
+  std::sort(found.begin(), found.end());   // ascending j: a deterministic, cache-friendly order
+}
+
+// Builds the CSR list from positions x (inside the cell) for the box `cell`.
+void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, const Box& cell,
+                 NeighborList& list) {
+  const int n = static_cast<int>(x.size());
+  const double rmax = max_radius_of(radius);
+  CellGrid g = make_grid(cell, 2.0 * rmax + list.skin);
+  const CellLists cl = bin_particles(g, x);
+  const Stencils st = make_stencils(g);
+  Vec3 off[27];
+  image_offsets(cell, off);
+  const std::size_t expected = list.partner.size();
+  list.first.assign(n + 1, 0);
+  list.partner.clear();
+  list.image.clear();
+  list.partner.reserve(expected + expected / 8);
+  list.image.reserve(expected + expected / 8);
+  std::vector<std::pair<std::int32_t, std::uint8_t>> found;
+  for (int i = 0; i < n; ++i) {
+    search_row(i, x, radius, list.skin, cl, st, off, found);
     for (auto& f : found) { list.partner.push_back(f.first); list.image.push_back(f.second); }
     list.first[i + 1] = static_cast<std::int32_t>(list.partner.size());
   }
@@ -174,10 +218,8 @@ void permute(std::vector<T>& v, const std::vector<std::int32_t>& order) {
 
 void sort_by_cell(State& s, double cutoff) {
   CellGrid g = make_grid(s.box, cutoff);
-  const int n = s.count();
-  std::vector<std::int32_t> key(n), order(n);
-  for (int i = 0; i < n; ++i) { key[i] = g.index_of(s.position[i]); order[i] = i; }
-  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return key[a] < key[b]; });
+  // By cell, particles of a cell in their present order (a stable counting sort).
+  const std::vector<std::int32_t> order = bin_particles(g, s.position).cell_members;
   permute(s.position, order); permute(s.velocity, order); permute(s.force, order);
   permute(s.radius, order); permute(s.mass, order); permute(s.id, order);
   if (s.rotations()) { permute(s.angular_velocity, order); permute(s.torque, order); }
