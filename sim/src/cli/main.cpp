@@ -338,11 +338,12 @@ struct BenchCommand {
                 "sliding_fraction=%.6g contacts=%ld\n",
                 steps + 200, m.p, m.stress.xx, m.stress.yy, m.stress.zz, m.E_kin, m.E_rot, m.sliding_fraction,
                 m.contacts);
-    std::printf("list rebuilds: %lld (%.4g per 10^4 steps), %.3f s = %.1f %% of the wall time; triggered by a rattler "
-                "%lld, by the packing %lld, by the box's stretch %lld, by flips %lld; packing's / largest displacement "
-                "(median) %.3g\n",
+    std::printf("list rebuilds: %lld (%.4g per 10^4 steps), %.3f s = %.1f %% of the wall time; triggered by a "
+                "displacement %lld (of those diagnosed: a rattler %lld, the packing %lld), by the box's stretch %lld, by "
+                "flips %lld; packing's / largest displacement (median) %.3g\n",
                 static_cast<long long>(timed.rebuilds), 1e4 * timed.rebuilds / static_cast<double>(steps), timed.seconds,
-                100.0 * timed.seconds / wall, static_cast<long long>(timed.by_rattler),
+                100.0 * timed.seconds / wall, static_cast<long long>(timed.displacement_triggers),
+                static_cast<long long>(timed.by_rattler),
                 static_cast<long long>(timed.by_packing), static_cast<long long>(timed.by_deformation),
                 static_cast<long long>(timed.by_flip), timed.median_nonrattler_ratio());
     std::printf("neighbor_list=%s\n", timed.json(wall, engine.skin()).c_str());

@@ -179,7 +179,7 @@ void Engine::rebuild_neighbors_if_stale(const StalenessTest& test, double max_di
   const auto t0 = Clock::now();
   if (flipped_) ++stats_.by_flip;
   else if (test.limit2 < 0) ++stats_.by_deformation;
-  else diagnose_trigger(test);
+  else if (stats_.displacement_triggers++ < 32 || stats_.displacement_triggers % 8 == 0) diagnose_trigger(test);
   const auto t1 = Clock::now();
   rebuild_neighbor_list(state_, list_, skin_, true);   // sorts the particles: repack them
   partition_pairs(list_, std::max(1, blocks_), scratch_);
@@ -213,6 +213,7 @@ RebuildStats RebuildStats::since(const RebuildStats& e) const {
   RebuildStats d = *this;
   d.steps -= e.steps; d.rebuilds -= e.rebuilds; d.by_rattler -= e.by_rattler; d.by_packing -= e.by_packing;
   d.by_deformation -= e.by_deformation; d.by_flip -= e.by_flip;
+  d.displacement_triggers -= e.displacement_triggers;
   d.seconds -= e.seconds; d.diagnosis_seconds -= e.diagnosis_seconds;
   const std::size_t k = std::min(e.nonrattler_ratio.size(), d.nonrattler_ratio.size());
   d.nonrattler_ratio.erase(d.nonrattler_ratio.begin(), d.nonrattler_ratio.begin() + static_cast<long>(k));
@@ -231,12 +232,14 @@ std::string RebuildStats::json(double wall_s, double skin_m) const {
   std::snprintf(buf, sizeof buf,
                 "{\"steps\": %lld, \"rebuilds\": %lld, \"rebuilds_per_1e4_steps\": %.4g, \"skin_m\": %.6g, "
                 "\"rebuild_s\": %.4g, \"rebuild_share\": %.4g, \"trigger_rattler\": %lld, \"trigger_packing\": %lld, "
-                "\"trigger_deformation\": %lld, \"trigger_flip\": %lld, \"packing_over_max_displacement_median\": %.4g, "
+                "\"trigger_displacement\": %lld, \"trigger_deformation\": %lld, \"trigger_flip\": %lld, "
+                "\"packing_over_max_displacement_median\": %.4g, "
                 "\"diagnosis_s\": %.4g}",
                 static_cast<long long>(steps), static_cast<long long>(rebuilds),
                 steps > 0 ? 1e4 * static_cast<double>(rebuilds) / static_cast<double>(steps) : 0.0, skin_m, seconds,
                 wall_s > 0 ? seconds / wall_s : 0.0, static_cast<long long>(by_rattler),
-                static_cast<long long>(by_packing), static_cast<long long>(by_deformation),
+                static_cast<long long>(by_packing), static_cast<long long>(displacement_triggers),
+                static_cast<long long>(by_deformation),
                 static_cast<long long>(by_flip), median_nonrattler_ratio(), diagnosis_seconds);
   return buf;
 }

@@ -101,6 +101,7 @@ CellLists bin_particles(const CellGrid& g, const std::vector<Vec3>& x) {
 struct Stencils {
   std::vector<std::int32_t> start, cell;
   std::vector<std::uint8_t> image;
+  std::vector<std::uint8_t> offset;   ///< (dx+1) | (dy+1) << 2 | (dz+1) << 4: where it lies from the own cell
 };
 
 Stencils make_stencils(const CellGrid& g) {
@@ -110,6 +111,7 @@ Stencils make_stencils(const CellGrid& g) {
   st.start.assign(ncell + 1, 0);
   st.cell.reserve(27L * ncell);
   st.image.reserve(27L * ncell);
+  st.offset.reserve(27L * ncell);
   for (int c = 0; c < ncell; ++c) {
     const int ci[3] = {c / (g.n[1] * g.n[2]), (c / g.n[2]) % g.n[1], c % g.n[2]};
     const std::size_t first = st.cell.size();
@@ -130,27 +132,54 @@ Stencils make_stencils(const CellGrid& g) {
           bool dup = false;
           if (small)
             for (std::size_t q = first; q < st.cell.size(); ++q) dup |= (st.cell[q] == cell && st.image[q] == img);
-          if (!dup) { st.cell.push_back(cell); st.image.push_back(static_cast<std::uint8_t>(img)); }
+          if (!dup) {
+            st.cell.push_back(cell);
+            st.image.push_back(static_cast<std::uint8_t>(img));
+            st.offset.push_back(static_cast<std::uint8_t>((dx + 1) | (dy + 1) << 2 | (dz + 1) << 4));
+          }
         }
     st.start[c + 1] = static_cast<std::int32_t>(st.cell.size());
   }
   return st;
 }
 
+// Squared gaps between particle i and the cells around its own, per axis: gap2[k][d + 1] for
+// the neighbour at offset d = -1, 0, 1 along axis k (0 for d = 0, and everywhere in a tilted
+// cell, where cells are slabs of fractional coordinates: no pruning there) [m^2]. Shrunk by a
+// margin far above the round-off of the cell index, so no cell that could hold a partner is pruned.
+void cell_gaps2(const CellGrid& g, const Vec3& x, int cell, double gap2[3][3]) {
+  for (int k = 0; k < 3; ++k) gap2[k][0] = gap2[k][1] = gap2[k][2] = 0.0;
+  if (g.tilted) return;
+  const int ci[3] = {cell / (g.n[1] * g.n[2]), (cell / g.n[2]) % g.n[1], cell % g.n[2]};
+  for (int k = 0; k < 3; ++k) {
+    const double size = 1.0 / g.inv_size[k], margin = 1e-9 * size * g.n[k];
+    const double below = std::max(0.0, x[k] - ci[k] * size - margin);
+    const double above = std::max(0.0, (ci[k] + 1) * size - x[k] - margin);
+    gap2[k][0] = below * below;
+    gap2[k][2] = above * above;
+  }
+}
+
 // The listed partners of particle i (j > i, within r_i + r_j + skin), ascending in (j, image),
-// appended to partner/image. The same pairs in the same order as a scan of all 27 cells.
-void search_row(int i, const std::vector<Vec3>& x, const std::vector<double>& radius, double skin,
-                const CellLists& cl, const Stencils& st, const Vec3 off[27],
+// in `found`: the same pairs in the same order as a test of every particle of the 27 cells.
+// Skipped: cells whose members all precede i, and cells farther from x_i than r_i + r_max + skin.
+void search_row(int i, const std::vector<Vec3>& x, const std::vector<double>& radius, double skin, double rmax,
+                const CellGrid& g, const CellLists& cl, const Stencils& st, const Vec3 off[27],
                 std::vector<std::pair<std::int32_t, std::uint8_t>>& found) {
   found.clear();
   const int c = cl.cell_of[i];
   const Vec3 xi = x[i];
   const double ri = radius[i];
+  double gap2[3][3];
+  cell_gaps2(g, xi, c, gap2);
+  const double farthest = ri + rmax + skin, farthest2 = farthest * farthest;
   for (int q = st.start[c]; q < st.start[c + 1]; ++q) {
-    const Vec3& o = off[st.image[q]];
     const std::int32_t* m0 = cl.cell_members.data() + cl.cell_start[st.cell[q]];
     const std::int32_t* m1 = cl.cell_members.data() + cl.cell_start[st.cell[q] + 1];
     if (m0 == m1 || m1[-1] <= i) continue;             // members ascend: none with j > i
+    const int d = st.offset[q];
+    if (gap2[0][d & 3] + gap2[1][(d >> 2) & 3] + gap2[2][d >> 4] >= farthest2) continue;   // none can reach x_i
+    const Vec3& o = off[st.image[q]];
     for (const std::int32_t* m = std::upper_bound(m0, m1, i); m < m1; ++m) {
       const int j = *m;
       const Vec3 d = x[j] + o - xi;
@@ -179,7 +208,7 @@ void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, 
   list.image.reserve(expected + expected / 8);
   std::vector<std::pair<std::int32_t, std::uint8_t>> found;
   for (int i = 0; i < n; ++i) {
-    search_row(i, x, radius, list.skin, cl, st, off, found);
+    search_row(i, x, radius, list.skin, rmax, g, cl, st, off, found);
     for (auto& f : found) { list.partner.push_back(f.first); list.image.push_back(f.second); }
     list.first[i + 1] = static_cast<std::int32_t>(list.partner.size());
   }

@@ -20,8 +20,10 @@ namespace dem {
 struct RebuildStats {
   std::int64_t steps = 0;            ///< steps taken
   std::int64_t rebuilds = 0;         ///< list builds in those steps (not the one at construction)
-  std::int64_t by_rattler = 0;       ///< displacement triggers whose farthest-moved particle is a rattler
-  std::int64_t by_packing = 0;       ///< displacement triggers by a particle of the load-bearing packing
+  std::int64_t displacement_triggers = 0;   ///< rebuilds because a particle moved half the skin
+  /// Of those, diagnosed (the first 32, then every 8th: the diagnosis reads every contact):
+  std::int64_t by_rattler = 0;       ///< the farthest-moved particle is a rattler
+  std::int64_t by_packing = 0;       ///< it belongs to the load-bearing packing
   std::int64_t by_deformation = 0;   ///< the box's stretch alone used up the skin
   std::int64_t by_flip = 0;          ///< flips of the sheared cell
   double seconds = 0;                ///< wall time of the rebuilds (wrap, sort, pairs, blocks, records) [s]
