@@ -173,20 +173,34 @@ double Engine::advance_particles(int begin, int end, const AffineMap& map, bool 
   return worst;
 }
 
-void Engine::rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2) {
-  if (!(test.limit2 < 0 || max_displacement2 >= test.limit2)) return;
+bool Engine::rebuild_due(const StalenessTest& test, double max_displacement2) {
+  return test.limit2 < 0 || max_displacement2 >= test.limit2;
+}
+
+void Engine::begin_rebuild(const StalenessTest& test, int chunks) {
   using Clock = std::chrono::steady_clock;
   const auto t0 = Clock::now();
   if (flipped_) ++stats_.by_flip;
   else if (test.limit2 < 0) ++stats_.by_deformation;
   else if (stats_.displacement_triggers++ < 32 || stats_.displacement_triggers % 8 == 0) diagnose_trigger(test);
-  const auto t1 = Clock::now();
-  rebuild_neighbor_list(state_, list_, skin_, true);   // sorts the particles: repack them
+  rebuild_started_ = Clock::now();
+  stats_.diagnosis_seconds += std::chrono::duration<double>(rebuild_started_ - t0).count();
+  rebuild_.begin(state_, list_, skin_, true, chunks);   // sorts the particles: repacked in finish_rebuild
+}
+
+void Engine::finish_rebuild() {
+  rebuild_.finish();
   partition_pairs(list_, std::max(1, blocks_), scratch_);
   pack_particles(state_, 0, state_.count(), scratch_);
   ++stats_.rebuilds;
-  stats_.diagnosis_seconds += std::chrono::duration<double>(t1 - t0).count();
-  stats_.seconds += std::chrono::duration<double>(Clock::now() - t1).count();
+  stats_.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - rebuild_started_).count();
+}
+
+void Engine::rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2) {
+  if (!rebuild_due(test, max_displacement2)) return;
+  begin_rebuild(test, 1);
+  rebuild_.search(0);
+  finish_rebuild();
 }
 
 // Which particle crossed the half skin: a rattler (measure()'s rule, on the contacts of the
@@ -323,10 +337,16 @@ void Engine::step_threaded(const AffineMap& map, bool affine, const StalenessTes
                                                 map, affine, test));
     worst_displacement2_[t] = worst;
     sync();
+    double all = 0;   // every member reads the same maxima: the same decision
+    for (double w : worst_displacement2_) all = std::max(all, w);
+    if (rebuild_due(test, all)) {   // 4, the pair search shared by the team (the same list for any nt)
+      if (t == 0) begin_rebuild(test, nt);
+      sync();
+      for (int c = t; c < rebuild_.chunks(); c += nt) rebuild_.search(c);
+      sync();
+      if (t == 0) finish_rebuild();
+    }
     if (t == 0) {
-      double all = 0;
-      for (double w : worst_displacement2_) all = std::max(all, w);
-      rebuild_neighbors_if_stale(test, all);
       partition_pairs(list_, blocks_, scratch_);
       begin_pair_loop(model_, state_, list_, scratch_);
     }

@@ -190,29 +190,74 @@ void search_row(int i, const std::vector<Vec3>& x, const std::vector<double>& ra
   std::sort(found.begin(), found.end());   // ascending j: a deterministic, cache-friendly order
 }
 
-// Builds the CSR list from positions x (inside the cell) for the box `cell`.
-void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, const Box& cell,
-                 NeighborList& list) {
-  const int n = static_cast<int>(x.size());
-  const double rmax = max_radius_of(radius);
-  CellGrid g = make_grid(cell, 2.0 * rmax + list.skin);
-  const CellLists cl = bin_particles(g, x);
-  const Stencils st = make_stencils(g);
+// What a pair search needs: the grid, its cells and stencils, the image offsets.
+struct SearchContext {
+  const std::vector<Vec3>* x = nullptr;
+  const std::vector<double>* radius = nullptr;
+  double skin = 0, rmax = 0;
+  CellGrid grid{};
+  CellLists cells;
+  Stencils stencils;
   Vec3 off[27];
-  image_offsets(cell, off);
-  const std::size_t expected = list.partner.size();
-  list.first.assign(n + 1, 0);
-  list.partner.clear();
-  list.image.clear();
-  list.partner.reserve(expected + expected / 8);
-  list.image.reserve(expected + expected / 8);
+};
+
+void prepare_search(SearchContext& c, const std::vector<Vec3>& x, const std::vector<double>& radius, const Box& cell,
+                    double skin) {
+  c.x = &x;
+  c.radius = &radius;
+  c.skin = skin;
+  c.rmax = max_radius_of(radius);
+  c.grid = make_grid(cell, 2.0 * c.rmax + skin);
+  c.cells = bin_particles(c.grid, x);
+  c.stencils = make_stencils(c.grid);
+  image_offsets(cell, c.off);
+}
+
+// The rows [begin, end) of the list: their partners and images appended in row order, and each
+// row's pair count in count[i - begin].
+struct Rows {
+  std::vector<std::int32_t> partner, count;
+  std::vector<std::uint8_t> image;
+};
+
+void search_rows(const SearchContext& c, int begin, int end, Rows& out) {
+  out.partner.clear();
+  out.image.clear();
+  out.count.assign(end - begin, 0);
   std::vector<std::pair<std::int32_t, std::uint8_t>> found;
-  for (int i = 0; i < n; ++i) {
-    search_row(i, x, radius, list.skin, rmax, g, cl, st, off, found);
-    for (auto& f : found) { list.partner.push_back(f.first); list.image.push_back(f.second); }
-    list.first[i + 1] = static_cast<std::int32_t>(list.partner.size());
+  for (int i = begin; i < end; ++i) {
+    search_row(i, *c.x, *c.radius, c.skin, c.rmax, c.grid, c.cells, c.stencils, c.off, found);
+    for (auto& f : found) { out.partner.push_back(f.first); out.image.push_back(f.second); }
+    out.count[i - begin] = static_cast<std::int32_t>(found.size());
+  }
+}
+
+// The CSR list from rows searched in chunks, joined in row order (the same list for any chunks).
+void join_rows(const std::vector<Rows>& chunks, int n, double rmax, NeighborList& list) {
+  std::size_t total = 0;
+  for (const Rows& r : chunks) total += r.partner.size();
+  list.first.assign(n + 1, 0);
+  list.partner.resize(total);
+  list.image.resize(total);
+  int i = 0;
+  std::size_t at = 0;
+  for (const Rows& r : chunks) {
+    std::copy(r.partner.begin(), r.partner.end(), list.partner.begin() + static_cast<long>(at));
+    std::copy(r.image.begin(), r.image.end(), list.image.begin() + static_cast<long>(at));
+    at += r.partner.size();
+    for (std::int32_t k : r.count) { list.first[i + 1] = list.first[i] + k; ++i; }
   }
   list.radius_max = rmax;
+}
+
+// Builds the CSR list from positions x (inside the cell) for the box `cell`, on this thread.
+void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, const Box& cell,
+                 NeighborList& list) {
+  SearchContext c;
+  prepare_search(c, x, radius, cell, list.skin);
+  std::vector<Rows> rows(1);
+  search_rows(c, 0, static_cast<int>(x.size()), rows[0]);
+  join_rows(rows, static_cast<int>(x.size()), c.rmax, list);
 }
 
 void wrap_into_box(State& s) {
@@ -308,23 +353,62 @@ void place_history(State& s, const NeighborList& list) {
 
 namespace {
 
-void build(State& state, NeighborList& list, double skin, bool sort) {
+// Wraps, sorts, stores the build reference: everything of a build before the pair search.
+void prepare_build(State& state, NeighborList& list, double skin, bool sort) {
   list.skin = skin;
   wrap_into_box(state);
   if (sort) sort_by_cell(state, 2.0 * max_radius_of(state.radius) + skin);
   state.position_at_build = state.position;
   state.length_at_build = state.box.length;
   state.tilt_at_build = state.box.tilt;
-  build_pairs(state.position, state.radius, state.box, list);
-  state.list_valid = true;
-  ++list.builds;
 }
 
 }  // namespace
 
+struct ListRebuild::Impl {
+  State* state = nullptr;
+  NeighborList* list = nullptr;
+  SearchContext context;
+  std::vector<Rows> rows;
+  std::vector<int> bounds;
+};
+
+ListRebuild::ListRebuild() : impl_(std::make_unique<Impl>()) {}
+ListRebuild::~ListRebuild() = default;
+
+void ListRebuild::begin(State& state, NeighborList& list, double skin, bool sort, int chunks) {
+  Impl& m = *impl_;
+  m.state = &state;
+  m.list = &list;
+  prepare_build(state, list, skin, sort);
+  prepare_search(m.context, state.position, state.radius, state.box, skin);
+  const int n = state.count();
+  chunks = std::max(1, std::min(chunks, n));
+  m.rows.resize(chunks);
+  m.bounds.resize(chunks + 1);
+  for (int k = 0; k <= chunks; ++k) m.bounds[k] = static_cast<int>(static_cast<long>(n) * k / chunks);
+}
+
+int ListRebuild::chunks() const { return static_cast<int>(impl_->rows.size()); }
+
+void ListRebuild::search(int chunk) {
+  Impl& m = *impl_;
+  search_rows(m.context, m.bounds[chunk], m.bounds[chunk + 1], m.rows[chunk]);
+}
+
+void ListRebuild::finish() {
+  Impl& m = *impl_;
+  join_rows(m.rows, m.state->count(), m.context.rmax, *m.list);
+  m.state->list_valid = true;
+  ++m.list->builds;
+  place_history(*m.state, *m.list);   // the history kept its old order (keyed by ids) meanwhile
+}
+
 void rebuild_neighbor_list(State& state, NeighborList& list, double skin, bool sort) {
-  build(state, list, skin, sort);   // the history keeps its old order (keyed by ids) meanwhile
-  place_history(state, list);
+  ListRebuild r;
+  r.begin(state, list, skin, sort, 1);
+  r.search(0);
+  r.finish();
 }
 
 void restore_neighbor_list(const State& state, NeighborList& list, double skin) {

@@ -1,5 +1,6 @@
 // The time stepper: advances (Model, State) by one step, read as a list of named stages.
 #pragma once
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <stdexcept>
@@ -106,7 +107,10 @@ class Engine {
   AffineMap deform_box(const VelGrad& rate, bool* flipped);   // 3 (box): the map particles follow
   double advance_particles(int begin, int end, const AffineMap& map, bool affine,
                            const StalenessTest& test);   // 1-3, zeroes F; returns max |u|^2
-  void rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2);  // 4
+  void rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2);  // 4 on this thread
+  static bool rebuild_due(const StalenessTest& test, double max_displacement2);
+  void begin_rebuild(const StalenessTest& test, int chunks);   // 4: statistics, wrap, sort, cells
+  void finish_rebuild();                                        // 4: join the searched rows, blocks, records
   void diagnose_trigger(const StalenessTest& test);      // 4, statistics: who crossed the half skin
   void finish_forces_and_kick(int begin, int end);       // 5 (damping) and 6
   void kick_rotations(int begin, int end, double h);     // 1 and 6 for angular velocities (friction)
@@ -117,6 +121,8 @@ class Engine {
   const Model& model_;
   State& state_;
   NeighborList list_;
+  ListRebuild rebuild_;              ///< the rebuild in progress (its pair search shared by the team)
+  std::chrono::steady_clock::time_point rebuild_started_;   ///< statistics
   ForceScratch scratch_;
   std::unique_ptr<StepTeam> team_;   ///< the threads of step_threaded (threads_ > 1)
   TeamSizeChooser chooser_{1, false};   ///< team or this thread alone, step by step
