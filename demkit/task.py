@@ -51,6 +51,21 @@ def last_error_line(log_path):
     return lines[-1] if lines else ""
 
 
+NEIGHBOR_LIST_LINE = "dem mode: neighbor_list "
+
+
+def neighbor_list_summary(output):
+    """The JSON object of `dem mode`'s last `dem mode: neighbor_list {...}` line (rebuild counts,
+    their wall-time share, triggers: rattler, packing, deformation, flip), or None."""
+    for ln in reversed(output.splitlines()):
+        if ln.startswith(NEIGHBOR_LIST_LINE):
+            try:
+                return json.loads(ln[len(NEIGHBOR_LIST_LINE):])
+            except ValueError:
+                return None
+    return None
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--status", help="status JSON to write (complete | blew_up | skipped)")
@@ -93,6 +108,9 @@ def main(argv=None):
         if rc == 3:
             lines = [ln.strip() for ln in output.splitlines() if ln.strip()]
             status["message"] = next((ln for ln in reversed(lines) if ln.startswith("dem")), lines[-1] if lines else "")
+        nl = neighbor_list_summary(output)
+        if nl is not None:   # rebuilds, their share of the wall time and what triggered them
+            status["neighbor_list"] = nl
         warnings = [ln.strip() for ln in output.splitlines() if "warning:" in ln][:20]
         if warnings:   # e.g. far from quasi-static: read by the driver and by the fit tables
             status["warning"] = " | ".join(warnings)

@@ -318,7 +318,8 @@ struct BenchCommand {
   void add(CLI::App& app, std::vector<std::string>& overrides) {
     cmd = app.add_subcommand("bench", "particle-steps per second on a packing under D2");
     cmd->add_option("--kernel", kernel, "pair kernel: auto, avx512, avx2, generic or reference (the same bits)");
-    cmd->add_option("--packing", packing, "YADE-format packing")->check(CLI::ExistingFile);
+    cmd->add_option("--packing", packing, "YADE-format packing, or a checkpoint (*.ckpt: its state, velocities "
+                                          "included)")->check(CLI::ExistingFile);
     cmd->add_option("--steps", steps, "steps to time");
     cmd->add_option("--threads", threads, "threads, 1 or more")->check(CLI::Range(1, 4096));
     cmd->add_option("--rate-tc", rate_tc, "D2 strain rate times t_c");
@@ -327,15 +328,20 @@ struct BenchCommand {
   int run(std::vector<std::string> overrides) const {
     overrides.push_back("integration.threads=" + std::to_string(threads));
     dem::Model model = dem::load_scene("", overrides, nullptr, "bench");
-    dem::State state = dem::read_packing(packing, model.density);
+    // A checkpoint (.ckpt) starts from its bit-exact state, velocities included (a relaxed
+    // production packing); a YADE text packing starts at rest.
+    dem::State state = fs::path(packing).extension() == ".ckpt" ? dem::read_checkpoint(packing).state
+                                                                : dem::read_packing(packing, model.density);
     const dem::Vec3 rate = dem::Vec3{1, 0, -1} * (rate_tc / model.t_contact);
     dem::Engine engine(model, state);
     engine.set_pair_kernel(dem::pair_kernel_from_name(kernel));
     for (int i = 0; i < 200; ++i) engine.step(rate);   // warm-up
     const long builds0 = engine.neighbor_list().builds;
+    const dem::RebuildStats before = engine.rebuild_stats();
     const auto t0 = std::chrono::steady_clock::now();
     for (long i = 0; i < steps; ++i) engine.step(rate);
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const dem::RebuildStats timed = engine.rebuild_stats().since(before);   // the timed steps only
     const dem::Measurement m = dem::measure(model, state, engine.neighbor_list(), rate);
     const double ps = static_cast<double>(steps) * state.count() / wall;
     std::printf("packing %s\nN = %d, phi = %.4f, C = %.3f, threads = %d, steps = %ld, pair kernel %s\n",
@@ -350,6 +356,15 @@ struct BenchCommand {
                 "sliding_fraction=%.6g contacts=%ld\n",
                 steps + 200, m.p, m.stress.xx, m.stress.yy, m.stress.zz, m.E_kin, m.E_rot, m.sliding_fraction,
                 m.contacts);
+    std::printf("list rebuilds: %lld (%.4g per 10^4 steps), %.3f s = %.1f %% of the wall time; triggered by a "
+                "displacement %lld (of those diagnosed: a rattler %lld, the packing %lld), by the box's stretch %lld, by "
+                "flips %lld; packing's / largest displacement (median) %.3g\n",
+                static_cast<long long>(timed.rebuilds), 1e4 * timed.rebuilds / static_cast<double>(steps), timed.seconds,
+                100.0 * timed.seconds / wall, static_cast<long long>(timed.displacement_triggers),
+                static_cast<long long>(timed.by_rattler),
+                static_cast<long long>(timed.by_packing), static_cast<long long>(timed.by_deformation),
+                static_cast<long long>(timed.by_flip), timed.median_nonrattler_ratio());
+    std::printf("neighbor_list=%s\n", timed.json(wall, engine.skin()).c_str());
     std::printf("particle_steps_per_s=%.6g\n", ps);
     return 0;
   }
@@ -432,9 +447,12 @@ struct ModeCommand {
     if (!quiet) print_info(model);
     else warn_time_step(model);
     const auto t0 = std::chrono::steady_clock::now();
-    const auto steps = m.path.empty() ? dem::run_stage(model, state, spec, out, "", nullptr, quiet)
-                                      : dem::run_path(model, state, m, spec.name, out, quiet);
+    dem::RebuildStats list_stats;
+    const auto steps = m.path.empty() ? dem::run_stage(model, state, spec, out, "", nullptr, quiet, "", &list_stats)
+                                      : dem::run_path(model, state, m, spec.name, out, quiet, "", &list_stats);
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    // The run summary's neighbour-list entry (demkit.task copies this line into the task's JSON).
+    std::fprintf(stderr, "dem mode: neighbor_list %s\n", list_stats.json(wall, model.skin_over_rmin * model.radius_min).c_str());
     std::fprintf(stderr, "dem mode: %lld steps of %d particles in %.2f s: %.3f M particle-steps/s -> %s\n",
                  static_cast<long long>(steps), state.count(), wall, steps * double(state.count()) / wall / 1e6,
                  out.c_str());

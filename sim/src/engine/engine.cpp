@@ -2,8 +2,12 @@
 #include "dem/engine/parallel.hpp"
 #include "dem/engine/step_team.hpp"
 
+#include "dem/measure/measure.hpp"
+
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 
 namespace dem {
@@ -169,12 +173,89 @@ double Engine::advance_particles(int begin, int end, const AffineMap& map, bool 
   return worst;
 }
 
+bool Engine::rebuild_due(const StalenessTest& test, double max_displacement2) {
+  return test.limit2 < 0 || max_displacement2 >= test.limit2;
+}
+
+void Engine::begin_rebuild(const StalenessTest& test, int chunks) {
+  using Clock = std::chrono::steady_clock;
+  const auto t0 = Clock::now();
+  if (flipped_) ++stats_.by_flip;
+  else if (test.limit2 < 0) ++stats_.by_deformation;
+  else if (stats_.displacement_triggers++ < 32 || stats_.displacement_triggers % 8 == 0) diagnose_trigger(test);
+  rebuild_started_ = Clock::now();
+  stats_.diagnosis_seconds += std::chrono::duration<double>(rebuild_started_ - t0).count();
+  rebuild_.begin(state_, list_, skin_, true, chunks);   // sorts the particles: repacked in finish_rebuild
+}
+
+void Engine::finish_rebuild() {
+  rebuild_.finish();
+  partition_pairs(list_, std::max(1, blocks_), scratch_);
+  pack_particles(state_, 0, state_.count(), scratch_);
+  ++stats_.rebuilds;
+  stats_.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - rebuild_started_).count();
+}
+
 void Engine::rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2) {
-  if (test.limit2 < 0 || max_displacement2 >= test.limit2) {
-    rebuild_neighbor_list(state_, list_, skin_, true);   // sorts the particles: repack them
-    partition_pairs(list_, std::max(1, blocks_), scratch_);
-    pack_particles(state_, 0, state_.count(), scratch_);
+  if (!rebuild_due(test, max_displacement2)) return;
+  begin_rebuild(test, 1);
+  rebuild_.search(0);
+  finish_rebuild();
+}
+
+// Which particle crossed the half skin: a rattler (measure()'s rule, on the contacts of the
+// list about to be replaced) or one of the load-bearing packing, and how far the packing
+// itself moved. Reads the state only.
+void Engine::diagnose_trigger(const StalenessTest& test) {
+  const int n = state_.count();
+  std::vector<std::pair<int, int>> contacts;
+  contacts.reserve(list_.pair_count());
+  for_each_contact(state_, list_, [&](int i, int j, const Vec3&, double, double) { contacts.emplace_back(i, j); });
+  const std::vector<char> rattler = rattler_flags(n, contacts);
+  double all = -1, packing = 0;
+  int farthest = 0;
+  for (int i = 0; i < n; ++i) {
+    const double u2 = displacement2_since_build(state_, test, i);
+    if (u2 > all) { all = u2; farthest = i; }
+    if (!rattler[i]) packing = std::max(packing, u2);
   }
+  ++(rattler[farthest] ? stats_.by_rattler : stats_.by_packing);
+  stats_.nonrattler_ratio.push_back(all > 0 ? static_cast<float>(std::sqrt(packing / all)) : 1.0f);
+}
+
+RebuildStats RebuildStats::since(const RebuildStats& e) const {
+  RebuildStats d = *this;
+  d.steps -= e.steps; d.rebuilds -= e.rebuilds; d.by_rattler -= e.by_rattler; d.by_packing -= e.by_packing;
+  d.by_deformation -= e.by_deformation; d.by_flip -= e.by_flip;
+  d.displacement_triggers -= e.displacement_triggers;
+  d.seconds -= e.seconds; d.diagnosis_seconds -= e.diagnosis_seconds;
+  const std::size_t k = std::min(e.nonrattler_ratio.size(), d.nonrattler_ratio.size());
+  d.nonrattler_ratio.erase(d.nonrattler_ratio.begin(), d.nonrattler_ratio.begin() + static_cast<long>(k));
+  return d;
+}
+
+double RebuildStats::median_nonrattler_ratio() const {
+  if (nonrattler_ratio.empty()) return 0;
+  std::vector<float> v = nonrattler_ratio;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+std::string RebuildStats::json(double wall_s, double skin_m) const {
+  char buf[640];
+  std::snprintf(buf, sizeof buf,
+                "{\"steps\": %lld, \"rebuilds\": %lld, \"rebuilds_per_1e4_steps\": %.4g, \"skin_m\": %.6g, "
+                "\"rebuild_s\": %.4g, \"rebuild_share\": %.4g, \"trigger_rattler\": %lld, \"trigger_packing\": %lld, "
+                "\"trigger_displacement\": %lld, \"trigger_deformation\": %lld, \"trigger_flip\": %lld, "
+                "\"packing_over_max_displacement_median\": %.4g, "
+                "\"diagnosis_s\": %.4g}",
+                static_cast<long long>(steps), static_cast<long long>(rebuilds),
+                steps > 0 ? 1e4 * static_cast<double>(rebuilds) / static_cast<double>(steps) : 0.0, skin_m, seconds,
+                wall_s > 0 ? seconds / wall_s : 0.0, static_cast<long long>(by_rattler),
+                static_cast<long long>(by_packing), static_cast<long long>(displacement_triggers),
+                static_cast<long long>(by_deformation),
+                static_cast<long long>(by_flip), median_nonrattler_ratio(), diagnosis_seconds);
+  return buf;
 }
 
 void Engine::kick_rotations(int begin, int end, double h) {
@@ -222,10 +303,12 @@ void Engine::step(const VelGrad& strain_rate) {
   const AffineMap map = affine ? deform_box(strain_rate, &flipped) : AffineMap{};
   StalenessTest test = staleness_test(state_, list_);   // box of this step, list of the last
   if (flipped) { test.limit2 = -1; ++flips_; }        // new lattice vectors: rebuild
+  flipped_ = flipped;
   if (threads_ <= 1 && blocks_ <= 1) step_serial(map, affine, test);
   else step_threaded(map, affine, test);
   end_pair_loop(state_, scratch_);   // the blocks' dissipation, in block order
   chooser_.step_done();
+  ++stats_.steps;
   state_.time += model_.dt;
   ++state_.step;
   if (model_.check_every_steps > 0 && state_.step % model_.check_every_steps == 0) check_sanity();
@@ -254,10 +337,16 @@ void Engine::step_threaded(const AffineMap& map, bool affine, const StalenessTes
                                                 map, affine, test));
     worst_displacement2_[t] = worst;
     sync();
+    double all = 0;   // every member reads the same maxima: the same decision
+    for (double w : worst_displacement2_) all = std::max(all, w);
+    if (rebuild_due(test, all)) {   // 4, the pair search shared by the team (the same list for any nt)
+      if (t == 0) begin_rebuild(test, nt);
+      sync();
+      for (int c = t; c < rebuild_.chunks(); c += nt) rebuild_.search(c);
+      sync();
+      if (t == 0) finish_rebuild();
+    }
     if (t == 0) {
-      double all = 0;
-      for (double w : worst_displacement2_) all = std::max(all, w);
-      rebuild_neighbors_if_stale(test, all);
       partition_pairs(list_, blocks_, scratch_);
       begin_pair_loop(model_, state_, list_, scratch_);
     }

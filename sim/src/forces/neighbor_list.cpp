@@ -76,70 +76,188 @@ CellGrid make_grid(const Box& b, double cutoff) {
   return g;
 }
 
-// Builds the CSR list from positions x (inside [0, L)) for the box length L.
-void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, const Box& cell,
-                 NeighborList& list) {
+// The linked cells of one build: the cell of each particle and the members of each cell
+// (particle indices, ascending within a cell: a counting sort, stable in i).
+struct CellLists {
+  std::vector<std::int32_t> cell_of, cell_start, cell_members;
+};
+
+CellLists bin_particles(const CellGrid& g, const std::vector<Vec3>& x) {
   const int n = static_cast<int>(x.size());
-  const double rmax = max_radius_of(radius);
-  const double cutoff = 2.0 * rmax + list.skin;
-  CellGrid g = make_grid(cell, cutoff);
   const int ncell = g.n[0] * g.n[1] * g.n[2];
-  std::vector<std::int32_t> cell_of(n), cell_start(ncell + 1, 0), cell_members(n);
-  for (int i = 0; i < n; ++i) { cell_of[i] = g.index_of(x[i]); ++cell_start[cell_of[i] + 1]; }
-  for (int c = 0; c < ncell; ++c) cell_start[c + 1] += cell_start[c];
-  {
-    std::vector<std::int32_t> fill(cell_start.begin(), cell_start.end() - 1);
-    for (int i = 0; i < n; ++i) cell_members[fill[cell_of[i]]++] = i;
-  }
-  // With fewer than 3 cells along an axis, neighbour cells repeat: scan each distinct
-  // (cell, image) combination once by iterating over images explicitly.
-  list.first.assign(n + 1, 0);
-  list.partner.clear();
-  list.image.clear();
-  Vec3 off[27];
-  image_offsets(cell, off);
-  std::vector<std::pair<std::int32_t, std::uint8_t>> found;
-  for (int i = 0; i < n; ++i) {
-    found.clear();
-    const int ci[3] = {cell_of[i] / (g.n[1] * g.n[2]), (cell_of[i] / g.n[2]) % g.n[1],
-                       cell_of[i] % g.n[2]};
-    // Candidate (cell, shift) pairs, deduplicated for small grids.
-    int cand_cell[27], cand_img[27], ncand = 0;
+  CellLists c;
+  c.cell_of.resize(n);
+  c.cell_start.assign(ncell + 1, 0);
+  c.cell_members.resize(n);
+  for (int i = 0; i < n; ++i) { c.cell_of[i] = g.index_of(x[i]); ++c.cell_start[c.cell_of[i] + 1]; }
+  for (int k = 0; k < ncell; ++k) c.cell_start[k + 1] += c.cell_start[k];
+  std::vector<std::int32_t> fill(c.cell_start.begin(), c.cell_start.end() - 1);
+  for (int i = 0; i < n; ++i) c.cell_members[fill[c.cell_of[i]]++] = i;
+  return c;
+}
+
+// The 27-cell stencil of every cell as (neighbour cell, periodic image) entries. With fewer
+// than 3 cells along an axis neighbour cells repeat: each distinct (cell, image) once.
+struct Stencils {
+  std::vector<std::int32_t> start, cell;
+  std::vector<std::uint8_t> image;
+  std::vector<std::uint8_t> offset;   ///< (dx+1) | (dy+1) << 2 | (dz+1) << 4: where it lies from the own cell
+};
+
+Stencils make_stencils(const CellGrid& g) {
+  const int ncell = g.n[0] * g.n[1] * g.n[2];
+  const bool small = g.n[0] < 3 || g.n[1] < 3 || g.n[2] < 3;
+  Stencils st;
+  st.start.assign(ncell + 1, 0);
+  st.cell.reserve(27L * ncell);
+  st.image.reserve(27L * ncell);
+  st.offset.reserve(27L * ncell);
+  for (int c = 0; c < ncell; ++c) {
+    const int ci[3] = {c / (g.n[1] * g.n[2]), (c / g.n[2]) % g.n[1], c % g.n[2]};
+    const std::size_t first = st.cell.size();
     for (int dx = -1; dx <= 1; ++dx)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dz = -1; dz <= 1; ++dz) {
           const int d[3] = {dx, dy, dz};
           int cc[3], sh[3];
           for (int k = 0; k < 3; ++k) {
-            int c = ci[k] + d[k];
+            int v = ci[k] + d[k];
             sh[k] = 0;
-            if (c < 0) { c += g.n[k]; sh[k] = -1; }
-            if (c >= g.n[k]) { c -= g.n[k]; sh[k] = 1; }
-            cc[k] = c;
+            if (v < 0) { v += g.n[k]; sh[k] = -1; }
+            if (v >= g.n[k]) { v -= g.n[k]; sh[k] = 1; }
+            cc[k] = v;
           }
           const int cell = (cc[0] * g.n[1] + cc[1]) * g.n[2] + cc[2];
           const int img = (sh[0] + 1) * 9 + (sh[1] + 1) * 3 + (sh[2] + 1);
           bool dup = false;
-          for (int q = 0; q < ncand; ++q) dup |= (cand_cell[q] == cell && cand_img[q] == img);
-          if (!dup) { cand_cell[ncand] = cell; cand_img[ncand] = img; ++ncand; }
+          if (small)
+            for (std::size_t q = first; q < st.cell.size(); ++q) dup |= (st.cell[q] == cell && st.image[q] == img);
+          if (!dup) {
+            st.cell.push_back(cell);
+            st.image.push_back(static_cast<std::uint8_t>(img));
+            st.offset.push_back(static_cast<std::uint8_t>((dx + 1) | (dy + 1) << 2 | (dz + 1) << 4));
+          }
         }
-    for (int q = 0; q < ncand; ++q) {
-      const Vec3& o = off[cand_img[q]];
-      for (int m = cell_start[cand_cell[q]]; m < cell_start[cand_cell[q] + 1]; ++m) {
-        const int j = cell_members[m];
-        if (j <= i) continue;
-        const Vec3 d = x[j] + o - x[i];
-        const double reach = radius[i] + radius[j] + list.skin;
-        if (dot(d, d) < reach * reach)
-          found.emplace_back(j, static_cast<std::uint8_t>(cand_img[q]));
-      }
+    st.start[c + 1] = static_cast<std::int32_t>(st.cell.size());
+  }
+  return st;
+}
+
+// Squared gaps between particle i and the cells around its own, per axis: gap2[k][d + 1] for
+// the neighbour at offset d = -1, 0, 1 along axis k (0 for d = 0, and everywhere in a tilted
+// cell, where cells are slabs of fractional coordinates: no pruning there) [m^2]. Shrunk by a
+// margin far above the round-off of the cell index, so no cell that could hold a partner is pruned.
+void cell_gaps2(const CellGrid& g, const Vec3& x, int cell, double gap2[3][3]) {
+  for (int k = 0; k < 3; ++k) gap2[k][0] = gap2[k][1] = gap2[k][2] = 0.0;
+  if (g.tilted) return;
+  const int ci[3] = {cell / (g.n[1] * g.n[2]), (cell / g.n[2]) % g.n[1], cell % g.n[2]};
+  for (int k = 0; k < 3; ++k) {
+    const double size = 1.0 / g.inv_size[k], margin = 1e-9 * size * g.n[k];
+    const double below = std::max(0.0, x[k] - ci[k] * size - margin);
+    const double above = std::max(0.0, (ci[k] + 1) * size - x[k] - margin);
+    gap2[k][0] = below * below;
+    gap2[k][2] = above * above;
+  }
+}
+
+// The listed partners of particle i (j > i, within r_i + r_j + skin), ascending in (j, image),
+// in `found`: the same pairs in the same order as a test of every particle of the 27 cells.
+// Skipped: cells whose members all precede i, and cells farther from x_i than r_i + r_max + skin.
+void search_row(int i, const std::vector<Vec3>& x, const std::vector<double>& radius, double skin, double rmax,
+                const CellGrid& g, const CellLists& cl, const Stencils& st, const Vec3 off[27],
+                std::vector<std::pair<std::int32_t, std::uint8_t>>& found) {
+  found.clear();
+  const int c = cl.cell_of[i];
+  const Vec3 xi = x[i];
+  const double ri = radius[i];
+  double gap2[3][3];
+  cell_gaps2(g, xi, c, gap2);
+  const double farthest = ri + rmax + skin, farthest2 = farthest * farthest;
+  for (int q = st.start[c]; q < st.start[c + 1]; ++q) {
+    const std::int32_t* m0 = cl.cell_members.data() + cl.cell_start[st.cell[q]];
+    const std::int32_t* m1 = cl.cell_members.data() + cl.cell_start[st.cell[q] + 1];
+    if (m0 == m1 || m1[-1] <= i) continue;             // members ascend: none with j > i
+    const int d = st.offset[q];
+    if (gap2[0][d & 3] + gap2[1][(d >> 2) & 3] + gap2[2][d >> 4] >= farthest2) continue;   // none can reach x_i
+    const Vec3& o = off[st.image[q]];
+    for (const std::int32_t* m = std::upper_bound(m0, m1, i); m < m1; ++m) {
+      const int j = *m;
+      const Vec3 d = x[j] + o - xi;
+      const double reach = ri + radius[j] + skin;   // the operations of the oracle's cutoff, in order
+      if (dot(d, d) < reach * reach) found.emplace_back(j, st.image[q]);
     }
-    // Ascending j for a deterministic, cache-friendly order.
-    std::sort(found.begin(), found.end());
-    for (auto& f : found) { list.partner.push_back(f.first); list.image.push_back(f.second); }
-    list.first[i + 1] = static_cast<std::int32_t>(list.partner.size());
+  }
+  std::sort(found.begin(), found.end());   // ascending j: a deterministic, cache-friendly order
+}
+
+// What a pair search needs: the grid, its cells and stencils, the image offsets.
+struct SearchContext {
+  const std::vector<Vec3>* x = nullptr;
+  const std::vector<double>* radius = nullptr;
+  double skin = 0, rmax = 0;
+  CellGrid grid{};
+  CellLists cells;
+  Stencils stencils;
+  Vec3 off[27];
+};
+
+void prepare_search(SearchContext& c, const std::vector<Vec3>& x, const std::vector<double>& radius, const Box& cell,
+                    double skin) {
+  c.x = &x;
+  c.radius = &radius;
+  c.skin = skin;
+  c.rmax = max_radius_of(radius);
+  c.grid = make_grid(cell, 2.0 * c.rmax + skin);
+  c.cells = bin_particles(c.grid, x);
+  c.stencils = make_stencils(c.grid);
+  image_offsets(cell, c.off);
+}
+
+// The rows [begin, end) of the list: their partners and images appended in row order, and each
+// row's pair count in count[i - begin].
+struct Rows {
+  std::vector<std::int32_t> partner, count;
+  std::vector<std::uint8_t> image;
+};
+
+void search_rows(const SearchContext& c, int begin, int end, Rows& out) {
+  out.partner.clear();
+  out.image.clear();
+  out.count.assign(end - begin, 0);
+  std::vector<std::pair<std::int32_t, std::uint8_t>> found;
+  for (int i = begin; i < end; ++i) {
+    search_row(i, *c.x, *c.radius, c.skin, c.rmax, c.grid, c.cells, c.stencils, c.off, found);
+    for (auto& f : found) { out.partner.push_back(f.first); out.image.push_back(f.second); }
+    out.count[i - begin] = static_cast<std::int32_t>(found.size());
+  }
+}
+
+// The CSR list from rows searched in chunks, joined in row order (the same list for any chunks).
+void join_rows(const std::vector<Rows>& chunks, int n, double rmax, NeighborList& list) {
+  std::size_t total = 0;
+  for (const Rows& r : chunks) total += r.partner.size();
+  list.first.assign(n + 1, 0);
+  list.partner.resize(total);
+  list.image.resize(total);
+  int i = 0;
+  std::size_t at = 0;
+  for (const Rows& r : chunks) {
+    std::copy(r.partner.begin(), r.partner.end(), list.partner.begin() + static_cast<long>(at));
+    std::copy(r.image.begin(), r.image.end(), list.image.begin() + static_cast<long>(at));
+    at += r.partner.size();
+    for (std::int32_t k : r.count) { list.first[i + 1] = list.first[i] + k; ++i; }
   }
   list.radius_max = rmax;
+}
+
+// Builds the CSR list from positions x (inside the cell) for the box `cell`, on this thread.
+void build_pairs(const std::vector<Vec3>& x, const std::vector<double>& radius, const Box& cell,
+                 NeighborList& list) {
+  SearchContext c;
+  prepare_search(c, x, radius, cell, list.skin);
+  std::vector<Rows> rows(1);
+  search_rows(c, 0, static_cast<int>(x.size()), rows[0]);
+  join_rows(rows, static_cast<int>(x.size()), c.rmax, list);
 }
 
 void wrap_into_box(State& s) {
@@ -174,10 +292,8 @@ void permute(std::vector<T>& v, const std::vector<std::int32_t>& order) {
 
 void sort_by_cell(State& s, double cutoff) {
   CellGrid g = make_grid(s.box, cutoff);
-  const int n = s.count();
-  std::vector<std::int32_t> key(n), order(n);
-  for (int i = 0; i < n; ++i) { key[i] = g.index_of(s.position[i]); order[i] = i; }
-  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return key[a] < key[b]; });
+  // By cell, particles of a cell in their present order (a stable counting sort).
+  const std::vector<std::int32_t> order = bin_particles(g, s.position).cell_members;
   permute(s.position, order); permute(s.velocity, order); permute(s.force, order);
   permute(s.radius, order); permute(s.mass, order); permute(s.id, order);
   if (s.rotations()) { permute(s.angular_velocity, order); permute(s.torque, order); }
@@ -237,23 +353,62 @@ void place_history(State& s, const NeighborList& list) {
 
 namespace {
 
-void build(State& state, NeighborList& list, double skin, bool sort) {
+// Wraps, sorts, stores the build reference: everything of a build before the pair search.
+void prepare_build(State& state, NeighborList& list, double skin, bool sort) {
   list.skin = skin;
   wrap_into_box(state);
   if (sort) sort_by_cell(state, 2.0 * max_radius_of(state.radius) + skin);
   state.position_at_build = state.position;
   state.length_at_build = state.box.length;
   state.tilt_at_build = state.box.tilt;
-  build_pairs(state.position, state.radius, state.box, list);
-  state.list_valid = true;
-  ++list.builds;
 }
 
 }  // namespace
 
+struct ListRebuild::Impl {
+  State* state = nullptr;
+  NeighborList* list = nullptr;
+  SearchContext context;
+  std::vector<Rows> rows;
+  std::vector<int> bounds;
+};
+
+ListRebuild::ListRebuild() : impl_(std::make_unique<Impl>()) {}
+ListRebuild::~ListRebuild() = default;
+
+void ListRebuild::begin(State& state, NeighborList& list, double skin, bool sort, int chunks) {
+  Impl& m = *impl_;
+  m.state = &state;
+  m.list = &list;
+  prepare_build(state, list, skin, sort);
+  prepare_search(m.context, state.position, state.radius, state.box, skin);
+  const int n = state.count();
+  chunks = std::max(1, std::min(chunks, n));
+  m.rows.resize(chunks);
+  m.bounds.resize(chunks + 1);
+  for (int k = 0; k <= chunks; ++k) m.bounds[k] = static_cast<int>(static_cast<long>(n) * k / chunks);
+}
+
+int ListRebuild::chunks() const { return static_cast<int>(impl_->rows.size()); }
+
+void ListRebuild::search(int chunk) {
+  Impl& m = *impl_;
+  search_rows(m.context, m.bounds[chunk], m.bounds[chunk + 1], m.rows[chunk]);
+}
+
+void ListRebuild::finish() {
+  Impl& m = *impl_;
+  join_rows(m.rows, m.state->count(), m.context.rmax, *m.list);
+  m.state->list_valid = true;
+  ++m.list->builds;
+  place_history(*m.state, *m.list);   // the history kept its old order (keyed by ids) meanwhile
+}
+
 void rebuild_neighbor_list(State& state, NeighborList& list, double skin, bool sort) {
-  build(state, list, skin, sort);   // the history keeps its old order (keyed by ids) meanwhile
-  place_history(state, list);
+  ListRebuild r;
+  r.begin(state, list, skin, sort, 1);
+  r.search(0);
+  r.finish();
 }
 
 void restore_neighbor_list(const State& state, NeighborList& list, double skin) {

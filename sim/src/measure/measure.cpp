@@ -68,6 +68,29 @@ double axis_angle_deg(const Vec3& a, const Vec3& b) {
   return std::acos(c) * 180.0 / M_PI;
 }
 
+std::vector<char> rattler_flags(int n, const std::vector<std::pair<int, int>>& pairs) {
+  std::vector<int> degree(n, 0);
+  for (auto& pr : pairs) { ++degree[pr.first]; ++degree[pr.second]; }
+  std::vector<char> rattler(n, 0);
+  std::vector<int> start(n + 1, 0), adj(2 * pairs.size());
+  for (auto& pr : pairs) { ++start[pr.first + 1]; ++start[pr.second + 1]; }
+  for (int i = 0; i < n; ++i) start[i + 1] += start[i];
+  std::vector<int> fill(start.begin(), start.end() - 1);
+  for (auto& pr : pairs) { adj[fill[pr.first]++] = pr.second; adj[fill[pr.second]++] = pr.first; }
+  std::vector<int> queue;
+  for (int i = 0; i < n; ++i)
+    if (degree[i] < 4) { rattler[i] = 1; queue.push_back(i); }
+  while (!queue.empty()) {
+    const int i = queue.back();
+    queue.pop_back();
+    for (int a = start[i]; a < start[i + 1]; ++a) {
+      const int j = adj[a];
+      if (!rattler[j] && --degree[j] < 4) { rattler[j] = 1; queue.push_back(j); }
+    }
+  }
+  return rattler;
+}
+
 Measurement measure(const Model& model, const State& s, const NeighborList& list,
                     const VelGrad& rate) {
   Measurement m;
@@ -81,7 +104,6 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
   m.eps_d = deviatoric_magnitude(m.strain.x, m.strain.y, m.strain.z);
   m.nu = s.volume_fraction();
 
-  std::vector<int> degree(n, 0);
   std::vector<std::pair<int, int>> pairs;
   Sym3 contact_stress, fabric;
   double overlap_sum = 0;
@@ -110,7 +132,6 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
     const double rel = delta / std::min(s.radius[i], s.radius[j]);
     m.overlap_max_rel = std::max(m.overlap_max_rel, rel);
     overlap_sum += rel;
-    ++degree[i]; ++degree[j];
     pairs.emplace_back(i, j);
   });
   m.contacts = static_cast<long>(pairs.size());
@@ -146,26 +167,7 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
   m.F_dev = deviatoric_magnitude(m.fabric.xx, m.fabric.yy, m.fabric.zz);
   m.C = 2.0 * m.contacts / n;
 
-  // Rattlers: remove particles with fewer than 4 contacts, recursively.
-  std::vector<char> rattler(n, 0);
-  {
-    std::vector<int> start(n + 1, 0), adj(2 * pairs.size());
-    for (auto& pr : pairs) { ++start[pr.first + 1]; ++start[pr.second + 1]; }
-    for (int i = 0; i < n; ++i) start[i + 1] += start[i];
-    std::vector<int> fill(start.begin(), start.end() - 1);
-    for (auto& pr : pairs) { adj[fill[pr.first]++] = pr.second; adj[fill[pr.second]++] = pr.first; }
-    std::vector<int> queue;
-    for (int i = 0; i < n; ++i)
-      if (degree[i] < 4) { rattler[i] = 1; queue.push_back(i); }
-    while (!queue.empty()) {
-      const int i = queue.back();
-      queue.pop_back();
-      for (int a = start[i]; a < start[i + 1]; ++a) {
-        const int j = adj[a];
-        if (!rattler[j] && --degree[j] < 4) { rattler[j] = 1; queue.push_back(j); }
-      }
-    }
-  }
+  const std::vector<char> rattler = rattler_flags(n, pairs);
   long n_rattlers = 0, contacts_nr = 0;
   for (int i = 0; i < n; ++i) n_rattlers += rattler[i];
   for (auto& pr : pairs) contacts_nr += (!rattler[pr.first] && !rattler[pr.second]);

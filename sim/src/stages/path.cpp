@@ -288,7 +288,8 @@ void run_path_stage(PathRun& run, const PathStage& stage) {
 }  // namespace
 
 std::int64_t run_path(const Model& model, State& state, const DeformationMode& mode, const std::string& label,
-                      const std::string& csv_path, bool quiet, const std::string& failed_checkpoint) {
+                      const std::string& csv_path, bool quiet, const std::string& failed_checkpoint,
+                      RebuildStats* stats) {
   // Strains from the path start.
   state.box.zero_strain();
   state.box.reference = state.box.length;
@@ -331,6 +332,7 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
   if (run.max_inertial > kQuasiStaticInertial)
     std::cerr << "dem: warning: path " << label << " reached an inertial number of " << run.max_inertial << " (> "
               << kQuasiStaticInertial << "): not quasi-static; lower protocol.deviatoric_rate_tc or servo.rate_max_tc\n";
+  if (stats) *stats = engine.rebuild_stats();
   return run.steps;
 }
 

@@ -191,7 +191,7 @@ bool relaxed(const Model& model, const StageSpec& spec, const State& state, cons
 std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
                        const std::string& csv_path, const std::string& vtk_dir,
                        const std::function<void(double, const State&)>& on_checkpoint,
-                       bool quiet, const std::string& failed_checkpoint) {
+                       bool quiet, const std::string& failed_checkpoint, RebuildStats* stats) {
   // Strains from the stage start; lengths re-based so that opposite rates cancel exactly.
   state.box.zero_strain();
   state.box.reference = state.box.length;
@@ -296,6 +296,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
     std::cerr << "dem: warning: stage " << spec.name << " reached an inertial number of " << max_inertial
               << " (> " << kQuasiStaticInertial << "): not quasi-static; the curves depend on the rate. "
               << "Lower protocol.deviatoric_rate_tc (see docs/stability.md)\n";
+  if (stats) *stats = engine.rebuild_stats();
   return steps;
 }
 

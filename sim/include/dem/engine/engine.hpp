@@ -1,5 +1,7 @@
 // The time stepper: advances (Model, State) by one step, read as a list of named stages.
 #pragma once
+#include <chrono>
+#include <cstdint>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -13,6 +15,31 @@
 #include "dem/core/state.hpp"
 
 namespace dem {
+
+/// What the neighbour list cost and why it was rebuilt (statistics only: nothing here feeds
+/// back into the step, so the bits never depend on it, nor on the timing it records).
+struct RebuildStats {
+  std::int64_t steps = 0;            ///< steps taken
+  std::int64_t rebuilds = 0;         ///< list builds in those steps (not the one at construction)
+  std::int64_t displacement_triggers = 0;   ///< rebuilds because a particle moved half the skin
+  /// Of those, diagnosed (the first 32, then every 8th: the diagnosis reads every contact):
+  std::int64_t by_rattler = 0;       ///< the farthest-moved particle is a rattler
+  std::int64_t by_packing = 0;       ///< it belongs to the load-bearing packing
+  std::int64_t by_deformation = 0;   ///< the box's stretch alone used up the skin
+  std::int64_t by_flip = 0;          ///< flips of the sheared cell
+  double seconds = 0;                ///< wall time of the rebuilds (wrap, sort, pairs, blocks, records) [s]
+  double diagnosis_seconds = 0;      ///< wall time of the trigger diagnosis (not in `seconds`) [s]
+  /// Per displacement trigger: the largest displacement since the build among non-rattlers
+  /// over the largest among all particles (1 when a non-rattler triggered).
+  std::vector<float> nonrattler_ratio;
+  /// What happened after `earlier` (a copy of these statistics taken before).
+  RebuildStats since(const RebuildStats& earlier) const;
+  /// Median of nonrattler_ratio (0 when empty).
+  double median_nonrattler_ratio() const;
+  /// One JSON object: these counts, the rebuilds per 10^4 steps, the skin [m] and the share of
+  /// `wall_s` spent in rebuilds (the run summary of `dem mode` and `dem bench`).
+  std::string json(double wall_s, double skin_m) const;
+};
 
 class Engine {
  public:
@@ -50,6 +77,10 @@ class Engine {
   void check_sanity() const;
 
   const NeighborList& neighbor_list() const { return list_; }
+  /// Rebuild counts, triggers and their wall time since construction (statistics).
+  const RebuildStats& rebuild_stats() const { return stats_; }
+  /// The Verlet skin the list is built with [m].
+  double skin() const { return skin_; }
   /// The pair loop's implementation (default: the fastest this CPU runs, best_pair_kernel()).
   /// Every kernel gives the same bits; the choice is for tests and benchmarks.
   void set_pair_kernel(PairKernel kernel) { scratch_.kernel = kernel; }
@@ -76,7 +107,11 @@ class Engine {
   AffineMap deform_box(const VelGrad& rate, bool* flipped);   // 3 (box): the map particles follow
   double advance_particles(int begin, int end, const AffineMap& map, bool affine,
                            const StalenessTest& test);   // 1-3, zeroes F; returns max |u|^2
-  void rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2);  // 4
+  void rebuild_neighbors_if_stale(const StalenessTest& test, double max_displacement2);  // 4 on this thread
+  static bool rebuild_due(const StalenessTest& test, double max_displacement2);
+  void begin_rebuild(const StalenessTest& test, int chunks);   // 4: statistics, wrap, sort, cells
+  void finish_rebuild();                                        // 4: join the searched rows, blocks, records
+  void diagnose_trigger(const StalenessTest& test);      // 4, statistics: who crossed the half skin
   void finish_forces_and_kick(int begin, int end);       // 5 (damping) and 6
   void kick_rotations(int begin, int end, double h);     // 1 and 6 for angular velocities (friction)
   void evaluate_forces();                                // 5 on its own (construction)
@@ -86,11 +121,15 @@ class Engine {
   const Model& model_;
   State& state_;
   NeighborList list_;
+  ListRebuild rebuild_;              ///< the rebuild in progress (its pair search shared by the team)
+  std::chrono::steady_clock::time_point rebuild_started_;   ///< statistics
   ForceScratch scratch_;
   std::unique_ptr<StepTeam> team_;   ///< the threads of step_threaded (threads_ > 1)
   TeamSizeChooser chooser_{1, false};   ///< team or this thread alone, step by step
   std::vector<double> worst_displacement2_;   // per thread
   VelGrad rate_;
+  RebuildStats stats_;
+  bool flipped_ = false;             ///< this step flipped the cell (statistics)
   long flips_ = 0;
   int threads_ = 1;
   int blocks_ = 1;                   ///< pair-loop blocks (block_count of the model's setting)

@@ -17,6 +17,7 @@
 #pragma once
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "dem/core/state.hpp"
@@ -42,6 +43,25 @@ void image_offsets(const Box& box, Vec3 offsets[27]);
 /// build reference in the state. Throws std::runtime_error if the box is shorter than
 /// twice the list cutoff 2*r_max + skin along any axis (too few particles for the box).
 void rebuild_neighbor_list(State& state, NeighborList& list, double skin, bool sort_by_cell);
+
+/// rebuild_neighbor_list in three phases, so that a team of threads shares the pair search:
+/// begin (one thread: wrap, sort, build reference, linked cells), search(c) for every chunk
+/// c < chunks() (any thread, chunks concurrently: rows are searched independently), finish (one
+/// thread: the chunks' rows joined in order, the history placed). The list, and so the bits,
+/// do not depend on the number of chunks or on which thread searched which.
+class ListRebuild {
+ public:
+  ListRebuild();
+  ~ListRebuild();
+  void begin(State& state, NeighborList& list, double skin, bool sort_by_cell, int chunks);
+  int chunks() const;
+  void search(int chunk);
+  void finish();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 /// Puts the state's per-contact history (State::ContactHistory: records keyed by the pair's
 /// particle ids, in any order) into the order of `list`: a listed pair gets the record of the

@@ -3,6 +3,7 @@
 #pragma once
 #include <cmath>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "dem/core/model.hpp"
@@ -67,6 +68,10 @@ double deviatoric_magnitude_eig(const Sym3& t);
 Sym3 log_strain_tensor(const Box& box);
 /// Angle [deg] between the axes of two unit vectors (0..90: directions, not orientations).
 double axis_angle_deg(const Vec3& a, const Vec3& b);
+
+/// The rattler rule of measure(): a particle with fewer than 4 contacts is a rattler, removed
+/// with its contacts, recursively. `pairs` are the contacts (i, j) of n particles; 1 = rattler.
+std::vector<char> rattler_flags(int n, const std::vector<std::pair<int, int>>& pairs);
 
 /// Measures a state. `list` must be current for the state (it is after every Engine step).
 /// `strain_rate` [1/s] enters the dashpot forces, the inertial number (max |L_ij|) and the

@@ -20,6 +20,10 @@
 #include "dem/core/state.hpp"
 
 namespace dem {
+struct RebuildStats;   // dem/engine/engine.hpp
+}
+
+namespace dem {
 
 struct RunOptions {
   std::string out_dir;                 ///< results folder (created)
@@ -64,11 +68,12 @@ struct StageSpec {
 /// The CSV's comment lines include `# physics: HASH key=value ...` (shear_physics for
 /// deviatoric stages, preparation_physics otherwise; checks.hpp). Throws std::runtime_error
 /// when a write fails (full disk: only csv_path.part is left) and BlowUp after saving the
-/// last good state as `failed_checkpoint` (default: csv_path + ".failed.ckpt").
+/// last good state as `failed_checkpoint` (default: csv_path + ".failed.ckpt"). `stats`, if
+/// given, receives the neighbour list's rebuild statistics of the stage (Engine::rebuild_stats).
 std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
                        const std::string& csv_path, const std::string& vtk_dir,
                        const std::function<void(double, const State&)>& on_checkpoint,
-                       bool quiet, const std::string& failed_checkpoint = "");
+                       bool quiet, const std::string& failed_checkpoint = "", RebuildStats* stats = nullptr);
 
 /// Runs the loading path `mode.path` (stages in order, strains accumulated from the path start)
 /// from `state`, writing one curve to csv_path (rows of every stage, the stage's name in the
@@ -78,7 +83,8 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
 /// stopped with an error naming it. A path of one strain-controlled stage ending on eps_d gives
 /// the rows of run_stage on the same mode bit for bit. Errors as run_stage.
 std::int64_t run_path(const Model& model, State& state, const DeformationMode& mode, const std::string& label,
-                      const std::string& csv_path, bool quiet, const std::string& failed_checkpoint = "");
+                      const std::string& csv_path, bool quiet, const std::string& failed_checkpoint = "",
+                      RebuildStats* stats = nullptr);
 
 /// The columns a path curve has after curve_columns(): the applied box strain rate [1/s], the
 /// servo's targets [Pa] (NaN where none), its relative error, and eps_d accumulated along the
