@@ -50,4 +50,12 @@ std::vector<std::string> planned_task_files(const Model& model);
 /// open, inherited by the workflow driver, which checks it).
 int prepare_ensemble_folder(const std::string& dir, const std::string& resolved_scene, bool force);
 
+/// Readies DIR for a parameter sweep (dem/io/sweep.hpp): DIR/rows/NAME/scene.toml per row (its
+/// resolved scene: each row folder is an ordinary ensemble folder), then DIR/sweep.json. The same
+/// sweep continues where it stopped; another sweep (other rows, values or scenes) is refused,
+/// naming what differs, unless `force` (which removes DIR's rows/, sweep/ and logs/). An
+/// ensemble folder (DIR/scene.toml) is refused. Takes the lock as prepare_ensemble_folder does.
+int prepare_sweep_folder(const std::string& dir, const std::string& sweep_json,
+                         const std::vector<std::pair<std::string, std::string>>& rows, bool force);
+
 }  // namespace dem
