@@ -161,16 +161,28 @@ def plot_against(out, rows, sweep, key):
     nrows = (len(panels) + 1) // 2
     fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.4 * nrows), squeeze=False)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    undetermined = False
     for ax, (q, par, sel) in zip(axes.flat, panels):
+        allv = np.array([fnum(r, par) for r in sel])
+        span = np.ptp(allv) if np.ptp(allv) > 0 else max(abs(np.mean(allv)), 1e-12)
         for i, ((mode, nu), s) in enumerate(series(sel).items()):
             s = sorted(s, key=lambda r: xs[r["row"]])
             x = np.array([xs[r["row"]] for r in s])
             v = np.array([fnum(r, par) for r in s])
             lo = np.array([fnum(r, f"{par}_lo95") for r in s])
             hi = np.array([fnum(r, f"{par}_hi95") for r in s])
-            err = [np.nan_to_num(v - lo), np.nan_to_num(hi - v)]
-            ax.errorbar(x, v, yerr=err, fmt="-o" if mode == "D2" else "--s", ms=4, capsize=2.5, lw=1,
-                        color=colours[i % len(colours)], label=rf"{mode}, $\nu$ = {float(nu):.3g}")
+            # as in demkit.figures: an interval far wider than the value and the spread is no result:
+            # a hollow marker without its bar
+            ok = np.isfinite(lo) & np.isfinite(hi) & (0.5 * (hi - lo) <= 3 * np.maximum(np.abs(v), span))
+            colour, label = colours[i % len(colours)], rf"{mode}, $\nu$ = {float(nu):.3g}"
+            ax.plot(x, v, "-" if mode == "D2" else "--", lw=1, color=colour)
+            if ok.any():
+                ax.errorbar(x[ok], v[ok], yerr=[(v - lo)[ok], (hi - v)[ok]], fmt="o" if mode == "D2" else "s", ms=4,
+                            capsize=2.5, color=colour, label=label)
+            if (~ok).any():
+                undetermined = True
+                ax.plot(x[~ok], v[~ok], "o" if mode == "D2" else "s", ms=5, mfc="white", color=colour,
+                        label=None if ok.any() else label)
         ax.set_xlabel(key_label(key))
         ax.set_ylabel(parameter_label(par, q))
         ax.grid(alpha=0.3)
@@ -181,6 +193,8 @@ def plot_against(out, rows, sweep, key):
     text = f"sweep over {key}: fits of each row's ensemble; bars: 95 % intervals (jackknife over packings, t)"
     if others:
         text += f"\nthe rows also change {', '.join(others)} (sweep/parameters.md)"
+    if undetermined:
+        text += "\nhollow: not determined (95 % interval beyond 3x the value and the spread of the values)"
     if left_out:
         text += "\nnot drawn (fewer than two values): " + ", ".join(left_out)
     fig.suptitle(text, fontsize=8)

@@ -202,3 +202,23 @@ def test_json_writer_writes_non_finite_numbers_as_null(tmp_path):
     write_json_atomic(str(f), {"a": float("nan"), "b": [1.5, float("inf"), -float("inf")], "c": "s"})
     assert json.loads(f.read_text()) == {"a": None, "b": [1.5, None, None], "c": "s"}
     assert not (tmp_path / "x.json.part").exists()
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or shutil.which("sbatch") is None,
+                    reason="needs root and Debian's slurm-wlm + munge (scripts/install-deps.sh) to start a Slurm")
+def test_slurm_profile_gives_the_local_sweep(swept, tmp_path):
+    from conftest import ROOT
+    cluster = tmp_path / "slurm"
+    script = os.path.join(ROOT, "scripts", "slurm-local.sh")
+    start = subprocess.run(["bash", script, "start", str(cluster)], capture_output=True, text=True, timeout=120)
+    assert start.returncode == 0, start.stderr
+    try:
+        env = {**os.environ, "SLURM_CONF": str(cluster / "slurm.conf"), "CI": "true"}   # CI: poll every 1 s
+        out = tmp_path / "run"
+        p = run_dem("ensemble", swept["scene"], "--sweep", swept["table"], "--out", out, "--profile", "slurm",
+                    env=env, timeout=900)
+        assert p.returncode == 0, p.stderr[-3000:]
+        assert len(glob.glob(str(out / "logs" / "slurm" / "*.out"))) >= 8, "tasks did not go through sbatch"
+        assert (out / "sweep" / "parameters.csv").read_bytes() == (swept["dir"] / "sweep" / "parameters.csv").read_bytes()
+    finally:
+        subprocess.run(["bash", script, "stop", str(cluster)], timeout=60)

@@ -535,14 +535,14 @@ State initial_state(const Model& model, const std::function<void(const std::stri
 }  // namespace
 
 void run_protocol(const Model& model, const RunOptions& opt) {
-  if (model.ensemble_packings > 1)
-    throw SceneError("ensemble.packings = " + std::to_string(model.ensemble_packings) +
-                     ": this scene is an ensemble of independent packings; run it with `dem ensemble SCENE --out DIR` "
-                     "(or pass --set ensemble.packings=1 for one packing)");
   if (model.sweep_rows > 0)
     throw SceneError("the scene has a [sweep] table of " + std::to_string(model.sweep_rows) + " rows: run the sweep "
                      "with `dem ensemble SCENE --out DIR` (one ensemble per row, docs/ensembles.md); to run the base "
                      "scene alone, remove its [sweep] section");
+  if (model.ensemble_packings > 1)
+    throw SceneError("ensemble.packings = " + std::to_string(model.ensemble_packings) +
+                     ": this scene is an ensemble of independent packings; run it with `dem ensemble SCENE --out DIR` "
+                     "(or pass --set ensemble.packings=1 for one packing)");
   const fs::path dir(opt.out_dir);
   const bool want_prep = opt.stages == "all" || opt.stages == "prep";
   const bool want_dev = opt.stages == "all" || opt.stages == "deviatoric";
