@@ -17,7 +17,7 @@ std::string write_temp(const std::string& name, const std::string& content) {
   std::ofstream(p) << content;
   return p;
 }
-const char* kScene = "[particles]\ncount = 100\n[contact]\nstiffness_N_m = 2e5\n";
+const char* kScene = "[particles]\ncount = 100\n";
 }  // namespace
 
 TEST(Sweep, TabsAndSpacesGiveTheSameRows) {

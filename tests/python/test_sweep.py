@@ -28,6 +28,7 @@ checkpoints_unloading = [0.74]
 modes = ["D2"]
 deviatoric_rate_tc = 6e-5
 eps_d_max = 0.04
+relax_ke_ratio = 1e-4
 [integration]
 dt_over_tc = 0.1
 [output]
