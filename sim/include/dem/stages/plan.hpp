@@ -34,7 +34,7 @@ void check_work(const Model& model, const std::string& origin);
 ///        "series": "unloading" (protocol.modes_from),
 ///        "checkpoints": [{"phi": 0.8, "stem": "unloading_phi0.800"}, ...] (descending phi),
 ///        "modes": ["D2", ...], "prep_particle_steps": P, "mode_particle_steps": {"D2": M, ...},
-///        "threads": T}
+///        "tasks": [planned_task_files], "threads": T}   (nlohmann-json; a non-finite number is null)
 std::string plan_json(const Model& model);
 
 /// The status file of every task of the ensemble workflow for this scene, relative to the
