@@ -17,11 +17,11 @@ which is not a comparison of the two curves).
 """
 import argparse
 import os
-import json
 import sys
 
 import numpy as np
 
+from demkit.atomic import finite_or_null, write_json_atomic  # noqa: F401 (finite_or_null: also imported from here)
 from demkit.curves import read_curve, require, CurveError
 
 QUANTITIES = ("p_Pa", "s_dev", "F_dev", "C", "eps_v")
@@ -70,23 +70,6 @@ def compare(a, b, npoints=200):
                          max_rel=entry["max_abs"] / plateau, rms_rel=entry["rms_abs"] / plateau)
         res[q] = entry
     return res, grid
-
-
-def finite_or_null(obj):
-    """obj with every non-finite float (and numpy number) replaced by None, for strict JSON."""
-    if isinstance(obj, dict):
-        return {k: finite_or_null(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [finite_or_null(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return finite_or_null(obj.tolist())
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if np.isfinite(obj) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    return obj
 
 
 def verdict(res, tol):
@@ -201,8 +184,7 @@ def main(argv=None):
     if a.plot:
         overlay(ca, cb, a.labels.split(",") if a.labels else short_labels(a.first, a.second), a.plot)
     if a.json:
-        with open(a.json, "w") as fh:
-            json.dump(finite_or_null(res), fh, indent=2, allow_nan=False)   # NaN/inf: null (valid JSON)
+        write_json_atomic(a.json, res, indent=2)   # NaN/inf: null (valid JSON)
     return 0 if all(x["ok"] for x in v.values()) else 4
 
 

@@ -2,7 +2,9 @@
 shows progress with the time left, and keeps Snakemake's own log in DIR/logs/snakemake.log.
 
 Called by `dem ensemble SCENE --out DIR` after the runner has validated the scene and written
-DIR/scene.toml; by hand:  python3 -m demkit.ensemble DIR [--cores N] [--profile slurm]
+DIR/scene.toml (or, for a parameter sweep, DIR/sweep.json and DIR/rows/NAME/scene.toml: one
+ensemble per row, then the summary of demkit.sweep); by hand:
+    python3 -m demkit.ensemble DIR [--cores N] [--profile slurm]
 
 Progress is measured from the files the tasks leave (status JSONs), weighted by each task's
 estimated particle-steps from `dem info --json`, so it reads the same on one machine and on a
@@ -30,16 +32,44 @@ def load_plan(dem, out):
     return json.loads(r.stdout)
 
 
-def task_weights(plan):
+def read_sweep(out):
+    """DIR/sweep.json (written by `dem ensemble --sweep` or a scene's [sweep]), or None."""
+    path = os.path.join(out, "sweep.json")
+    if not os.path.exists(path):
+        return None
+    with open(path) as fh:
+        return json.load(fh)
+
+
+def load_plans(dem, out):
+    """[(base, plan)]: ("", plan) for an ensemble folder, ("rows/NAME/", plan) per row of a sweep
+    (the prefix of the row's files relative to DIR)."""
+    sweep = read_sweep(out)
+    bases = [r["folder"] + "/" for r in sweep["rows"]] if sweep else [""]
+    return sweep, [(b, load_plan(dem, os.path.join(out, b))) for b in bases]
+
+
+def task_weights(plan, base=""):
     """{status file relative to DIR: particle-steps} for every task of the plan."""
     w = {}
     for m in plan["members"]:
-        w[f"members/{m['name']}/prep.json"] = plan["prep_particle_steps"]
+        w[f"{base}members/{m['name']}/prep.json"] = plan["prep_particle_steps"]
         for c in plan["checkpoints"]:
             phi = c["stem"].rsplit("_", 1)[1]   # the series may hold '_' (cycle_unloading_phi0.800)
             for mode in plan["modes"]:
-                w[f"members/{m['name']}/deviatoric/{mode}_{phi}.json"] = plan["mode_particle_steps"][mode]
+                w[f"{base}members/{m['name']}/deviatoric/{mode}_{phi}.json"] = plan["mode_particle_steps"][mode]
     return w
+
+
+def all_weights(plans):
+    w = {}
+    for base, plan in plans:
+        w.update(task_weights(plan, base))
+    return w
+
+
+def planned_tasks(plans):
+    return [base + t for base, plan in plans for t in (plan.get("tasks") or list(task_weights(plan)))]
 
 
 def fmt_time(s):
@@ -48,8 +78,8 @@ def fmt_time(s):
 
 
 class Progress:
-    def __init__(self, out, weights, stream=sys.stderr):
-        self.out, self.weights, self.stream = out, weights, stream
+    def __init__(self, out, weights, stream=sys.stderr, what="ensemble"):
+        self.out, self.weights, self.stream, self.what = out, weights, stream, what
         self.total = sum(weights.values())
         self.t0 = time.time()
         self.done0 = self.done_weight()[1]   # work finished by an earlier run (resume)
@@ -72,7 +102,7 @@ class Progress:
         frac = w / self.total if self.total else 1.0
         left = el * (self.total - w) / new if new > 0 else float("nan")
         eta = f"~{fmt_time(left)} left" if new > 0 and w < self.total else ("reducing" if w >= self.total else "estimating")
-        return f"[ensemble] {n}/{len(self.weights)} tasks, {100 * frac:3.0f}% of the work, {fmt_time(el)} elapsed, {eta}"
+        return f"[{self.what}] {n}/{len(self.weights)} tasks, {100 * frac:3.0f}% of the work, {fmt_time(el)} elapsed, {eta}"
 
     def show(self, final=False):
         ln = self.line()
@@ -171,7 +201,7 @@ def main(argv=None):
         sys.exit("dem ensemble: snakemake is not installed (Debian package 'snakemake'; scripts/install-deps.sh installs it)")
     out = os.path.abspath(a.out)
     dem = os.path.abspath(a.dem)
-    plan = load_plan(dem, out)
+    sweep, plans = load_plans(dem, out)
     if a.profile and uses_slurm(a.profile):
         why = slurm_preflight()
         if why:
@@ -183,20 +213,17 @@ def main(argv=None):
     env = dict(os.environ)
     env["PYTHONPATH"] = REPO + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     env.setdefault("OMP_WAIT_POLICY", "passive")   # single-threaded tasks: never spin on shared cores
-    tasks = plan.get("tasks") or list(task_weights(plan))
-    missing = missing_tasks(out, tasks)
-    stale = os.path.join(out, "fit", "parameters.csv")
-    if missing and os.path.exists(stale):
-        # fit tables written while tasks were missing (`dem fit --partial`, a copy, an older plan):
-        # they must not stand for the ensemble; the reduce writes them again once every task is done
-        sys.stderr.write(f"dem ensemble: {len(missing)} of {len(tasks)} tasks have no result yet, so the fit tables "
-                         f"in {out}/fit are of a partial ensemble: they are redone when every task is finished\n")
-        os.unlink(stale)
+    tasks = planned_tasks(plans)
+    drop_stale_results(out, plans, sweep)
+    final = os.path.join(out, "sweep" if sweep else "fit", "parameters.csv")
     if a.profile and "slurm" in os.path.basename(os.path.normpath(a.profile)):
         check_slurm()
-    prog = Progress(out, task_weights(plan))
-    sys.stderr.write(f"dem ensemble: {plan['packings']} packings x {len(plan['checkpoints'])} volume fractions x "
-                     f"{len(plan['modes'])} modes = {len(prog.weights)} tasks + reduce, "
+    prog = Progress(out, all_weights(plans), what="sweep" if sweep else "ensemble")
+    plan = plans[0][1]
+    rows = f"{len(plans)} rows ({', '.join(sweep['keys'])}) x " if sweep else ""
+    sys.stderr.write(f"dem ensemble: {rows}{plan['packings']} packings x {len(plan['checkpoints'])} volume fractions x "
+                     f"{len(plan['modes'])} modes = {len(prog.weights)} tasks + "
+                     f"{f'{len(plans)} reduces + summary' if sweep else 'reduce'}, "
                      f"{prog.total / 1e9:.1f}e9 particle-steps (estimated); Snakemake log: {log_path}\n")
     cmd = snakemake_command(out, dem, a.cores, a.profile, extra)
     with open(log_path, "a") as log:
@@ -218,18 +245,48 @@ def main(argv=None):
             return 130
     prog.show(final=True)
     if proc.returncode != 0:
-        return explain_failure(out, plan, log_path, proc.returncode, a.profile)
+        return explain_failure(out, plans, log_path, proc.returncode, a.profile)
     missing = missing_tasks(out, tasks)
-    if missing or not os.path.exists(stale):
+    if missing or not os.path.exists(final):
         what = (f"{len(missing)} of {len(tasks)} planned tasks have no result ({', '.join(missing[:3])}"
-                f"{', ...' if len(missing) > 3 else ''})") if missing else "the reduce wrote no fit/parameters.csv"
+                f"{', ...' if len(missing) > 3 else ''})") if missing else \
+            f"the {'summary' if sweep else 'reduce'} wrote no {os.path.relpath(final, out)}"
         sys.stderr.write(f"dem ensemble: Snakemake ended without error, but the ensemble is incomplete: {what}; "
                          f"nothing is reported as done: run the same command again to continue (logs: {out}/logs)\n")
         return 1
-    report_members(out)
+    for base, _ in plans:
+        report_members(os.path.join(out, base), base)
+    if sweep:
+        sys.stderr.write(f"dem ensemble: sweep done in {fmt_time(time.time() - prog.t0)}: summary (fitted parameters "
+                         f"against {', '.join(sweep['keys'])}) in {out}/sweep; each row's ensemble in {out}/rows/NAME "
+                         "(ensemble/, fit/, plots/)\n")
+        return 0
     sys.stderr.write(f"dem ensemble: done in {fmt_time(time.time() - prog.t0)}: averages in {out}/ensemble, "
                      f"fit tables in {out}/fit, plots in {out}/plots\n")
     return 0
+
+
+def drop_stale_results(out, plans, sweep):
+    """Fit tables written while tasks were missing (`dem fit --partial`, a copy, an older plan) must
+    not stand for the ensemble: the reduce writes them again once every task is done; so is a
+    sweep's summary while any row is unfinished."""
+    unfinished = 0
+    for base, plan in plans:
+        tasks = [base + t for t in (plan.get("tasks") or list(task_weights(plan)))]
+        missing = missing_tasks(out, tasks)
+        fit = os.path.join(out, base, "fit", "parameters.csv")
+        if missing or not os.path.exists(fit):
+            unfinished += 1
+        if missing and os.path.exists(fit):
+            sys.stderr.write(f"dem ensemble: {len(missing)} of {len(tasks)} tasks have no result yet, so the fit tables "
+                             f"in {os.path.join(out, base, 'fit')} are of a partial ensemble: they are redone when "
+                             "every task is finished\n")
+            os.unlink(fit)
+    summary = os.path.join(out, "sweep", "parameters.csv")
+    if sweep and unfinished and os.path.exists(summary):
+        sys.stderr.write(f"dem ensemble: {unfinished} of {len(plans)} rows are unfinished, so {out}/sweep is redone "
+                         "when they are\n")
+        os.unlink(summary)
 
 
 def missing_tasks(out, tasks):
@@ -268,7 +325,7 @@ def free_bytes(path):
         return -1
 
 
-def explain_failure(out, plan, log_path, code, profile):
+def explain_failure(out, plans, log_path, code, profile):
     """The cause of a failed workflow, and its fix, with the README's exit code."""
     try:
         with open(log_path, errors="replace") as fh:
@@ -276,7 +333,8 @@ def explain_failure(out, plan, log_path, code, profile):
     except OSError:
         tail = []
     text = "".join(tail)
-    preps = {m["name"]: read_status(os.path.join(out, "members", m["name"], "prep.json")) for m in plan["members"]}
+    preps = {base + m["name"]: read_status(os.path.join(out, base, "members", m["name"], "prep.json"))
+             for base, plan in plans for m in plan["members"]}
     blown = {k: v for k, v in preps.items() if v and v.get("status") == "blew_up"}
     free = free_bytes(out)
     if preps and len(blown) == len(preps):
@@ -304,7 +362,7 @@ def explain_failure(out, plan, log_path, code, profile):
     return 1
 
 
-def report_members(out):
+def report_members(out, base=""):
     bad = []
     for f in sorted(glob.glob(os.path.join(out, "members", "*", "**", "*.json"), recursive=True)):
         if os.path.basename(f) == "manifest.json":
@@ -312,9 +370,9 @@ def report_members(out):
         with open(f) as fh:
             st = json.load(fh)
         if st.get("status") not in (None, "complete"):
-            bad.append(f"{os.path.relpath(f, out)}: {st['status']}: {st.get('message') or st.get('reason', '')}")
+            bad.append(f"{base}{os.path.relpath(f, out)}: {st['status']}: {st.get('message') or st.get('reason', '')}")
         elif st.get("warning"):   # e.g. far from quasi-static: said here, not only in logs/
-            bad.append(f"{os.path.relpath(f, out)}: {st['warning']}")
+            bad.append(f"{base}{os.path.relpath(f, out)}: {st['warning']}")
     for b in bad:
         sys.stderr.write(f"dem ensemble: warning: {b}\n")
 

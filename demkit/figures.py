@@ -45,10 +45,13 @@ def toolkit_version():
 
 
 def scene_hash(run):
-    """sha256 (first 16 hex digits) of RUN/scene.toml, the resolved scene; None without one."""
+    """sha256 (first 16 hex digits) of RUN/scene.toml, the resolved scene (of a sweep folder:
+    its sweep.json, which names every row); None without one."""
     if not run:
         return None
     path = os.path.join(run, "scene.toml")
+    if not os.path.isfile(path):
+        path = os.path.join(run, "sweep.json")
     if not os.path.isfile(path):
         return None
     with open(path, "rb") as fh:

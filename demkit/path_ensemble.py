@@ -37,6 +37,8 @@ import sys
 import numpy as np
 from scipy import stats
 
+from demkit.atomic import write_atomic
+
 QUANTITIES = ("nu", "eps_v", "p_star", "s_dev_signed", "F_dev_signed", "s_dev", "F_dev", "eps_zz", "sigma_r_p0")
 NAME_RE = re.compile(r"([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv$")
 
@@ -56,18 +58,6 @@ def read_csv(path):
 
 def fnum(col):
     return np.array([float(v) for v in col])
-
-
-def write_atomic(path, text):
-    """Write, flush, fsync, rename: a reader never sees half a file; errors propagate."""
-    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-    tmp = path + ".part"
-    from demkit.task import open_exclusive
-    with open_exclusive(tmp) as fh:   # never follows a planted link
-        fh.write(text)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
 
 
 def fmt(v):

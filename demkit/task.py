@@ -16,27 +16,7 @@ import subprocess
 import sys
 import time
 
-
-def open_exclusive(tmp):
-    """A temporary file created exclusively: whatever is at `tmp` (a stale .part, a planted
-    symbolic link) is unlinked first, and O_EXCL | O_NOFOLLOW never follow a link."""
-    try:
-        os.unlink(tmp)
-    except FileNotFoundError:
-        pass
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
-    return os.fdopen(fd, "w")
-
-
-def write_json_atomic(path, obj):
-    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-    tmp = path + ".part"
-    with open_exclusive(tmp) as fh:
-        json.dump(obj, fh, indent=1)
-        fh.write("\n")
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+from demkit.atomic import write_json_atomic
 
 
 def last_error_line(log_path):

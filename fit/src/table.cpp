@@ -2,6 +2,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "dem/common/atomic_file.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cctype>
@@ -28,31 +30,6 @@ std::vector<std::string> split(const std::string& line) {
   while (std::getline(ls, cur, ',')) out.push_back(cur);
   if (!line.empty() && line.back() == ',') out.push_back("");
   return out;
-}
-// Every write and the close are checked: on a full disk only path.part is left.
-void write_part(const std::string& path, const std::string& s) {
-  const std::string tmp = path + ".part";
-  // Created exclusively: a stale .part or a planted link is unlinked, never followed.
-  if (::unlink(tmp.c_str()) != 0 && errno != ENOENT) throw std::runtime_error("cannot remove the old " + tmp);
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
-  if (fd < 0) throw std::runtime_error("cannot write " + tmp + " (" + std::strerror(errno) + ")");
-  const char* p = s.data();
-  std::size_t left = s.size();
-  int err = 0;
-  while (left > 0) {
-    const ssize_t w = ::write(fd, p, left);
-    if (w < 0 && errno == EINTR) continue;
-    if (w <= 0) { err = w < 0 ? errno : ENOSPC; break; }
-    p += w;
-    left -= static_cast<std::size_t>(w);
-  }
-  if (::close(fd) != 0 && !err) err = errno;
-  if (err)
-    throw std::runtime_error("writing " + tmp + " failed (" + std::strerror(err) + (err == ENOSPC ? ": disk full" : "") +
-                             "): " + path + " was not written (only the incomplete .part is left); free space and run again");
-}
-void commit_part(const std::string& path) {
-  if (std::rename((path + ".part").c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + path + ".part");
 }
 }  // namespace
 
@@ -161,10 +138,6 @@ std::string json_text(const Table& t, const std::string& caption) {
   }
   return js.dump(2) + "\n";
 }
-void write_all_or_none(const std::vector<std::pair<std::string, std::string>>& files) {
-  for (const auto& [path, text] : files) write_part(path, text);
-  for (const auto& [path, text] : files) commit_part(path);
-}
 }  // namespace
 
 void write_table_all(const Table& t, const std::string& stem, const std::string& caption) {
@@ -189,7 +162,7 @@ void write_table_all(const Table& t, const std::string& stem, const std::string&
   }
   tex << "\\bottomrule\n\\end{tabular}\n";
   // All four or none: renamed into place only once every one is written.
-  write_all_or_none({{stem + ".csv", csv_text(t)}, {stem + ".json", json_text(t, caption)}, {stem + ".md", md.str()},
+  dem::write_files_atomic({{stem + ".csv", csv_text(t)}, {stem + ".json", json_text(t, caption)}, {stem + ".md", md.str()},
                      {stem + ".tex", tex.str()}});
 }
 
@@ -506,7 +479,7 @@ std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string
 
 void write_fit_tables(const Table& t, const std::vector<SummaryRow>& rows, const std::string& stem,
                       const std::string& caption) {
-  write_all_or_none({{stem + ".csv", csv_text(t)}, {stem + ".json", json_text(t, caption)},
+  dem::write_files_atomic({{stem + ".csv", csv_text(t)}, {stem + ".json", json_text(t, caption)},
                      {stem + ".md", summary_markdown(rows, caption)}, {stem + ".tex", summary_latex(rows, caption)}});
 }
 
@@ -517,9 +490,6 @@ std::string table_number(double v, int prec) {
   return b;
 }
 
-void write_text_file(const std::string& path, const std::string& content) {
-  write_part(path, content);
-  commit_part(path);
-}
+void write_text_file(const std::string& path, const std::string& content) { dem::write_file_atomic(path, content); }
 
 }  // namespace demfit

@@ -1,6 +1,7 @@
 // dem: command-line front end. Each subcommand is a small struct: its options (add) and what
 // it does (run); main parses and maps exceptions to the README's exit codes.
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cctype>
@@ -22,6 +23,7 @@
 #include "dem/stages/preparation.hpp"
 #include "dem/stages/protocol.hpp"
 #include "dem/io/scene.hpp"
+#include "dem/io/sweep.hpp"
 #include "demfit/cli.hpp"
 #include "demfit/ensemble.hpp"
 #include "demfit/identifiability.hpp"
@@ -255,10 +257,10 @@ struct RunCommand {
   }
 };
 
-// K packings through the Snakemake workflow.
+// K packings through the Snakemake workflow; with a sweep, one such ensemble per row.
 struct EnsembleCommand {
   CLI::App* cmd = nullptr;
-  std::string scene, out, profile;
+  std::string scene, out, profile, sweep;
   int cores = 0;
   bool force = false;
   void add(CLI::App& app, std::vector<std::string>& overrides) {
@@ -268,6 +270,11 @@ struct EnsembleCommand {
     cmd->add_option("scene", scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
     cmd->add_option("--out", out, "results folder")->required();
     cmd->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
+    cmd->add_option("--sweep", sweep, "parameter sweep: a table (header of section.key names, optional 'name' "
+                                      "column, one row of --set values per ensemble; tabs or spaces): one ensemble "
+                                      "per row in DIR/rows/NAME, and a summary in DIR/sweep (docs/ensembles.md); "
+                                      "a scene's own [sweep] table runs without it")
+        ->check(CLI::ExistingFile);
     cmd->add_option("--cores", cores, "single-threaded tasks at once (default: all cores; with --profile: the profile's)");
     cmd->add_option("--profile", profile, "Snakemake profile: slurm (workflow/profiles/slurm) or a folder");
     cmd->add_flag("--force", force, "start afresh: remove the results in --out (without it a rerun continues "
@@ -276,7 +283,22 @@ struct EnsembleCommand {
   int run(const std::vector<std::string>& overrides) const {
     std::string resolved;
     dem::load_scene_file(scene, overrides, &resolved);
-    const int lock = dem::prepare_ensemble_folder(out, resolved, force);
+    dem::Sweep sw = dem::scene_sweep(scene);
+    if (!sweep.empty()) {
+      if (!sw.rows.empty())
+        throw ArgumentError("--sweep " + sweep + ", but " + scene + " has a [sweep] table of its own: give the sweep "
+                            "in one place (remove the scene's [sweep], or drop --sweep)");
+      sw = dem::read_sweep_table(sweep);
+    }
+    int lock = -1;
+    if (sw.rows.empty()) {
+      lock = dem::prepare_ensemble_folder(out, resolved, force);
+    } else {
+      const std::vector<std::string> scenes = dem::resolve_sweep(scene, overrides, sw);   // every row, before anything runs
+      std::vector<std::pair<std::string, std::string>> rows;
+      for (std::size_t i = 0; i < sw.rows.size(); ++i) rows.emplace_back(sw.rows[i].name, scenes[i]);
+      lock = dem::prepare_sweep_folder(out, dem::sweep_json(sw, overrides), rows, force);
+    }
     setenv("DEM_ENSEMBLE_LOCK_FD", std::to_string(lock).c_str(), 1);   // held across exec by the driver
     std::vector<std::string> args = {out, "--dem", fs::canonical("/proc/self/exe").string()};
     if (cores > 0) args.insert(args.end(), {"--cores", std::to_string(cores)});
@@ -302,6 +324,9 @@ struct InfoCommand {
     if (json) std::printf("%s", dem::plan_json(model).c_str());
     else {
       print_info(model);
+      if (model.sweep_rows > 0)
+        std::printf("sweep              %d rows ([sweep]): `dem ensemble` runs one ensemble of this scene per row; the "
+                    "figures above are of the base scene\n", model.sweep_rows);
       if (!no_probe) print_wall_time_estimate(model);
     }
     return 0;
@@ -496,10 +521,10 @@ struct CollideCommand {
                           "overlap stays well below the radius (and the contact spans >= 20 steps)");
     const double m1 = dem::sphere_mass(r1, model.density), m2 = dem::sphere_mass(r2, model.density);
     const dem::PairCollision a = dem::pair_collision(model.contact.stiffness, model.contact.damping, m1 * m2 / (m1 + m2));
-    std::printf("{\"t_contact_s\": %.12g, \"restitution\": %.12g, \"t_contact_analytic_s\": %.12g, "
-                "\"restitution_analytic\": %.12g, \"dt_s\": %.12g, \"allow_attractive\": %s}\n",
-                r.contact_time, r.restitution, a.t_contact, a.restitution, model.dt,
-                model.contact.allow_attractive ? "true" : "false");
+    const nlohmann::ordered_json j{{"t_contact_s", r.contact_time}, {"restitution", r.restitution},
+                                   {"t_contact_analytic_s", a.t_contact}, {"restitution_analytic", a.restitution},
+                                   {"dt_s", model.dt}, {"allow_attractive", model.contact.allow_attractive}};
+    std::printf("%s\n", j.dump().c_str());   // nlohmann-json: a non-finite number is written as null
     return 0;
   }
   // Oblique impact (dem::simulate_oblique_collision): line of centres z (0 -> 1), initial
@@ -507,11 +532,13 @@ struct CollideCommand {
   int oblique(const dem::Model& model) const {
     if (!(angle_deg >= 0 && angle_deg < 90)) throw ArgumentError("--angle-deg must lie in [0, 90)");
     const dem::ObliqueResult r = dem::simulate_oblique_collision(model, r1, r2, v0, angle_deg * M_PI / 180.0);
-    std::printf("{\"angle_deg\": %.12g, \"normal_restitution\": %.12g, \"tangential_restitution\": %.12g, "
-                "\"omega0_y_rad_s\": %.12g, \"omega1_y_rad_s\": %.12g, \"normal_impulse_Ns\": %.12g, "
-                "\"tangential_impulse_Ns\": %.12g, \"friction\": %.12g, \"dt_s\": %.12g}\n",
-                angle_deg, r.normal_restitution, r.tangential_restitution, r.omega[0].y, r.omega[1].y, r.normal_impulse,
-                r.tangential_impulse, model.contact.frictional() ? model.contact.friction : 0.0, model.dt);
+    const nlohmann::ordered_json j{{"angle_deg", angle_deg}, {"normal_restitution", r.normal_restitution},
+                                   {"tangential_restitution", r.tangential_restitution},
+                                   {"omega0_y_rad_s", r.omega[0].y}, {"omega1_y_rad_s", r.omega[1].y},
+                                   {"normal_impulse_Ns", r.normal_impulse}, {"tangential_impulse_Ns", r.tangential_impulse},
+                                   {"friction", model.contact.frictional() ? model.contact.friction : 0.0},
+                                   {"dt_s", model.dt}};
+    std::printf("%s\n", j.dump().c_str());
     return 0;
   }
 };

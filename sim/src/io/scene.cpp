@@ -5,6 +5,7 @@
 #include "dem/stages/plan.hpp"
 #include "dem/stages/preparation.hpp"
 #include "io/preparation_toml.hpp"
+#include "io/sweep_toml.hpp"
 
 #include <toml++/toml.h>
 
@@ -514,6 +515,10 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   for (auto& ov : overrides) apply_override(root, ov);
 
   Model m;
+  // [sweep]: checked here (so `dem info` and `dem run` refuse a bad one), then left out of the
+  // resolved scene: the rows' scenes are ordinary scenes (dem/io/sweep.hpp).
+  m.sweep_rows = static_cast<int>(parse_scene_sweep(root, origin).rows.size());
+  root.erase("sweep");
   KeyReader r(root, origin);
   r.get("particles", "count", m.count);
   r.get("particles", "radius_min_m", m.radius_min);

@@ -11,6 +11,8 @@
 #include <sstream>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include <cerrno>
 #include <cstring>
 #include <fcntl.h>
@@ -72,29 +74,26 @@ double prep_particle_steps(const Model& m) {
 }
 
 std::string plan_json(const Model& m) {
-  std::ostringstream o;
-  o.precision(17);
-  o << "{\n  \"packings\": " << m.ensemble_packings << ",\n  \"members\": [";
+  nlohmann::ordered_json j;
+  j["packings"] = m.ensemble_packings;
+  j["members"] = nlohmann::ordered_json::array();
   for (int k = 0; k < m.ensemble_packings; ++k) {
     char name[32];
     std::snprintf(name, sizeof name, "m%03d", k);
-    o << (k ? ", " : "") << "{\"name\": \"" << name << "\", \"seed\": " << member_seed(m.seed, k) << "}";
+    j["members"].push_back({{"name", name}, {"seed", member_seed(m.seed, k)}});
   }
-  const std::vector<double> phis = mode_checkpoints(m.protocol);
-  o << "],\n  \"series\": \"" << m.protocol.modes_from << "\",\n  \"checkpoints\": [";
-  for (std::size_t i = 0; i < phis.size(); ++i)
-    o << (i ? ", " : "") << "{\"phi\": " << phis[i] << ", \"stem\": \"" << checkpoint_stem(m.protocol.modes_from, phis[i])
-      << "\"}";
-  o << "],\n  \"modes\": [";
-  for (std::size_t i = 0; i < m.protocol.modes.size(); ++i) o << (i ? ", " : "") << "\"" << m.protocol.modes[i].name << "\"";
-  o << "],\n  \"prep_particle_steps\": " << prep_particle_steps(m) << ",\n  \"mode_particle_steps\": {";
-  for (std::size_t i = 0; i < m.protocol.modes.size(); ++i)
-    o << (i ? ", " : "") << "\"" << m.protocol.modes[i].name << "\": " << mode_particle_steps(m, m.protocol.modes[i]);
-  o << "},\n  \"tasks\": [";
-  const auto tasks = planned_task_files(m);
-  for (std::size_t i = 0; i < tasks.size(); ++i) o << (i ? ", " : "") << "\"" << tasks[i] << "\"";
-  o << "],\n  \"threads\": " << m.threads << "\n}\n";
-  return o.str();
+  j["series"] = m.protocol.modes_from;
+  j["checkpoints"] = nlohmann::ordered_json::array();
+  for (double phi : mode_checkpoints(m.protocol))
+    j["checkpoints"].push_back({{"phi", phi}, {"stem", checkpoint_stem(m.protocol.modes_from, phi)}});
+  j["modes"] = nlohmann::ordered_json::array();
+  for (const auto& mode : m.protocol.modes) j["modes"].push_back(mode.name);
+  j["prep_particle_steps"] = prep_particle_steps(m);
+  j["mode_particle_steps"] = nlohmann::ordered_json::object();
+  for (const auto& mode : m.protocol.modes) j["mode_particle_steps"][mode.name] = mode_particle_steps(m, mode);
+  j["tasks"] = planned_task_files(m);
+  j["threads"] = m.threads;
+  return j.dump(2) + "\n";
 }
 
 std::vector<double> preparation_stage_steps(const Model& m) {
@@ -206,6 +205,63 @@ int prepare_ensemble_folder(const std::string& dir_name, const std::string& reso
   fs::create_directories(dir);
   if (lock < 0) lock = lock_ensemble_folder(dir);
   write_file_atomic(scene.string(), resolved);
+  return lock;
+}
+
+namespace {
+
+std::string file_text(const std::filesystem::path& f) {
+  std::ifstream in(f, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// What of a sweep folder differs from this sweep ("" when nothing: the same sweep continues).
+std::string sweep_difference(const std::filesystem::path& dir, const std::string& json,
+                             const std::vector<std::pair<std::string, std::string>>& rows) {
+  std::string d;
+  if (file_text(dir / "sweep.json") != json) d += "\n    its sweep.json (keys, rows or base --set)" +
+                                                  differing_lines(file_text(dir / "sweep.json"), json);
+  for (const auto& [name, scene] : rows) {
+    const auto f = dir / "rows" / name / "scene.toml";
+    if (std::filesystem::exists(f) && file_text(f) != scene)
+      d += "\n    rows/" + name + "/scene.toml:" + differing_lines(file_text(f), scene);
+  }
+  return d;
+}
+
+}  // namespace
+
+int prepare_sweep_folder(const std::string& dir_name, const std::string& json,
+                         const std::vector<std::pair<std::string, std::string>>& rows, bool force) {
+  namespace fs = std::filesystem;
+  const fs::path dir(dir_name);
+  int lock = -1;
+  if (fs::exists(dir / "sweep.json")) {
+    lock = lock_ensemble_folder(dir);
+    const std::string diff = sweep_difference(dir, json, rows);
+    if (diff.empty() && !force) return lock;   // the same sweep: continue where it stopped
+    if (!force)
+      throw std::runtime_error(dir_name + " holds the results of another sweep (it differs in:" + diff +
+                               "\n  ); choose another --out, or pass --force to remove those results");
+    for (const char* sub : {"rows", "sweep", "logs", ".snakemake"}) fs::remove_all(dir / sub);
+    fs::remove(dir / "sweep.json");
+  } else if (fs::exists(dir / "scene.toml")) {
+    throw std::runtime_error(dir_name + " is the folder of an ensemble (scene.toml), not of a sweep: choose another "
+                             "--out for the sweep");
+  } else if (fs::exists(dir) && !fs::is_empty(dir) && !force) {
+    throw std::runtime_error(dir_name + " exists and is not a sweep folder (no sweep.json): choose another --out");
+  }
+  fs::create_directories(dir);
+  if (lock < 0) lock = lock_ensemble_folder(dir);
+  for (const auto& [name, scene] : rows) {
+    const fs::path row = dir / "rows" / name;
+    fs::create_directories(row);
+    const fs::path f = row / "scene.toml";
+    if (!fs::exists(f) || file_text(f) != scene) write_file_atomic(f.string(), scene);
+  }
+  write_file_atomic((dir / "sweep.json").string(), json);   // last: a folder without it was not readied
   return lock;
 }
 

@@ -1,6 +1,8 @@
 #include "dem/stages/protocol.hpp"
 #include "dem/stages/preparation.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -304,17 +306,6 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
 
 namespace {
 
-std::string json_escape(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    if (c == '"' || c == '\\') { o += '\\'; o += c; }
-    else if (c == '\n') o += "\\n";
-    else if (static_cast<unsigned char>(c) < 0x20) o += ' ';
-    else o += c;
-  }
-  return o;
-}
-
 struct Manifest {
   struct Output {
     std::string stage, file, physics;
@@ -324,22 +315,20 @@ struct Manifest {
   std::string path, scene, command;
   std::vector<Output> stages;
   bool complete = false;
+  // JSON through nlohmann-json (strings escaped, a non-finite number written as null).
   void save() const {
-    std::ostringstream o;
-    o << "{\n  \"tool\": \"dem\",\n  \"version\": \"" DEM_VERSION "\",\n  \"command\": \""
-      << json_escape(command) << "\",\n  \"complete\": " << (complete ? "true" : "false")
-      << ",\n  \"outputs\": [";
-    for (std::size_t i = 0; i < stages.size(); ++i) {
-      const Output& st = stages[i];
-      o << (i ? ",\n    " : "\n    ") << "{\"stage\": \"" << json_escape(st.stage) << "\", \"file\": \""
-        << json_escape(st.file) << "\", \"physics\": \"" << json_escape(st.physics) << "\"";
-      if (st.steps >= 0)
-        o << ", \"steps\": " << st.steps << ", \"wall_s\": " << st.wall_s
-          << ", \"particle_steps_per_s\": " << st.particle_steps_per_s;
-      o << "}";
+    nlohmann::ordered_json j{{"tool", "dem"}, {"version", DEM_VERSION}, {"command", command}, {"complete", complete}};
+    j["outputs"] = nlohmann::ordered_json::array();
+    for (const Output& st : stages) {
+      nlohmann::ordered_json o{{"stage", st.stage}, {"file", st.file}, {"physics", st.physics}};
+      if (st.steps >= 0) {
+        o["steps"] = st.steps;
+        o["wall_s"] = st.wall_s;
+        o["particle_steps_per_s"] = st.particle_steps_per_s;
+      }
+      j["outputs"].push_back(std::move(o));
     }
-    o << "\n  ]\n}\n";
-    write_file_atomic(path, o.str());
+    write_file_atomic(path, j.dump(2) + "\n");
   }
 };
 
@@ -396,8 +385,12 @@ std::string read_text(const fs::path& f) {
   return ss.str();
 }
 
+// A manifest that does not parse, or has no "complete": true, is of an unfinished run.
 bool manifest_complete(const fs::path& file) {
-  return read_text(file).find("\"complete\": true") != std::string::npos;
+  const nlohmann::json j = nlohmann::json::parse(read_text(file), nullptr, false);
+  if (j.is_discarded() || !j.is_object()) return false;
+  const auto it = j.find("complete");
+  return it != j.end() && it->is_boolean() && it->get<bool>();
 }
 
 // The text after `tag` (e.g. "# physics: ") in the comment lines of a curve CSV ("" if none:
@@ -543,6 +536,10 @@ State initial_state(const Model& model, const std::function<void(const std::stri
 }  // namespace
 
 void run_protocol(const Model& model, const RunOptions& opt) {
+  if (model.sweep_rows > 0)
+    throw SceneError("the scene has a [sweep] table of " + std::to_string(model.sweep_rows) + " rows: run the sweep "
+                     "with `dem ensemble SCENE --out DIR` (one ensemble per row, docs/ensembles.md); to run the base "
+                     "scene alone, remove its [sweep] section");
   if (model.ensemble_packings > 1)
     throw SceneError("ensemble.packings = " + std::to_string(model.ensemble_packings) +
                      ": this scene is an ensemble of independent packings; run it with `dem ensemble SCENE --out DIR` "

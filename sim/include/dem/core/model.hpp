@@ -218,6 +218,9 @@ struct Model {
   /// [ensemble] packings: independent packings of this scene (K >= 1). Member k is the same
   /// scene with particles.seed = member_seed(seed, k); K = 1 is a single packing.
   int ensemble_packings = 1;
+  /// Rows of the scene's [sweep] table (0: none). The table itself is read by dem/io/sweep.hpp;
+  /// it is not part of the resolved scene (each row's scene is an ordinary scene).
+  int sweep_rows = 0;
 
   // Derived quantities (filled by finalize()).
   double t_contact = 0;              ///< t_c of two radius_min spheres [s]

@@ -5,19 +5,13 @@
 #include <string>
 #include <vector>
 
+#include "dem/common/atomic_file.hpp"
 #include "dem/core/model.hpp"
 #include "dem/core/state.hpp"
 
 namespace dem {
 
-/// Writes `content` to `path` atomically. Throws std::runtime_error on I/O failure.
-void write_file_atomic(const std::string& path, const std::string& content);
-
-/// Creates PATH (a temporary `*.part`) for writing, exclusively: whatever is there (a stale
-/// .part, a planted symbolic link) is unlinked first, and the new file is opened with
-/// O_CREAT | O_EXCL | O_NOFOLLOW, so a write never follows a link to another file. Returns the
-/// file descriptor; throws std::runtime_error naming the file.
-int create_exclusive(const std::string& path);
+// write_file_atomic and create_exclusive: dem/common/atomic_file.hpp (shared with fit/).
 
 /// The whole of an input file, refused unless it is a regular file (not a device such as
 /// /dev/zero, a FIFO or a socket: opened without blocking, then checked) of at most max_bytes.

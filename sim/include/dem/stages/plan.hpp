@@ -34,7 +34,7 @@ void check_work(const Model& model, const std::string& origin);
 ///        "series": "unloading" (protocol.modes_from),
 ///        "checkpoints": [{"phi": 0.8, "stem": "unloading_phi0.800"}, ...] (descending phi),
 ///        "modes": ["D2", ...], "prep_particle_steps": P, "mode_particle_steps": {"D2": M, ...},
-///        "threads": T}
+///        "tasks": [planned_task_files], "threads": T}   (nlohmann-json; a non-finite number is null)
 std::string plan_json(const Model& model);
 
 /// The status file of every task of the ensemble workflow for this scene, relative to the
@@ -49,5 +49,13 @@ std::vector<std::string> planned_task_files(const Model& model);
 /// `dem ensemble` works on is refused, --force or not. Returns the lock's file descriptor (held
 /// open, inherited by the workflow driver, which checks it).
 int prepare_ensemble_folder(const std::string& dir, const std::string& resolved_scene, bool force);
+
+/// Readies DIR for a parameter sweep (dem/io/sweep.hpp): DIR/rows/NAME/scene.toml per row (its
+/// resolved scene: each row folder is an ordinary ensemble folder), then DIR/sweep.json. The same
+/// sweep continues where it stopped; another sweep (other rows, values or scenes) is refused,
+/// naming what differs, unless `force` (which removes DIR's rows/, sweep/ and logs/). An
+/// ensemble folder (DIR/scene.toml) is refused. Takes the lock as prepare_ensemble_folder does.
+int prepare_sweep_folder(const std::string& dir, const std::string& sweep_json,
+                         const std::vector<std::pair<std::string, std::string>>& rows, bool force);
 
 }  // namespace dem

@@ -1,0 +1,52 @@
+"""The one atomic writer of demkit (the C++ side has dem::write_file_atomic, common/atomic_file.hpp):
+write PATH.part, created exclusively (a stale .part or a planted symbolic link is unlinked, never
+followed), flush and fsync, then rename onto PATH, so a reader never sees half a file and a file
+that exists is complete. Every error propagates (a full disk leaves only the .part).
+"""
+import json
+import os
+
+
+def open_exclusive(tmp, mode="w", newline=None):
+    """A temporary file created exclusively: whatever is at `tmp` is unlinked first, and
+    O_EXCL | O_NOFOLLOW never follow a link."""
+    try:
+        os.unlink(tmp)
+    except FileNotFoundError:
+        pass
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    return os.fdopen(fd, mode, newline=newline)
+
+
+def write_atomic(path, data):
+    """Write str or bytes to `path` atomically (its folder is created if needed)."""
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    tmp = path + ".part"
+    with open_exclusive(tmp, "wb" if isinstance(data, (bytes, bytearray)) else "w") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def write_json_atomic(path, obj, indent=1):
+    """JSON of `obj`; NaN and infinities become null (they are not JSON numbers)."""
+    write_atomic(path, json.dumps(finite_or_null(obj), indent=indent, allow_nan=False) + "\n")
+
+
+def finite_or_null(obj):
+    """obj with every non-finite float (and numpy number) replaced by None, for strict JSON."""
+    import numpy as np   # here: the workflow's task wrapper writes JSON without needing numpy
+    if isinstance(obj, dict):
+        return {k: finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite_or_null(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return finite_or_null(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
