@@ -3,7 +3,10 @@
 #include <Eigen/Dense>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -77,9 +80,12 @@ CellGrid make_grid(const Box& b, double cutoff) {
 }
 
 // The linked cells of one build: the cell of each particle and the members of each cell
-// (particle indices, ascending within a cell: a counting sort, stable in i).
+// (particle indices, ascending within a cell: a counting sort, stable in i). `ordered`: the
+// particles are ordered by cell (as sort_by_cell leaves them), so the members of cell k are the
+// consecutive indices cell_start[k] .. cell_start[k + 1] - 1.
 struct CellLists {
   std::vector<std::int32_t> cell_of, cell_start, cell_members;
+  bool ordered = false;
 };
 
 CellLists bin_particles(const CellGrid& g, const std::vector<Vec3>& x) {
@@ -89,68 +95,25 @@ CellLists bin_particles(const CellGrid& g, const std::vector<Vec3>& x) {
   c.cell_of.resize(n);
   c.cell_start.assign(ncell + 1, 0);
   c.cell_members.resize(n);
-  for (int i = 0; i < n; ++i) { c.cell_of[i] = g.index_of(x[i]); ++c.cell_start[c.cell_of[i] + 1]; }
+  c.ordered = true;
+  for (int i = 0; i < n; ++i) {
+    c.cell_of[i] = g.index_of(x[i]);
+    ++c.cell_start[c.cell_of[i] + 1];
+    if (i > 0 && c.cell_of[i] < c.cell_of[i - 1]) c.ordered = false;
+  }
   for (int k = 0; k < ncell; ++k) c.cell_start[k + 1] += c.cell_start[k];
   std::vector<std::int32_t> fill(c.cell_start.begin(), c.cell_start.end() - 1);
   for (int i = 0; i < n; ++i) c.cell_members[fill[c.cell_of[i]]++] = i;
   return c;
 }
 
-// The 27-cell stencil of every cell as (neighbour cell, periodic image) entries. With fewer
-// than 3 cells along an axis neighbour cells repeat: each distinct (cell, image) once.
-struct Stencils {
-  std::vector<std::int32_t> start, cell;
-  std::vector<std::uint8_t> image;
-  std::vector<std::uint8_t> offset;   ///< (dx+1) | (dy+1) << 2 | (dz+1) << 4: where it lies from the own cell
-};
-
-Stencils make_stencils(const CellGrid& g) {
-  const int ncell = g.n[0] * g.n[1] * g.n[2];
-  const bool small = g.n[0] < 3 || g.n[1] < 3 || g.n[2] < 3;
-  Stencils st;
-  st.start.assign(ncell + 1, 0);
-  st.cell.reserve(27L * ncell);
-  st.image.reserve(27L * ncell);
-  st.offset.reserve(27L * ncell);
-  for (int c = 0; c < ncell; ++c) {
-    const int ci[3] = {c / (g.n[1] * g.n[2]), (c / g.n[2]) % g.n[1], c % g.n[2]};
-    const std::size_t first = st.cell.size();
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz) {
-          const int d[3] = {dx, dy, dz};
-          int cc[3], sh[3];
-          for (int k = 0; k < 3; ++k) {
-            int v = ci[k] + d[k];
-            sh[k] = 0;
-            if (v < 0) { v += g.n[k]; sh[k] = -1; }
-            if (v >= g.n[k]) { v -= g.n[k]; sh[k] = 1; }
-            cc[k] = v;
-          }
-          const int cell = (cc[0] * g.n[1] + cc[1]) * g.n[2] + cc[2];
-          const int img = (sh[0] + 1) * 9 + (sh[1] + 1) * 3 + (sh[2] + 1);
-          bool dup = false;
-          if (small)
-            for (std::size_t q = first; q < st.cell.size(); ++q) dup |= (st.cell[q] == cell && st.image[q] == img);
-          if (!dup) {
-            st.cell.push_back(cell);
-            st.image.push_back(static_cast<std::uint8_t>(img));
-            st.offset.push_back(static_cast<std::uint8_t>((dx + 1) | (dy + 1) << 2 | (dz + 1) << 4));
-          }
-        }
-    st.start[c + 1] = static_cast<std::int32_t>(st.cell.size());
-  }
-  return st;
-}
-
 // Squared gaps between particle i and the cells around its own, per axis: gap2[k][d + 1] for
 // the neighbour at offset d = -1, 0, 1 along axis k (0 for d = 0, and everywhere in a tilted
 // cell, where cells are slabs of fractional coordinates: no pruning there) [m^2]. Shrunk by a
 // margin far above the round-off of the cell index, so no cell that could hold a partner is pruned.
-void cell_gaps2(const CellGrid& g, const Vec3& x, int cell, double gap2[3][3]) {
+void cell_gaps2(const CellGrid& g, const Vec3& x, const int ci[3], double gap2[3][3]) {
   for (int k = 0; k < 3; ++k) gap2[k][0] = gap2[k][1] = gap2[k][2] = 0.0;
   if (g.tilted) return;
-  const int ci[3] = {cell / (g.n[1] * g.n[2]), (cell / g.n[2]) % g.n[1], cell % g.n[2]};
   for (int k = 0; k < 3; ++k) {
     const double size = 1.0 / g.inv_size[k], margin = 1e-9 * size * g.n[k];
     const double below = std::max(0.0, x[k] - ci[k] * size - margin);
@@ -160,46 +123,140 @@ void cell_gaps2(const CellGrid& g, const Vec3& x, int cell, double gap2[3][3]) {
   }
 }
 
-// The listed partners of particle i (j > i, within r_i + r_j + skin), ascending in (j, image),
-// in `found`: the same pairs in the same order as a test of every particle of the 27 cells.
-// Skipped: cells whose members all precede i, and cells farther from x_i than r_i + r_max + skin.
-void search_row(int i, const std::vector<Vec3>& x, const std::vector<double>& radius, double skin, double rmax,
-                const CellGrid& g, const CellLists& cl, const Stencils& st, const Vec3 off[27],
-                std::vector<std::pair<std::int32_t, std::uint8_t>>& found) {
-  found.clear();
-  const int c = cl.cell_of[i];
-  const Vec3 xi = x[i];
-  const double ri = radius[i];
-  double gap2[3][3];
-  cell_gaps2(g, xi, c, gap2);
-  const double farthest = ri + rmax + skin, farthest2 = farthest * farthest;
-  for (int q = st.start[c]; q < st.start[c + 1]; ++q) {
-    const std::int32_t* m0 = cl.cell_members.data() + cl.cell_start[st.cell[q]];
-    const std::int32_t* m1 = cl.cell_members.data() + cl.cell_start[st.cell[q] + 1];
-    if (m0 == m1 || m1[-1] <= i) continue;             // members ascend: none with j > i
-    const int d = st.offset[q];
-    if (gap2[0][d & 3] + gap2[1][(d >> 2) & 3] + gap2[2][d >> 4] >= farthest2) continue;   // none can reach x_i
-    const Vec3& o = off[st.image[q]];
-    for (const std::int32_t* m = std::upper_bound(m0, m1, i); m < m1; ++m) {
-      const int j = *m;
-      const Vec3 d = x[j] + o - xi;
-      const double reach = ri + radius[j] + skin;   // the operations of the oracle's cutoff, in order
-      if (dot(d, d) < reach * reach) found.emplace_back(j, st.image[q]);
-    }
-  }
-  std::sort(found.begin(), found.end());   // ascending j: a deterministic, cache-friendly order
+// Cell coordinate c + d wrapped into [0, n), and the periodic shift (-1, 0, 1) that took it there.
+struct Wrapped {
+  int cell, shift;
+};
+inline Wrapped wrap_cell(int c, int d, int n) {
+  const int v = c + d;
+  return v < 0 ? Wrapped{v + n, -1} : v >= n ? Wrapped{v - n, 1} : Wrapped{v, 0};
 }
 
-// What a pair search needs: the grid, its cells and stencils, the image offsets.
+// What a pair search needs: the grid, its cells, the image offsets.
 struct SearchContext {
   const std::vector<Vec3>* x = nullptr;
   const std::vector<double>* radius = nullptr;
   double skin = 0, rmax = 0;
   CellGrid grid{};
   CellLists cells;
-  Stencils stencils;
   Vec3 off[27];
+  /// When the particles are ordered by cell, consecutive indices are searched four at a time
+  /// from these copies of x, y, z, r (four far-away entries of padding).
+  std::vector<double> soa_x, soa_y, soa_z, soa_r;
 };
+
+using Found = std::vector<std::pair<std::int32_t, std::uint8_t>>;
+
+// The candidates j in [j0, j1) of particle i, image offset o, in `found` when within
+// r_i + r_j + skin: four at a time from the search's copies of x, y, z, r (padded by four), with
+// the oracle's operations in its order (no FMA: this file is built with -ffp-contract=off), so
+// every lane decides as the scalar test does. One body; an AVX2 build of it where the CPU has it.
+typedef double V4 __attribute__((vector_size(32)));
+typedef std::int64_t M4 __attribute__((vector_size(32)));
+
+__attribute__((always_inline)) inline void test_range_body(const SearchContext& c, int i, int j0, int j1,
+                                                           const Vec3& o, int img, Found& found) {
+  const Vec3 xi = (*c.x)[i];
+  const double ri = (*c.radius)[i];
+  const V4 ox{o.x, o.x, o.x, o.x}, oy{o.y, o.y, o.y, o.y}, oz{o.z, o.z, o.z, o.z};
+  const V4 xx{xi.x, xi.x, xi.x, xi.x}, xy{xi.y, xi.y, xi.y, xi.y}, xz{xi.z, xi.z, xi.z, xi.z};
+  const V4 rr{ri, ri, ri, ri}, sk{c.skin, c.skin, c.skin, c.skin};
+  for (int j = j0; j < j1; j += 4) {
+    V4 X, Y, Z, R;
+    std::memcpy(&X, c.soa_x.data() + j, sizeof X);
+    std::memcpy(&Y, c.soa_y.data() + j, sizeof Y);
+    std::memcpy(&Z, c.soa_z.data() + j, sizeof Z);
+    std::memcpy(&R, c.soa_r.data() + j, sizeof R);
+    const V4 dx = X + ox - xx, dy = Y + oy - xy, dz = Z + oz - xz;
+    const V4 reach = rr + R + sk;
+    const M4 hit = dx * dx + dy * dy + dz * dz < reach * reach;
+    unsigned bits = static_cast<unsigned>((hit[0] & 1) | (hit[1] & 2) | (hit[2] & 4) | (hit[3] & 8));
+    if (j1 - j < 4) bits &= (1u << (j1 - j)) - 1;
+    for (; bits; bits &= bits - 1) found.emplace_back(j + __builtin_ctz(bits), static_cast<std::uint8_t>(img));
+  }
+}
+
+__attribute__((target("avx2"))) void test_range_avx2(const SearchContext& c, int i, int j0, int j1, const Vec3& o,
+                                                     int img, Found& found) {
+  test_range_body(c, i, j0, j1, o, img, found);
+}
+void test_range_generic(const SearchContext& c, int i, int j0, int j1, const Vec3& o, int img, Found& found) {
+  test_range_body(c, i, j0, j1, o, img, found);
+}
+std::atomic<bool> search_avx2{__builtin_cpu_supports("avx2") != 0};
+
+// Particle i's candidates among the members of one cell (periodic image img), appended to
+// `found`: the general case, particles in any order (members ascend within a cell).
+void search_cell(int i, const SearchContext& c, int cell, int img, Found& found) {
+  const std::int32_t* m0 = c.cells.cell_members.data() + c.cells.cell_start[cell];
+  const std::int32_t* m1 = c.cells.cell_members.data() + c.cells.cell_start[cell + 1];
+  if (m0 == m1 || m1[-1] <= i) return;             // none with j > i
+  const Vec3* x = c.x->data();
+  const double* radius = c.radius->data();
+  const Vec3 xi = x[i], o = c.off[img];
+  const double ri = radius[i];
+  for (const std::int32_t* m = std::upper_bound(m0, m1, i); m < m1; ++m) {
+    const int j = *m;
+    const Vec3 d = x[j] + o - xi;
+    const double reach = ri + radius[j] + c.skin;   // the operations of the oracle's cutoff, in order
+    if (dot(d, d) < reach * reach) found.emplace_back(j, static_cast<std::uint8_t>(img));
+  }
+}
+
+// One column of cells (fixed x and y neighbour, z offsets -1, 0, 1 not pruned by their gap
+// `gz`), image shifts sx, sy in x and y. Particles ordered by cell: neighbouring z cells without
+// a wrap between them are one run of consecutive indices, tested from max(run start, i + 1).
+void search_column(int i, const SearchContext& c, int wx, int sx, int wy, int sy, const int ci[3],
+                   const bool keep_z[3], Found& found) {
+  const CellGrid& g = c.grid;
+  const int column = (wx * g.n[1] + wy) * g.n[2];
+  int run_first = -1, run_last = -1, run_shift = 0;
+  auto flush = [&] {
+    if (run_first < 0) return;
+    const int img = (sx + 1) * 9 + (sy + 1) * 3 + (run_shift + 1);
+    if (!c.cells.ordered) {
+      for (int z = run_first; z <= run_last; ++z) search_cell(i, c, column + z, img, found);
+    } else {
+      const int j0 = std::max(c.cells.cell_start[column + run_first], i + 1);
+      const int j1 = c.cells.cell_start[column + run_last + 1];
+      if (j0 < j1) (search_avx2.load(std::memory_order_relaxed) ? test_range_avx2 : test_range_generic)(c, i, j0, j1, c.off[img], img, found);
+    }
+    run_first = -1;
+  };
+  for (int dz = -1; dz <= 1; ++dz) {
+    if (!keep_z[dz + 1]) continue;
+    const Wrapped wz = wrap_cell(ci[2], dz, g.n[2]);
+    if (run_first >= 0 && (wz.shift != run_shift || wz.cell != run_last + 1)) flush();
+    if (run_first < 0) { run_first = wz.cell; run_shift = wz.shift; }
+    run_last = wz.cell;
+  }
+  flush();
+}
+
+// The listed partners of particle i (j > i, within r_i + r_j + skin), ascending in (j, image),
+// in `found`: the same pairs in the same order as a test of every particle of the 27 cells
+// around i's. Skipped: cells whose members all precede i, and cells farther from x_i than
+// r_i + r_max + skin.
+void search_row(int i, const SearchContext& c, Found& found) {
+  found.clear();
+  const CellGrid& g = c.grid;
+  const int cell = c.cells.cell_of[i];
+  const int ci[3] = {cell / (g.n[1] * g.n[2]), (cell / g.n[2]) % g.n[1], cell % g.n[2]};
+  double gap2[3][3];
+  cell_gaps2(g, (*c.x)[i], ci, gap2);
+  const double farthest = (*c.radius)[i] + c.rmax + c.skin, farthest2 = farthest * farthest;
+  for (int dx = -1; dx <= 1; ++dx) {
+    const Wrapped wx = wrap_cell(ci[0], dx, g.n[0]);
+    for (int dy = -1; dy <= 1; ++dy) {
+      const double gxy = gap2[0][dx + 1] + gap2[1][dy + 1];
+      if (gxy >= farthest2) continue;   // no cell of the column can hold a partner
+      const Wrapped wy = wrap_cell(ci[1], dy, g.n[1]);
+      const bool keep_z[3] = {gxy + gap2[2][0] < farthest2, true, gxy + gap2[2][2] < farthest2};
+      search_column(i, c, wx.cell, wx.shift, wy.cell, wy.shift, ci, keep_z, found);
+    }
+  }
+  std::sort(found.begin(), found.end());   // ascending j: a deterministic, cache-friendly order
+}
 
 void prepare_search(SearchContext& c, const std::vector<Vec3>& x, const std::vector<double>& radius, const Box& cell,
                     double skin) {
@@ -209,8 +266,15 @@ void prepare_search(SearchContext& c, const std::vector<Vec3>& x, const std::vec
   c.rmax = max_radius_of(radius);
   c.grid = make_grid(cell, 2.0 * c.rmax + skin);
   c.cells = bin_particles(c.grid, x);
-  c.stencils = make_stencils(c.grid);
   image_offsets(cell, c.off);
+  if (!c.cells.ordered) return;
+  const std::size_t n = x.size();
+  const double far = std::numeric_limits<double>::infinity();
+  for (auto* v : {&c.soa_x, &c.soa_y, &c.soa_z, &c.soa_r}) v->assign(n + 4, 0.0);
+  for (std::size_t i = 0; i < n; ++i) {
+    c.soa_x[i] = x[i].x; c.soa_y[i] = x[i].y; c.soa_z[i] = x[i].z; c.soa_r[i] = radius[i];
+  }
+  for (std::size_t i = n; i < n + 4; ++i) c.soa_x[i] = c.soa_y[i] = c.soa_z[i] = far;
 }
 
 // The rows [begin, end) of the list: their partners and images appended in row order, and each
@@ -226,7 +290,7 @@ void search_rows(const SearchContext& c, int begin, int end, Rows& out) {
   out.count.assign(end - begin, 0);
   std::vector<std::pair<std::int32_t, std::uint8_t>> found;
   for (int i = begin; i < end; ++i) {
-    search_row(i, *c.x, *c.radius, c.skin, c.rmax, c.grid, c.cells, c.stencils, c.off, found);
+    search_row(i, c, found);
     for (auto& f : found) { out.partner.push_back(f.first); out.image.push_back(f.second); }
     out.count[i - begin] = static_cast<std::int32_t>(found.size());
   }
@@ -300,6 +364,10 @@ void sort_by_cell(State& s, double cutoff) {
 }
 
 }  // namespace
+
+bool pair_search_avx2(bool on) {
+  return search_avx2.exchange(on && __builtin_cpu_supports("avx2"));
+}
 
 double max_radius_of(const std::vector<double>& radius) {
   double r = 0;

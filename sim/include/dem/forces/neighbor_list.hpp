@@ -63,6 +63,11 @@ class ListRebuild {
   std::unique_ptr<Impl> impl_;
 };
 
+/// The pair search tests four candidates at a time from consecutive particles of a cell (the
+/// cell-sorted order of a rebuild), in an AVX2 build of its loop where the CPU has AVX2. `on =
+/// false` forces the generic build, which gives the same list (tests); returns the setting before.
+bool pair_search_avx2(bool on);
+
 /// Puts the state's per-contact history (State::ContactHistory: records keyed by the pair's
 /// particle ids, in any order) into the order of `list`: a listed pair gets the record of the
 /// same two particles (odd entries negated if they are listed the other way round), every other
