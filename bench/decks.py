@@ -32,21 +32,27 @@ def write_lammps_data(path, cell, spheres, density, style):
             fh.write(f"{i} 1 {2 * r!r} {density!r} {x!r} {y!r} {z!r}\n")
 
 
-def _motion(dt, rate, gamma_b, steps):
-    """The part both codes share: velocity Verlet, drag on the peculiar velocity, D2 box."""
+def _motion(dt, rate, gamma_b, steps, warmup=0):
+    """The part both codes share: velocity Verlet, drag on the peculiar velocity, D2 box. With
+    warmup > 0: `warmup` untimed steps first (as `dem bench`'s warm-up), then the timed run with
+    `pre no` (no second setup, so no list build between the two runs); the timed run's summary
+    (loop time, list builds, timing breakdown) is then the last one in the log."""
+    runs = f"run {warmup}\nrun {steps} pre no\n" if warmup else f"run {steps}\n"
     return f"""timestep {dt!r}
 fix integ all nve/sphere
 fix visc all viscous {gamma_b}
 fix def all deform 1 x trate {rate!r} z trate {-rate!r} remap x
 thermo 1000
-run {steps}
-"""
+""" + runs
 
 
-def lammps_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4):
+def lammps_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4, warmup=0):
     # pair granular: hooke normal force k*delta with absolute velocity damping (damping velocity:
     # eta_n = gamma), no tangential force; fix viscous: -gamma_b v on every atom; fix deform
     # trate: true strain rate (D2), remap x: positions follow the box, velocities stay peculiar.
+    # neighbor skin bin + neigh_modify delay 0 every 1 check yes: the list (pairs within
+    # r_i + r_j + skin) is rebuilt as soon as an atom has moved skin/2 since the last build, as
+    # ours. warmup: untimed steps before the timed run (see _motion).
     return f"""units si
 atom_style sphere
 atom_modify map array
@@ -56,9 +62,9 @@ comm_modify vel yes
 read_data {data}
 pair_style granular
 pair_coeff * * hooke {k} {gamma} tangential linear_nohistory 0 0 damping velocity
-neighbor {skin} bin
+neighbor {skin!r} bin
 neigh_modify delay 0 every 1 check yes
-""" + _motion(dt, rate, gamma_b, steps)
+""" + _motion(dt, rate, gamma_b, steps, warmup)
 
 
 def lammps_friction_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4, mu=0.5, kt_ratio=2 / 7):
