@@ -1,6 +1,7 @@
 // Bad input gets a clear error naming the key or line and the fix.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -113,4 +114,25 @@ TEST(Packing, SharedBenchmarkPackingHasTheAdvertisedVolumeFraction) {
   const dem::State s = dem::read_packing(std::string(DEM_SOURCE_DIR) + "/data/packings/n9261_phi0.70.txt", 2000);
   EXPECT_EQ(s.count(), 9261);
   EXPECT_NEAR(s.volume_fraction(), 0.700, 5e-4);
+}
+
+// The skin: "auto" (the default) follows the time step by its rule, a number overrides it, and the
+// resolved scene keeps "auto", so a resolved scene run at another dt gets that dt's skin.
+TEST(Scene, SkinIsAutoByDefaultANumberOverridesIt) {
+  std::string resolved;
+  const dem::Model t50 = dem::load_scene("", {}, &resolved);
+  EXPECT_TRUE(t50.skin_auto);
+  EXPECT_EQ(t50.skin_over_rmin, 0.4);   // the default time step keeps the old skin (and bits)
+  EXPECT_TRUE(has(resolved, "skin_over_rmin = 'auto'")) << resolved;
+  const dem::Model t5 = dem::load_scene(resolved, {"integration.dt_over_tc=0.2"});
+  EXPECT_NEAR(t5.skin_over_rmin, 0.4 * std::pow(10.0, 0.4), 1e-12);
+  const dem::Model t10 = dem::load_scene("[integration]\ndt_over_tc = 0.1\nskin_over_rmin = \"auto\"\n");
+  EXPECT_TRUE(t10.skin_auto);
+  EXPECT_GT(t10.skin_over_rmin, t50.skin_over_rmin);
+  EXPECT_LT(t10.skin_over_rmin, t5.skin_over_rmin);
+  const dem::Model set = dem::load_scene("[integration]\ndt_over_tc = 0.2\nskin_over_rmin = 0.3\n");
+  EXPECT_FALSE(set.skin_auto);
+  EXPECT_EQ(set.skin_over_rmin, 0.3);
+  EXPECT_TRUE(has(error_of("[integration]\nskin_over_rmin = \"thick\"\n"), "must be a number or \"auto\""));
+  EXPECT_TRUE(has(error_of("[integration]\nskin_over_rmin = 0\n"), "skin_over_rmin must be in (0, 4]"));
 }

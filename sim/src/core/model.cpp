@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
@@ -30,6 +31,11 @@ unsigned long long member_seed(unsigned long long seed, int k) {
   z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
   z ^= z >> 31;
   return z >> 11;   // 53 bits
+}
+
+double auto_skin_over_rmin(double dt_over_tc) {
+  if (!(dt_over_tc > 0.02)) return 0.4;
+  return 0.4 * std::pow(dt_over_tc / 0.02, 0.4);
 }
 
 void Model::finalize() {

@@ -72,6 +72,19 @@ class KeyReader {
     }
   }
 
+  // A number, or the string "auto" (also when absent: the resolved scene then says "auto").
+  // Returns true for "auto" (out unchanged).
+  bool get_number_or_auto(const std::string& section, const std::string& key, double& out) {
+    known_[section].insert(key);
+    toml::table* sec = section_table(section);
+    toml::node* node = sec ? sec->get(key) : nullptr;
+    if (!node) { set_default(section, key, std::string("auto")); return true; }
+    if (auto v = node->value_exact<std::string>(); v && *v == "auto") return true;
+    if (auto v = node->value<double>(); v && !node->is_string()) { out = *v; return false; }
+    type_error(section + "." + key, "a number or \"auto\"");
+    return false;
+  }
+
   // A key read elsewhere (not through get): known, never given a default.
   void known(const std::string& section, const std::string& key) { known_[section].insert(key); }
 
@@ -545,7 +558,8 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
                         "' is unknown; use \"sllod\" (default: the kinetic stress does work in a deforming box) or "
                         "\"plain\" (the scheme of dem 0.1)");
   r.get("integration", "dt_over_tc", m.dt_over_tc);
-  r.get("integration", "skin_over_rmin", m.skin_over_rmin);
+  m.skin_auto = r.get_number_or_auto("integration", "skin_over_rmin", m.skin_over_rmin);
+  if (m.skin_auto) m.skin_over_rmin = auto_skin_over_rmin(m.dt_over_tc);
   r.get("integration", "threads", m.threads);
   r.get_if_present("integration", "blocks", m.blocks);
   r.get_if_present("integration", "adaptive_threads", m.adaptive_threads);

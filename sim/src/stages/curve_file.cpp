@@ -23,7 +23,10 @@ std::string curve_preamble(const Model& m, const std::string& stage, const Physi
     << "# overlap_*_rel: overlap / smaller radius of the pair; inertial_number=max|rate| 2<r> sqrt(rho/p)\n"
     << "# t_c=" << m.t_contact << " s, dt=" << m.dt << " s, k=" << m.contact.stiffness
     << " N/m, gamma=" << m.contact.damping << " kg/s, gamma_b=" << m.background_damping << " kg/s\n"
-    << "# physics: " << physics_line(physics) << "\n";
+    << "# physics: " << physics_line(physics) << "\n"
+    << "# neighbour list: skin=" << m.skin_over_rmin * m.radius_min << " m = " << m.skin_over_rmin << " r_min ("
+    << (m.skin_auto ? "auto, from dt/t_c" : "set in the scene")
+    << "); the list is exact, so the skin changes the cost and the order of the force sums, not the physics\n";
   if (m.contact.frictional())
     o << "# friction: Cundall-Strack, mu=" << m.contact.friction << ", k_t=" << m.contact.tangential_stiffness_ratio * m.contact.stiffness
       << " N/m, gamma_t=" << m.contact.tangential_damping << " kg/s"

@@ -198,7 +198,8 @@ struct Model {
   /// kinetic stress's work out of the energy balance.
   bool sllod = true;
   double dt_over_tc = 1.0 / 50.0;    ///< dt as a fraction of t_c of the two smallest particles
-  double skin_over_rmin = 0.4;       ///< Verlet skin / radius_min
+  double skin_over_rmin = 0.4;       ///< Verlet skin / radius_min (a scene's "auto": auto_skin_over_rmin)
+  bool skin_auto = false;            ///< skin_over_rmin came from auto_skin_over_rmin (the scene's default)
   int threads = 0;                   ///< OpenMP threads; 0: all available
   /// Blocks of the pair loop (forces.hpp): the summation order of the forces depends on the
   /// blocks, not on the threads that run them, so one block count gives the same bits for any
@@ -246,5 +247,14 @@ double sphere_mass(double radius, double density);
 
 /// File-name tag of a volume fraction: "phi0.700" (3 decimals; checkpoint and curve names).
 std::string fmt_phi(double phi);
+
+/// The neighbour skin a scene gets by default ("auto"), from its time step alone, so the same
+/// scene gives the same skin (and bits) on any machine, thread count and restart:
+///   skin / r_min = 0.4 (dt/t_c / 0.02)^0.4 for dt > t_c/50, else 0.4 (the default at t_c/50;
+/// 1.0 at t_c/5, 1.56 at the stability limit). A thicker skin lists more pairs (each costs the pair loop every step) but is
+/// rebuilt less often (each rebuild costs about 60 listed pairs' worth per particle); particles
+/// move about dt further per step, so the best skin grows with dt. The constants come from the
+/// measured cost model in docs/benchmarks.md ("Choosing the skin").
+double auto_skin_over_rmin(double dt_over_tc);
 
 }  // namespace dem
