@@ -5,6 +5,8 @@ the error of s_dev, F_dev and p against a converged reference and the wall time.
 
     /usr/bin/python3 bench/accuracy_cost.py [--eps 0.06]        (about 30 minutes, 1 thread)
     /usr/bin/python3 bench/accuracy_cost.py --only-n            (just the N series, merged into the JSON)
+    /usr/bin/python3 bench/accuracy_cost.py --only-auto-skin    (just the dt series at the default "auto"
+                                                                 skin, merged; a minute)
 
 Writes docs/accuracy_cost.md, docs/accuracy_cost.png/.svg and bench/accuracy_cost.json.
 Error: RMS over eps_d of |x - x_ref| for s_dev and F_dev; RMS relative error for p.
@@ -133,18 +135,46 @@ def yade_point(eps):
     return {"error": error(y, ref), "cpu_s": steps * 9261 / thr[0], "throughput": thr[0]}
 
 
+# The scenes' default skin ("auto": thicker at larger dt, sim/include/dem/core/model.hpp) against
+# the dt series at 0.4 r_min: the list is exact, so only the summation order should differ.
+AUTO_SKIN_SERIES = "dt (auto skin)"
+AUTO_SKIN_CONFIGS = [dict(DEFAULT, dt=d, skin="auto") for d in (0.05, 0.1, 0.2, 0.3, 0.4)]
+
+
+def auto_skin(dt_over_tc):
+    """The skin/r_min of "auto" (for the table; the rule is dem::auto_skin_over_rmin in sim/src/core/model.cpp)."""
+    return 0.4 * max(1.0, dt_over_tc / 0.02) ** 0.4
+
+
+def run_series(cfgs, eps, tmp, ref):
+    """Each config's run, its error against `ref` and its CPU time."""
+    out = []
+    for cfg in cfgs:
+        c, wall = run(cfg, eps, tmp)
+        err = error(c, ref) if c is not None and ref is not None else None
+        out.append({"config": cfg, "wall_s": wall, "error": err,
+                    "max_inertial_number": float(c["inertial_number"].max()) if c is not None else None})
+        print(cfg, f"{wall:.1f}s", err, file=sys.stderr)
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--eps", type=float, default=0.06)
     ap.add_argument("--replot", action="store_true", help="redraw from bench/accuracy_cost.json without running")
     ap.add_argument("--only-n", action="store_true", help="run only the N series and merge it into the JSON")
+    ap.add_argument("--only-auto-skin", action="store_true",
+                    help="run only the dt series at the auto skin (against the stored reference) and merge it")
     a = ap.parse_args()
     jpath = os.path.join(HERE, "accuracy_cost.json")
-    if a.replot or a.only_n:
+    if a.replot or a.only_n or a.only_auto_skin:
         with open(jpath) as fh:
             results = json.load(fh)
         if a.only_n:
             results["N (spread over seeds)"] = n_series(a.eps, tempfile.mkdtemp())
+        if a.only_auto_skin:
+            results[AUTO_SKIN_SERIES] = run_series(AUTO_SKIN_CONFIGS, a.eps, tempfile.mkdtemp(), read_curve(REFERENCE_CSV))
+        if a.only_n or a.only_auto_skin:
             with open(jpath, "w") as fh:
                 json.dump(results, fh, indent=2)
         report(results, a.eps)
@@ -157,6 +187,7 @@ def main():
         "dt (symplectic Euler)": [dict(DEFAULT, dt=d, integrator="symplectic_euler") for d in (0.01, 0.02, 0.05, 0.1, 0.2, 0.4)],
         "rate": [dict(DEFAULT, rate=r) for r in (1e-5, 3e-5, 1e-4, 3e-4, 1e-3)],
         "skin": [dict(DEFAULT, skin=s) for s in (0.1, 0.2, 0.4, 0.8)],
+        AUTO_SKIN_SERIES: AUTO_SKIN_CONFIGS,
     }
     results = {}
     ref_dt, _ = run(dict(DEFAULT, dt=0.005), a.eps, tmp, keep=REFERENCE_CSV)
@@ -234,7 +265,8 @@ def report(results, eps):
             c, e = r["config"], r["error"]
             es = ("blew up", "", "") if e is None else (f"{e['s_dev']:.2e}", f"{e['F_dev']:.2e}", f"{e['p_rel']:.2e}")
             mi = "" if r["max_inertial_number"] is None else f"{r['max_inertial_number']:.1e}"
-            lines.append(f"| {name} | {c['dt']} | {c['rate']} | {c['skin']} | {c['integrator']} | {r['wall_s']:.1f} | "
+            skin = c["skin"] if c["skin"] != "auto" else f"auto ({auto_skin(c['dt']):.2f})"
+            lines.append(f"| {name} | {c['dt']} | {c['rate']} | {skin} | {c['integrator']} | {r['wall_s']:.1f} | "
                          f"{es[0]} | {es[1]} | {es[2]} | {mi} |")
     if yade:
         e = yade["error"]

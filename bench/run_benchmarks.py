@@ -93,15 +93,19 @@ def relaxed_quickstart_checkpoint(work):
 
 
 def production_cases(work):
-    """label -> (ours' packing, LAMMPS' packing, dt / t_c, strain rate x t_c, steps factor). The
-    quickstart member: ours from the relaxed checkpoint (bit-exact state, velocities included),
-    LAMMPS from the YADE text file `dem run` writes beside it (positions and radii: at rest);
-    9x the steps at N = 1000 for about the same particle-steps as at N = 9261."""
+    """label -> (ours' packing, LAMMPS' packing, dt / t_c, strain rate x t_c, steps factor, skin/r_min
+    or None for the scenes' "auto"). The quickstart member: ours from the relaxed checkpoint
+    (bit-exact state, velocities included), LAMMPS from the YADE text file `dem run` writes beside
+    it (positions and radii: at rest); 9x the steps at N = 1000 for about the same particle-steps
+    as at N = 9261. The production rows also at 0.4 r_min, the skin before "auto"."""
     ckpt = relaxed_quickstart_checkpoint(work)
     txt = os.path.splitext(ckpt)[0] + ".txt"
-    return {"quickstart member (N = 1000, φ = 0.80), t_c/5, 3e-5/t_c": (ckpt, txt, 0.2, 3e-5, 9),
-            "shared N = 9261, t_c/10, 1e-5/t_c (Figure 3)": (PACKING, PACKING, 0.1, 1e-5, 1),
-            "shared N = 9261, t_c/50, 5e-6/t_c (default dt)": (PACKING, PACKING, 0.02, RATE_TC, 1)}
+    qs, fig3 = "quickstart member (N = 1000, φ = 0.80), t_c/5, 3e-5/t_c", "shared N = 9261, t_c/10, 1e-5/t_c (Figure 3)"
+    return {qs: (ckpt, txt, 0.2, 3e-5, 9, None),
+            qs + ", skin 0.4 r_min": (ckpt, txt, 0.2, 3e-5, 9, 0.4),
+            fig3: (PACKING, PACKING, 0.1, 1e-5, 1, None),
+            fig3 + ", skin 0.4 r_min": (PACKING, PACKING, 0.1, 1e-5, 1, 0.4),
+            "shared N = 9261, t_c/50, 5e-6/t_c (default dt)": (PACKING, PACKING, 0.02, RATE_TC, 1, None)}
 
 
 def median_run(rs):
@@ -123,11 +127,11 @@ def production_rows(work, steps, rounds):
     cases = production_cases(work)
     runs, extra = {k: [] for k in cases}, {k: {} for k in cases}
     for rnd in range(rounds):
-        for k, (pk, lpk, dt, rate, f) in cases.items():
-            runs[k].append(bench_production(pk, steps * f, dt, rate))
+        for k, (pk, lpk, dt, rate, f, skin) in cases.items():
+            runs[k].append(bench_production(pk, steps * f, dt, rate, skin))
             if rnd == 0:
                 extra[k]["lammps"] = lammps_production(lpk, steps * f, dt, rate, runs[k][-1], work)
-            if rnd == 0 and lpk != pk:
+            if rnd == 0 and lpk != pk and skin is None:
                 extra[k]["ours_from_lammps_packing"] = bench_production(lpk, steps * f, dt, rate)
     rows = {k: dict(median_run(rs), **extra[k]) for k, rs in runs.items()}
     for row in rows.values():
