@@ -7,7 +7,8 @@ side by side in one run, plus our cost against N. Not a test: numbers depend on 
 Writes a Markdown table (default docs/benchmarks.md) and bench/results.json. Codes that are
 not installed are reported as such (scripts/install-deps.sh --bench installs LAMMPS and LIGGGHTS).
 --production-only: only the production time steps (ours and LAMMPS at the same dt, rate and
-skin; about 2-3 minutes), to bench/production.md and bench/production.json.
+skin; about 3-4 minutes), to bench/production.md and bench/production.json, and spliced into
+docs/benchmarks.md in place of its production section (its notes from bench/benchmarks_notes.md anew).
 """
 import argparse
 import json
@@ -353,9 +354,21 @@ def production_section(prod):
     return lines + ["", "What differs between the two codes' runs:", ""] + production_notes(prod)
 
 
+def splice_production(page, section, note):
+    """Puts `section` (its "## Production time steps" heading first) into the generated page in place
+    of the one there (or before its notes), and the page's notes anew from bench/benchmarks_notes.md;
+    the page's other tables are left as the last full run wrote them."""
+    with open(page) as fh:
+        text = fh.read()
+    head = text.split("\n## Notes", 1)[0].split("\n## Production time steps", 1)[0].rstrip("\n")
+    lines = [head] + section[:3] + [note, ""] + section[3:]
+    write_markdown(page, lines, os.path.join(HERE, "benchmarks_notes.md"))
+
+
 def production_only(a):
     """--production-only: the production rows (ours + LAMMPS) alone, written to bench/production.json
-    and bench/production.md (or --out); docs/benchmarks.md and bench/results.json are left alone."""
+    and bench/production.md (or --out), and spliced into docs/benchmarks.md (splice_production);
+    bench/results.json is left alone."""
     work = tempfile.mkdtemp(prefix="dem_bench_")
     res = {"machine": machine(), "production": production_rows(work, step_counts(a.quick)[0] // 2,
                                                                production_rounds(a.quick))}
@@ -363,7 +376,11 @@ def production_only(a):
         json.dump(res, fh, indent=2)
     lines = ["# Production time steps: ours and LAMMPS", "", generated_by(a, res["machine"]),
              "The same section as in docs/benchmarks.md (a full run of the script regenerates both)."]
-    write_markdown(a.out or os.path.join(HERE, "production.md"), lines + production_section(res["production"]))
+    section = production_section(res["production"])
+    write_markdown(a.out or os.path.join(HERE, "production.md"), lines + section)
+    if not a.out:
+        splice_production(os.path.join(ROOT, "docs", "benchmarks.md"), section,
+                          f"(This section: {generated_by(a, res['machine'])[0].lower()}{generated_by(a, res['machine'])[1:]})")
     shutil.rmtree(work, ignore_errors=True)
 
 
