@@ -166,30 +166,35 @@ TEST(Rebuild, FrictionalOracleAtEveryStepAcrossHundredsOfRebuilds) {
   EXPECT_GT(e.rebuild_stats().rebuilds, 200) << "the test must cross hundreds of rebuilds";
 }
 
-// At the production time step (t_c/5; the thin skin of t_c/50, so the list is rebuilt often) and with
-// friction: 1, 2 and 4 threads, the same bits.
+// At the production time step (t_c/5) and with friction: 1, 2 and 4 threads, the same bits, at the
+// thin skin of t_c/50 (rebuilt every few steps) and at the scenes' default "auto" skin (1 r_min here).
 TEST(Rebuild, ThreadCountsGiveTheSameBitsAtTheProductionTimeStep) {
-  for (const char* friction : {"0", "0.5"}) {
-    auto run = [&](int threads) {
-      dem::State s = dem_test::random_state(400, 0.38, 2.0, 5);
-      const dem::Model m = dem_test::model_with({"integration.threads=" + std::to_string(threads),
-                                                 "integration.dt_over_tc=0.2", std::string("contact.friction=") + friction,
-                                                 "integration.adaptive_threads=false", "integration.skin_over_rmin=0.4"});
-      const Vec3 rate = Vec3(1, 0, -1) * (1e-3 / m.t_contact);
-      dem::Engine e(m, s);
-      for (int k = 0; k < 400; ++k) e.step(rate);
-      EXPECT_GT(e.rebuild_stats().rebuilds, 10) << "the test must cross list rebuilds";
-      return s;
-    };
-    const dem::State one = run(1);
-    for (int threads : {2, 4}) {
-      const dem::State t = run(threads);
-      ASSERT_EQ(t.id, one.id);
-      EXPECT_TRUE(dem_test::same_bits(t.position, one.position)) << threads << " threads, friction " << friction;
-      EXPECT_TRUE(dem_test::same_bits(t.velocity, one.velocity)) << threads << " threads, friction " << friction;
-      EXPECT_TRUE(dem_test::same_bits(t.force, one.force)) << threads << " threads, friction " << friction;
+  for (const std::string skin : {"0.4", "auto"})
+    for (const char* friction : {"0", "0.5"}) {
+      const int steps = skin == "auto" ? 1500 : 400;
+      auto run = [&](int threads) {
+        dem::State s = dem_test::random_state(400, 0.38, 2.0, 5);
+        const dem::Model m = dem_test::model_with({"integration.threads=" + std::to_string(threads),
+                                                   "integration.dt_over_tc=0.2", std::string("contact.friction=") + friction,
+                                                   "integration.adaptive_threads=false",
+                                                   "integration.skin_over_rmin=" + (skin == "auto" ? "\"auto\"" : skin)});
+        EXPECT_EQ(m.skin_auto, skin == "auto");
+        const Vec3 rate = Vec3(1, 0, -1) * (1e-3 / m.t_contact);
+        dem::Engine e(m, s);
+        for (int k = 0; k < steps; ++k) e.step(rate);
+        EXPECT_GT(e.rebuild_stats().rebuilds, 10) << "the test must cross list rebuilds (skin " << skin << ")";
+        return s;
+      };
+      const dem::State one = run(1);
+      for (int threads : {2, 4}) {
+        const dem::State t = run(threads);
+        ASSERT_EQ(t.id, one.id);
+        const std::string what = std::to_string(threads) + " threads, friction " + friction + ", skin " + skin;
+        EXPECT_TRUE(dem_test::same_bits(t.position, one.position)) << what;
+        EXPECT_TRUE(dem_test::same_bits(t.velocity, one.velocity)) << what;
+        EXPECT_TRUE(dem_test::same_bits(t.force, one.force)) << what;
+      }
     }
-  }
 }
 
 // The statistics: every rebuild of a diagonal run is a displacement trigger; the diagnosed ones

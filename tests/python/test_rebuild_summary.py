@@ -33,3 +33,29 @@ def test_bench_prints_the_rebuild_summary():
     nl = json.loads(line[len("neighbor_list="):])
     assert nl["steps"] == 300 and nl["skin_m"] > 0
     assert "list rebuilds:" in r.stdout and "of the wall time" in r.stdout
+
+
+def _preamble(curve):
+    return [ln for ln in curve.read_text().splitlines() if ln.startswith("#")]
+
+
+def test_the_skin_is_recorded_and_is_not_physics(tmp_path):
+    # The quickstart scene (t_c/5) gets the auto skin, 0.4 (dt/t_c / 0.02)^0.4 = 1.005 r_min; the
+    # same run with the skin set by hand has the same physics record (hash and keys) and says so.
+    packing = os.path.join(ROOT, "data", "packings", "n9261_phi0.70.txt")
+    scene = os.path.join(ROOT, "data", "scenes", "quickstart.toml")
+    curves = {}
+    for name, extra in (("auto", []), ("set", ["--set", "integration.skin_over_rmin=0.4"])):
+        curves[name] = tmp_path / f"{name}.csv"
+        run_dem("mode", "--packing", packing, "--scene", scene, "--mode", "D2", "--eps-max", "0.01", "--rate-tc", "3e-4",
+                "--out", curves[name], "--quiet", "--threads", "1", *extra, check=True)
+    pre = {k: _preamble(c) for k, c in curves.items()}
+    skin = {k: next(ln for ln in p if ln.startswith("# neighbour list: skin=")) for k, p in pre.items()}
+    r_min = 0.5e-3
+    auto = float(skin["auto"].split("skin=")[1].split()[0])
+    assert abs(auto / r_min - 0.4 * 10 ** 0.4) < 1e-4 and "auto, from dt/t_c" in skin["auto"], skin["auto"]
+    assert "skin=0.0002 m = 0.4 r_min (set in the scene)" in skin["set"], skin["set"]
+    physics = {k: next(ln for ln in p if ln.startswith("# physics:")) for k, p in pre.items()}
+    assert physics["auto"] == physics["set"]
+    info = run_dem("info", scene, check=True).stdout
+    assert "neighbour list     skin = 0.0005024 m = 1 r_min (auto" in info, info
