@@ -252,7 +252,7 @@ std::string fmt_phi(double phi);
 /// scene gives the same skin (and bits) on any machine, thread count and restart:
 ///   skin / r_min = 0.4 (dt/t_c / 0.02)^0.4 for dt > t_c/50, else 0.4 (the default at t_c/50;
 /// 1.0 at t_c/5, 1.56 at the stability limit). A thicker skin lists more pairs (each costs the pair loop every step) but is
-/// rebuilt less often (each rebuild costs about 60 listed pairs' worth per particle); particles
+/// rebuilt less often (each rebuild costs about 65 listed pairs' worth per particle); particles
 /// move about dt further per step, so the best skin grows with dt. The constants come from the
 /// measured cost model in docs/benchmarks.md ("Choosing the skin").
 double auto_skin_over_rmin(double dt_over_tc);
