@@ -7,6 +7,7 @@
 #include <fstream>
 
 #include "dem/io/io.hpp"
+#include "dem/core/model.hpp"
 #include "dem/io/scene.hpp"
 
 namespace {
@@ -130,6 +131,13 @@ TEST(Scene, SkinIsAutoByDefaultANumberOverridesIt) {
   EXPECT_TRUE(t10.skin_auto);
   EXPECT_GT(t10.skin_over_rmin, t50.skin_over_rmin);
   EXPECT_LT(t10.skin_over_rmin, t5.skin_over_rmin);
+  // A box of few particles caps it (at least the old 0.4 r_min): 120 spheres at t_c/2.5 hold 0.4 only.
+  const dem::Model few = dem::load_scene("[particles]\ncount = 120\n[integration]\ndt_over_tc = 0.4\n");
+  EXPECT_TRUE(few.skin_auto);
+  EXPECT_EQ(few.skin_over_rmin, 0.4);
+  const dem::Model some = dem::load_scene("[particles]\ncount = 200\n[integration]\ndt_over_tc = 0.4\n");
+  EXPECT_GT(some.skin_over_rmin, 0.4);
+  EXPECT_LT(some.skin_over_rmin, dem::auto_skin_over_rmin(0.4));
   const dem::Model set = dem::load_scene("[integration]\ndt_over_tc = 0.2\nskin_over_rmin = 0.3\n");
   EXPECT_FALSE(set.skin_auto);
   EXPECT_EQ(set.skin_over_rmin, 0.3);

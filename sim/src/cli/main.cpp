@@ -116,7 +116,7 @@ void print_info(const dem::Model& m) {
   std::printf("time step          dt = %.6g s (t_c / %.4g), %s\n", m.dt, 1.0 / m.dt_over_tc,
               m.integrator == dem::Integrator::VelocityVerlet ? "velocity Verlet" : "symplectic Euler");
   std::printf("neighbour list     skin = %.4g m = %.3g r_min (%s)\n", m.skin_over_rmin * m.radius_min, m.skin_over_rmin,
-              m.skin_auto ? "auto: 0.4 (dt/t_c / 0.02)^0.4 above t_c/50" : "set in the scene");
+              m.skin_auto ? "auto: 0.4 (dt/t_c / 0.02)^0.4 above t_c/50, less in a box of few particles" : "set in the scene");
   const std::vector<double> prep_steps = dem::preparation_stage_steps(m);
   for (std::size_t i = 0; i < p.preparation.size(); ++i)
     std::printf("prep %-15s %s: %s%.3g steps\n", p.preparation[i].name.c_str(),

@@ -71,7 +71,7 @@ CellGrid make_grid(const Box& b, double cutoff) {
       throw std::runtime_error(
           std::string(tilted ? "perpendicular width of the tilted cell " : "box edge ") + std::to_string(width[k]) +
           " m is shorter than twice the neighbour cutoff " + std::to_string(cutoff) +
-          " m: use more particles or a smaller skin");
+          " m: use more particles or a smaller skin (integration.skin_over_rmin, in units of the smallest radius)");
     g.n[k] = std::max(1, static_cast<int>(width[k] / cutoff));
     g.inv_size[k] = g.n[k] / b.length[k];
   }

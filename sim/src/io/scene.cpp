@@ -515,6 +515,22 @@ static void read_tangential(KeyReader& r, ContactLaw& c, const std::string& orig
   }
 }
 
+// The auto skin of a scene with few particles: at most what lets the box at the preparation's
+// densest volume fraction, its shortest edge shrunk by the modes' strain (exp(-eps_d_max)), hold
+// two list cutoffs (2 r_max + skin) with 10 % to spare, but never below the old 0.4 r_min (a box
+// too small for that was too small before too). Packings from a file keep the rule (their count
+// is not known here).
+static void cap_auto_skin(Model& m) {
+  if (!m.packing_file.empty()) return;
+  double phi = std::max(m.protocol.cycle_phi_max, m.protocol.target_phi);
+  for (const PrepStage& st : m.protocol.preparation) phi = std::max(phi, st.phi);
+  const double a = m.radius_min, b = m.radius_max;
+  const double mean_r3 = b > a ? (b * b * b * b - a * a * a * a) / (4 * (b - a)) : a * a * a;
+  const double edge = std::cbrt(m.count * 4.0 / 3.0 * M_PI * mean_r3 / phi) * std::exp(-m.protocol.eps_d_max);
+  const double cap = (0.9 * edge / 2 - 2 * b) / a;
+  m.skin_over_rmin = std::min(m.skin_over_rmin, std::max(0.4, cap));
+}
+
 Model load_scene(const std::string& text, const std::vector<std::string>& overrides,
                  std::string* resolved, const std::string& origin) {
   toml::table root;
@@ -718,6 +734,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
       if (st.stop == PathStop::Time) st.until *= m.t_contact;   // time_tc -> seconds
   p.preparation = preparation ? parse_preparation(*preparation, m.t_contact, origin) : default_preparation(p);
   validate_preparation(p, m.t_contact, origin);
+  if (m.skin_auto) cap_auto_skin(m);
   check_work(m, origin);
   if (resolved) {
     std::ostringstream o;

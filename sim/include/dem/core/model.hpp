@@ -254,7 +254,8 @@ std::string fmt_phi(double phi);
 /// 1.0 at t_c/5, 1.56 at the stability limit). A thicker skin lists more pairs (each costs the pair loop every step) but is
 /// rebuilt less often (each rebuild costs about 65 listed pairs' worth per particle); particles
 /// move about dt further per step, so the best skin grows with dt. The constants come from the
-/// measured cost model in docs/benchmarks.md ("Choosing the skin").
+/// measured cost model of bench/skin_scan.py (docs/skin_scan.md). The scene loader caps it for a
+/// box of few particles (never below 0.4), so such a scene still fits two list cutoffs.
 double auto_skin_over_rmin(double dt_over_tc);
 
 }  // namespace dem
