@@ -9,6 +9,9 @@
 #include "dem/io/io.hpp"
 #include "dem/core/model.hpp"
 #include "dem/io/scene.hpp"
+#include "dem/stages/plan.hpp"
+
+#include <unistd.h>
 
 namespace {
 std::string error_of(const std::string& text, const std::vector<std::string>& ov = {}) {
@@ -143,4 +146,34 @@ TEST(Scene, SkinIsAutoByDefaultANumberOverridesIt) {
   EXPECT_EQ(set.skin_over_rmin, 0.3);
   EXPECT_TRUE(has(error_of("[integration]\nskin_over_rmin = \"thick\"\n"), "must be a number or \"auto\""));
   EXPECT_TRUE(has(error_of("[integration]\nskin_over_rmin = 0\n"), "skin_over_rmin must be in (0, 4]"));
+}
+
+// An ensemble folder of a version before "auto" stores the skin as a number: it continues when
+// "auto" gives the same skin (t_c/50), and is another scene when it does not (t_c/5).
+TEST(Scene, AnEnsembleFolderWithTheSkinAsANumberContinuesWhenTheSkinIsTheSame) {
+  namespace fs = std::filesystem;
+  for (const char* dt : {"0.02", "0.2"}) {
+    std::string resolved;
+    dem::load_scene(std::string("[integration]\ndt_over_tc = ") + dt + "\n", {}, &resolved);
+    ASSERT_NE(resolved.find("skin_over_rmin = 'auto'"), std::string::npos);
+    std::string stored = resolved;
+    stored.replace(stored.find("skin_over_rmin = 'auto'"), 23, "skin_over_rmin = 0.40000000000000002");
+    const fs::path dir = fs::temp_directory_path() / (std::string("dem_old_skin_") + dt);
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    std::ofstream(dir / "scene.toml") << stored;
+    if (std::string(dt) == "0.02") {
+      const int lock = dem::prepare_ensemble_folder(dir.string(), resolved, false);
+      EXPECT_GE(lock, 0);
+      ::close(lock);
+    } else {
+      try {
+        dem::prepare_ensemble_folder(dir.string(), resolved, false);
+        ADD_FAILURE() << "a folder run at another skin must be refused";
+      } catch (const std::runtime_error& e) {
+        EXPECT_TRUE(has(e.what(), "another scene")) << e.what();
+      }
+    }
+    fs::remove_all(dir);
+  }
 }

@@ -21,6 +21,7 @@
 
 #include "dem/core/errors.hpp"
 #include "dem/io/io.hpp"
+#include "dem/io/scene.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/stages/protocol.hpp"
 
@@ -183,6 +184,32 @@ int lock_ensemble_folder(const std::filesystem::path& dir) {
 
 }  // namespace
 
+namespace {
+
+// The text without its `skin_over_rmin = ...` line.
+std::string without_skin_line(const std::string& text) {
+  std::istringstream in(text);
+  std::string out, line;
+  while (std::getline(in, line))
+    if (line.rfind("skin_over_rmin", 0) != 0) out += line + "\n";
+  return out;
+}
+
+// Whether a folder's stored scene and this resolved scene are the same scene: the same text, or
+// texts that differ only in how the skin is given (a number in folders of versions before
+// "auto", or "auto") when both give the same skin (the same list and bits).
+bool same_scene(const std::string& stored, const std::string& resolved) {
+  if (stored == resolved) return true;
+  if (without_skin_line(stored) != without_skin_line(resolved)) return false;
+  try {
+    return load_scene(stored).skin_over_rmin == load_scene(resolved).skin_over_rmin;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+}  // namespace
+
 int prepare_ensemble_folder(const std::string& dir_name, const std::string& resolved, bool force) {
   namespace fs = std::filesystem;
   const fs::path dir(dir_name), scene = dir / "scene.toml";
@@ -192,7 +219,7 @@ int prepare_ensemble_folder(const std::string& dir_name, const std::string& reso
     std::ifstream in(scene);
     std::stringstream old;
     old << in.rdbuf();
-    if (old.str() == resolved && !force) return lock;   // the same ensemble: continue where it stopped
+    if (same_scene(old.str(), resolved) && !force) return lock;   // the same ensemble: continue where it stopped
     if (!force)
       throw std::runtime_error(dir_name + " holds the results of another scene (its scene.toml differs in:" +
                                differing_lines(old.str(), resolved) +
@@ -225,7 +252,7 @@ std::string sweep_difference(const std::filesystem::path& dir, const std::string
                                                   differing_lines(file_text(dir / "sweep.json"), json);
   for (const auto& [name, scene] : rows) {
     const auto f = dir / "rows" / name / "scene.toml";
-    if (std::filesystem::exists(f) && file_text(f) != scene)
+    if (std::filesystem::exists(f) && !same_scene(file_text(f), scene))
       d += "\n    rows/" + name + "/scene.toml:" + differing_lines(file_text(f), scene);
   }
   return d;
