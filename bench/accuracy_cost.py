@@ -236,11 +236,11 @@ def report(results, eps):
             ax.loglog([yade["cpu_s"]], [yade["error"][q]], "ks", ms=9, label="YADE (dt = t_c/50, rate 1e-4)")
     if nser:
         for ax, q in zip(axes, ("s_dev", "F_dev", "p_rel")):
-            ax.loglog([r["wall_s"] for r in nser], [r["spread"][q] for r in nser], "D-", color="tab:purple",
+            ax.loglog([r["wall_s"] for r in nser], [r["spread"][q] for r in nser], "D-", color="tab:brown",
                       label="N = 1000 … 10⁵: spread over seeds")
             for r in nser:
                 ax.annotate(f"{r['N']:g}", (r["wall_s"], r["spread"][q]), fontsize=7, xytext=(3, 3),
-                            textcoords="offset points", color="tab:purple")
+                            textcoords="offset points", color="tab:brown")
     d = [r for r in results["dt (velocity Verlet)"] if r["config"]["dt"] == 0.02][0]
     for ax, q in zip(axes, ("s_dev", "F_dev", "p_rel")):
         ax.loglog([d["wall_s"]], [max(d["error"][q], 1e-7)], "r*", ms=14,
