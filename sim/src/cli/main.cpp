@@ -374,9 +374,10 @@ struct BenchCommand {
     std::printf("packing %s\nN = %d, phi = %.4f, C = %.3f, threads = %d, steps = %ld, pair kernel %s\n",
                 packing.c_str(), state.count(), m.nu, m.C, engine.threads(), steps,
                 dem::pair_kernel_name(engine.pair_kernel()));
-    std::printf("wall %.3f s, %.3f M particle-steps/s, %.2f listed pairs per particle, %ld list rebuilds\n",
+    std::printf("wall %.3f s, %.3f M particle-steps/s, %.2f listed pairs per particle, %ld list rebuilds, "
+                "skin %.3g r_min (%s)\n",
                 wall, ps / 1e6, static_cast<double>(engine.neighbor_list().pair_count()) / state.count(),
-                engine.neighbor_list().builds - builds0);
+                engine.neighbor_list().builds - builds0, model.skin_over_rmin, model.skin_auto ? "auto" : "set");
     // The state after warm-up + timed steps, for physics parity with the other codes' decks
     // (bench/run_benchmarks.py --parity): contact + kinetic stress, energies, sliding.
     std::printf("after %ld steps: p_Pa=%.8g sxx_Pa=%.8g syy_Pa=%.8g szz_Pa=%.8g E_kin_J=%.8g E_rot_J=%.8g "
