@@ -24,7 +24,6 @@ import resource
 import subprocess
 import sys
 import tempfile
-import time
 
 import numpy as np
 
@@ -34,6 +33,7 @@ sys.path.insert(0, ROOT)
 from demkit.curves import read_curve  # noqa: E402
 sys.path.insert(0, HERE)
 from report import write_markdown  # noqa: E402
+from skin_scan import auto_skin  # noqa: E402
 
 DEM = os.path.join(ROOT, "build", "dem")
 PACKING = os.path.join(ROOT, "data", "yade", "packing_phi0.740.txt")
@@ -139,11 +139,6 @@ def yade_point(eps):
 # the dt series at 0.4 r_min: the list is exact, so only the summation order should differ.
 AUTO_SKIN_SERIES = "dt (auto skin)"
 AUTO_SKIN_CONFIGS = [dict(DEFAULT, dt=d, skin="auto") for d in (0.05, 0.1, 0.2, 0.3, 0.4)]
-
-
-def auto_skin(dt_over_tc):
-    """The skin/r_min of "auto" (for the table; the rule is dem::auto_skin_over_rmin in sim/src/core/model.cpp)."""
-    return 0.4 * max(1.0, dt_over_tc / 0.02) ** 0.4
 
 
 def run_series(cfgs, eps, tmp, ref):

@@ -288,7 +288,7 @@ void search_rows(const SearchContext& c, int begin, int end, Rows& out) {
   out.partner.clear();
   out.image.clear();
   out.count.assign(end - begin, 0);
-  std::vector<std::pair<std::int32_t, std::uint8_t>> found;
+  Found found;
   for (int i = begin; i < end; ++i) {
     search_row(i, c, found);
     for (auto& f : found) { out.partner.push_back(f.first); out.image.push_back(f.second); }
