@@ -21,7 +21,7 @@ from ._core import (BlowUp, Box, Engine, FitResult, Measurement, Scene, SceneErr
                     run_stage, saturating)
 
 __all__ = ["BlowUp", "Box", "Checkpoint", "Engine", "FitResult", "Measurement", "Scene", "SceneError", "State",
-           "curve_columns", "fit_curve", "fit_saturating", "load_scene", "random_packing", "read_checkpoint",
+           "contact_models", "curve_columns", "fit_curve", "fit_saturating", "load_scene", "random_packing", "read_checkpoint",
            "read_curve", "read_packing", "run_mode", "run_prep_stage", "run_protocol", "run_stage", "saturating",
            "scene_toml", "version"]
 
@@ -29,6 +29,14 @@ version = _core.version
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 Checkpoint = namedtuple("Checkpoint", "state scene_toml label")
+
+
+def contact_models():
+    """Every contact sub-model of the registry (the same as `dem info --contact-models --json`): a list of
+    dicts with slot, name, title, selected_by, reference, keys (key, unit, default, bounds, meaning),
+    history, rotations, curve_columns, vtk_fields and the YADE and LAMMPS counterparts."""
+    import json
+    return json.loads(_core._contact_models_json())
 Checkpoint.__doc__ = "A checkpoint read back: the State (bit-exact), the resolved scene text it was made with, its label."
 
 

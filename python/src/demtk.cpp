@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "dem/contact/contact_forces.hpp"
+#include "dem/contact/registry.hpp"
 #include "dem/core/errors.hpp"
 #include "dem/core/model.hpp"
 #include "dem/core/state.hpp"
@@ -488,6 +489,8 @@ PYBIND11_MODULE(_core, m) {
     }
   });
   m.attr("version") = DEM_VERSION;
+  m.def("_contact_models_json", [] { return dem::contact::registry_json().dump(); },
+        "the contact sub-model registry as JSON text (demtk.contact_models() parses it)");
 
   // ---- Scene
   py::class_<Scene>(m, "Scene", "A validated scene (the C++ Model): immutable. Build it with demtk.load_scene().")
@@ -498,8 +501,25 @@ PYBIND11_MODULE(_core, m) {
       .def_property_readonly("radius_min", [](const Scene& s) { return s.model->radius_min; }, "[m]")
       .def_property_readonly("radius_max", [](const Scene& s) { return s.model->radius_max; }, "[m]")
       .def_property_readonly("density", [](const Scene& s) { return s.model->density; }, "[kg/m^3]")
-      .def_property_readonly("stiffness", [](const Scene& s) { return s.model->contact.stiffness; }, "k [N/m]")
-      .def_property_readonly("damping", [](const Scene& s) { return s.model->contact.damping; }, "gamma [kg/s]")
+      .def_property_readonly("stiffness", [](const Scene& s) { return s.model->contact.reference_stiffness(); },
+                             "k [N/m]: the normal sub-model's reference stiffness (k of the linear law, k1 of Luding's)")
+      .def_property_readonly("damping", [](const Scene& s) { return s.model->contact.time_step_damping(); },
+                             "gamma [kg/s]: the normal dashpot")
+      .def_property_readonly("contact",
+                             [](const Scene& s) {
+                               const dem::ContactLaw& law = s.model->contact;
+                               py::dict models, values;
+                               for (dem::ContactSlot slot : {dem::ContactSlot::Normal, dem::ContactSlot::Tangential,
+                                                             dem::ContactSlot::Rolling, dem::ContactSlot::Twisting})
+                                 models[py::str(dem::contact::slot_name(slot))] = law.model(slot);
+                               for (const auto& [k, v] : law.values()) values[py::str("contact." + k)] = v;
+                               py::dict d;
+                               d["models"] = models;
+                               d["values"] = values;
+                               return d;
+                             },
+                             "the contact model: {'models': slot -> sub-model name, 'values': 'contact.KEY' -> value} "
+                             "(demtk.contact_models() describes every sub-model and key)")
       .def_property_readonly("background_damping", [](const Scene& s) { return s.model->background_damping; },
                              "gamma_b [kg/s]")
       .def_property_readonly("t_c", [](const Scene& s) { return s.model->t_contact; },

@@ -152,7 +152,7 @@ TEST(Servo, AffineStiffnessOfAHandBuiltContactMatchesTheClosedForm) {
   const dem::Model m = dem_test::model_with({"contact.damping_kg_s=0"});
   dem::Engine e(m, s);
   const dem::AxisResponse a = dem::axis_response(m, s, e.neighbor_list(), Vec3{0, 0, 0});
-  const double V = 1e-6, k = m.contact.stiffness;
+  const double V = 1e-6, k = m.contact.get("stiffness_N_m");
   EXPECT_NEAR(a.M[0][0], k * l * l / V, 1e-9 * k * l * l / V);
   EXPECT_NEAR(a.M[1][1], 0, 1e-12 * k * l * l / V);
   EXPECT_NEAR(a.M[0][2], 0, 1e-12 * k * l * l / V);
@@ -176,7 +176,7 @@ TEST(Servo, ShearStiffnessInATiltedCellPredictsTheAffineStressRate) {
   dem::State s = s0;
   dem::Engine e(m, s);
   const dem::AxisResponse a = dem::axis_response(m, s, e.neighbor_list(), VelGrad(Vec3{0, 0, 0}, Vec3{0, 1, 0}));
-  const double V = L.x * L.y * L.z, k = m.contact.stiffness, w = k * l * l / V;
+  const double V = L.x * L.y * L.z, k = m.contact.get("stiffness_N_m"), w = k * l * l / V;
   const double nn[3] = {n.x * n.y, n.x * n.z, n.y * n.z}, n2[3] = {n.x * n.x, n.y * n.y, n.z * n.z};
   for (int i = 0; i < 3; ++i)
     for (int b = 0; b < 3; ++b) {

@@ -143,7 +143,7 @@ FrictionBalance friction_balance(double dt_over_tc, double time, const VelGrad& 
                                        "contact.tangential=cundall_strack", "contact.friction=" + std::to_string(mu),
                                        "integration.threads=1",
                                        "integration.dt_over_tc=" + std::to_string(dt_over_tc)});
-  m.contact.objective_spring = objective;
+  m.contact.set("objective_spring", objective ? 1.0 : 0.0);
   dem::State s = dem_test::random_state(300, 0.36, 2.0, 11);
   const VelGrad rate = shape * (rate_tc / m.t_contact);   // fast: contacts rotate and slide
   dem::Engine e(m, s);
@@ -347,8 +347,8 @@ TEST(Friction, ThreadsGiveTheSameBits) {
 
 TEST(Friction, SceneKeysComposeAndBadValuesAreRefused) {
   const dem::Model m = dem_test::model_with({"contact.friction=0.5"});
-  EXPECT_EQ(m.contact.tangential, dem::TangentialModel::CundallStrack);
-  EXPECT_NEAR(m.contact.tangential_stiffness_ratio, 2.0 / 7.0, 1e-15);
+  EXPECT_EQ(m.contact.model(dem::ContactSlot::Tangential), "cundall_strack");
+  EXPECT_NEAR(m.contact.get("tangential_stiffness_ratio"), 2.0 / 7.0, 1e-15);
   EXPECT_FALSE(dem_test::model_with({}).contact.frictional());
   std::string resolved;   // a frictionless scene's resolved text (stored with every result) is unchanged
   dem::load_scene("[particles]\ncount = 100\n", {}, &resolved);
@@ -379,7 +379,7 @@ TEST(Friction, AffineStiffnessOfAStickingContactMatchesTheStressChange) {
   e0.step(Vec3{0, 0, 0});
   const dem::AxisResponse r1 = dem::axis_response(m, s, e.neighbor_list(), Vec3{0, 0, 0});
   const dem::AxisResponse rs = dem::axis_response(m, still, e0.neighbor_list(), Vec3{0, 0, 0});
-  const double V = s.box.volume(), k = m.contact.stiffness, kt = k * m.contact.tangential_stiffness_ratio;
+  const double V = s.box.volume(), k = m.contact.get("stiffness_N_m"), kt = k * m.contact.get("tangential_stiffness_ratio");
   const double n2[3] = {n.x * n.x, n.y * n.y, n.z * n.z};
   // sigma V changes by -M V strain; the volume change itself divides the stress by (1 + strain)
   const double sv[3] = {r1.stress.xx * V - rs.stress.xx * still.box.volume(), r1.stress.yy * V - rs.stress.yy * still.box.volume(),
@@ -417,7 +417,7 @@ Ring make_ring(double w0, double mu_r) {
   for (int k = 0; k < 4; ++k) g.s.angular_velocity[k] = Vec3{0, 0, (k % 2 ? -1.0 : 1.0) * w0};
   const double a = r - delta / 2;
   g.a_red = a * a / (2 * a);
-  g.fn = g.m.contact.stiffness * delta;
+  g.fn = g.m.contact.get("stiffness_N_m") * delta;
   g.I = 0.4 * g.s.mass[0] * r * r;
   return g;
 }
@@ -433,7 +433,7 @@ double spin_of_id0(const dem::State& s) {
 TEST(Rolling, ElasticRollingOscillatesAtTheSpringsFrequencyAndKeepsEnergy) {
   Ring g = make_ring(1e4, 1.0);
   dem::Engine e(g.m, g.s);
-  const double kr = g.m.contact.rolling_stiffness_ratio * g.m.contact.stiffness;
+  const double kr = g.m.contact.get("rolling_stiffness_ratio") * g.m.contact.get("stiffness_N_m");
   const double omega = std::sqrt(4 * kr * g.a_red * g.a_red / g.I);
   auto energy = [&] {
     const auto q = dem::measure(g.m, g.s, e.neighbor_list(), Vec3{0, 0, 0});
@@ -543,7 +543,7 @@ double twist_of_id0(const dem::State& s) {
 TEST(Twisting, ElasticTwistOscillatesAtTheSpringsFrequencyAndKeepsEnergy) {
   Ring g = make_twist_ring(1e4, 1.0, 0.0);
   dem::Engine e(g.m, g.s);
-  const double ko = g.m.contact.twisting_stiffness_ratio * g.m.contact.stiffness;
+  const double ko = g.m.contact.get("twisting_stiffness_ratio") * g.m.contact.get("stiffness_N_m");
   const double omega = std::sqrt(4 * ko * g.a_red * g.a_red / g.I);
   auto energy = [&] {
     const auto q = dem::measure(g.m, g.s, e.neighbor_list(), Vec3{0, 0, 0});
@@ -574,7 +574,7 @@ TEST(Twisting, ElasticTwistOscillatesAtTheSpringsFrequencyAndKeepsEnergy) {
 // w_0(t) = w0 exp(-eta t) (cos(w_d t) - eta/w_d sin(w_d t)), w_d^2 = Omega^2 - eta^2.
 TEST(Twisting, DampedTwistFollowsTheSpringDashpotClosedForm) {
   Ring probe = make_twist_ring(1e4, 1.0, 0.0);
-  const double ko = probe.m.contact.twisting_stiffness_ratio * probe.m.contact.stiffness;
+  const double ko = probe.m.contact.get("twisting_stiffness_ratio") * probe.m.contact.get("stiffness_N_m");
   const double omega = std::sqrt(4 * ko * probe.a_red * probe.a_red / probe.I);
   const double eta = 0.2 * omega, gamma_o = eta * probe.I / (2 * probe.a_red * probe.a_red);
   Ring g = make_twist_ring(1e4, 1.0, gamma_o);

@@ -84,7 +84,7 @@ TEST(Scene, OverridesReachEveryKeyAndTheResolvedSceneReloads) {
                                         "protocol.modes=[\"D3\"]", "protocol.checkpoints_unloading=[0.7]"},
                                        &resolved);
   EXPECT_EQ(m.count, 500);
-  EXPECT_EQ(m.contact.damping, 0.0);
+  EXPECT_EQ(m.contact.get("damping_kg_s"), 0.0);
   EXPECT_EQ(m.integrator, dem::Integrator::SymplecticEuler);
   ASSERT_EQ(m.protocol.modes.size(), 1u);
   EXPECT_EQ(m.protocol.modes[0].name, "D3");

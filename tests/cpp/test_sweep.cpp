@@ -46,8 +46,8 @@ TEST(Sweep, SceneValuesReachTheModelAsTheirTomlLiterals) {
   for (int i = 0; i < 2; ++i) {
     EXPECT_EQ(resolved[i].find("[sweep]"), std::string::npos);
     const dem::Model m = dem::load_scene(resolved[i]);
-    EXPECT_EQ(m.contact.friction, mu[i]);
-    EXPECT_EQ(m.contact.stiffness, k[i]);
+    EXPECT_EQ(m.contact.get("friction"), mu[i]);
+    EXPECT_EQ(m.contact.get("stiffness_N_m"), k[i]);
     EXPECT_EQ(m.protocol.modes.size(), std::size_t(i + 1));
     EXPECT_EQ(m.sweep_rows, 0);
   }

@@ -30,7 +30,7 @@ def test_frictional_curves_have_the_friction_columns_and_record(rough_and_smooth
     for name in FRICTION_COLUMNS:
         assert name in c, name
     text = (rough / "deviatoric" / "D2_phi0.720.csv").read_text()
-    assert "contact.friction=0.5" in text and "# friction: Cundall-Strack" in text
+    assert "contact.friction=0.5" in text and "# contact tangential: cundall_strack, Cundall-Strack" in text
     assert 0 <= c["sliding_fraction"].min() and c["sliding_fraction"].max() <= 1
     assert np.all(np.diff(c["W_friction_J"]) >= 0)          # dissipation only accumulates
     assert c["W_friction_J"][-1] > c["W_friction_J"][0]      # shear slides contacts

@@ -127,7 +127,8 @@ def test_dem_info_prints_ludings_tension_limit_and_twisting():
             "--set", "contact.twisting_friction=0.1"]
     out = run_dem("info", os.path.join(REPO, "data", "scenes", "quickstart.toml"), *keys, check=True).stdout
     contact_line = next(line for line in out.splitlines() if line.startswith("contact "))
-    assert "clamped at zero" not in contact_line and "-kc delta" in contact_line and "2e+07" in contact_line
-    assert "twisting           mu_o = 0.1" in out
+    normal_line = next(line for line in out.splitlines() if line.startswith("  normal "))
+    assert "clamped at zero" not in contact_line and "-kc delta" in normal_line and "2e+07" in normal_line
+    assert "  twisting         sds: mu_o = 0.1" in out
     plain = run_dem("info", os.path.join(REPO, "data", "scenes", "quickstart.toml"), check=True).stdout
     assert "clamped at zero" in next(line for line in plain.splitlines() if line.startswith("contact "))

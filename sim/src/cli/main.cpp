@@ -14,6 +14,7 @@
 #include <thread>
 #include <unistd.h>
 
+#include "dem/contact/registry.hpp"
 #include "dem/io/checks.hpp"
 #include "dem/stages/collision.hpp"
 #include "dem/engine/engine.hpp"
@@ -76,12 +77,12 @@ std::string g_text(double v) {
   return b;
 }
 
-// What bounds the tension of a contact: the no-tension clamp, nothing, or Luding's adhesive limit.
+// What bounds the tension of a contact: the no-tension clamp, nothing, or a normal law with history
+// (Luding's adhesive limit: its own line says).
 std::string tension_limit(const dem::ContactLaw& c) {
-  if (c.normal == dem::NormalModel::Luding)
-    return c.luding_kc > 0 ? "tension limited by Luding's adhesive branch -kc delta (kc = " + g_text(c.luding_kc) + " N/m)"
-                           : "no tension (Luding's law with kc = 0)";
-  return c.allow_attractive ? "attractive allowed" : "clamped at zero";
+  if (dem::contact::find_submodel(dem::ContactSlot::Normal, c.model(dem::ContactSlot::Normal))->history > 0)
+    return "tension as the normal law says (below)";
+  return c.allow_attractive() ? "attractive allowed" : "clamped at zero";
 }
 
 void print_info(const dem::Model& m) {
@@ -89,30 +90,14 @@ void print_info(const dem::Model& m) {
   const auto& p = m.protocol;
   std::printf("particles          N = %d, r in [%g, %g] m, rho = %g kg/m^3, memory ~%.3g MB (estimate)\n", m.count,
               m.radius_min, m.radius_max, m.density, dem::estimated_memory_bytes(m.count) / 1e6);
-  std::printf("contact            k = %g N/m, gamma = %g kg/s, gamma_b = %g kg/s, %s\n",
-              m.contact.stiffness, m.contact.damping, m.background_damping,
-              tension_limit(m.contact).c_str());
+  std::printf("contact            gamma_b = %g kg/s (background damping), normal force %s; sub-models "
+              "(dem info --contact-models lists every one with its keys):\n",
+              m.background_damping, tension_limit(m.contact).c_str());
+  const dem::contact::PairScale scale = dem::contact::pair_scale(m.contact, m.radius_min, m.density);
+  for (const std::string& line : dem::contact::describe_contact(m.contact, scale)) std::printf("%s\n", line.c_str());
   std::printf("smallest pair      t_c = %.6g s, e = %.6g\n", m.t_contact, m.restitution);
-  if (m.contact.normal == dem::NormalModel::Luding)
-    std::printf("normal law         Luding elasto-plastic adhesive: k1 = %g, kp = %g, kc = %g N/m, phi_f = %g "
-                "(t_c and dt from kp); restitution without adhesion sqrt(k1/k2): from 1 (small impacts) down to "
-                "sqrt(k1/kp) = %.4g at delta_max = delta*, then back towards 1 (elastic limit branch kp)\n",
-                m.contact.stiffness, m.contact.luding_kp, m.contact.luding_kc, m.contact.luding_plasticity_depth,
-                std::sqrt(m.contact.stiffness / m.contact.luding_kp));
-  if (m.contact.rolling())
-    std::printf("rolling            mu_r = %g, k_r/k = %g, gamma_r = %g kg/s (torque <= mu_r a' f_n)\n",
-                m.contact.rolling_friction, m.contact.rolling_stiffness_ratio, m.contact.rolling_damping);
-  if (m.contact.twisting())
-    std::printf("twisting           mu_o = %g, k_o/k = %g, gamma_o = %g kg/s (torque about n <= mu_o a' f_n)\n",
-                m.contact.twisting_friction, m.contact.twisting_stiffness_ratio, m.contact.twisting_damping);
-  if (m.contact.frictional()) {
-    // The contact point's tangential oscillation: stiffness k_t, effective mass 2/7 m_r.
-    const double mr = 0.5 * dem::sphere_mass(m.radius_min, m.density), kt = m.contact.tangential_stiffness_ratio * m.contact.stiffness;
-    std::printf("friction           Cundall-Strack, mu = %g, k_t = %g N/m (k_t/k = %g), gamma_t = %g kg/s; tangential "
-                "half-period pi sqrt(2 m_r/(7 k_t)) = %.6g s; rotations on (6 degrees of freedom)\n",
-                m.contact.friction, kt, m.contact.tangential_stiffness_ratio, m.contact.tangential_damping,
-                M_PI * std::sqrt(2.0 * mr / (7.0 * kt)));
-  }
+  for (const std::string& line : dem::contact::stability_lines(m.contact, scale, m.dt))
+    std::printf("stability          %s\n", line.c_str());
   std::printf("time step          dt = %.6g s (t_c / %.4g), %s\n", m.dt, 1.0 / m.dt_over_tc,
               m.integrator == dem::Integrator::VelocityVerlet ? "velocity Verlet" : "symplectic Euler");
   std::printf("neighbour list     skin = %.4g m = %.3g r_min (%s)\n", m.skin_over_rmin * m.radius_min, m.skin_over_rmin,
@@ -312,16 +297,26 @@ struct EnsembleCommand {
 struct InfoCommand {
   CLI::App* cmd = nullptr;
   std::string scene;
-  bool json = false, no_probe = false;
+  bool json = false, no_probe = false, contact_models = false;
   void add(CLI::App& app, std::vector<std::string>& overrides) {
-    cmd = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates)");
-    cmd->add_option("scene", scene, "scene TOML file")->required()->check(CLI::ExistingFile);
+    cmd = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates, each contact sub-model's "
+                                     "values and stability limits); --contact-models: every contact sub-model");
+    cmd->add_option("scene", scene, "scene TOML file (not needed with --contact-models)")->check(CLI::ExistingFile);
+    cmd->add_flag("--contact-models", contact_models, "list every contact sub-model of the registry: its scene keys "
+                                                      "(units, defaults, bounds, meaning), history, curve columns, "
+                                                      "YADE and LAMMPS counterparts (with --json: as JSON)");
     cmd->add_option("--set", overrides, "override a scene key");
     cmd->add_flag("--json", json, "print the run plan as JSON instead: members (seeds), checkpoints, modes, "
                                   "estimated particle-steps per task (read by workflow/Snakefile)");
     cmd->add_flag("--no-probe", no_probe, "no wall-time estimate (it times about a second of steps on a dense packing)");
   }
   int run(const std::vector<std::string>& overrides) const {
+    if (contact_models) {
+      if (json) std::printf("%s\n", dem::contact::registry_json().dump(1).c_str());
+      else std::printf("%s", dem::contact::registry_text().c_str());
+      return 0;
+    }
+    if (scene.empty()) throw ArgumentError("dem info needs a scene file (or --contact-models)");
     const dem::Model model = dem::load_scene_file(scene, overrides);
     if (json) std::printf("%s", dem::plan_json(model).c_str());
     else {
@@ -460,8 +455,8 @@ struct ModeCommand {
                    "defaults: r in [%g, %g] m, rho = %g kg/m^3, k = %g N/m, gamma = %g kg/s, gamma_b = %g kg/s, "
                    "dt = t_c/%.4g, %s, deviatoric rate %g/t_c (`dem info` on a scene shows its values; give the "
                    "scene that made the packing with --scene)\n",
-                   packing.c_str(), model.radius_min, model.radius_max, model.density, model.contact.stiffness,
-                   model.contact.damping, model.background_damping, 1.0 / model.dt_over_tc,
+                   packing.c_str(), model.radius_min, model.radius_max, model.density, model.contact.reference_stiffness(),
+                   model.contact.time_step_damping(), model.background_damping, 1.0 / model.dt_over_tc,
                    model.integrator == dem::Integrator::VelocityVerlet ? "velocity Verlet" : "symplectic Euler",
                    model.protocol.deviatoric_rate * model.t_contact);
     check_output_file(out, force);
@@ -523,10 +518,11 @@ struct CollideCommand {
                           "(the spheres pass through each other, t_c and e are meaningless); lower --v0 so that the "
                           "overlap stays well below the radius (and the contact spans >= 20 steps)");
     const double m1 = dem::sphere_mass(r1, model.density), m2 = dem::sphere_mass(r2, model.density);
-    const dem::PairCollision a = dem::pair_collision(model.contact.stiffness, model.contact.damping, m1 * m2 / (m1 + m2));
+    const dem::PairCollision a = dem::pair_collision(model.contact.reference_stiffness(), model.contact.time_step_damping(),
+                                                      m1 * m2 / (m1 + m2));   // the linear law's closed form
     const nlohmann::ordered_json j{{"t_contact_s", r.contact_time}, {"restitution", r.restitution},
                                    {"t_contact_analytic_s", a.t_contact}, {"restitution_analytic", a.restitution},
-                                   {"dt_s", model.dt}, {"allow_attractive", model.contact.allow_attractive}};
+                                   {"dt_s", model.dt}, {"allow_attractive", model.contact.allow_attractive()}};
     std::printf("%s\n", j.dump().c_str());   // nlohmann-json: a non-finite number is written as null
     return 0;
   }
@@ -539,7 +535,7 @@ struct CollideCommand {
                                    {"tangential_restitution", r.tangential_restitution},
                                    {"omega0_y_rad_s", r.omega[0].y}, {"omega1_y_rad_s", r.omega[1].y},
                                    {"normal_impulse_Ns", r.normal_impulse}, {"tangential_impulse_Ns", r.tangential_impulse},
-                                   {"friction", model.contact.frictional() ? model.contact.friction : 0.0},
+                                   {"friction", model.contact.get_or("friction", 0.0)},
                                    {"dt_s", model.dt}};
     std::printf("%s\n", j.dump().c_str());
     return 0;

@@ -38,9 +38,22 @@ double auto_skin_over_rmin(double dt_over_tc) {
   return 0.4 * std::pow(dt_over_tc / 0.02, 0.4);
 }
 
+double ContactLaw::get(const std::string& key) const {
+  const auto it = values_.find(key);
+  if (it == values_.end())
+    throw std::logic_error("contact." + key + " is not a key of the chosen contact sub-models (normal '" +
+                           model(ContactSlot::Normal) + "', tangential '" + model(ContactSlot::Tangential) + "')");
+  return it->second;
+}
+
+double ContactLaw::get_or(const std::string& key, double fallback) const {
+  const auto it = values_.find(key);
+  return it == values_.end() ? fallback : it->second;
+}
+
 void Model::finalize() {
   const double m = sphere_mass(radius_min, density);
-  const PairCollision c = pair_collision(contact.time_step_stiffness(), contact.damping, 0.5 * m);
+  const PairCollision c = pair_collision(contact.time_step_stiffness(), contact.time_step_damping(), 0.5 * m);
   t_contact = c.t_contact;
   restitution = c.restitution;
   dt = dt_over_tc * t_contact;

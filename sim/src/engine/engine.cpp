@@ -388,9 +388,9 @@ void Engine::check_sanity() const {
     if (!std::isfinite(w.x + w.y + w.z)) {
       std::ostringstream m;
       m << "non-finite angular velocity of particle " << s.id[i] << " at step " << s.step
-        << ": the rotations diverged; the tangential spring may be too stiff for the time step (contact.tangential_"
-           "stiffness_ratio = " << model_.contact.tangential_stiffness_ratio << ": keep it near 2/7, or reduce "
-           "integration.dt_over_tc = " << model_.dt_over_tc << ")";
+        << ": the rotations diverged; a tangential, rolling or twisting spring may be too stiff for the time step "
+           "(`dem info` lists each sub-model's stability limit at this dt; keep the stiffness ratios near 2/7, or "
+           "reduce integration.dt_over_tc = " << model_.dt_over_tc << ")";
       throw BlowUp(m.str());
     }
   }

@@ -10,6 +10,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "dem/contact/registry.hpp"
 #include "dem/forces/neighbor_list.hpp"
 #include "dem/core/errors.hpp"
 
@@ -122,37 +123,17 @@ std::string physics_list(const std::vector<double>& v) {
 
 Physics material_physics(const Model& m) {
   Physics p = {{"particles.radius_min_m", num(m.radius_min)},
-          {"particles.radius_max_m", num(m.radius_max)},
-          {"particles.density_kg_m3", num(m.density)},
-          {"contact.stiffness_N_m", num(m.contact.stiffness)},
-          {"contact.damping_kg_s", num(m.contact.damping)},
-          {"contact.allow_attractive", m.contact.allow_attractive ? "true" : "false"},
-          {"contact.background_damping_kg_s", num(m.background_damping)},
-          {"integration.integrator", m.integrator == Integrator::VelocityVerlet ? "velocity_verlet" : "symplectic_euler"},
-          {"integration.dt_over_tc", num(m.dt_over_tc)},
-          {"integration.kinematics", m.sllod ? "sllod" : "plain"}};
-  if (m.contact.normal == NormalModel::Luding) {   // a linear record keeps its old keys (and hash)
-    p.push_back({"contact.normal", "luding"});
-    p.push_back({"contact.luding_kp_N_m", num(m.contact.luding_kp)});
-    p.push_back({"contact.luding_kc_N_m", num(m.contact.luding_kc)});
-    p.push_back({"contact.luding_plasticity_depth", num(m.contact.luding_plasticity_depth)});
-  }
-  if (m.contact.frictional()) {   // a frictionless record keeps its old keys (and hash)
-    p.push_back({"contact.tangential", "cundall_strack"});
-    p.push_back({"contact.friction", num(m.contact.friction)});
-    p.push_back({"contact.tangential_stiffness_ratio", num(m.contact.tangential_stiffness_ratio)});
-    p.push_back({"contact.tangential_damping_kg_s", num(m.contact.tangential_damping)});
-    if (m.contact.rolling()) {
-      p.push_back({"contact.rolling_friction", num(m.contact.rolling_friction)});
-      p.push_back({"contact.rolling_stiffness_ratio", num(m.contact.rolling_stiffness_ratio)});
-      p.push_back({"contact.rolling_damping_kg_s", num(m.contact.rolling_damping)});
-    }
-    if (m.contact.twisting()) {
-      p.push_back({"contact.twisting_friction", num(m.contact.twisting_friction)});
-      p.push_back({"contact.twisting_stiffness_ratio", num(m.contact.twisting_stiffness_ratio)});
-      p.push_back({"contact.twisting_damping_kg_s", num(m.contact.twisting_damping)});
-    }
-  }
+               {"particles.radius_max_m", num(m.radius_max)},
+               {"particles.density_kg_m3", num(m.density)}};
+  // The normal keys records before the registry listed here (their hashes stay the same).
+  for (const std::string& key : contact::record_base_keys())
+    if (m.contact.has(key)) p.push_back({"contact." + key, num(m.contact.get(key))});
+  p.insert(p.end(), {{"contact.allow_attractive", m.contact.allow_attractive() ? "true" : "false"},
+                     {"contact.background_damping_kg_s", num(m.background_damping)},
+                     {"integration.integrator", m.integrator == Integrator::VelocityVerlet ? "velocity_verlet" : "symplectic_euler"},
+                     {"integration.dt_over_tc", num(m.dt_over_tc)},
+                     {"integration.kinematics", m.sllod ? "sllod" : "plain"}});
+  for (auto& kv : contact::contact_record(m.contact, num)) p.push_back(kv);   // the sub-models beyond the defaults
   return p;
 }
 

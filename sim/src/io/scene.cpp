@@ -1,5 +1,7 @@
 #include "dem/io/scene.hpp"
 
+#include "dem/contact/contact_model.hpp"
+#include "dem/contact/registry.hpp"
 #include "dem/io/io.hpp"
 #include "dem/measure/control.hpp"
 #include "dem/stages/plan.hpp"
@@ -440,79 +442,23 @@ bool builtin_mode(const std::string& name, DeformationMode* mode) {
   return true;
 }
 
-// The tangential sub-model's keys. Absent from a frictionless scene's resolved text (so its
-// outputs keep their bytes); a frictional scene lists all of them. `friction` alone (> 0)
-// selects cundall_strack.
-// The normal sub-model: "linear" (default; no key in a linear scene's resolved text) or "luding".
-static void read_normal(KeyReader& r, ContactLaw& c, const std::string& origin) {
-  std::string name;
-  r.get_if_present("contact", "normal", name);
-  if (name.empty() || name == "linear") {
-    for (const char* key : {"luding_kp_N_m", "luding_kc_N_m", "luding_plasticity_depth"}) {
-      double unused = 0;
-      r.get_if_present("contact", key, unused);
-      if (unused != 0)
-        throw SceneError(origin + ": contact." + key + " belongs to Luding's law: set contact.normal = \"luding\"");
-    }
-    return;
-  }
-  if (name != "luding")
-    throw SceneError(origin + ": contact.normal = '" + name + "' is unknown; use \"linear\" (spring-dashpot) or "
-                     "\"luding\" (elasto-plastic adhesive, docs/contact_models.md)");
-  c.normal = NormalModel::Luding;
-  c.luding_kp = 5 * c.stiffness;
-  c.luding_kc = 0;
-  c.luding_plasticity_depth = 0.05;
-  r.get("contact", "luding_kp_N_m", c.luding_kp);
-  r.get("contact", "luding_kc_N_m", c.luding_kc);
-  r.get("contact", "luding_plasticity_depth", c.luding_plasticity_depth);
-}
-
-static void read_tangential(KeyReader& r, ContactLaw& c, const std::string& origin) {
-  std::string name;
-  r.get_if_present("contact", "friction", c.friction);
-  r.get_if_present("contact", "tangential", name);
-  const bool explicit_none = name == "none";
-  if (name.empty()) name = c.friction != 0 ? "cundall_strack" : "none";
-  if (name == "none") {
-    if (c.friction != 0)
-      throw SceneError(origin + ": contact.friction = " + std::to_string(c.friction) + " needs a tangential model: "
-                       "set contact.tangential = \"cundall_strack\" (or remove contact.friction)");
-    for (const char* key : {"tangential_stiffness_ratio", "tangential_damping_kg_s", "rolling_friction",
-                            "rolling_stiffness_ratio", "rolling_damping_kg_s", "twisting_friction",
-                            "twisting_stiffness_ratio", "twisting_damping_kg_s"}) {
-      double unused = 0;
-      r.get_if_present("contact", key, unused);
-      if (unused != 0 && !explicit_none)   // "none" said outright switches friction off, keys and all
-        throw SceneError(origin + ": contact." + key + " is a key of the tangential model, but contact.tangential "
-                         "is \"none\": set contact.tangential = \"cundall_strack\" and contact.friction");
-    }
-    return;
-  }
-  if (name != "cundall_strack")
-    throw SceneError(origin + ": contact.tangential = '" + name + "' is unknown; use \"none\" (frictionless) or "
-                     "\"cundall_strack\" (linear tangential spring with a Coulomb limit, docs/contact_models.md)");
-  c.tangential = TangentialModel::CundallStrack;
-  r.get("contact", "tangential", name);   // listed in the resolved scene
-  r.get("contact", "friction", c.friction);
-  r.get("contact", "tangential_stiffness_ratio", c.tangential_stiffness_ratio);
-  r.get("contact", "tangential_damping_kg_s", c.tangential_damping);
-  r.get_if_present("contact", "rolling_friction", c.rolling_friction);
-  if (c.rolling_friction != 0) {
-    r.get("contact", "rolling_stiffness_ratio", c.rolling_stiffness_ratio);
-    r.get("contact", "rolling_damping_kg_s", c.rolling_damping);
-  } else {
-    r.get_if_present("contact", "rolling_stiffness_ratio", c.rolling_stiffness_ratio);
-    r.get_if_present("contact", "rolling_damping_kg_s", c.rolling_damping);
-  }
-  r.get_if_present("contact", "twisting_friction", c.twisting_friction);
-  if (c.twisting_friction != 0) {
-    r.get("contact", "twisting_stiffness_ratio", c.twisting_stiffness_ratio);
-    r.get("contact", "twisting_damping_kg_s", c.twisting_damping);
-  } else {
-    r.get_if_present("contact", "twisting_stiffness_ratio", c.twisting_stiffness_ratio);
-    r.get_if_present("contact", "twisting_damping_kg_s", c.twisting_damping);
-  }
+// [contact]: the sub-models and their keys, as the registry's descriptions say (contact/registry.hpp).
+static void read_contact_section(KeyReader& r, ContactLaw& c, const std::string& origin, toml::table& root) {
+  auto node = [&root](const std::string& key) -> toml::node* {
+    toml::node* sec = root.get("contact");
+    return sec && sec->as_table() ? sec->as_table()->get(key) : nullptr;
+  };
+  contact::ContactKeys keys;
+  keys.present = [&](const std::string& key) { return node(key) != nullptr; };
+  keys.get_number = [&](const std::string& key, double& v) { r.get("contact", key, v); };
+  keys.peek_number = [&](const std::string& key, double& v) { r.get_if_present("contact", key, v); };
+  keys.get_string = [&](const std::string& key, std::string& v) { r.get("contact", key, v); };
+  keys.peek_string = [&](const std::string& key, std::string& v) { r.get_if_present("contact", key, v); };
+  for (const contact::SubModelInfo* m : contact::submodels())
+    for (const contact::KeySpec& k : m->keys) r.known("contact", k.name);
+  r.known("contact", "normal");
+  r.known("contact", "tangential");
+  contact::read_contact(keys, c, origin);
 }
 
 // The auto skin of a scene with few particles: at most what lets the box at the preparation's
@@ -555,12 +501,11 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   r.get("particles", "density_kg_m3", m.density);
   r.get("particles", "seed", m.seed);
   r.get("particles", "packing_file", m.packing_file);
-  r.get("contact", "stiffness_N_m", m.contact.stiffness);
-  r.get("contact", "damping_kg_s", m.contact.damping);
-  r.get("contact", "allow_attractive", m.contact.allow_attractive);
+  bool attractive = false;
+  r.get("contact", "allow_attractive", attractive);
+  m.contact.set_allow_attractive(attractive);
   r.get("contact", "background_damping_kg_s", m.background_damping);
-  read_normal(r, m.contact, origin);
-  read_tangential(r, m.contact, origin);
+  read_contact_section(r, m.contact, origin, root);
   std::string integrator = "velocity_verlet";
   r.get("integration", "integrator", integrator);
   if (integrator == "velocity_verlet") m.integrator = Integrator::VelocityVerlet;
@@ -684,6 +629,11 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   } catch (const std::invalid_argument& e) {
     throw SceneError(origin + ": " + e.what());
   }
+  // Every sub-model's oscillators must be integrable at this dt (contact/registry.hpp).
+  const std::string unstable =
+      contact::stability_problem(m.contact, contact::pair_scale(m.contact, m.radius_min, m.density), m.dt);
+  if (!unstable.empty()) throw SceneError(origin + ": " + unstable);
+  contact::compose(m.contact);
   auto positive = [&](double v, const char* key) {
     if (!(v > 0) || !std::isfinite(v))
       throw SceneError(origin + ": protocol." + key + " must be a positive number");
@@ -779,53 +729,15 @@ std::string g(double v) {
   return b;
 }
 
-void validate_normal(const ContactLaw& c) {
-  if (c.normal != NormalModel::Luding) return;
-  if (!(c.luding_kp > c.stiffness) || !std::isfinite(c.luding_kp))
-    fail("contact.luding_kp_N_m must exceed contact.stiffness_N_m (k1, the loading stiffness) and be finite, "
-         "e.g. 5 k1");
-  if (!(c.luding_kc >= 0) || !std::isfinite(c.luding_kc))
-    fail("contact.luding_kc_N_m must be zero (no adhesion) or positive and finite");
-  if (!(c.luding_plasticity_depth > 0 && c.luding_plasticity_depth <= 1))
-    fail("contact.luding_plasticity_depth (phi_f) must be in (0, 1], e.g. 0.05");
-}
-
-void validate_tangential(const ContactLaw& c) {
-  validate_normal(c);
-  if (!c.frictional()) return;
-  if (!(c.friction >= 0) || !std::isfinite(c.friction))
-    fail("contact.friction must be zero or positive and finite (the Coulomb coefficient mu, e.g. 0.5)");
-  if (!finite_positive(c.tangential_stiffness_ratio) || c.tangential_stiffness_ratio > 10)
-    fail("contact.tangential_stiffness_ratio (k_t/k) must be in (0, 10]; 2/7 = 0.2857 gives the tangential "
-         "oscillation the normal one's period");
-  if (!(c.tangential_damping >= 0) || !std::isfinite(c.tangential_damping))
-    fail("contact.tangential_damping_kg_s must be zero or positive and finite");
-  if (!(c.rolling_friction >= 0) || !std::isfinite(c.rolling_friction))
-    fail("contact.rolling_friction must be zero (off) or positive and finite (mu_r: rolling torque <= mu_r a' f_n)");
-  if (!finite_positive(c.rolling_stiffness_ratio) || c.rolling_stiffness_ratio > 10)
-    fail("contact.rolling_stiffness_ratio (k_r/k) must be in (0, 10]");
-  if (!(c.rolling_damping >= 0) || !std::isfinite(c.rolling_damping))
-    fail("contact.rolling_damping_kg_s must be zero or positive and finite");
-  if (!(c.twisting_friction >= 0) || !std::isfinite(c.twisting_friction))
-    fail("contact.twisting_friction must be zero (off) or positive and finite (mu_o: twisting torque <= mu_o a' f_n)");
-  if (!finite_positive(c.twisting_stiffness_ratio) || c.twisting_stiffness_ratio > 10)
-    fail("contact.twisting_stiffness_ratio (k_o/k) must be in (0, 10]");
-  if (!(c.twisting_damping >= 0) || !std::isfinite(c.twisting_damping))
-    fail("contact.twisting_damping_kg_s must be zero or positive and finite");
-}
-
 void validate_particles_and_contact(const Model& m) {
   if (m.count < 2) fail("particles.count must be at least 2");
   if (!finite_positive(m.radius_min)) fail("particles.radius_min_m must be positive and finite");
   if (!(m.radius_max >= m.radius_min) || !std::isfinite(m.radius_max))
     fail("particles.radius_max_m must be at least particles.radius_min_m, and finite");
   if (!finite_positive(m.density)) fail("particles.density_kg_m3 must be positive and finite");
-  if (!finite_positive(m.contact.stiffness)) fail("contact.stiffness_N_m must be positive and finite");
-  if (!(m.contact.damping >= 0) || !std::isfinite(m.contact.damping))
-    fail("contact.damping_kg_s must be zero or positive and finite");
   if (!(m.background_damping >= 0) || !std::isfinite(m.background_damping))
     fail("contact.background_damping_kg_s must be zero or positive and finite");
-  validate_tangential(m.contact);
+  contact::validate_contact(m.contact);
 }
 
 void validate_integration(const Model& m) {

@@ -100,18 +100,18 @@ std::vector<Vec3> wrapped_positions(const State& s) {
 
 VtkContacts contact_network(const Model& model, const State& s, const NeighborList& list) {
   const std::vector<Vec3> x = wrapped_positions(s);
-  const bool linear = model.contact.normal == NormalModel::Linear, frictional = model.contact.frictional();
+  const bool frictional = model.contact.frictional();
   VtkContacts c;
   std::vector<double> force, overlap, sliding;
   std::vector<Vec3> normal, tangential;
   // The model's forces at the state's velocities and stored springs (contact_forces.hpp); the
-  // linear law's normal force is its spring part k delta (the dashpot's is velocity noise here).
+  // normal force is the normal sub-model's elastic part (the dashpot's is velocity noise here).
   contact::for_each_contact_force(model, s, list, VelGrad{}, [&](const contact::ContactForce& f) {
     c.i.push_back(f.i);
     c.j.push_back(f.j);
     c.from.push_back(x[f.i]);
     c.to.push_back(x[f.i] + f.d);
-    force.push_back(linear ? model.contact.stiffness * f.delta : f.fn);
+    force.push_back(f.fn_elastic);
     overlap.push_back(f.delta);
     normal.push_back(f.n);
     if (frictional) {

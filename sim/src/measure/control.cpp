@@ -13,12 +13,10 @@ namespace dem {
 
 AxisResponse axis_response(const Model& model, const State& s, const NeighborList& list, const VelGrad& rate) {
   AxisResponse r;
-  const double k = model.contact.stiffness;   // the normal sub-model's tangent stiffness
   Sym3 contact;
   double M[3][3] = {}, S[3][3] = {};
   const bool sheared = rate.sheared() || s.box.sheared();
   const bool frictional = model.contact.frictional();
-  const double kt = model.contact.tangential_stiffness_ratio * k;   // the tangential sub-model's
   contact::for_each_contact_force(model, s, list, rate, [&](const contact::ContactForce& c) {
     const Vec3& n = c.n;
     const Vec3& d = c.d;
@@ -26,11 +24,11 @@ AxisResponse axis_response(const Model& model, const State& s, const NeighborLis
     contact.add_outer(d, n, c.fn);
     if (frictional) contact.add_outer(d, c.ft, 1.0);   // symmetric part of d (x) f_t
     const double n2[3] = {n.x * n.x, n.y * n.y, n.z * n.z};
-    const double w = k * dist * dist;
+    const double w = c.kn * dist * dist;   // the normal sub-model's tangent stiffness
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b) M[a][b] += w * n2[a] * n2[b];
-    if (frictional && !c.sliding) {   // a sticking spring resists the tangential part of l (eps . n)
-      const double wt = kt * dist * dist;
+    if (c.kt > 0) {   // a sticking spring resists the tangential part of l (eps . n)
+      const double wt = c.kt * dist * dist;
       for (int a = 0; a < 3; ++a)
         for (int b = 0; b < 3; ++b) M[a][b] += wt * ((a == b ? n2[a] : 0.0) - n2[a] * n2[b]);
     }

@@ -161,7 +161,7 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
   m.p = m.stress.trace() / 3.0;
   double rsum = 0;
   for (double r : s.radius) rsum += r;
-  m.p_star = 2.0 * (rsum / n) * m.p / model.contact.stiffness;
+  m.p_star = 2.0 * (rsum / n) * m.p / model.contact.reference_stiffness();
   m.sigma_dev = deviatoric_magnitude(m.stress.xx, m.stress.yy, m.stress.zz);
   m.s_dev = m.p > 0 ? m.sigma_dev / m.p : 0.0;
   m.F_dev = deviatoric_magnitude(m.fabric.xx, m.fabric.yy, m.fabric.zz);

@@ -4,6 +4,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "dem/contact/registry.hpp"
 #include "dem/io/io.hpp"
 #include "dem/measure/measure.hpp"
 
@@ -21,18 +22,15 @@ std::string curve_preamble(const Model& m, const std::string& stage, const Physi
     << "# stress: compression positive, contact + kinetic (fluctuation) parts; p=tr/3; p_star=2<r>p/k; s_dev=sigma_dev/p\n"
     << "# fabric: F=(1/V) sum_p V_p sum_c n(x)n; C=2*contacts/N; rattlers: <4 contacts, removed recursively\n"
     << "# overlap_*_rel: overlap / smaller radius of the pair; inertial_number=max|rate| 2<r> sqrt(rho/p)\n"
-    << "# t_c=" << m.t_contact << " s, dt=" << m.dt << " s, k=" << m.contact.stiffness
-    << " N/m, gamma=" << m.contact.damping << " kg/s, gamma_b=" << m.background_damping << " kg/s\n"
+    << "# t_c=" << m.t_contact << " s, dt=" << m.dt << " s, k=" << m.contact.reference_stiffness()
+    << " N/m, gamma=" << m.contact.time_step_damping() << " kg/s, gamma_b=" << m.background_damping << " kg/s\n"
     << "# physics: " << physics_line(physics) << "\n"
     << "# neighbour list: skin=" << m.skin_over_rmin * m.radius_min << " m = " << m.skin_over_rmin << " r_min ("
     << (m.skin_auto ? "auto, from dt/t_c" : "set in the scene")
     << "); the list is exact, so the skin changes the cost and the order of the force sums, not the physics\n";
+  o << contact::contact_preamble(m.contact, contact::pair_scale(m.contact, m.radius_min, m.density));
   if (m.contact.frictional())
-    o << "# friction: Cundall-Strack, mu=" << m.contact.friction << ", k_t=" << m.contact.tangential_stiffness_ratio * m.contact.stiffness
-      << " N/m, gamma_t=" << m.contact.tangential_damping << " kg/s"
-      << (m.contact.rolling() ? "; rolling resistance mu_r=" + std::to_string(m.contact.rolling_friction) : std::string())
-      << (m.contact.twisting() ? "; twisting resistance mu_o=" + std::to_string(m.contact.twisting_friction) : std::string())
-      << "; stress includes d(x)f_t (symmetric part); "
+    o << "# rotations: stress includes d(x)f_t (symmetric part); "
          "sliding_fraction: contacts at the Coulomb limit; E_rot_J=sum I w^2/2; omega_mean_rad_s=mean |w|; "
          "E_t_J: tangential (and rolling, twisting) springs (part of E_pot_J); W_friction_J: energy lost to sliding (and rolling, twisting) since the state began; "
          "sigma_antisym_rel=|antisymmetric contact stress|/p (torque balance: small when quasi-static)\n";

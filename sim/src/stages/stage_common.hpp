@@ -10,7 +10,7 @@ namespace dem {
 /// Energy of a 0.1%-of-r_min overlap per particle: the floor of energy ratios [J].
 inline double energy_floor(const Model& m, const State& s) {
   const double d = 1e-3 * m.radius_min;
-  return s.count() * 0.5 * m.contact.stiffness * d * d;
+  return s.count() * 0.5 * m.contact.reference_stiffness() * d * d;
 }
 
 /// Above this inertial number the deviatoric response depends visibly on the strain rate.

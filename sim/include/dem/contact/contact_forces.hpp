@@ -23,6 +23,9 @@ struct ContactForce {
   bool sliding;    ///< at the Coulomb limit at the last step (friction)
   double energy;   ///< elastic energy of the contact [J] (normal spring + tangential and rolling springs)
   double spring_energy;   ///< the tangential and rolling springs' part of it [J]
+  double fn_elastic;      ///< the normal sub-model's elastic force alone (no dashpot) [N]
+  double kn;              ///< the normal sub-model's tangent stiffness at this contact [N/m] (the servo's)
+  double kt;              ///< the tangential spring's stiffness while sticking [N/m] (0: none, or sliding)
 };
 
 /// Calls visit(const ContactForce&) for every listed pair in contact, in list order. The
@@ -36,7 +39,7 @@ void for_each_contact_force(const Model& model, const State& s, const NeighborLi
     using CM = std::decay_t<decltype(cm)>;
     const bool with_history = CM::history > 0 && s.history.values.size() == list.partner.size() * CM::history;
     for_each_listed_contact(s, list, [&](long p, int i, int j, const Vec3& d, double r, double delta) {
-      ContactForce c{p, i, j, d, r, delta, d * (1.0 / r), 0.0, Vec3{0, 0, 0}, false, 0.0, 0.0};
+      ContactForce c{p, i, j, d, r, delta, d * (1.0 / r), 0.0, Vec3{0, 0, 0}, false, 0.0, 0.0, 0.0, 0.0, 0.0};
       const Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + rate.apply(d);
       const NormalGeometry<double> g{r, c.n.x, c.n.y, c.n.z, delta, -dot(v_rel, c.n), v_rel.x, v_rel.y, v_rel.z};
       if constexpr (CM::history > 0) {
@@ -44,6 +47,9 @@ void for_each_contact_force(const Model& model, const State& s, const NeighborLi
         const double a12 = s.radius[i] * s.radius[j] / (s.radius[i] + s.radius[j]);
         double* h = with_history ? const_cast<double*>(s.history.values.data()) + p * CM::history : kZero;
         c.fn = cm.normal_force(g, a12, h, false);   // read only (advance = false)
+        if constexpr (CM::normal_history > 0) c.fn_elastic = cm.normal.force(delta, a12, h);
+        else c.fn_elastic = cm.normal.template bind<double>().force(g);
+        c.kn = cm.normal.tangent_stiffness(delta, a12, h);
         if constexpr (CM::rotations) {
           const double ai = s.radius[i] - 0.5 * delta, aj = s.radius[j] - 0.5 * delta;
           const Vec3 wi = s.rotations() ? s.angular_velocity[i] : Vec3{0, 0, 0};
@@ -52,11 +58,14 @@ void for_each_contact_force(const Model& model, const State& s, const NeighborLi
           const double* ht = h + CM::tangential_offset;
           c.ft = cm.tangential.force(TangentialInput{c.n, v_contact, std::max(c.fn, 0.0)}, ht);
           c.sliding = ht[3] != 0.0;
+          if (!c.sliding) c.kt = cm.tangential.stiffness();
         }
         c.energy = cm.energy(delta, a12, h);
         c.spring_energy = c.energy - cm.normal_energy(delta, a12, h);
       } else {
         c.fn = cm.normal_force(g);
+        c.fn_elastic = cm.normal.template bind<double>().force(g);
+        c.kn = cm.normal.tangent_stiffness(delta, 0.0, nullptr);
         c.energy = cm.energy(delta, 0.0, nullptr);
       }
       visit(static_cast<const ContactForce&>(c));

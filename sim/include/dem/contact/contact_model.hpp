@@ -6,12 +6,15 @@
 // of freedom per particle. `with_contact_model` turns the scene's ContactLaw into the concrete
 // type once per pair loop (or measurement), so the loops are compiled for each model.
 //
-// Where a new sub-model goes (ARCHITECTURE.md): a struct in its own header beside these
-// (force templated on the lane type if it should run in the vector kernels; `history` and
-// `rotations` constants), a template slot or a type here, a case in with_contact_model, its
-// keys in io/scene.cpp and io/checks.cpp (physics record), and its tests.
+// Where a new sub-model goes (ARCHITECTURE.md): a struct in its own header beside these, with
+// its force (templated on the lane type if it should run in the vector kernels), `history`,
+// `name`, `from(law, k_ref)` and `info()` (its keys, text, oscillators, counterparts:
+// submodel.hpp); then one entry in its slot's list below and one in registry.cpp. The scene
+// loader, checks, physics record, `dem info`, curve preambles and VTK read the descriptions.
 #pragma once
+#include <array>
 #include <type_traits>
+#include <utility>
 
 #include "dem/contact/geometry.hpp"
 #include "dem/contact/normal_linear.hpp"
@@ -96,57 +99,85 @@ struct ContactModel {
 };
 
 template <class Normal, class Tangential, class Rolling = NoRolling>
-using Model3 = ContactModel<Normal, LinearDashpot, Tangential, Rolling>;
+using Model3 = ContactModel<Normal, typename Normal::Damping, Tangential, Rolling>;
 using Frictionless = Model3<LinearSpring, NoTangential>;
 using Frictional = Model3<LinearSpring, CundallStrack>;
 using FrictionalRolling = Model3<LinearSpring, CundallStrack, RollingSpring>;
 
-inline Frictionless frictionless(const ContactLaw& law) {
-  return {LinearSpring{law.stiffness}, LinearDashpot{law.damping}, NoTangential{}, law.allow_attractive};
-}
-inline Frictional frictional(const ContactLaw& law) {
-  return {LinearSpring{law.stiffness}, LinearDashpot{law.damping},
-          CundallStrack{law.tangential_stiffness_ratio * law.stiffness, law.tangential_damping, law.friction,
-                        law.objective_spring},
-          law.allow_attractive};
-}
-inline FrictionalRolling frictional_rolling(const ContactLaw& law) {
-  const Frictional base = frictional(law);
-  return {base.normal, base.damping, base.tangential, base.attractive,
-          RollingSpring{law.rolling_stiffness_ratio * law.stiffness, law.rolling_damping, law.rolling_friction}};
-}
-/// Rolling (mu_r may be 0: off) and twisting resistance.
-inline RollingTwisting rolling_twisting(const ContactLaw& law) {
-  return {frictional_rolling(law).rolling,
-          TwistingSpring{law.twisting_stiffness_ratio * law.stiffness, law.twisting_damping, law.twisting_friction}};
+/// The sub-models the composition is generated from, slot by slot (the registry, registry.hpp,
+/// lists their descriptions in the same order). A new sub-model is one entry here.
+template <class... T> struct TypeList { static constexpr int size = sizeof...(T); };
+using NormalModels = TypeList<LinearSpring, LudingNormal>;
+using TangentialModels = TypeList<NoTangential, CundallStrack>;
+using RollingSlotModels = TypeList<NoRolling, RollingSpring, RollingTwisting>;
+
+namespace detail {
+template <class L, int I> struct At;
+template <class H, class... T> struct At<TypeList<H, T...>, 0> { using type = H; };
+template <class H, class... T, int I> struct At<TypeList<H, T...>, I> { using type = typename At<TypeList<T...>, I - 1>::type; };
+
+/// Calls f(type tag of entry i of L) for a runtime index i.
+template <class L, int I = 0, class F>
+decltype(auto) visit_index(int i, F&& f) {
+  using T = typename At<L, I>::type;
+  if constexpr (I + 1 < L::size) {
+    if (i != I) return visit_index<L, I + 1>(i, std::forward<F>(f));
+  }
+  return f(static_cast<T*>(nullptr));
 }
 
-/// Calls f(model) with the concrete contact model of the scene's law: the normal sub-model
-/// (linear or Luding's), the tangential one (none or Cundall-Strack), rolling (off, on, or
-/// rolling with twisting).
+/// A composition that can run: rolling and twisting need the tangential model's rotations.
+template <class N, class T, class R>
+inline constexpr bool valid_composition = T::rotations || R::history == 0;
+
+template <class N, class T, class R>
+ContactModel<N, typename N::Damping, T, R> compose_model(const ContactLaw& law) {
+  const double k_ref = law.reference_stiffness();
+  return {N::from(law, k_ref), N::Damping::from(law, k_ref), T::from(law, k_ref),
+          N::history == 0 && law.allow_attractive(), R::from(law, k_ref)};
+}
+}  // namespace detail
+
+/// Which entry of each slot list the law chose: normal and tangential by name, the rolling slot
+/// by the first type that accepts the law. Throws std::logic_error for a name no list has.
+std::array<int, 3> composition_index(const ContactLaw& law);
+
+/// Calls f(model) with the concrete contact model of the scene's law, generated from the slot
+/// lists above (every valid product). The composed model is taken from the law's cache when the
+/// cache matches the law (contact::compose fills it; the loader calls it), else built here.
 template <class F>
 decltype(auto) with_contact_model(const ContactLaw& law, F&& f) {
-  if (law.normal == NormalModel::Luding) {
-    const LudingNormal n{law.stiffness, law.luding_kp, law.luding_kc, law.luding_plasticity_depth};
-    const Frictional base = frictional(law);
-    if (law.twisting())
-      return f(Model3<LudingNormal, CundallStrack, RollingTwisting>{n, base.damping, base.tangential, false,
-                                                                    rolling_twisting(law)});
-    if (law.rolling())
-      return f(Model3<LudingNormal, CundallStrack, RollingSpring>{n, base.damping, base.tangential, false,
-                                                                  frictional_rolling(law).rolling});
-    if (law.frictional()) return f(Model3<LudingNormal, CundallStrack>{n, base.damping, base.tangential, false});
-    return f(Model3<LudingNormal, NoTangential>{n, base.damping, NoTangential{}, false});
-  }
-  if (law.twisting()) {
-    const Frictional base = frictional(law);
-    return f(Model3<LinearSpring, CundallStrack, RollingTwisting>{base.normal, base.damping, base.tangential,
-                                                                  base.attractive, rolling_twisting(law)});
-  }
-  if (law.rolling()) return f(frictional_rolling(law));
-  if (law.frictional()) return f(frictional(law));
-  return f(frictionless(law));
+  const ContactLaw::Cache& cache = law.cache();
+  const bool cached = cache.model && cache.stamp == law.stamp();
+  const std::array<int, 3> idx = cached ? cache.index : composition_index(law);
+  return detail::visit_index<NormalModels>(idx[0], [&](auto* n) -> decltype(auto) {
+    return detail::visit_index<TangentialModels>(idx[1], [&](auto* t) -> decltype(auto) {
+      return detail::visit_index<RollingSlotModels>(idx[2], [&](auto* r) -> decltype(auto) {
+        using N = std::remove_pointer_t<decltype(n)>;
+        using T = std::remove_pointer_t<decltype(t)>;
+        using R = std::remove_pointer_t<decltype(r)>;
+        if constexpr (detail::valid_composition<N, T, R>) {
+          using CM = ContactModel<N, typename N::Damping, T, R>;
+          if (cached) return f(*static_cast<const CM*>(cache.model.get()));
+          const CM cm = detail::compose_model<N, T, R>(law);
+          return f(cm);
+        } else {
+          // composition_index never names it (rolling needs rotations): the frictionless model
+          return f(detail::compose_model<LinearSpring, NoTangential, NoRolling>(law));
+        }
+      });
+    });
+  });
 }
+
+/// The frictionless linear spring-dashpot of a law (the vector kernels' model).
+inline Frictionless frictionless(const ContactLaw& law) {
+  return detail::compose_model<LinearSpring, NoTangential, NoRolling>(law);
+}
+
+/// Builds the law's composed model once and keeps it in the law's cache (call after the last
+/// change of the law, before the pair loops run on several threads).
+void compose(const ContactLaw& law);
 
 /// Doubles of per-contact history of the scene's model (0: none), and which of them change
 /// sign when the pair's particles swap roles (bit k: entry k).

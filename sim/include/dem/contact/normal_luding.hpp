@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <cmath>
 
+#include "dem/contact/normal_linear.hpp"
+#include "dem/contact/submodel.hpp"
+
 namespace dem::contact {
 
 /// Hysteretic force f_hys [N] (repulsion positive) of overlap delta, pair radius
@@ -29,6 +32,12 @@ namespace dem::contact {
 struct LudingNormal {
   double k1, kp, kc, phi_f;
   static constexpr int history = 1;   ///< delta_max [m] (even under i <-> j)
+  static constexpr const char* name = "luding";
+  using Damping = LinearDashpot;
+  static LudingNormal from(const ContactLaw& law, double = 0) {
+    return {law.get("stiffness_N_m"), law.get("luding_kp_N_m"), law.get("luding_kc_N_m"),
+            law.get("luding_plasticity_depth")};
+  }
 
   double delta_star(double a12) const { return kp / (kp - k1) * phi_f * 2.0 * a12; }
   double k2_of(double delta_max, double a12) const {
@@ -75,6 +84,55 @@ struct LudingNormal {
     return 0.5 * k2 * d * d;
   }
   double stiffness() const { return kp; }
+  /// The servo's affine stiffness of a contact [N/m]: k1, the loading branch's.
+  double tangent_stiffness(double, double, const double*) const { return k1; }
+
+  static const SubModelInfo& info() {
+    static const SubModelInfo i = [] {
+      SubModelInfo d;
+      d.slot = Slot::Normal;
+      d.name = name;
+      d.title = "Luding's elasto-plastic adhesive law (loading k1, un-/reloading k2 up to kp, adhesion -kc delta)";
+      d.reference = "S. Luding, Granular Matter 10 (2008) 235, sec. 2.1";
+      d.keys = {{"stiffness_N_m", "N/m", 1e8, "", 0, 0, true, "k1, the loading (virgin) branch's stiffness, e.g. 1e8"},
+                {"damping_kg_s", "kg/s", 1.0, "", 0, 0, false, "gamma, the normal dashpot's viscosity, e.g. 1"},
+                {"luding_kp_N_m", "N/m", 5.0, "stiffness_N_m", 0, 0, true,
+                 "kp, the un-/reloading limit stiffness (> k1; default 5 k1)"},
+                {"luding_kc_N_m", "N/m", 0.0, "", 0, 0, false, "kc, the adhesive stiffness (0: no adhesion)"},
+                {"luding_plasticity_depth", "1", 0.05, "", 0, 1, true,
+                 "phi_f, the plastic overlap depth as a fraction of 2 a12, in (0, 1], e.g. 0.05"}};
+      d.history = 1;
+      d.history_text = "delta_max [m], even under i <-> j";
+      d.yade = "LudingMat + Law2_ScGeom_LudingPhys_Basic (its periodic shift velocity is wrong in a deforming cell: "
+               "compare pair by pair)";
+      d.lammps = "none (pair granular has no elasto-plastic adhesive normal law; the closest is jkr or dmt)";
+      d.vtk_fields = {"delta_max_m"};
+      d.describe = [](const ContactLaw& law, const PairScale&) {
+        const double k1 = law.get("stiffness_N_m"), kp = law.get("luding_kp_N_m"), kc = law.get("luding_kc_N_m");
+        return "Luding elasto-plastic adhesive: k1 = " + g_num(k1) + ", kp = " + g_num(kp) + ", kc = " + g_num(kc) +
+               " N/m, phi_f = " + g_num(law.get("luding_plasticity_depth")) + ", gamma = " +
+               g_num(law.get("damping_kg_s")) + " kg/s (t_c and dt from kp); restitution without adhesion "
+               "sqrt(k1/k2): from 1 (small impacts) down to sqrt(k1/kp) = " + g_num(std::sqrt(k1 / kp)) +
+               " at delta_max = delta*, then back towards 1 (elastic limit branch kp); " +
+               (kc > 0 ? "tension limited by the adhesive branch -kc delta" : "no tension (kc = 0)");
+      };
+      d.time_step_stiffness = [](const ContactLaw& law) { return law.get("luding_kp_N_m"); };
+      d.time_step_damping = [](const ContactLaw& law) { return law.get("damping_kg_s"); };
+      d.reference_stiffness = [](const ContactLaw& law) { return law.get("stiffness_N_m"); };
+      d.oscillators = [](const ContactLaw& law, const PairScale& s) {
+        return std::vector<Oscillator>{{"the normal spring-dashpot of the smallest pair on its stiffest branch (kp)",
+                                        s.m_r, law.get("luding_kp_N_m"), law.get("damping_kg_s"), "luding_kp_N_m",
+                                        1.0, "damping_kg_s"}};
+      };
+      d.check = [](const ContactLaw& law) -> std::string {
+        if (!(law.get("luding_kp_N_m") > law.get("stiffness_N_m")))
+          return "contact.luding_kp_N_m must exceed contact.stiffness_N_m (k1, the loading stiffness), e.g. 5 k1";
+        return "";
+      };
+      return d;
+    }();
+    return i;
+  }
 };
 
 }  // namespace dem::contact

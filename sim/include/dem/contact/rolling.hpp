@@ -20,9 +20,54 @@ struct RollingInput {
   double fn;
 };
 
+/// The rolling slot of the composed model holds one of NoRolling, RollingSpring or
+/// RollingTwisting, the first whose `accepts` takes the law's rolling and twisting choice.
 struct NoRolling {
   static constexpr int history = 0;
+  static bool accepts(const ContactLaw& law) { return !law.rolling() && !law.twisting(); }
+  static NoRolling from(const ContactLaw&, double) { return {}; }
 };
+
+namespace detail {
+/// The description of a rolling or twisting spring-dashpot-slider (they differ in names only).
+inline SubModelInfo sds_info(Slot slot, const std::string& what, const std::string& sym) {
+  SubModelInfo d;
+  d.slot = slot;
+  d.name = "sds";
+  d.switch_key = what + "_friction";
+  d.title = what + " resistance: a spring-dashpot-slider on the relative " + what + " displacement, torque <= mu_" +
+            sym + " a' f_n";
+  d.reference = "Luding, Granular Matter 10 (2008) 235, sec. 2.3";
+  d.keys = {{what + "_friction", "1", 0.0, "", 0, 0, false,
+             "mu_" + sym + ": " + what + " torque <= mu_" + sym + " a' f_n; 0: off (needs a tangential model)"},
+            {what + "_stiffness_ratio", "1", 2.0 / 7.0, "", 0, 10, true, "k_" + sym + "/k, in (0, 10]"},
+            {what + "_damping_kg_s", "kg/s", 0.0, "", 0, 0, false, "gamma_" + sym + ", its dashpot, e.g. 0"}};
+  d.rotations = true;
+  d.lammps = what == "rolling" ? "rolling sds k_r gamma_r mu_r" : "twisting sds k_o gamma_o mu_o";
+  d.yade = "none with this spring-dashpot-slider (CohFrictMat's moment law is elastic-plastic without a dashpot)";
+  d.describe = [what, sym](const ContactLaw& law, const PairScale&) {
+    return "mu_" + sym + " = " + g_num(law.get(what + "_friction")) + ", k_" + sym + "/k = " +
+           g_num(law.get(what + "_stiffness_ratio")) + ", gamma_" + sym + " = " + g_num(law.get(what + "_damping_kg_s")) +
+           " kg/s (torque " + (what == "rolling" ? "" : "about n ") + "<= mu_" + sym + " a' f_n)";
+  };
+  d.oscillators = [what](const ContactLaw& law, const PairScale& s) {
+    // Two equal spheres turning against each other: xi'' = -2 a'^2 k xi / I, a' = r/2,
+    // I = 2/5 m r^2, m = 2 m_r: an oscillator of effective mass 1.6 m_r.
+    return std::vector<Oscillator>{{"the " + what + " spring-dashpot of the smallest pair (effective mass 1.6 m_r)",
+                                    1.6 * s.m_r, law.get(what + "_stiffness_ratio") * s.k_ref,
+                                    law.get(what + "_damping_kg_s"), what + "_stiffness_ratio", s.k_ref,
+                                    what + "_damping_kg_s"}};
+  };
+  return d;
+}
+/// A rolling or twisting key's value, its default where the sub-model is off.
+inline double key_or_default(const ContactLaw& law, const SubModelInfo& info, const std::string& key) {
+  for (const KeySpec& k : info.keys)
+    if (k.name == key) return law.get_or(key, k.fallback);
+  return law.get(key);
+}
+}  // namespace detail
+
 
 /// Rolling velocity v_r = -a' (w_i - w_j) x n [m/s] (even under i <-> j); a spring xi_r [m]
 /// rotated into the tangent plane keeping its length and advanced by v_r dt, as the tangential
@@ -36,6 +81,22 @@ struct RollingSpring {
   double gamma_r;   ///< [kg/s]
   double mu_r;      ///< rolling friction coefficient (dimensionless: torque <= mu_r a' fn)
   static constexpr int history = 3;
+  static bool accepts(const ContactLaw& law) { return law.rolling() && !law.twisting(); }
+  /// From the scene's keys (zero torque where rolling is off); k_ref: the normal reference stiffness.
+  static RollingSpring from(const ContactLaw& law, double k_ref) {
+    const SubModelInfo& i = info();
+    return {detail::key_or_default(law, i, "rolling_stiffness_ratio") * k_ref,
+            detail::key_or_default(law, i, "rolling_damping_kg_s"), detail::key_or_default(law, i, "rolling_friction")};
+  }
+  static const SubModelInfo& info() {
+    static const SubModelInfo i = [] {
+      SubModelInfo d = detail::sds_info(Slot::Rolling, "rolling", "r");
+      d.history = 3;
+      d.history_text = "the rolling spring xi_r (3 doubles [m], even under i <-> j)";
+      return d;
+    }();
+    return i;
+  }
 
   /// One step: updates h and returns the torque on i [N m] (on j: its negative); `dissipated`
   /// gains the energy lost at the rolling limit [J] (as CundallStrack::update).
@@ -69,6 +130,20 @@ struct TwistingSpring {
   double gamma_o;   ///< [kg/s]
   double mu_o;      ///< twisting friction coefficient (torque <= mu_o a' fn)
   static constexpr int history = 1;
+  static TwistingSpring from(const ContactLaw& law, double k_ref) {
+    const SubModelInfo& i = info();
+    return {detail::key_or_default(law, i, "twisting_stiffness_ratio") * k_ref,
+            detail::key_or_default(law, i, "twisting_damping_kg_s"), detail::key_or_default(law, i, "twisting_friction")};
+  }
+  static const SubModelInfo& info() {
+    static const SubModelInfo i = [] {
+      SubModelInfo d = detail::sds_info(Slot::Twisting, "twisting", "o");
+      d.history = 1;
+      d.history_text = "the twisting spring xi_o (1 double [m], even under i <-> j)";
+      return d;
+    }();
+    return i;
+  }
 
   /// One step: updates h[0] and returns the twisting force f_o [N] (torque on i: a' f_o n).
   double update(const RollingInput& c, double dt, double* h, double* dissipated) const {
@@ -94,6 +169,10 @@ struct RollingTwisting {
   RollingSpring rolling;
   TwistingSpring twisting;
   static constexpr int history = RollingSpring::history + TwistingSpring::history;
+  static bool accepts(const ContactLaw& law) { return law.twisting(); }
+  static RollingTwisting from(const ContactLaw& law, double k_ref) {
+    return {RollingSpring::from(law, k_ref), TwistingSpring::from(law, k_ref)};
+  }
 
   /// One step: both springs; returns the torque on i [N m] (on j: its negative).
   Vec3 update(const RollingInput& c, double dt, double* h, double* dissipated) const {

@@ -5,6 +5,7 @@
 #pragma once
 #include <cmath>
 
+#include "dem/contact/submodel.hpp"
 #include "dem/core/vec3.hpp"
 
 namespace dem::contact {
@@ -23,6 +24,21 @@ struct TangentialInput {
 struct NoTangential {
   static constexpr int history = 0;          ///< doubles of per-contact history
   static constexpr bool rotations = false;   ///< needs angular velocities and torques
+  static constexpr const char* name = "none";
+  static NoTangential from(const ContactLaw&, double) { return {}; }
+  static const SubModelInfo& info() {
+    static const SubModelInfo i = [] {
+      SubModelInfo d;
+      d.slot = Slot::Tangential;
+      d.name = name;
+      d.title = "frictionless: no tangential force, no rotations (3 degrees of freedom per particle)";
+      d.yade = "FrictMat with frictionAngle = 0 and blockedDOFs = \"XYZ\", or ViscElMat with ks = cs = 0";
+      d.lammps = "tangential linear_nohistory 0 0";
+      d.describe = [](const ContactLaw&, const PairScale&) { return std::string("frictionless, no rotations"); };
+      return d;
+    }();
+    return i;
+  }
 };
 
 /// Cundall-Strack (1979) sliding friction as in Luding (2008), eqs. 17-21, and LAMMPS'
@@ -43,6 +59,13 @@ struct CundallStrack {
   static constexpr int history = 4;          ///< xi_x, xi_y, xi_z [m], slipping (0/1)
   static constexpr bool rotations = true;
   static constexpr unsigned odd_mask = 0x7;  ///< history entries that change sign when i and j swap
+  static constexpr const char* name = "cundall_strack";
+  /// From the scene's keys; k_ref: the normal sub-model's reference stiffness [N/m].
+  static CundallStrack from(const ContactLaw& law, double k_ref) {
+    return {law.get("tangential_stiffness_ratio") * k_ref, law.get("tangential_damping_kg_s"), law.get("friction"),
+            law.get_or("objective_spring", 1.0) != 0.0};
+  }
+  static const SubModelInfo& info();
 
   static Vec3 tangent_part(const Vec3& v, const Vec3& n) { return v - n * dot(v, n); }
 
@@ -91,5 +114,44 @@ struct CundallStrack {
   double energy(const double* h) const { return 0.5 * kt * (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]); }
   double stiffness() const { return kt; }
 };
+
+inline const SubModelInfo& CundallStrack::info() {
+  static const SubModelInfo i = [] {
+    SubModelInfo d;
+    d.slot = Slot::Tangential;
+    d.name = name;
+    d.title = "Cundall-Strack sliding friction: linear tangential spring (objective), optional dashpot, Coulomb limit";
+    d.reference = "Cundall & Strack, Geotechnique 29 (1979) 47; Luding, Granular Matter 10 (2008) 235, eqs. 17-21";
+    d.keys = {{"friction", "1", 0.0, "", 0, 0, false, "mu, the Coulomb coefficient, e.g. 0.5 (a value > 0 alone selects "
+                                                      "cundall_strack)"},
+              {"tangential_stiffness_ratio", "1", 2.0 / 7.0, "", 0, 10, true,
+               "k_t/k, in (0, 10]; 2/7 gives the tangential oscillation the normal one's period"},
+              {"tangential_damping_kg_s", "kg/s", 0.0, "", 0, 0, false, "gamma_t, the tangential dashpot, e.g. 0"}};
+    d.implied_by = "friction";
+    d.history = history;
+    d.history_text = "the spring xi (3 doubles [m], odd under i <-> j) and a slip flag";
+    d.rotations = true;
+    d.yade = "FrictMat (young = k/r, poisson = k_t/k, frictionAngle = atan(mu)) + Law2_ScGeom_FrictPhys_CundallStrack";
+    d.lammps = "tangential linear_history k_t x_gamma_t mu";
+    d.curve_columns = {"sliding_fraction", "E_rot_J", "omega_mean_rad_s", "E_t_J", "W_friction_J", "sigma_antisym_rel"};
+    d.vtk_fields = {"sliding", "tangential_force_N"};
+    d.describe = [](const ContactLaw& law, const PairScale& s) {
+      const double kt = law.get("tangential_stiffness_ratio") * s.k_ref;
+      return "Cundall-Strack, mu = " + g_num(law.get("friction")) + ", k_t = " + g_num(kt) + " N/m (k_t/k = " +
+             g_num(law.get("tangential_stiffness_ratio")) + "), gamma_t = " + g_num(law.get("tangential_damping_kg_s")) +
+             " kg/s; tangential half-period pi sqrt(2 m_r/(7 k_t)) = " + g_num(M_PI * std::sqrt(2.0 * s.m_r / (7.0 * kt))) +
+             " s; rotations on (6 degrees of freedom)";
+    };
+    d.oscillators = [](const ContactLaw& law, const PairScale& s) {
+      // The contact point of two equal spheres: 1/m_eff = 1/m_r + a^2/I_i + a^2/I_j = 7/(2 m_r).
+      return std::vector<Oscillator>{{"the tangential spring-dashpot of the smallest pair's contact point "
+                                      "(effective mass 2/7 m_r)", 2.0 / 7.0 * s.m_r,
+                                      law.get("tangential_stiffness_ratio") * s.k_ref, law.get("tangential_damping_kg_s"),
+                                      "tangential_stiffness_ratio", s.k_ref, "tangential_damping_kg_s"}};
+    };
+    return d;
+  }();
+  return i;
+}
 
 }  // namespace dem::contact

@@ -4,6 +4,9 @@
 #pragma once
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -17,54 +20,70 @@ enum class Integrator {
   SymplecticEuler,    ///< v += a dt; x += v dt  (what YADE's NewtonIntegrator does)
 };
 
-/// The normal sub-model of the contact (contact/normal_linear.hpp, contact/normal_luding.hpp).
-enum class NormalModel {
-  Linear,   ///< linear spring-dashpot (default)
-  Luding,   ///< Luding's elasto-plastic adhesive law (k1 = stiffness, kp, kc, plasticity depth)
-};
+/// The slots of the contact model, in the order a contact's force is composed
+/// (contact/contact_model.hpp); each holds one sub-model, chosen by name.
+enum class ContactSlot { Normal = 0, Tangential = 1, Rolling = 2, Twisting = 3 };
+inline constexpr int kContactSlots = 4;
 
-/// The tangential sub-model of the contact (contact/tangential.hpp).
-enum class TangentialModel {
-  None,            ///< frictionless (default): no tangential force, no rotations
-  CundallStrack,   ///< linear tangential spring + optional dashpot, Coulomb limit mu
-};
+/// The contact model as the scene chose it ([contact]): a sub-model name per slot and the values
+/// of the chosen sub-models' keys. What the names mean, which keys each sub-model has (units,
+/// defaults, bounds) and how they become forces is declared by the sub-models themselves and
+/// collected in one registry (contact/registry.hpp); this struct only carries the choice, so a
+/// new sub-model adds nothing here. Filled by the scene loader (`contact::read_contact`).
+class ContactLaw {
+ public:
+  /// The sub-model in a slot: "linear" / "luding" (normal), "none" / "cundall_strack"
+  /// (tangential), "none" / "sds" (rolling, twisting), or whatever the registry holds.
+  const std::string& model(ContactSlot s) const { return models_[static_cast<int>(s)]; }
+  /// A key's value (a scene key of a chosen sub-model, without "contact."): throws
+  /// std::logic_error naming the key when the chosen sub-models have no such key.
+  double get(const std::string& key) const;
+  /// A key's value, or `fallback` when the chosen sub-models have no such key.
+  double get_or(const std::string& key, double fallback) const;
+  bool has(const std::string& key) const { return values_.count(key) != 0; }
+  const std::map<std::string, double>& values() const { return values_; }
+  void select(ContactSlot s, const std::string& name) { models_[static_cast<int>(s)] = name; ++stamp_; }
+  void set(const std::string& key, double v) { values_[key] = v; ++stamp_; }
+  void clear_values() { values_.clear(); ++stamp_; }
 
-/// The contact model's parameters as the scene gives them (`[contact]`); contact/contact_model.hpp
-/// composes the sub-models from them. Normal: linear spring-dashpot,
-/// f_n = k*delta + gamma*d(delta)/dt  [N], repulsive positive.
-struct ContactLaw {
-  double stiffness = 1e8;       ///< k [N/m = kg/s^2], > 0
-  double damping = 1.0;         ///< gamma [kg/s], >= 0; constant, not mass-scaled
-  /// If false (default) the force is clamped at zero when the dashpot outweighs the spring
+  /// If false (default) the normal force is clamped at zero when the dashpot outweighs the spring
   /// on separation (no sticking; physical for dry grains), which is also what YADE 2023.02a's
-  /// Law2_ScGeom_ViscElPhys_Basic does (docs/yade.md). If true the force may turn attractive
-  /// (the textbook linear spring-dashpot, which the analytic t_c and e describe exactly).
-  bool allow_attractive = false;
-  NormalModel normal = NormalModel::Linear;
-  double luding_kp = 0;                     ///< [N/m] un-/reloading limit stiffness kp > k1 (luding)
-  double luding_kc = 0;                     ///< [N/m] adhesive stiffness kc >= 0 (luding)
-  double luding_plasticity_depth = 0;       ///< phi_f (luding), > 0
-  /// The stiffness that sets t_c and dt: k, or kp for Luding's law (its fastest branch).
-  double time_step_stiffness() const { return normal == NormalModel::Luding ? luding_kp : stiffness; }
-  TangentialModel tangential = TangentialModel::None;
-  double friction = 0.0;                    ///< Coulomb coefficient mu (cundall_strack), >= 0
-  double tangential_stiffness_ratio = 2.0 / 7.0;   ///< k_t / k (cundall_strack), > 0
-  double tangential_damping = 0.0;          ///< gamma_t [kg/s] (cundall_strack), >= 0
-  /// Not a scene key: the tests' mutation check. false drops the rotation of the spring into
-  /// the tangent plane (not objective), which the energy-balance test must catch.
-  bool objective_spring = true;
-  /// Rolling resistance (contact/rolling.hpp; needs the tangential model's rotations):
-  double rolling_friction = 0.0;            ///< mu_r: rolling torque <= mu_r a' f_n; 0: off
-  double rolling_stiffness_ratio = 2.0 / 7.0;   ///< k_r / k, > 0
-  double rolling_damping = 0.0;             ///< gamma_r [kg/s], >= 0
-  bool rolling() const { return frictional() && rolling_friction > 0; }
-  /// Twisting (torsion) resistance (contact/rolling.hpp, RollingTwisting; needs the tangential model):
-  double twisting_friction = 0.0;           ///< mu_o: twisting torque <= mu_o a' f_n; 0: off
-  double twisting_stiffness_ratio = 2.0 / 7.0;   ///< k_o / k, > 0
-  double twisting_damping = 0.0;            ///< gamma_o [kg/s], >= 0
-  bool twisting() const { return frictional() && twisting_friction > 0; }
-  /// The model needs angular velocities, torques and per-contact history.
-  bool frictional() const { return tangential != TangentialModel::None; }
+  /// Law2_ScGeom_ViscElPhys_Basic does (docs/yade.md). If true the force may turn attractive.
+  bool allow_attractive() const { return attractive_; }
+  void set_allow_attractive(bool a) { attractive_ = a; ++stamp_; }
+
+  /// The model needs angular velocities, torques and per-contact history (a tangential sub-model).
+  bool frictional() const { return model(ContactSlot::Tangential) != "none"; }
+  bool rolling() const { return frictional() && model(ContactSlot::Rolling) != "none"; }
+  bool twisting() const { return frictional() && model(ContactSlot::Twisting) != "none"; }
+  /// The normal sub-model's stiffness for t_c and dt [N/m] (its fastest branch): set by the
+  /// registry from the normal sub-model's declaration when the law is composed.
+  double time_step_stiffness() const { return time_step_stiffness_; }
+  /// The normal sub-model's dashpot for t_c and e [kg/s] (constant viscosity).
+  double time_step_damping() const { return time_step_damping_; }
+  void set_time_step(double k, double gamma) { time_step_stiffness_ = k; time_step_damping_ = gamma; }
+  /// The normal sub-model's reference stiffness [N/m] for p* = 2<r>p/k (k, or k1 for Luding's law).
+  double reference_stiffness() const { return reference_stiffness_; }
+  void set_reference_stiffness(double k) { reference_stiffness_ = k; }
+
+  /// Changes with every change of the choice or a value: the composed model cached for the pair
+  /// loops (contact::compose) is used only while it matches.
+  std::uint64_t stamp() const { return stamp_; }
+  struct Cache {
+    std::shared_ptr<const void> model;   ///< the composed model, of the type the indices name
+    std::array<int, 3> index{};          ///< its normal, tangential and rolling-slot type
+    std::uint64_t stamp = ~0ULL;
+  };
+  const Cache& cache() const { return cache_; }
+  void set_cache(Cache c) const { cache_ = std::move(c); }
+
+ private:
+  std::array<std::string, kContactSlots> models_{"linear", "none", "none", "none"};
+  std::map<std::string, double> values_;
+  bool attractive_ = false;
+  double time_step_stiffness_ = 0, time_step_damping_ = 0, reference_stiffness_ = 0;
+  std::uint64_t stamp_ = 0;
+  mutable Cache cache_;
 };
 
 /// What ends a stage of a loading path (PathStage::stop).
