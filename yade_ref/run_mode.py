@@ -74,14 +74,27 @@ MODES = {"D2": (1.0, 0.0, -1.0), "D3": (0.5, 0.5, -1.0), "iso_compress": (-1.0, 
          "uniaxial_z": (0.0, 0.0, -1.0)}
 # Simple shear SS_ij: v_i = 2 r x_j (upper triangular, as ours; docs/simple_shear.md).
 SHEARS = {"SS_xy": (0, 1), "SS_xz": (0, 2), "SS_yz": (1, 2)}
-COLUMNS = ["step", "time_s", "eps_xx", "eps_yy", "eps_zz", "eps_v", "eps_d", "nu", "p_Pa", "p_star",
-           "sigma_xx_Pa", "sigma_yy_Pa", "sigma_zz_Pa", "sigma_xy_Pa", "sigma_xz_Pa", "sigma_yz_Pa",
-           "sigma_dev_Pa", "s_dev", "F_xx", "F_yy", "F_zz", "F_xy", "F_xz", "F_yz", "F_dev", "C",
-           "C_nonrattler", "rattler_fraction", "E_kin_J", "overlap_max_rel", "overlap_mean_rel",
-           "E_pot_J", "p_kin_Pa", "inertial_number", "contacts", "eps_xy", "eps_xz", "eps_yz", "eps_d_eig",
-           "sigma_dev_eig_Pa", "s_dev_eig", "F_dev_eig", "angle_sigma_F_deg", "angle_sigma_D_deg", "angle_F_D_deg",
-           "stage"]
-FRICTION_COLUMNS = ["sliding_fraction", "E_rot_J", "omega_mean_rad_s", "E_t_J", "W_friction_J", "sigma_antisym_rel"]
+
+
+def _column_table():
+    """The curve columns as ours defines them, once (sim/src/measure/measure.cpp, column_table):
+    `dem info --columns --json` of the build beside this script (or $DEM_BIN)."""
+    import json
+    import os
+    import subprocess
+    root = os.path.dirname(os.path.dirname(os.path.abspath(sys.argv[0])))
+    dem = os.environ.get("DEM_BIN", os.path.join(root, "build", "dem"))
+    try:
+        out = subprocess.run([dem, "info", "--columns", "--json"], capture_output=True, text=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError) as e:
+        sys.exit(f"run_mode.py: cannot read the curve columns from {dem} info --columns --json ({e}): build ours first "
+                 "(bash scripts/setup.sh) or set DEM_BIN")
+    return json.loads(out)
+
+
+_TABLE = _column_table()
+COLUMNS = [c["name"] for c in _TABLE if c["group"] == "every"] + ["stage"]
+FRICTION_COLUMNS = [c["name"] for c in _TABLE if c["group"] == "rotations"]
 
 
 def dev(a, b, c):

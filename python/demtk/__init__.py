@@ -16,12 +16,12 @@ import os
 from collections import namedtuple
 
 from . import _core
-from ._core import (BlowUp, Box, Engine, FitResult, Measurement, Scene, SceneError, State, curve_columns,
+from ._core import (BlowUp, Box, Engine, FitResult, Measurement, Scene, SceneError, State, column_table, curve_columns,
                     fit_saturating, random_packing, read_packing, run_mode, run_prep_stage, run_protocol,
                     run_stage, saturating)
 
 __all__ = ["BlowUp", "Box", "Checkpoint", "Engine", "FitResult", "Measurement", "Scene", "SceneError", "State",
-           "contact_models", "curve_columns", "fit_curve", "fit_saturating", "load_scene", "random_packing", "read_checkpoint",
+           "column_table", "contact_models", "curve_columns", "fit_curve", "fit_saturating", "load_scene", "random_packing", "read_checkpoint",
            "read_curve", "read_packing", "run_mode", "run_prep_stage", "run_protocol", "run_stage", "saturating",
            "scene_toml", "version"]
 
@@ -34,7 +34,7 @@ Checkpoint = namedtuple("Checkpoint", "state scene_toml label")
 def contact_models():
     """Every contact sub-model of the registry (the same as `dem info --contact-models --json`): a list of
     dicts with slot, name, title, selected_by, reference, keys (key, unit, default, bounds, meaning),
-    history, rotations, curve_columns, vtk_fields and the YADE and LAMMPS counterparts."""
+    history, rotations, column_groups (of demtk.column_table()), vtk_fields and the YADE and LAMMPS counterparts."""
     import json
     return json.loads(_core._contact_models_json())
 Checkpoint.__doc__ = "A checkpoint read back: the State (bit-exact), the resolved scene text it was made with, its label."

@@ -188,31 +188,15 @@ PyState state_from_arrays(const py::object& positions, const py::object& radii, 
 // ---------------------------------------------------------------------------------------
 // Measurement: the curve columns (in curve_columns() order) and the tensors.
 
-std::vector<double> row_values(const dem::Measurement& m) {
-  const auto& S = m.stress;
-  const auto& F = m.fabric;
-  // Exactly the arguments of curve_row() (measure.cpp), in its order.
-  return {static_cast<double>(m.step), m.time, m.strain.x, m.strain.y, m.strain.z, m.eps_v, m.eps_d, m.nu, m.p,
-          m.p_star, S.xx, S.yy, S.zz, S.xy, S.xz, S.yz, m.sigma_dev, m.s_dev, F.xx, F.yy, F.zz, F.xy, F.xz, F.yz,
-          m.F_dev, m.C, m.C_nonrattler, m.rattler_fraction, m.E_kin, m.overlap_max_rel, m.overlap_mean_rel, m.E_pot,
-          m.stress_kinetic.trace() / 3.0, m.inertial_number, static_cast<double>(m.contacts), m.strain_tensor.xy,
-          m.strain_tensor.xz, m.strain_tensor.yz, m.eps_d_eig, m.sigma_dev_eig, m.s_dev_eig, m.F_dev_eig,
-          m.angle_sigma_F, m.angle_sigma_D, m.angle_F_D};
-}
-
+// Every column the CLI writes for this measurement (the column table, measure.hpp: the Every
+// group, and the Rotations group for a model with rotations), in file order.
 py::dict columns_dict(const dem::Measurement& m) {
-  const auto& names = dem::curve_columns();
-  const std::vector<double> v = row_values(m);
-  // curve_columns() ends with "stage" (written by the curve file, not by curve_row).
-  const std::size_t n = names.size() && names.back() == "stage" ? names.size() - 1 : names.size();
-  if (n != v.size())
-    throw std::logic_error("demtk: curve_columns() has " + std::to_string(n) + " numeric columns but the binding "
-                           "knows " + std::to_string(v.size()) + ": update row_values() in python/src/demtk.cpp");
   py::dict d;
-  for (std::size_t k = 0; k < n; ++k) {
-    if (names[k] == "step") d[py::str(names[k])] = py::int_(m.step);
-    else if (names[k] == "contacts") d[py::str(names[k])] = py::int_(m.contacts);
-    else d[py::str(names[k])] = py::float_(v[k]);
+  for (const dem::CurveColumn& c : dem::column_table()) {
+    if (!c.value || (c.group == dem::ColumnGroup::Rotations && !m.frictional)) continue;
+    const double v = c.value(m);
+    if (c.integer) d[py::str(c.name)] = py::int_(static_cast<long long>(v));
+    else d[py::str(c.name)] = py::float_(v);
   }
   return d;
 }
@@ -699,7 +683,30 @@ PYBIND11_MODULE(_core, m) {
                              "log strain 3x3 since the stage start [-]")
       .def("row", [](const dem::Measurement& me) { return dem::curve_row(me); },
            "the CSV row `dem` writes for it (without the stage column)");
-  m.def("curve_columns", []() { return dem::curve_columns(); });
+  m.def("curve_columns",
+        [](bool rotations) {
+          std::vector<std::string> c = dem::curve_columns();
+          if (rotations) c.insert(c.end(), dem::friction_columns().begin(), dem::friction_columns().end());
+          return c;
+        },
+        py::arg("rotations") = false,
+        "the numeric curve columns in file order (the column table, measure.hpp); rotations=True adds those of a "
+        "model with rotations (friction); the file's last column, `stage`, is text");
+  m.def("column_table",
+        [] {
+          py::list out;
+          for (const dem::CurveColumn& c : dem::column_table()) {
+            py::dict d;
+            d["name"] = c.name;
+            d["unit"] = c.unit;
+            d["meaning"] = c.meaning;
+            d["group"] = dem::group_name(c.group);
+            out.append(d);
+          }
+          return out;
+        },
+        "every curve column: name, unit, meaning, group ('every', 'rotations': models with rotations, 'path', "
+        "'path_sheared')");
 
   // ---- Engine
   py::class_<PyEngine>(m, "Engine",

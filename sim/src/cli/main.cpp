@@ -294,10 +294,25 @@ struct EnsembleCommand {
   }
 };
 
+// The column table (measure.hpp) for people (a Markdown table) or programs (JSON).
+void print_columns(bool json) {
+  if (json) {
+    nlohmann::ordered_json j = nlohmann::ordered_json::array();
+    for (const dem::CurveColumn& c : dem::column_table())
+      j.push_back({{"name", c.name}, {"unit", c.unit}, {"meaning", c.meaning}, {"group", dem::group_name(c.group)}});
+    std::printf("%s\n", j.dump(1).c_str());
+    return;
+  }
+  std::printf("| column | unit | in | meaning |\n|---|---|---|---|\n");
+  for (const dem::CurveColumn& c : dem::column_table())
+    std::printf("| `%s` | %s | %s | %s |\n", c.name, c.unit, dem::group_name(c.group), c.meaning);
+  std::printf("| `stage` | text | every | the stage or path-stage name |\n");
+}
+
 struct InfoCommand {
   CLI::App* cmd = nullptr;
   std::string scene;
-  bool json = false, no_probe = false, contact_models = false;
+  bool json = false, no_probe = false, contact_models = false, columns = false;
   void add(CLI::App& app, std::vector<std::string>& overrides) {
     cmd = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates, each contact sub-model's "
                                      "values and stability limits); --contact-models: every contact sub-model");
@@ -305,6 +320,8 @@ struct InfoCommand {
     cmd->add_flag("--contact-models", contact_models, "list every contact sub-model of the registry: its scene keys "
                                                       "(units, defaults, bounds, meaning), history, curve columns, "
                                                       "YADE and LAMMPS counterparts (with --json: as JSON)");
+    cmd->add_flag("--columns", columns, "list every curve column: name, unit, meaning and which curves have it "
+                                        "(with --json: as JSON; docs/curve_columns.md is made from it)");
     cmd->add_option("--set", overrides, "override a scene key");
     cmd->add_flag("--json", json, "print the run plan as JSON instead: members (seeds), checkpoints, modes, "
                                   "estimated particle-steps per task (read by workflow/Snakefile)");
@@ -316,7 +333,11 @@ struct InfoCommand {
       else std::printf("%s", dem::contact::registry_text().c_str());
       return 0;
     }
-    if (scene.empty()) throw ArgumentError("dem info needs a scene file (or --contact-models)");
+    if (columns) {
+      print_columns(json);
+      return 0;
+    }
+    if (scene.empty()) throw ArgumentError("dem info needs a scene file (or --contact-models, --columns)");
     const dem::Model model = dem::load_scene_file(scene, overrides);
     if (json) std::printf("%s", dem::plan_json(model).c_str());
     else {

@@ -370,7 +370,7 @@ nlohmann::json registry_json() {
                                                          : "contact." + m->switch_key + " > 0"},
                    {"reference", m->reference}, {"keys", keys}, {"history", m->history},
                    {"history_text", m->history_text}, {"rotations", m->rotations}, {"yade", m->yade},
-                   {"lammps", m->lammps}, {"curve_columns", m->curve_columns}, {"vtk_fields", m->vtk_fields}});
+                   {"lammps", m->lammps}, {"column_groups", m->column_groups}, {"vtk_fields", m->vtk_fields}});
   }
   return all;
 }
@@ -386,10 +386,10 @@ std::string registry_text() {
            (k.fallback_times.empty() ? g_num(k.fallback) : g_num(k.fallback) + " x contact." + k.fallback_times) + ", " +
            bounds_text(k) + ": " + k.meaning + "\n";
     if (m->history) o += "    history: " + std::to_string(m->history) + " doubles per contact (" + m->history_text + ")\n";
-    if (!m->curve_columns.empty()) {
+    if (!m->column_groups.empty()) {
       std::string c;
-      for (const auto& n : m->curve_columns) c += (c.empty() ? "" : ", ") + n;
-      o += "    curve columns: " + c + "\n";
+      for (const auto& n : m->column_groups) c += (c.empty() ? "" : ", ") + n;
+      o += "    curve columns: the \"" + c + "\" group (dem info --columns)\n";
     }
     o += "    YADE: " + m->yade + "\n    LAMMPS: " + m->lammps + "\n";
   }

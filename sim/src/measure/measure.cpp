@@ -206,48 +206,123 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
   return m;
 }
 
+namespace {
+using G = ColumnGroup;
+double antisym_rel(const Measurement& m) { return m.p > 0 ? norm(m.stress_antisym) / m.p : 0.0; }
+}  // namespace
+
+const std::vector<CurveColumn>& column_table() {
+  // clang-format off
+  static const std::vector<CurveColumn> t = {
+    {"step", "count", "time steps since the stage (or path) start", G::Every, [](const Measurement& m) { return double(m.step); }, true},
+    {"time_s", "s", "time since the stage start", G::Every, [](const Measurement& m) { return m.time; }},
+    {"eps_xx", "1", "true (log) box strain ln(L/L0) along x since the stage start, extension positive", G::Every, [](const Measurement& m) { return m.strain.x; }},
+    {"eps_yy", "1", "true box strain along y", G::Every, [](const Measurement& m) { return m.strain.y; }},
+    {"eps_zz", "1", "true box strain along z", G::Every, [](const Measurement& m) { return m.strain.z; }},
+    {"eps_v", "1", "volumetric strain (eps_xx + eps_yy + eps_zz)/3", G::Every, [](const Measurement& m) { return m.eps_v; }},
+    {"eps_d", "1", "deviatoric strain magnitude sqrt(((a-b)^2+(b-c)^2+(c-a)^2)/2) of the diagonal (eigenvalues in a sheared cell)", G::Every, [](const Measurement& m) { return m.eps_d; }},
+    {"nu", "1", "volume fraction", G::Every, [](const Measurement& m) { return m.nu; }},
+    {"p_Pa", "Pa", "pressure tr(sigma)/3, compression positive, contact + kinetic", G::Every, [](const Measurement& m) { return m.p; }},
+    {"p_star", "1", "dimensionless pressure 2<r>p/k (k: the normal sub-model's reference stiffness)", G::Every, [](const Measurement& m) { return m.p_star; }},
+    {"sigma_xx_Pa", "Pa", "stress xx", G::Every, [](const Measurement& m) { return m.stress.xx; }},
+    {"sigma_yy_Pa", "Pa", "stress yy", G::Every, [](const Measurement& m) { return m.stress.yy; }},
+    {"sigma_zz_Pa", "Pa", "stress zz", G::Every, [](const Measurement& m) { return m.stress.zz; }},
+    {"sigma_xy_Pa", "Pa", "stress xy (symmetric part)", G::Every, [](const Measurement& m) { return m.stress.xy; }},
+    {"sigma_xz_Pa", "Pa", "stress xz", G::Every, [](const Measurement& m) { return m.stress.xz; }},
+    {"sigma_yz_Pa", "Pa", "stress yz", G::Every, [](const Measurement& m) { return m.stress.yz; }},
+    {"sigma_dev_Pa", "Pa", "deviatoric stress magnitude of the diagonal (eigenvalues in a sheared cell)", G::Every, [](const Measurement& m) { return m.sigma_dev; }},
+    {"s_dev", "1", "stress ratio sigma_dev/p", G::Every, [](const Measurement& m) { return m.s_dev; }},
+    {"F_xx", "1", "fabric F = (1/V) sum_p V_p sum_c n(x)n, xx", G::Every, [](const Measurement& m) { return m.fabric.xx; }},
+    {"F_yy", "1", "fabric yy", G::Every, [](const Measurement& m) { return m.fabric.yy; }},
+    {"F_zz", "1", "fabric zz", G::Every, [](const Measurement& m) { return m.fabric.zz; }},
+    {"F_xy", "1", "fabric xy", G::Every, [](const Measurement& m) { return m.fabric.xy; }},
+    {"F_xz", "1", "fabric xz", G::Every, [](const Measurement& m) { return m.fabric.xz; }},
+    {"F_yz", "1", "fabric yz", G::Every, [](const Measurement& m) { return m.fabric.yz; }},
+    {"F_dev", "1", "deviatoric fabric magnitude of the diagonal (eigenvalues in a sheared cell)", G::Every, [](const Measurement& m) { return m.F_dev; }},
+    {"C", "1", "coordination number 2 contacts / N", G::Every, [](const Measurement& m) { return m.C; }},
+    {"C_nonrattler", "1", "coordination number of the non-rattlers", G::Every, [](const Measurement& m) { return m.C_nonrattler; }},
+    {"rattler_fraction", "1", "rattlers / N (fewer than 4 contacts, removed recursively)", G::Every, [](const Measurement& m) { return m.rattler_fraction; }},
+    {"E_kin_J", "J", "kinetic energy of the fluctuation velocities", G::Every, [](const Measurement& m) { return m.E_kin; }},
+    {"overlap_max_rel", "1", "largest overlap / smaller radius of the pair", G::Every, [](const Measurement& m) { return m.overlap_max_rel; }},
+    {"overlap_mean_rel", "1", "mean overlap / smaller radius over contacts", G::Every, [](const Measurement& m) { return m.overlap_mean_rel; }},
+    {"E_pot_J", "J", "elastic energy of the contacts (normal and tangential, rolling, twisting springs)", G::Every, [](const Measurement& m) { return m.E_pot; }},
+    {"p_kin_Pa", "Pa", "kinetic part of the pressure", G::Every, [](const Measurement& m) { return m.stress_kinetic.trace() / 3.0; }},
+    {"inertial_number", "1", "max|L_ij| 2<r> sqrt(rho/p) (0 when p <= 0)", G::Every, [](const Measurement& m) { return m.inertial_number; }},
+    {"contacts", "count", "contacts (overlapping pairs)", G::Every, [](const Measurement& m) { return double(m.contacts); }, true},
+    {"eps_xy", "1", "shear component xy of the log strain 0.5 ln(F F^T)", G::Every, [](const Measurement& m) { return m.strain_tensor.xy; }},
+    {"eps_xz", "1", "log strain xz", G::Every, [](const Measurement& m) { return m.strain_tensor.xz; }},
+    {"eps_yz", "1", "log strain yz", G::Every, [](const Measurement& m) { return m.strain_tensor.yz; }},
+    {"eps_d_eig", "1", "deviatoric magnitude of the log strain's eigenvalues (objective)", G::Every, [](const Measurement& m) { return m.eps_d_eig; }},
+    {"sigma_dev_eig_Pa", "Pa", "deviatoric magnitude of the stress eigenvalues (objective)", G::Every, [](const Measurement& m) { return m.sigma_dev_eig; }},
+    {"s_dev_eig", "1", "sigma_dev_eig / p", G::Every, [](const Measurement& m) { return m.s_dev_eig; }},
+    {"F_dev_eig", "1", "deviatoric magnitude of the fabric eigenvalues (objective)", G::Every, [](const Measurement& m) { return m.F_dev_eig; }},
+    {"angle_sigma_F_deg", "deg", "angle between the major stress and major fabric directions (nan: undefined)", G::Every, [](const Measurement& m) { return m.angle_sigma_F; }},
+    {"angle_sigma_D_deg", "deg", "angle between the major stress direction and the most compressive strain-rate direction", G::Every, [](const Measurement& m) { return m.angle_sigma_D; }},
+    {"angle_F_D_deg", "deg", "angle between the major fabric direction and the most compressive strain-rate direction", G::Every, [](const Measurement& m) { return m.angle_F_D; }},
+    {"sliding_fraction", "1", "contacts at the Coulomb limit / contacts", G::Rotations, [](const Measurement& m) { return m.sliding_fraction; }},
+    {"E_rot_J", "J", "rotational kinetic energy sum I w^2/2", G::Rotations, [](const Measurement& m) { return m.E_rot; }},
+    {"omega_mean_rad_s", "rad/s", "mean |w|", G::Rotations, [](const Measurement& m) { return m.omega_mean; }},
+    {"E_t_J", "J", "elastic energy of the tangential (and rolling, twisting) springs (part of E_pot_J)", G::Rotations, [](const Measurement& m) { return m.E_t; }},
+    {"W_friction_J", "J", "energy lost to sliding (and rolling, twisting) since the state began", G::Rotations, [](const Measurement& m) { return m.W_friction; }},
+    {"sigma_antisym_rel", "1", "|antisymmetric contact stress| / p (torque balance: small when quasi-static)", G::Rotations, antisym_rel},
+    {"rate_xx_1_s", "1/s", "applied box strain rate L_xx (prescribed or the servo's)", G::Path, nullptr},
+    {"rate_yy_1_s", "1/s", "applied box strain rate L_yy", G::Path, nullptr},
+    {"rate_zz_1_s", "1/s", "applied box strain rate L_zz", G::Path, nullptr},
+    {"target_xx_Pa", "Pa", "stress target on xx (nan: strain controlled)", G::Path, nullptr},
+    {"target_yy_Pa", "Pa", "stress target on yy", G::Path, nullptr},
+    {"target_zz_Pa", "Pa", "stress target on zz", G::Path, nullptr},
+    {"target_p_Pa", "Pa", "mean-pressure target (nan: none)", G::Path, nullptr},
+    {"control_error_rel", "1", "largest |stress - target| / target over the controlled components", G::Path, nullptr},
+    {"eps_d_accumulated", "1", "eps_d travelled along the whole path (sum of |d eps_d|)", G::Path, nullptr},
+    {"rate_xy_1_s", "1/s", "applied shear rate L_xy", G::PathSheared, nullptr},
+    {"rate_xz_1_s", "1/s", "applied shear rate L_xz", G::PathSheared, nullptr},
+    {"rate_yz_1_s", "1/s", "applied shear rate L_yz", G::PathSheared, nullptr},
+  };
+  // clang-format on
+  return t;
+}
+
+const char* group_name(ColumnGroup g) {
+  switch (g) {
+    case ColumnGroup::Every: return "every";
+    case ColumnGroup::Rotations: return "rotations";
+    case ColumnGroup::Path: return "path";
+    case ColumnGroup::PathSheared: return "path_sheared";
+  }
+  return "";
+}
+
+std::vector<std::string> columns_of(ColumnGroup g) {
+  std::vector<std::string> out;
+  for (const CurveColumn& c : column_table())
+    if (c.group == g) out.push_back(c.name);
+  return out;
+}
+
 const std::vector<std::string>& curve_columns() {
-  static const std::vector<std::string> cols = {
-      "step", "time_s", "eps_xx", "eps_yy", "eps_zz", "eps_v", "eps_d", "nu", "p_Pa", "p_star",
-      "sigma_xx_Pa", "sigma_yy_Pa", "sigma_zz_Pa", "sigma_xy_Pa", "sigma_xz_Pa", "sigma_yz_Pa",
-      "sigma_dev_Pa", "s_dev", "F_xx", "F_yy", "F_zz", "F_xy", "F_xz", "F_yz", "F_dev", "C",
-      "C_nonrattler", "rattler_fraction", "E_kin_J", "overlap_max_rel", "overlap_mean_rel",
-      "E_pot_J", "p_kin_Pa", "inertial_number", "contacts", "eps_xy", "eps_xz", "eps_yz", "eps_d_eig",
-      "sigma_dev_eig_Pa", "s_dev_eig", "F_dev_eig", "angle_sigma_F_deg", "angle_sigma_D_deg", "angle_F_D_deg"};
+  static const std::vector<std::string> cols = columns_of(ColumnGroup::Every);
   return cols;
 }
 
 const std::vector<std::string>& friction_columns() {
-  static const std::vector<std::string> cols = {"sliding_fraction", "E_rot_J", "omega_mean_rad_s", "E_t_J",
-                                                "W_friction_J", "sigma_antisym_rel"};
+  static const std::vector<std::string> cols = columns_of(ColumnGroup::Rotations);
   return cols;
 }
 
-std::string friction_row(const Measurement& m) {
-  char buf[512];
-  const double a = norm(m.stress_antisym);
-  std::snprintf(buf, sizeof buf, ",%.10g,%.10g,%.10g,%.10g,%.10g,%.10g", m.sliding_fraction, m.E_rot, m.omega_mean,
-                m.E_t, m.W_friction, m.p > 0 ? a / m.p : 0.0);
-  return buf;
-}
-
 std::string curve_row(const Measurement& m) {
-  char buf[2048];
-  const auto& S = m.stress;
-  const auto& F = m.fabric;
-  std::snprintf(buf, sizeof buf,
-                "%lld,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,"
-                "%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,"
-                "%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,"
-                "%.10g,%.10g,%.10g,%ld,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g,%.10g",
-                static_cast<long long>(m.step), m.time, m.strain.x, m.strain.y, m.strain.z, m.eps_v,
-                m.eps_d, m.nu, m.p, m.p_star, S.xx, S.yy, S.zz, S.xy, S.xz, S.yz, m.sigma_dev,
-                m.s_dev, F.xx, F.yy, F.zz, F.xy, F.xz, F.yz, m.F_dev, m.C, m.C_nonrattler,
-                m.rattler_fraction, m.E_kin, m.overlap_max_rel, m.overlap_mean_rel, m.E_pot,
-                m.stress_kinetic.trace() / 3.0, m.inertial_number, m.contacts, m.strain_tensor.xy,
-                m.strain_tensor.xz, m.strain_tensor.yz, m.eps_d_eig, m.sigma_dev_eig, m.s_dev_eig, m.F_dev_eig,
-                m.angle_sigma_F, m.angle_sigma_D, m.angle_F_D);
-  return m.frictional ? std::string(buf) + friction_row(m) : std::string(buf);
+  std::string row;
+  row.reserve(1024);
+  char b[40];
+  for (const CurveColumn& c : column_table()) {
+    if (c.group == ColumnGroup::Path || c.group == ColumnGroup::PathSheared) break;
+    if (c.group == ColumnGroup::Rotations && !m.frictional) break;
+    const double v = c.value(m);
+    if (c.integer) std::snprintf(b, sizeof b, "%lld", static_cast<long long>(v));
+    else std::snprintf(b, sizeof b, "%.10g", v);
+    if (!row.empty()) row += ',';
+    row += b;
+  }
+  return row;
 }
 
 }  // namespace dem

@@ -18,10 +18,8 @@
 
 namespace dem {
 
-const std::vector<std::string>& path_columns() {
-  static const std::vector<std::string> cols = {"rate_xx_1_s",  "rate_yy_1_s",  "rate_zz_1_s", "target_xx_Pa",
-                                                "target_yy_Pa", "target_zz_Pa", "target_p_Pa", "control_error_rel",
-                                                "eps_d_accumulated"};
+const std::vector<std::string>& path_columns() {   // the column table's (measure.cpp), written by extra_row
+  static const std::vector<std::string> cols = columns_of(ColumnGroup::Path);
   return cols;
 }
 
@@ -37,7 +35,10 @@ bool path_sheared(const DeformationMode& mode) {
 
 std::vector<std::string> columns_of(bool sheared) {
   std::vector<std::string> c = path_columns();
-  if (sheared) c.insert(c.end(), {"rate_xy_1_s", "rate_xz_1_s", "rate_yz_1_s"});
+  if (sheared) {
+    const std::vector<std::string> shear = columns_of(ColumnGroup::PathSheared);
+    c.insert(c.end(), shear.begin(), shear.end());
+  }
   return c;
 }
 

@@ -69,7 +69,8 @@ struct SubModelInfo {
   bool rotations = false;    ///< needs angular velocities and torques (6 degrees of freedom)
   std::string yade;          ///< the YADE counterpart (classes), or "none"
   std::string lammps;        ///< the LAMMPS `pair granular` counterpart, or "none"
-  std::vector<std::string> curve_columns;   ///< curve columns it adds (names of measure.hpp's table)
+  /// Groups of curve columns it adds (the column table's groups, measure.hpp: "rotations").
+  std::vector<std::string> column_groups;
   std::vector<std::string> vtk_fields;      ///< contact-network fields it adds
   /// Its `dem info` line and curve-preamble text for a law and pair scale.
   std::function<std::string(const ContactLaw&, const PairScale&)> describe;

@@ -133,7 +133,7 @@ inline const SubModelInfo& CundallStrack::info() {
     d.rotations = true;
     d.yade = "FrictMat (young = k/r, poisson = k_t/k, frictionAngle = atan(mu)) + Law2_ScGeom_FrictPhys_CundallStrack";
     d.lammps = "tangential linear_history k_t x_gamma_t mu";
-    d.curve_columns = {"sliding_fraction", "E_rot_J", "omega_mean_rad_s", "E_t_J", "W_friction_J", "sigma_antisym_rel"};
+    d.column_groups = {"rotations"};
     d.vtk_fields = {"sliding", "tangential_force_N"};
     d.describe = [](const ContactLaw& law, const PairScale& s) {
       const double kt = law.get("tangential_stiffness_ratio") * s.k_ref;

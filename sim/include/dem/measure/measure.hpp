@@ -80,16 +80,39 @@ std::vector<char> rattler_flags(int n, const std::vector<std::pair<int, int>>& p
 Measurement measure(const Model& model, const State& state, const NeighborList& list,
                     const VelGrad& strain_rate);
 
-/// Column names of the curve CSV, in order; units are in the names (_Pa, _J, _s) or the
-/// quantity is dimensionless. Shared with yade_ref/ and the fitter.
+/// Which curves have a column: every curve, curves of a model with rotations (a tangential
+/// sub-model: its SubModelInfo::curve_columns names this group), loading-path curves, and
+/// path curves with a shear stage.
+enum class ColumnGroup { Every, Rotations, Path, PathSheared };
+
+/// One curve column, defined once: the CSV header, `dem info --columns [--json]`, the docs'
+/// column list (docs/curve_columns.md, generated), demtk's measure() and yade_ref/run_mode.py
+/// read this table.
+struct CurveColumn {
+  const char* name;      ///< header name; its suffix names the unit (_Pa, _J, _s, _1_s, _deg, _rad_s)
+  const char* unit;      ///< "1" (dimensionless), "Pa", "J", "s", "1/s", "deg", "rad/s", "count"
+  const char* meaning;   ///< one line
+  ColumnGroup group;
+  /// Its value in a Measurement (nullptr for path columns: the path runner writes them, path.cpp).
+  double (*value)(const Measurement&);
+  bool integer = false;  ///< written as an integer (step, contacts)
+};
+
+/// Every column, in file order (every, rotations, path, path with shear; `stage` last, not listed).
+const std::vector<CurveColumn>& column_table();
+/// The group's name in text and JSON ("every", "rotations", "path", "path_sheared").
+const char* group_name(ColumnGroup g);
+/// The names of one group's columns, in order.
+std::vector<std::string> columns_of(ColumnGroup g);
+
+/// Column names of the curve CSV every curve has, in order (the Every group).
 const std::vector<std::string>& curve_columns();
 
-/// One CSV row (no newline) in the order of curve_columns(); `stage` is appended last.
+/// One CSV row (no newline) of the Every columns and, when m.frictional, the Rotations ones;
+/// `stage` is appended last by the curve file.
 std::string curve_row(const Measurement& m);
 
-/// The columns a frictional curve adds after curve_columns() (curve_row appends their values
-/// when m.frictional): sliding_fraction, E_rot_J, omega_mean_rad_s, E_t_J, W_friction_J,
-/// sigma_antisym_rel (|antisymmetric stress| / p: the torque-balance check).
+/// The columns a frictional curve adds after curve_columns() (the Rotations group).
 const std::vector<std::string>& friction_columns();
 
 }  // namespace dem
