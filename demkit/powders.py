@@ -22,7 +22,8 @@ inverse sigma_c / sigma_1 (finite through a zero cohesion), and its interval is 
 that interval (the upper end infinite when the interval of 1/ffc reaches 0).
 
     /usr/bin/python3 -m demkit.powders --out DIR --label NAME RUN [RUN ...]      # one adhesion level
-    /usr/bin/python3 -m demkit.powders --table OUT_DIR LEVEL_DIR [LEVEL_DIR ...]  # the table over levels
+    /usr/bin/python3 -m demkit.powders --table --out DIR LEVEL_DIR [LEVEL_DIR ...]  # the table over levels
+    /usr/bin/python3 -m demkit.powders --sweep --out DIR SWEEP_DIR    # a `dem ensemble --sweep` of the scene
 """
 import argparse
 import csv
@@ -230,6 +231,50 @@ def rumpf_tensile_strength(nu, coordination, f_bond, d):
 
 
 # ------------------------------------------------------------------------------------------
+# Compaction and tensile strength (data/scenes/powder_compaction.toml)
+
+def stage_ends(curve, prefix):
+    """[(stage, sigma_zz [Pa], nu, control error, E_kin/E_pot)] at the last row of each stage whose
+    name starts with prefix, in order (the packing at rest at that stage's target)."""
+    out = []
+    for name in dict.fromkeys(curve["stage"].tolist()):
+        if name.startswith(prefix):
+            i = np.flatnonzero(curve["stage"] == name)[-1]
+            out.append((name, float(curve["sigma_zz_Pa"][i]), float(curve["nu"][i]),
+                        float(curve["control_error_rel"][i]), float(curve["E_kin_J"][i] / curve["E_pot_J"][i])))
+    return out
+
+
+def compaction_tensile(run):
+    """From a run of powder_compaction.toml: the loose state (the stress-controlled preparation's
+    end), nu at rest at each load and unload step (sigma_zz, nu), the uniaxial tensile strength
+    -min(sigma_zz) of the compaction path's extend stage, the isotropic one -min(p) of iso_ext's, and
+    what Rumpf's estimate needs: nu and C where the extension starts, and the mean overlap at the
+    end of the 1e8 Pa step (the consolidation; delta_max of a typical contact)."""
+    hits = sorted(glob.glob(os.path.join(run, "deviatoric", "compaction_phi*.csv")))
+    if not hits:
+        raise CurveError(f"{run}: no deviatoric/compaction_phi*.csv (run data/scenes/powder_compaction.toml there)")
+    c = read_curve(hits[0])
+    prep = read_curve(os.path.join(run, "prep", "loose.csv"))
+    out = {"run": run, "nu_loose": float(prep["nu"][-1]), "sigma_zz_loose_Pa": float(prep["sigma_zz_Pa"][-1]),
+           "loose_error": float(prep["control_error_rel"][-1]),
+           "load": stage_ends(c, "load_"), "unload": stage_ends(c, "unload_")}
+    top = np.flatnonzero(c["stage"] == out["load"][-1][0])[-1]
+    out["overlap_consolidated_rel"] = float(c["overlap_mean_rel"][top])
+    out["sigma_consolidated_Pa"] = float(c["sigma_zz_Pa"][top])
+    ext = np.flatnonzero(c["stage"] == "extend")
+    out["nu_ext"], out["C_ext"] = float(c["nu"][ext[0]]), float(c["C"][ext[0]])
+    out["tensile_uniaxial_Pa"] = float(-c["sigma_zz_Pa"][ext].min())
+    iso = sorted(glob.glob(os.path.join(run, "deviatoric", "iso_ext_phi*.csv")))
+    if iso:
+        ci = read_curve(iso[0])
+        e = np.flatnonzero(ci["stage"] == "extend")
+        out["tensile_isotropic_Pa"] = float(-ci["p_Pa"][e].min())
+        out["C_ext_iso"], out["nu_ext_iso"] = float(ci["C"][e[0]]), float(ci["nu"][e[0]])
+    return out
+
+
+# ------------------------------------------------------------------------------------------
 # Output
 
 
@@ -363,6 +408,53 @@ def level_extra(members, scene_keys):
     return {"Bo": mean, "Bo_ci95": h, "kc_over_k1": kc / k1}
 
 
+def sweep_levels(folder):
+    """{row name: [member run folders]} of a `dem ensemble --sweep` folder (rows/NAME/members/mKKK)
+    or of a plain ensemble folder (members/mKKK: one level named after the folder)."""
+    rows = sorted(glob.glob(os.path.join(folder, "rows", "*")))
+    if not rows:
+        rows = [folder]
+    out = {}
+    for r in rows:
+        members = sorted(m for m in glob.glob(os.path.join(r, "members", "m*")) if glob.glob(
+            os.path.join(m, "deviatoric", "shear_tester_phi*.csv")))
+        if members:
+            out[os.path.basename(os.path.normpath(r))] = members
+    if not out:
+        raise CurveError(f"{folder}: no rows/*/members/m*/deviatoric/shear_tester_phi*.csv (a dem ensemble of "
+                         "data/scenes/shear_tester.toml)")
+    return out
+
+
+def scene_luding(run):
+    """k1, kp, kc, phi_f and the mean diameter of a run folder's scene.toml (for the Bond number)."""
+    import tomllib
+    with open(os.path.join(run, "scene.toml"), "rb") as fh:
+        sc = tomllib.load(fh)
+    c, p = sc.get("contact", {}), sc.get("particles", {})
+    k1 = float(c.get("stiffness_N_m", 1e8))
+    return {"k1": k1, "kp": float(c.get("luding_kp_N_m", 5 * k1)), "kc": float(c.get("luding_kc_N_m", 0.0)),
+            "phi_f": float(c.get("luding_plasticity_depth", 0.05)),
+            "d": float(p.get("radius_min_m", 0.5e-3)) + float(p.get("radius_max_m", 1.5e-3))}
+
+
+def analyse_sweep(folder, out):
+    """Every row of a sweep: its level folder under out/levels/NAME, then the table and plots."""
+    sums = []
+    for name, members in sweep_levels(folder).items():
+        rows = [analyse_run(m) for m in members]
+        keys = scene_luding(members[0])
+        s = write_level(rows, os.path.join(out, "levels", name), name, level_extra(rows, keys))
+        s["members"] = rows
+        s["sigma_2_mean_Pa"] = float(np.mean([m["sigma_2_Pa"] for m in rows]))
+        sums.append(s)
+    sums.sort(key=lambda s: s.get("kc_over_k1", 0))
+    write_table(sums, out)
+    plot_loci(sums, out)
+    plot_flow_function(sums, out)
+    return sums
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -370,9 +462,14 @@ def main(argv=None):
     ap.add_argument("--out", required=True, help="output folder")
     ap.add_argument("--label", default="", help="the level's name (e.g. kc/k1=0.5)")
     ap.add_argument("--table", action="store_true", help="collect level folders (summary.json) into the table and plots")
+    ap.add_argument("--sweep", action="store_true", help="RUN is a `dem ensemble --sweep` folder: every row a level")
     ap.add_argument("--luding", default="", help="k1,kp,kc,phi_f,d (N/m, -, m) for the Bond number of a level")
     a = ap.parse_args(argv)
     try:
+        if a.sweep:
+            analyse_sweep(a.runs[0], a.out)
+            print(open(os.path.join(a.out, "table.md")).read())
+            return 0
         if a.table:
             sums = []
             for lvl in a.runs:

@@ -2,6 +2,7 @@
 synthetic Mohr circles with known sigma_c and sigma_1 recovers them, the flowability classes, the
 averaging over packings, and the closed forms of Luding's pull-off force and Rumpf's estimate."""
 import math
+import os
 
 import numpy as np
 import pytest
@@ -98,3 +99,23 @@ def test_pull_off_force_equals_the_least_force_of_the_law_along_an_unloading(dma
 def test_rumpf_and_bond_number_closed_forms():
     assert powders.rumpf_tensile_strength(0.6, 6.0, 1e-3, 2e-3) == pytest.approx(0.6 * 6 * 1e-3 / (math.pi * 4e-6))
     assert powders.bond_number(2.0, 1e6, 1e-3) == pytest.approx(2.0)
+
+
+@pytest.mark.parametrize("dmax_over_star,kc_over_k1", [(0.3, 0.5), (0.7, 5.0), (1.3, 2.0)])
+def test_two_particle_pull_off_through_the_engine_equals_the_closed_form(dmax_over_star, kc_over_k1):
+    """Two spheres pressed to delta_max and pulled apart by a prescribed overlap rate through our
+    engine (bench/luding_pair.py's loop, demtk): the most tensile force is the closed-form pull-off
+    force kc (k2 - k1) delta_max / (k2 + kc) (written from the law, not from the engine)."""
+    pytest.importorskip("demtk")
+    import sys
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                                    "bench"))
+    import luding_pair as lp
+    phi_f, kc = 0.01, kc_over_k1 * lp.K1
+    rows = lp.run_loop(lp.scene(kc, phi_f), [0.0, dmax_over_star, 0.0], 4000)
+    f_min = min(f for _, _, f in rows)
+    law = lp.law(kc, phi_f)
+    expected = powders.luding_pull_off(lp.K1, lp.KP, kc, phi_f, law.a12, dmax_over_star * law.delta_star)
+    # the overlap moves delta*/4000 per step: the discrete minimum misses the corner by < kc of that
+    assert -f_min == pytest.approx(expected, rel=0, abs=kc * law.delta_star / 4000 + 1e-9 * expected)
+    assert max(d for _, d, _ in rows) == pytest.approx(dmax_over_star * law.delta_star, rel=1e-6)
