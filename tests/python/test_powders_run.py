@@ -37,7 +37,7 @@ preparation = [
 ]
 modes_from = "loose"
 modes = ["shear_tester", "pull"]
-deviatoric_rate_tc = 2e-4
+deviatoric_rate_tc = 1e-4
 [paths]
 shear_tester = [
   {{ name = "preshear0", rate = "SS_xz", sigma_Pa = {{ z = 1e8 }}, until = {{ eps_d = 0.12 }} }},
@@ -96,10 +96,11 @@ def test_shear_tester_builds_the_locus_and_assigns_classes(runs):
         assert abs(s1 / 6e7 - 1) < 0.25 and abs(s2 / 3e7 - 1) < 0.4
         assert r["sigma_1_Pa"] > r["sigma_pre_Pa"] > 0
         assert r["class"] in [name for _, name in powders.CLASSES]
-        assert 0 < r["servo_error_mean"] < 0.05                      # sigma_zz held at sigma_pre
+        assert 0 < r["servo_error_mean"] < 0.06      # sigma_zz held at sigma_pre: 3.6 % and 4.3 % at this fast rate
     strong, none = res["kc5"], res["kc0"]
     assert strong["c_Pa"] > none["c_Pa"]
     assert strong["sigma_c_Pa"] > 0 and math.isfinite(strong["ffc"])
+    assert strong["ffc"] < none["ffc"]          # adhesion makes it less flowable
     s = powders.summarise([strong], "kc5")
     assert s["class"] == strong["class"]
 
