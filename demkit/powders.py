@@ -9,7 +9,9 @@ The construction (Schulze, "Powders and Bulk Solids", Springer 2008, ch. 3; Jeni
   tangent to the YL, sigma_c = 2 c cos(phi_lin) / (1 - sin(phi_lin));
 - the major consolidation stress sigma_1: the Mohr circle through the pre-shear point
   (sigma_pre, tau_pre) tangent to the YL (of the two such circles the one that touches the YL at
-  or left of the pre-shear point, where the YL ends), sigma_1 = its centre + radius;
+  or left of the pre-shear point, where the YL ends; a pre-shear point above the YL, where there is
+  none: the circle through it whose tangent there has the YL's slope, Jenike's end point E),
+  sigma_1 = its centre + radius;
 - the effective angle of internal friction phi_e: the line through the origin tangent to that
   circle, sin(phi_e) = (sigma_1 - sigma_2) / (sigma_1 + sigma_2);
 - ffc = sigma_1 / sigma_c and its class (Jenike; Schulze's table): ffc < 1 not flowing, 1-2 very
@@ -75,15 +77,16 @@ def steady_state_circle(c, phi, sigma_pre, tau_pre):
     Tangency: radius = c cos(phi) + centre sin(phi); through the point: (sigma_pre - centre)^2 +
     tau_pre^2 = radius^2, a quadratic in the centre; of its two roots the circle whose tangent point
     lies at or left of the pre-shear point is taken (the YL ends at the pre-shear point). A pre-shear point
-    above the YL (no such circle) gives the circle tangent at the point's projection on the YL."""
+    above the YL (no such circle; a locus that is concave at small stresses) gives the circle through
+    the point whose tangent there has the YL's slope (Jenike's end point E of the locus:
+    centre sigma_pre + tau_pre tan(phi), radius tau_pre / cos(phi))."""
     sp, cp = math.sin(phi), math.cos(phi)
     a = cp * cp
     b = -2 * (sigma_pre + c * sp * cp)
     k = sigma_pre ** 2 + tau_pre ** 2 - (c * cp) ** 2
     disc = b * b - 4 * a * k
-    if disc < 0:     # the point lies above the locus: tangent at its projection
-        foot = (sigma_pre + (tau_pre - c) * math.tan(phi)) / (1 + math.tan(phi) ** 2)
-        centre = foot + (c + foot * math.tan(phi)) * math.tan(phi)
+    if disc < 0:     # the point lies above the locus: the circle through it with the YL's slope there
+        return sigma_pre + tau_pre * math.tan(phi), tau_pre / cp
     else:   # the root whose tangent point (centre - radius sin(phi)) lies at or left of the point
         roots = sorted(((-b - math.sqrt(disc)) / (2 * a), (-b + math.sqrt(disc)) / (2 * a)))
         left = [r for r in roots if r - (c * cp + r * sp) * sp <= sigma_pre * (1 + 1e-12)]
@@ -408,6 +411,105 @@ def level_extra(members, scene_keys):
     return {"Bo": mean, "Bo_ci95": h, "kc_over_k1": kc / k1}
 
 
+def finished(run):
+    """A run folder whose manifest.json says complete (runs still going are left out)."""
+    try:
+        with open(os.path.join(run, "manifest.json")) as fh:
+            return json.load(fh).get("complete") is True
+    except (OSError, ValueError):
+        return False
+
+
+def compaction_levels(level_dirs, out):
+    """Compaction and tensile strength over packings, one level (adhesion) per folder of run
+    folders (LEVEL/s*/): compaction.csv, compaction.md and compaction.{png,svg}."""
+    rows, per_level = [], {}
+    for lvl in level_dirs:
+        runs = sorted(r for r in glob.glob(os.path.join(lvl, "*")) if finished(r))
+        res = [compaction_tensile(r) for r in runs]
+        if not res:
+            raise CurveError(f"{lvl}: no run folders with a compaction curve")
+        keys = scene_luding(runs[0])
+        name = os.path.basename(os.path.normpath(lvl))
+        per_level[name] = res
+        row = {"label": name, "K": len(res), "kc_over_k1": keys["kc"] / keys["k1"]}
+        for q in ("nu_loose", "tensile_uniaxial_Pa", "tensile_isotropic_Pa", "C_ext", "C_ext_iso", "nu_ext",
+                  "overlap_consolidated_rel"):
+            row[q], row[q + "_ci95"], _, _ = mean_ci([r.get(q, math.nan) for r in res])
+        for key in ("load", "unload"):
+            for k, step in enumerate(res[0][key]):
+                m, h, _, _ = mean_ci([r[key][k][2] for r in res])
+                row[f"nu_{step[0]}"], row[f"nu_{step[0]}_ci95"] = m, h
+        # Rumpf with the pull-off force at the mean consolidation overlap
+        r_mean = keys["d"] / 2
+        f = [luding_pull_off(keys["k1"], keys["kp"], keys["kc"], keys["phi_f"], r_mean / 2,
+                             r["overlap_consolidated_rel"] * r_mean) for r in res]
+        row["f_pull_N"] = float(np.mean(f))
+        row["Bo_consolidation"] = bond_number(row["f_pull_N"], float(np.mean([r["sigma_consolidated_Pa"] for r in res])),
+                                              keys["d"])
+        rumpf_u = [rumpf_tensile_strength(r["nu_ext"], r["C_ext"], fi, keys["d"]) for r, fi in zip(res, f)]
+        rumpf_i = [rumpf_tensile_strength(r["nu_ext_iso"], r["C_ext_iso"], fi, keys["d"]) for r, fi in zip(res, f)
+                   if "nu_ext_iso" in r]
+        row["rumpf_uniaxial_Pa"], row["rumpf_uniaxial_Pa_ci95"], _, _ = mean_ci(rumpf_u)
+        row["rumpf_isotropic_Pa"], row["rumpf_isotropic_Pa_ci95"], _, _ = mean_ci(rumpf_i)
+        rows.append(row)
+    cols = list(rows[0].keys())
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(cols)
+    for r in rows:
+        w.writerow([r[c] if isinstance(r[c], str) else f"{r[c]:.6g}" for c in cols])
+    write_atomic(os.path.join(out, "compaction.csv"), buf.getvalue())
+    steps = [k for k in cols if k.startswith("nu_load_") or k.startswith("nu_unload_")]
+    steps = [k for k in steps if not k.endswith("_ci95")]
+    lines = ["| level | K | ν loose (σ_zz = 1 MPa, prep) | " + " | ".join(
+                 ("ν at " + k[3:].replace("_", " ") + " Pa") for k in steps) + " |",
+             "|---|---|---|" + "---|" * len(steps)]
+    for r in rows:
+        lines.append(f"| {r['label']} | {r['K']} | {fmt(r['nu_loose'], r['nu_loose_ci95'])} | " +
+                     " | ".join(fmt(r[k], r[k + '_ci95']) for k in steps) + " |")
+    lines += ["", "| level | K | Bo (at 100 MPa) | C at extension | σ_t uniaxial [MPa] | Rumpf uniaxial [MPa] | "
+              "σ_t isotropic [MPa] | Rumpf isotropic [MPa] |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['label']} | {r['K']} | {fmt(r['Bo_consolidation'])} | {fmt(r['C_ext'], r['C_ext_ci95'])} | "
+                     f"{fmt(r['tensile_uniaxial_Pa'] / 1e6, r['tensile_uniaxial_Pa_ci95'] / 1e6)} | "
+                     f"{fmt(r['rumpf_uniaxial_Pa'] / 1e6, r['rumpf_uniaxial_Pa_ci95'] / 1e6)} | "
+                     f"{fmt(r['tensile_isotropic_Pa'] / 1e6, r['tensile_isotropic_Pa_ci95'] / 1e6)} | "
+                     f"{fmt(r['rumpf_isotropic_Pa'] / 1e6, r['rumpf_isotropic_Pa_ci95'] / 1e6)} |")
+    write_atomic(os.path.join(out, "compaction.md"), "\n".join(lines) + "\n")
+    plot_compaction(per_level, out)
+    return rows
+
+
+def plot_compaction(per_level, out):
+    """nu against sigma_zz at rest on each load and unload step, mean and 95 % interval per level."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(5.2, 4))
+    for k, (name, res) in enumerate(per_level.items()):
+        for key, style in (("load", "-o"), ("unload", "--s")):
+            sig = np.array([[st[1] for st in r[key]] for r in res]).mean(axis=0) / 1e6
+            nus = np.array([[st[2] for st in r[key]] for r in res])
+            m = nus.mean(axis=0)
+            h = [mean_ci(nus[:, j])[1] for j in range(nus.shape[1])]
+            ax.errorbar(sig, m, yerr=np.nan_to_num(h), fmt=style, color=f"C{k}", ms=4, capsize=2,
+                        label=f"{name} {key}")
+        loose = np.array([(r["sigma_zz_loose_Pa"], r["nu_loose"]) for r in res])
+        ax.plot(loose[:, 0].mean() / 1e6, loose[:, 1].mean(), "^", color=f"C{k}", ms=6)
+    ax.set_xscale("log")
+    ax.set_xlabel("σ_zz [MPa] (confined: x, y fixed)")
+    ax.set_ylabel("volume fraction ν")
+    ax.set_title("confined compaction in load steps, at rest (▲: the loose state)", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    for ext in ("png", "svg"):
+        buf = io.BytesIO()
+        fig.savefig(buf, format=ext, dpi=120)
+        write_atomic(os.path.join(out, f"compaction.{ext}"), buf.getvalue())
+    plt.close(fig)
+
+
 def sweep_levels(folder):
     """{row name: [member run folders]} of a `dem ensemble --sweep` folder (rows/NAME/members/mKKK)
     or of a plain ensemble folder (members/mKKK: one level named after the folder)."""
@@ -440,8 +542,16 @@ def scene_luding(run):
 
 def analyse_sweep(folder, out):
     """Every row of a sweep: its level folder under out/levels/NAME, then the table and plots."""
+    return analyse_levels(sweep_levels(folder), out)
+
+
+def analyse_levels(levels, out):
+    """{name: [run folders]}: each level's members.csv and summary.json under out/levels/NAME,
+    then table.csv, table.md, yield_loci.{png,svg} and flow_function.{png,svg} in out."""
     sums = []
-    for name, members in sweep_levels(folder).items():
+    for name, members in levels.items():
+        if not members:
+            continue
         rows = [analyse_run(m) for m in members]
         keys = scene_luding(members[0])
         s = write_level(rows, os.path.join(out, "levels", name), name, level_extra(rows, keys))
@@ -463,9 +573,22 @@ def main(argv=None):
     ap.add_argument("--label", default="", help="the level's name (e.g. kc/k1=0.5)")
     ap.add_argument("--table", action="store_true", help="collect level folders (summary.json) into the table and plots")
     ap.add_argument("--sweep", action="store_true", help="RUN is a `dem ensemble --sweep` folder: every row a level")
+    ap.add_argument("--compaction", action="store_true",
+                    help="RUNS are level folders of powder_compaction.toml runs (LEVEL/s*/): compaction and tensile tables")
+    ap.add_argument("--levels", action="store_true",
+                    help="RUNS are level folders of shear_tester.toml runs (LEVEL/s*/): every level, then the table")
     ap.add_argument("--luding", default="", help="k1,kp,kc,phi_f,d (N/m, -, m) for the Bond number of a level")
     a = ap.parse_args(argv)
     try:
+        if a.compaction:
+            compaction_levels(a.runs, a.out)
+            print(open(os.path.join(a.out, "compaction.md")).read())
+            return 0
+        if a.levels:
+            analyse_levels({os.path.basename(os.path.normpath(d)): sorted(
+                r for r in glob.glob(os.path.join(d, "*")) if finished(r)) for d in a.runs}, a.out)
+            print(open(os.path.join(a.out, "table.md")).read())
+            return 0
         if a.sweep:
             analyse_sweep(a.runs[0], a.out)
             print(open(os.path.join(a.out, "table.md")).read())

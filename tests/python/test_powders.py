@@ -57,10 +57,12 @@ def test_cohesionless_locus_is_free_flowing_with_phi_e_equal_to_phi():
     assert negative["sigma_c_Pa"] == 0 and negative["ffc"] == math.inf
 
 
-def test_a_preshear_point_above_the_locus_gives_the_tangent_circle_at_its_projection():
+def test_a_preshear_point_above_the_locus_gives_the_circle_through_it_with_the_locus_slope():
     pts, pre, _, _ = synthetic(1.0, 30, 10.0, 60)
-    centre, radius = powders.steady_state_circle(1.0, math.radians(30), pre[0], pre[1] + 5.0)
-    assert radius == pytest.approx(1.0 * math.cos(math.radians(30)) + centre * 0.5, rel=1e-12)
+    sp, tp = pre[0], pre[1] + 5.0
+    centre, radius = powders.steady_state_circle(1.0, math.radians(30), sp, tp)
+    assert math.hypot(sp - centre, tp) == pytest.approx(radius, rel=1e-12)        # through the point
+    assert (centre - sp) / tp == pytest.approx(math.tan(math.radians(30)), rel=1e-12)   # slope of the YL there
 
 
 @pytest.mark.parametrize("ffc,name", [(0.5, "not flowing"), (1.5, "very cohesive"), (3.0, "cohesive"),
