@@ -545,6 +545,25 @@ def analyse_sweep(folder, out):
     return analyse_levels(sweep_levels(folder), out)
 
 
+TRIM_COLUMNS = ("step", "eps_d_accumulated", "sigma_zz_Pa", "sigma_xz_Pa", "target_zz_Pa", "control_error_rel", "nu",
+                "C", "overlap_mean_rel", "inertial_number", "stage")
+
+
+def trim_curve(src, dst, columns=TRIM_COLUMNS):
+    """A copy of a curve with its comment lines and only `columns` (for data/)."""
+    with open(src) as fh:
+        lines = fh.read().splitlines()
+    comments = [ln for ln in lines if ln.startswith("#")]
+    rows = list(csv.reader(ln for ln in lines if ln and not ln.startswith("#")))
+    keep = [rows[0].index(c) for c in columns if c in rows[0]]
+    buf = io.StringIO()
+    buf.write("\n".join(comments) + "\n")
+    w = csv.writer(buf, lineterminator="\n")
+    for r in rows:
+        w.writerow([r[k] for k in keep])
+    write_atomic(dst, buf.getvalue())
+
+
 def analyse_levels(levels, out):
     """{name: [run folders]}: each level's members.csv and summary.json under out/levels/NAME,
     then table.csv, table.md, yield_loci.{png,svg} and flow_function.{png,svg} in out."""
@@ -555,6 +574,7 @@ def analyse_levels(levels, out):
         rows = [analyse_run(m) for m in members]
         keys = scene_luding(members[0])
         s = write_level(rows, os.path.join(out, "levels", name), name, level_extra(rows, keys))
+        trim_curve(find_curve(members[0]), os.path.join(out, "levels", name, "curve_first_packing.csv"))
         s["members"] = rows
         s["sigma_2_mean_Pa"] = float(np.mean([m["sigma_2_Pa"] for m in rows]))
         sums.append(s)
