@@ -158,12 +158,26 @@ def find_curve(run):
     return hits[0]
 
 
+def run_cost(run):
+    """(time steps, wall seconds) of a run folder, summed over its manifest's stages (NaN if none)."""
+    try:
+        with open(os.path.join(run, "manifest.json")) as fh:
+            outs = json.load(fh).get("outputs", [])
+    except (OSError, ValueError):
+        return math.nan, math.nan
+    timed = [o for o in outs if "steps" in o]
+    if not timed:
+        return math.nan, math.nan
+    return float(sum(o["steps"] for o in timed)), float(sum(o["wall_s"] for o in timed))
+
+
 def analyse_run(run):
     path = find_curve(run)
     points, pre, extra = shear_test_points(read_curve(path), path)
     out = analyse_locus(points, pre)
     out.update(extra)
     out["run"] = run
+    out["steps"], out["wall_s"] = run_cost(run) if os.path.isdir(run) else (math.nan, math.nan)
     return out
 
 
@@ -183,7 +197,7 @@ def mean_ci(values):
 
 
 QUANTITIES = ("sigma_pre_Pa", "tau_pre_Pa", "sigma_1_Pa", "sigma_c_Pa", "c_Pa", "phi_lin_deg", "phi_e_deg",
-              "nu", "C", "overlap_mean_rel", "servo_error_mean", "servo_error_max")
+              "nu", "C", "overlap_mean_rel", "servo_error_mean", "servo_error_max", "steps", "wall_s")
 
 
 def summarise(members, label="", extra=None):
@@ -293,7 +307,8 @@ def fmt(v, e=None):
 def write_level(members, out, label, extra=None):
     """members.csv (one row per packing) and summary.json of one adhesion level."""
     cols = ["run", "sigma_pre_Pa", "tau_pre_Pa", "sigma_1_Pa", "sigma_2_Pa", "sigma_c_Pa", "c_Pa", "phi_lin_deg",
-            "phi_e_deg", "ffc", "class", "nu", "C", "overlap_mean_rel", "servo_error_mean", "servo_error_max"]
+            "phi_e_deg", "ffc", "class", "nu", "C", "overlap_mean_rel", "servo_error_mean", "servo_error_max", "steps",
+            "wall_s"]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(cols + ["failure_points_sigma_n_Pa:tau_f_Pa"])
@@ -308,7 +323,7 @@ def write_level(members, out, label, extra=None):
 
 TABLE_COLS = ("label", "K", "Bo", "Bo_ci95", "sigma_pre_Pa", "sigma_1_Pa", "sigma_1_Pa_ci95", "sigma_c_Pa",
               "sigma_c_Pa_ci95", "ffc", "ffc_lo", "ffc_hi", "class", "phi_e_deg", "phi_e_deg_ci95", "phi_lin_deg",
-              "phi_lin_deg_ci95", "c_Pa", "c_Pa_ci95", "nu", "C", "servo_error_mean")
+              "phi_lin_deg_ci95", "c_Pa", "c_Pa_ci95", "nu", "C", "servo_error_mean", "servo_error_max", "steps", "wall_s")
 
 
 def write_table(summaries, out):
@@ -376,16 +391,18 @@ def plot_flow_function(summaries, out):
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(5, 4.2))
     top = max(s["sigma_1_Pa"] for s in summaries) / 1e6 * 1.2
+    ytop = top / 1.5
     x = np.linspace(0, top, 10)
-    for (bound, name), (_, nxt) in zip(CLASSES[:-1], CLASSES[1:]):
+    for bound, name in CLASSES[:-1]:
         ax.plot(x, x / bound, color="0.7", lw=0.8)
-        ax.text(top * 0.98, top / bound * 0.98, f"ffc = {bound:g}", fontsize=7, ha="right", va="top", color="0.4")
+        xl = min(top, ytop * bound) * 0.97
+        ax.text(xl, xl / bound, f"ffc = {bound:g}", fontsize=7, ha="right", va="bottom", color="0.4")
     for s in summaries:
         ax.errorbar(s["sigma_1_Pa"] / 1e6, s["sigma_c_Pa"] / 1e6, xerr=s["sigma_1_Pa_ci95"] / 1e6,
                     yerr=s["sigma_c_Pa_ci95"] / 1e6, fmt="o", capsize=3,
                     label=f"{s['label']}: ffc {fmt(s['ffc'])} ({s['class']})")
     ax.set_xlim(0, top)
-    ax.set_ylim(0, top / 1.5)
+    ax.set_ylim(0, ytop)
     ax.set_xlabel("major consolidation stress σ₁ [MPa]")
     ax.set_ylabel("unconfined yield strength σ_c [MPa]")
     ax.set_title("flow function (95 % intervals over packings)", fontsize=9)
