@@ -45,6 +45,7 @@ from demkit.curves import CurveError, read_curve, require
 CLASSES = ((1.0, "not flowing"), (2.0, "very cohesive"), (4.0, "cohesive"), (10.0, "easy-flowing"),
            (math.inf, "free-flowing"))
 PRESHEAR_TAIL = 0.5     # the steady pre-shear value: mean over the last half of a pre-shear stage's rows
+PEAK_WINDOW = 5         # rows (0.01 of strain at the scene's sampling) of the running mean whose peak is tau_f
 
 
 def flow_class(ffc):
@@ -117,7 +118,8 @@ def analyse_locus(points, preshear):
 
 def shear_test_points(curve, path="curve"):
     """From a shear-tester path curve: the shear-to-failure points (sigma_n, tau_f) of its stages
-    named shear_*, tau_f = the peak of tau = -sigma_xz and sigma_n = sigma_zz at that row, and the
+    named shear_*, tau_f = the peak of tau = -sigma_xz (a running mean over PEAK_WINDOW rows) and
+    sigma_n = sigma_zz (the same mean) there, and the
     pre-shear point: the mean (sigma_zz, tau) over the last half of each preshear* stage's rows,
     averaged over those stages. Also the servo's error on sigma_zz, the mean overlap and the
     coordination number at the end of the pre-shear (for the Bond number and Rumpf)."""
@@ -129,8 +131,13 @@ def shear_test_points(curve, path="curve"):
     for name in names:
         rows = np.flatnonzero(stage == name)
         if name.startswith("shear_") and rows.size:
-            k = rows[np.argmax(tau[rows])]
-            points.append((float(curve["sigma_zz_Pa"][k]), float(tau[k])))
+            # the peak of tau smoothed over PEAK_WINDOW rows: the max of the raw, noisy signal is biased up
+            w = min(PEAK_WINDOW, rows.size)
+            kern = np.ones(w) / w
+            t_s = np.convolve(tau[rows], kern, mode="valid")
+            s_s = np.convolve(curve["sigma_zz_Pa"][rows], kern, mode="valid")
+            k = int(np.argmax(t_s))
+            points.append((float(s_s[k]), float(t_s[k])))
         if name.startswith("preshear") and rows.size >= 4:
             tail = rows[int(rows.size * (1 - PRESHEAR_TAIL)):]
             tails.append(tail)
