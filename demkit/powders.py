@@ -342,11 +342,12 @@ def write_table(summaries, out):
         w.writerow([s.get(c, "") if isinstance(s.get(c, ""), str) else f"{s.get(c, math.nan):.6g}"
                     for c in TABLE_COLS])
     write_atomic(os.path.join(out, "table.csv"), buf.getvalue())
-    lines = ["| level | K | Bo | σ₁ [MPa] | σ_c [MPa] | ffc (95 %) | class | φ_e [°] | φ_lin [°] | c [MPa] | ν | C |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| level | kc/k1 | σ_pre [MPa] | K | Bo | σ₁ [MPa] | σ_c [MPa] | ffc (95 %) | class | φ_e [°] | φ_lin [°] | "
+             "c [MPa] | ν | C |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in summaries:
         ffc = f"{fmt(s['ffc'])} ({fmt(s['ffc_lo'])}–{fmt(s['ffc_hi'])})"
-        lines.append(f"| {s['label']} | {s['K']} | {fmt(s.get('Bo', math.nan), s.get('Bo_ci95'))} | "
+        lines.append(f"| {s['label']} | {s.get('kc_over_k1', math.nan):g} | {s['sigma_pre_Pa'] / 1e6:.0f} | {s['K']} | "
+                     f"{fmt(s.get('Bo', math.nan), s.get('Bo_ci95'))} | "
                      f"{fmt(s['sigma_1_Pa'] / 1e6, s['sigma_1_Pa_ci95'] / 1e6)} | "
                      f"{fmt(s['sigma_c_Pa'] / 1e6, s['sigma_c_Pa_ci95'] / 1e6)} | {ffc} | {s['class']} | "
                      f"{fmt(s['phi_e_deg'], s['phi_e_deg_ci95'])} | {fmt(s['phi_lin_deg'], s['phi_lin_deg_ci95'])} | "
@@ -360,8 +361,12 @@ def plot_loci(summaries, out):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(1, len(summaries), figsize=(4.2 * len(summaries), 4), squeeze=False)
-    for ax, s in zip(axes[0], summaries):
+    ncol = min(4, len(summaries))
+    nrow = -(-len(summaries) // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.0 * nrow), squeeze=False)
+    for ax in axes.flat[len(summaries):]:
+        ax.set_visible(False)
+    for ax, s in zip(axes.flat, summaries):
         pts = np.array([p for m in s["members"] for p in m["points"]]) / 1e6
         ax.plot(pts[:, 0], pts[:, 1], "o", ms=3, color="0.5", label="shear to failure")
         pre = np.array([(m["sigma_pre_Pa"], m["tau_pre_Pa"]) for m in s["members"]]) / 1e6
@@ -381,7 +386,7 @@ def plot_loci(summaries, out):
         ax.set_aspect("equal")
         ax.set_xlabel("σ [MPa]")
         ax.set_ylabel("τ [MPa]")
-        ax.set_title(f"{s['label']}: ffc = {fmt(s['ffc'])}", fontsize=9)
+        ax.set_title(f"{s['label']} (kc/k1 = {s.get('kc_over_k1', math.nan):g}): ffc = {fmt(s['ffc'])}", fontsize=9)
         ax.legend(fontsize=6, loc="upper left")
     fig.tight_layout()
     for ext in ("png", "svg"):
@@ -408,6 +413,13 @@ def plot_flow_function(summaries, out):
         ax.errorbar(s["sigma_1_Pa"] / 1e6, s["sigma_c_Pa"] / 1e6, xerr=s["sigma_1_Pa_ci95"] / 1e6,
                     yerr=s["sigma_c_Pa_ci95"] / 1e6, fmt="o", capsize=3,
                     label=f"{s['label']}: ffc {fmt(s['ffc'])} ({s['class']})")
+    groups = {}
+    for s in summaries:   # one adhesion at several pre-shear stresses: the flow function as a line
+        groups.setdefault(s.get("kc_over_k1"), []).append((s["sigma_1_Pa"] / 1e6, s["sigma_c_Pa"] / 1e6))
+    for kc, pts in groups.items():
+        if len(pts) > 1:
+            pts.sort()
+            ax.plot(*zip(*pts), color="0.3", lw=0.8, ls="--")
     ax.set_xlim(0, top)
     ax.set_ylim(0, ytop)
     ax.set_xlabel("major consolidation stress σ₁ [MPa]")
