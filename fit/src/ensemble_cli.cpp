@@ -300,10 +300,15 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
               << "tables say so in their warnings\n";
   }
   auto cells = collect_cells(run);
-  if (cells.empty()) {
+  if (cells.empty() && (!missing.empty() || o.planned_tasks.empty())) {
     std::cerr << "dem fit: no finished mode runs under " << (run / "members") << " (is the ensemble workflow finished?)\n";
     return 1;
   }
+  // Every planned task finished, none a plain mode: an ensemble of loading paths only (e.g. the
+  // shear tester, docs/powders.md). Nothing to fit: the tables are written empty, and said so.
+  if (cells.empty())
+    std::cerr << "dem fit: " << run.string() << ": only loading paths, which are not fitted; the tables are empty "
+              << "(the paths' curves are in members/*/deviatoric/)\n";
   for (const fs::path& d : {out, ens}) fs::remove_all(d);   // no stale tables or averages of another run
   fs::create_directories(out);
   fs::create_directories(ens);
@@ -419,7 +424,7 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
                             run.string() + "\"";
     if (std::system(cmd.c_str()) != 0) std::cerr << "dem fit: plotting failed (tables are written)\n";
   }
-  return fitted > 0 ? 0 : 1;
+  return fitted > 0 || cells.empty() ? 0 : 1;   // an ensemble of paths only has nothing to fit: not an error
 }
 
 }  // namespace demfit

@@ -420,6 +420,9 @@ long run_prep_stage(const Scene& sc, PyState& ps, const std::string& stage, cons
       *copy.s = now;
       on_checkpoint(phi, copy);
     };
+  if (st->kind == dem::PrepStage::Kind::Pressure || st->kind == dem::PrepStage::Kind::Uniaxial)
+    throw dem::SceneError("preparation stage '" + stage + "' is stress controlled (kind pressure or uniaxial): run it "
+                          "with `dem run SCENE --stages prep` (not from Python yet)");
   if (st->kind == dem::PrepStage::Kind::Relax) {
     dem::StageSpec spec{st->name, dem::Vec3{0, 0, 0}, dem::StopKind::Relaxed, 0, {}, st->ke_ratio, st->max_time, ""};
     return nogil_blowup([&] { return static_cast<long>(dem::run_stage(model, *ps.s, spec, out, "", cb, quiet)); });

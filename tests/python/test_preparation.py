@@ -165,7 +165,7 @@ def test_an_interrupted_custom_preparation_resumes_after_its_last_finished_stage
 
 BAD = [
     ('target_phi = 0.64\npreparation = [{ name = "a", kind = "relax" }]', "protocol.target_phi belongs to the built-in"),
-    ('preparation = [{ name = "a", kind = "squeeze" }]', 'kind must be "compress", "expand" or "relax"'),
+    ('preparation = [{ name = "a", kind = "squeeze" }]', 'kind must be "compress", "expand", "relax", "pressure" or "uniaxial"'),
     ('preparation = [{ name = "a", kind = "compress", rate_tc = 1e-3, until = { phi = 0.64 }, checkpoints = [0.7] }]',
      "lies beyond the stage's target"),
     ('preparation = [{ name = "a", kind = "relax" }, { name = "a", kind = "relax" }]', "two stages are named 'a'"),

@@ -106,7 +106,9 @@ void print_info(const dem::Model& m) {
   for (std::size_t i = 0; i < p.preparation.size(); ++i)
     std::printf("prep %-15s %s: %s%.3g steps\n", p.preparation[i].name.c_str(),
                 dem::describe(p.preparation[i], m.t_contact).c_str(),
-                p.preparation[i].kind == dem::PrepStage::Kind::Relax ? "at most " : "", prep_steps[i]);
+                p.preparation[i].kind == dem::PrepStage::Kind::Relax || p.preparation[i].kind == dem::PrepStage::Kind::Pressure ||
+                        p.preparation[i].kind == dem::PrepStage::Kind::Uniaxial ? "at most " : "",
+                prep_steps[i]);
   std::printf("modes              from the checkpoints %s, deviatoric rate %.4g /s (%.4g/t_c)\n", p.modes_from.c_str(),
               p.deviatoric_rate, p.deviatoric_rate * m.t_contact);
   for (auto& mode : p.modes) {

@@ -262,11 +262,11 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
                            const std::map<std::string, DeformationMode>& custom) {
   auto fail = [&](const std::string& what) { throw SceneError(where + ": " + what); };
   static const std::set<std::string> keys = {"name", "rate", "sigma_p0", "sigma_Pa", "pressure_p0", "pressure_Pa",
-                                             "constant_volume", "until"};
+                                             "constant_volume", "until", "max_time_tc"};
   for (auto&& [k, v] : t)
     if (!keys.count(std::string(k.str())))
       fail("unknown key '" + std::string(k.str()) + "'; a stage has name, rate, sigma_p0 or sigma_Pa, "
-           "pressure_p0 or pressure_Pa, constant_volume, until");
+           "pressure_p0 or pressure_Pa, constant_volume, until, max_time_tc (with until.ke_ratio)");
   // A stress target is present (the key is there) and then must be a positive finite number;
   // in multiples of p0 at most 1e6 (so that the target in pascals, p0 times it, stays finite).
   auto check_target = [&](const std::string& key, double v, bool relative) {
@@ -358,8 +358,11 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
   const toml::table* until = t.get("until") ? t.get("until")->as_table() : nullptr;
   if (!until || until->size() != 1)
     fail("until must be a table with one stop condition, e.g. until = { eps_d = 0.2 }; stops: eps_d (added by the "
-         "stage), time_tc (duration / t_c), eps_v, eps_xx, eps_yy, eps_zz (since the path start), p_p0, p_Pa, s_dev, phi");
+         "stage), time_tc (duration / t_c), eps_v, eps_xx, eps_yy, eps_zz (since the path start), p_p0, p_Pa, s_dev, phi, ke_ratio, tau_xz_p0, tau_xz_Pa (also xy, yz)");
   static const std::map<std::string, PathStop> stops = {
+      {"tau_xy_p0", PathStop::TauXY}, {"tau_xy_Pa", PathStop::TauXY}, {"tau_xz_p0", PathStop::TauXZ},
+      {"tau_xz_Pa", PathStop::TauXZ}, {"tau_yz_p0", PathStop::TauYZ}, {"tau_yz_Pa", PathStop::TauYZ},
+      {"ke_ratio", PathStop::Relaxed},
       {"eps_d", PathStop::EpsD},   {"time_tc", PathStop::Time}, {"eps_v", PathStop::EpsV},
       {"eps_xx", PathStop::EpsXX}, {"eps_yy", PathStop::EpsYY}, {"eps_zz", PathStop::EpsZZ},
       {"p_p0", PathStop::Pressure}, {"p_Pa", PathStop::Pressure}, {"s_dev", PathStop::SDev}, {"phi", PathStop::Phi}};
@@ -367,14 +370,22 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
   const std::string stop(first->first.str());
   const toml::node& uv = first->second;
   if (!stops.count(stop))
-    fail("until." + stop + " is not a stop condition; use eps_d, time_tc, eps_v, eps_xx, eps_yy, eps_zz, p_p0, p_Pa, s_dev or phi");
+    fail("until." + stop + " is not a stop condition; use eps_d, time_tc, eps_v, eps_xx, eps_yy, eps_zz, p_p0, p_Pa, s_dev, phi, ke_ratio (a servo stage at "
+         "rest) or tau_ij_p0 / tau_ij_Pa (ij = xy, xz, yz: the shear stress -sigma_ij)");
   auto value = uv.value<double>();
   if (!value || !std::isfinite(*value)) fail("until." + stop + " must be a finite number");
-  if (stop == "p_p0" && std::fabs(*value) > 1e6)
-    fail("until.p_p0 = " + std::to_string(*value) + " is more than 1e6 times the starting pressure: give a value of the order of 1");
+  const bool relative_stop = stop == "p_p0" || (stop.size() > 3 && stop.compare(stop.size() - 3, 3, "_p0") == 0);
+  if (relative_stop && std::fabs(*value) > 1e6)
+    fail("until." + stop + " = " + std::to_string(*value) + " is more than 1e6 times the starting pressure: give a value of the order of 1");
   s.stop = stops.at(stop);
   s.until = *value;
-  s.until_relative = stop == "p_p0";
+  s.until_relative = relative_stop;
+  if (const toml::node* n = t.get("max_time_tc")) {
+    auto v = n->value<double>();
+    if (s.stop != PathStop::Relaxed) fail("max_time_tc bounds a stage that stops on until.ke_ratio; remove it");
+    if (!v || !std::isfinite(*v) || !(*v > 0)) fail("max_time_tc must be a positive number (times t_c)");
+    s.max_time = *v;   // in t_c until the scene's t_c is known
+  }
   return s;
 }
 
@@ -682,6 +693,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   for (auto& mode : p.modes)
     for (auto& st : mode.path)
       if (st.stop == PathStop::Time) st.until *= m.t_contact;   // time_tc -> seconds
+      else if (st.stop == PathStop::Relaxed) st.max_time *= m.t_contact;
   p.preparation = preparation ? parse_preparation(*preparation, m.t_contact, origin) : default_preparation(p);
   validate_preparation(p, m.t_contact, origin);
   if (m.skin_auto) cap_auto_skin(m);

@@ -151,6 +151,10 @@ const char* stop_name(PathStop s) {
     case PathStop::Pressure: return "p";
     case PathStop::SDev: return "s_dev";
     case PathStop::Phi: return "phi";
+    case PathStop::TauXY: return "tau_xy";
+    case PathStop::TauXZ: return "tau_xz";
+    case PathStop::TauYZ: return "tau_yz";
+    case PathStop::Relaxed: return "ke_ratio";
   }
   return "?";
 }
@@ -190,7 +194,9 @@ void validate_path(const std::string& path_name, const std::vector<PathStage>& p
              "(rate_x + rate_y + rate_z = " + std::to_string(trace) + "): make it trace-free, e.g. [1, 0, -1]");
     }
     if (stressed == 3 && !(s.sheared() && s.stop == PathStop::EpsD) && s.stop != PathStop::Time &&
-        s.stop != PathStop::Pressure && s.stop != PathStop::SDev && s.stop != PathStop::Phi)
+        s.stop != PathStop::Pressure && s.stop != PathStop::SDev && s.stop != PathStop::Phi &&
+        s.stop != PathStop::Relaxed &&
+        !(s.sheared() && (s.stop == PathStop::TauXY || s.stop == PathStop::TauXZ || s.stop == PathStop::TauYZ)))
       fail(std::string("all three axes are stress controlled, so no strain is prescribed and a stop on ") +
            stop_name(s.stop) + " may never come: stop on time_tc, p, s_dev or phi (or eps_d with a prescribed shear)");
     const bool servo = s.has_servo();
@@ -236,6 +242,17 @@ void validate_path(const std::string& path_name, const std::vector<PathStage>& p
       case PathStop::Phi:
         if (!(s.until > 0 && s.until < 1)) fail("until.phi must be a volume fraction in (0, 1)");
         if (trace == 0 && !servo) fail("the prescribed rate is volume conserving, so phi never changes: stop on eps_d");
+        break;
+      case PathStop::Relaxed:
+        if (!(s.until > 0)) fail("until.ke_ratio must be > 0 (E_kin < ke_ratio * E_pot, e.g. 1e-6)");
+        if (!servo || moves)
+          fail("until.ke_ratio ends a stage that holds its stress targets with nothing else prescribed: give a servo "
+               "target and rate = [0, 0, 0]");
+        break;
+      case PathStop::TauXY: case PathStop::TauXZ: case PathStop::TauYZ:
+        if (!moves && !servo)
+          fail(std::string("nothing moves the box in this stage (zero rate, no servo): ") + stop_name(s.stop) +
+               " would never change");
         break;
     }
   }

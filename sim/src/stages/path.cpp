@@ -25,6 +25,9 @@ const std::vector<std::string>& path_columns() {   // the column table's (measur
 
 namespace {
 
+// A Relaxed stop also wants every servo target held within this relative error.
+constexpr double kRelaxedTolerance = 1e-2;
+
 // A path with a shear stage also writes the shear rates (L_xy, L_xz, L_yz) after the usual
 // columns; a diagonal path's columns are unchanged.
 bool path_sheared(const DeformationMode& mode) {
@@ -126,6 +129,10 @@ struct StopProbe {
         return p > 0 ? deviatoric_magnitude(r.stress.xx, r.stress.yy, r.stress.zz) / p : 0.0;
       }
       case PathStop::Phi: return s.volume_fraction();
+      case PathStop::TauXY: return -r.stress.xy;
+      case PathStop::TauXZ: return -r.stress.xz;
+      case PathStop::TauYZ: return -r.stress.yz;
+      case PathStop::Relaxed: return 0;   // judged on the sampled rows (run_path_stage)
     }
     return 0;
   }
@@ -145,6 +152,7 @@ struct StopProbe {
   }
   // Reached: eps_d and time grow from 0 to the target; the others cross it from their start value.
   bool reached(double x, double x_start) const {
+    if (stage.stop == PathStop::Relaxed) return false;
     if (stage.stop == PathStop::EpsD || stage.stop == PathStop::Time) return x >= stage.until;
     return (x - stage.until) * (x_start - stage.until) <= 0;
   }
@@ -187,7 +195,8 @@ void run_path_stage(PathRun& run, const PathStage& stage) {
   state.box.log_strain = Vec3{0, 0, 0};
   const VelGrad prescribed = stage.gradient_shape() * model.protocol.deviatoric_rate;
   Servo servo(stage, prescribed, model.protocol.servo);
-  const bool needs_response = servo.active() || stage.stop == PathStop::Pressure || stage.stop == PathStop::SDev;
+  const bool needs_response = servo.active() || stage.stop == PathStop::Pressure || stage.stop == PathStop::SDev ||
+                              stage.stop == PathStop::TauXY || stage.stop == PathStop::TauXZ || stage.stop == PathStop::TauYZ;
   AxisResponse resp = axis_response(model, state, run.engine.neighbor_list(), prescribed);
   servo.start(resp, model, state);
   const std::int64_t every = servo.active() ? std::max<std::int64_t>(1, std::llround(servo.tau() / (20 * dt)))
@@ -257,7 +266,14 @@ void run_path_stage(PathRun& run, const PathStage& stage) {
     const double sx = sample_on_x ? x : travel;
     bool sample = std::fabs(sx - last_sample) >= model.output.sample_strain * (1 - 1e-9) ||
                   (time_rows && stage_steps % model.output.relax_sample_steps == 0);
-    if (!done && (travel > 4 || state.time - probe.time0 > time_limit) && stage.stop != PathStop::Time)
+    const bool relaxed_stop = stage.stop == PathStop::Relaxed;
+    if (relaxed_stop && stage.max_time > 0 && state.time - probe.time0 >= stage.max_time) {
+      done = true;
+      std::cerr << "dem: warning: path " << run.label << ", stage '" << stage.name << "': not relaxed (E_kin < "
+                << stage.until << " E_pot, targets within 1 %) after max_time; it ends there\n";
+    }
+    if (!done && !(relaxed_stop && stage.max_time > 0) && (travel > 4 || state.time - probe.time0 > time_limit) &&
+        stage.stop != PathStop::Time)
       throw std::runtime_error("path " + run.label + ", stage '" + stage.name + "': its stop condition was not met after "
                                "a strain of " + std::to_string(travel) + " (or 4 / rate limit in time): the target "
                                "may be beyond what this packing reaches (e.g. an s_dev above its critical state); "
@@ -268,6 +284,10 @@ void run_path_stage(PathRun& run, const PathStage& stage) {
       check_kinetic_energy(model, state, last_m, run.e_floor, run.prev_ekin);
       run.prev_ekin = last_m.E_kin;
       run.max_inertial = std::max(run.max_inertial, last_m.inertial_number);
+      // A Relaxed stop: the row that finds the packing at rest with its targets held is the last.
+      if (relaxed_stop && !done)
+        done = last_m.E_kin < stage.until * std::max(last_m.E_pot, run.e_floor) &&
+               servo.relative_error(last_m.stress) < kRelaxedTolerance;
       run.csv.row(curve_row(last_m) + extra_row(rate, servo, last_m.stress, run.accumulated, run.sheared),
                   stage.name);
       run.csv.check(stage.name);

@@ -101,7 +101,8 @@ std::vector<double> preparation_stage_steps(const Model& m) {
   std::vector<double> steps;
   double phi = m.protocol.initial_phi;
   for (const auto& s : m.protocol.preparation) {
-    if (s.kind == PrepStage::Kind::Relax) {
+    if (s.kind == PrepStage::Kind::Relax || s.kind == PrepStage::Kind::Pressure ||
+        s.kind == PrepStage::Kind::Uniaxial) {   // at most; a stress stage ends where it finds its target at rest
       steps.push_back(s.max_time / m.dt);
       continue;
     }

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -344,8 +345,35 @@ using RunSpec = std::function<void(State&, const StageSpec&, const std::function
 // Saves the state as checkpoint <series>_<phi>.
 using SaveCheckpoint = std::function<void(const std::string& series, double phi, const State&)>;
 
+// Runs a stress-controlled preparation stage (pressure / uniaxial) on the state.
+using RunStress = std::function<void(State&, const PrepStage&)>;
+
+// A stress-controlled stage as a one-stage loading path (path.cpp): the servo drives p, or sigma_zz
+// with the x and y lengths fixed, to the target (at most at the stage's rate) and holds it until
+// the packing is at rest there (PathStop::Relaxed) or max_time.
+DeformationMode stress_stage_path(const PrepStage& s) {
+  PathStage st;
+  st.name = s.name;
+  st.relative = false;
+  if (s.kind == PrepStage::Kind::Pressure) st.pressure = s.target;
+  else st.sigma.z = s.target;
+  st.stop = PathStop::Relaxed;
+  st.until = s.ke_ratio;
+  st.max_time = s.max_time;
+  DeformationMode m;
+  m.name = s.name;
+  m.path = {st};
+  return m;
+}
+
 // Runs one preparation stage (PrepStage in model.hpp says what it does). Returns false if skipped.
-bool run_prep_stage(const PrepStage& s, State& st, const RunSpec& run, const SaveCheckpoint& save) {
+bool run_prep_stage(const PrepStage& s, State& st, const RunSpec& run, const RunStress& run_stress,
+                    const SaveCheckpoint& save) {
+  if (s.kind == PrepStage::Kind::Pressure || s.kind == PrepStage::Kind::Uniaxial) {
+    run_stress(st, s);
+    if (!s.checkpoint_name.empty()) save(s.checkpoint_name, st.volume_fraction(), st);
+    return true;
+  }
   if (s.kind == PrepStage::Kind::Relax) {
     run(st, StageSpec{s.name, Vec3{0, 0, 0}, StopKind::Relaxed, 0, {}, s.ke_ratio, s.max_time, ""}, nullptr);
     return true;
@@ -493,6 +521,31 @@ void clear_replaced(const fs::path& dir, bool prep, const std::vector<std::strin
     if (removed.size() > 12) list += ", ... (" + std::to_string(removed.size()) + " in all)";
     std::cerr << "dem: --force: removed the earlier results this run replaces in " << dir.string() << ": " << list << "\n";
   }
+}
+
+// The checkpoints the modes start from: those the scene lists (mode_checkpoints) and, when a
+// stress-controlled stage writes the series modes_from, every checkpoint of that series on disk
+// (named by the volume fraction the stage reached, which the scene cannot list). Densest first.
+std::vector<double> checkpoints_to_run(const Protocol& p, const fs::path& dir) {
+  std::vector<double> phis = mode_checkpoints(p);
+  const bool stress_series = std::any_of(p.preparation.begin(), p.preparation.end(), [&](const PrepStage& s) {
+    return (s.kind == PrepStage::Kind::Pressure || s.kind == PrepStage::Kind::Uniaxial) &&
+           s.checkpoint_name == p.modes_from;
+  });
+  if (!stress_series || !fs::is_directory(dir / "checkpoints")) return phis;
+  const std::string prefix = p.modes_from + "_phi";
+  for (auto& f : fs::directory_iterator(dir / "checkpoints")) {
+    const std::string n = f.path().filename().string();
+    if (f.path().extension() != ".ckpt" || n.rfind(prefix, 0) != 0) continue;
+    char* end = nullptr;
+    const std::string num = n.substr(prefix.size(), n.size() - prefix.size() - 5);
+    const double phi = std::strtod(num.c_str(), &end);
+    if (end == num.c_str() || *end != '\0') continue;
+    if (std::none_of(phis.begin(), phis.end(), [&](double q) { return fmt_phi(q) == fmt_phi(phi); }))
+      phis.push_back(phi);
+  }
+  std::sort(phis.begin(), phis.end(), std::greater<double>());
+  return phis;
 }
 
 // The last preparation stage whose curve and end state exist ("" if none).
@@ -663,8 +716,19 @@ void run_protocol(const Model& model, const RunOptions& opt) {
       std::cerr << "dem: note: no preparation stage is named cycle_unloading: `dem fit` and `dem model` read the "
                    "isotropic (unloading) branch from prep/cycle_unloading.csv, so they will have none; name the "
                    "unloading stage you want fitted so\n";
+    const RunStress run_stress = [&](State& st, const PrepStage& s) {
+      Model m = model;   // the stage's rate is its servo's rate limit
+      m.protocol.servo.rate_max = s.rate;
+      m.protocol.servo.rate_max_tc = s.rate * model.t_contact;
+      const std::string csv = stage_csv("prep", s.name);
+      const auto t0 = std::chrono::steady_clock::now();
+      const std::int64_t steps = run_path(m, st, stress_stage_path(s), s.name, csv, opt.quiet,
+                                          (dir / ("failed_" + s.name + ".ckpt")).string());
+      record_time(s.name, steps, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+                  st.count());
+    };
     for (std::size_t i = first_prep; i < p.preparation.size(); ++i) {
-      run_prep_stage(p.preparation[i], state, run, save);
+      run_prep_stage(p.preparation[i], state, run, run_stress, save);
       write_checkpoint((dir / "prep" / ("after_" + prep_names[i] + ".ckpt")).string(),
                        Checkpoint{ckpt_scene, "end of stage " + prep_names[i], state});
       man.save();
@@ -672,7 +736,7 @@ void run_protocol(const Model& model, const RunOptions& opt) {
   }
 
   if (want_dev) {
-    for (double phi : mode_checkpoints(p)) {
+    for (double phi : checkpoints_to_run(p, dir)) {
       const fs::path ck = dir / "checkpoints" / (checkpoint_stem(p.modes_from, phi) + ".ckpt");
       if (!fs::exists(ck))
         throw std::runtime_error("checkpoint " + ck.string() + " is missing: run --stages prep first");

@@ -95,6 +95,8 @@ enum class PathStop {
   Pressure,   ///< p crosses `until` [Pa]
   SDev,       ///< s_dev crosses `until`
   Phi,        ///< the volume fraction crosses `until`
+  TauXY, TauXZ, TauYZ,   ///< the shear stress tau_ij = -sigma_ij [Pa] crosses `until` (forward SS_ij: tau > 0)
+  Relaxed,    ///< at a sampled row: E_kin < `until` * max(E_pot, E_floor) and every servo target held within 1 %
 };
 
 /// One stage of a loading path (strain reversal, cyclic shear, mixed control). Each axis is
@@ -114,8 +116,9 @@ struct PathStage {
   bool relative = true;                 ///< sigma, pressure (and a Pressure stop) in multiples of p0, else [Pa]
   bool constant_volume = false;         ///< asserts tr(rate) = 0 and no servo (checked)
   PathStop stop = PathStop::EpsD;
-  double until = 0;                     ///< stop value (see PathStop); a Pressure stop in Pa once resolved
-  bool until_relative = false;          ///< a Pressure stop given in multiples of p0
+  double until = 0;                     ///< stop value (see PathStop); a Pressure or Tau stop in Pa once resolved
+  bool until_relative = false;          ///< a Pressure or Tau stop given in multiples of p0
+  double max_time = 0;                  ///< a Relaxed stop ends (with a warning) after this [s]; 0: no limit but the path's
   bool sheared() const { return shear_shape.x != 0 || shear_shape.y != 0 || shear_shape.z != 0; }
   /// The prescribed velocity-gradient shape (diagonal + upper entries).
   VelGrad gradient_shape() const { return {rate_shape, shear_shape}; }
@@ -153,13 +156,16 @@ struct ServoOptions {
 /// Checkpoints: a phi strictly between the stage's start and `phi` is landed on exactly; one
 /// equal to the start (end) volume fraction is saved before (after) the stage.
 struct PrepStage {
-  enum class Kind { Compress, Expand, Relax };
+  /// Pressure / Uniaxial: stress controlled (a servo, control.hpp) from wherever the packing is to
+  /// `target` [Pa] (p, or sigma_zz with the x and y lengths fixed), then held there until relaxed.
+  enum class Kind { Compress, Expand, Relax, Pressure, Uniaxial };
   std::string name;                  ///< file stem: prep/<name>.csv, resume point prep/after_<name>.ckpt
   Kind kind = Kind::Relax;
   double rate = 0;                   ///< compress/expand: true strain rate per axis, magnitude [1/s]
   double phi = 0;                    ///< compress/expand: target volume fraction
   double ke_ratio = 1e-8;            ///< relax: ends when E_kin < ke_ratio * max(E_pot, E_floor)
-  double max_time = 0;               ///< relax: ends after this duration at the latest [s]
+  double max_time = 0;               ///< relax, pressure, uniaxial: ends after this duration at the latest [s]
+  double target = 0;                 ///< pressure / uniaxial: the stress target [Pa] (rate: the servo's rate limit)
   std::string checkpoint_name;       ///< checkpoints/<checkpoint_name>_phiX.XXX.{ckpt,txt}
   std::vector<double> checkpoints;   ///< volume fractions at which the state is saved
 };
