@@ -109,6 +109,7 @@ DEM_HK void history_body(const HistoryInputs<CM>& in, long p0, int n, HistoryChu
   const auto rate = contact::rate_lanes<T>(in.rate);
   const T dt = splat<T>(in.dt), mz = splat<T>(-0.0), zero = splat<T>(0.0);
   const double* P = in.packed;
+  const CM model = in.model;   // a local copy: its constants (k, -1/k, ...) leave the loop
   for (int q = 0; q < n; q += W) {
     const int valid = std::min(W, n - q);   // a short last group repeats its last pair (not written back)
     std::int32_t I[W], J[W], C[W];
@@ -144,7 +145,7 @@ DEM_HK void history_body(const HistoryInputs<CM>& in, long p0, int n, HistoryChu
     load_columns(P + 4, I, 8, vxi, vyi, vzi, pad);
     load_columns(P + 4, J, 8, vxj, vyj, vzj, pad);
     const contact::PairForces<T> c =
-        in.model.template advance<Sheared>(sep, ri, rj, vxj - vxi, vyj - vyi, vzj - vzi, wi, wj, rate, dt, h);
+        model.template advance<Sheared>(sep, ri, rj, vxj - vxi, vyj - vyi, vzj - vzi, wi, wj, rate, dt, h);
     store(out.fx + q, select(touch, c.fj.x, mz));
     store(out.fy + q, select(touch, c.fj.y, mz));
     store(out.fz + q, select(touch, c.fj.z, mz));

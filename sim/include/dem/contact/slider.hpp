@@ -35,6 +35,7 @@ __attribute__((always_inline)) inline SliderStep<T, V> slider_step(const V& star
   const V f = xi * (-k) - v * gamma;
   const T f2 = dot(f, f);
   const auto slip = lanes::greater(f2, limit * limit);
+  if (!lanes::any(slip)) return {f, xi, lanes::splat<T>(0.0), slip};   // all stick: what the picks give
   const V fs = f * (limit / lanes::sqrt(f2));
   const V xs = (fs + v * gamma) * (lanes::splat<T>(-1.0) / k);
   const T e = lanes::splat<T>(0.5) * k * (dot(start + xs, step) - dot(xs, xs) + dot(start, start));
