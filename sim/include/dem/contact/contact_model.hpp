@@ -7,8 +7,9 @@
 // type once per pair loop (or measurement), so the loops are compiled for each model.
 //
 // Where a new sub-model goes (ARCHITECTURE.md): a struct in its own header beside these
-// (force templated on the lane type if it should run in the vector kernels; `history` and
-// `rotations` constants), a template slot or a type here, a case in with_contact_model, its
+// (force templated on the lane type so that the vector kernels run it: `Bound<T>` without
+// history, `update` on lanes and `lane_body = true` with it, else the scalar loop runs the
+// model; `history` and `rotations` constants), a template slot or a type here, a case in with_contact_model, its
 // keys in io/scene.cpp and io/checks.cpp (physics record), and its tests.
 #pragma once
 #include <type_traits>

@@ -5,7 +5,9 @@
 //   T = double      one pair (the reference loop, the all-pairs oracle, GCC's auto-vectorised
 //                   generic/AVX-512 kernels);
 //   T = Lanes<4>    four pairs in one AVX2 register (the hand-written kernel keeps only the
-//                   loads, transposes and prefetches; the arithmetic is this body).
+//                   loads, transposes and prefetches; the arithmetic is this body);
+//   T = Lanes<2|8>  two (generic x86-64) or eight (AVX-512) pairs: the kernels of the models
+//                   with history (forces/history_kernels.hpp) run every width from one source.
 // Lanes are GCC vector extensions, not intrinsics: their operators need no target attribute,
 // so the body inlines into a `target("avx2")` kernel and compiles to 256-bit instructions there,
 // while the same source gives scalar code elsewhere. Every operation is the IEEE operation of
