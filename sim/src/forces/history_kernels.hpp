@@ -70,34 +70,55 @@ template <class T> DEM_HK void load_columns(const double* base, const std::int32
                                             T& c, T& d) {
   if constexpr (T::width == 4) {
     typedef double V2 __attribute__((vector_size(16)));
-    V2 h[4][2];   // record l: entries 0-1, 2-3
-    for (int l = 0; l < 4; ++l) {
-      std::memcpy(&h[l][0], base + stride * idx[l], 16);
-      std::memcpy(&h[l][1], base + stride * idx[l] + 2, 16);
-    }
-    for (int k = 0; k < 2; ++k) {
-      const typename T::V t0 = __builtin_shufflevector(h[0][k], h[2][k], 0, 1, 2, 3);   // r0 r0 r2 r2
-      const typename T::V t1 = __builtin_shufflevector(h[1][k], h[3][k], 0, 1, 2, 3);   // r1 r1 r3 r3
-      (k == 0 ? a : c).v = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
-      (k == 0 ? b : d).v = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
-    }
+    const double *r0 = base + stride * idx[0], *r1 = base + stride * idx[1], *r2 = base + stride * idx[2],
+                 *r3 = base + stride * idx[3];
+    V2 h0, h1, h2, h3;   // entries 0-1 of records 0-3
+    std::memcpy(&h0, r0, 16); std::memcpy(&h1, r1, 16); std::memcpy(&h2, r2, 16); std::memcpy(&h3, r3, 16);
+    typename T::V t0 = __builtin_shufflevector(h0, h2, 0, 1, 2, 3);   // r0 r0 r2 r2
+    typename T::V t1 = __builtin_shufflevector(h1, h3, 0, 1, 2, 3);   // r1 r1 r3 r3
+    a.v = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
+    b.v = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
+    std::memcpy(&h0, r0 + 2, 16); std::memcpy(&h1, r1 + 2, 16); std::memcpy(&h2, r2 + 2, 16); std::memcpy(&h3, r3 + 2, 16);
+    t0 = __builtin_shufflevector(h0, h2, 0, 1, 2, 3);
+    t1 = __builtin_shufflevector(h1, h3, 0, 1, 2, 3);
+    c.v = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
+    d.v = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
   } else if constexpr (T::width == 2) {
     typedef double V2 __attribute__((vector_size(16)));
-    V2 h[2][2];
-    for (int l = 0; l < 2; ++l) {
-      std::memcpy(&h[l][0], base + stride * idx[l], 16);
-      std::memcpy(&h[l][1], base + stride * idx[l] + 2, 16);
-    }
-    a.v = __builtin_shufflevector(h[0][0], h[1][0], 0, 2);
-    b.v = __builtin_shufflevector(h[0][0], h[1][0], 1, 3);
-    c.v = __builtin_shufflevector(h[0][1], h[1][1], 0, 2);
-    d.v = __builtin_shufflevector(h[0][1], h[1][1], 1, 3);
+    const double *r0 = base + stride * idx[0], *r1 = base + stride * idx[1];
+    V2 h0, h1;
+    std::memcpy(&h0, r0, 16); std::memcpy(&h1, r1, 16);
+    a.v = __builtin_shufflevector(h0, h1, 0, 2);
+    b.v = __builtin_shufflevector(h0, h1, 1, 3);
+    std::memcpy(&h0, r0 + 2, 16); std::memcpy(&h1, r1 + 2, 16);
+    c.v = __builtin_shufflevector(h0, h1, 0, 2);
+    d.v = __builtin_shufflevector(h0, h1, 1, 3);
   } else {
     a = gather<T>(base, idx, stride, 0);
     b = gather<T>(base, idx, stride, 1);
     c = gather<T>(base, idx, stride, 2);
     d = gather<T>(base, idx, stride, 3);
   }
+}
+
+/// Entries 0-2 of records of `stride` doubles (the angular velocities, Vec3: no fourth entry to
+/// read): entries 0-1 as two-double halves, transposed, entry 2 gathered.
+template <class T> DEM_HK void load_columns3(const double* base, const std::int32_t* idx, long stride, T& a, T& b,
+                                             T& c) {
+  if constexpr (T::width == 4) {
+    typedef double V2 __attribute__((vector_size(16)));
+    V2 h0, h1, h2, h3;
+    std::memcpy(&h0, base + stride * idx[0], 16); std::memcpy(&h1, base + stride * idx[1], 16);
+    std::memcpy(&h2, base + stride * idx[2], 16); std::memcpy(&h3, base + stride * idx[3], 16);
+    const typename T::V t0 = __builtin_shufflevector(h0, h2, 0, 1, 2, 3);
+    const typename T::V t1 = __builtin_shufflevector(h1, h3, 0, 1, 2, 3);
+    a.v = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
+    b.v = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
+  } else {
+    a = gather<T>(base, idx, stride, 0);
+    b = gather<T>(base, idx, stride, 1);
+  }
+  c = gather<T>(base, idx, stride, 2);
 }
 
 /// Pass 1 of a chunk for lanes of T: pairs p0 .. p0+n-1.
@@ -138,8 +159,8 @@ DEM_HK void history_body(const HistoryInputs<CM>& in, long p0, int n, HistoryChu
     contact::V3<T> wi{zero, zero, zero}, wj{zero, zero, zero};
     if constexpr (CM::rotations) {
       const double* w = &in.w[0].x;
-      wi = {gather<T>(w, I, 3, 0), gather<T>(w, I, 3, 1), gather<T>(w, I, 3, 2)};
-      wj = {gather<T>(w, J, 3, 0), gather<T>(w, J, 3, 1), gather<T>(w, J, 3, 2)};
+      load_columns3(w, I, 3, wi.x, wi.y, wi.z);
+      load_columns3(w, J, 3, wj.x, wj.y, wj.z);
     }
     T vxi, vyi, vzi, vxj, vyj, vzj;
     load_columns(P + 4, I, 8, vxi, vyi, vzi, pad);
