@@ -1,5 +1,9 @@
+// Lanes of 4 and 8 doubles (history_kernels.hpp) pass between always-inline functions only: no
+// ABI is crossed.
+#pragma GCC diagnostic ignored "-Wpsabi"
 #include "dem/forces/forces.hpp"
 #include "dem/engine/parallel.hpp"
+#include "forces/history_kernels.hpp"
 #include "forces/pair_kernels.hpp"
 
 #include <algorithm>
@@ -35,7 +39,10 @@ struct PairSums {
 };
 
 // One pair of a model with history (friction): force on j, torques, and the history advanced
-// by one step of dt; false (history zeroed) if the spheres do not touch.
+// by one step of dt; false (history zeroed) if the spheres do not touch. The arithmetic is the
+// contact model's body (T = double), the one the vector kernels run on lanes of pairs; the
+// pair's dissipation is summed over its sliders first, then added to `dissipated`, as the
+// kernels' adding pass does.
 template <bool Sheared, class CM>
 inline bool contact_force_history(const CM& cm, const Vec3& xi, const Vec3& xj_image, const Vec3& vi,
                                   const Vec3& vj, const Vec3& wi, const Vec3& wj, double ri, double rj,
@@ -45,30 +52,13 @@ inline bool contact_force_history(const CM& cm, const Vec3& xi, const Vec3& xj_i
     for (int k = 0; k < CM::history; ++k) h[k] = 0.0;   // the contact ended: its springs with it
     return false;
   }
-  double vx, vy, vz;
-  contact::relative_velocity<Sheared>(sep, vj.x - vi.x, vj.y - vi.y, vj.z - vi.z, contact::rate_lanes<double>(rate), vx, vy, vz);
-  const NormalGeometry<double> g = contact::normal_geometry(sep, vx, vy, vz);
-  const double fn = cm.normal_force(g, ri * rj / (ri + rj), h, true);
-  const Vec3 n{g.nx, g.ny, g.nz};
-  out.fj = n * fn;
-  if constexpr (CM::rotations) {
-  const double ai = ri - 0.5 * g.delta, aj = rj - 0.5 * g.delta;   // lever arms to the overlap's middle
-  const Vec3 v_contact = Vec3{vx, vy, vz} - cross(wi * ai + wj * aj, n);
-  const Vec3 ft = cm.tangential.update(contact::TangentialInput{n, v_contact, std::max(fn, 0.0)}, dt,
-                                       h + CM::tangential_offset, dissipated);
-  const Vec3 nxf = cross(n, ft);
-  out.fj += ft;
-  out.ti = nxf * (-ai);   // (a_i n) x (-f_j)
-  out.tj = nxf * (-aj);   // (-a_j n) x f_j
-  if constexpr (CM::RollingModel::history > 0) {   // a couple: torques only
-    const Vec3 tr = cm.rolling.update(contact::RollingInput{n, wi, wj, ai * aj / (ai + aj), std::max(fn, 0.0)}, dt,
-                                      h + CM::rolling_offset, dissipated);
-    out.ti += tr;
-    out.tj -= tr;
-  }
-  } else {
-    (void)wi; (void)wj; (void)dissipated;
-  }
+  const contact::PairForces<double> c =
+      cm.template advance<Sheared>(sep, ri, rj, vj.x - vi.x, vj.y - vi.y, vj.z - vi.z, contact::v3(wi),
+                                   contact::v3(wj), contact::rate_lanes<double>(rate), dt, h);
+  out.fj = contact::vec3(c.fj);
+  out.ti = contact::vec3(c.ti);
+  out.tj = contact::vec3(c.tj);
+  *dissipated += c.dissipated;
   return true;
 }
 
@@ -197,6 +187,72 @@ void pair_loop_vector(PairKernel kernel, const ContactLaw& law, const State& s, 
   if (p_begin < p_end) f[current] += fi;
 }
 
+// Pass 2 of a chunk of a model with history: forces, torques and dissipation in list order, as
+// pair_loop_history adds them (a pair out of contact carries -0.0 everywhere: no change).
+// `current`, `fi`, `ti` carry the running sums of particle `current` across chunks.
+template <bool Spin>
+void add_history_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, const kernels::HistoryChunk& c, int end,
+                       Vec3* f, Vec3* tq, std::vector<std::vector<SpilledForce>>& spill,
+                       std::vector<std::vector<SpilledForce>>& spill_torque, const std::uint16_t* block_of,
+                       int& current, Vec3& fi, Vec3& ti, double& dissipated) {
+  for (int q = 0; q < n; ++q) {
+    const int i = pi[q], j = pj[q];
+    if (i != current) {
+      f[current] += fi;
+      if (Spin) tq[current] += ti;
+      fi = Vec3{0, 0, 0};
+      ti = Vec3{0, 0, 0};
+      current = i;
+    }
+    const Vec3 fj{c.fx[q], c.fy[q], c.fz[q]};
+    if (j < end) {
+      f[j] += fj;
+      if (Spin) tq[j] += Vec3{c.tjx[q], c.tjy[q], c.tjz[q]};
+    } else {
+      if (fj.x != 0.0 || fj.y != 0.0 || fj.z != 0.0) queue_spill(spill[block_of[j]], j, fj);   // +-0: no-op
+      const Vec3 tj{c.tjx[q], c.tjy[q], c.tjz[q]};
+      if (Spin && (tj.x != 0.0 || tj.y != 0.0 || tj.z != 0.0)) queue_spill(spill_torque[block_of[j]], j, tj);
+    }
+    fi -= fj;
+    if (Spin) ti += Vec3{c.tix[q], c.tiy[q], c.tiz[q]};
+    dissipated += c.d[q];
+  }
+}
+
+// The pair loop of a model with history on a vector kernel (history_kernels.hpp): the same bits
+// as pair_loop_history.
+template <bool Sheared, class CM>
+void pair_loop_history_vector(PairKernel kernel, const CM& cm, State& s, const NeighborList& list,
+                              const double* packed, const std::int32_t* pair_i, const VelGrad& rate, double dt,
+                              int begin, int end, Vec3* f, std::vector<std::vector<SpilledForce>>& spill,
+                              std::vector<std::vector<SpilledForce>>& spill_torque, const std::uint16_t* block_of,
+                              double* dissipated) {
+  Vec3 off3[27];
+  image_offsets(s.box, off3);
+  alignas(64) double off[27 * 4];
+  for (int c = 0; c < 27; ++c) {
+    off[4 * c] = off3[c].x; off[4 * c + 1] = off3[c].y; off[4 * c + 2] = off3[c].z; off[4 * c + 3] = 0.0;
+  }
+  const long p_begin = list.first[begin], p_end = list.first[end];
+  const kernels::HistoryInputs<CM> in{packed, pair_i, list.partner.data(), list.image.data(), off,
+                                      s.angular_velocity.data(), cm, rate, dt, s.history.values.data()};
+  const kernels::HistoryKernelFn<CM> run = kernels::history_kernel_of<Sheared, CM>(kernel);
+  static thread_local kernels::HistoryChunk chunk;
+  Vec3* tq = s.torque.data();
+  int current = p_begin < p_end ? pair_i[p_begin] : begin;
+  Vec3 fi{0, 0, 0}, ti{0, 0, 0};
+  for (long p0 = p_begin; p0 < p_end; p0 += kernels::kChunk) {
+    const int n = static_cast<int>(std::min<long>(kernels::kChunk, p_end - p0));
+    run(in, p0, n, chunk);
+    add_history_chunk<CM::rotations>(pair_i + p0, list.partner.data() + p0, n, chunk, end, f, tq, spill,
+                                     spill_torque, block_of, current, fi, ti, *dissipated);
+  }
+  if (p_begin < p_end) {
+    f[current] += fi;
+    if (CM::rotations) tq[current] += ti;
+  }
+}
+
 void add_background_damping(const Model& m, State& s) {
   const double gb = m.background_damping;
   if (gb == 0.0) return;
@@ -247,6 +303,20 @@ void accumulate_pair_forces(const Model& model, State& state, const NeighborList
     if constexpr (CM::history > 0) {
       for (auto& to : scratch.spill_torque[b]) to.clear();
       scratch.dissipated[b] = 0.0;
+      if constexpr (CM::vectorised) {
+        if (scratch.kernel != PairKernel::reference) {
+          const std::int32_t* pair_i = scratch.pair_i.data();
+          if (rate.sheared())
+            pair_loop_history_vector<true>(scratch.kernel, cm, state, list, scratch.packed.data(), pair_i, rate,
+                                           model.dt, begin, end, force, spill, scratch.spill_torque[b], block_of,
+                                           &scratch.dissipated[b]);
+          else
+            pair_loop_history_vector<false>(scratch.kernel, cm, state, list, scratch.packed.data(), pair_i, rate,
+                                            model.dt, begin, end, force, spill, scratch.spill_torque[b], block_of,
+                                            &scratch.dissipated[b]);
+          return;
+        }
+      }
       if (rate.sheared())
         pair_loop_history<true>(cm, state, list, rate, model.dt, begin, end, force, spill, scratch.spill_torque[b],
                                 block_of, &scratch.dissipated[b]);

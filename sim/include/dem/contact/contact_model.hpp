@@ -9,7 +9,8 @@
 // Where a new sub-model goes (ARCHITECTURE.md): a struct in its own header beside these, with
 // its force (templated on the lane type if it should run in the vector kernels), `history`,
 // `name`, `from(law, k_ref)` and `info()` (its keys, text, oscillators, counterparts:
-// submodel.hpp); then one entry in its slot's list below and one in registry.cpp. The scene
+// submodel.hpp); with history, `update` on lanes and `lane_body = true` let the vector kernels
+// run it (else the scalar loop does); then one entry in its slot's list below and one in registry.cpp. The scene
 // loader, checks, physics record, `dem info`, curve preambles and VTK read the descriptions.
 #pragma once
 #include <array>
@@ -29,6 +30,18 @@ namespace dem::contact {
 /// History doubles of a sub-model (0 for those that declare none).
 template <class S, class = void> struct HistoryOf { static constexpr int value = 0; };
 template <class S> struct HistoryOf<S, std::void_t<decltype(S::history)>> { static constexpr int value = S::history; };
+/// Whether a sub-model with history has a body on lanes (`lane_body = true`: its update is a
+/// template on the lane type); one without history needs none (its Bound<T> is its body).
+template <class S, class = void> struct LaneBodyOf { static constexpr bool value = HistoryOf<S>::value == 0; };
+template <class S> struct LaneBodyOf<S, std::void_t<decltype(S::lane_body)>> { static constexpr bool value = S::lane_body; };
+
+/// What one pair of a model with history gives, in lanes of T: the force on j [N] (on i: its
+/// negative), the torques on i and j [N m], and the energy lost to the sliders this step [J].
+template <class T>
+struct PairForces {
+  V3<T> fj, ti, tj;
+  T dissipated;
+};
 
 template <class Normal, class Damping, class Tangential, class Rolling = NoRolling>
 struct ContactModel {
@@ -46,8 +59,10 @@ struct ContactModel {
   static constexpr int rolling_offset = normal_history + Tangential::history;
   static constexpr int history = normal_history + Tangential::history + Rolling::history;
   static constexpr bool rotations = Tangential::rotations;
-  /// Runs in the vector kernels (no history to read and write per pair).
-  static constexpr bool vectorised = history == 0;
+  /// Runs in the vector kernels: no history, or every sub-model with history has a body on lanes
+  /// (a sub-model without one falls back to the scalar reference loop, pair_loop_history).
+  static constexpr bool vectorised = history == 0 || (LaneBodyOf<Normal>::value && LaneBodyOf<Tangential>::value &&
+                                                      LaneBodyOf<Rolling>::value);
   /// History entries that change sign when i and j swap (the tangential spring's).
   static constexpr unsigned odd_mask = [] {
     if constexpr (Tangential::history > 0) return Tangential::odd_mask << tangential_offset;
@@ -82,6 +97,47 @@ struct ContactModel {
       (void)a12; (void)h; (void)advance;
       return bind<double>().normal_force(g);
     }
+  }
+  /// One step of one pair of a model with history, in lanes of T (double: the reference loop):
+  /// the separation `sep` of the radii ri, rj [m], the velocity difference v_j - v_i [m/s], the
+  /// angular velocities [1/s], the rate [1/s] and dt [s]; h (CM::history entries) is advanced.
+  /// The contact is assumed (the caller discards pairs out of contact). Every sub-model's body
+  /// is called here in the fixed order normal -> damping -> tangential -> rolling.
+  template <bool Sheared, class T>
+  __attribute__((always_inline)) PairForces<T> advance(const Separation<T>& sep, T ri, T rj, T dvx, T dvy, T dvz,
+                                                       const V3<T>& wi, const V3<T>& wj, const RateLanes<T>& rate,
+                                                       T dt, T* h) const {
+    using lanes::splat;
+    T vx, vy, vz;
+    relative_velocity<Sheared>(sep, dvx, dvy, dvz, rate, vx, vy, vz);
+    const NormalGeometry<T> g = normal_geometry(sep, vx, vy, vz);
+    T fn;
+    if constexpr (normal_history > 0)
+      fn = normal.update(g.delta, ri * rj / (ri + rj), h) + damping.template bind<T>().force(g);
+    else
+      fn = bind<T>().normal_force(g);
+    const V3<T> n{g.nx, g.ny, g.nz};
+    PairForces<T> out{n * fn, {}, {}, splat<T>(0.0)};
+    if constexpr (rotations) {
+      const T half = splat<T>(0.5), zero = splat<T>(0.0);
+      const T ai = ri - half * g.delta, aj = rj - half * g.delta;   // lever arms to the overlap's middle
+      const V3<T> v_contact = V3<T>{vx, vy, vz} - cross(wi * ai + wj * aj, n);
+      const T fn_plus = lanes::select(lanes::less(fn, zero), zero, fn);   // std::max(fn, 0.0)
+      const V3<T> ft = tangential.update(n, v_contact, fn_plus, dt, h + tangential_offset, out.dissipated);
+      const V3<T> nxf = cross(n, ft);
+      out.fj = out.fj + ft;
+      out.ti = nxf * (-ai);   // (a_i n) x (-f_j)
+      out.tj = nxf * (-aj);   // (-a_j n) x f_j
+      if constexpr (Rolling::history > 0) {   // a couple: torques only
+        const V3<T> tr =
+            rolling.update(RollingInput<T>{n, wi, wj, ai * aj / (ai + aj), fn_plus}, dt, h + rolling_offset, out.dissipated);
+        out.ti = out.ti + tr;
+        out.tj = out.tj - tr;
+      }
+    } else {
+      (void)wi; (void)wj; (void)dt;
+    }
+    return out;
   }
   /// Elastic energy of the normal sub-model alone [J].
   double normal_energy(double delta, double a12, const double* h) const {

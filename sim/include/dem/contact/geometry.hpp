@@ -5,6 +5,32 @@
 
 namespace dem::contact {
 
+/// A 3-vector of lanes (T = double: one pair), with Vec3's operations in Vec3's order, so that
+/// the lane bodies of the history sub-models give Vec3's bits.
+template <class T>
+struct V3 {
+  T x, y, z;
+};
+#define DEM_V3 __attribute__((always_inline)) inline
+template <class T> DEM_V3 V3<T> operator+(const V3<T>& a, const V3<T>& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+template <class T> DEM_V3 V3<T> operator-(const V3<T>& a, const V3<T>& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+template <class T> DEM_V3 V3<T> operator*(const V3<T>& a, T s) { return {a.x * s, a.y * s, a.z * s}; }
+template <class T> DEM_V3 T dot(const V3<T>& a, const V3<T>& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+template <class T> DEM_V3 V3<T> cross(const V3<T>& a, const V3<T>& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+/// m ? a : b, lane by lane, for lanes and 3-vectors of lanes.
+template <class M, class T> DEM_V3 T pick(M m, T a, T b) { return lanes::select(m, a, b); }
+template <class M, class T> DEM_V3 V3<T> pick(M m, const V3<T>& a, const V3<T>& b) {
+  return {lanes::select(m, a.x, b.x), lanes::select(m, a.y, b.y), lanes::select(m, a.z, b.z)};
+}
+/// The one-dimensional springs (twisting) use the same slider: dot of scalars is their product.
+DEM_V3 double dot(double a, double b) { return a * b; }
+template <int W> DEM_V3 lanes::Lanes<W> dot(lanes::Lanes<W> a, lanes::Lanes<W> b) { return a * b; }
+inline V3<double> v3(const Vec3& a) { return {a.x, a.y, a.z}; }
+inline Vec3 vec3(const V3<double>& a) { return {a.x, a.y, a.z}; }
+#undef DEM_V3
+
 /// Where j's image is relative to i: the branch vector d = x_j + image - x_i [m], |d|^2 and
 /// the reach r_i + r_j [m]. In contact when |d|^2 < reach^2 (`touching`).
 template <class T>

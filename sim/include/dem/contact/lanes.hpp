@@ -5,7 +5,9 @@
 //   T = double      one pair (the reference loop, the all-pairs oracle, GCC's auto-vectorised
 //                   generic/AVX-512 kernels);
 //   T = Lanes<4>    four pairs in one AVX2 register (the hand-written kernel keeps only the
-//                   loads, transposes and prefetches; the arithmetic is this body).
+//                   loads, transposes and prefetches; the arithmetic is this body);
+//   T = Lanes<2|8>  two (generic x86-64) or eight (AVX-512) pairs: the kernels of the models
+//                   with history (forces/history_kernels.hpp) run every width from one source.
 // Lanes are GCC vector extensions, not intrinsics: their operators need no target attribute,
 // so the body inlines into a `target("avx2")` kernel and compiles to 256-bit instructions there,
 // while the same source gives scalar code elsewhere. Every operation is the IEEE operation of
@@ -20,10 +22,17 @@ template <int W>
 struct Lanes {
   typedef double V __attribute__((vector_size(8 * W)));
   typedef std::int64_t M __attribute__((vector_size(8 * W)));   ///< mask: all ones = true
+  static constexpr int width = W;
   V v;
 };
 
-using L4 = Lanes<4>;
+using L2 = Lanes<2>;   ///< SSE2 (the generic kernel of the history models)
+using L4 = Lanes<4>;   ///< AVX2
+using L8 = Lanes<8>;   ///< AVX-512
+
+/// Pairs in one value of T: 1 for double.
+template <class T> struct WidthOf { static constexpr int value = 1; };
+template <int W> struct WidthOf<Lanes<W>> { static constexpr int value = W; };
 
 #define DEM_LANE __attribute__((always_inline)) inline
 template <int W> DEM_LANE Lanes<W> operator+(Lanes<W> a, Lanes<W> b) { return {a.v + b.v}; }
@@ -38,7 +47,11 @@ template <int W> struct MaskOf<Lanes<W>> { using type = typename Lanes<W>::M; };
 template <class T> using Mask = typename MaskOf<T>::type;
 
 /// A constant in every lane.
-template <class T> DEM_LANE T splat(double x) { return T{x}; }
+template <class T> DEM_LANE T splat(double x) {
+  T r;
+  for (int l = 0; l < T::width; ++l) r.v[l] = x;
+  return r;
+}
 template <> DEM_LANE double splat<double>(double x) { return x; }
 template <> DEM_LANE L4 splat<L4>(double x) { return {L4::V{x, x, x, x}}; }
 
@@ -47,9 +60,22 @@ DEM_LANE bool less(double a, double b) { return a < b; }
 DEM_LANE bool greater(double a, double b) { return a > b; }
 template <int W> DEM_LANE typename Lanes<W>::M less(Lanes<W> a, Lanes<W> b) { return a.v < b.v; }
 template <int W> DEM_LANE typename Lanes<W>::M greater(Lanes<W> a, Lanes<W> b) { return a.v > b.v; }
+DEM_LANE bool less_equal(double a, double b) { return a <= b; }
+DEM_LANE bool greater_equal(double a, double b) { return a >= b; }
+DEM_LANE bool equal(double a, double b) { return a == b; }
+template <int W> DEM_LANE typename Lanes<W>::M less_equal(Lanes<W> a, Lanes<W> b) { return a.v <= b.v; }
+template <int W> DEM_LANE typename Lanes<W>::M greater_equal(Lanes<W> a, Lanes<W> b) { return a.v >= b.v; }
+template <int W> DEM_LANE typename Lanes<W>::M equal(Lanes<W> a, Lanes<W> b) { return a.v == b.v; }
 /// m ? a : b, lane by lane.
 DEM_LANE double select(bool m, double a, double b) { return m ? a : b; }
 template <int W> DEM_LANE Lanes<W> select(typename Lanes<W>::M m, Lanes<W> a, Lanes<W> b) { return {m ? a.v : b.v}; }
+/// True in any lane.
+DEM_LANE bool any(bool m) { return m; }
+template <class M> DEM_LANE bool any(M m) {
+  bool r = false;
+  for (unsigned l = 0; l < sizeof(M) / 8; ++l) r |= m[l] != 0;
+  return r;
+}
 /// A scalar flag as a mask (true in every lane).
 template <class T> DEM_LANE Mask<T> mask_of(bool b) {
   const Mask<T> none{};

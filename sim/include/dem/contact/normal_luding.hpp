@@ -8,6 +8,7 @@
 
 #include "dem/contact/normal_linear.hpp"
 #include "dem/contact/submodel.hpp"
+#include "dem/contact/lanes.hpp"
 
 namespace dem::contact {
 
@@ -38,44 +39,55 @@ struct LudingNormal {
     return {law.get("stiffness_N_m"), law.get("luding_kp_N_m"), law.get("luding_kc_N_m"),
             law.get("luding_plasticity_depth")};
   }
+  static constexpr bool lane_body = true;   ///< update() runs on lanes: the vector kernels take it
 
-  double delta_star(double a12) const { return kp / (kp - k1) * phi_f * 2.0 * a12; }
-  double k2_of(double delta_max, double a12) const {
-    const double ds = delta_star(a12);
-    return delta_max >= ds ? kp : k1 + (kp - k1) * delta_max / ds;
+  // Every function below is one body for one pair (T = double) and for lanes of pairs: branches
+  // are picks, the operations those of the scalar law in its order.
+  template <class T> __attribute__((always_inline)) T delta_star(T a12) const {
+    using lanes::splat;
+    return splat<T>(kp) / (splat<T>(kp) - splat<T>(k1)) * splat<T>(phi_f) * splat<T>(2.0) * a12;
+  }
+  template <class T> __attribute__((always_inline)) T k2_of(T delta_max, T a12) const {
+    using lanes::splat;
+    const T ds = delta_star(a12);
+    return lanes::select(lanes::greater_equal(delta_max, ds), splat<T>(kp),
+                         splat<T>(k1) + (splat<T>(kp) - splat<T>(k1)) * delta_max / ds);
   }
   /// The force at overlap delta with the stored delta_max, without changing it.
-  double force(double delta, double a12, const double* h) const {
-    double copy = h[0];
+  template <class T> T force(T delta, T a12, const T* h) const {
+    T copy = h[0];
     return update(delta, a12, &copy);
   }
   /// The force, and delta_max updated on the loading branch (up to delta*) and the adhesive limit.
-  double update(double delta, double a12, double* h) const {
-    const double k2 = k2_of(h[0], a12);
-    const double f = k2 * (delta - (1.0 - k1 / k2) * h[0]);
-    if (f >= k1 * delta) {
-      const double ds = delta_star(a12);
-      if (delta < ds) {
-        h[0] = std::max(h[0], delta);
-        return k1 * delta;
-      }
-      h[0] = ds;   // on the limit branch: elastic along kp from here on
-      return kp * (delta - (1.0 - k1 / kp) * ds);
-    }
-    if (f <= -kc * delta) {
-      h[0] = adhesive_delta_max(delta, a12);
-      return -kc * delta;
-    }
-    return f;
+  template <class T> __attribute__((always_inline)) T update(T delta, T a12, T* h) const {
+    using lanes::select;
+    using lanes::splat;
+    const T h0 = h[0], K1 = splat<T>(k1), Kp = splat<T>(kp), one = splat<T>(1.0);
+    const T k2 = k2_of(h0, a12);
+    const T f = k2 * (delta - (one - K1 / k2) * h0);
+    const T k1d = K1 * delta, kcd = -splat<T>(kc) * delta;
+    const auto loading = lanes::greater_equal(f, k1d);
+    const auto adhesive = lanes::less_equal(f, kcd);
+    const T ds = delta_star(a12);
+    const auto below = lanes::less(delta, ds);
+    // on the limit branch beyond delta*: elastic along kp from there on
+    const T h_load = select(below, select(lanes::less(h0, delta), delta, h0), ds);
+    const T f_load = select(below, k1d, Kp * (delta - (one - K1 / Kp) * ds));
+    h[0] = select(loading, h_load, select(adhesive, adhesive_delta_max(delta, a12), h0));
+    return select(loading, f_load, select(adhesive, kcd, f));
   }
   /// The delta_max whose own k2-line passes through (delta, -kc delta): k2(h) delta -
   /// (k2(h) - k1) h = -kc delta. With k2(h) = k1 + c h (c = (kp - k1)/delta*) that is
   /// c h^2 - c delta h - (k1 + kc) delta = 0. (The peers' (k2 + kc)/(k2 - k1) delta keeps the old k2,
   /// so the next step's k2-line misses the point and the branch is not exactly -kc delta.)
-  double adhesive_delta_max(double delta, double a12) const {
-    const double ds = delta_star(a12), c = (kp - k1) / ds;
-    const double h = 0.5 * delta + std::sqrt(0.25 * delta * delta + (k1 + kc) * delta / c);
-    return h < ds ? h : (kp + kc) / (kp - k1) * delta;   // k2 = kp at and beyond delta*
+  template <class T> __attribute__((always_inline)) T adhesive_delta_max(T delta, T a12) const {
+    using lanes::splat;
+    const T ds = delta_star(a12), c = (splat<T>(kp) - splat<T>(k1)) / ds;
+    const T h = splat<T>(0.5) * delta +
+                lanes::sqrt(splat<T>(0.25) * delta * delta + (splat<T>(k1) + splat<T>(kc)) * delta / c);
+    // k2 = kp at and beyond delta*
+    return lanes::select(lanes::less(h, ds), h,
+                         (splat<T>(kp) + splat<T>(kc)) / (splat<T>(kp) - splat<T>(k1)) * delta);
   }
   /// The energy the contact would give back unloading along its k2-line [J].
   double energy(double delta, double a12, const double* h) const {

@@ -6,13 +6,13 @@
 #include <cmath>
 
 #include "dem/contact/submodel.hpp"
+#include "dem/contact/slider.hpp"
 #include "dem/core/vec3.hpp"
 
 namespace dem::contact {
 
-/// What a tangential sub-model sees of a contact (scalar: frictional contacts run on the
-/// reference loop): unit normal n (i to j), the relative velocity of the contact points
-/// v_c = (v_j - v_i) + L d - (a_i w_i + a_j w_j) x n [m/s] (a = r - delta/2, the lever arms
+/// What a tangential sub-model's `force` sees of a contact (the measurements): unit normal
+/// n (i to j), the relative velocity of the contact points v_c = (v_j - v_i) + L d - (a_i w_i + a_j w_j) x n [m/s] (a = r - delta/2, the lever arms
 /// to the middle of the overlap), and the normal force fn >= 0 [N] after the clamp.
 struct TangentialInput {
   Vec3 n;
@@ -58,6 +58,7 @@ struct CundallStrack {
   bool objective = true;   ///< false: no rotation of the spring (the tests' mutation check)
   static constexpr int history = 4;          ///< xi_x, xi_y, xi_z [m], slipping (0/1)
   static constexpr bool rotations = true;
+  static constexpr bool lane_body = true;    ///< update() runs on lanes: the vector kernels take it
   static constexpr unsigned odd_mask = 0x7;  ///< history entries that change sign when i and j swap
   static constexpr const char* name = "cundall_strack";
   /// From the scene's keys; k_ref: the normal sub-model's reference stiffness [N/m].
@@ -67,48 +68,46 @@ struct CundallStrack {
   }
   static const SubModelInfo& info();
 
-  static Vec3 tangent_part(const Vec3& v, const Vec3& n) { return v - n * dot(v, n); }
-
-  /// The spring rotated into the tangent plane of n, length kept.
-  static Vec3 rotate_spring(const Vec3& xi, const Vec3& n) {
-    const double len2 = dot(xi, xi);
-    if (len2 == 0.0) return xi;
-    const Vec3 p = tangent_part(xi, n);
-    const double p2 = dot(p, p);
-    return p2 > 0.0 ? p * std::sqrt(len2 / p2) : Vec3{0, 0, 0};
+  template <class T>
+  __attribute__((always_inline)) static V3<T> tangent_part(const V3<T>& v, const V3<T>& n) {
+    return v - n * dot(v, n);
   }
 
-  /// One step of the contact: updates h (xi, slip) and returns the tangential force on j [N].
-  /// `dissipated` gains the energy lost to sliding [J]: the work the contact's motion did on the
-  /// spring over the step (trapezoid of the spring force along the increment v_t dt, second
-  /// order like the integrator) minus the change of the spring's energy; zero while sticking.
-  Vec3 update(const TangentialInput& c, double dt, double* h, double* dissipated) const {
-    const Vec3 vt = tangent_part(c.v_contact, c.n);
-    const Vec3 old{h[0], h[1], h[2]};
-    const Vec3 start = objective ? rotate_spring(old, c.n) : old;
-    const Vec3 step = vt * dt;
-    Vec3 xi = start + step;
-    Vec3 f = xi * (-kt) - vt * gamma_t;
-    const double limit = mu * c.fn, f2 = dot(f, f);
-    h[3] = 0.0;
-    if (f2 > limit * limit) {
-      f = f * (limit / std::sqrt(f2));
-      xi = (f + vt * gamma_t) * (-1.0 / kt);
-      *dissipated += 0.5 * kt * (dot(start + xi, step) - dot(xi, xi) + dot(start, start));
-      h[3] = 1.0;
-    }
-    h[0] = xi.x; h[1] = xi.y; h[2] = xi.z;
-    return f;
+  /// The spring rotated into the tangent plane of n, length kept (a zero spring stays as it is;
+  /// one along n, which has no tangent direction, becomes zero).
+  template <class T>
+  __attribute__((always_inline)) static V3<T> rotate_spring(const V3<T>& xi, const V3<T>& n) {
+    const T zero = lanes::splat<T>(0.0);
+    const T len2 = dot(xi, xi);
+    const V3<T> p = tangent_part(xi, n);
+    const T p2 = dot(p, p);
+    const V3<T> rotated = pick(lanes::greater(p2, zero), p * lanes::sqrt(len2 / p2), V3<T>{zero, zero, zero});
+    return pick(lanes::equal(len2, zero), xi, rotated);
+  }
+
+  /// One step of the contact (unit normal n from i to j, relative velocity of the contact points
+  /// v_contact [m/s], normal force fn >= 0 [N]): updates h (xi, slip), adds the energy lost to
+  /// sliding to `dissipated` [J] and returns the tangential force on j [N]. The spring is
+  /// rotated (objective), then one step of the slider (slider.hpp) with the tangential velocity.
+  template <class T>
+  __attribute__((always_inline)) V3<T> update(const V3<T>& n, const V3<T>& v_contact, T fn, T dt, T* h,
+                                              T& dissipated) const {
+    const V3<T> vt = tangent_part(v_contact, n);
+    const V3<T> old{h[0], h[1], h[2]};
+    const V3<T> start = objective ? rotate_spring(old, n) : old;
+    const SliderStep<T, V3<T>> s =
+        slider_step(start, vt, dt, lanes::splat<T>(kt), lanes::splat<T>(gamma_t), lanes::splat<T>(mu) * fn);
+    h[0] = s.spring.x; h[1] = s.spring.y; h[2] = s.spring.z;
+    h[3] = lanes::select(s.sliding, lanes::splat<T>(1.0), lanes::splat<T>(0.0));
+    dissipated = dissipated + s.dissipated;
+    return s.force;
   }
 
   /// The force the stored spring exerts now, without changing it (measurements: never mutate
-  /// the history in a diagnostic).
+  /// the history in a diagnostic): the slider over a step of zero length.
   Vec3 force(const TangentialInput& c, const double* h) const {
-    const Vec3 vt = tangent_part(c.v_contact, c.n);
-    Vec3 f = Vec3{h[0], h[1], h[2]} * (-kt) - vt * gamma_t;
-    const double limit = mu * c.fn, f2 = dot(f, f);
-    if (f2 > limit * limit) f = f * (limit / std::sqrt(f2));
-    return f;
+    const V3<double> vt = tangent_part(v3(c.v_contact), v3(c.n));
+    return vec3(slider_step(V3<double>{h[0], h[1], h[2]}, vt, 0.0, kt, gamma_t, mu * c.fn).force);
   }
 
   double energy(const double* h) const { return 0.5 * kt * (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]); }
