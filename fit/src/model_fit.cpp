@@ -205,6 +205,89 @@ Parameters start_values(const std::vector<CurveData>& curves, const IsoData& iso
   return s;
 }
 
+// Per-curve start of the frictional family: at constant volume s and F do not depend on p, so
+// each curve's (s_max, ln beta_s, kappa_s, F_max, ln beta_F, n_F) is fitted to its s and F alone.
+struct StressFabricResidual {
+  std::vector<double> eps, s, F, ws, wF;
+  double nu, p0, s0, F0, b, max_step;
+  Surface surface;
+  std::vector<double> iso;
+  template <class T>
+  bool operator()(T const* const* par, T* r) const {
+    const T* x = par[0];
+    T sh[kNumShear], ex[kNumExt], isoT[kNumIso];
+    for (int i = 0; i < kNumShear; ++i) sh[i] = T(0.0);
+    for (int i = 0; i < kNumExt; ++i) ex[i] = T(0.0);
+    for (int i = 0; i < kNumIso; ++i) isoT[i] = T(iso[i]);
+    sh[kSmaxA] = x[0]; sh[kLnBetaSA] = x[1]; ex[kKappaA] = x[2]; sh[kFmaxA] = x[3]; sh[kLnBetaFA] = x[4]; ex[kNFA] = x[5];
+    const auto st = monotone_shear<T>(isoT, sh, nu, nu, p0, s0, F0, eps, max_step, Ext<T>{ex, b, surface});
+    const std::size_t n = eps.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      r[i] = (st[i].s - T(s[i])) * T(ws[i]);
+      r[n + i] = (st[i].F - T(F[i])) * T(wF[i]);
+    }
+    return true;
+  }
+};
+
+// Weighted least-squares line y = a + b (nu - nu_ref) through per-curve values.
+void line_through(const std::vector<double>& nus, const std::vector<double>& y, double nu_ref, double* a, double* b) {
+  const std::size_t n = y.size();
+  if (n == 0) return;
+  double mx = 0, my = 0;
+  for (std::size_t i = 0; i < n; ++i) { mx += nus[i] - nu_ref; my += y[i]; }
+  mx /= n; my /= n;
+  double sxy = 0, sxx = 0;
+  for (std::size_t i = 0; i < n; ++i) { sxy += (nus[i] - nu_ref - mx) * (y[i] - my); sxx += (nus[i] - nu_ref - mx) * (nus[i] - nu_ref - mx); }
+  *b = sxx > 0 ? sxy / sxx : 0.0;
+  *a = my - *b * mx;
+}
+
+// The frictional family's start: per-curve fits of the stress-ratio and fabric laws (three
+// starts in n_F, the best kept), lines through them in nu; the pressure terms from `base` (the
+// group model's calibration), the dilatancy off (d_D = 0, chi_D = 0.5).
+Parameters extended_start(const std::vector<CurveData>& curves, const Parameters& base, const CalibrationOptions& o) {
+  Parameters P = base;
+  std::vector<double> nus, v[6];
+  const std::vector<double> iso = base.iso();
+  for (const auto& c : curves) {
+    std::vector<double> best;
+    double best_cost = 1e300;
+    for (double n0 : {0.5, 3.0, 8.0}) {
+      double x[6] = {*std::max_element(c.s.begin(), c.s.end()), std::log(6.0), 0.5,
+                     1.1 * *std::max_element(c.F.begin(), c.F.end()), std::log(10.0), n0};
+      auto* f = new StressFabricResidual{c.eps, c.s, c.F, weights(c.se_s, o.se_floor, c.source + " s_dev"),
+                                         weights(c.se_F, o.se_floor, c.source + " F_dev"), c.nu, c.p.front(), c.s.front(),
+                                         c.F.front(), lode_b_of(c.mode), 2e-3, o.surface, iso};
+      auto* cost = new ceres::DynamicAutoDiffCostFunction<StressFabricResidual, 6>(f);
+      cost->AddParameterBlock(6);
+      cost->SetNumResiduals(2 * static_cast<int>(c.eps.size()));
+      ceres::Problem pr;
+      pr.AddResidualBlock(cost, nullptr, x);
+      const double lo[6] = {0.01, std::log(0.1), -0.9, 0.005, std::log(0.1), -1.0};
+      const double hi[6] = {5.0, std::log(2e3), 30.0, 5.0, std::log(2e3), 30.0};
+      for (int i = 0; i < 6; ++i) { pr.SetParameterLowerBound(x, i, lo[i]); pr.SetParameterUpperBound(x, i, hi[i]); }
+      ceres::Solver::Options so;
+      so.linear_solver_type = ceres::DENSE_QR;
+      so.max_num_iterations = 200;
+      ceres::Solver::Summary sum;
+      ceres::Solve(so, &pr, &sum);
+      if (sum.IsSolutionUsable() && sum.final_cost < best_cost) { best_cost = sum.final_cost; best.assign(x, x + 6); }
+    }
+    if (best.empty()) continue;
+    nus.push_back(c.nu);
+    for (int i = 0; i < 6; ++i) v[i].push_back(best[i]);
+  }
+  line_through(nus, v[0], P.nu_ref, &P.shear[kSmaxA], &P.shear[kSmaxB]);
+  line_through(nus, v[1], P.nu_ref, &P.shear[kLnBetaSA], &P.shear[kLnBetaSB]);
+  line_through(nus, v[2], P.nu_ref, &P.ext[kKappaA], &P.ext[kKappaB]);
+  line_through(nus, v[3], P.nu_ref, &P.shear[kFmaxA], &P.shear[kFmaxB]);
+  line_through(nus, v[4], P.nu_ref, &P.shear[kLnBetaFA], &P.shear[kLnBetaFB]);
+  line_through(nus, v[5], P.nu_ref, &P.ext[kNFA], &P.ext[kNFB]);
+  P.ext[kDilA] = 0.0; P.ext[kDilB] = 0.0; P.ext[kChiD] = 0.5;
+  return P;
+}
+
 }  // namespace
 
 double lode_b_of(const std::string& mode) {
@@ -321,8 +404,9 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     // moderate extension: a fabric gated by the mobilisation, a stress ratio linear for longer.
     CalibrationOptions g = o;
     g.extended = false;
-    start = calibrate(curves_in, iso, g, paths).params;
-    start.ext[kNFA] = 1.0; start.ext[kKappaA] = 0.5; start.ext[kChiD] = 0.5;
+    Parameters base = calibrate(curves_in, iso, g, paths).params;
+    base.nu_ref = nu_ref;
+    start = extended_start(curves, base, o);
   }
   start.nu_ref = nu_ref;
   std::vector<double> isob = start.iso();
