@@ -641,7 +641,9 @@ TEST(ModelFriction, NeutralExtensionIsTheGroupModelBitForBit) {
   const Parameters X = frictional_truth();
   const auto active = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, mixed_path(),
                                         Ext<double>{X.ext, kLodeBD2, Surface::None});
-  EXPECT_GT(std::fabs(active.back().state.F - group.back().state.F), 1e-3);
+  double most = 0;
+  for (std::size_t i = 0; i < group.size(); ++i) most = std::max(most, std::fabs(active[i].state.F - group[i].state.F));
+  EXPECT_GT(most, 1e-3);
 }
 
 // The Lode-angle limit against closed forms. Matsuoka-Nakai passes through the Mohr-Coulomb
