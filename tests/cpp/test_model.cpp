@@ -729,3 +729,26 @@ TEST(ModelFriction, RecoversExtensionWithinJackknifeErrors) {
   ASSERT_EQ(errs.size(), 3u);
   for (const auto& e : errs) EXPECT_LT(e.rms_over_band, 1.0) << e.quantity;
 }
+
+// The Lode surface moves the limit, not the initial stiffness: from s = 0 the stress ratio rises
+// at G/p = beta_s s_max in D2 (b = 1/2) and in D3 (b = 0) alike, and tends to s_max and to the
+// surface's s_lim(b = 0) respectively (kappa_s = 0 here: the plain relaxation law, solved).
+TEST(ModelFriction, LodeSurfaceMovesTheLimitNotTheInitialSlope) {
+  Parameters P = frictional_truth();
+  P.ext[kKappaA] = P.ext[kKappaB] = 0.0;
+  const auto iso = P.iso();
+  const double nu = 0.74, p0 = isotropic_pressure(iso.data(), nu);
+  std::vector<double> eps;
+  for (int i = 0; i <= 400; ++i) eps.push_back(0.005 * i);
+  const auto d2 = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.0, 0.01, eps, 1e-3,
+                                         Ext<double>{P.ext, lode_b_of("D2"), Surface::LadeDuncan});
+  const auto d3 = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.0, 0.01, eps, 1e-3,
+                                         Ext<double>{P.ext, lode_b_of("D3"), Surface::LadeDuncan});
+  const Local<double> L = local(P.shear, nu, P.nu_ref);
+  const double slope = L.beta_s * L.s_max;
+  EXPECT_NEAR(d2[1].s / eps[1], slope, 0.02 * slope);
+  EXPECT_NEAR(d3[1].s / eps[1], d2[1].s / eps[1], 0.01 * slope);   // unscaled: 10 % apart, s_lim(0)/s_max
+  EXPECT_NEAR(d2.back().s, L.s_max, 1e-4);
+  EXPECT_NEAR(d3.back().s, lode_limit(L.s_max, 0.0, Surface::LadeDuncan), 1e-4);
+  EXPECT_GT(d3.back().s, d2.back().s + 0.02);
+}

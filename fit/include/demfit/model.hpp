@@ -291,7 +291,11 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const T dil = m.ext.p ? X.d_D * (r - X.chi_D) * (T(1.0) - T(sigma) * y.F / L.F_max) : T(0.0);   // plastic dilatancy
   const T relax = L.beta_p * (y.p - p_ref);          // excess pressure relaxing with |d eps_d|
   T dvol;                                            // d eps_vol per |d eps_d|
-  const T shear = L.beta_s * (T(sigma) * s_lim - y.s) * shape_s;   // the deviatoric source of ds
+  // The deviatoric source of ds. The rate is scaled by s_max/s_lim so that the initial shear
+  // stiffness G/p = beta_s s_max does not depend on the Lode angle (only the limit does): the
+  // DEM's D2 and D3 stress ratios rise together at first. 1 without a surface or at b_ref.
+  const bool lode = m.ext.surface != Surface::None && m.ext.b != kLodeBD2;
+  const T shear = L.beta_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_lim - y.s) * shape_s;
   if (seg.control == Control::Isobaric) {
     dvol = (A * T(sigma) - relax + B * dil) / B;
   } else if (seg.control == Control::Triaxial) {
