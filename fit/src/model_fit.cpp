@@ -412,6 +412,15 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   std::vector<double> isob = start.iso();
   std::vector<double> shear(start.shear, start.shear + kNumShear);
   std::vector<double> ext(start.ext, start.ext + kNumExt);
+  if (X) {   // the start inside the bounds set below (Ceres refuses an infeasible start)
+    for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
+      shear[i] = std::min(std::max(shear[i], std::log(1e-3)), std::log(300.0));
+      shear[i + 1] = std::min(std::max(shear[i + 1], -40.0), 40.0);
+    }
+    ext[kNFA] = std::min(std::max(ext[kNFA], -1.0), 30.0);
+    ext[kKappaA] = std::min(std::max(ext[kKappaA], -0.9), 30.0);
+    ext[kChiD] = std::min(std::max(ext[kChiD], -1.0), 3.0);
+  }
   std::vector<double*> blocks_all = {isob.data(), shear.data()};
   if (X) blocks_all.push_back(ext.data());
   double numin = 1e9;
@@ -509,6 +518,14 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     problem.SetParameterUpperBound(shear.data(), i, std::log(5e3));
   }
   if (X) {
+    // The frictional family reaches stiff corners of the rate laws (at mu = 1 a free fit took
+    // beta_p to 6600 at nu = 0.80, beyond RK4's stability at max_step 5e-4): the rates are kept
+    // at beta <= 300 at nu_ref and e^{+-40 (nu - nu_ref)} about it (<= 3300 at |nu - nu_ref| = 0.06).
+    for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
+      problem.SetParameterUpperBound(shear.data(), i, std::log(300.0));
+      problem.SetParameterLowerBound(shear.data(), i + 1, -40.0);
+      problem.SetParameterUpperBound(shear.data(), i + 1, 40.0);
+    }
     problem.SetParameterLowerBound(ext.data(), kNFA, -1.0);
     problem.SetParameterUpperBound(ext.data(), kNFA, 30.0);
     problem.SetParameterLowerBound(ext.data(), kKappaA, -0.9);
