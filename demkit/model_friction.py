@@ -157,6 +157,16 @@ def table(work, mus):
             md.append(f"| {mu} | {key[0]} | {key[1]:.2f} | {role} | " + " | ".join(cells) + " |")
     md += ["", "| μ | χ²/dof group | χ²/dof extended | held-out test chooses |", "|---|---|---|---|"]
     md += [f"| {mu} | {gc:.3g} | {xc:.3g} | {ch} |" for mu, gc, xc, ch in chis]
+    # Compact: per mu the worst curve of each kind, before -> after.
+    md += ["", "| μ | χ²/dof before → after | worst fitted D2 | worst predicted D3 | worst predicted isobaric | chosen |",
+           "|---|---|---|---|---|---|"]
+    for mu, gc, xc, ch in chis:
+        cells = []
+        for mode in ("D2", "D3", "isobaric"):
+            g = [float(r[5]) for r in out_rows if r[0] == mu and r[1] == mode and np.isfinite(float(r[5]))]
+            x = [float(r[6]) for r in out_rows if r[0] == mu and r[1] == mode and np.isfinite(float(r[6]))]
+            cells.append(f"{max(g):.2f} → {max(x):.2f}" if g and x else "–")
+        md.append(f"| {mu} | {gc:.3g} → {xc:.3g} | " + " | ".join(cells) + f" | {ch} |")
     text = ["mu,mode,nu,role,quantity,group_rms_over_band [-],extended_rms_over_band [-]\n"]
     text += [",".join(r) + "\n" for r in out_rows]
     write_atomic(os.path.join(work, "before_after.csv"), "".join(text))
