@@ -280,6 +280,121 @@ void write_model_paths(const Parameters& P, const CurveData& c, const std::strin
   }
 }
 
+// ---- Families, the held-out test, the summary table (docs/model.md, "The frictional extension") ----
+
+struct FamilyFit {
+  Calibration cal;
+  std::vector<std::vector<double>> jack;   ///< leave-one-out estimates
+  std::vector<double> heldout;             ///< per left-out packing: its own fitted curves' mean squared
+                                           ///< standardised error under the fit without it
+};
+
+// Packing k's own curves of the fitted modes, predicted from its own start state by the fit of
+// the other K - 1 packings: mean of ((model - member)/sd)^2 over rows > 0 and p*, s_dev, F_dev,
+// sd = the between-packing SD (se sqrt(K)) floored at 0.25 of its median, as the fit's weights.
+double heldout_score(const Parameters& P, const std::vector<CurveData>& curves, const std::vector<CurveFile>& files,
+                     const fs::path& member, int K, double eps_max) {
+  double ss = 0;
+  long n = 0;
+  for (std::size_t j = 0; j < curves.size(); ++j) {
+    const fs::path mc = member_curve(member, files[j]);
+    if (mc.empty()) continue;
+    const Table t = read_table(mc.string());
+    CurveData c = curves[j];
+    const auto& e = t.column("eps_d");
+    c.p = resample(e, t.column("p_star"), c.eps);
+    c.s = resample(e, t.column("s_dev"), c.eps);
+    c.F = resample(e, t.column("F_dev"), c.eps);
+    c.nu = t.column("nu").front();
+    const ModelCurve m = predict_curve(P, c, eps_max);
+    const std::vector<double>* mv[3] = {&m.p, &m.s, &m.F};
+    const std::vector<double>* dv[3] = {&c.p, &c.s, &c.F};
+    const std::vector<double>* sv[3] = {&c.se_p, &c.se_s, &c.se_F};
+    for (int q = 0; q < 3; ++q) {
+      std::vector<double> pos;
+      for (double v : *sv[q]) if (v > 0 && std::isfinite(v)) pos.push_back(v);
+      if (pos.empty()) continue;
+      std::nth_element(pos.begin(), pos.begin() + pos.size() / 2, pos.end());
+      const double floor = 0.25 * pos[pos.size() / 2];
+      for (std::size_t i = 1; i < m.eps.size(); ++i) {
+        const double sd = std::max((*sv[q])[i], floor) * std::sqrt(static_cast<double>(K));
+        const double r = ((*mv[q])[i] - (*dv[q])[i]) / sd;
+        ss += r * r;
+        ++n;
+      }
+    }
+  }
+  return n > 0 ? ss / n : std::nan("");
+}
+
+// Held-out test between the group model and the frictional family: d_k = score_group - score_ext
+// per left-out packing; the extended family is chosen when mean(d) - t_{K-1,0.975} SE(d) > 0 (it
+// predicts packings it was not fitted on better, beyond the spread between packings); otherwise
+// the group model, the simpler. Returns true when the extended family is chosen.
+bool write_selection(const FamilyFit& g, const FamilyFit& x, int K, const fs::path& out) {
+  Table t({"packing_left_out", "heldout_group [-]", "heldout_extended [-]", "difference [-]"});
+  std::vector<double> d;
+  for (std::size_t k = 0; k < g.heldout.size() && k < x.heldout.size(); ++k) {
+    d.push_back(g.heldout[k] - x.heldout[k]);
+    t.add_row({std::to_string(k), num(g.heldout[k], 4), num(x.heldout[k], 4), num(d.back(), 4)});
+  }
+  double mean = 0, ss = 0;
+  for (double v : d) mean += v / d.size();
+  for (double v : d) ss += (v - mean) * (v - mean);
+  const double se = d.size() > 1 ? std::sqrt(ss / (d.size() - 1) / d.size()) : std::nan("");
+  const double tq = d.size() > 1 ? t_quantile(0.975, d.size() - 1) : std::nan("");
+  const bool ext = d.size() > 1 && mean - tq * se > 0;
+  t.add_row({"mean", "nan", "nan", num(mean, 4)});
+  t.add_row({"se", "nan", "nan", num(se, 4)});
+  t.add_row({"chosen", ext ? "extended" : "group", "chi2/dof " + num(g.cal.chi2_dof(), 4) + " / " + num(x.cal.chi2_dof(), 4),
+             "nan"});
+  fs::create_directories(out);
+  write_table_all(t, (out / "selection").string(),
+                  "Held-out test of the two model families over " + std::to_string(K) +
+                  " packings: each packing's own fitted curves predicted by the fit without it, mean squared error in "
+                  "units of the between-packing SD; the extended family is chosen when the mean difference exceeds "
+                  "t_{K-1,0.975} x its SE (docs/model.md)");
+  return ext;
+}
+
+struct SummaryRow {
+  std::string mode;
+  double nu;
+  std::string role, quantity;
+  double rms_over_band;
+};
+
+// One line per curve: RMS error over the band half-width of p* (or eps_v where p is held),
+// s_dev and F_dev, fitted and predicted, with the calibration's chi2/dof: the table of issue 31.
+void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, const std::string& fit_label,
+                   const fs::path& out) {
+  Table t({"mode", "nu [-]", "role", "p_star [band]", "eps_v [band]", "s_dev [band]", "F_dev [band]", "worst [band]"});
+  std::vector<std::pair<std::string, double>> keys;
+  for (const auto& r : rows)
+    if (std::find(keys.begin(), keys.end(), std::make_pair(r.mode, r.nu)) == keys.end()) keys.push_back({r.mode, r.nu});
+  double worst_all = 0;
+  for (const auto& [mode, nu] : keys) {
+    double v[4] = {std::nan(""), std::nan(""), std::nan(""), std::nan("")};
+    std::string role;
+    for (const auto& r : rows) {
+      if (r.mode != mode || r.nu != nu || r.quantity.find("after turn") != std::string::npos) continue;
+      role = r.role;
+      const int q = r.quantity == "p_star" ? 0 : r.quantity == "eps_v" ? 1 : r.quantity.rfind("s_dev", 0) == 0 ? 2 : 3;
+      v[q] = r.rms_over_band;
+    }
+    double worst = 0;
+    for (double x : v) if (std::isfinite(x)) worst = std::max(worst, x);
+    worst_all = std::max(worst_all, worst);
+    t.add_row({mode, num(nu, 4), role, num(v[0], 3), num(v[1], 3), num(v[2], 3), num(v[3], 3), num(worst, 3)});
+  }
+  t.add_row({"calibration", "nan", "chi2/dof " + num(cal.chi2_dof(), 4), "nan", "nan", "nan", "nan", num(worst_all, 3)});
+  write_table_all(t, (out / "summary").string(),
+                  std::string("RMS of model - DEM mean over the mean 95 % band half-width per curve (") +
+                      (cal.params.extended ? std::string("extended family, ") + surface_name(cal.params.surface) + " surface"
+                                           : "group model") +
+                      ", calibrated on " + fit_label + "); p_star on constant-volume rows, eps_v where p is held");
+}
+
 int run(const ModelCommandOptions& o) {
   const fs::path dir(o.dir);
   if (!fs::is_directory(dir)) throw InputError(o.dir + " is not a folder: give an ensemble folder reduced by `dem fit`");
@@ -340,11 +455,26 @@ int run(const ModelCommandOptions& o) {
 
   CalibrationOptions co;
   co.eps_max = o.eps_max;
+  if (o.family != "group" && o.family != "extended" && o.family != "auto")
+    throw InputError("--family " + o.family + ": give group (the incremental anisotropic model), extended (with the "
+                     "frictional extension) or auto (both, chosen by the held-out test)");
+  if (o.surface == "ld") co.surface = Surface::LadeDuncan;
+  else if (o.surface == "mn") co.surface = Surface::MatsuokaNakai;
+  else if (o.surface == "none") co.surface = Surface::None;
+  else throw InputError("--surface " + o.surface + ": give ld (Lade-Duncan), mn (Matsuoka-Nakai) or none");
   std::cerr << "dem model: fitting " << fit_curves.size() << " mode curves, " << fit_paths.size() << " path curves ("
             << fit_label << ") and " << iso.nu.size() << " isotropic points\n";
-  Calibration cal;
+  const int K = fit_curves.front().packings;
+  // One family: calibration, jackknife over packings, and the held-out score of each left-out
+  // packing (its own fitted curves predicted by the fit without it).
+  auto fit_family = [&](bool extended) {
+  FamilyFit ff;
+  Calibration& cal = ff.cal;
+  CalibrationOptions co_f = co;
+  co_f.extended = extended;
+  std::cerr << "dem model: family " << (extended ? "extended" : "group") << "\n";
   try {
-    cal = calibrate(fit_curves, iso, co, fit_paths);
+    cal = calibrate(fit_curves, iso, co_f, fit_paths);
   } catch (const std::invalid_argument& e) {
     throw InputError(e.what());
   }
@@ -352,8 +482,7 @@ int run(const ModelCommandOptions& o) {
 
   // Jackknife over packings: the same fit with each packing left out of every mean curve and
   // of the isotropic branch.
-  const int K = fit_curves.front().packings;
-  std::vector<std::vector<double>> jack_est;   // leave-one-out estimates (for the jackknife correlations)
+  std::vector<std::vector<double>>& jack_est = ff.jack;   // leave-one-out estimates (for the jackknife correlations)
   if (o.jackknife && K >= 2) {
     bool complete = static_cast<int>(members.size()) == K;
     for (const auto& c : fit_curves) complete = complete && c.packings == K;
@@ -367,7 +496,7 @@ int run(const ModelCommandOptions& o) {
                              " member curves of every fitted mean; errors from the covariance instead");
     } else {
       std::vector<std::vector<double>>& est = jack_est;
-      CalibrationOptions cj = co;
+      CalibrationOptions cj = co_f;
       cj.start = &cal.params;
       for (int k = 0; k < K; ++k) {
         std::vector<CurveData> loo;
@@ -381,6 +510,7 @@ int run(const ModelCommandOptions& o) {
           loo_paths.push_back(leave_one_out_path(fit_paths[j], member_path_curve(members[k], fit_path_files[j])));
         const Calibration ck = calibrate(loo, read_isotropic(iso_k), cj, loo_paths);
         est.push_back(ck.value);
+        ff.heldout.push_back(heldout_score(ck.params, fit_curves, fit_files, members[k], K, o.eps_max));
         std::cerr << "dem model: jackknife " << k + 1 << "/" << K << " (" << members[k].filename().string()
                   << " left out): chi2/dof = " << num(ck.chi2_dof(), 4) << "\n";
       }
@@ -402,6 +532,21 @@ int run(const ModelCommandOptions& o) {
     }
   }
 
+  return ff;
+  };
+
+  std::vector<std::string> fams = o.family == "auto" ? std::vector<std::string>{"group", "extended"}
+                                                     : std::vector<std::string>{o.family};
+  std::vector<FamilyFit> fits;
+  for (const auto& fam : fams) fits.push_back(fit_family(fam == "extended"));
+  std::size_t chosen = 0;
+  if (fits.size() == 2) {
+    chosen = write_selection(fits[0], fits[1], K, out) ? 1 : 0;
+    std::cerr << "dem model: held-out test chooses the " << fams[chosen] << " family (selection.md)\n";
+  }
+  auto write_results = [&](const FamilyFit& ff, const fs::path& out) {
+  const Calibration& cal = ff.cal;
+  const std::vector<std::vector<double>>& jack_est = ff.jack;
   fs::create_directories(out / "curves");
   write_parameter_tables(cal, K, out, fit_label);
   std::vector<double> nus;
@@ -410,10 +555,12 @@ int run(const ModelCommandOptions& o) {
 
   Table pred({"mode", "nu", "role", "quantity", "n", "rms [quantity]", "max_abs [quantity]", "bias [quantity]",
               "band_halfwidth [quantity]", "rms_over_band [-]", "max_over_band [-]", "frac_in_band [-]"});
+  std::vector<SummaryRow> summary;
   auto evaluate = [&](const CurveData& c, const CurveFile& f, const std::string& role) {
     const ModelCurve m = predict_curve(cal.params, c, o.eps_max);
     write_model_curve(m, c, role, out / "curves" / (f.mode + "_" + f.tag + ".csv"));
     for (const auto& e : prediction_errors(m, c)) {
+      summary.push_back({c.mode, c.nu, role, e.quantity, e.rms_over_band});
       pred.add_row({c.mode, num(c.nu, 4), role, e.quantity, std::to_string(e.n), num(e.rms, 4), num(e.max_abs, 4),
                     num(e.bias, 4), num(e.band, 4), num(e.rms_over_band, 3), num(e.max_over_band, 3), num(e.frac_in_band, 3)});
       std::cerr << "dem model: " << c.mode << " nu=" << num(c.nu, 4) << " " << role << " " << e.quantity
@@ -429,6 +576,7 @@ int run(const ModelCommandOptions& o) {
     write_path_curve(m, d, role, out / "curves" / "paths" / (f.mode + "_" + f.tag + ".csv"));
     for (const auto& e : path_errors(m, d)) {
       if (e.n == 0) continue;
+      summary.push_back({d.name, d.nu, role, e.quantity, e.rms_over_band});
       pred.add_row({d.name, num(d.nu, 4), role, e.quantity, std::to_string(e.n), num(e.rms, 4), num(e.max_abs, 4),
                     num(e.bias, 4), num(e.band, 4), num(e.rms_over_band, 3), num(e.max_over_band, 3), num(e.frac_in_band, 3)});
       std::cerr << "dem model: " << d.name << " nu=" << num(d.nu, 4) << " " << role << " " << e.quantity << ": rms "
@@ -446,6 +594,7 @@ int run(const ModelCommandOptions& o) {
   write_identifiability(cal, jack_est, nus, fit_label, out);
   for (std::size_t j = 0; j < fit_curves.size(); ++j) write_model_paths(cal.params, fit_curves[j], fit_files[j].tag, out / "curves");
 
+  write_summary(summary, cal, fit_label, out);
   for (const auto& w : cal.warnings) std::cerr << "dem model: warning: " << w << "\n";
   std::cerr << "dem model: tables and curves written to " << out.string() << "\n";
   if (!o.no_plots) {
@@ -453,7 +602,14 @@ int run(const ModelCommandOptions& o) {
                             out.string() + "\"";
     if (std::system(cmd.c_str()) != 0) std::cerr << "dem model: plotting failed (tables are written)\n";
   }
-  return cal.ok ? 0 : 1;
+  };
+  int rc = 0;
+  for (std::size_t f = 0; f < fits.size(); ++f) {
+    const fs::path dest = fits.size() == 2 && f != chosen ? out / fams[f] : out;
+    write_results(fits[f], dest);
+    if (f == chosen && !fits[f].cal.ok) rc = 1;
+  }
+  return rc;
 }
 
 }  // namespace
@@ -469,6 +625,10 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
   app.add_option("--eps-max", o.eps_max, "fit and compare only eps_d <= this [-]");
   app.add_flag("--no-jackknife{false}", o.jackknife, "errors from the covariance only (faster)");
   app.add_flag("--no-plots", o.no_plots, "skip the matplotlib plots");
+  app.add_option("--family", o.family, "group (the incremental anisotropic model), extended (with the frictional "
+                 "extension: docs/model.md) or auto (both; the held-out test chooses, the other goes to OUT/FAMILY)");
+  app.add_option("--surface", o.surface, "Lode-angle surface of the extended family: ld (Lade-Duncan), mn "
+                 "(Matsuoka-Nakai), none");
   app.add_flag("--force", o.force, "overwrite an existing output folder");
 }
 

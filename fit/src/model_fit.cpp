@@ -43,12 +43,17 @@ std::vector<double> weights(const std::vector<double>& se, double floor_rel, con
 }
 
 // One D2 curve: residuals (model - mean)/sigma for p*, s_dev, F_dev at every strain.
+// par[2]: the extension block of the frictional family (when `extended`).
 struct CurveResidual {
   std::vector<double> eps, p, s, F, wp, ws, wF;
   double nu0, p0, s0, F0, nu_ref, max_step;
+  bool extended = false;
+  double b = kLodeBD2;
+  Surface surface = Surface::None;
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step);
+    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None};
+    const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
       r[i] = (st[i].p - T(p[i])) * T(wp[i]);
@@ -76,9 +81,13 @@ struct PathResidual {
   std::vector<double> acc, p, ev, s, F, w1, ws, wF;
   std::vector<int> direction, isobaric;
   double nu0, p0, s0, F0, nu_ref, max_step;
+  bool extended = false;
+  double b = kLodeBD2;
+  Surface surface = Surface::None;
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step);
+    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None};
+    const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step, ext);
     const std::size_t n = acc.size();
     for (std::size_t i = 0; i < n; ++i) {
       r[i] = isobaric[i] ? (st[i].eps_vol / T(3.0) - T(ev[i])) * T(w1[i]) : (st[i].state.p - T(p[i])) * T(w1[i]);
@@ -196,7 +205,99 @@ Parameters start_values(const std::vector<CurveData>& curves, const IsoData& iso
   return s;
 }
 
+// Per-curve start of the frictional family: at constant volume s and F do not depend on p, so
+// each curve's (s_max, ln beta_s, kappa_s, F_max, ln beta_F, n_F) is fitted to its s and F alone.
+struct StressFabricResidual {
+  std::vector<double> eps, s, F, ws, wF;
+  double nu, p0, s0, F0, b, max_step;
+  Surface surface;
+  std::vector<double> iso;
+  template <class T>
+  bool operator()(T const* const* par, T* r) const {
+    const T* x = par[0];
+    T sh[kNumShear], ex[kNumExt], isoT[kNumIso];
+    for (int i = 0; i < kNumShear; ++i) sh[i] = T(0.0);
+    for (int i = 0; i < kNumExt; ++i) ex[i] = T(0.0);
+    for (int i = 0; i < kNumIso; ++i) isoT[i] = T(iso[i]);
+    sh[kSmaxA] = x[0]; sh[kLnBetaSA] = x[1]; ex[kKappaA] = x[2]; sh[kFmaxA] = x[3]; sh[kLnBetaFA] = x[4]; ex[kNFA] = x[5];
+    const auto st = monotone_shear<T>(isoT, sh, nu, nu, p0, s0, F0, eps, max_step, Ext<T>{ex, b, surface});
+    const std::size_t n = eps.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      r[i] = (st[i].s - T(s[i])) * T(ws[i]);
+      r[n + i] = (st[i].F - T(F[i])) * T(wF[i]);
+    }
+    return true;
+  }
+};
+
+// Weighted least-squares line y = a + b (nu - nu_ref) through per-curve values.
+void line_through(const std::vector<double>& nus, const std::vector<double>& y, double nu_ref, double* a, double* b) {
+  const std::size_t n = y.size();
+  if (n == 0) return;
+  double mx = 0, my = 0;
+  for (std::size_t i = 0; i < n; ++i) { mx += nus[i] - nu_ref; my += y[i]; }
+  mx /= n; my /= n;
+  double sxy = 0, sxx = 0;
+  for (std::size_t i = 0; i < n; ++i) { sxy += (nus[i] - nu_ref - mx) * (y[i] - my); sxx += (nus[i] - nu_ref - mx) * (nus[i] - nu_ref - mx); }
+  *b = sxx > 0 ? sxy / sxx : 0.0;
+  *a = my - *b * mx;
+}
+
+// The frictional family's start: per-curve fits of the stress-ratio and fabric laws (three
+// starts in n_F, the best kept), lines through them in nu; the pressure terms from `base` (the
+// group model's calibration), the dilatancy off (d_D = 0, chi_D = 0.5).
+Parameters extended_start(const std::vector<CurveData>& curves, const Parameters& base, const CalibrationOptions& o) {
+  Parameters P = base;
+  std::vector<double> nus, v[6];
+  const std::vector<double> iso = base.iso();
+  for (const auto& c : curves) {
+    std::vector<double> best;
+    double best_cost = 1e300;
+    for (double n0 : {0.5, 3.0, 8.0}) {
+      double x[6] = {*std::max_element(c.s.begin(), c.s.end()), std::log(6.0), 0.5,
+                     1.1 * *std::max_element(c.F.begin(), c.F.end()), std::log(10.0), n0};
+      auto* f = new StressFabricResidual{c.eps, c.s, c.F, weights(c.se_s, o.se_floor, c.source + " s_dev"),
+                                         weights(c.se_F, o.se_floor, c.source + " F_dev"), c.nu, c.p.front(), c.s.front(),
+                                         c.F.front(), lode_b_of(c.mode), 2e-3, o.surface, iso};
+      auto* cost = new ceres::DynamicAutoDiffCostFunction<StressFabricResidual, 6>(f);
+      cost->AddParameterBlock(6);
+      cost->SetNumResiduals(2 * static_cast<int>(c.eps.size()));
+      ceres::Problem pr;
+      pr.AddResidualBlock(cost, nullptr, x);
+      const double lo[6] = {0.01, std::log(0.1), -0.9, 0.005, std::log(0.1), -1.0};
+      const double hi[6] = {5.0, std::log(2e3), 30.0, 5.0, std::log(2e3), 30.0};
+      for (int i = 0; i < 6; ++i) { pr.SetParameterLowerBound(x, i, lo[i]); pr.SetParameterUpperBound(x, i, hi[i]); }
+      ceres::Solver::Options so;
+      so.linear_solver_type = ceres::DENSE_QR;
+      so.max_num_iterations = 200;
+      ceres::Solver::Summary sum;
+      ceres::Solve(so, &pr, &sum);
+      if (sum.IsSolutionUsable() && sum.final_cost < best_cost) { best_cost = sum.final_cost; best.assign(x, x + 6); }
+    }
+    if (best.empty()) continue;
+    nus.push_back(c.nu);
+    for (int i = 0; i < 6; ++i) v[i].push_back(best[i]);
+  }
+  line_through(nus, v[0], P.nu_ref, &P.shear[kSmaxA], &P.shear[kSmaxB]);
+  line_through(nus, v[1], P.nu_ref, &P.shear[kLnBetaSA], &P.shear[kLnBetaSB]);
+  line_through(nus, v[2], P.nu_ref, &P.ext[kKappaA], &P.ext[kKappaB]);
+  line_through(nus, v[3], P.nu_ref, &P.shear[kFmaxA], &P.shear[kFmaxB]);
+  line_through(nus, v[4], P.nu_ref, &P.shear[kLnBetaFA], &P.shear[kLnBetaFB]);
+  line_through(nus, v[5], P.nu_ref, &P.ext[kNFA], &P.ext[kNFB]);
+  P.ext[kDilA] = 0.0; P.ext[kDilB] = 0.0; P.ext[kChiD] = 0.5;
+  return P;
+}
+
 }  // namespace
+
+double lode_b_of(const std::string& mode) {
+  if (mode == "D3" || mode.find("triaxial") != std::string::npos) return 0.0;
+  return kLodeBD2;
+}
+
+const char* surface_name(Surface s) {
+  return s == Surface::MatsuokaNakai ? "Matsuoka-Nakai" : s == Surface::LadeDuncan ? "Lade-Duncan" : "none";
+}
 
 CurveData read_curve(const std::string& path, const std::string& mode, double nu) {
   const Table t = read_table(path);
@@ -297,9 +398,31 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   nu_mean /= curves.size();
   const double nu_ref = o.nu_ref > 0 ? o.nu_ref : nu_mean;
   Parameters start = o.start ? *o.start : start_values(curves, iso, nu_ref);
+  const bool X = o.extended;
+  if (X && !o.start) {
+    // The frictional family starts from the group model's calibration (its nested case) with a
+    // moderate extension: a fabric gated by the mobilisation, a stress ratio linear for longer.
+    CalibrationOptions g = o;
+    g.extended = false;
+    Parameters base = calibrate(curves_in, iso, g, paths).params;
+    base.nu_ref = nu_ref;
+    start = extended_start(curves, base, o);
+  }
   start.nu_ref = nu_ref;
   std::vector<double> isob = start.iso();
   std::vector<double> shear(start.shear, start.shear + kNumShear);
+  std::vector<double> ext(start.ext, start.ext + kNumExt);
+  if (X) {   // the start inside the bounds set below (Ceres refuses an infeasible start)
+    for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
+      shear[i] = std::min(std::max(shear[i], std::log(1e-3)), std::log(300.0));
+      shear[i + 1] = std::min(std::max(shear[i + 1], -40.0), 40.0);
+    }
+    ext[kNFA] = std::min(std::max(ext[kNFA], -1.0), 30.0);
+    ext[kKappaA] = std::min(std::max(ext[kKappaA], -0.9), 30.0);
+    ext[kChiD] = std::min(std::max(ext[kChiD], -1.0), 3.0);
+  }
+  std::vector<double*> blocks_all = {isob.data(), shear.data()};
+  if (X) blocks_all.push_back(ext.data());
   double numin = 1e9;
   // Both jamming fractions must lie below every start state (the curves' nu); branch points
   // below them are allowed (C = C0 there; p* < 0 is simply a large residual).
@@ -311,11 +434,13 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     auto* f = new CurveResidual{c.eps, c.p, c.s, c.F, weights(c.se_p, o.se_floor, c.source + " p_star"),
                                 weights(c.se_s, o.se_floor, c.source + " s_dev"), weights(c.se_F, o.se_floor, c.source + " F_dev"),
                                 c.nu, c.p.front(), c.s.front(), c.F.front(), nu_ref, o.max_step};
+    f->extended = X; f->b = lode_b_of(c.mode); f->surface = o.surface;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
+    if (X) cost->AddParameterBlock(kNumExt);
     cost->SetNumResiduals(3 * static_cast<int>(c.eps.size()));
-    problem.AddResidualBlock(cost, nullptr, isob.data(), shear.data());
+    problem.AddResidualBlock(cost, nullptr, blocks_all);
     n_res += 3 * static_cast<int>(c.eps.size());
   }
   for (const auto& d : paths) {
@@ -341,11 +466,13 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     for (std::size_t i = 1; i <= prefix; ++i) w1[i] = ws[i] = wF[i] = 0.0;
     auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, ws, wF, d.direction, d.isobaric,
                                d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
+    f->extended = X; f->b = lode_b_of(d.name); f->surface = o.surface;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
+    if (X) cost->AddParameterBlock(kNumExt);
     cost->SetNumResiduals(3 * static_cast<int>(n));
-    problem.AddResidualBlock(cost, nullptr, isob.data(), shear.data());
+    problem.AddResidualBlock(cost, nullptr, blocks_all);
     n_res += 3 * static_cast<int>(n - 1 - prefix);   // weighted rows only
     for (double v : d.nu_m) numin = std::min(numin, v);
   }
@@ -390,6 +517,22 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     problem.SetParameterLowerBound(shear.data(), i, std::log(1e-3));
     problem.SetParameterUpperBound(shear.data(), i, std::log(5e3));
   }
+  if (X) {
+    // The frictional family reaches stiff corners of the rate laws (at mu = 1 a free fit took
+    // beta_p to 6600 at nu = 0.80, beyond RK4's stability at max_step 5e-4): the rates are kept
+    // at beta <= 300 at nu_ref and e^{+-40 (nu - nu_ref)} about it (<= 3300 at |nu - nu_ref| = 0.06).
+    for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
+      problem.SetParameterUpperBound(shear.data(), i, std::log(300.0));
+      problem.SetParameterLowerBound(shear.data(), i + 1, -40.0);
+      problem.SetParameterUpperBound(shear.data(), i + 1, 40.0);
+    }
+    problem.SetParameterLowerBound(ext.data(), kNFA, -1.0);
+    problem.SetParameterUpperBound(ext.data(), kNFA, 30.0);
+    problem.SetParameterLowerBound(ext.data(), kKappaA, -0.9);
+    problem.SetParameterUpperBound(ext.data(), kKappaA, 30.0);
+    problem.SetParameterLowerBound(ext.data(), kChiD, -1.0);
+    problem.SetParameterUpperBound(ext.data(), kChiD, 3.0);
+  }
 
   // One start volume fraction: (nu - nu_ref) is zero on every curve, so the nu-slopes (*_b) are not
   // determined by the data: held at 0, quoted without errors, and said.
@@ -400,6 +543,10 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   if (one_nu) {
     for (int i = 1; i < kNumShear; i += 2) shear[i] = 0.0;
     problem.SetManifold(shear.data(), new ceres::SubsetManifold(kNumShear, {1, 3, 5, 7, 9, 11}));
+    if (X) {
+      for (int i : {kNFB, kKappaB, kDilB}) ext[i] = 0.0;
+      problem.SetManifold(ext.data(), new ceres::SubsetManifold(kNumExt, {kNFB, kKappaB, kDilB}));
+    }
   }
 
   ceres::Solver::Options so;
@@ -418,14 +565,19 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   cal.params = start;
   cal.params.set_iso(isob.data());
   std::copy(shear.begin(), shear.end(), cal.params.shear);
+  std::copy(ext.begin(), ext.end(), cal.params.ext);
+  cal.params.extended = X;
+  cal.params.surface = X ? o.surface : Surface::None;
   cal.chi2 = 2 * sum.final_cost;
   cal.n_residuals = n_res;
-  cal.n_free = (o.fit_isotropic ? kNumIso : 0) + kNumShear;
+  cal.n_free = (o.fit_isotropic ? kNumIso : 0) + kNumShear + (X ? kNumExt - (one_nu ? 3 : 0) : 0);
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(isob[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(shear[i]); }
+  if (X)
+    for (int i = 0; i < kNumExt; ++i) { cal.names.push_back(ext_name(i)); cal.value.push_back(ext[i]); }
 
-  // Covariance of all 19 (isotropic block zero when held), scaled by max(1, chi2/dof).
-  const int np = kNumIso + kNumShear;
+  // Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof).
+  const int np = kNumIso + kNumShear + (X ? kNumExt : 0);
   cal.se_cov.assign(np, kNaN);
   cal.corr.assign(np, std::vector<double>(np, kNaN));
   ceres::Covariance::Options co;
@@ -433,16 +585,18 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   co.null_space_rank = -1;
   ceres::Covariance cov(co);
   std::vector<const double*> blocks = {shear.data()};
+  if (X) blocks.push_back(ext.data());
   if (o.fit_isotropic) blocks.insert(blocks.begin(), isob.data());
   if (cov.Compute(blocks, &problem)) {
     std::vector<double> full(np * np, 0.0);
     if (o.fit_isotropic) {
       cov.GetCovarianceMatrix(blocks, full.data());
     } else {
-      std::vector<double> sub(kNumShear * kNumShear);
+      const int ns = np - kNumIso;
+      std::vector<double> sub(ns * ns);
       cov.GetCovarianceMatrix(blocks, sub.data());
-      for (int a = 0; a < kNumShear; ++a)
-        for (int b = 0; b < kNumShear; ++b) full[(kNumIso + a) * np + kNumIso + b] = sub[a * kNumShear + b];
+      for (int a = 0; a < ns; ++a)
+        for (int b = 0; b < ns; ++b) full[(kNumIso + a) * np + kNumIso + b] = sub[a * ns + b];
     }
     const double scale = std::max(1.0, cal.chi2_dof());
     for (int a = 0; a < np; ++a) {
@@ -460,6 +614,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   }
   if (one_nu) {
     for (int i = 1; i < kNumShear; i += 2) cal.se_cov[kNumIso + i] = kNaN;
+    if (X)
+      for (int i : {kNFB, kKappaB, kDilB}) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
     cal.warnings.push_back("one start volume fraction (nu = " + std::to_string(curves.empty() ? paths.front().nu : curves.front().nu) +
                            "): the nu-slopes (*_b) are not determined by the data; held at 0 without standard errors, "
                            "so the laws hold at this nu only. Calibrate on ensembles from several checkpoints "
@@ -487,8 +643,9 @@ ModelCurve predict_curve(const Parameters& params, const CurveData& c, double ep
   if (t.eps.empty() || std::fabs(t.eps.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + c.source + " does not start at eps_d = 0");
   const std::vector<double> iso = params.iso();
+  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface};
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
-                                         t.F.front(), t.eps, max_step);
+                                         t.F.front(), t.eps, max_step, ext);
   ModelCurve m;
   m.eps = t.eps;
   for (const auto& y : st) { m.p.push_back(y.p); m.s.push_back(y.s); m.F.push_back(y.F); m.nu.push_back(std::exp(y.ln_nu)); }
@@ -533,8 +690,9 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
   if (d.acc.empty() || std::fabs(d.acc.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + d.source + " does not start at eps_d_accumulated = 0");
   const std::vector<double> iso = params.iso();
+  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface};
   const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
-                                         d.F.front(), d.acc, d.direction, d.isobaric, max_step);
+                                         d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
   PathPrediction m;
   m.acc = d.acc;
   for (const auto& r : st) {

@@ -170,3 +170,34 @@ def test_bad_path_options_are_refused(tmp_path):
     assert r.returncode == 2 and "--paths" in r.stderr and "not a folder" in r.stderr, r.stderr
     r = run(PATHS, "--out", str(tmp_path / "o"), "--no-plots", "--no-jackknife", "--calibrate-on", "reversal")
     assert r.returncode == 2 and "monotone mode" in r.stderr, r.stderr
+
+
+# ---- The frictional family (docs/model.md, "The frictional extension") on a stored friction-study
+# ensemble (data/friction_n1000/mu_0.5: K = 8, nu = 0.69, 0.74, 0.80) ----
+
+def test_bad_family_and_surface_are_refused(tmp_path):
+    r = run(ENSEMBLE, "--out", str(tmp_path / "f"), "--family", "cam-clay", "--no-plots")
+    assert r.returncode == 2 and "--family" in r.stderr and "auto" in r.stderr, r.stderr
+    r = run(ENSEMBLE, "--out", str(tmp_path / "s"), "--family", "extended", "--surface", "tresca", "--no-plots")
+    assert r.returncode == 2 and "--surface" in r.stderr and "ld" in r.stderr, r.stderr
+
+
+def test_frictional_family_fits_the_mu_0_5_ensemble(tmp_path):
+    from demkit import model_friction
+    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
+    work = str(tmp_path / "mu_0.5")
+    model_friction.copy_tree(src, work)
+    model_friction.isobaric_paths(src, work)
+    out = str(tmp_path / "model")
+    r = run(work, "--out", out, "--family", "extended", "--no-jackknife", "--no-plots")
+    assert r.returncode == 0, r.stderr
+    params = {p["parameter"]: p for p in rows(os.path.join(out, "parameters.csv"))}
+    assert len(params) == 19 + 7 + 2
+    assert float(params["chi2_per_dof"]["value"]) < 3
+    summary = rows(os.path.join(out, "summary.csv"))
+    roles = {(s["mode"], s["role"]) for s in summary}
+    assert ("D2", "fitted") in roles and ("D3", "predicted") in roles and ("isobaric", "predicted") in roles
+    # Every fitted D2 curve within a band half-width RMS (the group model: up to 31 here).
+    for s in summary:
+        if s["mode"] == "D2":
+            assert float(s["worst [band]"]) < 1, s

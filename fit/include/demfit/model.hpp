@@ -40,6 +40,28 @@ enum ShearIndex {
   kNumShear
 };
 
+/// Layout of the extension block of the frictional family (docs/model.md, "The frictional
+/// extension"). Every term is neutral at zero: with all seven at 0 (and no Lode surface) the
+/// right-hand side is the group model's, bit for bit (x * 1.0, pow(r, 0.0) = 1, + B * 0.0).
+enum ExtIndex {
+  kNFA = 0, kNFB,          ///< n_F(nu) [-]: exponent of the mobilisation r^n_F that gates the fabric rate
+  kKappaA, kKappaB,        ///< kappa_s(nu) [-]: shape of the stress-ratio law, rate x (1 + kappa_s r)
+  kDilA, kDilB,            ///< d_D(nu) [-]: plastic dilatancy per unit eps_d, d_D (r - chi_D)(1 - F/F_max)
+  kChiD,                   ///< chi_D [-]: mobilisation at which the dilatancy changes sign (phase transformation)
+  kNumExt
+};
+
+/// Lode-angle dependence of the stress-ratio limit: s_max is the limit at the calibration
+/// test's intermediate-stress ratio b_ref; at another b the limit lies on the same
+/// Matsuoka-Nakai (I1 I2/I3 = const) or Lade-Duncan (I1^3/I3 = const) surface.
+enum class Surface { None = 0, MatsuokaNakai, LadeDuncan };
+
+/// b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3) the model assumes for a test: 0 for axisymmetric
+/// compression (D3 = diag(1/2, 1/2, -1) strain, the triaxial path), 1/2 for D2 = diag(1, 0, -1)
+/// (coaxial stress and strain: the stress Lode angle of the strain's; an assumption, the stored
+/// curves carry no intermediate stress). docs/model.md.
+constexpr double kLodeBD2 = 0.5;
+
 /// Named view of all parameters (double), with units; `iso()`/`shear()` give the Ceres blocks.
 struct Parameters {
   double p0 = 0.04;        ///< [-] p* prefactor of the isotropic pressure law
@@ -51,6 +73,9 @@ struct Parameters {
   double alpha = 0.5;      ///< [-] coordination power-law exponent
   double shear[kNumShear] = {0.16, -0.5, std::log(50.0), -5.0, 0.11, -0.8, std::log(40.0), -8.0,
                              0.3, -5.0, std::log(20.0), 0.0};
+  double ext[kNumExt] = {0, 0, 0, 0, 0, 0, 0};   ///< frictional extension (all 0: the group model)
+  bool extended = false;   ///< the frictional family (ext fitted, Lode surface `surface`)
+  Surface surface = Surface::None;   ///< Lode-angle surface of the extended family
   double nu_ref = 0.74;    ///< [-] volume fraction the nu-laws are centred on
   std::vector<double> iso() const { return {p0, nu_c, gamma_p, C0, C1, nu_cC, alpha}; }
   void set_iso(const double* v) { p0 = v[0]; nu_c = v[1]; gamma_p = v[2]; C0 = v[3]; C1 = v[4]; nu_cC = v[5]; alpha = v[6]; }
@@ -60,6 +85,10 @@ struct Parameters {
 inline const char* shear_name(int i) {
   static const char* n[kNumShear] = {"s_max_a", "s_max_b", "ln_beta_s_a", "ln_beta_s_b", "F_max_a", "F_max_b",
                                      "ln_beta_F_a", "ln_beta_F_b", "a_A_a", "a_A_b", "ln_beta_p_a", "ln_beta_p_b"};
+  return n[i];
+}
+inline const char* ext_name(int i) {
+  static const char* n[kNumExt] = {"n_F_a", "n_F_b", "kappa_s_a", "kappa_s_b", "d_D_a", "d_D_b", "chi_D"};
   return n[i];
 }
 inline const char* iso_name(int i) {
@@ -115,6 +144,65 @@ Local<T> local(const T* shear, const T& nu, double nu_ref) {
           shear[kAnisoA] + shear[kAnisoB] * d, exp(shear[kLnBetaPA] + shear[kLnBetaPB] * d)};
 }
 
+/// The extension's laws at nu (neutral when ext is null).
+template <class T>
+struct LocalExt {
+  T n_F, kappa_s, d_D, chi_D;
+};
+template <class T>
+LocalExt<T> local_ext(const T* ext, const T& nu, double nu_ref) {
+  if (ext == nullptr) return {T(0.0), T(0.0), T(0.0), T(0.0)};
+  const T d = nu - T(nu_ref);
+  return {ext[kNFA] + ext[kNFB] * d, ext[kKappaA] + ext[kKappaB] * d, ext[kDilA] + ext[kDilB] * d, ext[kChiD]};
+}
+
+/// The surface's invariant at mean stress 1, stress ratio s = q/p and intermediate-stress ratio
+/// b: principal stresses 1 + s c_i, c = ((2 - b), (2b - 1), -(1 + b))/(3 sqrt(1 - b + b^2)), so
+/// that q = sqrt(((s1-s2)^2 + (s2-s3)^2 + (s3-s1)^2)/2) = s. Returns the invariant and d/ds.
+template <class T>
+void surface_invariant(Surface f, const T& s, double b, T* value, T* deriv) {
+  const double k = 1.0 / std::sqrt(1.0 - b + b * b);
+  const double c[3] = {(2.0 - b) / 3.0 * k, (2.0 * b - 1.0) / 3.0 * k, -(1.0 + b) / 3.0 * k};
+  const T s1 = T(1.0) + s * T(c[0]), s2 = T(1.0) + s * T(c[1]), s3 = T(1.0) + s * T(c[2]);
+  const T I3 = s1 * s2 * s3;
+  const T dI3 = T(c[0]) * s2 * s3 + s1 * T(c[1]) * s3 + s1 * s2 * T(c[2]);
+  if (f == Surface::LadeDuncan) {   // I1^3 / I3, I1 = 3
+    *value = T(27.0) / I3;
+    *deriv = -T(27.0) * dI3 / (I3 * I3);
+    return;
+  }
+  const T I2 = s1 * s2 + s2 * s3 + s3 * s1;   // Matsuoka-Nakai: I1 I2 / I3
+  const T dI2 = T(c[0]) * (s2 + s3) + T(c[1]) * (s1 + s3) + T(c[2]) * (s1 + s2);
+  *value = T(3.0) * I2 / I3;
+  *deriv = T(3.0) * (dI2 * I3 - I2 * dI3) / (I3 * I3);
+}
+
+/// The stress-ratio limit at intermediate-stress ratio b on the surface through (s_ref, b_ref):
+/// s_ref itself when there is no surface or b == b_ref; else Newton's method on the invariant
+/// from s_ref (12 steps, converged to rounding for s < 2; differentiable for Ceres).
+template <class T>
+T lode_limit(const T& s_ref, double b, Surface f, double b_ref = kLodeBD2) {
+  if (f == Surface::None || b == b_ref) return s_ref;
+  T target, dummy;
+  surface_invariant(f, s_ref, b_ref, &target, &dummy);
+  T s = s_ref;
+  for (int it = 0; it < 12; ++it) {
+    T v, dv;
+    surface_invariant(f, s, b, &v, &dv);
+    s = s - (v - target) / dv;
+  }
+  return s;
+}
+
+/// What the frictional family adds to a run: its parameter block (null: the group model), the
+/// test's intermediate-stress ratio b and the Lode surface.
+template <class T>
+struct Ext {
+  const T* p = nullptr;
+  double b = kLodeBD2;
+  Surface surface = Surface::None;
+};
+
 /// State of the material point.
 template <class T>
 struct State {
@@ -169,6 +257,7 @@ struct Material {
   const T* shear;
   double nu_ref;
   T k;
+  Ext<T> ext = {};
 };
 
 /// Derivatives per unit |d eps_d| along a segment with direction sigma (+1/-1), or per unit
@@ -190,21 +279,35 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
     d.F = T(0.0);
     return d;
   }
+  // The frictional extension (docs/model.md): r the mobilised stress ratio on the test's Lode
+  // surface; neutral (the group model's numbers exactly) when m.ext.p is null or all zero.
+  const LocalExt<T> X = local_ext(m.ext.p, nu, m.nu_ref);
+  const T s_lim = lode_limit(L.s_max, m.ext.b, m.ext.surface);
+  T r = T(sigma) * y.s / s_lim;
+  if (!(r > T(1e-6))) r = T(1e-6);
+  using std::pow;
+  const T gate_F = m.ext.p ? pow(r, X.n_F) : T(1.0);                     // fabric follows the mobilisation
+  const T shape_s = T(1.0) + X.kappa_s * r;                               // stress ratio: linear for longer
+  const T dil = m.ext.p ? X.d_D * (r - X.chi_D) * (T(1.0) - T(sigma) * y.F / L.F_max) : T(0.0);   // plastic dilatancy
   const T relax = L.beta_p * (y.p - p_ref);          // excess pressure relaxing with |d eps_d|
   T dvol;                                            // d eps_vol per |d eps_d|
-  const T shear = L.beta_s * (T(sigma) * L.s_max - y.s);   // the deviatoric source of ds
+  // The deviatoric source of ds. The rate is scaled by s_max/s_lim so that the initial shear
+  // stiffness G/p = beta_s s_max does not depend on the Lode angle (only the limit does): the
+  // DEM's D2 and D3 stress ratios rise together at first. 1 without a surface or at b_ref.
+  const bool lode = m.ext.surface != Surface::None && m.ext.b != kLodeBD2;
+  const T shear = L.beta_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_lim - y.s) * shape_s;
   if (seg.control == Control::Isobaric) {
-    dvol = (A * T(sigma) - relax) / B;
+    dvol = (A * T(sigma) - relax + B * dil) / B;
   } else if (seg.control == Control::Triaxial) {
-    // (1 - s/3) dp - (p/3) ds = 0 with dp = -B dvol + A sigma - relax and
+    // (1 - s/3) dp - (p/3) ds = 0 with dp = -B dvol + A sigma - relax + B dil and
     // ds = shear - (A - s B)/p dvol: the B s/3 terms cancel, leaving (B - A/3) dvol.
-    dvol = ((T(1.0) - y.s / T(3.0)) * (A * T(sigma) - relax) - y.p / T(3.0) * shear) / (B - A / T(3.0));
+    dvol = ((T(1.0) - y.s / T(3.0)) * (A * T(sigma) - relax + B * dil) - y.p / T(3.0) * shear) / (B - A / T(3.0));
   } else {
     dvol = T(seg.volume_rate);
   }
   d.ln_nu = -dvol;
-  d.p = -B * dvol + A * T(sigma) - relax;
-  d.F = L.beta_F * (T(sigma) * L.F_max - y.F);
+  d.p = -B * dvol + A * T(sigma) - relax + B * dil;
+  d.F = L.beta_F * (T(sigma) * L.F_max - y.F) * gate_F;
   d.s = shear - (A - y.s * B) / y.p * dvol;
   return d;
 }
@@ -234,11 +337,11 @@ State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const S
 /// p0 / p_iso(nu0). Throws std::invalid_argument for an empty path or a non-positive state.
 template <class T>
 std::vector<Point<T>> integrate(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
-                                double F0, const std::vector<Segment>& path) {
+                                double F0, const std::vector<Segment>& path, const Ext<T>& ext = {}) {
   using std::log;
   if (path.empty()) throw std::invalid_argument("model path: no segments");
   if (!(nu0 > 0 && p0 > 0)) throw std::invalid_argument("model path: initial nu and p must be positive");
-  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0))};
+  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0)), ext};
   State<T> y{T(log(nu0)), T(p0), T(s0), T(F0)};
   T eps_vol = T(0.0);
   double acc = 0, eps_d = 0;
@@ -282,11 +385,12 @@ struct RowState {
 template <class T>
 std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
                                         double F0, const std::vector<double>& acc, const std::vector<int>& direction,
-                                        const std::vector<int>& isobaric, double max_step = 5e-4) {
+                                        const std::vector<int>& isobaric, double max_step = 5e-4,
+                                        const Ext<T>& ext = {}) {
   if (acc.empty() || direction.size() != acc.size() || isobaric.size() != acc.size())
     throw std::invalid_argument("model path rows: acc, direction and isobaric must have the same, non-zero length");
   if (!(nu0 > 0 && p0 > 0)) throw std::invalid_argument("model path rows: initial nu and p must be positive");
-  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0))};
+  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0)), ext};
   State<T> y{T(std::log(nu0)), T(p0), T(s0), T(F0)};
   T eps_vol = T(0.0);
   std::vector<RowState<T>> out;
@@ -320,9 +424,10 @@ inline double axial_strain(double eps_vol, double eps_d) { return (eps_vol - 2.0
 /// strains (increasing, >= 0): the path on which the model is calibrated (D2, D3).
 template <class T>
 std::vector<State<T>> monotone_shear(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
-                                     double F0, const std::vector<double>& eps, double max_step = 5e-4) {
+                                     double F0, const std::vector<double>& eps, double max_step = 5e-4,
+                                     const Ext<T>& ext = {}) {
   using std::exp;
-  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0))};
+  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0)), ext};
   State<T> y{T(std::log(nu0)), T(p0), T(s0), T(F0)};
   Segment seg;   // constant volume, forward
   std::vector<State<T>> out;

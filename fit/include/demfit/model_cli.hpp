@@ -19,6 +19,8 @@ struct ModelCommandOptions {
   bool jackknife = true;                  ///< errors from the jackknife over packings (needs DIR/members)
   bool no_plots = false;
   bool force = false;                     ///< overwrite an existing output folder
+  std::string family = "group";           ///< group, extended or auto (docs/model.md, "The frictional extension")
+  std::string surface = "ld";             ///< Lode surface of the extended family: ld, mn, none
 };
 
 void add_model_options(CLI::App& app, ModelCommandOptions& o);

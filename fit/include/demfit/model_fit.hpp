@@ -43,9 +43,20 @@ struct CalibrationOptions {
   /// Paths: leave out (weight 0) the leading rows that are forward constant-volume shear from the
   /// start, up to the first turn: a D2 run from the same packings, which the D2 curves carry.
   bool skip_d2_prefix = true;
+  /// The frictional family (docs/model.md, "The frictional extension"): the extension block
+  /// fitted too (started from the group model's calibration unless `start` is given), the
+  /// stress-ratio limit on `surface` at each test's Lode angle (lode_b_of).
+  bool extended = false;
+  Surface surface = Surface::LadeDuncan;
 };
 
-/// Result of a calibration. Parameter order: the 7 isotropic, then the 12 shear coefficients.
+/// Intermediate-stress ratio b the model assumes for a mode or path name: 0 for D3 and
+/// triaxial paths (axisymmetric compression), kLodeBD2 otherwise (D2 and paths made of D2).
+double lode_b_of(const std::string& mode);
+const char* surface_name(Surface s);
+
+/// Result of a calibration. Parameter order: the 7 isotropic, the 12 shear coefficients, then
+/// (frictional family) the 7 extension coefficients.
 struct Calibration {
   Parameters params;
   std::vector<std::string> names;       ///< 19 names
