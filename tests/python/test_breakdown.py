@@ -1,0 +1,66 @@
+"""demkit.breakdown on a hand-built timeline: two cores, three packings (one finished before this
+run), one mode each, then the reduce; every part computed by hand below."""
+import json
+import os
+
+import pytest
+
+from demkit import breakdown
+
+PLAN = {"members": [{"name": "m000"}, {"name": "m001"}, {"name": "m002"}],
+        "checkpoints": [{"stem": "unloading_phi0.800"}], "modes": ["D2"]}
+
+
+def put(root, name, start, end, **extra):
+    path = root / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"status": "complete", "t_start": start, "t_end": end, **extra}))
+
+
+@pytest.fixture
+def run(tmp_path):
+    put(tmp_path, "members/m002/prep.json", 40.0, 45.0)                  # before this run (t0 = 100): left out
+    put(tmp_path, "members/m002/deviatoric/D2_phi0.800.json", 45.0, 50.0)
+    put(tmp_path, "members/m000/prep.json", 102.0, 106.0)
+    put(tmp_path, "members/m001/prep.json", 103.0, 107.0)
+    put(tmp_path, "members/m000/deviatoric/D2_phi0.800.json", 106.5, 110.0)
+    put(tmp_path, "members/m001/deviatoric/D2_phi0.800.json", 107.2, 111.0, neighbor_list={"rebuild_s": 1.0})
+    put(tmp_path, "logs/reduce.json", 111.5, 114.0, plots_s=1.5)
+    return tmp_path
+
+
+def test_parts_by_hand(run):
+    bd = breakdown.breakdown(str(run), [("", PLAN)], 100.0, 115.0, 2, breakdown.reduce_status)
+    core_s = {"startup": 2 * 2.0,                        # 100-102, both cores
+              "preparations": 4.0 + 4.0,
+              "mode tasks": 3.5 + (3.8 - 1.0), "rebuilds": 1.0,
+              # a core idle while a task was ready: m001's prep (102-103), m000's mode (106-106.5),
+              # m001's mode (107-107.2), the reduce (111-111.5)
+              "scheduler": 1.0 + 0.5 + 0.2 + 0.5,
+              # a core idle with nothing ready: 110-111 (the reduce waits for m001), 111-111.5 (second
+              # core), 111.5-114 (second core beside the reduce)
+              "waiting": 1.0 + 0.5 + 2.5,
+              "reduction": 2.5 - 1.5, "plots": 1.5,
+              "finish": 2 * 1.0}                          # 114-115
+    assert sum(core_s.values()) == pytest.approx(2 * 15.0)
+    for k, v in core_s.items():
+        assert bd["parts_s"][k] == pytest.approx(v / 2, abs=1e-9), k
+    assert bd["tasks_run"] == 5 and bd["cores"] == 2 and bd["wall_s"] == 15.0
+    assert bd["scheduler_per_task_s"] == pytest.approx(2.2 / 5, abs=1e-3)
+    line = breakdown.summary_line(bd)
+    assert "where the 15.0 s went" in line and "scheduler 1.1 s (7 %)" in line
+
+
+def test_more_tasks_at_once_than_cores_widen_the_machine(run):
+    """A cluster runs more tasks at once than --cores says: the breakdown counts the cores it saw."""
+    put(run, "members/m000/deviatoric/D2_phi0.800.json", 102.0, 110.0)   # three at once from 103
+    bd = breakdown.breakdown(str(run), [("", PLAN)], 100.0, 115.0, 1, breakdown.reduce_status)
+    assert bd["cores"] == 3
+    assert sum(bd["parts_s"].values()) == pytest.approx(15.0)
+
+
+def test_process_start_time_is_before_now():
+    import time
+    t = breakdown.process_start_time()
+    assert t is not None and time.time() - 600 < t <= time.time()
+    assert os.path.exists("/proc/self/stat")
