@@ -41,11 +41,13 @@ def task_list(out, plans, reduce_status):
         for m in plan["members"]:
             prep = f"{base}members/{m['name']}/prep.json"
             tasks.append((prep, "prep", []))
+            # a grouped packing (rule member) runs its tasks in sequence: each needs the one before
+            grouped = os.path.exists(os.path.join(out, base, "members", m["name"], "member.json"))
             for c in plan["checkpoints"]:
                 phi = c["stem"].rsplit("_", 1)[1]
                 for mode in plan["modes"]:
                     name = f"{base}members/{m['name']}/deviatoric/{mode}_{phi}.json"
-                    tasks.append((name, "mode", [prep]))
+                    tasks.append((name, "mode", [tasks[-1][0] if grouped else prep]))
                     modes.append(name)
         tasks.append((reduce_status(base), "reduce", modes))
     return [(n, k, read_json(os.path.join(out, n)), deps) for n, k, deps in tasks]

@@ -64,3 +64,19 @@ def test_process_start_time_is_before_now():
     t = breakdown.process_start_time()
     assert t is not None and time.time() - 600 < t <= time.time()
     assert os.path.exists("/proc/self/stat")
+
+
+@pytest.mark.parametrize("grouped", [True, False])
+def test_a_grouped_packing_runs_in_sequence(tmp_path, grouped):
+    """In a group (rule member) a task is ready when the one before it ends: the second core idle
+    beside the sequence is waiting, not scheduler overhead; as single tasks, D3 was ready at 2."""
+    plan = {"members": [{"name": "m000"}], "checkpoints": [{"stem": "unloading_phi0.800"}], "modes": ["D2", "D3"]}
+    put(tmp_path, "members/m000/prep.json", 0.0, 2.0)
+    put(tmp_path, "members/m000/deviatoric/D2_phi0.800.json", 2.0, 4.0)
+    put(tmp_path, "members/m000/deviatoric/D3_phi0.800.json", 4.0, 6.0)
+    put(tmp_path, "logs/reduce.json", 6.0, 7.0)
+    if grouped:
+        put(tmp_path, "members/m000/member.json", 0.0, 0.0)
+    bd = breakdown.breakdown(str(tmp_path), [("", plan)], 0.0, 7.0, 2, breakdown.reduce_status)
+    assert bd["parts_s"]["scheduler"] == pytest.approx(0.0 if grouped else 2.0 / 2)
+    assert bd["parts_s"]["waiting"] == pytest.approx(7.0 / 2 if grouped else 5.0 / 2)
