@@ -79,10 +79,22 @@ def physics_hash(run):
     return None
 
 
-@functools.lru_cache(maxsize=64)
 def provenance(run):
-    """{'version', 'scene', 'physics'} of a run folder, for the figures' metadata (once per folder
-    and process: git and the file reads are not paid per figure)."""
+    """{'version', 'scene', 'physics'} of a run folder, for the figures' metadata: once per folder
+    and version of its scene file in a process (git and the file reads are not paid per figure)."""
+    stamp = None
+    for name in ("scene.toml", "sweep.json"):
+        try:
+            st = os.stat(os.path.join(run, name)) if run else None
+            stamp = (name, st.st_mtime_ns, st.st_size) if st else None
+            break
+        except OSError:
+            continue
+    return _provenance(run, stamp)
+
+
+@functools.lru_cache(maxsize=64)
+def _provenance(run, stamp):
     return {"version": toolkit_version(), "scene": scene_hash(run), "physics": physics_hash(run)}
 
 
