@@ -267,7 +267,8 @@ struct EnsembleCommand {
   bool force = false;
   void add(CLI::App& app, std::vector<std::string>& overrides) {
     cmd = app.add_subcommand("ensemble", "run an ensemble scene ([ensemble] packings = K) through the Snakemake "
-                                         "workflow (workflow/Snakefile): one task per preparation and per mode; "
+                                         "workflow (workflow/Snakefile): one task per preparation and per mode (a packing's "
+                                         "short tasks as one job); "
                                          "run again to continue after an interruption");
     cmd->add_option("scene", scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
     cmd->add_option("--out", out, "results folder")->required();
