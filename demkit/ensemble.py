@@ -298,14 +298,23 @@ def drop_stale_results(out, plans, sweep):
 
 def drop_stale_groups(out, plans):
     """A packing's group marker (members/mKKK/member.json, rule member) stands for its tasks: when
-    one of them has no result (deleted since), the marker goes, and the group reruns just that one."""
+    one of them has no status file or curve (deleted since), the marker goes, and the group reruns
+    just that task (`demkit.task --sequence` skips the others)."""
     for base, plan in plans:
         tasks = plan.get("tasks") or list(task_weights(plan))
         for m in plan["members"]:
             marker = os.path.join(out, base, "members", m["name"], "member.json")
             mine = [base + t for t in tasks if t.startswith(f"members/{m['name']}/")]
-            if os.path.exists(marker) and missing_tasks(out, mine):
+            curves = [t[:-len(".json")] + ".csv" for t in mine if "/deviatoric/" in t]   # a mode's result
+            if os.path.exists(marker) and missing_tasks(out, mine + curves):
                 os.unlink(marker)
+                sys.stderr.write(f"dem ensemble: {base}members/{m['name']}: results deleted since it finished: "
+                                 "those tasks run again\n")
+                # Snakemake does not look below a target that exists: the reduce (and a sweep's
+                # summary) must go too, so that the group and then they run again
+                for f in (os.path.join(out, base, "fit", "parameters.csv"), os.path.join(out, "sweep", "parameters.csv")):
+                    if os.path.exists(f):
+                        os.unlink(f)
 
 
 def missing_tasks(out, tasks):

@@ -79,6 +79,12 @@ def parser():
 SEPARATOR = ":::"
 
 
+def outputs(cmd):
+    """What a `dem` command writes (the value of its --out): a task whose status file stands but
+    whose curve is gone is not done."""
+    return [cmd[i + 1] for i, x in enumerate(cmd[:-1]) if x == "--out"]
+
+
 def run_sequence(done, segments):
     """The tasks of one group in order, in this process: a task whose status file exists finished
     in an earlier run (status files are written atomically, last) and is not run again, so a group
@@ -88,7 +94,7 @@ def run_sequence(done, segments):
     for seg in segments:
         a = parser().parse_args(seg)
         statuses.append(a.status)
-        if a.status and os.path.exists(a.status):
+        if a.status and os.path.exists(a.status) and all(os.path.exists(f) for f in outputs(a.command)):
             continue
         if a.requires and not os.path.exists(a.requires):   # the task it builds on failed: retried next run
             rc = rc or 1

@@ -80,3 +80,28 @@ def test_a_grouped_packing_runs_in_sequence(tmp_path, grouped):
     bd = breakdown.breakdown(str(tmp_path), [("", plan)], 0.0, 7.0, 2, breakdown.reduce_status)
     assert bd["parts_s"]["scheduler"] == pytest.approx(0.0 if grouped else 2.0 / 2)
     assert bd["parts_s"]["waiting"] == pytest.approx(7.0 / 2 if grouped else 5.0 / 2)
+
+
+def test_a_sequence_skips_finished_tasks_and_reruns_a_lost_output(tmp_path):
+    """demkit.task --sequence (rule member): a task with its status file and its --out is not run
+    again; one whose output was deleted runs again; the group's marker comes when all completed."""
+    import subprocess
+    import sys
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    count = tmp_path / "count"
+
+    def seg(name, out):
+        return ["--status", str(tmp_path / f"{name}.json"), "--log", str(tmp_path / f"{name}.log"), "--",
+                "sh", "-c", f"echo x >> {count}; echo {name} > {out}", "--out", str(out)]
+
+    cmd = [sys.executable, "-m", "demkit.task", "--sequence", str(tmp_path / "done.json"), ":::"] + \
+        seg("a", a) + [":::"] + seg("b", b)
+    env = {**os.environ, "PYTHONPATH": root}
+    assert subprocess.run(cmd, env=env).returncode == 0
+    assert count.read_text().count("x") == 2 and json.loads((tmp_path / "done.json").read_text())["status"] == "complete"
+    assert subprocess.run(cmd, env=env).returncode == 0
+    assert count.read_text().count("x") == 2          # both finished: nothing ran
+    b.unlink()
+    assert subprocess.run(cmd, env=env).returncode == 0
+    assert count.read_text().count("x") == 3 and b.read_text() == "b\n"

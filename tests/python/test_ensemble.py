@@ -214,6 +214,11 @@ def test_deleted_task_result_reruns_its_group(tiny, tmp_path):
     ensemble(tiny["scene"], out, "--cores", "2")
     assert json.loads(victim.read_text())["status"] == "complete"
     assert keep.stat().st_mtime_ns == t_keep
+    curve = out / "members" / "m002" / "deviatoric" / "D2_phi0.740.csv"   # a curve alone, its status kept
+    curve.unlink()
+    ensemble(tiny["scene"], out, "--cores", "2")
+    assert curve.read_bytes() == (tiny["dir"] / "members" / "m002" / "deviatoric" / "D2_phi0.740.csv").read_bytes()
+    assert keep.stat().st_mtime_ns == t_keep
 
 
 def test_blown_up_member_is_reported_not_dropped(tiny, tmp_path):
