@@ -4,7 +4,9 @@ followed), flush and fsync, then rename onto PATH, so a reader never sees half a
 that exists is complete. Every error propagates (a full disk leaves only the .part).
 """
 import json
+import math
 import os
+import sys
 
 
 def open_exclusive(tmp, mode="w", newline=None):
@@ -36,17 +38,20 @@ def write_json_atomic(path, obj, indent=1):
 
 def finite_or_null(obj):
     """obj with every non-finite float (and numpy number) replaced by None, for strict JSON."""
-    import numpy as np   # here: the workflow's task wrapper writes JSON without needing numpy
-    if isinstance(obj, dict):
+    np = sys.modules.get("numpy")   # numpy values come with numpy imported: the workflow's task
+    if isinstance(obj, dict):       # wrapper never pays numpy's import
         return {k: finite_or_null(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [finite_or_null(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return finite_or_null(obj.tolist())
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if np.isfinite(obj) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
+    if np is not None:
+        if isinstance(obj, np.ndarray):
+            return finite_or_null(obj.tolist())
+        if isinstance(obj, np.bool_):
+            return bool(obj)
+        if isinstance(obj, np.floating):
+            obj = float(obj)
+        elif isinstance(obj, np.integer):
+            return int(obj)
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
     return obj

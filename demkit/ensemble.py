@@ -20,6 +20,8 @@ import subprocess
 import sys
 import time
 
+from demkit import breakdown
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SNAKEFILE = os.path.join(REPO, "workflow", "Snakefile")
 PROFILES = os.path.join(REPO, "workflow", "profiles")
@@ -116,9 +118,9 @@ class Progress:
         self.last_line = ln
 
 
-def snakemake_command(out, dem, cores, profile, extra):
+def snakemake_command(out, dem, cores, profile, extra, group="auto"):
     cmd = ["snakemake", "-s", SNAKEFILE, "-d", out, "--config", f"dem={dem}", f"python={sys.executable}",
-           "--rerun-incomplete", "--keep-going", "--printshellcmds", "--nocolor"]
+           f"group={group}", "--scheduler", "greedy", "--rerun-incomplete", "--keep-going", "--printshellcmds", "--nocolor"]
     if profile:
         path = profile if os.sep in profile else os.path.join(PROFILES, profile)
         if not os.path.isdir(path):
@@ -193,12 +195,15 @@ def main(argv=None):
     ap.add_argument("--dem", default=os.path.join(REPO, "build", "dem"), help="the dem executable")
     ap.add_argument("--cores", type=int, default=0, help="parallel single-threaded tasks (default: all cores)")
     ap.add_argument("--profile", default="", help="Snakemake profile: 'slurm' (shipped) or a folder")
+    ap.add_argument("--group", default="auto", choices=("auto", "member", "task"),
+                    help="a packing's tasks as one Snakemake job: auto (when short), member (always), task (never)")
     ap.add_argument("--progress-seconds", type=float, default=5.0)
     argv = list(sys.argv[1:] if argv is None else argv)
     extra = argv[argv.index("--") + 1:] if "--" in argv else []   # after --: more Snakemake arguments
     a = ap.parse_args(argv[:len(argv) - len(extra) - (1 if "--" in argv else 0)])
     if shutil.which("snakemake") is None:
         sys.exit("dem ensemble: snakemake is not installed (Debian package 'snakemake'; scripts/install-deps.sh installs it)")
+    t0 = breakdown.process_start_time() or time.time()   # `dem ensemble` execs this driver: its start
     out = os.path.abspath(a.out)
     dem = os.path.abspath(a.dem)
     sweep, plans = load_plans(dem, out)
@@ -215,6 +220,7 @@ def main(argv=None):
     env.setdefault("OMP_WAIT_POLICY", "passive")   # single-threaded tasks: never spin on shared cores
     tasks = planned_tasks(plans)
     drop_stale_results(out, plans, sweep)
+    drop_stale_groups(out, plans)
     final = os.path.join(out, "sweep" if sweep else "fit", "parameters.csv")
     if a.profile and "slurm" in os.path.basename(os.path.normpath(a.profile)):
         check_slurm()
@@ -225,7 +231,7 @@ def main(argv=None):
                      f"{len(plan['modes'])} modes = {len(prog.weights)} tasks + "
                      f"{f'{len(plans)} reduces + summary' if sweep else 'reduce'}, "
                      f"{prog.total / 1e9:.1f}e9 particle-steps (estimated); Snakemake log: {log_path}\n")
-    cmd = snakemake_command(out, dem, a.cores, a.profile, extra)
+    cmd = snakemake_command(out, dem, a.cores, a.profile, extra, a.group)
     with open(log_path, "a") as log:
         log.write(f"\n=== {time.strftime('%Y-%m-%d %H:%M:%S')} {' '.join(cmd)}\n")
         log.flush()
@@ -256,6 +262,7 @@ def main(argv=None):
         return 1
     for base, _ in plans:
         report_members(os.path.join(out, base), base)
+    breakdown.report(out, plans, t0, a.cores or (1 if a.profile else os.cpu_count() or 1), sys.stderr)
     if sweep:
         sys.stderr.write(f"dem ensemble: sweep done in {fmt_time(time.time() - prog.t0)}: summary (fitted parameters "
                          f"against {', '.join(sweep['keys'])}) in {out}/sweep; each row's ensemble in {out}/rows/NAME "
@@ -287,6 +294,27 @@ def drop_stale_results(out, plans, sweep):
         sys.stderr.write(f"dem ensemble: {unfinished} of {len(plans)} rows are unfinished, so {out}/sweep is redone "
                          "when they are\n")
         os.unlink(summary)
+
+
+def drop_stale_groups(out, plans):
+    """A packing's group marker (members/mKKK/member.json, rule member) stands for its tasks: when
+    one of them has no status file or curve (deleted since), the marker goes, and the group reruns
+    just that task (`demkit.task --sequence` skips the others)."""
+    for base, plan in plans:
+        tasks = plan.get("tasks") or list(task_weights(plan))
+        for m in plan["members"]:
+            marker = os.path.join(out, base, "members", m["name"], "member.json")
+            mine = [base + t for t in tasks if t.startswith(f"members/{m['name']}/")]
+            curves = [t[:-len(".json")] + ".csv" for t in mine if "/deviatoric/" in t]   # a mode's result
+            if os.path.exists(marker) and missing_tasks(out, mine + curves):
+                os.unlink(marker)
+                sys.stderr.write(f"dem ensemble: {base}members/{m['name']}: results deleted since it finished: "
+                                 "those tasks run again\n")
+                # Snakemake does not look below a target that exists: the reduce (and a sweep's
+                # summary) must go too, so that the group and then they run again
+                for f in (os.path.join(out, base, "fit", "parameters.csv"), os.path.join(out, "sweep", "parameters.csv")):
+                    if os.path.exists(f):
+                        os.unlink(f)
 
 
 def missing_tasks(out, tasks):

@@ -11,6 +11,9 @@ import glob
 import os
 import re
 import sys
+import time
+
+T_START = time.time()   # before matplotlib's import: the plots' time printed at the end includes it
 
 import matplotlib
 
@@ -34,13 +37,13 @@ def ensemble_curves(run):
     return out
 
 
-def plot_bands(run, outdir, curves):
+def plot_bands(run, outdir, curves, qs=("s_dev", "F_dev", "p_star", "C")):
     """Mean and 95 % band of every (mode, nu), one panel per mode side by side (D2 | D3), sharing y."""
     nus = sorted({nu for _, nu, _ in curves})
     modes = sorted({mode for mode, _, _ in curves})
     cmap = plt.get_cmap("viridis")
     written = []
-    for q in ("s_dev", "F_dev", "p_star", "C"):
+    for q in qs:
         fig, axes = plt.subplots(1, len(modes), figsize=(4.2 * len(modes) + 0.6, 3.8), sharey=True, squeeze=False)
         for ax, mode in zip(axes[0], modes):
             for m, nu, c in curves:
@@ -63,7 +66,7 @@ def plot_bands(run, outdir, curves):
     return written
 
 
-def member_curve(run, member, mode, nu, q):
+def member_curve(run, member, mode, nu):
     f = os.path.join(run, "members", member, "deviatoric", f"{mode}_phi{nu:.3f}.csv")
     return read_curve(f) if os.path.exists(f) else None
 
@@ -92,11 +95,10 @@ def plot_fit_cells(run, outdir, curves, rows):
     written = []
     for mode, nu, c in curves:
         fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+        mcs = [mc for mc in (member_curve(run, m, mode, nu) for m in members) if mc is not None]   # read once per cell
         for ax, q in zip(axes, ("s_dev", "F_dev")):
-            for m in members:
-                mc = member_curve(run, m, mode, nu, q)
-                if mc is not None:
-                    ax.plot(mc["eps_d"], mc[q], "-", color="0.75", lw=0.6)
+            for mc in mcs:
+                ax.plot(mc["eps_d"], mc[q], "-", color="0.75", lw=0.6)
             e = c["eps_d"]
             ax.fill_between(e, c[q + "_lo95"], c[q + "_hi95"], color="C0", alpha=0.3, lw=0, label="95 % band of the mean")
             ax.plot(e, c[q + "_mean"], "C0-", lw=1.2, label=f"mean of {int(c['n_packings'][0])} packings (members grey)")
@@ -151,6 +153,22 @@ def plot_isotropic(run, outdir):
     return [stem + ".png"]
 
 
+def call(job):
+    f, args = job
+    return f(*args)
+
+
+def run_jobs(jobs, workers=None):
+    """Every figure's function, on two processes where there are two cores (forked after the
+    imports: matplotlib is imported once); the written files in the order of the jobs."""
+    workers = min(2, os.cpu_count() or 1, len(jobs)) if workers is None else workers
+    if workers < 2:
+        return [call(j) for j in jobs]
+    import multiprocessing
+    with multiprocessing.get_context("fork").Pool(workers) as pool:
+        return pool.map(call, jobs, chunksize=1)
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 1 or not os.path.isdir(argv[0]):
@@ -161,11 +179,12 @@ def main(argv=None):
     os.makedirs(outdir, exist_ok=True)
     curves = ensemble_curves(run)
     rows = read_rows(os.path.join(run, "fit", "parameters.csv"))
-    written = []
-    if curves:
-        written += plot_bands(run, outdir, curves) + plot_fit_cells(run, outdir, curves, rows)
-    written += plot_parameters(outdir, rows, run) + plot_isotropic(run, outdir)
-    print(f"dem plot: {len(written)} figures in {outdir}", file=sys.stderr)
+    jobs = [(plot_bands, (run, outdir, curves, (q,))) for q in ("s_dev", "F_dev", "p_star", "C") if curves]
+    jobs += [(plot_fit_cells, (run, outdir, [c], rows)) for c in curves]
+    jobs += [(plot_parameters, (outdir, rows, run)), (plot_isotropic, (run, outdir))]
+    written = [f for w in run_jobs(jobs) for f in w]
+    # demkit.task reads the seconds into the reduce's status (plots_s, the run's breakdown)
+    print(f"dem plot: {len(written)} figures in {outdir} ({time.time() - T_START:.2f} s)", file=sys.stderr)
     return 0
 
 

@@ -3,6 +3,7 @@ PNG and SVG (scene hash, toolkit version), the check that no panel is drawn empt
 parameters-against-nu figure (with the fitted nu-laws and their bands).
 """
 import csv
+import functools
 import hashlib
 import os
 import re
@@ -79,7 +80,21 @@ def physics_hash(run):
 
 
 def provenance(run):
-    """{'version', 'scene', 'physics'} of a run folder, for the figures' metadata."""
+    """{'version', 'scene', 'physics'} of a run folder, for the figures' metadata: once per folder
+    and version of its scene file in a process (git and the file reads are not paid per figure)."""
+    stamp = None
+    for name in ("scene.toml", "sweep.json"):
+        try:
+            st = os.stat(os.path.join(run, name)) if run else None
+            stamp = (name, st.st_mtime_ns, st.st_size) if st else None
+            break
+        except OSError:
+            continue
+    return _provenance(run, stamp)
+
+
+@functools.lru_cache(maxsize=64)
+def _provenance(run, stamp):
     return {"version": toolkit_version(), "scene": scene_hash(run), "physics": physics_hash(run)}
 
 
@@ -102,7 +117,7 @@ def save(fig, stem, run=None, dpi=150):
     (toolkit version), Source (scene sha256 and physics hash), Title; SVG Dublin Core Creator,
     Source, Title."""
     import matplotlib.pyplot as plt
-    p = provenance(run)
+    p = provenance(os.path.abspath(run) if run else None)
     source = f"scene sha256:{p['scene'] or 'none'}; physics {p['physics'] or 'none'}"
     title = os.path.basename(stem)
     SAVED.append({"stem": stem, "empty": len(empty_axes(fig)), "title": fig._suptitle.get_text() if fig._suptitle else "",

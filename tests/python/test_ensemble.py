@@ -50,8 +50,9 @@ def tiny(tmp_path_factory):
     d = tmp_path_factory.mktemp("ens")
     scene = d / "tiny.toml"
     scene.write_text(TINY)
+    t0 = time.time()
     p = ensemble(scene, d / "run", "--cores", "2")
-    return {"dir": d / "run", "scene": scene, "stderr": p.stderr}
+    return {"dir": d / "run", "scene": scene, "stderr": p.stderr, "wall": time.time() - t0}
 
 
 def member_curves(run, name):
@@ -155,9 +156,31 @@ def finished_tasks(out, stage):
             if not f.endswith("manifest.json") and os.path.relpath(f, out) not in marked]
 
 
-def test_killed_workflow_resumes_and_loses_only_running_tasks(tiny, tmp_path):
+def test_breakdown_adds_up_to_the_wall_time(tiny):
+    """The parts printed at the end and stored in run.json add up to the wall time measured here,
+    and the task parts are the tasks' own intervals (status files) over the cores."""
+    run = tiny["dir"]
+    bd = json.loads((run / "run.json").read_text())["breakdown"]
+    parts = bd["parts_s"]
+    assert sum(parts.values()) == pytest.approx(tiny["wall"], rel=0.03)
+    assert bd["wall_s"] == pytest.approx(tiny["wall"], rel=0.03) and bd["cores"] == 2
+
+    def seconds(pattern):
+        return sum(s["t_end"] - s["t_start"] for s in (json.loads(open(f).read()) for f in glob.glob(str(run / pattern))))
+    assert parts["preparations"] == pytest.approx(seconds("members/*/prep.json") / 2, abs=0.01)
+    assert parts["mode tasks"] + parts["rebuilds"] == pytest.approx(seconds("members/*/deviatoric/*.json") / 2, abs=0.01)
+    assert parts["reduction"] + parts["plots"] == pytest.approx(seconds("logs/reduce.json") / 2, abs=0.01)
+    assert 0 < parts["plots"] and 0 < parts["rebuilds"] < parts["mode tasks"]
+    assert "where the" in tiny["stderr"] and "scheduler overhead" in tiny["stderr"]
+    print(next(ln for ln in tiny["stderr"].splitlines() if "where the" in ln), f"(measured here: {tiny['wall']:.2f} s)")
+
+
+@pytest.mark.parametrize("group", ["member", "task"])
+def test_killed_workflow_resumes_and_loses_only_running_tasks(tiny, tmp_path, group):
+    """One Snakemake job per packing (group member: its tasks in sequence) or per task: a kill
+    loses only the running task, and the resumed run gives the bytes of an uninterrupted one."""
     out = tmp_path / "killed"
-    p = subprocess.Popen([DEM, "ensemble", str(tiny["scene"]), "--out", str(out), "--cores", "1"],
+    p = subprocess.Popen([DEM, "ensemble", str(tiny["scene"]), "--out", str(out), "--cores", "1", "--group", group],
                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 300
     while time.time() < deadline and not finished_tasks(out, "deviatoric"):
@@ -167,12 +190,35 @@ def test_killed_workflow_resumes_and_loses_only_running_tasks(tiny, tmp_path):
     finished = {f: os.stat(f).st_mtime_ns for f in finished_tasks(out, "**")}
     assert finished, "nothing finished before the kill"
     assert not (out / "fit" / "parameters.csv").exists()
-    r = ensemble(tiny["scene"], out, "--cores", "2")
+    r = ensemble(tiny["scene"], out, "--cores", "2", "--group", group)
     for f, t in finished.items():
         assert os.stat(f).st_mtime_ns == t, f"{f} was recomputed after the resume"
     for name in ("D2_phi0.740", "D3_phi0.740"):
         assert (out / "ensemble" / f"{name}.csv").read_bytes() == (tiny["dir"] / "ensemble" / f"{name}.csv").read_bytes()
+        for m in ("m000", "m001", "m002"):
+            curve = f"members/{m}/deviatoric/{name}.csv"
+            assert (out / curve).read_bytes() == (tiny["dir"] / curve).read_bytes(), curve
     assert "done in" in r.stderr
+    assert len(glob.glob(str(out / "members" / "*" / "member.json"))) == (3 if group == "member" else 0)
+
+
+def test_deleted_task_result_reruns_its_group(tiny, tmp_path):
+    """A packing's group marker does not stand for a task result deleted since: that task reruns."""
+    out = tmp_path / "copy"
+    shutil.copytree(tiny["dir"], out)
+    assert (out / "members" / "m001" / "member.json").exists()   # the tiny scene's tasks are short: grouped
+    victim = out / "members" / "m001" / "deviatoric" / "D3_phi0.740.json"
+    keep = out / "members" / "m001" / "deviatoric" / "D2_phi0.740.json"
+    t_keep = keep.stat().st_mtime_ns
+    victim.unlink()
+    ensemble(tiny["scene"], out, "--cores", "2")
+    assert json.loads(victim.read_text())["status"] == "complete"
+    assert keep.stat().st_mtime_ns == t_keep
+    curve = out / "members" / "m002" / "deviatoric" / "D2_phi0.740.csv"   # a curve alone, its status kept
+    curve.unlink()
+    ensemble(tiny["scene"], out, "--cores", "2")
+    assert curve.read_bytes() == (tiny["dir"] / "members" / "m002" / "deviatoric" / "D2_phi0.740.csv").read_bytes()
+    assert keep.stat().st_mtime_ns == t_keep
 
 
 def test_blown_up_member_is_reported_not_dropped(tiny, tmp_path):
@@ -220,7 +266,9 @@ def test_slurm_profile_gives_the_local_results(tiny, tmp_path):
         env = {**os.environ, "SLURM_CONF": str(cluster / "slurm.conf"), "CI": "true"}   # CI: poll every 1 s, not 10 s
         out = tmp_path / "run"
         ensemble(tiny["scene"], out, "--profile", "slurm", env=env)
-        assert len(glob.glob(str(out / "logs" / "slurm" / "*.out"))) >= 10, "tasks did not go through sbatch"
+        # grouped (the tiny scene's tasks are short): one sbatch job per packing and one for the reduce
+        assert len(glob.glob(str(out / "logs" / "slurm" / "*.out"))) >= 4, "tasks did not go through sbatch"
+        assert len(glob.glob(str(out / "members" / "*" / "member.json"))) == 3
         for f in sorted(glob.glob(str(tiny["dir"] / "ensemble" / "*.csv"))):
             assert (out / "ensemble" / os.path.basename(f)).read_bytes() == open(f, "rb").read(), f
         a = (tiny["dir"] / "fit" / "parameters.csv").read_text()

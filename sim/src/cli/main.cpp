@@ -249,12 +249,13 @@ struct RunCommand {
 // K packings through the Snakemake workflow; with a sweep, one such ensemble per row.
 struct EnsembleCommand {
   CLI::App* cmd = nullptr;
-  std::string scene, out, profile, sweep;
+  std::string scene, out, profile, sweep, group;
   int cores = 0;
   bool force = false;
   void add(CLI::App& app, std::vector<std::string>& overrides) {
     cmd = app.add_subcommand("ensemble", "run an ensemble scene ([ensemble] packings = K) through the Snakemake "
-                                         "workflow (workflow/Snakefile): one task per preparation and per mode; "
+                                         "workflow (workflow/Snakefile): one task per preparation and per mode (a packing's "
+                                         "short tasks as one job); "
                                          "run again to continue after an interruption");
     cmd->add_option("scene", scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
     cmd->add_option("--out", out, "results folder")->required();
@@ -266,6 +267,9 @@ struct EnsembleCommand {
         ->check(CLI::ExistingFile);
     cmd->add_option("--cores", cores, "single-threaded tasks at once (default: all cores; with --profile: the profile's)");
     cmd->add_option("--profile", profile, "Snakemake profile: slurm (workflow/profiles/slurm) or a folder");
+    cmd->add_option("--group", group, "auto (default): a packing's tasks run as one Snakemake job when they are short; "
+                                      "member: always; task: every preparation and mode its own job")
+        ->check(CLI::IsMember({"auto", "member", "task"}));
     cmd->add_flag("--force", force, "start afresh: remove the results in --out (without it a rerun continues "
                                     "where the last one stopped, and another scene's results are refused)");
   }
@@ -292,6 +296,7 @@ struct EnsembleCommand {
     std::vector<std::string> args = {out, "--dem", fs::canonical("/proc/self/exe").string()};
     if (cores > 0) args.insert(args.end(), {"--cores", std::to_string(cores)});
     if (!profile.empty()) args.insert(args.end(), {"--profile", profile});
+    if (!group.empty()) args.insert(args.end(), {"--group", group});
     return exec_python("demkit.ensemble", args);
   }
 };
