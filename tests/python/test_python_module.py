@@ -393,6 +393,8 @@ def test_example_script_runs(tmp_path):
                         "--out", str(tmp_path)], capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-3000:]
     assert "stopped at C =" in p.stdout and (tmp_path / "networks.npz").exists()
+    # a showcase ends in a result the toolkit stands behind: a usable fit, its numbers rounded to their errors
+    assert "s_dev fit: x0 =" in p.stdout and "not usable" not in p.stdout, p.stdout
 
 
 def test_notebook_executes(tmp_path):
@@ -408,6 +410,7 @@ def test_notebook_executes(tmp_path):
         os.environ["PYTHONPATH"] = env_path
     outputs = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
     assert "chosen rate" in outputs
+    assert "x_max =" in outputs and "not usable" not in outputs, outputs[-1500:]   # a usable fit, as in the script
 
 
 # ---- inside YADE -------------------------------------------------------------------------------
