@@ -55,6 +55,17 @@ std::string read_text(const fs::path& f) {
   return ss.str();
 }
 
+// A planned task is done when its status file exists, or, in a stored copy without status files
+// (data/*/members), when what it leaves is there: a mode's curve (renamed into place complete), a
+// preparation's unloading branch.
+bool task_done(const fs::path& run, const std::string& task) {
+  fs::path p = run / task;
+  if (fs::exists(p)) return true;
+  if (p.parent_path().filename() == "deviatoric") return fs::exists(p.replace_extension(".csv"));
+  if (p.filename() == "prep.json") return fs::exists(p.parent_path() / "prep" / "cycle_unloading.csv");
+  return false;
+}
+
 std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run) {
   const std::regex name_re(R"(([A-Za-z0-9_-]+)_(phi([0-9.]+))\.json)");
   std::map<std::pair<std::string, double>, Cell> cells;
@@ -90,12 +101,15 @@ std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run
     for (const auto& f : files) {
       std::smatch m;
       const std::string fname = f.filename().string();
-      if (!std::regex_match(fname, m, name_re)) continue;
+      // A curve without its status file: a stored copy (data/*/members keep the curves only); the curve
+      // was renamed into place complete, so it is a finished run.
+      const bool stored = std::regex_match(fname, m, flat_re) && !fs::exists(fs::path(f).replace_extension(".json"));
+      if (!stored && !std::regex_match(fname, m, name_re)) continue;
       Cell& c = cells[{m[1].str(), std::stod(m[3].str())}];
       c.mode = m[1]; c.tag = m[2]; c.nu = std::stod(m[3].str());
-      std::ifstream in(f);
       std::stringstream ss;
-      ss << in.rdbuf();
+      if (stored) ss << R"({"status": "complete"})";
+      else ss << std::ifstream(f).rdbuf();
       const std::string status = json_field(ss.str(), "status");
       const fs::path csv = md / "deviatoric" / (m[1].str() + "_" + m[2].str() + ".csv");
       if (status == "complete" && fs::exists(csv)) {
@@ -306,7 +320,7 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
   }
   std::vector<std::string> missing;
   for (const auto& t : o.planned_tasks)
-    if (!fs::exists(run / t)) missing.push_back(t);
+    if (!task_done(run, t)) missing.push_back(t);
   std::string incomplete;
   if (!missing.empty()) {
     incomplete = "ensemble incomplete: " + std::to_string(missing.size()) + " of " +
