@@ -17,11 +17,11 @@ from collections import namedtuple
 
 from . import _core
 from ._core import (BlowUp, Box, Engine, FitResult, Measurement, Scene, SceneError, State, curve_columns,
-                    fit_saturating, random_packing, read_packing, run_mode, run_prep_stage, run_protocol,
-                    run_stage, saturating)
+                    fit_saturating, format_paren, format_pm, random_packing, read_packing, run_mode, run_prep_stage,
+                    run_protocol, run_stage, saturating)
 
 __all__ = ["BlowUp", "Box", "Checkpoint", "Engine", "FitResult", "Measurement", "Scene", "SceneError", "State",
-           "curve_columns", "fit_curve", "fit_saturating", "load_scene", "random_packing", "read_checkpoint",
+           "curve_columns", "fit_curve", "fit_saturating", "format_paren", "format_pm", "load_scene", "random_packing", "read_checkpoint",
            "read_curve", "read_packing", "run_mode", "run_prep_stage", "run_protocol", "run_stage", "saturating",
            "scene_toml", "version"]
 
@@ -143,6 +143,12 @@ def _state_by_id(self, array):
 
 
 State.by_id = _state_by_id
+
+SceneError.__doc__ = ("A scene or packing `dem` would refuse (exit code 2): the message names the key or the "
+                      "input and the fix. A ValueError.")
+BlowUp.__doc__ = ("The run blew up (non-finite values, an overlap beyond max_overlap_fraction of a radius, "
+                  "exploding kinetic energy; exit code 3 of `dem`): .last_good_state (a State or None) and, from "
+                  "the stage runners, .checkpoint (the file the runner saved it to). A RuntimeError.")
 
 
 def read_curve(path, frame=True):

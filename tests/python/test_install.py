@@ -56,8 +56,8 @@ def public_callables():
 def doc_text(name, obj):
     """The docstring without pybind11's generated signature line."""
     lines = (getattr(obj, "__doc__", None) or "").strip().splitlines()
-    if lines and lines[0].startswith(name.split(".")[-1] + "("):
-        lines = lines[1:]
+    if lines and lines[0].startswith(name.split(".")[-1] + "(") and ("->" in lines[0] or ": " in lines[0].split(")")[0]):
+        lines = lines[1:]   # "step(self: demtk._core.Engine, n: int = 1, ...) -> int"
     return "\n".join(lines).strip()
 
 

@@ -3,6 +3,7 @@ numpy views that alias the engine's memory, errors as exceptions with the CLI's 
 callbacks that stop a run, the GIL released while stepping, the examples."""
 import json
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -393,8 +394,10 @@ def test_example_script_runs(tmp_path):
                         "--out", str(tmp_path)], capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-3000:]
     assert "stopped at C =" in p.stdout and (tmp_path / "networks.npz").exists()
-    # a showcase ends in a result the toolkit stands behind: a usable fit, its numbers rounded to their errors
-    assert "s_dev fit: x0 =" in p.stdout and "not usable" not in p.stdout, p.stdout
+    # a showcase ends in a result the toolkit stands behind: a fit's numbers only when it is usable (else
+    # the reason), and the model-free mean rounded to its error
+    assert ("s_dev fit: x0 =" in p.stdout) != ("s_dev fit not usable: " in p.stdout), p.stdout
+    assert re.search(r"s_dev over eps_d = 0.05-0.25: 0\.\d+\(\d+\) ", p.stdout), p.stdout
 
 
 def test_notebook_executes(tmp_path):
@@ -410,7 +413,8 @@ def test_notebook_executes(tmp_path):
         os.environ["PYTHONPATH"] = env_path
     outputs = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
     assert "chosen rate" in outputs
-    assert "x_max =" in outputs and "not usable" not in outputs, outputs[-1500:]   # a usable fit, as in the script
+    assert ("fit: x_max =" in outputs) != ("fit not usable: " in outputs), outputs[-1500:]   # as in the script
+    assert re.search(r"s_dev over eps_d = 0.05-0.25: 0\.\d+\(\d+\)", outputs), outputs[-1500:]
 
 
 # ---- inside YADE -------------------------------------------------------------------------------
