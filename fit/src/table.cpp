@@ -475,6 +475,9 @@ std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string
       if (x == "nan") x = "{---}";
     cells.push_back(c);
   }
+  // With the peak law's columns the table drops the initial slope and R^2 (in parameters.md and .csv) and
+  // narrows the column gaps, so that it fits A4 at \small (tests/python/test_tex.py).
+  const bool full = !extra;
   std::vector<std::string> fmt;
   for (std::size_t k = 0; k < (extra ? 9u : 5u); ++k) {
     std::vector<std::string> col;
@@ -485,12 +488,13 @@ std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string
   std::ostringstream tex;
   tex << "% " << tex_text(caption) << "\n% needs \\usepackage{booktabs} and \\usepackage{siunitx}; values rounded to "
       << "their standard errors, given in parentheses in units of the last digit\n";
-  tex << "\\begin{tabular}{l " << S(0) << " l" << (k_column ? " r" : "") << " " << S(1) << " " << S(2) << " " << S(3)
-      << " " << S(4);
+  if (!full) tex << "{\\setlength{\\tabcolsep}{4pt}%\n";
+  tex << "\\begin{tabular}{l " << S(0) << " l" << (k_column ? " r" : "") << " " << S(1) << " " << S(2);
+  if (full) tex << " " << S(3) << " " << S(4);
   if (extra) tex << " l " << S(5) << " " << S(6) << " " << S(7) << " " << S(8);
   tex << "}\n\\toprule\n";
-  tex << "Mode & {$\\nu$} & Quantity" << (k_column ? " & {$K$}" : "") << " & {$x_\\mathrm{max}$} & {$\\beta$} & "
-         "{$\\left.\\mathrm{d}x/\\mathrm{d}\\varepsilon_\\mathrm{d}\\right|_0$} & {$R^2$}";
+  tex << "Mode & {$\\nu$} & Quantity" << (k_column ? " & {$K$}" : "") << " & {$x_\\mathrm{max}$} & {$\\beta$}";
+  if (full) tex << " & {$\\left.\\mathrm{d}x/\\mathrm{d}\\varepsilon_\\mathrm{d}\\right|_0$} & {$R^2$}";
   if (extra) tex << " & Model & {$p$} & {$x_\\mathrm{peak}$} & {$\\varepsilon_\\mathrm{peak}$} & {$x_\\mathrm{cs}$}";
   tex << " \\\\\n\\midrule\n";
   for (std::size_t i = 0; i < rows.size(); ++i) {
@@ -500,17 +504,20 @@ std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string
     const auto& c = cells[i];
     tex << tex_text(r.mode) << " & " << c[0] << " & " << q;
     if (k_column) tex << " & " << packings_of(r);
-    tex << " & " << c[1] << " & " << c[2] << " & " << c[3] << " & " << c[4];
+    tex << " & " << c[1] << " & " << c[2];
+    if (full) tex << " & " << c[3] << " & " << c[4];
     if (extra)
       tex << " & " << (r.fitted && r.not_usable.empty() ? tex_text(model_short(r.model)) : "") << " & " << c[5] << " & "
           << c[6] << " & " << c[7] << " & " << c[8];
     tex << " \\\\\n";
   }
   tex << "\\bottomrule\n\\end{tabular}\n";
+  if (!full) tex << "}\n";
   std::vector<std::string> below;
   if (!k_column && !rows.empty()) below.push_back("$K = " + std::to_string(packings_of(rows.front())) + "$ " +
                                  (packings_of(rows.front()) == 1 ? "run (no ensemble)." : "packings per curve."));
-  if (extra) below.push_back("Model: the law chosen per curve (sat.: saturating), $p$: its test (docs/model\\_selection.md).");
+  if (extra) below.push_back("Model: the law chosen per curve (sat.: saturating), $p$: its test (docs/model\\_selection.md); "
+                             "initial slopes and $R^2$: parameters.md.");
   for (std::size_t k = 0; k < n.texts.size(); ++k)
     below.push_back("\\textsuperscript{" + mark_name(k) + "}~" + tex_text(n.texts[k]));
   if (!below.empty()) {
