@@ -491,11 +491,11 @@ std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string
   if (!full) tex << "{\\setlength{\\tabcolsep}{4pt}%\n";
   tex << "\\begin{tabular}{l " << S(0) << " l" << (k_column ? " r" : "") << " " << S(1) << " " << S(2);
   if (full) tex << " " << S(3) << " " << S(4);
-  if (extra) tex << " l " << S(5) << " " << S(6) << " " << S(7) << " " << S(8);
+  if (extra) tex << " l " << S(6) << " " << S(7) << " " << S(8);   // the test's p: parameters.md
   tex << "}\n\\toprule\n";
   tex << "Mode & {$\\nu$} & Quantity" << (k_column ? " & {$K$}" : "") << " & {$x_\\mathrm{max}$} & {$\\beta$}";
   if (full) tex << " & {$\\left.\\mathrm{d}x/\\mathrm{d}\\varepsilon_\\mathrm{d}\\right|_0$} & {$R^2$}";
-  if (extra) tex << " & Model & {$p$} & {$x_\\mathrm{peak}$} & {$\\varepsilon_\\mathrm{peak}$} & {$x_\\mathrm{cs}$}";
+  if (extra) tex << " & Model & {$x_\\mathrm{peak}$} & {$\\varepsilon_\\mathrm{peak}$} & {$x_\\mathrm{cs}$}";
   tex << " \\\\\n\\midrule\n";
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const auto& r = rows[i];
@@ -507,8 +507,8 @@ std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string
     tex << " & " << c[1] << " & " << c[2];
     if (full) tex << " & " << c[3] << " & " << c[4];
     if (extra)
-      tex << " & " << (r.fitted && r.not_usable.empty() ? tex_text(model_short(r.model)) : "") << " & " << c[5] << " & "
-          << c[6] << " & " << c[7] << " & " << c[8];
+      tex << " & " << (r.fitted && r.not_usable.empty() ? tex_text(model_short(r.model)) : "") << " & " << c[6] << " & "
+          << c[7] << " & " << c[8];
     tex << " \\\\\n";
   }
   tex << "\\bottomrule\n\\end{tabular}\n";
@@ -516,8 +516,8 @@ std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string
   std::vector<std::string> below;
   if (!k_column && !rows.empty()) below.push_back("$K = " + std::to_string(packings_of(rows.front())) + "$ " +
                                  (packings_of(rows.front()) == 1 ? "run (no ensemble)." : "packings per curve."));
-  if (extra) below.push_back("Model: the law chosen per curve (sat.: saturating), $p$: its test (docs/model\\_selection.md); "
-                             "initial slopes and $R^2$: parameters.md.");
+  if (extra) below.push_back("Model: the law chosen per curve (sat.: saturating; the test and its $p$: docs/model\\_selection.md); "
+                             "the test's $p$, initial slopes and $R^2$: parameters.md.");
   for (std::size_t k = 0; k < n.texts.size(); ++k)
     below.push_back("\\textsuperscript{" + mark_name(k) + "}~" + tex_text(n.texts[k]));
   if (!below.empty()) {
