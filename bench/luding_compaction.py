@@ -7,19 +7,18 @@ docs/luding_compaction.{png,svg}.
 
     /usr/bin/python3 bench/luding_compaction.py RUNS_DIR OUT_DIR
 """
-import csv
 import os
 import sys
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
+from demkit import curves  # noqa: E402
 STAGES = ["compress", "cycle_loading", "cycle_unloading"]
 
 
 def read_curve(path):
-    with open(path) as fh:
-        rows = [r for r in csv.DictReader(line for line in fh if not line.startswith("#"))]
-    return [{k: float(r[k]) for k in ("nu", "p_Pa", "C", "overlap_max_rel")} for r in rows]
+    c = curves.read_curve(path)
+    return [{k: float(c[k][i]) for k in ("nu", "p_Pa", "C", "overlap_max_rel")} for i in range(len(c["nu"]))]
 
 
 def nu_at_zero_pressure(rows):

@@ -19,11 +19,10 @@ class CurveError(ValueError):
     """A curve file is missing, malformed, or lacks a column."""
 
 
-def read_curve(path):
-    """Return a dict column name -> numpy array (float; non-numeric columns as str arrays).
-
-    Raises CurveError naming the file and the problem.
-    """
+def read_text(path):
+    """(comment lines, header, rows) of a curve CSV, the cells as text: the one reader of the format
+    (read_curve, demkit.path_ensemble and the benchmarks use it). Comment lines keep their '#' and
+    lose their line end. Raises CurveError naming the file and the problem."""
     try:
         # a regular file only: a device (/dev/zero) or a FIFO would never end (opened without blocking)
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
@@ -32,9 +31,11 @@ def read_curve(path):
             raise CurveError(f"{path} is not a regular file (a device, FIFO or folder): give a curve CSV")
         os.set_blocking(fd, True)
         with open(fd, newline="") as fh:
-            lines = [ln for ln in fh if ln.strip() and not ln.startswith("#")]
+            text = fh.read().splitlines()
     except OSError as e:
         raise CurveError(f"cannot read curve file {path}: {e.strerror}") from None
+    comments = [ln for ln in text if ln.startswith("#")]
+    lines = [ln for ln in text if ln.strip() and not ln.startswith("#")]
     if not lines:
         raise CurveError(f"{path}: no header line (empty or comments only)")
     rows = list(csv.reader(lines))
@@ -42,6 +43,15 @@ def read_curve(path):
     for i, r in enumerate(data):
         if len(r) != len(header):
             raise CurveError(f"{path}: data row {i + 1} has {len(r)} cells, header has {len(header)}")
+    return comments, header, data
+
+
+def read_curve(path):
+    """Return a dict column name -> numpy array (float; non-numeric columns as str arrays).
+
+    Raises CurveError naming the file and the problem.
+    """
+    _, header, data = read_text(path)
     out = {}
     for k, name in enumerate(header):
         col = [r[k] for r in data]

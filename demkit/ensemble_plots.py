@@ -22,7 +22,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from demkit.curves import read_curve  # noqa: E402
-from demkit.figures import legend_if_any, plot_parameters as parameters_figure, read_rows, save  # noqa: E402
+from demkit.figures import fit_label, legend_if_any, plot_parameters as parameters_figure, read_rows, save  # noqa: E402
+from demkit.figures import usable  # noqa: E402
 from demkit.plots import LABELS, law, paren  # noqa: E402
 
 NAME_RE = re.compile(r"([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv$")
@@ -105,9 +106,9 @@ def plot_fit_cells(run, outdir, curves, rows):
             r = [r for r in rows if r["mode"] == mode and abs(float(r["nu"]) - nu) < 1e-6 and r["quantity"] == q]
             if r and r[0]["x_max"] != "nan":
                 p = [float(r[0][n]) for n in ("x0", "x_max", "beta")]
-                ax.plot(e, law(*p, e), "r--", lw=1.2,
-                        label=f"fit: $x_\\mathrm{{max}}$ = {paren(p[1], float(r[0]['se_x_max']))}, "
-                              f"$\\beta$ = {paren(p[2], float(r[0]['se_beta']))} (jackknife SE)")
+                ax.plot(e, law(*p, e), "--" if usable(r[0]) else ":", color="r" if usable(r[0]) else "0.5", lw=1.2,
+                        label=fit_label(r[0], f"fit: $x_\\mathrm{{max}}$ = {paren(p[1], float(r[0]['se_x_max']))}, "
+                                              f"$\\beta$ = {paren(p[2], float(r[0]['se_beta']))} (jackknife SE)"))
             if r and r[0].get("model") in ("peak", "two-rate"):
                 plot_peak_law(ax, e, r[0])
             ax.set_xlabel(r"$\varepsilon_d$"); ax.set_ylabel(LABELS[q]); ax.grid(alpha=0.3)

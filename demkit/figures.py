@@ -149,6 +149,28 @@ def _num(r, k):
         return float("nan")
 
 
+def usable(row):
+    """The fit tables' one rule for a usable fit (demfit::unusable_reason, written as the `usable`
+    column of fit/parameters.csv; README, "Errors"): True when the row's numbers are determined by
+    the data. A table written before that column: finite standard errors of x_max and beta."""
+    u = (row.get("usable") or "").strip()
+    if u in ("yes", "no"):
+        return u == "yes"
+    return bool(np.isfinite(_num(row, "se_x_max")) and np.isfinite(_num(row, "se_beta")))
+
+
+def not_usable_because(row):
+    """The reason printed beside a fit that is not usable ("" for a usable one)."""
+    if usable(row):
+        return ""
+    return (row.get("not_usable_because") or "").strip() or "no finite standard error of x_max or beta"
+
+
+def fit_label(row, text):
+    """The legend of a fitted law: its numbers when usable, else only why it is not."""
+    return text if usable(row) else f"fit not usable: {not_usable_because(row)}"
+
+
 def plot_parameters(outdir, rows, laws, run, interval, note=""):
     """x_max and beta of s_dev and F_dev against nu, one panel each that has data at two or more
     volume fractions (the others are left out, and the figure says so), with the fitted nu-laws
@@ -172,8 +194,8 @@ def plot_parameters(outdir, rows, laws, run, interval, note=""):
     colours = {"D2": "#1f77b4", "D3": "#d62728"}
     undetermined = False
     for ax, (q, par, sel) in zip(axes.flat, panels):
-        # A value whose interval is far wider than the value and the spread of the values is not determined:
-        # a hollow marker without its bar, so it does not set the scale of the panel.
+        # A fit that is not usable (the tables' rule, `usable`): a hollow marker without its bar, so it
+        # does not set the scale of the panel and is not drawn as a result.
         allv = np.array([_num(r, par) for r in sel])
         span = np.ptp(allv) if np.ptp(allv) > 0 else max(abs(np.mean(allv)), 1e-12)
         shown = []
@@ -184,15 +206,16 @@ def plot_parameters(outdir, rows, laws, run, interval, note=""):
             nu = np.array([_num(r, "nu") for r in ms])
             v = np.array([_num(r, par) for r in ms])
             lohi = np.array([interval(r, par) for r in ms], dtype=float)
-            ok = np.isfinite(lohi).all(axis=1) & (0.5 * (lohi[:, 1] - lohi[:, 0]) <= 3 * np.maximum(np.abs(v), span))
+            ok = np.array([usable(r) for r in ms]) & np.isfinite(lohi).all(axis=1)
             colour = colours.get(mode, "k")
             err = [np.nan_to_num(v - lohi[:, 0]), np.nan_to_num(lohi[:, 1] - v)]
-            ax.errorbar(nu[ok] + dx, v[ok], yerr=[err[0][ok], err[1][ok]], fmt=marker, ms=4, capsize=2.5, color=colour,
-                        label=mode)
+            if np.any(ok):
+                ax.errorbar(nu[ok] + dx, v[ok], yerr=[err[0][ok], err[1][ok]], fmt=marker, ms=4, capsize=2.5,
+                            color=colour, label=mode)
             if np.any(~ok):
                 undetermined = True
                 ax.plot(nu[~ok] + dx, v[~ok], marker, ms=5, mfc="white", color=colour,
-                        label=None if np.any(ok) else mode)
+                        label=f"{mode}, not usable")
             shown += list(v) + list(lohi[ok].ravel())
             law = [lw for lw in laws if lw["mode"] == mode and lw["quantity"] == q and lw["parameter"] == par]
             if law:
@@ -216,7 +239,7 @@ def plot_parameters(outdir, rows, laws, run, interval, note=""):
         ax.set_visible(False)
     text = "bars: " + note + "; lines: linear ν-laws (fit/nu_laws.csv) with 95 % bands"
     if undetermined:
-        text += "\nhollow: not determined (95 % interval beyond 3x the value and the spread of the values; see fit/parameters.md)"
+        text += "\nhollow: fit not usable (no result; the reason beside it in fit/parameters.md, column not_usable_because)"
     if left_out:
         text += "\nnot drawn (fitted at fewer than two ν): " + ", ".join(left_out)
     fig.suptitle(text, fontsize=8)

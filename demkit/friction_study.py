@@ -25,22 +25,22 @@ import sys
 import tomllib
 
 import numpy as np
+from scipy import stats
 
 from demkit.curves import CurveError, read_curve
 from demkit import figures
+from demkit.rounding import pm
 
 CS_WINDOW = (0.25, 0.30)
 LATE_WINDOW = (0.15, 0.30)
 SLOPE_WINDOW = 0.03
-T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262,
-        10: 2.228, 11: 2.201, 15: 2.131, 20: 2.086}
+# A peak is a maximum the curve has passed: at least this much strain, and a drop below it, after it.
+PEAK_AFTER = 0.02
 
 
 def t975(dof):
-    if dof in T975:
-        return T975[dof]
-    keys = sorted(T975)
-    return T975[max(k for k in keys if k <= dof)] if dof > 0 else math.nan
+    """The 97.5 % quantile of Student's t with dof degrees of freedom (scipy); NaN for dof < 1."""
+    return float(stats.t.ppf(0.975, dof)) if dof >= 1 else math.nan
 
 
 def friction_of(folder):
@@ -81,12 +81,22 @@ def jamming(branch, p_solid=1e-3, n_line=3, n_sqrt=6):
     return out
 
 
+def peak(e, s):
+    """(s_peak, eps_peak) of a curve that has passed its maximum: at least PEAK_AFTER of strain after
+    it, with the curve below it there. (NaN, NaN) for a curve still rising at its end: its last point
+    is no peak, whatever the maximum of the data says."""
+    k = int(np.argmax(s))
+    if e[-1] - e[k] < PEAK_AFTER or not s[-1] < s[k]:
+        return math.nan, math.nan
+    return float(s[k]), float(e[k])
+
+
 def deviatoric(curve):
     e, s, f = curve["eps_d"], curve["s_dev"], curve["F_dev"]
-    k = int(np.argmax(s))
+    s_peak, eps_peak = peak(e, s)
     s_cs = window_mean(e, s, *CS_WINDOW)
-    return {"s_peak": float(s[k]), "eps_peak": float(e[k]), "s_cs": s_cs, "F_cs": window_mean(e, f, *CS_WINDOW),
-            "s_softening": float(s[k]) - s_cs, "p_star_cs": window_mean(e, curve["p_star"], *CS_WINDOW)}
+    return {"s_peak": s_peak, "eps_peak": eps_peak, "s_cs": s_cs, "F_cs": window_mean(e, f, *CS_WINDOW),
+            "s_softening": s_peak - s_cs, "p_star_cs": window_mean(e, curve["p_star"], *CS_WINDOW)}
 
 
 def slopes(e, v, width):
@@ -106,7 +116,7 @@ def isobaric(curve):
     return {"dilatancy_max": float(sl.max()) if len(sl) else math.nan,
             "dilatancy_late": float(np.polyfit(e[late], ev[late], 1)[0]) if late.sum() >= 4 else math.nan,
             "nu_cs": window_mean(e, curve["nu"], *CS_WINDOW), "s_cs": window_mean(e, curve["s_dev"], *CS_WINDOW),
-            "s_peak": float(np.max(curve["s_dev"]))}
+            "s_peak": peak(e, curve["s_dev"])[0]}
 
 
 def member_values(member):
@@ -147,17 +157,8 @@ def summarise(folder):
 
 
 def round_to_error(v, e):
-    """'0.197 ± 0.002': the error to one significant digit (two when it starts with 1), the value
-    to the same place (fit/src/table.cpp's rule)."""
-    if not math.isfinite(v):
-        return "n/a"
-    if not (math.isfinite(e) and e > 0):
-        return f"{v:.3g}"
-    d = math.floor(math.log10(e))
-    lead = e / 10 ** d
-    place = d - (1 if lead < 2 else 0)
-    digits = max(0, -place)
-    return f"{round(v, -place):.{digits}f} ± {round(e, -place):.{digits}f}"
+    """'0.197 ± 0.002': the value rounded to its error, the rule of every table (demkit.rounding)."""
+    return pm(v, e)
 
 
 UNITS = {"nu_J": "", "C_star_nr": "", "nu_bracket": "", "s_peak": "", "eps_peak": "", "s_cs": "", "F_cs": "",
@@ -236,8 +237,16 @@ def plot_stress_ratio(rows, out, run):
     import matplotlib.pyplot as plt
     nus = sorted({r["nu"] for r in rows if r["nu"]})
     mus = sorted({r["mu"] for r in rows})
-    fig, axes = plt.subplots(1, 3, figsize=(10.5, 3.4), sharey=True)
-    for ax, mode in zip(axes, ["D2", "D3", "isobaric_D2"]):
+    # a panel only for a mode with some finite value (short curves have no peak and no critical state)
+    modes = [m for m in ["D2", "D3", "isobaric_D2"]
+             if any(r["mode"] == m and r["quantity"] in ("s_peak", "s_cs") and math.isfinite(r["mean"]) for r in rows)]
+    if not modes:
+        print("friction_study: no stress-ratio figure: no curve reaches a peak or the critical-state window "
+              f"eps_d = {CS_WINDOW[0]}-{CS_WINDOW[1]} (run the modes further)", file=sys.stderr)
+        return
+    fig, axes = plt.subplots(1, len(modes), figsize=(3.5 * len(modes), 3.4), sharey=True, squeeze=False)
+    axes = axes[0]
+    for ax, mode in zip(axes, modes):
         for i, nu in enumerate(nus):
             for q, ls, mk in (("s_peak", "-", "o"), ("s_cs", "--", "s")):
                 x, y, h = series(rows, mode, nu, q)

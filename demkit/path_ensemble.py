@@ -28,7 +28,6 @@ A signed magnitude jumps by 2|s_dev| at the crossing when sigma_yy is not halfwa
 sigma_xx and sigma_zz; the mean over packings smooths that.
 """
 import argparse
-import csv
 import glob
 import os
 import re
@@ -38,22 +37,19 @@ import numpy as np
 from scipy import stats
 
 from demkit.atomic import write_atomic
+from demkit.curves import CurveError, read_text
 
 QUANTITIES = ("nu", "eps_v", "p_star", "s_dev_signed", "F_dev_signed", "s_dev", "F_dev", "eps_zz", "sigma_r_p0")
 NAME_RE = re.compile(r"([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv$")
 
 
 def read_csv(path):
-    """Comment lines (#...) and a header; returns (comments, {column: list of str})."""
-    with open(path, newline="") as fh:
-        lines = fh.readlines()
-    comments = [ln for ln in lines if ln.startswith("#")]
-    rows = list(csv.reader(ln for ln in lines if not ln.startswith("#") and ln.strip()))
-    if not rows:
-        raise SystemExit(f"path_ensemble: {path} has no header")
-    head, body = rows[0], rows[1:]
-    cols = {h: [r[i] for r in body] for i, h in enumerate(head)}
-    return comments, cols
+    """Comment lines (#..., with their line ends) and {column: list of str} (demkit.curves.read_text)."""
+    try:
+        comments, head, body = read_text(path)
+    except CurveError as e:
+        raise SystemExit(f"path_ensemble: {e}")
+    return [c + "\n" for c in comments], {h: [r[i] for r in body] for i, h in enumerate(head)}
 
 
 def fnum(col):

@@ -10,7 +10,6 @@ Writes RUN_DIR/plots/*.png and *.svg:
 """
 import argparse
 import glob
-import math
 import json
 import os
 import re
@@ -22,8 +21,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from demkit import rounding  # noqa: E402
 from demkit.curves import read_curve, CurveError  # noqa: E402
-from demkit.figures import legend_if_any, plot_parameters, read_rows, save  # noqa: E402
+from demkit.figures import fit_label, legend_if_any, plot_parameters, read_rows, save, usable  # noqa: E402
 
 NAME_RE = re.compile(r"([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv$")
 LABELS = {"s_dev": r"$s_\mathrm{dev} = \sigma_\mathrm{dev}/p$", "F_dev": r"$F_\mathrm{dev}$",
@@ -198,16 +198,8 @@ def plot_isotropic(run, outdir):
 
 
 def paren(v, se):
-    """A value rounded to its standard error, 0.197(2) (the rule of the fit tables, fit/src/table.cpp)."""
-    if not (np.isfinite(se) and se > 0):
-        return f"{v:.3g}"
-    d = math.floor(math.log10(se))
-    sig = 2 if se / 10 ** d < 2 else 1
-    place = d - sig + 1
-    n, u = round(v / 10 ** place), round(se / 10 ** place)
-    if place >= 0:
-        return f"{n * 10 ** place}({u * 10 ** place})"
-    return f"{n * 10.0 ** place:.{-place}f}({u})"
+    """A value rounded to its standard error, 0.197(2): the rule of every table (demkit.rounding)."""
+    return rounding.paren(v, se)
 
 
 def law(x0, xm, beta, e):
@@ -232,9 +224,10 @@ def plot_fits(run, outdir):
             if r and r[0]["x0"] != "nan":
                 p = [float(r[0][n]) for n in ("x0", "x_max", "beta")]
                 se = [float(r[0]["se_" + n]) for n in ("x0", "x_max", "beta")]
-                axes[0, k].plot(e, law(*p, e), "r-",
-                                label=f"fit: $x_0$ = {paren(p[0], se[0])}, $x_\\mathrm{{max}}$ = {paren(p[1], se[1])}, "
-                                      f"$\\beta$ = {paren(p[2], se[2])}")
+                axes[0, k].plot(e, law(*p, e), "r-" if usable(r[0]) else ":", color=None if usable(r[0]) else "0.5",
+                                label=fit_label(r[0], f"fit: $x_0$ = {paren(p[0], se[0])}, "
+                                                      f"$x_\\mathrm{{max}}$ = {paren(p[1], se[1])}, "
+                                                      f"$\\beta$ = {paren(p[2], se[2])}"))
                 axes[1, k].plot(e, y - law(*p, e), ".", ms=3)
                 axes[1, k].axhline(0, color="k", lw=0.5); axes[1, k].set_ylabel("residual")
                 axes[1, k].set_xlabel(r"$\varepsilon_d$")

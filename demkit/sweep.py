@@ -25,11 +25,12 @@ import sys
 import numpy as np
 
 from demkit.atomic import write_atomic, write_json_atomic
-from demkit.figures import legend_if_any, parameter_label, save
+from demkit.figures import legend_if_any, not_usable_because, parameter_label, save, usable
 from demkit.plots import paren
 
 FIT_COLUMNS = ["packings", "x0", "se_x0", "x_max", "se_x_max", "x_max_lo95", "x_max_hi95", "beta", "se_beta",
-               "beta_lo95", "beta_hi95", "initial_slope", "se_initial_slope", "r_squared", "error_method", "warnings"]
+               "beta_lo95", "beta_hi95", "initial_slope", "se_initial_slope", "r_squared", "error_method", "warnings",
+               "usable", "not_usable_because"]
 
 # Scene keys as a paper writes them; others: the key, with the unit its name carries.
 KEY_LABEL = {"contact.friction": r"friction coefficient $\mu$", "contact.stiffness_N_m": r"stiffness $k$ [N/m]",
@@ -113,15 +114,16 @@ def markdown(rows, sweep):
              "| " + " | ".join(head) + " |", "|" + ":--|" * (1 + len(keys)) + ":--|--:|:--|--:|--:|--:|--:|"]
     for r in rows:
         marks = []
-        for w in [w.strip() for w in r["warnings"].split(";") if w.strip()]:
+        why = not_usable_because(r)
+        for w in ([f"not usable: {why}"] if why else []) + [w.strip() for w in r["warnings"].split(";") if w.strip()]:
             notes.setdefault(w, chr(ord("a") + len(notes)) if len(notes) < 26 else str(len(notes) + 1))
             marks.append(notes[w])
         q = r["quantity"].replace("_dev", "<sub>dev</sub>")
         q += f" <sup>{','.join(marks)}</sup>" if marks else ""
+        values = ([paren(fnum(r, "x_max"), fnum(r, "se_x_max")), paren(fnum(r, "beta"), fnum(r, "se_beta")),
+                   f"{fnum(r, 'r_squared'):.3f}"] if not why else ["not usable", "", ""])
         lines.append("| " + " | ".join([r["row"], *[r[k] for k in keys], r["mode"], r["nu"], q, r["packings"],
-                                         paren(fnum(r, "x_max"), fnum(r, "se_x_max")),
-                                         paren(fnum(r, "beta"), fnum(r, "se_beta")),
-                                         f"{fnum(r, 'r_squared'):.3f}"]) + " |")
+                                         *values]) + " |")
     lines += ["", "Each value is rounded to its standard error, in parentheses in units of the last digit "
                   "(0.197(2) = 0.197 ± 0.002). K: packings. x<sub>max</sub>, β, R² are dimensionless; a swept key's "
                   "unit is in its name. Every digit: parameters.csv / parameters.json; each row's own tables: "
@@ -163,17 +165,15 @@ def plot_against(out, rows, sweep, key):
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     undetermined = False
     for ax, (q, par, sel) in zip(axes.flat, panels):
-        allv = np.array([fnum(r, par) for r in sel])
-        span = np.ptp(allv) if np.ptp(allv) > 0 else max(abs(np.mean(allv)), 1e-12)
         for i, ((mode, nu), s) in enumerate(series(sel).items()):
             s = sorted(s, key=lambda r: xs[r["row"]])
             x = np.array([xs[r["row"]] for r in s])
             v = np.array([fnum(r, par) for r in s])
             lo = np.array([fnum(r, f"{par}_lo95") for r in s])
             hi = np.array([fnum(r, f"{par}_hi95") for r in s])
-            # as in demkit.figures: an interval far wider than the value and the spread is no result:
-            # a hollow marker without its bar
-            ok = np.isfinite(lo) & np.isfinite(hi) & (0.5 * (hi - lo) <= 3 * np.maximum(np.abs(v), span))
+            # as in demkit.figures: a fit that is not usable (the tables' rule) is no result: a hollow
+            # marker without its bar
+            ok = np.array([usable(r) for r in s]) & np.isfinite(lo) & np.isfinite(hi)
             colour, label = colours[i % len(colours)], rf"{mode}, $\nu$ = {float(nu):.3g}"
             ax.plot(x, v, "-" if mode == "D2" else "--", lw=1, color=colour)
             if ok.any():
@@ -182,7 +182,7 @@ def plot_against(out, rows, sweep, key):
             if (~ok).any():
                 undetermined = True
                 ax.plot(x[~ok], v[~ok], "o" if mode == "D2" else "s", ms=5, mfc="white", color=colour,
-                        label=None if ok.any() else label)
+                        label=f"{label}, not usable")
         ax.set_xlabel(key_label(key))
         ax.set_ylabel(parameter_label(par, q))
         ax.grid(alpha=0.3)
@@ -194,7 +194,7 @@ def plot_against(out, rows, sweep, key):
     if others:
         text += f"\nthe rows also change {', '.join(others)} (sweep/parameters.md)"
     if undetermined:
-        text += "\nhollow: not determined (95 % interval beyond 3x the value and the spread of the values)"
+        text += "\nhollow: fit not usable (no result; the reason in sweep/parameters.md)"
     if left_out:
         text += "\nnot drawn (fewer than two values): " + ", ".join(left_out)
     fig.suptitle(text, fontsize=8)

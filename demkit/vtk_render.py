@@ -5,14 +5,19 @@ periodic cell (its edges, following the tilt of a sheared cell).
     /usr/bin/python3 -m demkit.vtk_render RUN/vtk/D2_phi0.720 [--frame -1] --out frame.png
 
 STAGE is the path without suffix: STAGE_NNNN.vtu, STAGE_contacts_NNNN.vtu and
-STAGE_cell_NNNN.vtu are read (sim/include/dem/io/vtk.hpp). Needs python3-vtk9 and, without a
-display, a virtual one: `xvfb-run -a /usr/bin/python3 -m demkit.vtk_render ...`.
+STAGE_cell_NNNN.vtu are read (sim/include/dem/io/vtk.hpp). Needs python3-vtk9. Debian's VTK
+renders through X even offscreen (it aborts without one), so without a display this starts a
+virtual one itself: it runs again under `xvfb-run -a` (Debian's xvfb, scripts/install-deps.sh),
+and says so when xvfb-run is missing instead of crashing.
 """
 import argparse
 import glob
 import os
 import re
+import shutil
 import sys
+
+UNDER_XVFB = "DEMKIT_VTK_RENDER_UNDER_XVFB"
 
 
 def frames(stage):
@@ -148,13 +153,30 @@ def render(stage, frame, out, size=900):
     return {"frame": n, "particles": particles.GetNumberOfPoints(), "contacts": contacts.GetNumberOfCells()}
 
 
+def ensure_display(argv):
+    """Without an X display, run this command again under `xvfb-run -a` (does not return); with one,
+    or already under it, return. Exits 2 naming the package when xvfb-run is missing."""
+    if os.environ.get("DISPLAY") or os.environ.get(UNDER_XVFB):
+        return
+    xvfb = shutil.which("xvfb-run")
+    if xvfb is None:
+        sys.exit("vtk_render: no display (DISPLAY is not set) and no xvfb-run to start a virtual one: install Debian's "
+                 "xvfb and xauth (scripts/install-deps.sh does), or run where a display is")
+    os.environ[UNDER_XVFB] = "1"
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.execv(xvfb, [xvfb, "-a", sys.executable, "-m", "demkit.vtk_render", *argv])
+
+
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else list(argv)
     ap = argparse.ArgumentParser(prog="python3 -m demkit.vtk_render", description=__doc__.split("\n\n")[0])
     ap.add_argument("stage", help="RUN/vtk/STAGE (without _NNNN.vtu)")
     ap.add_argument("--frame", type=int, default=-1, help="snapshot index in the series (default: the last)")
     ap.add_argument("--out", required=True, help="PNG to write")
     ap.add_argument("--size", type=int, default=900, help="image size in pixels")
     a = ap.parse_args(argv)
+    ensure_display(argv)
     info = render(a.stage, a.frame, a.out, a.size)
     print(f"vtk_render: frame {info['frame']}: {info['particles']} particles, {info['contacts']} contacts -> {a.out}",
           file=sys.stderr)

@@ -1,16 +1,20 @@
 #!/usr/bin/env bash
 # Installs every Debian package the toolkit needs (run as root, or with sudo available).
-# Usage: scripts/install-deps.sh [--no-yade] [--bench]
+# Usage: scripts/install-deps.sh [--no-yade] [--bench] [--tex]
 #   --no-yade   skip YADE (about 1 GiB with its dependencies); the YADE cross-check tests are then skipped.
 #   --bench     also LAMMPS and LIGGGHTS (for bench/run_benchmarks.py; not needed by the tests)
+#   --tex       also LaTeX (pdflatex, booktabs, siunitx: about 135 MB to download): the test that compiles
+#               every .tex table the toolkit writes runs only with it
 set -euo pipefail
 want_yade=1
 want_bench=0
+want_tex=0
 for a in "$@"; do
   case "$a" in
     --no-yade) want_yade=0 ;;
     --bench) want_bench=1 ;;
-    *) echo "install-deps.sh: unknown option '$a' (known: --no-yade, --bench)" >&2; exit 2 ;;
+    --tex) want_tex=1 ;;
+    *) echo "install-deps.sh: unknown option '$a' (known: --no-yade, --bench, --tex)" >&2; exit 2 ;;
   esac
 done
 SUDO=""
@@ -24,10 +28,12 @@ pkgs=(build-essential cmake pkg-config
       nlohmann-json3-dev
       python3 python3-pytest python3-numpy python3-matplotlib
       python3-vtk9 xvfb xauth
-      python3-dev pybind11-dev python3-pandas python3-nbformat python3-nbclient python3-ipykernel
+      python3-dev pybind11-dev python3-pandas python3-scipy python3-nbformat python3-nbclient python3-ipykernel
+      python3-pip python3-setuptools python3-wheel python3-venv
       snakemake slurm-wlm munge)
 [ "$want_yade" = 1 ] && pkgs+=(yade)
 [ "$want_bench" = 1 ] && pkgs+=(lammps liggghts openmpi-bin time)
+[ "$want_tex" = 1 ] && pkgs+=(texlive-latex-base texlive-latex-recommended texlive-science)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -25,7 +25,7 @@ namespace demfit {
 void add_fit_options(CLI::App& app, FitCommandOptions& o) {
   app.add_option("run_dir", o.run_dir, "results folder of `dem run`")->required()->check(CLI::ExistingDirectory);
   app.add_option("--eps-min", o.window_min, "fit window: smallest eps_d");
-  app.add_option("--eps-max", o.window_max, "fit window: largest eps_d");
+  app.add_option("--eps-max", o.window_max, "fit window: largest eps_d (default: the curve's end)")->default_str("");
   app.add_option("--loss", o.loss, "robust loss: none | huber | cauchy")->check(CLI::IsMember({"none", "huber", "cauchy"}));
   app.add_option("--gap-tolerance", o.gap_tolerance, "D2/D3 'same path' tolerance on the fitted curves");
   app.add_flag("--no-plots", o.no_plots, "skip plots");
@@ -152,8 +152,18 @@ void write_nu_laws(const FitsByModeQuantity& by_mode_q, const std::string& out_d
       }
     }
   }
-  if (!laws.rows.empty())
-    write_table_all(laws, out_dir + "/nu_laws", "Fitted parameters as linear functions of the volume fraction nu");
+  if (laws.rows.empty()) return;
+  const std::string caption = "Fitted parameters as linear functions of the volume fraction nu";
+  const auto& sym = tex_symbols();
+  const std::string tex = paper_latex(
+      laws,
+      {paper_text(laws, "Mode", "mode"), paper_text(laws, "Quantity", "quantity", sym),
+       paper_text(laws, "Parameter", "parameter", sym), paper_number(laws, "$a$", "a", "se_a"),
+       paper_number(laws, "$b$", "b", "se_b"), paper_number(laws, "$\\nu_\\mathrm{ref}$", "nu_ref"),
+       paper_number(laws, "$R^2$", "r_squared"), paper_number(laws, "$n$", "n")},
+      caption, "Each parameter of the usable fits against $\\nu$: $a + b\\,(\\nu - \\nu_\\mathrm{ref})$, weighted by "
+               "the fits' standard errors; warnings: nu\\_laws.csv.");
+  write_table_all(laws, out_dir + "/nu_laws", caption, tex);
 
 }
 
@@ -186,8 +196,22 @@ void write_isotropic(const std::vector<std::string>& unloading_csvs, const std::
   } catch (const std::exception& ex) {
     std::cerr << "dem fit: isotropic laws: " << ex.what() << "\n";
   }
-  if (!iso.rows.empty())
-    write_table_all(iso, out_dir + "/isotropic", "Isotropic (unloading) branch: coordination and pressure laws");
+  if (iso.rows.empty()) return;
+  const std::string caption = "Isotropic (unloading) branch: coordination and pressure laws";
+  const std::map<std::string, std::string> laws_tex = {
+      {"C_nonrattler(nu)", "$C_\\mathrm{nr}(\\nu)$"},
+      {"p0 + p1 (nu/p2 - 1)^p3 (p2 = nu_c)", "$p_0 + p_1 (\\nu/p_2 - 1)^{p_3}$, $p_2 = \\nu_c$"},
+      {"p_star(nu)", "$p^*(\\nu)$"},
+      {"p0 (nu C / p1)(-eps)(1 - p2 eps), eps = ln(p1/nu)",
+       "$p_0 \\frac{\\nu C}{p_1} (-\\epsilon)(1 - p_2 \\epsilon)$, $\\epsilon = \\ln(p_1/\\nu)$"}};
+  const std::string tex = paper_latex(
+      iso,
+      {paper_text(iso, "Law", "law", laws_tex), paper_text(iso, "Form", "formula", laws_tex),
+       paper_number(iso, "$p_0$", "p0", "se_p0"), paper_number(iso, "$p_1$", "p1", "se_p1"),
+       paper_number(iso, "$p_2$", "p2", "se_p2"), paper_number(iso, "$p_3$", "p3", "se_p3"),
+       paper_number(iso, "$R^2$", "r_squared"), paper_number(iso, "$n$", "n")},
+      caption);
+  write_table_all(iso, out_dir + "/isotropic", caption, tex);
 }
 
 int run_fit_command(const FitCommandOptions& o) {
@@ -237,10 +261,12 @@ int run_fit_command(const FitCommandOptions& o) {
 
   Table params({"mode", "nu", "quantity", "x0", "se_x0", "x_max", "se_x_max", "beta", "se_beta",
                 "corr_xmax_beta", "initial_slope", "se_initial_slope", "eps_95", "r_squared", "rmse", "n",
-                "eps_last", "gsl_max_rel_diff", "residual_autocorr", "se_inflation", "warnings"});
+                "eps_last", "gsl_max_rel_diff", "residual_autocorr", "se_inflation", "warnings", "usable",
+                "not_usable_because"});
   std::vector<SummaryRow> summary;
   FitsByModeQuantity by_mode_q;
   int warnings = 0, usable = 0;
+  std::map<std::string, int> not_usable;   // reason -> count, for the summary line
   for (auto& c : curves) {
     const auto& e = c.t.column("eps_d");
     for (const char* q : {"s_dev", "F_dev"}) {
@@ -269,18 +295,28 @@ int run_fit_command(const FitCommandOptions& o) {
           std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << s << "\n";
           ++warnings;
         }
+        const std::string why = unusable_reason(r);
         params.add_row({c.mode, num(c.phi, 4), q, num(r.x0), num(r.se_x0), num(r.x_max), num(r.se_x_max),
                         num(r.beta), num(r.se_beta), num(r.corr[1][2], 3), num(r.initial_slope),
                         num(r.se_initial_slope), num(r.eps_95), num(r.r_squared, 5), num(r.rmse), std::to_string(r.n),
-                        num(r.e_last, 4), num(gsl_gap, 2), num(r.residual_autocorrelation, 3), num(r.se_inflation, 3), w});
-        summary.push_back(summary_row(c.mode, c.phi, q, 0, r.x_max, r.se_x_max, r.beta, r.se_beta, r.initial_slope,
-                                      r.se_initial_slope, r.r_squared, r.warnings));
-        by_mode_q[{c.mode, q}].emplace_back(c.phi, r);
-        ++usable;
+                        num(r.e_last, 4), num(gsl_gap, 2), num(r.residual_autocorrelation, 3), num(r.se_inflation, 3), w,
+                        why.empty() ? "yes" : "no", why});
+        SummaryRow sr = summary_row(c.mode, c.phi, q, 0, r.x_max, r.se_x_max, r.beta, r.se_beta, r.initial_slope,
+                                    r.se_initial_slope, r.r_squared, r.warnings);
+        sr.not_usable = why;
+        summary.push_back(sr);
+        if (why.empty()) {
+          by_mode_q[{c.mode, q}].emplace_back(c.phi, r);
+          ++usable;
+        } else {
+          ++not_usable[why];
+        }
       } catch (const std::exception& ex) {
         std::cerr << "dem fit: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << ex.what() << "\n";
         params.add_row({c.mode, num(c.phi, 4), q, "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan",
-                        "nan", "nan", "nan", "0", "nan", "nan", "nan", "nan", std::string("not fitted: ") + ex.what()});
+                        "nan", "nan", "nan", "0", "nan", "nan", "nan", "nan", std::string("not fitted: ") + ex.what(),
+                        "no", std::string("not fitted: ") + ex.what()});
+        ++not_usable["not fitted"];
         SummaryRow nf;
         nf.mode = c.mode; nf.nu = c.phi; nf.quantity = q; nf.fitted = false;
         nf.warnings = {std::string("not fitted: ") + ex.what()};
@@ -311,20 +347,29 @@ int run_fit_command(const FitCommandOptions& o) {
             std::cerr << "dem fit: shared-path test nu=" << num(a.phi, 4) << " " << q << ": " << ex.what() << "\n";
           }
         }
-  if (!shared.rows.empty())
-    write_table_all(shared, (out / "shared_path").string(),
-                    "D2 vs D3: F-test of one shared law against two (corrected for correlated residuals unless --independent-errors) and the largest gap between the fitted curves; same_path: p >= 0.01 or gap <= --gap-tolerance");
+  if (!shared.rows.empty()) {
+    const std::string caption = "D2 vs D3: F-test of one shared law against two (corrected for correlated residuals unless "
+                                "--independent-errors) and the largest gap between the fitted curves; same_path: p >= 0.01 "
+                                "or gap <= --gap-tolerance";
+    const std::string tex = paper_latex(
+        shared,
+        {paper_number(shared, "$\\nu$", "nu"), paper_text(shared, "Quantity", "quantity", tex_symbols()),
+         paper_number(shared, "$F$", "f_statistic"), paper_number(shared, "$p$", "p_value"),
+         paper_number(shared, "max.\\ gap", "max_gap"), paper_text(shared, "Same path", "same_path")},
+        caption, "D2 against D3 from the same volume fraction: one law for both against one each (F-test).");
+    write_table_all(shared, (out / "shared_path").string(), caption, tex);
+  }
 
   write_nu_laws(by_mode_q, out.string());
   write_isotropic({(run / "prep" / "cycle_unloading.csv").string()}, out.string());
-  std::cerr << "dem fit: " << usable << " of " << params.rows.size() << " fits usable, written to " << out.string()
+  std::cerr << "dem fit: " << usable_summary(usable, params.rows.size(), not_usable) << ", written to " << out.string()
             << " (" << warnings << " warnings)\n";
   if (!o.no_plots) {
     const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.plots \"" +
                             run.string() + "\" --fits";
     if (std::system(cmd.c_str()) != 0) std::cerr << "dem fit: plotting failed (tables are written)\n";
   }
-  if (usable == 0) {
+  if (not_usable.count("not fitted") && not_usable.at("not fitted") == static_cast<int>(params.rows.size())) {
     std::cerr << "dem fit: no curve could be fitted (see the reasons above and in parameters.csv): nothing to report\n";
     return 1;
   }

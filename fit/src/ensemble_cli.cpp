@@ -55,6 +55,17 @@ std::string read_text(const fs::path& f) {
   return ss.str();
 }
 
+// A planned task is done when its status file exists, or, in a stored copy without status files
+// (data/*/members), when what it leaves is there: a mode's curve (renamed into place complete), a
+// preparation's unloading branch.
+bool task_done(const fs::path& run, const std::string& task) {
+  fs::path p = run / task;
+  if (fs::exists(p)) return true;
+  if (p.parent_path().filename() == "deviatoric") return fs::exists(p.replace_extension(".csv"));
+  if (p.filename() == "prep.json") return fs::exists(p.parent_path() / "prep" / "cycle_unloading.csv");
+  return false;
+}
+
 std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run) {
   const std::regex name_re(R"(([A-Za-z0-9_-]+)_(phi([0-9.]+))\.json)");
   std::map<std::pair<std::string, double>, Cell> cells;
@@ -63,9 +74,26 @@ std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run
   for (auto& d : fs::directory_iterator(run / "members"))
     if (d.is_directory()) member_dirs.push_back(d.path());
   std::sort(member_dirs.begin(), member_dirs.end());
+  const std::regex flat_re(R"(([A-Za-z0-9_-]+)_(phi([0-9.]+))\.csv)");
   for (const auto& md : member_dirs) {
     const std::string member = md.filename().string();
-    if (!fs::is_directory(md / "deviatoric")) continue;
+    if (!fs::is_directory(md / "deviatoric")) {
+      // A stored folder of the earlier layout (data/figure3_n9261): the mode curves directly in the
+      // member folder, without task status files; each curve there is a finished run.
+      std::vector<fs::path> flat;
+      for (auto& f : fs::directory_iterator(md)) flat.push_back(f.path());
+      std::sort(flat.begin(), flat.end());
+      for (const auto& f : flat) {
+        std::smatch m;
+        const std::string fname = f.filename().string();
+        if (!std::regex_match(fname, m, flat_re)) continue;
+        Cell& c = cells[{m[1].str(), std::stod(m[3].str())}];
+        c.mode = m[1]; c.tag = m[2]; c.nu = std::stod(m[3].str());
+        c.members.push_back(member);
+        c.curves.push_back(read_table(f.string()));
+      }
+      continue;
+    }
     const std::string prep_warning = fs::exists(md / "prep.json") ? json_field(read_text(md / "prep.json"), "warning") : "";
     std::vector<fs::path> files;
     for (auto& f : fs::directory_iterator(md / "deviatoric")) files.push_back(f.path());
@@ -73,12 +101,15 @@ std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run
     for (const auto& f : files) {
       std::smatch m;
       const std::string fname = f.filename().string();
-      if (!std::regex_match(fname, m, name_re)) continue;
+      // A curve without its status file: a stored copy (data/*/members keep the curves only); the curve
+      // was renamed into place complete, so it is a finished run.
+      const bool stored = std::regex_match(fname, m, flat_re) && !fs::exists(fs::path(f).replace_extension(".json"));
+      if (!stored && !std::regex_match(fname, m, name_re)) continue;
       Cell& c = cells[{m[1].str(), std::stod(m[3].str())}];
       c.mode = m[1]; c.tag = m[2]; c.nu = std::stod(m[3].str());
-      std::ifstream in(f);
       std::stringstream ss;
-      ss << in.rdbuf();
+      if (stored) ss << R"({"status": "complete"})";
+      else ss << std::ifstream(f).rdbuf();
       const std::string status = json_field(ss.str(), "status");
       const fs::path csv = md / "deviatoric" / (m[1].str() + "_" + m[2].str() + ".csv");
       if (status == "complete" && fs::exists(csv)) {
@@ -194,7 +225,7 @@ Table parameter_table() {
                 "pk_x0", "se_pk_x0", "pk_x_cs", "se_pk_x_cs", "pk_beta", "se_pk_beta", "pk_A", "se_pk_A", "pk_gamma",
                 "se_pk_gamma", "x_peak", "se_x_peak", "x_peak_lo95", "x_peak_hi95", "eps_peak", "se_eps_peak",
                 "eps_peak_lo95", "eps_peak_hi95", "pk_initial_slope", "se_pk_initial_slope", "pk_r_squared", "pk_rmse",
-                "selection_reason", "peak_warnings"});
+                "selection_reason", "peak_warnings", "usable", "not_usable_because"});
 }
 
 // The peak law and the choice between the laws for one curve (the peak fit may fail: then the
@@ -220,6 +251,13 @@ Choice choose(const std::vector<double>& grid, const std::vector<std::vector<dou
     c.choice.reason = std::string("the peak law could not be fitted (") + ex.what() + "): the saturating law is kept";
   }
   return c;
+}
+
+// The one rule (demfit::unusable_reason) for the row's reported law: the saturating fit, or the
+// peak law where the selection chose it.
+std::string row_unusable(const EnsembleFit& f, const Choice& ch) {
+  if (ch.choice.model == "saturating" || !ch.peak_fitted) return unusable_reason(f.fit);
+  return ch.peak.fit.ok ? "" : "the chosen " + ch.choice.model + " law did not converge";
 }
 
 std::vector<std::string> choice_cells(const EnsembleFit& f, const Choice& c) {
@@ -282,7 +320,7 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
   }
   std::vector<std::string> missing;
   for (const auto& t : o.planned_tasks)
-    if (!fs::exists(run / t)) missing.push_back(t);
+    if (!task_done(run, t)) missing.push_back(t);
   std::string incomplete;
   if (!missing.empty()) {
     incomplete = "ensemble incomplete: " + std::to_string(missing.size()) + " of " +
@@ -323,7 +361,8 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
   FitsByModeQuantity by_mode_q;
   std::map<std::tuple<std::string, double, std::string>, EnsembleFit> fits;
   std::map<std::pair<std::string, double>, std::vector<std::string>> fitted_members;
-  int warnings = 0, fitted = 0;
+  int warnings = 0, fitted = 0, usable = 0;
+  std::map<std::string, int> not_usable;   // reason -> count, for the summary line
   for (auto& [key, c] : cells) {
     for (const auto& e : c.excluded)
       std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << ": member " << e.member
@@ -347,9 +386,12 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
           std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": " << s << "\n";
           ++warnings;
         }
+        const std::string why = row_unusable(f, ch);
         auto row = parameter_row(c, q, f, w);
         const auto extra = choice_cells(f, ch);
         row.insert(row.end(), extra.begin(), extra.end());
+        row.push_back(why.empty() ? "yes" : "no");
+        row.push_back(why);
         params.add_row(row);
         if (ch.choice.model != "saturating")
           std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": " << ch.choice.reason << "\n";
@@ -369,9 +411,16 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
         sr.se_x_peak = ch.peak.se[kPkXpeak];
         sr.eps_peak = ch.peak.value[kPkEpsPeak];
         sr.se_eps_peak = ch.peak.se[kPkEpsPeak];
+        sr.not_usable = why;
         summary.push_back(sr);
-        by_mode_q[{c.mode, q}].emplace_back(c.nu, f.fit);
-        fits[{c.mode, c.nu, q}] = f;
+        if (why.empty()) {
+          by_mode_q[{c.mode, q}].emplace_back(c.nu, f.fit);
+          fits[{c.mode, c.nu, q}] = f;
+          ++usable;
+        } else {
+          ++not_usable[why];
+          std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": not usable: " << why << "\n";
+        }
         ++fitted;
       } catch (const std::exception& ex) {
         std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": not fitted: " << ex.what() << "\n";
@@ -380,6 +429,7 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
         nf.fitted = false;
         nf.warnings = {std::string("not fitted: ") + ex.what()};
         summary.push_back(nf);
+        ++not_usable["not fitted"];
         ++warnings;
       }
     }
@@ -408,17 +458,29 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
       std::cerr << "dem fit: shared-path test nu=" << num(nu, 4) << " " << q << ": " << ex.what() << "\n";
     }
   }
-  if (!shared.rows.empty())
-    write_table_all(shared, (out / "shared_path").string(),
-                    "D2 vs D3 from the same packings: paired jackknife differences of (x0, x_max, beta) against t "
-                    "(packings - 1 dof), Bonferroni p over the three; same_path: p >= 0.01");
+  if (!shared.rows.empty()) {
+    const std::string caption = "D2 vs D3 from the same packings: paired jackknife differences of (x0, x_max, beta) "
+                                "against t (packings - 1 dof), Bonferroni p over the three; same_path: p >= 0.01";
+    const std::string tex = paper_latex(
+        shared,
+        {paper_number(shared, "$\\nu$", "nu"), paper_text(shared, "Quantity", "quantity", tex_symbols()),
+         paper_number(shared, "$K$", "packings"), paper_number(shared, "$\\Delta x_0$", "diff_x0", "se_diff_x0"),
+         paper_number(shared, "$\\Delta x_\\mathrm{max}$", "diff_x_max", "se_diff_x_max"),
+         paper_number(shared, "$\\Delta\\beta$", "diff_beta", "se_diff_beta"), paper_number(shared, "$p$", "p_value"),
+         paper_text(shared, "Same path", "same_path")},
+        caption, "D3 minus D2 from the same packings (only usable fits), paired jackknife errors; $p$: Bonferroni over "
+                 "the three differences.");
+    write_table_all(shared, (out / "shared_path").string(), caption, tex);
+  }
   write_nu_laws(by_mode_q, out.string());
   std::vector<std::string> unloading;
-  for (auto& d : fs::directory_iterator(run / "members"))
-    unloading.push_back((d.path() / "prep" / "cycle_unloading.csv").string());
+  for (auto& d : fs::directory_iterator(run / "members"))   // prep/ of a task's member, or the earlier flat layout
+    unloading.push_back((d.path() / (fs::is_directory(d.path() / "prep") ? "prep" : "") / "cycle_unloading.csv").string());
   std::sort(unloading.begin(), unloading.end());
   write_isotropic(unloading, out.string());
-  std::cerr << "dem fit: " << fitted << " ensemble fits written to " << out.string() << " (" << warnings << " warnings)\n";
+  std::cerr << "dem fit: " << fitted << " ensemble fits written to " << out.string() << ": "
+            << usable_summary(usable, summary.size(), not_usable)
+            << " (" << warnings << " warnings)\n";
   if (!o.no_plots) {
     const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.ensemble_plots \"" +
                             run.string() + "\"";

@@ -261,12 +261,39 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
       worst = std::max(worst, rising ? extreme - v : v - extreme);
     }
     const double range = *std::max_element(y.begin(), y.end()) - *std::min_element(y.begin(), y.end());
-    if (worst > 5 * noise && worst > 0.2 * range)
+    r.non_monotone = worst > 5 * noise && worst > 0.2 * range;
+    if (r.non_monotone)
       r.warnings.push_back("data are not monotone (a reversal of " + fmt(worst) + " after the extreme, " +
                            fmt(worst / std::max(noise, 1e-300)) +
                            " x the point-to-point noise): the saturating law does not describe this curve");
   }
   return r;
+}
+
+std::string unusable_reason(const FitResult& r) {
+  if (!r.ok) {
+    for (const auto& w : r.warnings)
+      if (w.rfind("optimiser did not converge", 0) == 0) return "not converged";
+    return "ill-conditioned: the data do not determine x0, x_max and beta";
+  }
+  if (!std::isfinite(r.se_x_max) || !std::isfinite(r.se_beta))
+    return "no standard error of " + std::string(!std::isfinite(r.se_x_max) ? "x_max" : "beta") + " (a bound)";
+  if (r.non_monotone) return "not monotone: the saturating law does not describe the curve";
+  return "";
+}
+
+std::string usable_summary(int usable, std::size_t total, const std::map<std::string, int>& not_usable) {
+  std::string s = std::to_string(usable) + " of " + std::to_string(total) + " fits usable";
+  if (!not_usable.empty()) {
+    s += " (not usable:";
+    bool first = true;
+    for (const auto& [why, n] : not_usable) {
+      s += (first ? " " : "; ") + std::to_string(n) + " " + why;
+      first = false;
+    }
+    s += ")";
+  }
+  return s;
 }
 
 // ---- GSL cross-check ----

@@ -617,13 +617,15 @@ int run(const ModelCommandOptions& o) {
 void add_model_options(CLI::App& app, ModelCommandOptions& o) {
   app.add_option("dir", o.dir, "ensemble folder reduced by `dem fit` (ensemble/MODE_phiX.csv, members/)")->required();
   app.add_option("--out", o.out, "output folder (default DIR/model)");
-  app.add_option("--isotropic", o.isotropic, "unloading-branch curves (default DIR/members/*/[prep/]cycle_unloading.csv)");
+  app.add_option("--isotropic", o.isotropic, "unloading-branch curves (default DIR/members/*/[prep/]cycle_unloading.csv)")
+      ->default_str("");
   app.add_option("--calibrate-mode", o.calibrate_mode, "mode whose curves are fitted; all others are predicted");
   app.add_option("--paths", o.paths, "path ensembles PATH_phiX.csv of demkit.path_ensemble (default DIR/paths if it exists)");
   app.add_option("--calibrate-on", o.calibrate_on, "modes and paths fitted, comma-separated (e.g. D2,reversal,isobaric; "
-                 "default: --calibrate-mode); all others are predicted")->delimiter(',');
-  app.add_option("--eps-max", o.eps_max, "fit and compare only eps_d <= this [-]");
-  app.add_flag("--no-jackknife{false}", o.jackknife, "errors from the covariance only (faster)");
+                 "default: --calibrate-mode); all others are predicted")->delimiter(',')->default_str("");
+  app.add_option("--eps-max", o.eps_max, "fit and compare only eps_d <= this [-] (default: all)")->default_str("");
+  app.add_flag_callback("--no-jackknife", [&o] { o.jackknife = false; },
+                        "errors from the covariance only (faster; default: jackknife over the packings)");
   app.add_flag("--no-plots", o.no_plots, "skip the matplotlib plots");
   app.add_option("--family", o.family, "group (the incremental anisotropic model), extended (with the frictional "
                  "extension: docs/model.md) or auto (both; the held-out test chooses, the other goes to OUT/FAMILY)");

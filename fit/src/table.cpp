@@ -16,6 +16,7 @@
 
 #include <cerrno>
 #include <cstring>
+#include <map>
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -48,15 +49,29 @@ nlohmann::ordered_json json_cell(const std::string& cell) {
 }
 
 namespace {
+// Text in LaTeX's text mode: every special character escaped (a machine dump must compile).
 std::string tex_escape(const std::string& s) {
   std::string o;
   for (char c : s) {
-    if (c == '_' || c == '%' || c == '&' || c == '#') o += '\\';
-    o += c;
+    switch (c) {
+      case '_': case '%': case '&': case '#': case '$': case '{': case '}': o += '\\'; o += c; break;
+      case '~': o += "\\textasciitilde{}"; break;
+      case '^': o += "\\textasciicircum{}"; break;
+      case '\\': o += "\\textbackslash{}"; break;
+      case '<': o += "$<$"; break;
+      case '>': o += "$>$"; break;
+      default: o += c;
+    }
   }
   return o;
 }
 }  // namespace
+
+std::size_t column_index(const Table& t, const std::string& name) {
+  for (std::size_t k = 0; k < t.header.size(); ++k)
+    if (t.header[k] == name) return k;
+  throw std::logic_error("table " + t.source + " has no column '" + name + "'");
+}
 
 const std::vector<double>& Table::column(const std::string& name) const {
   for (std::size_t k = 0; k < header.size(); ++k)
@@ -141,6 +156,10 @@ std::string json_text(const Table& t, const std::string& caption) {
 }  // namespace
 
 void write_table_all(const Table& t, const std::string& stem, const std::string& caption) {
+  write_table_all(t, stem, caption, "");
+}
+
+void write_table_all(const Table& t, const std::string& stem, const std::string& caption, const std::string& latex) {
   std::ostringstream md, tex;
   md << "<!-- " << caption << " -->\n|";
   for (auto& h : t.header) md << " " << h << " |";
@@ -163,7 +182,7 @@ void write_table_all(const Table& t, const std::string& stem, const std::string&
   tex << "\\bottomrule\n\\end{tabular}\n";
   // All four or none: renamed into place only once every one is written.
   dem::write_files_atomic({{stem + ".csv", csv_text(t)}, {stem + ".json", json_text(t, caption)}, {stem + ".md", md.str()},
-                     {stem + ".tex", tex.str()}});
+                     {stem + ".tex", latex.empty() ? tex.str() : latex}});
 }
 
 // ---- Tables for people -------------------------------------------------------------------
@@ -270,7 +289,9 @@ Notes notes_of(const std::vector<SummaryRow>& rows) {
   Notes n;
   for (const auto& r : rows) {
     std::vector<std::string> m;
-    for (const auto& w : r.warnings) {
+    std::vector<std::string> texts = r.warnings;
+    if (r.fitted && !r.not_usable.empty()) texts.insert(texts.begin(), "not usable: " + r.not_usable);
+    for (const auto& w : texts) {
       auto it = std::find(n.texts.begin(), n.texts.end(), w);
       if (it == n.texts.end()) { n.texts.push_back(w); it = n.texts.end() - 1; }
       const std::string name = mark_name(static_cast<std::size_t>(it - n.texts.begin()));
@@ -297,7 +318,9 @@ const char* kExplainMd =
     "Each value is rounded to its standard error, given in parentheses in units of the last digit "
     "(0.197(2) = 0.197 \u00b1 0.002; the error to one significant digit, two when it starts with 1). "
     "K: packings averaged (1: a single run). Initial slope: dx/d\u03b5<sub>d</sub> at \u03b5<sub>d</sub> = 0 "
-    "(G/p for s<sub>dev</sub>). Every digit and every diagnostic: parameters.csv / parameters.json.";
+    "(G/p for s<sub>dev</sub>). \u201cnot usable\u201d: a fit whose numbers the data do not determine (ill-conditioned, "
+    "not converged, on a bound, or a curve the law does not describe: the reason in its footnote; column `usable` of "
+    "parameters.csv). Every digit and every diagnostic: parameters.csv / parameters.json.";
 std::string md_quantity(const std::string& q) {
   const auto u = q.find('_');
   return u == std::string::npos ? q : q.substr(0, u) + "<sub>" + q.substr(u + 1) + "</sub>";
@@ -357,7 +380,7 @@ std::string p_text(double p) {
 }
 // The four cells of the chosen model (model with p, x_peak, eps_peak, x_cs); Markdown or LaTeX.
 std::array<std::string, 4> model_cells(const SummaryRow& r, bool tex) {
-  if (!r.fitted) return {"", tex ? "{---}" : "", tex ? "{---}" : "", tex ? "{---}" : ""};
+  if (!r.fitted || !r.not_usable.empty()) return {"", tex ? "{---}" : "", tex ? "{---}" : "", tex ? "{---}" : ""};
   const bool peak = r.model == "peak";
   const std::string p = p_text(r.selection_p);
   const std::string m = r.model.empty() ? "" : r.model + (p.empty() ? "" : " (p = " + p + ")");
@@ -399,7 +422,9 @@ std::string summary_markdown(const std::vector<SummaryRow>& rows, const std::str
     std::string q = md_quantity(r.quantity);
     if (!n.marks[i].empty()) q += " <sup>" + joined(n.marks[i], ",") + "</sup>";
     md << "| " << r.mode << " | " << nu_text(r.nu) << " | " << q << " | " << packings_of(r) << " | ";
-    if (r.fitted)
+    if (r.fitted && !r.not_usable.empty())
+      md << "not usable | | | |";
+    else if (r.fitted)
       md << format_paren(r.x_max, r.se_x_max) << " | " << format_paren(r.beta, r.se_beta) << " | "
          << format_paren(r.slope, r.se_slope) << " | " << r2_text(r.r_squared) << " |";
     else
@@ -422,58 +447,143 @@ std::string summary_markdown(const std::vector<SummaryRow>& rows, const std::str
   return md.str();
 }
 
+// The model's short name for the LaTeX table (its width fits A4 at \small with the peak columns).
+static std::string model_short(const std::string& m) { return m == "saturating" ? "sat." : m; }
+
 std::string summary_latex(const std::vector<SummaryRow>& rows, const std::string& caption) {
   const Notes n = notes_of(rows);
-  std::vector<std::array<std::string, 5>> cells;   // nu, x_max, beta, slope, R^2 (S columns)
-  for (const auto& r : rows) {
-    if (r.fitted)
-      cells.push_back({nu_text(r.nu), format_paren(r.x_max, r.se_x_max), format_paren(r.beta, r.se_beta),
-                       format_paren(r.slope, r.se_slope), r2_text(r.r_squared)});
-    else
-      cells.push_back({nu_text(r.nu), "{---}", "{---}", "{---}", "{---}"});
-  }
   const bool extra = any_peak(rows);
-  std::vector<std::array<std::string, 4>> mcells;
-  for (const auto& r : rows) mcells.push_back(model_cells(r, true));
+  // K as a column only when the rows differ in it; else once, in the note below the table.
+  const bool k_column = std::any_of(rows.begin(), rows.end(), [&](const SummaryRow& r) {
+    return packings_of(r) != packings_of(rows.front());
+  });
+  // S columns: nu, x_max, beta, slope, R^2, then (extra) p of the model test, x_peak, eps_peak, x_cs.
+  std::vector<std::vector<std::string>> cells;
+  for (const auto& r : rows) {
+    std::vector<std::string> c;
+    if (r.fitted && r.not_usable.empty())
+      c = {nu_text(r.nu), format_paren(r.x_max, r.se_x_max), format_paren(r.beta, r.se_beta),
+           format_paren(r.slope, r.se_slope), r2_text(r.r_squared)};
+    else
+      c = {nu_text(r.nu), "{---}", "{---}", "{---}", "{---}"};
+    if (extra) {
+      const auto m = model_cells(r, true);
+      const std::string p = r.fitted && r.not_usable.empty() ? p_text(r.selection_p) : "";
+      c.insert(c.end(), {p.empty() ? "{---}" : p, m[1], m[2], m[3]});
+    }
+    for (auto& x : c)
+      if (x == "nan") x = "{---}";
+    cells.push_back(c);
+  }
+  // With the peak law's columns the table drops the initial slope and R^2 (in parameters.md and .csv) and
+  // narrows the column gaps, so that it fits A4 at \small (tests/python/test_tex.py).
+  const bool full = !extra;
   std::vector<std::string> fmt;
-  for (int k = 0; k < 5; ++k) {
+  for (std::size_t k = 0; k < (extra ? 9u : 5u); ++k) {
     std::vector<std::string> col;
-    for (const auto& c : cells) col.push_back(c[k] == "nan" ? "{---}" : c[k]);
+    for (const auto& c : cells) col.push_back(c[k]);
     fmt.push_back(table_format(col));
   }
-  for (int k = 1; k < 4; ++k) {
-    std::vector<std::string> col;
-    for (const auto& c : mcells) col.push_back(c[k]);
-    fmt.push_back(table_format(col));
-  }
+  auto S = [&](std::size_t k) { return "S[table-format=" + fmt[k] + "]"; };
   std::ostringstream tex;
   tex << "% " << tex_text(caption) << "\n% needs \\usepackage{booktabs} and \\usepackage{siunitx}; values rounded to "
       << "their standard errors, given in parentheses in units of the last digit\n";
-  tex << "\\begin{tabular}{l S[table-format=" << fmt[0] << "] l r S[table-format=" << fmt[1] << "] S[table-format="
-      << fmt[2] << "] S[table-format=" << fmt[3] << "] S[table-format=" << fmt[4] << "]";
-  if (extra) tex << " l S[table-format=" << fmt[5] << "] S[table-format=" << fmt[6] << "] S[table-format=" << fmt[7] << "]";
+  if (!full) tex << "{\\setlength{\\tabcolsep}{4pt}%\n";
+  tex << "\\begin{tabular}{l " << S(0) << " l" << (k_column ? " r" : "") << " " << S(1) << " " << S(2);
+  if (full) tex << " " << S(3) << " " << S(4);
+  if (extra) tex << " l " << S(6) << " " << S(7) << " " << S(8);   // the test's p: parameters.md
   tex << "}\n\\toprule\n";
-  tex << "Mode & {$\\nu$} & Quantity & {$K$} & {$x_\\mathrm{max}$} & {$\\beta$} & "
-         "{$\\left.\\mathrm{d}x/\\mathrm{d}\\varepsilon_\\mathrm{d}\\right|_0$} & {$R^2$}";
+  tex << "Mode & {$\\nu$} & Quantity" << (k_column ? " & {$K$}" : "") << " & {$x_\\mathrm{max}$} & {$\\beta$}";
+  if (full) tex << " & {$\\left.\\mathrm{d}x/\\mathrm{d}\\varepsilon_\\mathrm{d}\\right|_0$} & {$R^2$}";
   if (extra) tex << " & Model & {$x_\\mathrm{peak}$} & {$\\varepsilon_\\mathrm{peak}$} & {$x_\\mathrm{cs}$}";
   tex << " \\\\\n\\midrule\n";
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const auto& r = rows[i];
     std::string q = tex_quantity(r.quantity);
     if (!n.marks[i].empty()) q += "\\textsuperscript{" + joined(n.marks[i], ",") + "}";
-    auto cell = [](const std::string& c) { return c == "nan" ? std::string("{---}") : c; };
-    tex << tex_text(r.mode) << " & " << cells[i][0] << " & " << q << " & " << packings_of(r) << " & " << cell(cells[i][1])
-        << " & " << cell(cells[i][2]) << " & " << cell(cells[i][3]) << " & " << cell(cells[i][4]);
-    if (extra) tex << " & " << tex_text(mcells[i][0]) << " & " << mcells[i][1] << " & " << mcells[i][2] << " & " << mcells[i][3];
+    const auto& c = cells[i];
+    tex << tex_text(r.mode) << " & " << c[0] << " & " << q;
+    if (k_column) tex << " & " << packings_of(r);
+    tex << " & " << c[1] << " & " << c[2];
+    if (full) tex << " & " << c[3] << " & " << c[4];
+    if (extra)
+      tex << " & " << (r.fitted && r.not_usable.empty() ? tex_text(model_short(r.model)) : "") << " & " << c[6] << " & "
+          << c[7] << " & " << c[8];
     tex << " \\\\\n";
   }
   tex << "\\bottomrule\n\\end{tabular}\n";
-  if (!n.texts.empty()) {
+  if (!full) tex << "}\n";
+  std::vector<std::string> below;
+  if (!k_column && !rows.empty()) below.push_back("$K = " + std::to_string(packings_of(rows.front())) + "$ " +
+                                 (packings_of(rows.front()) == 1 ? "run (no ensemble)." : "packings per curve."));
+  if (extra) below.push_back("Model: the law chosen per curve (sat.: saturating; the test and its $p$: docs/model\\_selection.md); "
+                             "the test's $p$, initial slopes and $R^2$: parameters.md.");
+  for (std::size_t k = 0; k < n.texts.size(); ++k)
+    below.push_back("\\textsuperscript{" + mark_name(k) + "}~" + tex_text(n.texts[k]));
+  if (!below.empty()) {
     tex << "\n\\par\\smallskip{\\footnotesize\n";
-    for (std::size_t k = 0; k < n.texts.size(); ++k)
-      tex << "\\textsuperscript{" << mark_name(k) << "}~" << tex_text(n.texts[k]) << "\\par\n";
+    for (const auto& b : below) tex << b << "\\par\n";
     tex << "}\n";
   }
+  return tex.str();
+}
+
+const std::map<std::string, std::string>& tex_symbols() {
+  static const std::map<std::string, std::string> m = {
+      {"s_dev", "$s_\\mathrm{dev}$"}, {"F_dev", "$F_\\mathrm{dev}$"}, {"p_star", "$p^*$"},
+      {"x_max", "$x_\\mathrm{max}$"}, {"beta", "$\\beta$"}, {"x0", "$x_0$"}};
+  return m;
+}
+
+PaperColumn paper_text(const Table& t, const std::string& header, const std::string& column,
+                       const std::map<std::string, std::string>& as_tex) {
+  const std::size_t k = column_index(t, column);
+  return {header, [k, as_tex](const std::vector<std::string>& r) {
+            const auto it = as_tex.find(r[k]);
+            return it != as_tex.end() ? it->second : tex_text(r[k]);
+          }, false};
+}
+
+PaperColumn paper_number(const Table& t, const std::string& header, const std::string& column,
+                         const std::string& se_column) {
+  const std::size_t k = column_index(t, column);
+  const std::size_t e = se_column.empty() ? k : column_index(t, se_column);
+  const bool with_error = !se_column.empty();
+  return {header, [k, e, with_error](const std::vector<std::string>& r) {
+            const double v = std::strtod(r[k].c_str(), nullptr), se = with_error ? std::strtod(r[e].c_str(), nullptr) : NAN;
+            const std::string c = format_paren(v, se);
+            return c == "nan" ? std::string("{---}") : c;
+          }, true};
+}
+
+std::string paper_latex(const Table& t, const std::vector<PaperColumn>& cols, const std::string& caption,
+                        const std::string& note) {
+  std::vector<std::vector<std::string>> cells;
+  for (const auto& r : t.rows) {
+    std::vector<std::string> c;
+    for (const auto& col : cols) c.push_back(col.cell(r));
+    cells.push_back(c);
+  }
+  std::ostringstream tex;
+  tex << "% " << tex_text(caption) << "\n% needs \\usepackage{booktabs} and \\usepackage{siunitx}; values rounded to "
+      << "their standard errors, given in parentheses in units of the last digit; every digit: the .csv beside it\n";
+  tex << "\\begin{tabular}{";
+  for (std::size_t k = 0; k < cols.size(); ++k) {
+    if (!cols[k].number) { tex << (k ? " l" : "l"); continue; }
+    std::vector<std::string> col;
+    for (const auto& c : cells) col.push_back(c[k]);
+    tex << (k ? " " : "") << "S[table-format=" << table_format(col) << "]";
+  }
+  tex << "}\n\\toprule\n";
+  for (std::size_t k = 0; k < cols.size(); ++k)
+    tex << (k ? " & " : "") << (cols[k].number ? "{" + cols[k].header + "}" : cols[k].header);
+  tex << " \\\\\n\\midrule\n";
+  for (const auto& c : cells) {
+    for (std::size_t k = 0; k < c.size(); ++k) tex << (k ? " & " : "") << c[k];
+    tex << " \\\\\n";
+  }
+  tex << "\\bottomrule\n\\end{tabular}\n";
+  if (!note.empty()) tex << "\n\\par\\smallskip{\\footnotesize " << note << "\\par}\n";
   return tex.str();
 }
 

@@ -17,11 +17,12 @@ from collections import namedtuple
 
 from . import _core
 from ._core import (BlowUp, Box, Engine, FitResult, Measurement, Scene, SceneError, State, column_table, curve_columns,
-                    fit_saturating, random_packing, read_packing, run_mode, run_prep_stage, run_protocol,
-                    run_stage, saturating)
+                    fit_saturating, format_paren, format_pm, random_packing, read_packing, run_mode, run_prep_stage,
+                    run_protocol, run_stage, saturating)
 
 __all__ = ["BlowUp", "Box", "Checkpoint", "Engine", "FitResult", "Measurement", "Scene", "SceneError", "State",
-           "column_table", "contact_models", "curve_columns", "fit_curve", "fit_saturating", "load_scene", "random_packing", "read_checkpoint",
+           "column_table", "contact_models", "curve_columns", "fit_curve", "fit_saturating", "format_paren", "format_pm",
+           "load_scene", "random_packing", "read_checkpoint",
            "read_curve", "read_packing", "run_mode", "run_prep_stage", "run_protocol", "run_stage", "saturating",
            "scene_toml", "version"]
 
@@ -152,6 +153,12 @@ def _state_by_id(self, array):
 
 State.by_id = _state_by_id
 
+SceneError.__doc__ = ("A scene or packing `dem` would refuse (exit code 2): the message names the key or the "
+                      "input and the fix. A ValueError.")
+BlowUp.__doc__ = ("The run blew up (non-finite values, an overlap beyond max_overlap_fraction of a radius, "
+                  "exploding kinetic energy; exit code 3 of `dem`): .last_good_state (a State or None) and, from "
+                  "the stage runners, .checkpoint (the file the runner saved it to). A RuntimeError.")
+
 
 def read_curve(path, frame=True):
     """A curve CSV (`dem` or yade_ref/) as a pandas DataFrame (frame=True) or a numpy record array.
@@ -159,32 +166,21 @@ def read_curve(path, frame=True):
     The '#' comment lines (column definitions, `# physics:` ...) go to .attrs["comments"] of the
     DataFrame; units are in the column names (_Pa, _J, _s; others dimensionless)."""
     import numpy as np
+    import pandas as pd
     path = os.fspath(path)
     with open(path) as fh:
-        lines = fh.read().splitlines()
-    comments = [ln for ln in lines if ln.startswith("#")]
-    body = [ln for ln in lines if ln.strip() and not ln.startswith("#")]
-    if not body:
-        raise ValueError(f"{path}: no header line (empty or comments only)")
-    header = body[0].split(",")
-    rows = [ln.split(",") for ln in body[1:]]
-    for i, r in enumerate(rows):
-        if len(r) != len(header):
-            raise ValueError(f"{path}: data row {i + 1} has {len(r)} cells, header has {len(header)}")
-    cols = {}
-    for k, name in enumerate(header):
-        vals = [r[k] for r in rows]
-        try:
-            cols[name] = np.array([float(v) for v in vals])
-        except ValueError:
-            cols[name] = np.array(vals)
+        comments = [ln.rstrip("\n") for ln in fh if ln.startswith("#")]
+    try:   # pandas reads it; round_trip: each number exactly as written (not the fast parser, off in the last bit)
+        df = pd.read_csv(path, comment="#", float_precision="round_trip", skip_blank_lines=True)
+    except (pd.errors.EmptyDataError, pd.errors.ParserError) as e:
+        raise ValueError(f"{path}: {e}") from None
     for name in ("step", "contacts"):
-        if name in cols and cols[name].dtype.kind == "f":
-            cols[name] = cols[name].astype(np.int64)
+        if name in df and df[name].dtype.kind == "f":
+            df[name] = df[name].astype(np.int64)
+    header = list(df.columns)
+    cols = {h: df[h].to_numpy() for h in header}
     if not frame:
         return np.rec.fromarrays([cols[h] for h in header], names=header)
-    import pandas as pd
-    df = pd.DataFrame(cols, columns=header)
     df.attrs["comments"] = comments
     df.attrs["path"] = path
     return df
@@ -202,7 +198,7 @@ def _fit_as_dict(self):
     """The fit as a plain dict (corr as nested lists)."""
     keys = ["ok", "x0", "x_max", "beta", "se_x0", "se_x_max", "se_beta", "initial_slope", "se_initial_slope",
             "eps_95", "rmse", "r_squared", "cost", "residual_autocorrelation", "se_inflation", "n", "e_first",
-            "e_last", "jacobian_rcond", "warnings"]
+            "e_last", "jacobian_rcond", "warnings", "usable", "not_usable_because"]
     d = {k: getattr(self, k) for k in keys}
     d["corr"] = self.corr.tolist()
     return d

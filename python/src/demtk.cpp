@@ -34,6 +34,7 @@
 #include "dem/stages/plan.hpp"
 #include "dem/stages/protocol.hpp"
 #include "demfit/fit.hpp"
+#include "demfit/table.hpp"
 
 namespace py = pybind11;
 namespace fs = std::filesystem;
@@ -298,13 +299,16 @@ py::dict contacts(PyEngine& pe) {
   const auto& list = pe.engine->neighbor_list();
   const dem::VelGrad& L = pe.last_rate;
   std::vector<int> ii, jj;
-  std::vector<dem::Vec3> branch, normal, force;
-  std::vector<double> overlap, fn;
+  std::vector<dem::Vec3> branch, normal, force, ft, xi_t, xi_r;
+  std::vector<double> overlap, fn, xi_o;
+  std::vector<bool> sliding;
   // The model's forces (normal + tangential with friction) at the state's velocities and springs.
   dem::contact::for_each_contact_force(*pe.scene.model, s, list, L, [&](const dem::contact::ContactForce& c) {
     ii.push_back(c.i); jj.push_back(c.j);
     branch.push_back(c.d); normal.push_back(c.n); force.push_back(c.n * c.fn + c.ft);
     overlap.push_back(c.delta); fn.push_back(c.fn);
+    ft.push_back(c.ft); sliding.push_back(c.sliding);
+    xi_t.push_back(c.spring_tangential); xi_r.push_back(c.spring_rolling); xi_o.push_back(c.spring_twisting);
   });
   const py::ssize_t c = static_cast<py::ssize_t>(ii.size());
   auto ids = [&](const std::vector<int>& idx) {
@@ -334,6 +338,11 @@ py::dict contacts(PyEngine& pe) {
   d["row_i"] = rows(ii); d["row_j"] = rows(jj);
   d["branch"] = vecs(branch); d["normal"] = vecs(normal);
   d["overlap"] = scal(overlap); d["force_normal"] = scal(fn); d["force"] = vecs(force);
+  d["force_tangential"] = vecs(ft);
+  py::array_t<bool> sl(c);
+  for (py::ssize_t k = 0; k < c; ++k) sl.mutable_at(k) = sliding[static_cast<std::size_t>(k)];
+  d["sliding"] = sl;
+  d["spring_tangential"] = vecs(xi_t); d["spring_rolling"] = vecs(xi_r); d["spring_twisting"] = scal(xi_o);
   return d;
 }
 
@@ -483,7 +492,7 @@ PYBIND11_MODULE(_core, m) {
   py::class_<Scene>(m, "Scene", "A validated scene (the C++ Model): immutable. Build it with demtk.load_scene().")
       .def_property_readonly("toml", [](const Scene& s) { return s.toml; },
                              "the resolved scene as TOML text: every key with the value used")
-      .def_property_readonly("origin", [](const Scene& s) { return s.origin; })
+      .def_property_readonly("origin", [](const Scene& s) { return s.origin; }, "where the scene came from (file or text)")
       .def_property_readonly("count", [](const Scene& s) { return s.model->count; }, "particles.count N")
       .def_property_readonly("radius_min", [](const Scene& s) { return s.model->radius_min; }, "[m]")
       .def_property_readonly("radius_max", [](const Scene& s) { return s.model->radius_max; }, "[m]")
@@ -579,7 +588,8 @@ PYBIND11_MODULE(_core, m) {
             const double H[3][3] = {{b.length.x, b.tilt.x, b.tilt.y}, {0, b.length.y, b.tilt.z}, {0, 0, b.length.z}};
             return mat3(H);
           }, "cell matrix H (columns: the lattice vectors) [m]")
-      .def_property_readonly("flips", [](const dem::Box& b) { return std::vector<int>{b.flips[0], b.flips[1], b.flips[2]}; });
+      .def_property_readonly("flips", [](const dem::Box& b) { return std::vector<int>{b.flips[0], b.flips[1], b.flips[2]}; },
+                             "(xy, xz, yz) remaps of a sheared cell to its most orthogonal equivalent so far");
 
   // ---- State
   py::class_<PyState>(m, "State",
@@ -592,7 +602,7 @@ PYBIND11_MODULE(_core, m) {
                   py::arg("ids") = py::none(),
                   "A state from positions (N, 3) [m] inside [0, L), radii (N) [m], box lengths (3) [m], and "
                   "density [kg/m^3] or masses (N) [kg]; velocities (N, 3) [m/s] (default 0), ids (default 0..N-1).")
-      .def_property_readonly("count", [](const PyState& p) { return p.s->count(); })
+      .def_property_readonly("count", [](const PyState& p) { return p.s->count(); }, "number of particles N")
       .def_property_readonly("positions", [](py::object self) { return view(self.cast<PyState&>().s->position, self, false); },
                              "(N, 3) [m], read-only view")
       .def_property_readonly("velocities", [](py::object self) { return view(self.cast<PyState&>().s->velocity, self, true); },
@@ -612,8 +622,9 @@ PYBIND11_MODULE(_core, m) {
                              "(N) int32 original particle index of each row, read-only view")
       .def_property_readonly("box", [](const PyState& p) { return p.s->box; }, "a copy of the box (demtk.Box)")
       .def_property_readonly("time", [](const PyState& p) { return p.s->time; }, "simulated time [s]")
-      .def_property_readonly("step", [](const PyState& p) { return p.s->step; })
-      .def_property_readonly("volume_fraction", [](const PyState& p) { return p.s->volume_fraction(); })
+      .def_property_readonly("step", [](const PyState& p) { return p.s->step; }, "steps taken since the state began")
+      .def_property_readonly("volume_fraction", [](const PyState& p) { return p.s->volume_fraction(); },
+                             "sphere volume / cell volume [-]")
       .def_property_readonly("kinetic_energy", [](const PyState& p) { return p.s->kinetic_energy(); }, "[J]")
       .def_property_readonly("list_valid", [](const PyState& p) { return p.s->list_valid; },
                              "False: the next step builds a fresh neighbour list (and sorts the rows)")
@@ -677,7 +688,8 @@ PYBIND11_MODULE(_core, m) {
         if (!d.contains(k)) throw py::key_error(k);
         return py::object(d[py::str(k)]);
       })
-      .def("keys", [](const dem::Measurement& me) { return columns_dict(me).attr("keys")(); })
+      .def("keys", [](const dem::Measurement& me) { return columns_dict(me).attr("keys")(); },
+           "the curve column names, with their units in the names (_Pa, _J, _s; others dimensionless)")
       .def_property_readonly("stress", [](const dem::Measurement& me) { return sym3(me.stress); },
                              "3x3 [Pa], compression positive, contact + kinetic")
       .def_property_readonly("stress_kinetic", [](const dem::Measurement& me) { return sym3(me.stress_kinetic); }, "3x3 [Pa]")
@@ -741,19 +753,25 @@ PYBIND11_MODULE(_core, m) {
           }, py::arg("velocity_gradient") = py::none(),
           "Measures the state as `dem` does for a curve row (the velocity gradient of the last step unless given).")
       .def("contacts", &contacts,
-           "Per-contact arrays: id_i, id_j (particle ids), row_i, row_j (rows now), branch (N_c, 3) from i to j's "
-           "image [m], normal (unit, i to j), overlap [m], force_normal [N] (the contact law with the last step's "
-           "velocity gradient), force (N_c, 3) on j [N] (minus it on i).")
+           "Per-contact arrays (a dict): id_i, id_j (particle ids), row_i, row_j (rows now), branch (N_c, 3) from i to "
+           "j's image [m], normal (unit, i to j), overlap [m], force_normal [N] (the contact law with the last step's "
+           "velocity gradient), force (N_c, 3) on j [N] (minus it on i), force_tangential (N_c, 3) on j [N] (its "
+           "tangential part: the spring and dashpot, capped at mu force_normal), sliding (bool: at the Coulomb limit "
+           "at the last step), spring_tangential (N_c, 3) [m] (the Cundall-Strack spring xi: -k_t xi is its force), "
+           "spring_rolling (N_c, 3) [m] and spring_twisting [m] (the rolling and twisting springs). Without friction, "
+           "rolling or twisting resistance those are zeros and False.")
       .def("check_sanity", [](PyEngine& pe) {
             try { pe.engine->check_sanity(); } catch (const dem::BlowUp& e) { raise_blow_up(e, nullptr); }
           }, "the engine's sanity checks now (BlowUp)")
-      .def_property_readonly("state", [](const PyEngine& pe) { return pe.state_obj; })
-      .def_property_readonly("scene", [](const PyEngine& pe) { return pe.scene; })
+      .def_property_readonly("state", [](const PyEngine& pe) { return pe.state_obj; }, "the State it steps (the same object)")
+      .def_property_readonly("scene", [](const PyEngine& pe) { return pe.scene; }, "its Scene")
       .def_property_readonly("time", [](const PyEngine& pe) { return pe.state->time; }, "[s]")
-      .def_property_readonly("step_count", [](const PyEngine& pe) { return pe.state->step; })
-      .def_property_readonly("threads", [](const PyEngine& pe) { return pe.engine->threads(); })
-      .def_property_readonly("list_builds", [](const PyEngine& pe) { return pe.engine->neighbor_list().builds; })
-      .def_property_readonly("pair_kernel", [](const PyEngine& pe) { return std::string(dem::pair_kernel_name(pe.engine->pair_kernel())); })
+      .def_property_readonly("step_count", [](const PyEngine& pe) { return pe.state->step; }, "the state's step counter")
+      .def_property_readonly("threads", [](const PyEngine& pe) { return pe.engine->threads(); }, "threads stepping")
+      .def_property_readonly("list_builds", [](const PyEngine& pe) { return pe.engine->neighbor_list().builds; },
+                             "neighbour-list builds so far")
+      .def_property_readonly("pair_kernel", [](const PyEngine& pe) { return std::string(dem::pair_kernel_name(pe.engine->pair_kernel())); },
+                             "the pair loop's kernel (avx512, avx2, generic, reference: the same bits)")
       .def_property_readonly("velocity_gradient", [](const PyEngine& pe) { return velgrad_matrix(pe.last_rate); },
                              "of the last step [1/s]");
 
@@ -791,6 +809,11 @@ PYBIND11_MODULE(_core, m) {
       .def_readonly("e_first", &demfit::FitResult::e_first).def_readonly("e_last", &demfit::FitResult::e_last)
       .def_readonly("jacobian_rcond", &demfit::FitResult::jacobian_rcond)
       .def_readonly("warnings", &demfit::FitResult::warnings)
+      .def_property_readonly("usable", [](const demfit::FitResult& r) { return demfit::unusable_reason(r).empty(); },
+                             "the tables' one rule: the data determine the numbers (see not_usable_because)")
+      .def_property_readonly("not_usable_because", &demfit::unusable_reason,
+                             "why the fit is not usable (ill-conditioned, not converged, a bound, a curve the law does "
+                             "not describe); '' when it is")
       .def("__repr__", [](const demfit::FitResult& r) {
         std::ostringstream o;
         o << "<demtk.FitResult ok=" << r.ok << " x0=" << r.x0 << " x_max=" << r.x_max << " beta=" << r.beta
@@ -813,5 +836,10 @@ PYBIND11_MODULE(_core, m) {
       py::arg("correct_autocorrelation") = false, py::arg("fix_x0") = py::none(),
       "Fits x(e) = x_max - (x_max - x0) exp(-beta e) (Ceres) to strain e [-] and values y; raises ValueError for "
       "unusable input (fewer than 6 points, non-finite values, a flat curve).");
-  m.def("saturating", &demfit::saturating, py::arg("x0"), py::arg("x_max"), py::arg("beta"), py::arg("e"));
+  m.def("saturating", &demfit::saturating, py::arg("x0"), py::arg("x_max"), py::arg("beta"), py::arg("e"),
+        "x_max - (x_max - x0) exp(-beta e) at strain e [-] (x0, x_max in the units of the fitted quantity, beta [-])");
+  m.def("format_paren", &demfit::format_paren, py::arg("value"), py::arg("error"),
+        "the value rounded to its standard error, as the fit tables print it: '0.197(2)', '3.7(11)e-4'");
+  m.def("format_pm", &demfit::format_pm, py::arg("value"), py::arg("error"),
+        "the same as '0.197 \u00b1 0.002', '(3.7 \u00b1 1.1)e-4'");
 }

@@ -107,6 +107,30 @@ TEST(Fit, IllPosedInputsAreRefusedOrFlagged) {
   EXPECT_TRUE(has_warning(rp, "not monotone"));
 }
 
+TEST(Fit, OneRuleForUsable) {
+  // A saturating curve with noise, sampled well past saturation: usable.
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> gauss(0.0, 0.002);
+  std::vector<double> e, good, peak, line;
+  for (int i = 0; i <= 80; ++i) {
+    e.push_back(0.005 * i);
+    good.push_back(demfit::saturating(0.02, 0.15, 15.0, e.back()) + gauss(rng));
+    // peak at 0.05, then softening to 60 % of it: the saturating law does not describe it
+    peak.push_back(e.back() < 0.05 ? 2 * e.back() : 0.04 + 0.06 * std::exp(-(e.back() - 0.05) / 0.05));
+    line.push_back(0.01 + 0.5 * e.back() + gauss(rng));   // no curvature: x_max and beta not determined
+  }
+  const auto rg = demfit::fit_saturating(e, good);
+  EXPECT_EQ(demfit::unusable_reason(rg), "") << rg.warnings.size();
+  const auto rp = demfit::fit_saturating(e, peak);
+  EXPECT_NE(demfit::unusable_reason(rp).find("not monotone"), std::string::npos) << demfit::unusable_reason(rp);
+  const auto rl = demfit::fit_saturating(e, line);
+  EXPECT_NE(demfit::unusable_reason(rl), "") << "a straight line determines no asymptote";
+  // the summary line counts the reasons
+  EXPECT_EQ(demfit::usable_summary(1, 3, {{"not monotone", 1}, {"ill-conditioned", 1}}),
+            "1 of 3 fits usable (not usable: 1 ill-conditioned; 1 not monotone)");
+  EXPECT_EQ(demfit::usable_summary(2, 2, {}), "2 of 2 fits usable");
+}
+
 TEST(Fit, SharedPathTestSeparatesSameAndDifferentLaws) {
   std::mt19937_64 rng(99);
   std::normal_distribution<double> gauss(0.0, 0.002);

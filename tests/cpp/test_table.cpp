@@ -84,23 +84,25 @@ TEST(SummaryTable, LatexIsBooktabsWithAlignedColumns) {
   EXPECT_EQ(count(tex, "\\hline"), 0);
   EXPECT_EQ(count(tex, "\\begin{tabular}"), 1);
   EXPECT_EQ(count(tex, "\\end{tabular}"), 1);
-  // the column spec: 8 columns, the numbers in siunitx S columns with their formats
-  EXPECT_NE(tex.find("{l S[table-format=1.3] l r S[table-format=1.4(2)] S[table-format=2.0(1)] S[table-format=2.1(1)] "
+  // the column spec: 7 columns (K, the same for every row, is said once below the table), the numbers
+  // in siunitx S columns with their formats
+  EXPECT_NE(tex.find("{l S[table-format=1.3] l S[table-format=1.4(2)] S[table-format=2.0(1)] S[table-format=2.1(1)] "
                      "S[table-format=1.3]}"),
             std::string::npos)
       << tex;
-  // every body row between \midrule and \bottomrule has 7 column separators and ends with \\ .
+  // every body row between \midrule and \bottomrule has 6 column separators and ends with \\ .
   const auto body = tex.substr(tex.find("\\midrule") + 8, tex.find("\\bottomrule") - tex.find("\\midrule") - 8);
   std::istringstream in(body);
   int n = 0;
   for (std::string line; std::getline(in, line);) {
     if (line.empty()) continue;
     ++n;
-    EXPECT_EQ(count(line, "&") - count(line, "\\&"), 7) << line;
+    EXPECT_EQ(count(line, "&") - count(line, "\\&"), 6) << line;
     EXPECT_EQ(line.substr(line.size() - 2), "\\\\") << line;
   }
   EXPECT_EQ(n, 3);
-  EXPECT_NE(tex.find("$F_\\mathrm{dev}$\\textsuperscript{a} & 4 & 0.1645(4) & 68(5) & 11.5(9) & 0.683"), std::string::npos) << tex;
+  EXPECT_NE(tex.find("$F_\\mathrm{dev}$\\textsuperscript{a} & 0.1645(4) & 68(5) & 11.5(9) & 0.683"), std::string::npos) << tex;
+  EXPECT_NE(tex.find("$K = 4$ packings per curve."), std::string::npos) << tex;
   EXPECT_NE(tex.find("{---}"), std::string::npos);
   // text escaped: no bare % or & or < in the notes (the comment line starts with %)
   EXPECT_NE(tex.find("29.9\\% \\& more"), std::string::npos) << tex;
@@ -185,8 +187,9 @@ TEST(SummaryTable, ThePeakLawAddsFourColumnsOnlyWhereSomeCurveChoseIt) {
   const auto body = tex.substr(tex.find("\\midrule") + 8, tex.find("\\bottomrule") - tex.find("\\midrule") - 8);
   std::istringstream tin(body);
   for (std::string line; std::getline(tin, line);)
-    if (!line.empty()) EXPECT_EQ(count(line, "&") - count(line, "\\&"), 11) << line;
-  EXPECT_NE(tex.find("peak (p = 0.002) & 0.551(4) & 0.041(2) & 0.401(6)"), std::string::npos) << tex;
+    if (!line.empty()) EXPECT_EQ(count(line, "&") - count(line, "\\&"), 8) << line;   // K, p, slope, R^2 below
+  EXPECT_NE(tex.find("peak & 0.551(4) & 0.041(2) & 0.401(6)"), std::string::npos) << tex;
+  EXPECT_NE(tex.find("sat. & {---} & {---} & 0.2125(13)"), std::string::npos) << tex;
   // the saturating law everywhere: the eight columns and one sentence saying so
   const std::string plain = demfit::summary_markdown(rows_with_models(false), "caption");
   std::istringstream pin(plain);
@@ -195,4 +198,20 @@ TEST(SummaryTable, ThePeakLawAddsFourColumnsOnlyWhereSomeCurveChoseIt) {
   EXPECT_NE(plain.find("The saturating law was chosen for every curve."), std::string::npos) << plain;
   // without a choice (a single run) the table is as before
   EXPECT_EQ(demfit::summary_markdown(rows(), "c").find("Model:"), std::string::npos);
+}
+
+// The one "usable" rule in the tables for people: a fit that is not usable shows no numbers, and
+// its reason is a footnote; a K that differs between rows is a column again.
+TEST(SummaryTable, AFitThatIsNotUsableShowsItsReasonNotItsNumbers) {
+  auto r = rows();
+  r[1].not_usable = "ill-conditioned: the data do not determine x0, x_max and beta";
+  r[0].packings = 8;
+  const std::string md = demfit::summary_markdown(r, "caption");
+  EXPECT_NE(md.find("F<sub>dev</sub> <sup>a,b</sup> | 4 | not usable | | | |"), std::string::npos) << md;
+  EXPECT_NE(md.find("<sup>a</sup> not usable: ill-conditioned"), std::string::npos) << md;
+  EXPECT_EQ(md.find("0.1645(4)"), std::string::npos) << md;   // the numbers are not printed
+  const std::string tex = demfit::summary_latex(r, "caption");
+  EXPECT_NE(tex.find("\\textsuperscript{a,b} & 4 & {---} & {---} & {---} & {---}"), std::string::npos) << tex;
+  EXPECT_NE(tex.find("not usable: ill-conditioned"), std::string::npos) << tex;
+  EXPECT_EQ(tex.find("0.1645(4)"), std::string::npos) << tex;
 }

@@ -90,7 +90,7 @@ def test_slurm_profile_without_a_controller_is_refused_naming_slurm_conf(run_fol
     assert p.returncode == 2, p.stderr
     assert "SLURM_CONF=" + str(tmp_path / "missing" / "slurm.conf") in p.stderr
     assert 'eval "$(bash scripts/slurm-local.sh start' in p.stderr
-    assert not (tmp_path / "ens" / "members").exists()          # no task was started
+    assert not (tmp_path / "ens").exists()       # nothing written: no scene.toml, no lock, so a later run may use it
 
 
 def test_compare_json_is_valid_for_non_finite_values():
@@ -101,3 +101,19 @@ def test_compare_json_is_valid_for_non_finite_values():
            "e": np.bool_(True), "f": {"g": np.int64(7)}}
     text = json.dumps(finite_or_null(obj), allow_nan=False)      # raises on a bare NaN
     assert json.loads(text) == {"a": None, "b": 1.5, "c": [None, None, 2], "d": [None, 3.0], "e": True, "f": {"g": 7}}
+
+
+def test_help_shows_defaults_and_flags_as_typed():
+    bench = run_dem("bench", "--help")
+    assert bench.returncode == 0
+    assert re.search(r"--steps\s+INT[^\n]*20000", bench.stdout), bench.stdout   # the default beside the option
+    model = run_dem("model", "--help")
+    assert "--no-jackknife" in model.stdout and "{false}" not in model.stdout, model.stdout
+
+
+def test_set_before_the_scene_leaves_the_scene_to_the_positional(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE)
+    p = run_dem("info", "--set", "protocol.eps_d_max=0.02", "--set", "particles.seed=6", scene, "--no-probe")
+    assert p.returncode == 0, p.stderr
+    assert "scene is required" not in p.stderr

@@ -89,8 +89,9 @@ def test_friction_jams_lower_and_raises_the_stress_ratio(study):
     assert k0 == k5 == 2
     assert 0.6 < nu0 < 0.70                      # frictionless polydisperse spheres jam near 0.65 (docs/friction.md)
     assert nu5 < nu0 - 0.02, (nu0, nu5)         # frictional ones markedly lower
-    s0 = value(rows, 0.0, "D2", "s_peak")[0]
-    s5 = value(rows, 0.5, "D2", "s_peak")[0]
+    # the curves stop at eps_d = 0.08, before a peak: the largest stress ratio of the ensemble means
+    s0, s5 = (read_curve(str(study["folders"][mu] / "ensemble" / "D2_phi0.720.csv"))["s_dev_mean"].max()
+              for mu in ("0", "0.5"))
     assert s5 > 1.5 * s0, (s0, s5)               # friction at least 1.5x the frictionless stress ratio
 
 
@@ -113,6 +114,24 @@ def test_the_study_table_rounds_to_errors(study):
     md = (study["dir"] / "study" / "summary.md").read_text()
     assert "±" in md and "nu_J" in md
     assert os.path.isfile(study["dir"] / "study" / "jamming_vs_mu.png")
+
+
+def test_a_curve_still_rising_at_its_end_has_no_peak():
+    e = np.linspace(0, 0.08, 41)
+    rising = 0.3 * (1 - np.exp(-e / 0.05))
+    assert all(np.isnan(friction_study.peak(e, rising)))
+    e = np.linspace(0, 0.3, 151)
+    softening = 0.3 * (1 - np.exp(-e / 0.02)) + 0.1 * np.exp(-((e - 0.05) / 0.02) ** 2)
+    s_peak, eps_peak = friction_study.peak(e, softening)
+    assert abs(eps_peak - e[np.argmax(softening)]) < 1e-12 and s_peak == softening.max()
+    assert 0.03 < eps_peak < 0.08
+
+
+def test_t_quantiles_are_students():
+    # published two-sided 95 % values (e.g. NIST/SEMATECH e-Handbook, table 1.3.6.7.2)
+    for dof, t in ((1, 12.706), (3, 3.182), (7, 2.365), (13, 2.160), (30, 2.042)):
+        assert abs(friction_study.t975(dof) - t) < 1e-3, dof
+    assert np.isnan(friction_study.t975(0))
 
 
 def test_round_to_error_rule():

@@ -3,6 +3,7 @@ numpy views that alias the engine's memory, errors as exceptions with the CLI's 
 callbacks that stop a run, the GIL released while stepping, the examples."""
 import json
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -393,6 +394,10 @@ def test_example_script_runs(tmp_path):
                         "--out", str(tmp_path)], capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-3000:]
     assert "stopped at C =" in p.stdout and (tmp_path / "networks.npz").exists()
+    # a showcase ends in a result the toolkit stands behind: a fit's numbers only when it is usable (else
+    # the reason), and the model-free mean rounded to its error
+    assert ("s_dev fit: x0 =" in p.stdout) != ("s_dev fit not usable: " in p.stdout), p.stdout
+    assert re.search(r"s_dev over eps_d = 0.05-0.25: 0\.\d+\(\d+\) ", p.stdout), p.stdout
 
 
 def test_notebook_executes(tmp_path):
@@ -408,6 +413,8 @@ def test_notebook_executes(tmp_path):
         os.environ["PYTHONPATH"] = env_path
     outputs = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
     assert "chosen rate" in outputs
+    assert ("fit: x_max =" in outputs) != ("fit not usable: " in outputs), outputs[-1500:]   # as in the script
+    assert re.search(r"s_dev over eps_d = 0.05-0.25: 0\.\d+\(\d+\)", outputs), outputs[-1500:]
 
 
 # ---- inside YADE -------------------------------------------------------------------------------
@@ -424,3 +431,30 @@ def test_inside_yade_a_state_from_o_bodies_runs_dem_mode_bit_for_bit(tiny, tmp_p
                         "--out", str(ours), "--back"], capture_output=True, text=True, timeout=600, env=env)
     assert p.returncode == 0 and "handed back to O.bodies" in p.stdout, p.stdout[-2000:] + p.stderr[-2000:]
     assert ours.read_bytes() == cli.read_bytes()
+
+
+def test_contacts_carry_the_friction_state():
+    """contacts() of a frictional packing under shear: the tangential force obeys the Coulomb limit
+    |f_t| <= mu f_n, is at it on the contacts flagged sliding, lies in the tangent plane, adds to the
+    normal force to the total, and the springs are there (the rolling ones zero without rolling resistance)."""
+    mu = 0.5
+    scene = demtk.load_scene({"particles": {"count": 150, "seed": 2}, "contact": {"friction": mu},
+                              "integration": {"threads": 1}, "protocol": {"compress_rate_tc": 1e-3}})
+    state = demtk.random_packing(scene, 0.5)
+    eng = demtk.Engine(scene, state)
+    eng.step(10 ** 6, velocity_gradient=-scene.compress_rate * np.ones(3), every=200,
+             callback=lambda e: e.state.volume_fraction >= 0.68)
+    eng.step(20000, velocity_gradient=scene.velocity_gradient("D2", rate=1e-3 / scene.t_c))
+    c = eng.contacts()
+    fn, ft, n = c["force_normal"], c["force_tangential"], c["normal"]
+    assert len(fn) > 100 and c["sliding"].dtype == bool
+    mag = np.linalg.norm(ft, axis=1)
+    assert np.all(mag <= mu * np.maximum(fn, 0) * (1 + 1e-9) + 1e-300)
+    assert c["sliding"].any() and not c["sliding"].all()
+    # flagged at the last step's limit; fn here is recomputed at the current velocities, so the limit
+    # has moved by at most a step's change of fn
+    np.testing.assert_allclose(mag[c["sliding"]], mu * fn[c["sliding"]], rtol=1e-2)
+    assert np.max(np.abs(np.einsum("ij,ij->i", ft, n))) <= 1e-9 * np.max(mag)
+    np.testing.assert_allclose(c["force"], n * fn[:, None] + ft, rtol=1e-12, atol=1e-12 * np.max(np.abs(c["force"])))
+    assert np.linalg.norm(c["spring_tangential"], axis=1).max() > 0
+    assert not np.any(c["spring_rolling"]) and not np.any(c["spring_twisting"])   # no rolling resistance here

@@ -3,6 +3,7 @@
 // with Ceres (automatic differentiation) and, as an independent cross-check, GSL.
 #pragma once
 #include <cmath>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -69,7 +70,19 @@ struct FitResult {
   double e_first = 0;             ///< smallest strain among the points used
   double jacobian_rcond = 0;      ///< reciprocal condition number of the scaled Jacobian (0..1)
   std::vector<std::string> warnings;   ///< reasons to distrust a number (see fit_saturating)
+  bool non_monotone = false;      ///< the data reverse after their extreme (residual diagnostics)
 };
+
+/// The one rule for a usable fit, applied by every table, figure and summary line (`usable`
+/// column of parameters.csv; README, "Errors"): "" when the fitted numbers are determined by the
+/// data, else the reason, printed beside the fit. Not usable: the optimiser did not converge or
+/// the covariance is rank deficient or ill-conditioned (ok false), x_max or beta has no finite
+/// standard error (a bound, or no error estimate), or the data are not monotone (the saturating
+/// law does not describe the curve). Other warnings (an extrapolated x_max, large relative
+/// errors, correlated residuals) keep a fit usable: its error bars carry them.
+std::string unusable_reason(const FitResult& r);
+/// The summary line's words: "3 of 12 fits usable (9 not: 9 not monotone: ...)".
+std::string usable_summary(int usable, std::size_t total, const std::map<std::string, int>& not_usable);
 
 /// Ceres' logging (glog) initialised once, errors only; every Ceres solve in demfit calls it.
 void init_glog();

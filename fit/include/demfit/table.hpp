@@ -2,7 +2,9 @@
 // result tables as CSV, JSON, Markdown and LaTeX.
 #pragma once
 #include <cmath>
+#include <functional>
 #include <istream>
+#include <map>
 
 #include <nlohmann/json_fwd.hpp>
 #include <string>
@@ -37,6 +39,32 @@ void write_text_file(const std::string& path, const std::string& content);
 /// Writes stem.csv, stem.json, stem.md, stem.tex atomically, all four or none. Throws
 /// std::runtime_error when a write fails (full disk): then only *.part files are left.
 void write_table_all(const Table& t, const std::string& stem, const std::string& caption);
+/// The same with `latex` as stem.tex (a table for people, paper_latex) instead of the dump.
+void write_table_all(const Table& t, const std::string& stem, const std::string& caption, const std::string& latex);
+/// The index of a column by name; std::logic_error when there is none (a programming error).
+std::size_t column_index(const Table& t, const std::string& name);
+
+/// A column of a table for people: its LaTeX header and its cell of a machine row; `number`: a
+/// siunitx S column (its table-format is taken from the cells).
+struct PaperColumn {
+  std::string header;
+  std::function<std::string(const std::vector<std::string>&)> cell;
+  bool number = false;
+};
+/// A text column; cells found in `as_tex` are replaced by their LaTeX (a formula), others escaped.
+PaperColumn paper_text(const Table& t, const std::string& header, const std::string& column,
+                       const std::map<std::string, std::string>& as_tex = {});
+/// A number column: the value rounded to the standard error in `se_column` ("0.197(2)"), or to
+/// 3 significant digits without one (se_column ""); "{---}" where it is not a finite number.
+PaperColumn paper_number(const Table& t, const std::string& header, const std::string& column,
+                         const std::string& se_column = "");
+/// LaTeX of the names the tables use: quantities (s_dev, F_dev, p_star), parameters (x_max,
+/// beta, x0), yes/no; for paper_text's as_tex.
+const std::map<std::string, std::string>& tex_symbols();
+/// A booktabs tabular of `cols` over the rows of t (needs booktabs and siunitx), `note` (LaTeX)
+/// below it in \footnotesize.
+std::string paper_latex(const Table& t, const std::vector<PaperColumn>& cols, const std::string& caption,
+                        const std::string& note = "");
 
 // ---- Tables for people -------------------------------------------------------------------
 // A value rounded to its standard error. The rule: the error keeps one significant digit, two
@@ -66,6 +94,9 @@ struct SummaryRow {
   double x_max = 0, se_x_max = 0, beta = 0, se_beta = 0, slope = 0, se_slope = 0, r_squared = 0;
   std::vector<std::string> warnings;   ///< full texts: become footnote marks
   bool fitted = true;              ///< false: "not fitted" (the reason is the warning)
+  /// Why the fit is not usable (demfit::unusable_reason; "" when it is): its numbers are then not
+  /// printed, "not usable" stands in their place with the reason as a footnote.
+  std::string not_usable;
   /// The model chosen for the curve ("saturating", "peak"; "" where no choice was made, e.g. a
   /// single run) and, for the peak law, its peak and critical state (docs/model_selection.md).
   std::string model;

@@ -6,12 +6,14 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <sstream>
 #include <thread>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include "dem/contact/registry.hpp"
@@ -57,6 +59,17 @@ int exec_python(const std::string& module, const std::vector<std::string>& args)
   return 1;
 }
 
+// The same, as a child: its exit status (127 when python cannot start).
+int run_python(const std::string& module, const std::vector<std::string>& args) {
+  std::cout.flush();
+  const pid_t pid = fork();
+  if (pid < 0) return 127;
+  if (pid == 0) _exit(exec_python(module, args) == 0 ? 0 : 127);
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 127;
+}
+
 // Integration is stable for a single contact up to dt/t_c = 2/pi (refused above), but dense
 // packings went unstable at 0.48-0.52 (docs/stability.md): warn before that.
 void warn_time_step(const dem::Model& m) {
@@ -69,6 +82,11 @@ void warn_time_step(const dem::Model& m) {
     std::fprintf(stderr, "dem: note: %d threads run %d blocks of the pair loop, another summation order than 1-4 "
                          "threads (4 blocks): the curves differ from theirs in the last bits and then chaotically; "
                          "--set integration.blocks=4 gives the bits of 1-4 threads\n", threads, threads);
+}
+
+// --set takes one value per occurrence (repeatable), so `--set k=v SCENE` leaves SCENE to the positional.
+CLI::Option* add_set_option(CLI::App& cmd, std::vector<std::string>& overrides, const std::string& text) {
+  return cmd.add_option("--set", overrides, text)->allow_extra_args(false)->type_name("KEY=VALUE")->default_str("");
 }
 
 std::string g_text(double v) {
@@ -221,10 +239,10 @@ struct RunCommand {
     cmd = app.add_subcommand("run", "run a scene: preparation, checkpoints, deviatoric modes");
     cmd->add_option("scene", scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
     cmd->add_option("--out", out, "results folder")->required();
-    cmd->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
+    add_set_option(*cmd, overrides, "override a scene key: section.key=value (repeatable)");
     cmd->add_option("--stages", stages, "all | prep | deviatoric (deviatoric reuses DIR/checkpoints)");
-    cmd->add_option("--threads", threads, "threads, 1 or more (overrides integration.threads; its 0 means all cores)")
-        ->check(CLI::Range(1, 4096));
+    cmd->add_option("--threads", threads, "threads, 1 or more (default: integration.threads, whose 0 means all cores)")
+        ->check(CLI::Range(1, 4096))->default_str("");
     cmd->add_flag("--force", force, "overwrite finished results in --out");
     cmd->add_flag("--quiet", quiet, "no progress lines on stderr");
   }
@@ -259,13 +277,14 @@ struct EnsembleCommand {
                                          "run again to continue after an interruption");
     cmd->add_option("scene", scene, "scene TOML file (see data/scenes/)")->required()->check(CLI::ExistingFile);
     cmd->add_option("--out", out, "results folder")->required();
-    cmd->add_option("--set", overrides, "override a scene key: section.key=value (repeatable)");
+    add_set_option(*cmd, overrides, "override a scene key: section.key=value (repeatable)");
     cmd->add_option("--sweep", sweep, "parameter sweep: a table (header of section.key names, optional 'name' "
                                       "column, one row of --set values per ensemble; tabs or spaces): one ensemble "
                                       "per row in DIR/rows/NAME, and a summary in DIR/sweep (docs/ensembles.md); "
                                       "a scene's own [sweep] table runs without it")
         ->check(CLI::ExistingFile);
-    cmd->add_option("--cores", cores, "single-threaded tasks at once (default: all cores; with --profile: the profile's)");
+    cmd->add_option("--cores", cores, "single-threaded tasks at once (default: all cores; with --profile: the profile's)")
+        ->default_str("");
     cmd->add_option("--profile", profile, "Snakemake profile: slurm (workflow/profiles/slurm) or a folder");
     cmd->add_option("--group", group, "auto (default): a packing's tasks run as one Snakemake job when they are short; "
                                       "member: always; task: every preparation and mode its own job")
@@ -283,6 +302,8 @@ struct EnsembleCommand {
                             "in one place (remove the scene's [sweep], or drop --sweep)");
       sw = dem::read_sweep_table(sweep);
     }
+    // A Slurm profile's controller must answer before the folder is touched: a refused run writes nothing.
+    if (!profile.empty() && run_python("demkit.slurm_preflight", {profile}) != 0) return 2;
     int lock = -1;
     if (sw.rows.empty()) {
       lock = dem::prepare_ensemble_folder(out, resolved, force);
@@ -329,7 +350,7 @@ struct InfoCommand {
                                                       "YADE and LAMMPS counterparts (with --json: as JSON)");
     cmd->add_flag("--columns", columns, "list every curve column: name, unit, meaning and which curves have it "
                                         "(with --json: as JSON; docs/curve_columns.md is made from it)");
-    cmd->add_option("--set", overrides, "override a scene key");
+    add_set_option(*cmd, overrides, "override a scene key");
     cmd->add_flag("--json", json, "print the run plan as JSON instead: members (seeds), checkpoints, modes, "
                                   "estimated particle-steps per task (read by workflow/Snakefile)");
     cmd->add_flag("--no-probe", no_probe, "no wall-time estimate (it times about a second of steps on a dense packing)");
@@ -373,7 +394,7 @@ struct BenchCommand {
     cmd->add_option("--steps", steps, "steps to time");
     cmd->add_option("--threads", threads, "threads, 1 or more")->check(CLI::Range(1, 4096));
     cmd->add_option("--rate-tc", rate_tc, "D2 strain rate times t_c");
-    cmd->add_option("--set", overrides, "override a scene key");
+    add_set_option(*cmd, overrides, "override a scene key");
   }
   int run(std::vector<std::string> overrides) const {
     overrides.push_back("integration.threads=" + std::to_string(threads));
@@ -447,16 +468,17 @@ struct ModeCommand {
         ->check(CLI::ExistingFile);
     cmd->add_option("--packing", packing, "YADE-format packing (our checkpoints/*.txt), or a checkpoint "
                                           "(*.ckpt: bit-exact state, the curve equals `dem run`'s)")->required()->check(CLI::ExistingFile);
-    cmd->add_option("--threads", threads, "threads, 1 or more (overrides integration.threads; its 0 means all cores)")
-        ->check(CLI::Range(1, 4096));
+    cmd->add_option("--threads", threads, "threads, 1 or more (default: integration.threads, whose 0 means all cores)")
+        ->check(CLI::Range(1, 4096))->default_str("");
     cmd->add_option("--name", stage_name, "stage name in the CSV (default: the mode's name; `dem run` uses "
                                           "MODE_phiX.XXX)");
     cmd->add_option("--mode", mode, "D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, SS_xy/xz/yz (simple shear), "
                                     "or a [modes] name");
-    rate_opt = cmd->add_option("--rate-tc", rate_tc, "mode rate times t_c (default: protocol.deviatoric_rate_tc)");
-    eps_opt = cmd->add_option("--eps-max", eps, "stop at this eps_d (default: protocol.eps_d_max)");
+    rate_opt = cmd->add_option("--rate-tc", rate_tc, "mode rate times t_c (default: protocol.deviatoric_rate_tc)")
+                   ->default_str("");
+    eps_opt = cmd->add_option("--eps-max", eps, "stop at this eps_d (default: protocol.eps_d_max)")->default_str("");
     cmd->add_option("--out", out, "output CSV")->required();
-    cmd->add_option("--set", overrides, "override a scene key");
+    add_set_option(*cmd, overrides, "override a scene key");
     cmd->add_flag("--force", force, "overwrite an existing output CSV");
     cmd->add_flag("--quiet", quiet, "no progress lines");
   }
@@ -523,8 +545,10 @@ struct CollideCommand {
     cmd->add_option("--v0", v0, "approach speed [m/s]");
     cmd->add_option("--angle-deg", angle_deg,
                     "oblique impact: angle of the relative velocity from the line of centres [deg], in [0, 90); "
-                    "prints the normal and tangential restitution, the spins and the impulses (yade_ref/collision.py)");
-    cmd->add_option("--set", overrides, "override a scene key (e.g. integration.dt_over_tc=0.0005)");
+                    "prints the normal and tangential restitution, the spins and the impulses (yade_ref/collision.py); "
+                    "default: head-on")
+        ->default_str("");
+    add_set_option(*cmd, overrides, "override a scene key (e.g. integration.dt_over_tc=0.0005)");
   }
   int run(std::vector<std::string> overrides) const {
     overrides.insert(overrides.begin(), {"contact.background_damping_kg_s=0", "integration.threads=1"});
@@ -730,6 +754,7 @@ struct Commands {
 int main(int argc, char** argv) {
   CLI::App app{"dem: DEM runner, fitter and YADE cross-check for polydisperse spheres (frictionless, frictional, adhesive)"};
   app.require_subcommand(1);
+  app.option_defaults()->always_capture_default();   // --help shows each option's default (set before any option)
   std::vector<std::string> overrides;
   Commands commands;
   commands.add(app, overrides);

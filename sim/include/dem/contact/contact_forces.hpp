@@ -26,6 +26,9 @@ struct ContactForce {
   double fn_elastic;      ///< the normal sub-model's elastic force alone (no dashpot) [N]
   double kn;              ///< the normal sub-model's tangent stiffness at this contact [N/m] (the servo's)
   double kt;              ///< the tangential spring's stiffness while sticking [N/m] (0: none, or sliding)
+  Vec3 spring_tangential{0, 0, 0};   ///< the tangential spring xi [m] (zero without friction)
+  Vec3 spring_rolling{0, 0, 0};      ///< the rolling spring xi_r [m] (zero without rolling resistance)
+  double spring_twisting = 0;        ///< the twisting spring xi_o [m] (zero without twisting resistance)
 };
 
 /// Calls visit(const ContactForce&) for every listed pair in contact, in list order. The
@@ -59,6 +62,12 @@ void for_each_contact_force(const Model& model, const State& s, const NeighborLi
           c.ft = cm.tangential.force(TangentialInput{c.n, v_contact, std::max(c.fn, 0.0)}, ht);
           c.sliding = ht[3] != 0.0;
           if (!c.sliding) c.kt = cm.tangential.stiffness();
+          c.spring_tangential = Vec3{ht[0], ht[1], ht[2]};
+          using Rolling = typename CM::RollingModel;
+          const double* hr = h + CM::rolling_offset;
+          if constexpr (Rolling::history >= 3) c.spring_rolling = Vec3{hr[0], hr[1], hr[2]};
+          if constexpr (Rolling::history == 4) c.spring_twisting = hr[3];
+          if constexpr (Rolling::history == 1) c.spring_twisting = hr[0];
         }
         c.energy = cm.energy(delta, a12, h);
         c.spring_energy = c.energy - cm.normal_energy(delta, a12, h);
