@@ -16,6 +16,7 @@ import glob
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -219,6 +220,7 @@ def main(argv=None):
     env["PYTHONPATH"] = REPO + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     env.setdefault("OMP_WAIT_POLICY", "passive")   # single-threaded tasks: never spin on shared cores
     tasks = planned_tasks(plans)
+    drop_orphan_status(out, tasks)
     drop_stale_results(out, plans, sweep)
     drop_stale_groups(out, plans)
     final = os.path.join(out, "sweep" if sweep else "fit", "parameters.csv")
@@ -235,7 +237,11 @@ def main(argv=None):
     with open(log_path, "a") as log:
         log.write(f"\n=== {time.strftime('%Y-%m-%d %H:%M:%S')} {' '.join(cmd)}\n")
         log.flush()
-        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)
+        # Snakemake holds the folder lock too (a rerun cannot start a second one while it lives),
+        # and gets SIGTERM when this process dies, however it dies (SIGKILL included).
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, pass_fds=(lock.fileno(),),
+                                preexec_fn=die_with_parent)
+        stop_on = {sig: signal.signal(sig, _raise_interrupt) for sig in (signal.SIGTERM, signal.SIGHUP)}
         try:
             while proc.poll() is None:
                 prog.show()
@@ -249,6 +255,9 @@ def main(argv=None):
             prog.show(final=True)
             sys.stderr.write("dem ensemble: interrupted; run the same command again to continue where it stopped\n")
             return 130
+        finally:
+            for sig, old in stop_on.items():
+                signal.signal(sig, old)
     prog.show(final=True)
     if proc.returncode != 0:
         return explain_failure(out, plans, log_path, proc.returncode, a.profile)
@@ -271,6 +280,34 @@ def main(argv=None):
     sys.stderr.write(f"dem ensemble: done in {fmt_time(time.time() - prog.t0)}: averages in {out}/ensemble, "
                      f"fit tables in {out}/fit, plots in {out}/plots\n")
     return 0
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt   # SIGTERM, SIGHUP: stop Snakemake as Ctrl-C does
+
+
+def die_with_parent():
+    """In the Snakemake child: SIGTERM when its parent (this driver) dies (Linux prctl PR_SET_PDEATHSIG)."""
+    try:
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+
+
+def drop_orphan_status(out, tasks):
+    """A mode task whose status says complete while its curve is gone (deleted by hand) is not done:
+    its status file goes, so that Snakemake runs the task again (and the reduce after it)."""
+    for t in tasks:
+        if not (t.endswith(".json") and os.path.basename(os.path.dirname(t)) == "deviatoric"):
+            continue
+        path = os.path.join(out, t)
+        st = read_status(path) if os.path.exists(path) else None
+        csv_path = path[:-len(".json")] + ".csv"
+        if st and st.get("status") == "complete" and not os.path.exists(csv_path):
+            sys.stderr.write(f"dem ensemble: {os.path.relpath(csv_path, out)} is gone although its status file says "
+                             "complete: that task is run again\n")
+            os.unlink(path)
 
 
 def drop_stale_results(out, plans, sweep):

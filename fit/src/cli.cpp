@@ -96,12 +96,21 @@ std::string physics_difference(const std::string& a, const std::string& b) {
   std::vector<std::string> wa, wb;
   for (std::string w; ia >> w;) wa.push_back(w);
   for (std::string w; ib >> w;) wb.push_back(w);
+  // Keys on one side only count too (a frictional record against a frictionless one).
+  auto value_of = [](const std::vector<std::string>& words, const std::string& key) -> std::string {
+    for (std::size_t i = 1; i < words.size(); ++i)
+      if (words[i].rfind(key + "=", 0) == 0) return words[i].substr(key.size() + 1);
+    return "(absent)";
+  };
   std::string d;
-  for (std::size_t i = 1; i < wa.size(); ++i)
-    if (std::find(wb.begin(), wb.end(), wa[i]) == wb.end()) {
-      const std::string key = wa[i].substr(0, wa[i].find('='));
-      for (const auto& w : wb)
-        if (w.rfind(key + "=", 0) == 0) d += (d.empty() ? "" : "; ") + wa[i] + " vs " + w.substr(key.size() + 1);
+  std::vector<std::string> seen;
+  for (const auto* words : {&wa, &wb})
+    for (std::size_t i = 1; i < words->size(); ++i) {
+      const std::string key = (*words)[i].substr(0, (*words)[i].find('='));
+      if (std::find(seen.begin(), seen.end(), key) != seen.end()) continue;
+      seen.push_back(key);
+      const std::string va = value_of(wa, key), vb = value_of(wb, key);
+      if (va != vb) d += (d.empty() ? "" : "; ") + key + "=" + va + " vs " + vb;
     }
   return d;
 }

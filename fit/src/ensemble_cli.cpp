@@ -66,6 +66,15 @@ bool task_done(const fs::path& run, const std::string& task) {
   return false;
 }
 
+// A mode task's status file that says complete while its curve (the .csv beside it) is gone:
+// the task is not done (a curve deleted by hand must not become a fit on one packing fewer).
+bool curve_gone(const fs::path& status) {
+  if (status.extension() != ".json" || status.parent_path().filename() != "deviatoric") return false;
+  fs::path csv = status;
+  csv.replace_extension(".csv");
+  return json_field(read_text(status), "status") == "complete" && !fs::exists(csv);
+}
+
 std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run) {
   const std::regex name_re(R"(([A-Za-z0-9_-]+)_(phi([0-9.]+))\.json)");
   std::map<std::pair<std::string, double>, Cell> cells;
@@ -124,6 +133,9 @@ std::map<std::pair<std::string, double>, Cell> collect_cells(const fs::path& run
         c.curves.push_back(std::move(t));
         for (const std::string& w : {prep_warning, json_field(ss.str(), "warning")})
           if (!w.empty()) c.warnings.push_back("member " + member + ": " + w);
+      } else if (status == "complete") {   // its status stayed, its curve went: not a result
+        c.excluded.push_back({member, "curve_missing", csv.filename().string() + " is gone although its status file "
+                              "says complete: rerun the ensemble command to recompute it"});
       } else {
         std::string why = json_field(ss.str(), "message");
         if (why.empty()) why = json_field(ss.str(), "reason");
@@ -321,6 +333,7 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
   std::vector<std::string> missing;
   for (const auto& t : o.planned_tasks)
     if (!task_done(run, t)) missing.push_back(t);
+    else if (curve_gone(run / t)) missing.push_back(t + " (its curve is gone)");
   std::string incomplete;
   if (!missing.empty()) {
     incomplete = "ensemble incomplete: " + std::to_string(missing.size()) + " of " +

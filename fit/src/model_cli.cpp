@@ -2,6 +2,10 @@
 // the isotropic branch, then used to predict the other modes (D3); tables, curves, plots.
 #include "demfit/model_cli.hpp"
 
+#include <cstring>
+#include <cerrno>
+#include <unistd.h>
+#include <fcntl.h>
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -393,6 +397,24 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
                       (cal.params.extended ? std::string("extended family, ") + surface_name(cal.params.surface) + " surface"
                                            : "group model") +
                       ", calibrated on " + fit_label + "); p_star on constant-volume rows, eps_v where p is held");
+
+// --out before the calibration (minutes): a folder, or one that can be made, and writable.
+void check_output_folder(const fs::path& out) {
+  std::error_code ec;
+  if (fs::exists(out, ec) && !fs::is_directory(out, ec))
+    throw InputError("--out " + out.string() + " is a file, not a folder: give a folder (it is created if missing), "
+                     "e.g. --out " + (out.parent_path() / "model").string());
+  fs::create_directories(out, ec);
+  if (ec)
+    throw InputError("--out " + out.string() + ": the folder cannot be created (" + ec.message() + "): give a folder "
+                     "you can write, e.g. --out DIR/model");
+  const fs::path probe = out / ".dem-model-write-test";
+  const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  if (fd < 0)
+    throw InputError("--out " + out.string() + " is not writable (" + std::string(std::strerror(errno)) + "): give "
+                     "a folder you can write, e.g. --out DIR/model");
+  ::close(fd);
+  fs::remove(probe, ec);
 }
 
 int run(const ModelCommandOptions& o) {
@@ -401,6 +423,7 @@ int run(const ModelCommandOptions& o) {
   const fs::path out = o.out.empty() ? dir / "model" : fs::path(o.out);
   if (fs::exists(out / "parameters.csv") && !o.force)
     throw InputError(out.string() + " already holds model results: pass --force to overwrite, or --out another folder");
+  check_output_folder(out);
   const auto files = find_curves(dir);
   std::vector<std::string> fit_names = o.calibrate_on.empty() ? std::vector<std::string>{o.calibrate_mode} : o.calibrate_on;
   auto fitted = [&](const std::string& n) { return std::find(fit_names.begin(), fit_names.end(), n) != fit_names.end(); };

@@ -16,8 +16,10 @@
 #include <cstring>
 #include <filesystem>
 #include <memory>
+#include <mutex>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "dem/contact/contact_forces.hpp"
@@ -26,6 +28,7 @@
 #include "dem/core/model.hpp"
 #include "dem/core/state.hpp"
 #include "dem/engine/engine.hpp"
+#include "dem/engine/interrupt.hpp"
 #include "dem/forces/neighbor_list.hpp"
 #include "dem/io/checks.hpp"
 #include "dem/io/io.hpp"
@@ -124,9 +127,69 @@ dem::VelGrad to_velgrad(const py::object& o) {
 // ---------------------------------------------------------------------------------------
 // State
 
+// One thread at a time steps, measures or writes a State (two threads stepping one Engine freed
+// its buffers twice). The thread that holds it may nest (a step() callback that measures).
+struct StateUse {
+  std::mutex m;
+  std::thread::id owner;
+  int depth = 0;
+};
+
+class UseGuard {
+ public:
+  explicit UseGuard(const std::shared_ptr<StateUse>& u) : u_(u) {
+    std::lock_guard<std::mutex> lock(u_->m);
+    const auto me = std::this_thread::get_id();
+    if (u_->depth > 0 && u_->owner != me)
+      throw std::runtime_error("this State is in use by another thread (an Engine.step, measure or run_* call on it "
+                               "is running there): one thread at a time may step or read a State; give each thread "
+                               "its own state.copy() and Engine, or serialise the calls with a threading.Lock");
+    u_->owner = me;
+    ++u_->depth;
+  }
+  ~UseGuard() {
+    std::lock_guard<std::mutex> lock(u_->m);
+    --u_->depth;
+  }
+  UseGuard(const UseGuard&) = delete;
+  UseGuard& operator=(const UseGuard&) = delete;
+
+ private:
+  std::shared_ptr<StateUse> u_;
+};
+
 struct PyState {
   std::shared_ptr<dem::State> s = std::make_shared<dem::State>();
+  std::shared_ptr<StateUse> use = std::make_shared<StateUse>();
 };
+
+// Values written from Python (a writable view, set_velocities, set_positions, a callback) must be
+// finite before the engine steps them: a NaN would be reported as a blow-up blamed on dt, and its
+// "last good state" saved as a file that reads back as corrupt.
+void check_written(const dem::State& s) {
+  auto scan = [&](const std::vector<dem::Vec3>& v, const std::string& what) {
+    for (std::size_t i = 0; i < v.size(); ++i)
+      if (!std::isfinite(v[i].x) || !std::isfinite(v[i].y) || !std::isfinite(v[i].z)) {
+        std::ostringstream o;
+        o << "state." << what << " row " << i << " (particle " << (i < s.id.size() ? s.id[i] : -1) << ") is ["
+          << v[i].x << ", " << v[i].y << ", " << v[i].z << "]: a non-finite value written from Python (through the "
+          << what << " view or set_" << what << "); nothing was stepped: write finite values (a state.copy() taken "
+          << "before the write keeps the earlier ones)";
+        throw py::value_error(o.str());
+      }
+  };
+  scan(s.position, "positions");
+  scan(s.velocity, "velocities");
+  scan(s.angular_velocity, "angular_velocities");
+}
+
+// Ctrl-C while the engine steps with the GIL released: the poll (every 0.1 s, between two steps)
+// takes the GIL and lets Python run its signal handlers; KeyboardInterrupt (or whatever a
+// handler raises) propagates from there, the state left as the last full step left it.
+void poll_python_signals() {
+  py::gil_scoped_acquire acquire;
+  if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+}
 
 // A view of a vector's buffer, owned by `owner` (the Python State); read-only unless `writable`.
 template <class T>
@@ -146,6 +209,11 @@ void copy_rows(std::vector<dem::Vec3>& dst, const py::object& src, const char* w
   auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(src);
   if (!a || a.ndim() != 2 || a.shape(1) != 3 || static_cast<std::size_t>(a.shape(0)) != dst.size())
     throw py::value_error(std::string(what) + ": expected an array of shape (" + std::to_string(dst.size()) + ", 3)");
+  const double* d = a.data();
+  for (std::size_t k = 0; k < 3 * dst.size(); ++k)
+    if (!std::isfinite(d[k]))
+      throw py::value_error(std::string(what) + ": row " + std::to_string(k / 3) + " has a non-finite value (" +
+                            std::to_string(d[k]) + "); nothing was copied: give finite values");
   std::memcpy(static_cast<void*>(dst.data()), a.data(), dst.size() * sizeof(dem::Vec3));
 }
 
@@ -209,12 +277,16 @@ struct PyEngine {
   Scene scene;
   py::object state_obj;                 // the Python State (keeps the arrays' owner alive)
   std::shared_ptr<dem::State> state;
+  std::shared_ptr<StateUse> use;
   std::unique_ptr<dem::Engine> engine;
   dem::VelGrad last_rate;
   bool stop_requested = false;
 
   PyEngine(const Scene& sc, py::object st, bool forces_are_current) : scene(sc), state_obj(std::move(st)) {
     state = state_obj.cast<PyState&>().s;
+    use = state_obj.cast<PyState&>().use;
+    UseGuard guard(use);
+    check_written(*state);
     make(forces_are_current);
   }
   void make(bool forces_are_current) {
@@ -248,6 +320,8 @@ constexpr long kSignalCheckSteps = 5000;
 // the run by returning True or calling engine.stop(). Returns the steps taken.
 long run_steps(PyEngine& pe, py::object self, long n, const dem::VelGrad& L, const py::object& callback, long every,
                double every_strain, bool keep_last_good) {
+  UseGuard guard(pe.use);
+  check_written(*pe.state);
   pe.ensure();
   pe.stop_requested = false;
   pe.last_rate = L;
@@ -265,6 +339,7 @@ long run_steps(PyEngine& pe, py::object self, long n, const dem::VelGrad& L, con
       bool call = false;
       {
         py::gil_scoped_release release;
+        const dem::InterruptPoll poll(poll_python_signals);
         if (every_strain > 0 && has_cb) {
           for (long k = 0; k < chunk; ++k) {
             pe.engine->step(L);
@@ -283,6 +358,7 @@ long run_steps(PyEngine& pe, py::object self, long n, const dem::VelGrad& L, con
         if (PyErr_CheckSignals() != 0) throw py::error_already_set();
         py::object r = callback(self);
         if (!r.is_none() && r.cast<bool>()) pe.stop_requested = true;
+        check_written(*pe.state);   // the callback may have written through a view
         pe.ensure();   // the callback may have set positions
         if (keep_last_good) last_good = *pe.state;
       } else if (PyErr_CheckSignals() != 0) throw py::error_already_set();
@@ -294,6 +370,7 @@ long run_steps(PyEngine& pe, py::object self, long n, const dem::VelGrad& L, con
 }
 
 py::dict contacts(PyEngine& pe) {
+  UseGuard guard(pe.use);
   pe.ensure();
   const dem::State& s = *pe.state;
   const auto& list = pe.engine->neighbor_list();
@@ -353,6 +430,7 @@ template <class F>
 auto nogil_blowup(F&& f) {
   try {
     py::gil_scoped_release release;
+    const dem::InterruptPoll poll(poll_python_signals);
     return f();
   } catch (const dem::BlowUp& e) {
     raise_blow_up(e, nullptr);
@@ -375,6 +453,8 @@ long run_mode(const Scene& sc, PyState& ps, const std::string& mode, const std::
   const dem::Model& model = *sc.model;
   const dem::DeformationMode& m = find_mode(model, mode);
   check_out(out, force);
+  UseGuard guard(ps.use);
+  check_written(*ps.s);
   if (check) dem::check_packing(model, *ps.s, "state");
   const dem::StageSpec spec = mode_spec(model, m, name);
   return nogil_blowup([&] {
@@ -396,6 +476,8 @@ long run_stage_py(const Scene& sc, PyState& ps, const std::string& name, const p
                   const py::object& on_checkpoint, double ke_ratio, double max_time, const std::string& out,
                   const std::string& vtk_dir, bool quiet, bool force) {
   check_out(out, force);
+  UseGuard guard(ps.use);
+  check_written(*ps.s);
   const dem::VelGrad L = to_velgrad(velocity_gradient);
   dem::StageSpec spec{name, L.diag, stop_kind(stop), target, checkpoint_phis, ke_ratio, max_time, "", L.shear};
   std::function<void(double, const dem::State&)> cb;
@@ -421,6 +503,8 @@ long run_prep_stage(const Scene& sc, PyState& ps, const std::string& stage, cons
   }
   if (!st) throw dem::SceneError("preparation stage '" + stage + "' is not in this scene (its stages: " + names + ")");
   check_out(out, force);
+  UseGuard guard(ps.use);
+  check_written(*ps.s);
   std::function<void(double, const dem::State&)> cb;
   if (!on_checkpoint.is_none())
     cb = [&](double phi, const dem::State& now) {
@@ -629,26 +713,32 @@ PYBIND11_MODULE(_core, m) {
       .def_property_readonly("list_valid", [](const PyState& p) { return p.s->list_valid; },
                              "False: the next step builds a fresh neighbour list (and sorts the rows)")
       .def("set_positions", [](PyState& p, const py::object& x) {
+            UseGuard guard(p.use);
             copy_rows(p.s->position, x, "positions");
             p.s->list_valid = false;
           }, py::arg("positions"),
           "Copies positions (N, 3) [m] (rows in the current order) and marks the neighbour list invalid: the "
           "next step rebuilds it and the forces.")
-      .def("set_velocities", [](PyState& p, const py::object& v) { copy_rows(p.s->velocity, v, "velocities"); },
+      .def("set_velocities", [](PyState& p, const py::object& v) {
+             UseGuard guard(p.use);
+             copy_rows(p.s->velocity, v, "velocities");
+           },
            py::arg("velocities"), "Copies velocities (N, 3) [m/s] (rows in the current order).")
       .def("invalidate", [](PyState& p) { p.s->list_valid = false; },
            "Makes the next step rebuild the neighbour list and the forces (after writing through a view).")
       .def("zero_strain", [](PyState& p) {
+            UseGuard guard(p.use);
             p.s->box.zero_strain();
             p.s->box.reference = p.s->box.length;
             p.s->box.log_strain = dem::Vec3{0, 0, 0};
           }, "Zeroes the box strains here, as every stage runner does at a stage start (then Engine gives `dem mode`'s steps).")
-      .def("copy", [](const PyState& p) { PyState c; *c.s = *p.s; return c; }, "an independent copy")
-      .def("save_packing", [](const PyState& p, const std::string& path) { dem::write_packing(path, *p.s); },
+      .def("copy", [](const PyState& p) { UseGuard guard(p.use); PyState c; *c.s = *p.s; return c; }, "an independent copy")
+      .def("save_packing", [](const PyState& p, const std::string& path) { UseGuard guard(p.use); dem::write_packing(path, *p.s); },
            py::arg("path"), "YADE text packing (17 digits, original id order; positions and radii only)")
       .def("save_checkpoint", [](const PyState& p, const std::string& path, py::object scene, const std::string& label) {
             std::string toml;
             if (!scene.is_none()) toml = scene.cast<const Scene&>().toml;
+            UseGuard guard(p.use);
             dem::write_checkpoint(path, dem::Checkpoint{toml, label, *p.s});
           }, py::arg("path"), py::arg("scene") = py::none(), py::arg("label") = "",
           "bit-exact checkpoint (format of `dem`): the whole state with its neighbour-list reference")
@@ -747,6 +837,7 @@ PYBIND11_MODULE(_core, m) {
           "last callback, or at the call; keep_last_good=False skips that copy, for loops of short calls).")
       .def("stop", [](PyEngine& pe) { pe.stop_requested = true; }, "ends the running step() after the current callback")
       .def("measure", [](PyEngine& pe, py::object L) {
+            UseGuard guard(pe.use);
             pe.ensure();
             const dem::VelGrad g = L.is_none() ? pe.last_rate : to_velgrad(L);
             return dem::measure(*pe.scene.model, *pe.state, pe.engine->neighbor_list(), g);
@@ -761,6 +852,7 @@ PYBIND11_MODULE(_core, m) {
            "spring_rolling (N_c, 3) [m] and spring_twisting [m] (the rolling and twisting springs). Without friction, "
            "rolling or twisting resistance those are zeros and False.")
       .def("check_sanity", [](PyEngine& pe) {
+            UseGuard guard(pe.use);
             try { pe.engine->check_sanity(); } catch (const dem::BlowUp& e) { raise_blow_up(e, nullptr); }
           }, "the engine's sanity checks now (BlowUp)")
       .def_property_readonly("state", [](const PyEngine& pe) { return pe.state_obj; }, "the State it steps (the same object)")

@@ -11,7 +11,7 @@ CC=clang CXX=clang++ cmake -S . -B build-fuzz -DCMAKE_BUILD_TYPE=Release -DDEM_F
 cmake --build build-fuzz -j"$(nproc)" --target fuzz_scene fuzz_packing fuzz_checkpoint fuzz_curve >/dev/null
 corpus=tests/fuzz/corpus
 mkdir -p "$corpus"/{scene,packing,checkpoint,curve}
-cp data/scenes/*.toml "$corpus/scene/"
+cp data/scenes/*.toml tests/fuzz/seeds/scene/* "$corpus/scene/"   # seeds/: malformed shapes and --set lines (after %%)
 head -c 4000 data/packings/n9261_phi0.70.txt > "$corpus/packing/n9261_head.txt"
 printf '##PERIODIC:: 0.01 0.01 0.01\n0.001 0.002 0.003 0.001\n0.005 0.005 0.005 0.001\n' > "$corpus/packing/two.txt"
 head -c 6000 data/paper_n9261/D2_phi0.700.csv > "$corpus/curve/d2_head.csv"

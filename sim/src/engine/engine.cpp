@@ -1,4 +1,5 @@
 #include "dem/engine/engine.hpp"
+#include "dem/engine/interrupt.hpp"
 #include "dem/engine/parallel.hpp"
 #include "dem/engine/step_team.hpp"
 
@@ -297,6 +298,7 @@ void Engine::evaluate_forces() {
 }
 
 void Engine::step(const VelGrad& strain_rate) {
+  poll_interrupt();   // before anything changes: an interrupt leaves the last full step
   rate_ = strain_rate;
   const bool affine = !strain_rate.zero();
   bool flipped = false;

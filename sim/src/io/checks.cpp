@@ -7,10 +7,12 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <map>
 #include <sstream>
 #include <stdexcept>
 
 #include "dem/contact/registry.hpp"
+#include "dem/contact/contact_model.hpp"
 #include "dem/forces/neighbor_list.hpp"
 #include "dem/core/errors.hpp"
 
@@ -62,7 +64,41 @@ void validate_state(const State& s, const std::string& origin) {
   }
 }
 
+namespace {
+// The contact sub-models of a scene in words: its contact.normal and contact.tangential, and
+// the rolling and twisting resistances when on (record_defaults() names what is absent).
+std::string contact_models(const Model& m) {
+  std::string d;
+  for (const char* key : {"contact.normal", "contact.tangential", "contact.rolling_friction", "contact.twisting_friction"}) {
+    std::string v = record_defaults().at(key);
+    for (const auto& [k, value] : material_physics(m))
+      if (k == key) v = value;
+    d += (d.empty() ? "" : ", ") + std::string(key) + " = " + v;
+  }
+  return d;
+}
+}  // namespace
+
+void check_history(const Model& m, const State& s, const std::string& origin) {
+  const int w = contact::history_width(m.contact);
+  const auto fix = ": run it with the scene it was made with (RUN/scene.toml beside its checkpoints/; dem mode --scene "
+                   "that file), or start from a state without that history (the checkpoint's text packing, "
+                   "checkpoints/*.txt: positions and radii only)";
+  if (!s.history.values.empty() && s.history.width != w)
+    bad(origin, "carries the contact history of another contact model (" + std::to_string(s.history.ids.size() / 2) +
+                    " contacts, " + std::to_string(s.history.width) + " numbers each: tangential springs and the like), "
+                    "but this scene's contact model (" + contact_models(m) + ") keeps " +
+                    (w ? std::to_string(w) + " per contact" : "none") + ", so they would be dropped without a word" + fix);
+  if (!m.contact.frictional())
+    for (std::size_t i = 0; i < s.angular_velocity.size(); ++i)
+      if (s.angular_velocity[i].x != 0 || s.angular_velocity[i].y != 0 || s.angular_velocity[i].z != 0)
+        bad(origin, "particle " + std::to_string(s.id[i]) + " spins (angular velocity of a frictional model), but this "
+                    "scene's contact model is frictionless (" + contact_models(m) + "), so the rotations would be "
+                    "dropped without a word" + fix);
+}
+
 void check_packing(const Model& m, const State& s, const std::string& origin) {
+  check_history(m, s, origin);
   const auto [lo, hi] = std::minmax_element(s.radius.begin(), s.radius.end());
   if (*lo < m.radius_min * (1 - 1e-9) || *hi > m.radius_max * (1 + 1e-9)) {
     const int worst = *lo < m.radius_min * (1 - 1e-9) ? static_cast<int>(lo - s.radius.begin())
@@ -200,12 +236,55 @@ Physics parse_physics_line(const std::string& line) {
   return p;
 }
 
+// What a record without a key says: dem writes a sub-model's keys only while the sub-model is on
+// (a frictionless record has no contact.tangential, a linear one no contact.normal), and records
+// older than a key had its value then. The contact keys come from the sub-model registry
+// (contact::record_defaults: each slot's default choice and every key's default); a key absent on
+// one side and not listed here is a difference as it stands.
+const std::map<std::string, std::string>& record_defaults() {
+  static const std::map<std::string, std::string> d = [] {
+    std::map<std::string, std::string> m;
+    for (const auto& [k, v] : contact::record_defaults(physics_number)) m.emplace(k, v);
+    m.emplace("integration.kinematics", "plain");   // records before SLLOD (dem 0.1's scheme)
+    return m;
+  }();
+  return d;
+}
+
+namespace {
+const std::string* find_key(const Physics& p, const std::string& key) {
+  for (const auto& [k, v] : p)
+    if (k == key) return &v;
+  return nullptr;
+}
+
+// A side's value of `key` as the diff states it: its own, the default of a record without it
+// (said so), or "absent".
+std::string stated_value(const Physics& p, const std::string& key, const std::string& name, std::string* value) {
+  if (const std::string* v = find_key(p, key)) { *value = *v; return *v + " (" + name + ")"; }
+  const auto& defaults = record_defaults();
+  if (auto it = defaults.find(key); it != defaults.end()) {
+    *value = it->second;
+    return it->second + " (" + name + ": not in its record, read as the default of a record without it)";
+  }
+  *value = "";
+  return "absent (" + name + ": not in its record)";
+}
+}  // namespace
+
 std::string physics_diff(const Physics& a, const Physics& b, const std::string& a_name, const std::string& b_name) {
+  std::vector<std::string> keys;
+  for (const auto* p : {&a, &b})
+    for (const auto& kv : *p)
+      if (std::find(keys.begin(), keys.end(), kv.first) == keys.end()) keys.push_back(kv.first);
   std::string d;
-  for (const auto& [k, va] : a)
-    for (const auto& [kb, vb] : b)
-      if (k == kb && va != vb)
-        d += (d.empty() ? "" : "; ") + k + " = " + va + " (" + a_name + ") vs " + vb + " (" + b_name + ")";
+  for (const auto& k : keys) {
+    std::string va, vb;
+    const std::string sa = stated_value(a, k, a_name, &va), sb = stated_value(b, k, b_name, &vb);
+    const bool both_absent_or_equal = va == vb && (find_key(a, k) || record_defaults().count(k)) &&
+                                      (find_key(b, k) || record_defaults().count(k));
+    if (!both_absent_or_equal) d += (d.empty() ? "" : "; ") + k + " = " + sa + " vs " + sb;
+  }
   return d;
 }
 

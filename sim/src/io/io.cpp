@@ -1,6 +1,9 @@
 #include "dem/io/io.hpp"
 
 #include "dem/io/checks.hpp"
+#include "dem/contact/contact_model.hpp"
+#include "dem/core/errors.hpp"
+#include "dem/io/scene.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -295,6 +298,26 @@ Checkpoint read_checkpoint(const std::string& path) {
   return parse_checkpoint(read_regular_file(path, "checkpoint"), path);
 }
 
+namespace {
+// A checkpoint's contact history is of the contact model of its own scene: a record width that
+// model does not keep (a file assembled or altered with a valid checksum) would be dropped when
+// the state is stepped. A stored scene that does not load is reported where it is used.
+void check_history_width(const Checkpoint& c, const std::string& path) {
+  if (c.scene_toml.empty() || (c.state.history.width == 0 && c.state.history.values.empty())) return;
+  Model m;
+  try {
+    m = load_scene(c.scene_toml, {}, nullptr, path + " (its scene)");
+  } catch (const SceneError&) {
+    return;
+  }
+  const int w = contact::history_width(m.contact);
+  if (c.state.history.width != w)
+    throw std::runtime_error(path + ": checkpoint is corrupt (its contact history has " +
+                             std::to_string(c.state.history.width) + " numbers per contact, but the contact model of "
+                             "the scene stored in it keeps " + std::to_string(w) + "): rerun the preparation");
+}
+}  // namespace
+
 Checkpoint parse_checkpoint(const std::string& buf, const std::string& path) {
   const bool v5 = buf.size() >= 8 && std::memcmp(buf.data(), kMagicV5, 8) == 0;
   const bool v4 = v5 || (buf.size() >= 8 && std::memcmp(buf.data(), kMagicV4, 8) == 0);
@@ -352,6 +375,7 @@ Checkpoint parse_checkpoint(const std::string& buf, const std::string& path) {
     throw std::runtime_error(path + ": checkpoint is corrupt (no end marker where expected)");
   validate_state(s, path);
   if (s.list_valid && s.position_at_build.size() != s.position.size()) s.list_valid = false;
+  check_history_width(c, path);
   return c;
 }
 

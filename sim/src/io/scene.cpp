@@ -12,6 +12,7 @@
 #include <toml++/toml.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -209,10 +210,39 @@ std::string ascii_scene(std::string t, const std::string& origin) {
   return t;
 }
 
+// What a TOML node is, in words, for messages that say what was found instead.
+std::string node_kind(const toml::node& n) {
+  if (n.is_table()) return "a table";
+  if (n.is_array_of_tables()) return "an array of tables ([[...]])";
+  if (n.is_array()) return "an array";
+  if (n.is_string()) return "a string";
+  if (n.is_boolean()) return "a boolean";
+  if (n.is_number()) return "a number";
+  return "a date or time";
+}
+
+// Every top-level entry of a scene is a section: [name] with keys under it. `particles = 5`,
+// `[[contact]]` or `modes = [...]` are refused here, once, before any reader looks inside.
+void check_sections(const toml::table& root, const std::string& origin) {
+  for (auto&& [k, v] : root) {
+    if (v.is_table()) continue;
+    const std::string sec(k.str());
+    throw SceneError(origin + ": '" + sec + "' must be a section, [" + sec + "] on its own line followed by its key = "
+                     "value lines, but it is " + node_kind(v) +
+                     (v.is_array_of_tables() ? ": write [" + sec + "] once, not [[" + sec + "]]" : ""));
+  }
+}
+
+bool blank(const std::string& s) {
+  return std::all_of(s.begin(), s.end(), [](char c) { return std::isspace(static_cast<unsigned char>(c)); });
+}
+
+// --set section.key=value: the key path is read by TOML itself (quoted names, spaces around
+// the dots), and must be exactly two non-blank names; the value replaces the key's.
 void apply_override(toml::table& root, const std::string& ov) {
+  const std::string shape = ": give section.key=value, e.g. contact.damping_kg_s=0.5 (a string value may be bare)";
   const auto eq = ov.find('=');
-  if (eq == std::string::npos || eq == 0)
-    throw SceneError("override '" + ov + "' must look like section.key=value");
+  if (eq == std::string::npos || eq == 0) throw SceneError("override '" + ov + "' must look like section.key=value" + shape.substr(shape.find(',')));
   const std::string key = ov.substr(0, eq);
   std::string value = ov.substr(eq + 1);
   ascii_scene(key + " = " + value, "override '" + ov + "'");
@@ -225,18 +255,25 @@ void apply_override(toml::table& root, const std::string& ov) {
     try {
       parsed = toml::parse(key + " = \"" + value + "\"");
     } catch (const toml::parse_error& e) {
-      throw SceneError("override '" + ov + "' is not valid: " + std::string(e.description()));
+      throw SceneError("override '" + ov + "' is not valid (" + std::string(e.description()) + ")" + shape);
     }
   }
-  // Merge: replace the leaf, create sections as needed.
-  const std::string section = key.substr(0, key.find('.'));
-  const std::string leaf = key.substr(key.find('.') + 1);
+  toml::table* sec_in = parsed.size() == 1 ? parsed.begin()->second.as_table() : nullptr;
+  if (!sec_in || sec_in->is_inline() || sec_in->size() != 1)
+    throw SceneError("override '" + ov + "' must set one key of one section" + shape);
+  const std::string section(parsed.begin()->first.str());
+  const std::string leaf(sec_in->begin()->first.str());
+  toml::node& val = sec_in->begin()->second;
+  if (blank(section) || blank(leaf))
+    throw SceneError("override '" + ov + "': the key path '" + key + "' has a blank name (section '" + section +
+                     "', key '" + leaf + "')" + shape);
+  if (val.is_table() && !val.as_table()->is_inline())
+    throw SceneError("override '" + ov + "': nested keys (" + key + ") are not supported" + shape);
+  // Merge: replace the leaf, create the section as needed.
   if (!root.get(section)) root.insert(section, toml::table{});
   toml::table* sec = root.get(section)->as_table();
-  if (!sec) throw SceneError("override '" + ov + "': '" + section + "' is not a section");
-  toml::node* val = parsed.get(section)->as_table()->get(leaf);
-  if (!val) throw SceneError("override '" + ov + "': nested keys are not supported");
-  sec->insert_or_assign(leaf, *val);
+  if (!sec) throw SceneError("override '" + ov + "': '" + section + "' is not a section" + shape);
+  sec->insert_or_assign(leaf, val);
 }
 
 
@@ -252,9 +289,9 @@ void check_entry_name(const std::string& origin, const std::string& section, con
   if (!file_safe_name(name))
     throw SceneError(origin + ": " + section + " name '" + name + "' must be 1-64 letters, digits, _ or - (it becomes "
                      "part of file names, deviatoric/NAME_phi0.800.csv, and of the ensemble's task names): rename it, e.g. my_path_1");
-  if (section == "[paths]" && builtin_mode(name, nullptr))
+  if (builtin_mode(name, nullptr))
     throw SceneError(origin + ": " + section + " name '" + name + "' is a built-in mode (D2, D3, iso_compress, "
-                     "iso_expand, uniaxial_x/y/z, SS_xy/xz/yz): protocol.modes and rate = \"...\" could not tell them apart; rename it");
+                     "iso_expand, uniaxial_x/y/z, SS_xy/xz/yz): a scene cannot redefine one (protocol.modes and rate = \"...\" could not tell them apart); rename it, e.g. my_" + name);
 }
 
 // One stage of a [paths] entry: an inline table (see data/scenes/paths_example.toml).
@@ -488,6 +525,27 @@ static void cap_auto_skin(Model& m) {
   m.skin_over_rmin = std::min(m.skin_over_rmin, std::max(0.4, cap));
 }
 
+// A stress target in pascals the spheres cannot carry: at p* = 2 r_min p / k equal to
+// integration.max_overlap_fraction their overlaps reach that fraction of the radius, where the
+// run stops as a blow-up (blamed on dt). Relative targets are checked when p0 is known (path.cpp).
+static void check_stress_targets(const Model& m, const std::string& origin) {
+  const double limit = stress_target_limit(m);
+  for (const auto& mode : m.protocol.modes)
+    for (const auto& st : mode.path) {
+      if (st.relative) continue;
+      for (double t : {st.sigma.x, st.sigma.y, st.sigma.z, st.pressure})
+        if (std::isfinite(t) && t > limit) {
+          char b[700];
+          std::snprintf(b, sizeof b, "%s: paths.%s stage '%s': a stress target of %g Pa is beyond what these spheres "
+                        "carry: at integration.max_overlap_fraction x contact.stiffness_N_m / (2 particles.radius_min_m) "
+                        "= %g Pa their overlaps reach max_overlap_fraction of the radius; give a target far below that "
+                        "(elastic element tests stay near 1e-3 of it), or in multiples of the start pressure (sigma_p0, "
+                        "pressure_p0)", origin.c_str(), mode.name.c_str(), st.name.c_str(), t, limit);
+          throw SceneError(b);
+        }
+    }
+}
+
 Model load_scene(const std::string& text, const std::vector<std::string>& overrides,
                  std::string* resolved, const std::string& origin) {
   toml::table root;
@@ -498,6 +556,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
     m << origin << ":" << e.source().begin.line << ": TOML syntax error: " << e.description();
     throw SceneError(m.str());
   }
+  check_sections(root, origin);
   for (auto& ov : overrides) apply_override(root, ov);
 
   Model m;
@@ -679,6 +738,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
       }
     }
   }
+  check_stress_targets(m, origin);
   p.compress_rate = compress_tc / m.t_contact;
   p.cycle_rate = cycle_tc / m.t_contact;
   p.deviatoric_rate = dev_tc / m.t_contact;

@@ -163,7 +163,7 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
   for (double r : s.radius) rsum += r;
   m.p_star = 2.0 * (rsum / n) * m.p / model.contact.reference_stiffness();
   m.sigma_dev = deviatoric_magnitude(m.stress.xx, m.stress.yy, m.stress.zz);
-  m.s_dev = m.p > 0 ? m.sigma_dev / m.p : 0.0;
+  m.s_dev = m.p != 0 ? m.sigma_dev / std::fabs(m.p) : 0.0;   // |p|: a packing in tension (adhesion) too
   m.F_dev = deviatoric_magnitude(m.fabric.xx, m.fabric.yy, m.fabric.zz);
   m.C = 2.0 * m.contacts / n;
 
@@ -177,7 +177,7 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
   // Objective measures and non-coaxiality.
   m.eps_d_eig = deviatoric_magnitude_eig(m.strain_tensor);
   m.sigma_dev_eig = deviatoric_magnitude_eig(m.stress);
-  m.s_dev_eig = m.p > 0 ? m.sigma_dev_eig / m.p : 0.0;
+  m.s_dev_eig = m.p != 0 ? m.sigma_dev_eig / std::fabs(m.p) : 0.0;
   m.F_dev_eig = deviatoric_magnitude_eig(m.fabric);
   {
     const Sym3 D{rate.diag.x, rate.diag.y, rate.diag.z, 0.5 * rate.shear.x, 0.5 * rate.shear.y, 0.5 * rate.shear.z};
@@ -202,7 +202,7 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
 
   const double rate_max = std::max({std::fabs(rate.diag.x), std::fabs(rate.diag.y), std::fabs(rate.diag.z),
                                     std::fabs(rate.shear.x), std::fabs(rate.shear.y), std::fabs(rate.shear.z)});
-  m.inertial_number = m.p > 0 ? rate_max * 2.0 * (rsum / n) * std::sqrt(model.density / m.p) : 0.0;
+  m.inertial_number = m.p != 0 ? rate_max * 2.0 * (rsum / n) * std::sqrt(model.density / std::fabs(m.p)) : 0.0;
   return m;
 }
 

@@ -12,6 +12,7 @@
 #include "dem/measure/control.hpp"
 #include "dem/stages/curve_file.hpp"
 #include "dem/io/io.hpp"
+#include "dem/io/scene.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/stages/protocol.hpp"
 #include "stages/stage_common.hpp"
@@ -73,7 +74,7 @@ double stretching_eps_d(const VelGrad& L) {
 }
 
 // A stage with its relative targets resolved to pascals and its time stop in seconds.
-PathStage resolve(const PathStage& s, double p0) {
+PathStage resolve(const Model& model, const PathStage& s, double p0) {
   PathStage r = s;
   if (s.relative) { r.sigma = s.sigma * p0; r.pressure = s.pressure * p0; }
   if (s.until_relative) r.until = s.until * p0;
@@ -83,6 +84,13 @@ PathStage resolve(const PathStage& s, double p0) {
     if (std::isfinite(given[k]) && !std::isfinite(scaled[k]))
       throw SceneError("path stage '" + s.name + "': a stress target of " + std::to_string(given[k]) + " p0 is not a "
                        "finite pressure (p0 = " + std::to_string(p0) + " Pa): give a target of the order of 1");
+  for (int k = 0; k < 4; ++k)
+    if (std::isfinite(scaled[k]) && scaled[k] > stress_target_limit(model))
+      throw SceneError("path stage '" + s.name + "': a stress target of " + std::to_string(given[k]) + " p0 = " +
+                       std::to_string(scaled[k]) + " Pa is beyond what these spheres carry (" +
+                       std::to_string(stress_target_limit(model)) + " Pa = integration.max_overlap_fraction x "
+                       "contact.stiffness_N_m / (2 particles.radius_min_m), where the overlaps reach the blow-up limit): "
+                       "give a target of the order of 1");
   if (!std::isfinite(r.until))
     throw SceneError("path stage '" + s.name + "': its stop value times p0 is not finite: give a value of the order of 1");
   return r;
@@ -281,6 +289,7 @@ void run_path_stage(PathRun& run, const PathStage& stage) {
     if (sample || done) {
       run.engine.check_sanity();
       last_m = measure(model, state, run.engine.neighbor_list(), servo.active() ? rate : prescribed);
+      check_finite_measurement(model, state, last_m);
       check_kinetic_energy(model, state, last_m, run.e_floor, run.prev_ekin);
       run.prev_ekin = last_m.E_kin;
       run.max_inertial = std::max(run.max_inertial, last_m.inertial_number);
@@ -332,19 +341,20 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
   run.sheared = sheared;
   // The first row: the start state, with the first stage's name.
   const Measurement m0 = measure(model, state, engine.neighbor_list(), rate0);
+  check_finite_measurement(model, state, m0);
   run.prev_ekin = m0.E_kin;
   {
-    const PathStage first = resolve(mode.path.front(), p0);
+    const PathStage first = resolve(model, mode.path.front(), p0);
     Servo servo(first, rate0, model.protocol.servo);
     csv.row(curve_row(m0) + extra_row(rate0, servo, m0.stress, 0.0, sheared), first.name);
   }
   try {
-    for (const PathStage& st : mode.path) run_path_stage(run, resolve(st, p0));
+    for (const PathStage& st : mode.path) run_path_stage(run, resolve(model, st, p0));
   } catch (const BlowUp& e) {
     csv.abandon();
     const std::string failed = failed_checkpoint.empty() ? csv_path + ".failed.ckpt" : failed_checkpoint;
     write_checkpoint(failed, Checkpoint{"", "last good state of path " + label, run.last_good});
-    throw BlowUp(std::string(e.what()) + "\n     the last good state of path " + label + " was saved as " + failed);
+    throw BlowUp(blow_up_message(model, e.what()) + "\n     the last good state of path " + label + " was saved as " + failed);
   } catch (...) {
     csv.abandon();
     throw;

@@ -209,6 +209,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
                 model.contact.frictional() ? friction_columns() : std::vector<std::string>{});
 
   Measurement last_m = measure(model, state, engine.neighbor_list(), grad);
+  check_finite_measurement(model, state, last_m);
   auto write_row = [&](const Measurement& m) { csv.row(curve_row(m), spec.name); };
   write_row(last_m);
   State last_good = state;
@@ -274,6 +275,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
       if (sample || done) {
         engine.check_sanity();
         last_m = measure(model, state, engine.neighbor_list(), grad);
+        check_finite_measurement(model, state, last_m);
         check_kinetic_energy(model, state, last_m, e_floor, prev_sample_ekin);
         prev_sample_ekin = last_m.E_kin;
         max_inertial = std::max(max_inertial, last_m.inertial_number);
@@ -291,7 +293,7 @@ std::int64_t run_stage(const Model& model, State& state, const StageSpec& spec,
     // Keep the partial curve visibly partial (.part) and save the last good state.
     const std::string failed = failed_checkpoint.empty() ? csv_path + ".failed.ckpt" : failed_checkpoint;
     write_checkpoint(failed, Checkpoint{"", "last good state of stage " + spec.name, last_good});
-    throw BlowUp(std::string(e.what()) + "\n     the last good state of stage " + spec.name + " was saved as " + failed);
+    throw BlowUp(blow_up_message(model, e.what()) + "\n     the last good state of stage " + spec.name + " was saved as " + failed);
   }
   vtk.snapshot(state, engine.neighbor_list());
   csv.commit(spec.name);
@@ -493,6 +495,16 @@ void check_kept_curves(const Model& model, const fs::path& dir) {
   }
 }
 
+// A folder `dem ensemble` made ("" for any other): a run into it would write a single run's
+// folders beside the ensemble's and overwrite its scene.toml; --force would delete its fit/ and plots/.
+std::string ensemble_folder_kind(const fs::path& dir) {
+  if (fs::exists(dir / "sweep.json") || fs::is_directory(dir / "rows"))
+    return "a sweep folder (sweep.json, rows/: written by `dem ensemble` with a sweep)";
+  if (fs::is_directory(dir / "members") || fs::exists(dir / ".dem-ensemble.lock"))
+    return "an ensemble folder (members/, .dem-ensemble.lock: written by `dem ensemble`)";
+  return "";
+}
+
 // --force: remove what the rerun replaces, and say so.
 void clear_replaced(const fs::path& dir, bool prep, const std::vector<std::string>& prep_names) {
   if (!fs::is_directory(dir)) return;
@@ -607,6 +619,11 @@ void run_protocol(const Model& model, const RunOptions& opt) {
   };
 
   // 1. Checks, before anything is written.
+  if (const std::string kind = ensemble_folder_kind(dir); !kind.empty())
+    throw std::runtime_error(dir.string() + " is " + kind + ", not a run folder: `dem run` would overwrite its "
+                             "scene.toml and, with --force, delete its fit/ and plots/ (the ensemble's fit tables and "
+                             "figures): choose another --out for a single run; continue the ensemble with `dem ensemble "
+                             "SCENE --out " + dir.string() + "`");
   const bool resume = want_prep && !opt.force && fs::exists(dir / "manifest.json");
   if (resume && manifest_complete(dir / "manifest.json"))
     throw std::runtime_error("results already exist in " + dir.string() + " (manifest.json: a finished run): choose "

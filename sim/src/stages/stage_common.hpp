@@ -1,8 +1,13 @@
 // Pieces shared by the stage runners (protocol.cpp: run_stage, path.cpp: run_path).
 #pragma once
+#include <cmath>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "dem/engine/engine.hpp"
+#include "dem/core/errors.hpp"
+#include "dem/io/checks.hpp"
 #include "dem/measure/measure.hpp"
 
 namespace dem {
@@ -25,6 +30,57 @@ inline void check_kinetic_energy(const Model& model, const State& state, const M
     throw BlowUp("kinetic energy exploded to " + std::to_string(m.E_kin) + " J (" + std::to_string(m.E_kin / e_ref) +
                  " x the elastic energy) at step " + std::to_string(state.step) + ": the time step (dt_over_tc = " +
                  std::to_string(model.dt_over_tc) + ") or the strain rate is too large");
+}
+
+/// Scene numbers no physics has (|v| >= 1e30: a stiffness, damping or stress target of 1e300
+/// overflows the forces), as "key = value, ..."; "" when none.
+inline std::string absurd_values(const Model& model) {
+  std::string big;
+  for (const auto& [key, value] : material_physics(model)) {
+    const double v = std::strtod(value.c_str(), nullptr);
+    if (std::isfinite(v) && std::fabs(v) >= 1e30) big += (big.empty() ? "" : ", ") + key + " = " + value;
+  }
+  for (const auto& mode : model.protocol.modes)
+    for (const auto& st : mode.path)
+      for (double t : {st.sigma.x, st.sigma.y, st.sigma.z, st.pressure})
+        if (!st.relative && std::fabs(t) >= 1e30)
+          big += (big.empty() ? "" : ", ") + std::string("paths.") + mode.name + " stage '" + st.name + "' target " +
+                 physics_number(t) + " Pa";
+  return big;
+}
+
+/// The likely cause of a non-finite result: an absurd scene value, else the integration itself.
+inline std::string overflow_cause(const Model& model) {
+  const std::string big = absurd_values(model);
+  if (!big.empty())
+    return "the likely cause is " + big + ": no physical value (forces and stresses of that order overflow the "
+           "doubles); give values of the order of the scene's examples (data/scenes/)";
+  return "the integration diverged: the time step (integration.dt_over_tc = " + physics_number(model.dt_over_tc) +
+         ") or the strain rate is too large";
+}
+
+/// A blow-up's message with the absurd scene values named first when there are any (the engine's
+/// own checks blame dt or the rate, which is then not the cause).
+inline std::string blow_up_message(const Model& model, const std::string& what) {
+  const std::string big = absurd_values(model);
+  if (big.empty() || what.find("the likely cause is") != std::string::npos) return what;
+  return what + "\n     but the likely cause is " + big + ": no physical value (forces and stresses of that order "
+         "overflow the doubles)";
+}
+
+/// Throws BlowUp when a measured quantity of a curve row is not finite (inf or nan): such a row
+/// would be written as a result and the run end with exit 0.
+inline void check_finite_measurement(const Model& model, const State& state, const Measurement& m) {
+  const std::vector<std::pair<const char*, double>> values = {
+      {"p_Pa", m.p}, {"sigma_xx_Pa", m.stress.xx}, {"sigma_yy_Pa", m.stress.yy}, {"sigma_zz_Pa", m.stress.zz},
+      {"sigma_xy_Pa", m.stress.xy}, {"sigma_xz_Pa", m.stress.xz}, {"sigma_yz_Pa", m.stress.yz},
+      {"sigma_dev_Pa", m.sigma_dev}, {"s_dev", m.s_dev}, {"s_dev_eig", m.s_dev_eig}, {"F_dev", m.F_dev},
+      {"E_kin_J", m.E_kin}, {"E_pot_J", m.E_pot}, {"overlap_max_rel", m.overlap_max_rel},
+      {"inertial_number", m.inertial_number}, {"eps_d", m.eps_d}, {"eps_v", m.eps_v}, {"nu", m.nu}};
+  for (const auto& [name, v] : values)
+    if (!std::isfinite(v))
+      throw BlowUp("the measured " + std::string(name) + " is " + physics_number(v) + " at step " +
+                   std::to_string(state.step) + " (not a result): " + overflow_cause(model));
 }
 
 }  // namespace dem

@@ -2,6 +2,7 @@
 // the scene that will run them), the memory a scene needs, and the physics recorded with
 // every output so that results of different physics are never mixed.
 #pragma once
+#include <map>
 #include <string>
 #include <utility>
 #include <vector>
@@ -16,6 +17,10 @@ namespace dem {
 /// lengths finite and positive. Throws std::runtime_error naming `origin`, the problem and
 /// the particle.
 void validate_state(const State& state, const std::string& origin);
+
+/// Throws when the state carries contact history (or rotations) that the model would drop:
+/// another contact model's springs, spins under a frictionless law. Part of check_packing.
+void check_history(const Model& model, const State& state, const std::string& origin);
 
 /// A packing against the scene that will run it. t_c, dt and the Verlet skin come from the
 /// scene's radius bounds, so radii must lie in [radius_min_m, radius_max_m] (relative
@@ -59,8 +64,12 @@ std::string physics_hash(const Physics& physics);
 std::string physics_line(const Physics& physics);
 /// Inverse of physics_line (the hash is dropped); ignores malformed words.
 Physics parse_physics_line(const std::string& line);
+/// What a record without a key is read as (key -> value text): a sub-model's keys are written
+/// only while it is on, and records older than a key had this value. One table.
+const std::map<std::string, std::string>& record_defaults();
 /// The keys whose values differ, e.g. "contact.stiffness_N_m = 1e+08 (checkpoint) vs 5e+07
-/// (this scene)"; empty if none. `a_name`/`b_name` label the two sides.
+/// (this scene)"; empty if none. `a_name`/`b_name` label the two sides. A key on one side only
+/// is a difference unless the other side's record_defaults() value equals it (stated so).
 std::string physics_diff(const Physics& a, const Physics& b, const std::string& a_name,
                          const std::string& b_name);
 

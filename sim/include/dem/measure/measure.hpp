@@ -24,7 +24,7 @@ struct Measurement {
   double p = 0;                   ///< tr(stress)/3 [Pa]
   double p_star = 0;              ///< 2 <r> p / k
   double sigma_dev = 0;           ///< deviatoric magnitude of the stress diagonal [Pa] (sheared cell: sigma_dev_eig)
-  double s_dev = 0;               ///< sigma_dev / p
+  double s_dev = 0;               ///< sigma_dev / |p| (a packing in tension too; 0 when p = 0)
   Sym3 fabric;                    ///< (1/V) sum_p V_p sum_c n n
   double F_dev = 0;               ///< deviatoric magnitude of the fabric diagonal (sheared cell: F_dev_eig)
   double C = 0;                   ///< 2 * contacts / N
@@ -34,7 +34,7 @@ struct Measurement {
   double E_pot = 0;               ///< [J], elastic energy of contacts
   double overlap_max_rel = 0;     ///< max delta / min(r_i, r_j)
   double overlap_mean_rel = 0;    ///< mean delta / min(r_i, r_j) over contacts
-  double inertial_number = 0;     ///< |eps_dot|_max * 2<r> * sqrt(rho / p)   (0 when p <= 0)
+  double inertial_number = 0;     ///< |eps_dot|_max * 2<r> * sqrt(rho / |p|)   (0 when p = 0)
   long contacts = 0;
   // With friction (friction_columns(), after the usual columns):
   bool frictional = false;
@@ -50,7 +50,7 @@ struct Measurement {
   Sym3 strain_tensor;             ///< logarithmic strain 0.5 ln(F F^T) since the stage start
   double eps_d_eig = 0;           ///< deviatoric magnitude of the eigenvalues of strain_tensor
   double sigma_dev_eig = 0;       ///< ... of the stress [Pa]
-  double s_dev_eig = 0;           ///< sigma_dev_eig / p
+  double s_dev_eig = 0;           ///< sigma_dev_eig / |p|
   double F_dev_eig = 0;           ///< ... of the fabric
   /// Angles [deg, 0..90] between principal directions: the major (most compressive) stress
   /// direction, the major fabric direction, and the most compressive direction of the strain
