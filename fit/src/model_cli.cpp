@@ -397,6 +397,7 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
                       (cal.params.extended ? std::string("extended family, ") + surface_name(cal.params.surface) + " surface"
                                            : "group model") +
                       ", calibrated on " + fit_label + "); p_star on constant-volume rows, eps_v where p is held");
+}
 
 // --out before the calibration (minutes): a folder, or one that can be made, and writable.
 void check_output_folder(const fs::path& out) {

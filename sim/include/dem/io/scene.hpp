@@ -32,7 +32,7 @@ bool builtin_mode(const std::string& name, DeformationMode* mode);
 /// The largest stress target [Pa] a path stage may ask for: max_overlap_fraction * k / (2 r_min),
 /// where the overlaps reach the blow-up check's limit (p* = 2 r p / k).
 inline double stress_target_limit(const Model& m) {
-  return m.max_overlap_fraction * m.contact.stiffness / (2 * m.radius_min);
+  return m.max_overlap_fraction * m.contact.reference_stiffness() / (2 * m.radius_min);
 }
 
 }  // namespace dem
