@@ -55,15 +55,24 @@ std::string read_text(const fs::path& f) {
   return ss.str();
 }
 
-// A planned task is done when its status file exists, or, in a stored copy without status files
-// (data/*/members), when what it leaves is there: a mode's curve (renamed into place complete), a
-// preparation's unloading branch.
-bool task_done(const fs::path& run, const std::string& task) {
+// A planned task is done when its status file exists. A stored copy without any status files
+// (data/*/members: the copies keep curves only) is judged by what a task leaves instead: a mode's
+// curve (renamed into place complete), a preparation's unloading branch. A folder that has status
+// files keeps them as the record, so a missing one is a task not done.
+bool task_done(const fs::path& run, const std::string& task, bool stored_copy) {
   fs::path p = run / task;
   if (fs::exists(p)) return true;
+  if (!stored_copy) return false;
   if (p.parent_path().filename() == "deviatoric") return fs::exists(p.replace_extension(".csv"));
   if (p.filename() == "prep.json") return fs::exists(p.parent_path() / "prep" / "cycle_unloading.csv");
   return false;
+}
+
+// No planned task has its status file: a stored copy of an ensemble (or nothing ran at all).
+bool no_status_files(const fs::path& run, const std::vector<std::string>& tasks) {
+  for (const auto& t : tasks)
+    if (fs::exists(run / t)) return false;
+  return true;
 }
 
 // A mode task's status file that says complete while its curve (the .csv beside it) is gone:
@@ -331,8 +340,9 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
     return 1;
   }
   std::vector<std::string> missing;
+  const bool stored_copy = no_status_files(run, o.planned_tasks);
   for (const auto& t : o.planned_tasks)
-    if (!task_done(run, t)) missing.push_back(t);
+    if (!task_done(run, t, stored_copy)) missing.push_back(t);
     else if (curve_gone(run / t)) missing.push_back(t + " (its curve is gone)");
   std::string incomplete;
   if (!missing.empty()) {

@@ -132,7 +132,8 @@ def test_fit_tables_append_the_chosen_model(tiny):
         header = next(csv.reader(fh))
         fh.seek(0)
         rows = list(csv.DictReader(fh))
-    assert header.index("warnings") == 27 and header[28] == "model" and header[-1] == "peak_warnings"
+    assert header.index("warnings") == 27 and header[28] == "model" and header[-3] == "peak_warnings"
+    assert header[-2:] == ["usable", "not_usable_because"]   # the one usable rule (issue 33), last
     for r in rows:
         assert r["model"] in ("saturating", "peak", "two-rate"), r["model"]
         p = float(r["selection_p"])

@@ -391,11 +391,16 @@ def test_compare_refuses_partial_overlap_and_unordered_strain(tmp_path):
 def test_kept_curves_of_another_extent_or_mode_definition_are_refused(tiny, tmp_path):
     out = copy_run(tiny, tmp_path / "run")
     scene_before = (out / "scene.toml").read_bytes()
-    for change in (["--set", "protocol.eps_d_max=0.04"], ["--set", "modes.D2=[1.0, -1.0, 0.0]"]):
+    for change in (["--set", "protocol.eps_d_max=0.04"], ["--set", "protocol.eps_d_max=0.06"]):
         p = run_dem("run", tiny / "tiny.toml", "--out", out, "--stages", "deviatoric", "--quiet", *change)
         assert p.returncode == 2, p.stderr
         assert "as an earlier scene defined it" in p.stderr and "--force" in p.stderr, p.stderr
         assert (out / "scene.toml").read_bytes() == scene_before
+    # A built-in mode cannot be redefined at all any more (issue 32): refused before the curves are compared.
+    p = run_dem("run", tiny / "tiny.toml", "--out", out, "--stages", "deviatoric", "--quiet",
+                "--set", "modes.D2=[1.0, -1.0, 0.0]")
+    assert p.returncode == 2 and "is a built-in mode" in p.stderr, p.stderr
+    assert (out / "scene.toml").read_bytes() == scene_before
     p = run_dem("run", tiny / "tiny.toml", "--out", out, "--stages", "deviatoric", "--quiet", "--force",
                 "--set", "protocol.eps_d_max=0.04", check=True)
     eps = [float(r.split(",")[6]) for r in (out / "deviatoric" / "D2_phi0.690.csv").read_text().splitlines()
