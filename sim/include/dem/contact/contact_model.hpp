@@ -18,10 +18,12 @@
 #include <utility>
 
 #include "dem/contact/geometry.hpp"
+#include "dem/contact/normal_hertz.hpp"
 #include "dem/contact/normal_linear.hpp"
 #include "dem/contact/normal_luding.hpp"
 #include "dem/contact/rolling.hpp"
 #include "dem/contact/tangential.hpp"
+#include "dem/contact/tangential_mindlin.hpp"
 #include "dem/core/model.hpp"
 #include "dem/core/state.hpp"
 
@@ -196,8 +198,8 @@ using FrictionalRolling = Model3<LinearSpring, CundallStrack, RollingSpring>;
 /// The sub-models the composition is generated from, slot by slot (the registry, registry.hpp,
 /// lists their descriptions in the same order). A new sub-model is one entry here.
 template <class... T> struct TypeList { static constexpr int size = sizeof...(T); };
-using NormalModels = TypeList<LinearSpring, LudingNormal>;
-using TangentialModels = TypeList<NoTangential, CundallStrack>;
+using NormalModels = TypeList<LinearSpring, LudingNormal, HertzNormal>;
+using TangentialModels = TypeList<NoTangential, CundallStrack, MindlinTangential, MindlinForceTangential>;
 using RollingSlotModels = TypeList<NoRolling, RollingSpring, RollingTwisting>;
 
 namespace detail {
