@@ -264,10 +264,10 @@ TEST(Mindlin, NeedsHertzAndBadKeysAreRefused) {
 // the no-slip impact, integrated here for each rule (sticking_ratio). Between the regimes the
 // contact point recoils (psi2 < 0) with a minimum of psi2 (Maw, Barber & Fawcett, Wear 38 (1976)
 // 101; Di Renzo & Di Maio, Chem. Eng. Sci. 59 (2004) 525; Thornton, Cummins & Cleary, Powder
-// Technol. 233 (2013) 30). Impulses and e_n are taken in the frame of the initial line of
-// centres, which turns by about v_t t_c/(2r) during the contact: at 60 deg that moves e_n to
-// 0.985 and J_t/(mu J_n) to 0.95 (the same with cundall_strack, and at dt/10), hence the
-// sliding tolerances.
+// Technol. 233 (2013) 30). J_t is taken from the spins (frame-free); J_n and e_n in the frame of
+// the initial line of centres, which turns by about v_t t_c/(2r) during the contact (e_n = 0.985
+// at 60 deg; J_t measured from the velocities in that frame was 40 % off at 0.05 deg and 5 % at
+// 60 deg).
 TEST(Mindlin, ObliqueImpactsFollowSlidingTheoryAndTheStickingLimitOfEachRule) {
   const double mu = 0.092, v = 3.9, r = 1e-3, nu = 0.33;
   const double kappa = 2 * (1 - nu) / (2 - nu);
@@ -282,25 +282,35 @@ TEST(Mindlin, ObliqueImpactsFollowSlidingTheoryAndTheStickingLimitOfEachRule) {
     std::printf("%s: sticking limit psi2/psi1 = %.4f (RK4 of the no-slip impact)\n", rule, limit_ratio);
     std::printf("theta_deg  psi1     psi2     e_n     Jt/(mu Jn)\n");
     double psi2_min = 1e9, psi1_at_min = 0;
-    for (double deg : {0.05, 0.1, 0.5, 1.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 24.0, 30.0, 40.0, 50.0, 60.0}) {
+    double last_gap = 0;   // |psi2/psi1 - limit| of the previous (smaller) sticking angle
+    for (double deg : {0.005, 0.01, 0.05, 0.1, 0.5, 1.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 16.0, 20.0, 24.0, 30.0, 40.0, 50.0, 60.0}) {
       const double theta = deg * kPi / 180.0;
       const dem::ObliqueResult o = dem::simulate_oblique_collision(m, r, r, v, theta);
       const double vn = v * std::cos(theta), vt = v * std::sin(theta), en = o.normal_restitution;
       const double psi1 = 2 * vt / (mu * (1 + en) * vn);
-      const double vct_after = vt - 3.5 * o.tangential_impulse / mr;   // the contact point (I = 2/5 m r^2)
+      // The tangential impulse from the spin it left (I w / r, I = 2/5 m r^2): the torque is
+      // a n x f_t at every step, so this is free of the turn of the line of centres that biases
+      // the impulse measured in the initial frame (at 0.05 deg that bias is 40 % of J_t).
+      const double j_t = 0.4 * m1 * r * o.omega[0].y;
+      const double vct_after = vt - 3.5 * j_t / mr;   // the contact point
       const double psi2 = 2 * vct_after / (mu * (1 + en) * vn);
-      const double ratio = o.tangential_impulse / (mu * o.normal_impulse);
+      const double ratio = j_t / (mu * o.normal_impulse);
       std::printf("%9.2f  %7.4f  %7.4f  %.5f  %.4f  psi2/psi1 = %.4f\n", deg, psi1, psi2, en, ratio, psi2 / psi1);
       EXPECT_LE(ratio, 1.0 + 1e-9) << rule << " " << deg;   // |f_t| <= mu f_n at every step
       if (deg <= 20) EXPECT_NEAR(en, 1.0, 2e-3) << rule << " " << deg;   // elastic normal (frame turn small)
-      // Sticking (J_t < 1e-3 mu J_n): the rule's own no-slip impact. Measured 0.9416 (kept
-      // displacement; 0.9381 at dt/5) and 0.931-0.924 (kept force) against 0.919 of the RK4: a
-      // gap of 2 % not explained (docs/contact_models.md); a 1 % error of k_t/m_t moves the ratio
-      // by 1.5 %.
-      if (psi1 < 0.03) EXPECT_NEAR(psi2 / psi1, limit_ratio, 0.03) << rule << " " << deg;
+      // Sticking: the rule's own no-slip impact (a 1 % error of k_t/m_t moves the ratio by 1.5 %).
+      // The kept displacement meets it; the kept force slips at the end of the contact (its
+      // force stays while mu f_n -> 0), less the smaller psi1: it tends to the limit from below.
+      if (psi1 < 0.03) {
+        const double gap = std::fabs(psi2 / psi1 - limit_ratio);
+        if (!force_kept) EXPECT_LT(gap, 2e-3) << rule << " " << deg;
+        else if (deg == 0.005) EXPECT_LT(gap, 6e-3) << rule << " " << deg;
+        EXPECT_GE(gap, last_gap - 1e-4) << rule << " " << deg;
+        last_gap = gap;
+      }
       if (psi1 > 1.2 * 7) {   // gross sliding: psi2 = psi1 - 7
-        EXPECT_NEAR(ratio, 1.0, 0.06) << rule << " " << deg;
-        EXPECT_NEAR(psi2, psi1 - 7, 0.03 * psi1) << rule << " " << deg;
+        EXPECT_NEAR(ratio, 1.0, 0.01) << rule << " " << deg;
+        EXPECT_NEAR(psi2, psi1 - 7, 0.01 * psi1) << rule << " " << deg;
       } else if (psi1 > 3 && psi1 < 5) {   // between the regimes: the contact point recoils
         EXPECT_LT(psi2, 0.0) << rule << " " << deg;
         EXPECT_GT(psi2, -psi1) << rule << " " << deg;
