@@ -95,6 +95,89 @@ thermo_modify format float %.10g
 """ + _motion(dt, rate, gamma_b, steps)
 
 
+def tsuji_restitution_of_alpha(alpha, h=2e-3):
+    """The restitution of the dimensionless Hertz impact with Tsuji's dashpot,
+    x'' = -max(x^1.5 + alpha x^0.25 x', 0), x(0) = 0, x'(0) = 1 (RK4): ours' HertzNormal::restitution_of_alpha."""
+    def acc(x, u):
+        if x <= 0:
+            return 0.0
+        f = x * math.sqrt(x) + alpha * math.sqrt(math.sqrt(x)) * u
+        return -f if f > 0 else 0.0
+    x, u = 0.0, 1.0
+    for _ in range(1000000):
+        k1x, k1u = u, acc(x, u)
+        k2x, k2u = u + 0.5 * h * k1u, acc(x + 0.5 * h * k1x, u + 0.5 * h * k1u)
+        k3x, k3u = u + 0.5 * h * k2u, acc(x + 0.5 * h * k2x, u + 0.5 * h * k2u)
+        k4x, k4u = u + h * k3u, acc(x + h * k3x, u + h * k3u)
+        xn = x + h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
+        un = u + h / 6 * (k1u + 2 * k2u + 2 * k3u + k4u)
+        if xn < 0 and un < 0:
+            return -(u + (un - u) * x / (x - xn))
+        x, u = xn, un
+    return 0.0
+
+
+def _bisect(f, target, lo, hi, decreasing=True, it=48):
+    for _ in range(it):
+        mid = 0.5 * (lo + hi)
+        if (f(mid) > target) == decreasing:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def lammps_tsuji_alpha(e):
+    """LAMMPS' `damping tsuji` polynomial alpha(e) (gran_sub_mod_damping.cpp)."""
+    c = [1.2728, -4.2783, 11.087, -22.348, 27.467, -18.022, 4.8218]
+    return sum(ci * e ** k for k, ci in enumerate(c))
+
+
+def lammps_hertz_restitution(e):
+    """The e' to give LAMMPS' `hertz/material E e' nu ... damping tsuji` so that its polynomial
+    alpha(e') equals the alpha ours solves for the restitution e (contact.restitution): LAMMPS'
+    fit does not give e back (docs/contact_models.md, Hertz)."""
+    if e >= 1.0:
+        return 1.0
+    alpha = _bisect(tsuji_restitution_of_alpha, e, 0.0, 64.0)   # e(alpha) falls with alpha
+    return _bisect(lammps_tsuji_alpha, alpha, 0.0, 1.0)          # alpha(e') falls with e'
+
+
+def lammps_hertz_mindlin_deck(data, steps, rate, dt, E=1e8, nu=0.3, e=0.9, mu=0.5, rule="mindlin", gamma_b=0.1,
+                              skin=2e-4, warmup=0):
+    # Ours' contact.normal = "hertz" (E, nu, e) + contact.tangential = "mindlin" | "mindlin_force" (mu):
+    # `hertz/material E e' nu` is 4/3 E* sqrt(R* delta) delta with E* = E/(2(1 - nu^2)) (mixing of
+    # two equal materials), `damping tsuji` alpha(e') sqrt(m* F_el/delta) d(delta)/dt with e' from
+    # lammps_hertz_restitution (so alpha equals ours), `limit_damping` the no-tension clamp (ours'
+    # default contact.allow_attractive = false); `tangential mindlin NULL 0 mu` (k_t = 8 G*
+    # sqrt(R* delta) from E and nu, no tangential damping) keeps the displacement when k_t changes,
+    # `mindlin/force` the force (incremental), as ours' two rules. See lammps_friction_deck for the rest.
+    lammps_rule = {"mindlin": "mindlin", "mindlin_force": "mindlin/force"}[rule]
+    e_lammps = lammps_hertz_restitution(e)
+    return f"""units si
+atom_style sphere
+atom_modify map array
+boundary p p p
+newton off
+comm_modify vel yes
+read_data {data}
+pair_style granular
+pair_coeff * * hertz/material {E!r} {e_lammps!r} {nu!r} tangential {lammps_rule} NULL 0 {mu!r} damping tsuji limit_damping
+neighbor {skin!r} bin
+neigh_modify delay 0 every 1 check yes
+compute erot all erotate/sphere
+compute prs all pressure NULL virial
+thermo_style custom step ke c_erot c_prs c_prs[1] c_prs[2] c_prs[3]
+thermo_modify format float %.10g
+""" + _motion(dt, rate, gamma_b, steps, warmup)
+
+
+def rayleigh_time(r_min, E, nu, density):
+    """Ours' t_c of contact.normal = "hertz": the Rayleigh-wave time of the smallest sphere."""
+    G = E / (2 * (1 + nu))
+    return math.pi * r_min * math.sqrt(density / G) / (0.1631 * nu + 0.8766)
+
+
 def liggghts_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4):
     # gran model hooke/stiffness: kn, gamman given directly; absolute_damping on: gamman is
     # the damping coefficient itself (not times the effective mass); limitForce on: no

@@ -36,6 +36,16 @@
 # whose shear increment (ScGeom::getIncidentVel) adds the shift velocity correctly. That law has no
 # normal dashpot: --gamma 0, and ours contact.damping_kg_s = 0. W_friction_J = O.energy['plastDissip'].
 #
+# Hertz-Mindlin (--law mindlin, as ours' contact.normal = "hertz", contact.tangential = "mindlin_force"):
+# FrictMat(young = E, poisson = nu, frictionAngle = atan(mu)) + Ip2_FrictMat_FrictMat_MindlinPhys +
+# Law2_ScGeom_MindlinPhys_Mindlin: f_n = 4/3 E* sqrt(R*) delta^1.5, k_s = 8 G* sqrt(R* delta), the
+# shear force incremental (ours' "mindlin_force"), its periodic shift velocity added correctly
+# (ScGeom::getIncidentVel). --en e < 1 gives YADE's damping cn = alpha sqrt(m*) delta^(1/4) with its
+# own alpha(e) (Antypov 2011: not ours' Tsuji alpha solved for e) and the same cs on the shear (ours
+# has no tangential dashpot): compare at low rates, where the dashpots do little; --en 1: none.
+# t_c is ours' Rayleigh time of --r-min, p* = 2 <r> p / (2 E* r_min) as ours'. E_pot_J: the Hertz
+# energy 2/5 kno delta^2.5 plus the shear springs |F_s|^2 / (2 k_s).
+#
 # Physics set to match ours (see docs/yade.md for every choice):
 #  - ViscElMat with kn = 2k, cn = 2*gamma per material: two equal materials combine in series
 #    into a pair kn = k, cn = gamma (checked at start, the script stops if not);
@@ -67,7 +77,8 @@ import numpy as np
 from yade import O, Vector3, Matrix3, ViscElMat, ForceResetter, InsertionSortCollider, Bo1_Sphere_Aabb, \
     InteractionLoop, Ig2_Sphere_Sphere_ScGeom, Ip2_ViscElMat_ViscElMat_ViscElPhys, \
     Law2_ScGeom_ViscElPhys_Basic, NewtonIntegrator, PyRunner, PeriTriaxController, utils, FrictMat, \
-    Ip2_FrictMat_FrictMat_FrictPhys, Law2_ScGeom_FrictPhys_CundallStrack
+    Ip2_FrictMat_FrictMat_FrictPhys, Law2_ScGeom_FrictPhys_CundallStrack, Ip2_FrictMat_FrictMat_MindlinPhys, \
+    Law2_ScGeom_MindlinPhys_Mindlin, MatchMaker
 
 MODES = {"D2": (1.0, 0.0, -1.0), "D3": (0.5, 0.5, -1.0), "iso_compress": (-1.0, -1.0, -1.0),
          "iso_expand": (1.0, 1.0, 1.0), "uniaxial_x": (-1.0, 0.0, 0.0), "uniaxial_y": (0.0, -1.0, 0.0),
@@ -160,7 +171,10 @@ def parse():
                     help="Coulomb coefficient mu (ours: contact.friction); ViscElMat frictionAngle = atan(mu), rotations free")
     ap.add_argument("--kt-ratio", type=float, default=2.0 / 7.0, help="pair k_t / k (ours: contact.tangential_stiffness_ratio)")
     ap.add_argument("--gamma-t", type=float, default=0.0, help="pair tangential damping [kg/s] (ours: contact.tangential_damping_kg_s)")
-    ap.add_argument("--law", default="viscel", choices=["viscel", "frictphys"],
+    ap.add_argument("--young", type=float, default=1e8, help="--law mindlin: Young's modulus E [Pa] (ours: contact.youngs_modulus_Pa)")
+    ap.add_argument("--poisson", type=float, default=0.3, help="--law mindlin: nu (ours: contact.poisson_ratio)")
+    ap.add_argument("--en", type=float, default=1.0, help="--law mindlin: YADE's en (< 1: its nonlinear dashpot; 1: none)")
+    ap.add_argument("--law", default="viscel", choices=["viscel", "frictphys", "mindlin"],
                     help="viscel: ViscElMat + Law2_ScGeom_ViscElPhys_Basic (normal dashpot; its shift velocity has the wrong "
                          "sign: wrong for friction across the boundary of a deforming cell); frictphys: FrictMat per body + "
                          "Law2_ScGeom_FrictPhys_CundallStrack (no dashpot: needs --gamma 0)")
@@ -195,8 +209,14 @@ def main():
     rmin = a.r_min if a.r_min > 0 else min(s[3] for s in spheres)
     m_small = 4.0 / 3.0 * math.pi * rmin ** 3 * a.density
     mr = m_small / 2
-    w0sq, eta = a.k / mr, a.gamma / (2 * mr)
-    tc = math.pi / math.sqrt(w0sq - eta * eta)
+    if a.law == "mindlin":   # ours' Rayleigh time and reference stiffness (contact.normal = "hertz")
+        G = a.young / (2 * (1 + a.poisson))
+        tc = math.pi * rmin * math.sqrt(a.density / G) / (0.1631 * a.poisson + 0.8766)
+        a.k = 2 * a.young / (2 * (1 - a.poisson ** 2)) * rmin
+        a.gamma = 0.0
+    else:
+        w0sq, eta = a.k / mr, a.gamma / (2 * mr)
+        tc = math.pi / math.sqrt(w0sq - eta * eta)
     dt = a.dt_over_tc * tc
     rate = a.rate_tc / tc
     sheared = a.mode in SHEARS
@@ -228,13 +248,17 @@ def main():
     kt = a.kt_ratio * a.k if frict else 0.0
     gamma_t = a.gamma_t if frict else 0.0
     frictphys = a.law == "frictphys"
+    mindlin = a.law == "mindlin"
     if frictphys and (a.gamma != 0 or gamma_t != 0 or a.kt_ratio <= 0):
         sys.exit("run_mode.py: --law frictphys has no dashpots: pass --gamma 0 (and ours contact.damping_kg_s=0), --gamma-t 0")
-    if frict and not frictphys and a.mode in list(MODES) + list(SHEARS):
+    if frict and a.law == "viscel" and a.mode in list(MODES) + list(SHEARS):
         sys.stderr.write("run_mode.py: warning: --law viscel with friction in a deforming periodic cell: YADE 2023.02a's "
                          "ViscEl law adds the periodic shift velocity with the wrong sign (docs/yade.md, Friction); "
                          "use --law frictphys --gamma 0\n")
-    if not frictphys:
+    if mindlin:
+        mat = O.materials.append(FrictMat(young=a.young, poisson=a.poisson, density=a.density,
+                                          frictionAngle=math.atan(a.friction) if frict else 0))
+    elif not frictphys:
         mat = O.materials.append(ViscElMat(kn=2 * a.k, cn=2 * a.gamma, ks=2 * kt, cs=2 * gamma_t,
                                            frictionAngle=math.atan(a.friction) if frict else 0, density=a.density))
     for x, y, z, r in spheres:
@@ -245,7 +269,11 @@ def main():
         if not frict:
             b.state.blockedDOFs = "XYZ"         # frictionless: no torques, 3 degrees of freedom as ours
         O.bodies.append(b)
-    if frictphys:
+    if mindlin:
+        ip2 = Ip2_FrictMat_FrictMat_MindlinPhys(en=MatchMaker(algo="val", val=a.en)) if a.en < 1 \
+            else Ip2_FrictMat_FrictMat_MindlinPhys()
+        loop = InteractionLoop([Ig2_Sphere_Sphere_ScGeom()], [ip2], [Law2_ScGeom_MindlinPhys_Mindlin()])
+    elif frictphys:
         loop = InteractionLoop([Ig2_Sphere_Sphere_ScGeom()], [Ip2_FrictMat_FrictMat_FrictPhys()],
                                [Law2_ScGeom_FrictPhys_CundallStrack()])
         O.trackEnergy = True
@@ -308,14 +336,14 @@ def main():
                 for q in range(3):
                     sig[p][q] += 0.5 * (branch[p] * f[q] + branch[q] * f[p])
                     fab[p][q] += (v1 + v2) * n[p] * n[q]
-            epot += 0.5 * a.k * pen * pen
+            epot += 0.4 * i.phys.kno * pen ** 2.5 if mindlin else 0.5 * a.k * pen * pen
             if frict:
                 fs = i.phys.shearForce             # elastic shear force on id2 (after the Coulomb cap)
                 for p in range(3):
                     for q in range(3):
                         tsig[p][q] += branch[p] * fs[q]
                 fs2 = fs.dot(fs)
-                e_t += 0.5 * fs2 / kt
+                e_t += 0.5 * fs2 / (i.phys.ks if mindlin else kt) if fs2 > 0 else 0.0
                 if fs2 > 0 and math.sqrt(fs2) >= i.phys.tangensOfFrictionAngle * f.norm() * (1 - 1e-9):
                     n_slide += 1
             rel = pen / min(b1.shape.radius, b2.shape.radius)
@@ -403,9 +431,17 @@ def main():
     steps_per_sample = max(1, int(round(a.sample_strain / per_step)))
     # One step with dt = 0 creates the interactions of the initial packing without moving it
     # (O.iter becomes 1), so the first row measures the packing as loaded.
+    before = [(Vector3(b.state.pos), Vector3(b.state.vel), Vector3(b.state.angVel)) for b in O.bodies]
     O.dt = 0.0
     O.run(1, True)
     O.dt = dt
+    if mindlin:   # its incident velocity divides by dt: the dt = 0 step's shear springs (and motion) are nan
+        for i in O.interactions:
+            if i.isReal:
+                i.phys.shearElastic = i.phys.shearForce = i.phys.usElastic = i.phys.usTotal = Vector3(0, 0, 0)
+        for b, (x, v, w) in zip(O.bodies, before):   # at rest in the flow, as the dt = 0 step leaves the others
+            b.state.pos, b.state.angVel = x, w
+            b.state.vel = v + O.cell.velGrad * x
     first = measure()
     check_pairs()
     if sheared and (a.side_stress_p0 > 0 or a.isobaric_p0 > 0):
@@ -455,7 +491,11 @@ def main():
         out.write(f"# isobaric servo (Python): p = {a.isobaric_p0} x p0 = {p_goal:.8g} Pa (contact stress), dead-beat over "
                   f"{a.servo_every} steps, low-pass 0.25, |u| <= {a.servo_rate_factor} x rate\n")
     if frict:
-        if frictphys:
+        if mindlin:
+            out.write(f"# Hertz-Mindlin: E={a.young} Pa, nu={a.poisson}, mu={a.friction}, en={a.en}; FrictMat + "
+                      "Ip2_FrictMat_FrictMat_MindlinPhys + Law2_ScGeom_MindlinPhys_Mindlin (incremental shear force); "
+                      "W_friction_J not tracked (nan)\n")
+        elif frictphys:
             out.write(f"# friction: mu={a.friction} (frictionAngle=atan(mu)), k_t={kt:.8g} N/m, no dashpots; FrictMat per body "
                       "(young = k/r, poisson = k_t/k) + Law2_ScGeom_FrictPhys_CundallStrack; W_friction_J = O.energy['plastDissip']\n")
         else:
@@ -492,6 +532,17 @@ def check_pairs():
     frict = a.friction > 0
     kt = a.kt_ratio * a.k if frict else 0.0
     gamma_t = a.gamma_t if frict else 0.0
+    if a.law == "mindlin":   # Mindlin: kn, ks depend on the overlap; the coefficients are checked
+        E_star, G = a.young / (2 * (1 - a.poisson ** 2)), a.young / (2 * (1 + a.poisson))
+        for i in O.interactions:
+            if i.isReal:
+                r1, r2 = O.bodies[i.id1].shape.radius, O.bodies[i.id2].shape.radius
+                R = r1 * r2 / (r1 + r2)
+                want_n, want_s = 4 / 3 * E_star * math.sqrt(R), 8 * G / (2 * (2 - a.poisson)) * math.sqrt(R)
+                if abs(i.phys.kno - want_n) > 1e-9 * want_n or abs(i.phys.kso - want_s) > 1e-9 * want_s:
+                    sys.exit(f"run_mode.py: pair kno={i.phys.kno}, kso={i.phys.kso} differ from {want_n}, {want_s}")
+                break
+        return
     for i in O.interactions:
         if i.isReal:
             cn = getattr(i.phys, "cn", 0.0)       # FrictPhys: no dashpots

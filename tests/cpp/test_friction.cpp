@@ -270,6 +270,14 @@ TEST(Friction, ListWithHistoryEqualsTheAllPairsOracleAcrossRebuildsAndFlips) {
   expect_list_with_history_equals_oracle({"contact.friction=0.5", "integration.threads=1"});
 }
 
+// Hertz-Mindlin (test_hertz.cpp): the per-pair normal (a12 and m* from the masses) and Mindlin's
+// history (xi, slip, k_t) against the oracle, for both rules of a changing k_t.
+TEST(Mindlin, ListWithHertzMindlinHistoryEqualsTheAllPairsOracle) {
+  for (const char* rule : {"mindlin", "mindlin_force"})
+    expect_list_with_history_equals_oracle({"contact.normal=\"hertz\"", std::string("contact.tangential=\"") + rule + "\"",
+                                            "contact.friction=0.5", "contact.restitution=0.5", "integration.threads=1"});
+}
+
 TEST(Twisting, ListWithRollingAndTwistingHistoryEqualsTheAllPairsOracle) {
   // The twist spring is entry 7 (after xi_t, slip, xi_r): declaring it odd must be caught.
   expect_list_with_history_equals_oracle({"contact.friction=0.5", "contact.rolling_friction=0.1",
@@ -356,7 +364,7 @@ TEST(Friction, SceneKeysComposeAndBadValuesAreRefused) {
   EXPECT_EQ(resolved.find("tangential"), std::string::npos);
   EXPECT_THROW(dem_test::model_with({"contact.friction=-0.1"}), dem::SceneError);
   EXPECT_THROW(dem_test::model_with({"contact.friction=0.5", "contact.tangential=\"none\""}), dem::SceneError);
-  EXPECT_THROW(dem_test::model_with({"contact.tangential=\"mindlin\""}), dem::SceneError);
+  EXPECT_THROW(dem_test::model_with({"contact.tangential=\"mindlin_deresiewicz\""}), dem::SceneError);
   EXPECT_THROW(dem_test::model_with({"contact.tangential_stiffness_ratio=0.5"}), dem::SceneError);
   EXPECT_THROW(dem_test::model_with({"contact.friction=0.5", "contact.tangential_stiffness_ratio=0"}), dem::SceneError);
 }

@@ -56,8 +56,9 @@ const std::vector<const SubModelInfo*>& submodels() {
   static const SubModelInfo twisting_off = off_info(Slot::Twisting, "twisting");
   // The registry: one line per sub-model, each slot's default first.
   static const std::vector<const SubModelInfo*> all = {
-      &LinearSpring::info(), &LudingNormal::info(),       // normal
-      &NoTangential::info(), &CundallStrack::info(),      // tangential
+      &LinearSpring::info(), &LudingNormal::info(), &HertzNormal::info(),     // normal
+      &NoTangential::info(), &CundallStrack::info(), &MindlinTangential::info(),
+      &MindlinForceTangential::info(),                                        // tangential
       &rolling_off, &RollingSpring::info(),               // rolling
       &twisting_off, &TwistingSpring::info()};            // twisting
   return all;

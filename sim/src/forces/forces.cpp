@@ -45,15 +45,16 @@ struct PairSums {
 // kernels' adding pass does.
 template <bool Sheared, class CM>
 inline bool contact_force_history(const CM& cm, const Vec3& xi, const Vec3& xj_image, const Vec3& vi,
-                                  const Vec3& vj, const Vec3& wi, const Vec3& wj, double ri, double rj,
-                                  const VelGrad& rate, double dt, double* h, double* dissipated, PairSums& out) {
+                                  const Vec3& vj, const Vec3& wi, const Vec3& wj, double ri, double rj, double mi,
+                                  double mj, const VelGrad& rate, double dt, double* h, double* dissipated,
+                                  PairSums& out) {
   const Separation<double> sep = contact::separation(xi.x, xi.y, xi.z, ri, xj_image.x, xj_image.y, xj_image.z, rj);
   if (!contact::touching(sep)) {
     for (int k = 0; k < CM::history; ++k) h[k] = 0.0;   // the contact ended: its springs with it
     return false;
   }
   const contact::PairForces<double> c =
-      cm.template advance<Sheared>(sep, ri, rj, vj.x - vi.x, vj.y - vi.y, vj.z - vi.z, contact::v3(wi),
+      cm.template advance<Sheared>(sep, ri, rj, mi, mj, vj.x - vi.x, vj.y - vi.y, vj.z - vi.z, contact::v3(wi),
                                    contact::v3(wj), contact::rate_lanes<double>(rate), dt, h);
   out.fj = contact::vec3(c.fj);
   out.ti = contact::vec3(c.ti);
@@ -107,6 +108,7 @@ void pair_loop_history(const CM& cm, State& s, const NeighborList& list, const V
   const Vec3* w = s.angular_velocity.data();
   Vec3* tq = s.torque.data();
   const double* rad = s.radius.data();
+  const double* mass = s.mass.data();
   double* H = s.history.values.data();
   constexpr int kw = CM::history;
   for (int i = begin; i < end; ++i) {
@@ -115,7 +117,7 @@ void pair_loop_history(const CM& cm, State& s, const NeighborList& list, const V
       const int j = list.partner[p];
       PairSums c;
       if (!contact_force_history<Sheared>(cm, x[i], x[j] + off[list.image[p]], v[i], v[j], spin ? w[i] : kNoSpin,
-                                          spin ? w[j] : kNoSpin, rad[i], rad[j], rate, dt,
+                                          spin ? w[j] : kNoSpin, rad[i], rad[j], mass[i], mass[j], rate, dt,
                                           H + static_cast<long>(kw) * p, dissipated, c))
         continue;
       if (j < end) {
@@ -235,7 +237,8 @@ void pair_loop_history_vector(PairKernel kernel, const CM& cm, State& s, const N
   }
   const long p_begin = list.first[begin], p_end = list.first[end];
   const kernels::HistoryInputs<CM> in{packed, pair_i, list.partner.data(), list.image.data(), off,
-                                      s.angular_velocity.data(), cm, rate, dt, s.history.values.data()};
+                                      s.angular_velocity.data(), cm, rate, dt, s.history.values.data(),
+                                      s.mass.data()};
   const kernels::HistoryKernelFn<CM> run = kernels::history_kernel_of<Sheared, CM>(kernel);
   static thread_local kernels::HistoryChunk chunk;
   Vec3* tq = s.torque.data();
@@ -300,29 +303,32 @@ void accumulate_pair_forces(const Model& model, State& state, const NeighborList
   const std::uint16_t* block_of = scratch.block_of.data();
   contact::with_contact_model(model.contact, [&](const auto& cm) {
     using CM = std::decay_t<decltype(cm)>;
-    if constexpr (CM::history > 0) {
-      for (auto& to : scratch.spill_torque[b]) to.clear();
-      scratch.dissipated[b] = 0.0;
+    if constexpr (CM::history_loop) {
+      // A model without history (Hertz alone: per_pair) has no torques or sliders, and
+      // begin_pair_loop set up neither: its loops get a dissipation they add zeros to.
+      double no_dissipation = 0.0;
+      auto& spill_torque = CM::history > 0 ? scratch.spill_torque[b] : spill;
+      double* dissipated = CM::history > 0 ? &scratch.dissipated[b] : &no_dissipation;
+      if constexpr (CM::history > 0) for (auto& to : spill_torque) to.clear();
+      *dissipated = 0.0;
       if constexpr (CM::vectorised) {
         if (scratch.kernel != PairKernel::reference) {
           const std::int32_t* pair_i = scratch.pair_i.data();
           if (rate.sheared())
             pair_loop_history_vector<true>(scratch.kernel, cm, state, list, scratch.packed.data(), pair_i, rate,
-                                           model.dt, begin, end, force, spill, scratch.spill_torque[b], block_of,
-                                           &scratch.dissipated[b]);
+                                           model.dt, begin, end, force, spill, spill_torque, block_of, dissipated);
           else
             pair_loop_history_vector<false>(scratch.kernel, cm, state, list, scratch.packed.data(), pair_i, rate,
-                                            model.dt, begin, end, force, spill, scratch.spill_torque[b], block_of,
-                                            &scratch.dissipated[b]);
+                                            model.dt, begin, end, force, spill, spill_torque, block_of, dissipated);
           return;
         }
       }
       if (rate.sheared())
-        pair_loop_history<true>(cm, state, list, rate, model.dt, begin, end, force, spill, scratch.spill_torque[b],
-                                block_of, &scratch.dissipated[b]);
+        pair_loop_history<true>(cm, state, list, rate, model.dt, begin, end, force, spill, spill_torque, block_of,
+                                dissipated);
       else
-        pair_loop_history<false>(cm, state, list, rate, model.dt, begin, end, force, spill, scratch.spill_torque[b],
-                                 block_of, &scratch.dissipated[b]);
+        pair_loop_history<false>(cm, state, list, rate, model.dt, begin, end, force, spill, spill_torque, block_of,
+                                 dissipated);
     } else if (scratch.kernel == PairKernel::reference) {
       if (rate.sheared()) pair_loop_reference<true>(cm, state, list, rate, begin, end, force, spill, block_of);
       else pair_loop_reference<false>(cm, state, list, rate, begin, end, force, spill, block_of);
@@ -416,12 +422,13 @@ void compute_forces_all_pairs(const Model& model, State& s, const VelGrad& rate,
     for (int i = 0; i < n; ++i)
       for (int j = i + 1; j < n; ++j) {
         const Vec3 xj = s.position[i] + minimum_image(s.box, s.position[i], s.position[j]);
-        if constexpr (CM::history > 0) {
+        if constexpr (CM::history_loop) {
           // the record in the orientation (smaller id, larger id); this loop's pair is (i, j)
           const bool swapped = s.id[i] > s.id[j];
           const auto key = std::make_pair(std::min(s.id[i], s.id[j]), std::max(s.id[i], s.id[j]));
           std::vector<double> h(CM::history, 0.0);
-          if (const auto it = history->find(key); it != history->end()) h = it->second;
+          if constexpr (CM::history > 0)
+            if (const auto it = history->find(key); it != history->end()) h = it->second;
           auto flip = [&] {
             if (swapped) for (int k = 0; k < CM::history; ++k) if ((s.history.odd >> k) & 1u) h[k] = -h[k];
           };
@@ -432,12 +439,16 @@ void compute_forces_all_pairs(const Model& model, State& s, const VelGrad& rate,
           const Vec3 wj = s.rotations() ? s.angular_velocity[j] : Vec3{0, 0, 0};
           const bool touch = rate.sheared()
               ? contact_force_history<true>(cm, s.position[i], xj, s.velocity[i], s.velocity[j], wi, wj, s.radius[i],
-                                            s.radius[j], rate, model.dt, h.data(), &dissipated, c)
+                                            s.radius[j], s.mass[i], s.mass[j], rate, model.dt, h.data(), &dissipated, c)
               : contact_force_history<false>(cm, s.position[i], xj, s.velocity[i], s.velocity[j], wi, wj, s.radius[i],
-                                             s.radius[j], rate, model.dt, h.data(), &dissipated, c);
+                                             s.radius[j], s.mass[i], s.mass[j], rate, model.dt, h.data(), &dissipated, c);
           flip();
-          if (!touch) { history->erase(key); continue; }
-          (*history)[key] = h;
+          if constexpr (CM::history > 0) {
+            if (!touch) { history->erase(key); continue; }
+            (*history)[key] = h;
+          } else if (!touch) {
+            continue;
+          }
           s.friction_dissipated += dissipated;
           s.force[j] += c.fj; s.force[i] -= c.fj;
           if (s.rotations()) { s.torque[i] += c.ti; s.torque[j] += c.tj; }

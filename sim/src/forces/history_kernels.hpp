@@ -50,6 +50,7 @@ struct HistoryInputs {
   VelGrad rate;                ///< [1/s]
   double dt;                   ///< [s]
   double* history;             ///< State::history.values (CM::history per listed pair)
+  const double* mass;          ///< per particle [kg] (read when a sub-model is per_pair)
 };
 
 #define DEM_HK __attribute__((always_inline)) inline
@@ -151,7 +152,7 @@ DEM_HK void history_body(const HistoryInputs<CM>& in, long p0, int n, HistoryChu
       std::fill(H, H + kw * valid, 0.0);
       continue;
     }
-    T h[kw];
+    T h[kw > 0 ? kw : 1];
     std::int32_t L[W];   // the group's pairs, relative to its first
     for (int l = 0; l < W; ++l) L[l] = std::min(l, valid - 1);
     for (int k = 0; k + 4 <= kw; k += 4) load_columns(H + k, L, kw, h[k], h[k + 1], h[k + 2], h[k + 3]);
@@ -165,8 +166,10 @@ DEM_HK void history_body(const HistoryInputs<CM>& in, long p0, int n, HistoryChu
     T vxi, vyi, vzi, vxj, vyj, vzj;
     load_columns(P + 4, I, 8, vxi, vyi, vzi, pad);
     load_columns(P + 4, J, 8, vxj, vyj, vzj, pad);
+    T mi = zero, mj = zero;
+    if constexpr (CM::per_pair) { mi = gather<T>(in.mass, I, 1, 0); mj = gather<T>(in.mass, J, 1, 0); }
     const contact::PairForces<T> c =
-        model.template advance<Sheared>(sep, ri, rj, vxj - vxi, vyj - vyi, vzj - vzi, wi, wj, rate, dt, h);
+        model.template advance<Sheared>(sep, ri, rj, mi, mj, vxj - vxi, vyj - vyi, vzj - vzi, wi, wj, rate, dt, h);
     store(out.fx + q, select(touch, c.fj.x, mz));
     store(out.fy + q, select(touch, c.fj.y, mz));
     store(out.fz + q, select(touch, c.fj.z, mz));

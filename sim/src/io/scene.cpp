@@ -575,6 +575,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   r.get("contact", "allow_attractive", attractive);
   m.contact.set_allow_attractive(attractive);
   r.get("contact", "background_damping_kg_s", m.background_damping);
+  m.contact.set_scale(m.radius_min, m.density);   // for a law's time scale (Hertz's Rayleigh time)
   read_contact_section(r, m.contact, origin, root);
   std::string integrator = "velocity_verlet";
   r.get("integration", "integrator", integrator);

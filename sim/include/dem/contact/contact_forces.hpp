@@ -45,12 +45,14 @@ void for_each_contact_force(const Model& model, const State& s, const NeighborLi
       ContactForce c{p, i, j, d, r, delta, d * (1.0 / r), 0.0, Vec3{0, 0, 0}, false, 0.0, 0.0, 0.0, 0.0, 0.0};
       const Vec3 v_rel = (s.velocity[j] - s.velocity[i]) + rate.apply(d);
       const NormalGeometry<double> g{r, c.n.x, c.n.y, c.n.z, delta, -dot(v_rel, c.n), v_rel.x, v_rel.y, v_rel.z};
-      if constexpr (CM::history > 0) {
-        static double kZero[CM::history] = {};
+      if constexpr (CM::history_loop) {
+        static double kZero[CM::history + 1] = {};
         const double a12 = s.radius[i] * s.radius[j] / (s.radius[i] + s.radius[j]);
+        const double m_r = CM::per_pair ? s.mass[i] * s.mass[j] / (s.mass[i] + s.mass[j]) : 0.0;
         double* h = with_history ? const_cast<double*>(s.history.values.data()) + p * CM::history : kZero;
-        c.fn = cm.normal_force(g, a12, h, false);   // read only (advance = false)
+        c.fn = cm.normal_force(g, a12, h, false, m_r);   // read only (advance = false)
         if constexpr (CM::normal_history > 0) c.fn_elastic = cm.normal.force(delta, a12, h);
+        else if constexpr (CM::per_pair_normal) c.fn_elastic = cm.normal.elastic(delta, a12);
         else c.fn_elastic = cm.normal.template bind<double>().force(g);
         c.kn = cm.normal.tangent_stiffness(delta, a12, h);
         if constexpr (CM::rotations) {
@@ -59,9 +61,14 @@ void for_each_contact_force(const Model& model, const State& s, const NeighborLi
           const Vec3 wj = s.rotations() ? s.angular_velocity[j] : Vec3{0, 0, 0};
           const Vec3 v_contact = v_rel - cross(wi * ai + wj * aj, c.n);
           const double* ht = h + CM::tangential_offset;
-          c.ft = cm.tangential.force(TangentialInput{c.n, v_contact, std::max(c.fn, 0.0)}, ht);
+          const TangentialInput in{c.n, v_contact, std::max(c.fn, 0.0), delta, a12};
+          c.ft = cm.tangential.force(in, ht);
           c.sliding = ht[3] != 0.0;
-          if (!c.sliding) c.kt = cm.tangential.stiffness();
+          if constexpr (PerPairOf<typename std::decay_t<decltype(cm.tangential)>>::value) {
+            if (!c.sliding) c.kt = cm.tangential.stiffness(in);
+          } else {
+            if (!c.sliding) c.kt = cm.tangential.stiffness();
+          }
           c.spring_tangential = Vec3{ht[0], ht[1], ht[2]};
           using Rolling = typename CM::RollingModel;
           const double* hr = h + CM::rolling_offset;

@@ -18,10 +18,12 @@
 #include <utility>
 
 #include "dem/contact/geometry.hpp"
+#include "dem/contact/normal_hertz.hpp"
 #include "dem/contact/normal_linear.hpp"
 #include "dem/contact/normal_luding.hpp"
 #include "dem/contact/rolling.hpp"
 #include "dem/contact/tangential.hpp"
+#include "dem/contact/tangential_mindlin.hpp"
 #include "dem/core/model.hpp"
 #include "dem/core/state.hpp"
 
@@ -34,6 +36,10 @@ template <class S> struct HistoryOf<S, std::void_t<decltype(S::history)>> { stat
 /// template on the lane type); one without history needs none (its Bound<T> is its body).
 template <class S, class = void> struct LaneBodyOf { static constexpr bool value = HistoryOf<S>::value == 0; };
 template <class S> struct LaneBodyOf<S, std::void_t<decltype(S::lane_body)>> { static constexpr bool value = S::lane_body; };
+/// Whether a sub-model reads its pair beyond the geometry (`per_pair = true`: its body takes a
+/// PairLanes<T>, the overlap, a12 and the reduced mass; Hertz's damping, Mindlin's stiffness).
+template <class S, class = void> struct PerPairOf { static constexpr bool value = false; };
+template <class S> struct PerPairOf<S, std::void_t<decltype(S::per_pair)>> { static constexpr bool value = S::per_pair; };
 
 /// What one pair of a model with history gives, in lanes of T: the force on j [N] (on i: its
 /// negative), the torques on i and j [N m], and the energy lost to the sliders this step [J].
@@ -59,6 +65,12 @@ struct ContactModel {
   static constexpr int rolling_offset = normal_history + Tangential::history;
   static constexpr int history = normal_history + Tangential::history + Rolling::history;
   static constexpr bool rotations = Tangential::rotations;
+  /// A sub-model reads the pair beyond its geometry (PairLanes: the pair loops pass the masses).
+  static constexpr bool per_pair_normal = PerPairOf<Normal>::value;
+  static constexpr bool per_pair = per_pair_normal || PerPairOf<Tangential>::value;
+  /// Runs on the loops of the models with history (pair_loop_history and the history kernels,
+  /// which call `advance`): it has history, or a sub-model reads its pair (Hertz alone).
+  static constexpr bool history_loop = history > 0 || per_pair;
   /// Runs in the vector kernels: no history, or every sub-model with history has a body on lanes
   /// (a sub-model without one falls back to the scalar reference loop, pair_loop_history).
   static constexpr bool vectorised = history == 0 || (LaneBodyOf<Normal>::value && LaneBodyOf<Tangential>::value &&
@@ -86,34 +98,53 @@ struct ContactModel {
   template <class T> Bound<T> bind() const {
     return {normal.template bind<T>(), damping.template bind<T>(), lanes::mask_of<T>(attractive), lanes::splat<T>(0.0)};
   }
-  /// The normal force of one pair [N] (a12 = r_i r_j/(r_i + r_j) [m], h the contact's history):
-  /// `advance` updates a history normal's state (the pair loop), otherwise it is only read.
+  /// The normal force of one pair [N] (a12 = r_i r_j/(r_i + r_j) [m], h the contact's history,
+  /// m_r the pair's reduced mass [kg], read by a per-pair normal law): `advance` updates a history
+  /// normal's state (the pair loop), otherwise it is only read.
   __attribute__((always_inline)) double normal_force(const NormalGeometry<double>& g, double a12 = 0,
-                                                     double* h = nullptr, bool advance = false) const {
+                                                     double* h = nullptr, bool advance = false,
+                                                     double m_r = 0) const {
     if constexpr (normal_history > 0) {
+      (void)m_r;
       const double f = advance ? normal.update(g.delta, a12, h) : normal.force(g.delta, a12, h);
       return f + damping.template bind<double>().force(g);
+    } else if constexpr (per_pair_normal) {
+      (void)h; (void)advance;
+      return clamp(normal.force(g, PairLanes<double>{g.delta, a12, m_r}));
     } else {
-      (void)a12; (void)h; (void)advance;
+      (void)a12; (void)h; (void)advance; (void)m_r;
       return bind<double>().normal_force(g);
     }
   }
+  /// The no-tension clamp of a per-pair normal law's force (as Bound::normal_force's).
+  template <class T> __attribute__((always_inline)) T clamp(T f) const {
+    const T zero = lanes::splat<T>(0.0);
+    return lanes::select(lanes::greater(f, zero) | lanes::mask_of<T>(attractive), f, zero);
+  }
   /// One step of one pair of a model with history, in lanes of T (double: the reference loop):
-  /// the separation `sep` of the radii ri, rj [m], the velocity difference v_j - v_i [m/s], the
+  /// the separation `sep` of the radii ri, rj [m], the masses mi, mj [kg] (read only by a
+  /// per-pair sub-model: others may pass zeros), the velocity difference v_j - v_i [m/s], the
   /// angular velocities [1/s], the rate [1/s] and dt [s]; h (CM::history entries) is advanced.
   /// The contact is assumed (the caller discards pairs out of contact). Every sub-model's body
   /// is called here in the fixed order normal -> damping -> tangential -> rolling.
   template <bool Sheared, class T>
-  __attribute__((always_inline)) PairForces<T> advance(const Separation<T>& sep, T ri, T rj, T dvx, T dvy, T dvz,
+  __attribute__((always_inline)) PairForces<T> advance(const Separation<T>& sep, T ri, T rj, T mi, T mj, T dvx, T dvy,
+                                                       T dvz,
                                                        const V3<T>& wi, const V3<T>& wj, const RateLanes<T>& rate,
                                                        T dt, T* h) const {
     using lanes::splat;
     T vx, vy, vz;
     relative_velocity<Sheared>(sep, dvx, dvy, dvz, rate, vx, vy, vz);
     const NormalGeometry<T> g = normal_geometry(sep, vx, vy, vz);
+    PairLanes<T> pair{g.delta, splat<T>(0.0), splat<T>(0.0)};
+    if constexpr (normal_history > 0 || per_pair) pair.a12 = ri * rj / (ri + rj);
+    if constexpr (per_pair) pair.m_r = mi * mj / (mi + mj);
+    else { (void)mi; (void)mj; }
     T fn;
     if constexpr (normal_history > 0)
-      fn = normal.update(g.delta, ri * rj / (ri + rj), h) + damping.template bind<T>().force(g);
+      fn = normal.update(g.delta, pair.a12, h) + damping.template bind<T>().force(g);
+    else if constexpr (per_pair_normal)
+      fn = clamp(normal.force(g, pair));
     else
       fn = bind<T>().normal_force(g);
     const V3<T> n{g.nx, g.ny, g.nz};
@@ -123,7 +154,11 @@ struct ContactModel {
       const T ai = ri - half * g.delta, aj = rj - half * g.delta;   // lever arms to the overlap's middle
       const V3<T> v_contact = V3<T>{vx, vy, vz} - cross(wi * ai + wj * aj, n);
       const T fn_plus = lanes::select(lanes::less(fn, zero), zero, fn);   // std::max(fn, 0.0)
-      const V3<T> ft = tangential.update(n, v_contact, fn_plus, dt, h + tangential_offset, out.dissipated);
+      V3<T> ft;
+      if constexpr (PerPairOf<Tangential>::value)
+        ft = tangential.update(n, v_contact, fn_plus, dt, h + tangential_offset, out.dissipated, pair);
+      else
+        ft = tangential.update(n, v_contact, fn_plus, dt, h + tangential_offset, out.dissipated);
       const V3<T> nxf = cross(n, ft);
       out.fj = out.fj + ft;
       out.ti = nxf * (-ai);   // (a_i n) x (-f_j)
@@ -141,7 +176,7 @@ struct ContactModel {
   }
   /// Elastic energy of the normal sub-model alone [J].
   double normal_energy(double delta, double a12, const double* h) const {
-    if constexpr (normal_history > 0) return normal.energy(delta, a12, h);
+    if constexpr (normal_history > 0 || per_pair_normal) return normal.energy(delta, a12, h);
     else { (void)a12; (void)h; return normal.energy(delta); }
   }
   /// Elastic energy stored in a contact of overlap delta [m] and history h [J].
@@ -163,8 +198,8 @@ using FrictionalRolling = Model3<LinearSpring, CundallStrack, RollingSpring>;
 /// The sub-models the composition is generated from, slot by slot (the registry, registry.hpp,
 /// lists their descriptions in the same order). A new sub-model is one entry here.
 template <class... T> struct TypeList { static constexpr int size = sizeof...(T); };
-using NormalModels = TypeList<LinearSpring, LudingNormal>;
-using TangentialModels = TypeList<NoTangential, CundallStrack>;
+using NormalModels = TypeList<LinearSpring, LudingNormal, HertzNormal>;
+using TangentialModels = TypeList<NoTangential, CundallStrack, MindlinTangential, MindlinForceTangential>;
 using RollingSlotModels = TypeList<NoRolling, RollingSpring, RollingTwisting>;
 
 namespace detail {

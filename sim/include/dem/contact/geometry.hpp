@@ -59,6 +59,14 @@ struct NormalGeometry {
   T vx, vy, vz;   ///< v_rel [m/s]
 };
 
+/// What a sub-model that declares `per_pair = true` reads of its pair beyond the geometry
+/// (Hertz's damping, Mindlin's stiffness): the overlap delta [m] (as NormalGeometry's, not
+/// clamped), a12 = r_i r_j/(r_i + r_j) [m] and the reduced mass m_r = m_i m_j/(m_i + m_j) [kg].
+template <class T>
+struct PairLanes {
+  T delta, a12, m_r;
+};
+
 /// The velocity gradient L [1/s] in lanes (bound once, outside a kernel's loop).
 template <class T>
 struct RateLanes {

@@ -13,11 +13,14 @@ namespace dem::contact {
 
 /// What a tangential sub-model's `force` sees of a contact (the measurements): unit normal
 /// n (i to j), the relative velocity of the contact points v_c = (v_j - v_i) + L d - (a_i w_i + a_j w_j) x n [m/s] (a = r - delta/2, the lever arms
-/// to the middle of the overlap), and the normal force fn >= 0 [N] after the clamp.
+/// to the middle of the overlap), the normal force fn >= 0 [N] after the clamp, and for a
+/// per-pair law (Mindlin) the overlap delta [m] and a12 = r_i r_j/(r_i + r_j) [m].
 struct TangentialInput {
   Vec3 n;
   Vec3 v_contact;
   double fn;
+  double delta = 0;
+  double a12 = 0;
 };
 
 /// Frictionless: no tangential force.

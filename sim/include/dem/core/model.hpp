@@ -65,6 +65,12 @@ class ContactLaw {
   /// The normal sub-model's reference stiffness [N/m] for p* = 2<r>p/k (k, or k1 for Luding's law).
   double reference_stiffness() const { return reference_stiffness_; }
   void set_reference_stiffness(double k) { reference_stiffness_ = k; }
+  /// The smallest particle's radius [m] and the particles' density [kg/m^3], for a normal law
+  /// whose time scale needs them (Hertz's Rayleigh time): the scene loader sets them before the
+  /// contact keys are read.
+  double scale_radius() const { return scale_radius_; }
+  double scale_density() const { return scale_density_; }
+  void set_scale(double radius_min, double density) { scale_radius_ = radius_min; scale_density_ = density; ++stamp_; }
 
   /// Changes with every change of the choice or a value: the composed model cached for the pair
   /// loops (contact::compose) is used only while it matches.
@@ -82,6 +88,7 @@ class ContactLaw {
   std::map<std::string, double> values_;
   bool attractive_ = false;
   double time_step_stiffness_ = 0, time_step_damping_ = 0, reference_stiffness_ = 0;
+  double scale_radius_ = 0, scale_density_ = 0;
   std::uint64_t stamp_ = 0;
   mutable Cache cache_;
 };
