@@ -66,15 +66,37 @@ template <class T> DEM_HK T load_unaligned(const double* from) {
 }
 template <class T> DEM_HK void store_unaligned(double* to, T v) { std::memcpy(to, &v, sizeof(T)); }
 
+/// Where lane l's row starts: base + stride * idx[l] (particle records, image offsets: the index
+/// read again at each use, so that 8 lanes do not keep 8 addresses per record in registers) or
+/// base + stride * l (the history of consecutive pairs).
+template <class Index> struct Indexed {
+  const double* base;
+  const Index* idx;
+  long stride;
+  DEM_HK const double* operator[](int l) const { return base + stride * idx[l]; }
+};
+struct Consecutive {
+  double* base;
+  long stride;
+  DEM_HK double* operator[](int l) const { return base + stride * l; }
+};
+
+/// Lanes first .. of rows (the upper half of 8 lanes).
+template <class Rows> struct Shifted {
+  const Rows& rows;
+  int first;
+  DEM_HK auto operator[](int l) const { return rows[first + l]; }
+};
+
 /// Four consecutive doubles of each lane's row (row[l], l < W) as four lane values a b c d
 /// (column 0 .. 3): two-double halves transposed with GCC's vector shuffles (as the
 /// frictionless AVX2 kernel's load4), so that one source serves every width; 8 lanes are two
 /// groups of 4 joined.
-template <class T> DEM_HK void load_block(const double* const* row, T& a, T& b, T& c, T& d) {
+template <class T, class Rows> DEM_HK void load_block(const Rows& row, T& a, T& b, T& c, T& d) {
   if constexpr (lanes::width<T> == 8) {
     V4 a0, b0, c0, d0, a1, b1, c1, d1;
     load_block<V4>(row, a0, b0, c0, d0);
-    load_block<V4>(row + 4, a1, b1, c1, d1);
+    load_block<V4>(Shifted<Rows>{row, 4}, a1, b1, c1, d1);
     a = __builtin_shufflevector(a0, a1, 0, 1, 2, 3, 4, 5, 6, 7);
     b = __builtin_shufflevector(b0, b1, 0, 1, 2, 3, 4, 5, 6, 7);
     c = __builtin_shufflevector(c0, c1, 0, 1, 2, 3, 4, 5, 6, 7);
@@ -99,11 +121,11 @@ template <class T> DEM_HK void load_block(const double* const* row, T& a, T& b, 
 }
 
 /// load_block's inverse: columns a b c d back to four consecutive doubles of each lane's row.
-template <class T> DEM_HK void store_block(double* const* row, T a, T b, T c, T d) {
+template <class T, class Rows> DEM_HK void store_block(const Rows& row, T a, T b, T c, T d) {
   if constexpr (lanes::width<T> == 8) {
     store_block<V4>(row, __builtin_shufflevector(a, a, 0, 1, 2, 3), __builtin_shufflevector(b, b, 0, 1, 2, 3),
                     __builtin_shufflevector(c, c, 0, 1, 2, 3), __builtin_shufflevector(d, d, 0, 1, 2, 3));
-    store_block<V4>(row + 4, __builtin_shufflevector(a, a, 4, 5, 6, 7), __builtin_shufflevector(b, b, 4, 5, 6, 7),
+    store_block<V4>(Shifted<Rows>{row, 4}, __builtin_shufflevector(a, a, 4, 5, 6, 7), __builtin_shufflevector(b, b, 4, 5, 6, 7),
                     __builtin_shufflevector(c, c, 4, 5, 6, 7), __builtin_shufflevector(d, d, 4, 5, 6, 7));
   } else if constexpr (lanes::width<T> == 4) {
     const T t0 = __builtin_shufflevector(a, b, 0, 4, 2, 6);   // a0 b0 a2 b2
@@ -125,11 +147,11 @@ template <class T> DEM_HK void store_block(double* const* row, T a, T b, T c, T 
 
 /// Entries 0-2 of each lane's row (the angular velocities, Vec3: no fourth entry to read):
 /// entries 0-1 as two-double halves, transposed, entry 2 lane by lane.
-template <class T> DEM_HK void load_block3(const double* const* row, T& a, T& b, T& c) {
+template <class T, class Rows> DEM_HK void load_block3(const Rows& row, T& a, T& b, T& c) {
   if constexpr (lanes::width<T> == 8) {
     V4 a0, b0, c0, a1, b1, c1;
     load_block3<V4>(row, a0, b0, c0);
-    load_block3<V4>(row + 4, a1, b1, c1);
+    load_block3<V4>(Shifted<Rows>{row, 4}, a1, b1, c1);
     a = __builtin_shufflevector(a0, a1, 0, 1, 2, 3, 4, 5, 6, 7);
     b = __builtin_shufflevector(b0, b1, 0, 1, 2, 3, 4, 5, 6, 7);
     c = __builtin_shufflevector(c0, c1, 0, 1, 2, 3, 4, 5, 6, 7);
@@ -140,7 +162,7 @@ template <class T> DEM_HK void load_block3(const double* const* row, T& a, T& b,
     const T t1 = __builtin_shufflevector(h1, h3, 0, 1, 2, 3);
     a = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
     b = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
-    c = T{row[0][2], row[1][2], row[2][2], row[3][2]};
+    c = __builtin_shufflevector(V2{row[0][2], row[1][2]}, V2{row[2][2], row[3][2]}, 0, 1, 2, 3);
   } else {
     const V2 h0 = load_unaligned<V2>(row[0]), h1 = load_unaligned<V2>(row[1]);
     a = __builtin_shufflevector(h0, h1, 0, 2);
@@ -158,9 +180,7 @@ template <class T, int kw> DEM_HK void load_history(const double* H, T* h) {
   if constexpr (kw >= 4) {
     for (int k0 = 0; k0 < kw; k0 += 4) {
       const int k = k0 + 4 <= kw ? k0 : kw - 4;
-      const double* row[W];
-      for (int l = 0; l < W; ++l) row[l] = H + kw * l + k;
-      load_block(row, h[k], h[k + 1], h[k + 2], h[k + 3]);
+      load_block(Consecutive{const_cast<double*>(H) + k, kw}, h[k], h[k + 1], h[k + 2], h[k + 3]);
     }
   } else {
     for (int k = 0; k < kw; ++k)
@@ -172,9 +192,7 @@ template <class T, int kw> DEM_HK void store_history(double* H, const T* h) {
   if constexpr (kw >= 4) {
     for (int k0 = 0; k0 < kw; k0 += 4) {
       const int k = k0 + 4 <= kw ? k0 : kw - 4;
-      double* row[W];
-      for (int l = 0; l < W; ++l) row[l] = H + kw * l + k;
-      store_block(row, h[k], h[k + 1], h[k + 2], h[k + 3]);
+      store_block(Consecutive{H + k, kw}, h[k], h[k + 1], h[k + 2], h[k + 3]);
     }
   } else {
     for (int k = 0; k < kw; ++k)
@@ -184,26 +202,18 @@ template <class T, int kw> DEM_HK void store_history(double* H, const T* h) {
 
 /// One group of W pairs (indices I, J, images C; their history rows at H, CM::history doubles
 /// each), results at out[q .. q+W).
-template <class T, bool Sheared, class CM>
+template <class T, bool Sheared, class CM, class Image>
 DEM_HK void history_group(const HistoryInputs<CM>& in, const CM& model, const contact::RateLanes<T>& rate, T dt,
-                          const std::int32_t* I, const std::int32_t* J, const std::int32_t* C, double* H,
+                          const std::int32_t* I, const std::int32_t* J, const Image* C, double* H,
                           HistoryChunk& out, int q) {
   using lanes::select;
   constexpr int W = lanes::width<T>, kw = CM::history;
   const T mz = lanes::splat<T>(-0.0), zero = lanes::splat<T>(0.0);
   const double* P = in.packed;
-  const double* ri_row[W];
-  const double* rj_row[W];
-  const double* off_row[W];
-  for (int l = 0; l < W; ++l) {
-    ri_row[l] = P + 8L * I[l];
-    rj_row[l] = P + 8L * J[l];
-    off_row[l] = in.off + 4 * C[l];
-  }
   T xi, yi, zi, ri, xj, yj, zj, rj, ox, oy, oz, pad;
-  load_block(ri_row, xi, yi, zi, ri);
-  load_block(rj_row, xj, yj, zj, rj);
-  load_block(off_row, ox, oy, oz, pad);
+  load_block(Indexed<std::int32_t>{P, I, 8}, xi, yi, zi, ri);
+  load_block(Indexed<std::int32_t>{P, J, 8}, xj, yj, zj, rj);
+  load_block(Indexed<Image>{in.off, C, 4}, ox, oy, oz, pad);
   contact::Separation<T> sep = contact::separation(xi, yi, zi, ri, xj + ox, yj + oy, zj + oz, rj);
   const auto touch = contact::touching(sep);
   if (!lanes::any(touch)) {   // no contact in the group: nothing to add, the springs end
@@ -216,22 +226,12 @@ DEM_HK void history_group(const HistoryInputs<CM>& in, const CM& model, const co
   load_history<T, kw>(H, h);
   contact::V3<T> wi{zero, zero, zero}, wj{zero, zero, zero};
   if constexpr (CM::rotations) {
-    const double* wi_row[W];
-    const double* wj_row[W];
-    for (int l = 0; l < W; ++l) {
-      wi_row[l] = &in.w[I[l]].x;
-      wj_row[l] = &in.w[J[l]].x;
-    }
-    load_block3(wi_row, wi.x, wi.y, wi.z);
-    load_block3(wj_row, wj.x, wj.y, wj.z);
+    load_block3(Indexed<std::int32_t>{&in.w[0].x, I, 3}, wi.x, wi.y, wi.z);
+    load_block3(Indexed<std::int32_t>{&in.w[0].x, J, 3}, wj.x, wj.y, wj.z);
   }
-  for (int l = 0; l < W; ++l) {   // velocities: entries 4-7 of the records
-    ri_row[l] += 4;
-    rj_row[l] += 4;
-  }
-  T vxi, vyi, vzi, vxj, vyj, vzj;
-  load_block(ri_row, vxi, vyi, vzi, pad);
-  load_block(rj_row, vxj, vyj, vzj, pad);
+  T vxi, vyi, vzi, vxj, vyj, vzj;   // velocities: entries 4-7 of the records
+  load_block(Indexed<std::int32_t>{P + 4, I, 8}, vxi, vyi, vzi, pad);
+  load_block(Indexed<std::int32_t>{P + 4, J, 8}, vxj, vyj, vzj, pad);
   contact::PairForces<T> c =
       model.template advance<Sheared>(sep, ri, rj, vxj - vxi, vyj - vyi, vzj - vzi, wi, wj, rate, dt, h);
   store(out.fx + q, select(touch, c.fj.x, mz));
@@ -261,13 +261,13 @@ DEM_HK void history_body(const HistoryInputs<CM>& in, long p0, int n, HistoryChu
   const int whole = n / W * W;
   for (int q = 0; q < whole; q += W) {
     const long p = p0 + q;
-    std::int32_t C[W];
-    for (int l = 0; l < W; ++l) C[l] = in.image[p + l];
-    history_group<T, Sheared>(in, model, rate, dt, in.pair_i + p, in.partner + p, C, in.history + kw * p, out, q);
+    history_group<T, Sheared>(in, model, rate, dt, in.pair_i + p, in.partner + p, in.image + p, in.history + kw * p,
+                              out, q);
   }
   if (whole == n) return;
   const int valid = n - whole;
-  std::int32_t I[W], J[W], C[W];
+  std::int32_t I[W], J[W];
+  std::uint8_t C[W];
   alignas(64) double H[W * kw];
   for (int l = 0; l < W; ++l) {
     const long p = p0 + whole + std::min(l, valid - 1);
