@@ -192,11 +192,17 @@ void pair_loop_vector(PairKernel kernel, const ContactLaw& law, const State& s, 
 // Pass 2 of a chunk of a model with history: forces, torques and dissipation in list order, as
 // pair_loop_history adds them (a pair out of contact carries -0.0 everywhere: no change).
 // `current`, `fi`, `ti` carry the running sums of particle `current` across chunks.
+// The running sums are copied into locals for the loop: through the references (one of them
+// into ForceScratch, which may alias f and tq for all the compiler knows) every pair stored and
+// reloaded them, a store-to-load chain that was a quarter of this pass's time.
 template <bool Spin>
 void add_history_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, const kernels::HistoryChunk& c, int end,
                        Vec3* f, Vec3* tq, std::vector<std::vector<SpilledForce>>& spill,
                        std::vector<std::vector<SpilledForce>>& spill_torque, const std::uint16_t* block_of,
-                       int& current, Vec3& fi, Vec3& ti, double& dissipated) {
+                       int& current_sum, Vec3& fi_sum, Vec3& ti_sum, double& dissipated_sum) {
+  int current = current_sum;
+  Vec3 fi = fi_sum, ti = ti_sum;
+  double dissipated = dissipated_sum;
   for (int q = 0; q < n; ++q) {
     const int i = pi[q], j = pj[q];
     if (i != current) {
@@ -219,6 +225,10 @@ void add_history_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, co
     if (Spin) ti += Vec3{c.tix[q], c.tiy[q], c.tiz[q]};
     dissipated += c.d[q];
   }
+  current_sum = current;
+  fi_sum = fi;
+  ti_sum = ti;
+  dissipated_sum = dissipated;
 }
 
 // The pair loop of a model with history on a vector kernel (history_kernels.hpp): the same bits

@@ -55,136 +55,231 @@ struct HistoryInputs {
 
 #define DEM_HK __attribute__((always_inline)) inline
 
-template <class T> DEM_HK void store(double* to, T v) { std::memcpy(to, &v, sizeof(T)); }
+/// Lanes of T to W doubles at `to` (the 64-byte aligned chunk arrays, q a multiple of W).
+template <class T> DEM_HK void store(double* to, T v) { *reinterpret_cast<T*>(to) = v; }
 
-/// Lane l of T: entry `field` of the record of index idx[l] (records of `stride` doubles).
-template <class T> DEM_HK T gather(const double* base, const std::int32_t* idx, long stride, int field) {
-  T r;
-  for (int l = 0; l < T::width; ++l) r.v[l] = base[stride * idx[l] + field];
-  return r;
+typedef double V2 __attribute__((vector_size(16)));
+typedef double V4 __attribute__((vector_size(32)));
+template <class T> DEM_HK T load_unaligned(const double* from) {
+  T v;
+  std::memcpy(&v, from, sizeof(T));
+  return v;
 }
+template <class T> DEM_HK void store_unaligned(double* to, T v) { std::memcpy(to, &v, sizeof(T)); }
 
-/// Entries 0-3 of the records at base + stride * idx[l] as four lane values (a b c d), loaded as
-/// two-double halves and transposed (as the frictionless AVX2 kernel's load4, written with GCC's
-/// vector shuffles so that one source serves every target); lanes of 8 are gathered.
-template <class T> DEM_HK void load_columns(const double* base, const std::int32_t* idx, long stride, T& a, T& b,
-                                            T& c, T& d) {
-  if constexpr (T::width == 4) {
-    typedef double V2 __attribute__((vector_size(16)));
-    const double *r0 = base + stride * idx[0], *r1 = base + stride * idx[1], *r2 = base + stride * idx[2],
-                 *r3 = base + stride * idx[3];
-    V2 h0, h1, h2, h3;   // entries 0-1 of records 0-3
-    std::memcpy(&h0, r0, 16); std::memcpy(&h1, r1, 16); std::memcpy(&h2, r2, 16); std::memcpy(&h3, r3, 16);
-    typename T::V t0 = __builtin_shufflevector(h0, h2, 0, 1, 2, 3);   // r0 r0 r2 r2
-    typename T::V t1 = __builtin_shufflevector(h1, h3, 0, 1, 2, 3);   // r1 r1 r3 r3
-    a.v = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
-    b.v = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
-    std::memcpy(&h0, r0 + 2, 16); std::memcpy(&h1, r1 + 2, 16); std::memcpy(&h2, r2 + 2, 16); std::memcpy(&h3, r3 + 2, 16);
-    t0 = __builtin_shufflevector(h0, h2, 0, 1, 2, 3);
-    t1 = __builtin_shufflevector(h1, h3, 0, 1, 2, 3);
-    c.v = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
-    d.v = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
-  } else if constexpr (T::width == 2) {
-    typedef double V2 __attribute__((vector_size(16)));
-    const double *r0 = base + stride * idx[0], *r1 = base + stride * idx[1];
-    V2 h0, h1;
-    std::memcpy(&h0, r0, 16); std::memcpy(&h1, r1, 16);
-    a.v = __builtin_shufflevector(h0, h1, 0, 2);
-    b.v = __builtin_shufflevector(h0, h1, 1, 3);
-    std::memcpy(&h0, r0 + 2, 16); std::memcpy(&h1, r1 + 2, 16);
-    c.v = __builtin_shufflevector(h0, h1, 0, 2);
-    d.v = __builtin_shufflevector(h0, h1, 1, 3);
+/// Where lane l's row starts: base + stride * idx[l] (particle records, image offsets: the index
+/// read again at each use, so that 8 lanes do not keep 8 addresses per record in registers) or
+/// base + stride * l (the history of consecutive pairs).
+template <class Index> struct Indexed {
+  const double* base;
+  const Index* idx;
+  long stride;
+  DEM_HK const double* operator[](int l) const { return base + stride * idx[l]; }
+};
+struct Consecutive {
+  double* base;
+  long stride;
+  DEM_HK double* operator[](int l) const { return base + stride * l; }
+};
+
+/// Lanes first .. of rows (the upper half of 8 lanes).
+template <class Rows> struct Shifted {
+  const Rows& rows;
+  int first;
+  DEM_HK auto operator[](int l) const { return rows[first + l]; }
+};
+
+/// Four consecutive doubles of each lane's row (row[l], l < W) as four lane values a b c d
+/// (column 0 .. 3): two-double halves transposed with GCC's vector shuffles (as the
+/// frictionless AVX2 kernel's load4), so that one source serves every width; 8 lanes are two
+/// groups of 4 joined.
+template <class T, class Rows> DEM_HK void load_block(const Rows& row, T& a, T& b, T& c, T& d) {
+  if constexpr (lanes::width<T> == 8) {
+    V4 a0, b0, c0, d0, a1, b1, c1, d1;
+    load_block<V4>(row, a0, b0, c0, d0);
+    load_block<V4>(Shifted<Rows>{row, 4}, a1, b1, c1, d1);
+    a = __builtin_shufflevector(a0, a1, 0, 1, 2, 3, 4, 5, 6, 7);
+    b = __builtin_shufflevector(b0, b1, 0, 1, 2, 3, 4, 5, 6, 7);
+    c = __builtin_shufflevector(c0, c1, 0, 1, 2, 3, 4, 5, 6, 7);
+    d = __builtin_shufflevector(d0, d1, 0, 1, 2, 3, 4, 5, 6, 7);
+  } else if constexpr (lanes::width<T> == 4) {
+    for (int half = 0; half < 2; ++half) {   // columns 0-1, then 2-3
+      const V2 h0 = load_unaligned<V2>(row[0] + 2 * half), h1 = load_unaligned<V2>(row[1] + 2 * half);
+      const V2 h2 = load_unaligned<V2>(row[2] + 2 * half), h3 = load_unaligned<V2>(row[3] + 2 * half);
+      const T t0 = __builtin_shufflevector(h0, h2, 0, 1, 2, 3);   // r0 r0 r2 r2
+      const T t1 = __builtin_shufflevector(h1, h3, 0, 1, 2, 3);   // r1 r1 r3 r3
+      (half ? c : a) = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
+      (half ? d : b) = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
+    }
   } else {
-    a = gather<T>(base, idx, stride, 0);
-    b = gather<T>(base, idx, stride, 1);
-    c = gather<T>(base, idx, stride, 2);
-    d = gather<T>(base, idx, stride, 3);
+    static_assert(lanes::width<T> == 2);
+    for (int half = 0; half < 2; ++half) {
+      const V2 h0 = load_unaligned<V2>(row[0] + 2 * half), h1 = load_unaligned<V2>(row[1] + 2 * half);
+      (half ? c : a) = __builtin_shufflevector(h0, h1, 0, 2);
+      (half ? d : b) = __builtin_shufflevector(h0, h1, 1, 3);
+    }
   }
 }
 
-/// Entries 0-2 of records of `stride` doubles (the angular velocities, Vec3: no fourth entry to
-/// read): entries 0-1 as two-double halves, transposed, entry 2 gathered.
-template <class T> DEM_HK void load_columns3(const double* base, const std::int32_t* idx, long stride, T& a, T& b,
-                                             T& c) {
-  if constexpr (T::width == 4) {
-    typedef double V2 __attribute__((vector_size(16)));
-    V2 h0, h1, h2, h3;
-    std::memcpy(&h0, base + stride * idx[0], 16); std::memcpy(&h1, base + stride * idx[1], 16);
-    std::memcpy(&h2, base + stride * idx[2], 16); std::memcpy(&h3, base + stride * idx[3], 16);
-    const typename T::V t0 = __builtin_shufflevector(h0, h2, 0, 1, 2, 3);
-    const typename T::V t1 = __builtin_shufflevector(h1, h3, 0, 1, 2, 3);
-    a.v = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
-    b.v = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
+/// load_block's inverse: columns a b c d back to four consecutive doubles of each lane's row.
+template <class T, class Rows> DEM_HK void store_block(const Rows& row, T a, T b, T c, T d) {
+  if constexpr (lanes::width<T> == 8) {
+    store_block<V4>(row, __builtin_shufflevector(a, a, 0, 1, 2, 3), __builtin_shufflevector(b, b, 0, 1, 2, 3),
+                    __builtin_shufflevector(c, c, 0, 1, 2, 3), __builtin_shufflevector(d, d, 0, 1, 2, 3));
+    store_block<V4>(Shifted<Rows>{row, 4}, __builtin_shufflevector(a, a, 4, 5, 6, 7), __builtin_shufflevector(b, b, 4, 5, 6, 7),
+                    __builtin_shufflevector(c, c, 4, 5, 6, 7), __builtin_shufflevector(d, d, 4, 5, 6, 7));
+  } else if constexpr (lanes::width<T> == 4) {
+    const T t0 = __builtin_shufflevector(a, b, 0, 4, 2, 6);   // a0 b0 a2 b2
+    const T t1 = __builtin_shufflevector(a, b, 1, 5, 3, 7);   // a1 b1 a3 b3
+    const T t2 = __builtin_shufflevector(c, d, 0, 4, 2, 6);   // c0 d0 c2 d2
+    const T t3 = __builtin_shufflevector(c, d, 1, 5, 3, 7);   // c1 d1 c3 d3
+    store_unaligned(row[0], __builtin_shufflevector(t0, t2, 0, 1, 4, 5));
+    store_unaligned(row[1], __builtin_shufflevector(t1, t3, 0, 1, 4, 5));
+    store_unaligned(row[2], __builtin_shufflevector(t0, t2, 2, 3, 6, 7));
+    store_unaligned(row[3], __builtin_shufflevector(t1, t3, 2, 3, 6, 7));
   } else {
-    a = gather<T>(base, idx, stride, 0);
-    b = gather<T>(base, idx, stride, 1);
+    static_assert(lanes::width<T> == 2);
+    store_unaligned(row[0], V2{a[0], b[0]});
+    store_unaligned(row[0] + 2, V2{c[0], d[0]});
+    store_unaligned(row[1], V2{a[1], b[1]});
+    store_unaligned(row[1] + 2, V2{c[1], d[1]});
   }
-  c = gather<T>(base, idx, stride, 2);
 }
 
-/// Pass 1 of a chunk for lanes of T: pairs p0 .. p0+n-1.
+/// Entries 0-2 of each lane's row (the angular velocities, Vec3: no fourth entry to read):
+/// entries 0-1 as two-double halves, transposed, entry 2 lane by lane.
+template <class T, class Rows> DEM_HK void load_block3(const Rows& row, T& a, T& b, T& c) {
+  if constexpr (lanes::width<T> == 8) {
+    V4 a0, b0, c0, a1, b1, c1;
+    load_block3<V4>(row, a0, b0, c0);
+    load_block3<V4>(Shifted<Rows>{row, 4}, a1, b1, c1);
+    a = __builtin_shufflevector(a0, a1, 0, 1, 2, 3, 4, 5, 6, 7);
+    b = __builtin_shufflevector(b0, b1, 0, 1, 2, 3, 4, 5, 6, 7);
+    c = __builtin_shufflevector(c0, c1, 0, 1, 2, 3, 4, 5, 6, 7);
+  } else if constexpr (lanes::width<T> == 4) {
+    const V2 h0 = load_unaligned<V2>(row[0]), h1 = load_unaligned<V2>(row[1]);
+    const V2 h2 = load_unaligned<V2>(row[2]), h3 = load_unaligned<V2>(row[3]);
+    const T t0 = __builtin_shufflevector(h0, h2, 0, 1, 2, 3);
+    const T t1 = __builtin_shufflevector(h1, h3, 0, 1, 2, 3);
+    a = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
+    b = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
+    c = __builtin_shufflevector(V2{row[0][2], row[1][2]}, V2{row[2][2], row[3][2]}, 0, 1, 2, 3);
+  } else {
+    const V2 h0 = load_unaligned<V2>(row[0]), h1 = load_unaligned<V2>(row[1]);
+    a = __builtin_shufflevector(h0, h1, 0, 2);
+    b = __builtin_shufflevector(h0, h1, 1, 3);
+    c = T{row[0][2], row[1][2]};
+  }
+}
+
+/// The history of W consecutive pairs (rows of CM::history doubles from H) into lanes h[k], and
+/// back: blocks of four columns transposed (a width that is not a multiple of 4 ends with a
+/// block overlapping the one before it: its shared columns are loaded and stored twice, with
+/// the same values); fewer than four columns lane by lane.
+template <class T, int kw> DEM_HK void load_history(const double* H, T* h) {
+  constexpr int W = lanes::width<T>;
+  if constexpr (kw >= 4) {
+    for (int k0 = 0; k0 < kw; k0 += 4) {
+      const int k = k0 + 4 <= kw ? k0 : kw - 4;
+      load_block(Consecutive{const_cast<double*>(H) + k, kw}, h[k], h[k + 1], h[k + 2], h[k + 3]);
+    }
+  } else {
+    for (int k = 0; k < kw; ++k)
+      for (int l = 0; l < W; ++l) h[k][l] = H[kw * l + k];
+  }
+}
+template <class T, int kw> DEM_HK void store_history(double* H, const T* h) {
+  constexpr int W = lanes::width<T>;
+  if constexpr (kw >= 4) {
+    for (int k0 = 0; k0 < kw; k0 += 4) {
+      const int k = k0 + 4 <= kw ? k0 : kw - 4;
+      store_block(Consecutive{H + k, kw}, h[k], h[k + 1], h[k + 2], h[k + 3]);
+    }
+  } else {
+    for (int k = 0; k < kw; ++k)
+      for (int l = 0; l < W; ++l) H[kw * l + k] = h[k][l];
+  }
+}
+
+/// One group of W pairs (indices I, J, images C; their history rows at H, CM::history doubles
+/// each), results at out[q .. q+W).
+template <class T, bool Sheared, class CM, class Image>
+DEM_HK void history_group(const HistoryInputs<CM>& in, const CM& model, const contact::RateLanes<T>& rate, T dt,
+                          const std::int32_t* I, const std::int32_t* J, const Image* C, double* H,
+                          HistoryChunk& out, int q) {
+  using lanes::select;
+  constexpr int W = lanes::width<T>, kw = CM::history;
+  const T mz = lanes::splat<T>(-0.0), zero = lanes::splat<T>(0.0);
+  const double* P = in.packed;
+  T xi, yi, zi, ri, xj, yj, zj, rj, ox, oy, oz, pad;
+  load_block(Indexed<std::int32_t>{P, I, 8}, xi, yi, zi, ri);
+  load_block(Indexed<std::int32_t>{P, J, 8}, xj, yj, zj, rj);
+  load_block(Indexed<Image>{in.off, C, 4}, ox, oy, oz, pad);
+  contact::Separation<T> sep = contact::separation(xi, yi, zi, ri, xj + ox, yj + oy, zj + oz, rj);
+  const auto touch = contact::touching(sep);
+  if (!lanes::any(touch)) {   // no contact in the group: nothing to add, the springs end
+    for (double* a : {out.fx, out.fy, out.fz, out.tix, out.tiy, out.tiz, out.tjx, out.tjy, out.tjz, out.d})
+      store(a + q, mz);
+    std::fill(H, H + kw * W, 0.0);
+    return;
+  }
+  T h[kw > 0 ? kw : 1];
+  load_history<T, kw>(H, h);
+  contact::V3<T> wi{zero, zero, zero}, wj{zero, zero, zero};
+  if constexpr (CM::rotations) {
+    load_block3(Indexed<std::int32_t>{&in.w[0].x, I, 3}, wi.x, wi.y, wi.z);
+    load_block3(Indexed<std::int32_t>{&in.w[0].x, J, 3}, wj.x, wj.y, wj.z);
+  }
+  T vxi, vyi, vzi, vxj, vyj, vzj;   // velocities: entries 4-7 of the records
+  load_block(Indexed<std::int32_t>{P + 4, I, 8}, vxi, vyi, vzi, pad);
+  load_block(Indexed<std::int32_t>{P + 4, J, 8}, vxj, vyj, vzj, pad);
+  T mi = zero, mj = zero;   // masses: read only by a sub-model of the pair (per_pair: Hertz)
+  if constexpr (CM::per_pair)
+    for (int l = 0; l < W; ++l) mi[l] = in.mass[I[l]], mj[l] = in.mass[J[l]];
+  contact::PairForces<T> c =
+      model.template advance<Sheared>(sep, ri, rj, mi, mj, vxj - vxi, vyj - vyi, vzj - vzi, wi, wj, rate, dt, h);
+  store(out.fx + q, select(touch, c.fj.x, mz));
+  store(out.fy + q, select(touch, c.fj.y, mz));
+  store(out.fz + q, select(touch, c.fj.z, mz));
+  store(out.tix + q, select(touch, c.ti.x, mz));
+  store(out.tiy + q, select(touch, c.ti.y, mz));
+  store(out.tiz + q, select(touch, c.ti.z, mz));
+  store(out.tjx + q, select(touch, c.tj.x, mz));
+  store(out.tjy + q, select(touch, c.tj.y, mz));
+  store(out.tjz + q, select(touch, c.tj.z, mz));
+  store(out.d + q, select(touch, c.dissipated, mz));
+  for (int k = 0; k < kw; ++k) h[k] = select(touch, h[k], zero);   // out of contact: the springs end
+  store_history<T, kw>(H, h);
+}
+
+/// Pass 1 of a chunk for lanes of T: pairs p0 .. p0+n-1. Whole groups of W pairs read their
+/// indices and history in place; a short last group runs on copies padded with its last pair
+/// (only its own pairs' history is written back: the pairs after it belong to the next chunk
+/// or to another block's thread).
 template <class T, bool Sheared, class CM>
 DEM_HK void history_body(const HistoryInputs<CM>& in, long p0, int n, HistoryChunk& out) {
-  using lanes::select;
-  using lanes::splat;
-  constexpr int W = T::width, kw = CM::history;
-  const auto rate = contact::rate_lanes<T>(in.rate);
-  const T dt = splat<T>(in.dt), mz = splat<T>(-0.0), zero = splat<T>(0.0);
-  const double* P = in.packed;
+  constexpr int W = lanes::width<T>, kw = CM::history;
+  contact::RateLanes<T> rate = contact::rate_lanes<T>(in.rate);   // not const: GCC keeps const aggregates in memory
+  const T dt = lanes::splat<T>(in.dt);
   const CM model = in.model;   // a local copy: its constants (k, -1/k, ...) leave the loop
-  for (int q = 0; q < n; q += W) {
-    const int valid = std::min(W, n - q);   // a short last group repeats its last pair (not written back)
-    std::int32_t I[W], J[W], C[W];
-    for (int l = 0; l < W; ++l) {
-      const long p = p0 + q + std::min(l, valid - 1);
-      I[l] = in.pair_i[p]; J[l] = in.partner[p]; C[l] = in.image[p];
-    }
-    double* H = in.history + kw * (p0 + q);
-    T xi, yi, zi, ri, xj, yj, zj, rj, ox, oy, oz, pad;
-    load_columns(P, I, 8, xi, yi, zi, ri);
-    load_columns(P, J, 8, xj, yj, zj, rj);
-    load_columns(in.off, C, 4, ox, oy, oz, pad);
-    const contact::Separation<T> sep = contact::separation(xi, yi, zi, ri, xj + ox, yj + oy, zj + oz, rj);
-    const auto touch = contact::touching(sep);
-    if (!lanes::any(touch)) {   // no contact in the group: nothing to add, the springs end
-      for (double* a : {out.fx, out.fy, out.fz, out.tix, out.tiy, out.tiz, out.tjx, out.tjy, out.tjz, out.d})
-        store(a + q, mz);
-      std::fill(H, H + kw * valid, 0.0);
-      continue;
-    }
-    T h[kw > 0 ? kw : 1];
-    std::int32_t L[W];   // the group's pairs, relative to its first
-    for (int l = 0; l < W; ++l) L[l] = std::min(l, valid - 1);
-    for (int k = 0; k + 4 <= kw; k += 4) load_columns(H + k, L, kw, h[k], h[k + 1], h[k + 2], h[k + 3]);
-    for (int k = kw / 4 * 4; k < kw; ++k) h[k] = gather<T>(H, L, kw, k);
-    contact::V3<T> wi{zero, zero, zero}, wj{zero, zero, zero};
-    if constexpr (CM::rotations) {
-      const double* w = &in.w[0].x;
-      load_columns3(w, I, 3, wi.x, wi.y, wi.z);
-      load_columns3(w, J, 3, wj.x, wj.y, wj.z);
-    }
-    T vxi, vyi, vzi, vxj, vyj, vzj;
-    load_columns(P + 4, I, 8, vxi, vyi, vzi, pad);
-    load_columns(P + 4, J, 8, vxj, vyj, vzj, pad);
-    T mi = zero, mj = zero;
-    if constexpr (CM::per_pair) { mi = gather<T>(in.mass, I, 1, 0); mj = gather<T>(in.mass, J, 1, 0); }
-    const contact::PairForces<T> c =
-        model.template advance<Sheared>(sep, ri, rj, mi, mj, vxj - vxi, vyj - vyi, vzj - vzi, wi, wj, rate, dt, h);
-    store(out.fx + q, select(touch, c.fj.x, mz));
-    store(out.fy + q, select(touch, c.fj.y, mz));
-    store(out.fz + q, select(touch, c.fj.z, mz));
-    store(out.tix + q, select(touch, c.ti.x, mz));
-    store(out.tiy + q, select(touch, c.ti.y, mz));
-    store(out.tiz + q, select(touch, c.ti.z, mz));
-    store(out.tjx + q, select(touch, c.tj.x, mz));
-    store(out.tjy + q, select(touch, c.tj.y, mz));
-    store(out.tjz + q, select(touch, c.tj.z, mz));
-    store(out.d + q, select(touch, c.dissipated, mz));
-    for (int k = 0; k < kw; ++k) {
-      const T hk = select(touch, h[k], zero);
-      for (int l = 0; l < valid; ++l) H[kw * l + k] = hk.v[l];
-    }
+  const int whole = n / W * W;
+  for (int q = 0; q < whole; q += W) {
+    const long p = p0 + q;
+    history_group<T, Sheared>(in, model, rate, dt, in.pair_i + p, in.partner + p, in.image + p, in.history + kw * p,
+                              out, q);
   }
+  if (whole == n) return;
+  const int valid = n - whole;
+  std::int32_t I[W], J[W];
+  std::uint8_t C[W];
+  alignas(64) double H[W * (kw > 0 ? kw : 1)];
+  for (int l = 0; l < W; ++l) {
+    const long p = p0 + whole + std::min(l, valid - 1);
+    I[l] = in.pair_i[p]; J[l] = in.partner[p]; C[l] = in.image[p];
+    std::copy(in.history + kw * p, in.history + kw * (p + 1), H + kw * l);
+  }
+  history_group<T, Sheared>(in, model, rate, dt, I, J, C, H, out, whole);
+  std::copy(H, H + kw * valid, in.history + kw * (p0 + whole));
 }
 #undef DEM_HK
 

@@ -85,8 +85,8 @@ DEM_AVX2 void load4(const double* base, const std::int32_t* idx, int stride, __m
   d = _mm256_unpackhi_pd(t2, t3);
 }
 
-DEM_AVX2 L4 lanes_of(__m256d v) { return L4{reinterpret_cast<L4::V&>(v)}; }
-DEM_AVX2 __m256d reg(L4 v) { return reinterpret_cast<__m256d&>(v.v); }
+DEM_AVX2 L4 lanes_of(__m256d v) { return (L4)v; }
+DEM_AVX2 __m256d reg(L4 v) { return (__m256d)v; }
 
 template <bool Sheared>
 __attribute__((target("avx2"))) void kernel_avx2(const KernelInputs& in, long p0, int n, double* fx, double* fy,

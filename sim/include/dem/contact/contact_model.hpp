@@ -135,7 +135,7 @@ struct ContactModel {
     using lanes::splat;
     T vx, vy, vz;
     relative_velocity<Sheared>(sep, dvx, dvy, dvz, rate, vx, vy, vz);
-    const NormalGeometry<T> g = normal_geometry(sep, vx, vy, vz);
+    NormalGeometry<T> g = normal_geometry(sep, vx, vy, vz);
     PairLanes<T> pair{g.delta, splat<T>(0.0), splat<T>(0.0)};
     if constexpr (normal_history > 0 || per_pair) pair.a12 = ri * rj / (ri + rj);
     if constexpr (per_pair) pair.m_r = mi * mj / (mi + mj);
@@ -147,24 +147,29 @@ struct ContactModel {
       fn = clamp(normal.force(g, pair));
     else
       fn = bind<T>().normal_force(g);
-    const V3<T> n{g.nx, g.ny, g.nz};
+    V3<T> n{g.nx, g.ny, g.nz};
     PairForces<T> out{n * fn, {}, {}, splat<T>(0.0)};
     if constexpr (rotations) {
       const T half = splat<T>(0.5), zero = splat<T>(0.0);
       const T ai = ri - half * g.delta, aj = rj - half * g.delta;   // lever arms to the overlap's middle
-      const V3<T> v_contact = V3<T>{vx, vy, vz} - cross(wi * ai + wj * aj, n);
-      const T fn_plus = lanes::select(lanes::less(fn, zero), zero, fn);   // std::max(fn, 0.0)
+      V3<T> v_contact = V3<T>{vx, vy, vz} - cross(wi * ai + wj * aj, n);
+      T fn_plus = lanes::select(lanes::less(fn, zero), zero, fn);   // std::max(fn, 0.0)
+      // Lanes out of contact (the kernels discard them) get an infinite Coulomb limit, so that
+      // they never send their group down the sliders' rare sliding branch (one pair, T = double,
+      // is always in contact here).
+      if constexpr (lanes::is_lanes<T>)
+        fn_plus = lanes::select(touching(sep), fn_plus, splat<T>(__builtin_inf()));
       V3<T> ft;
       if constexpr (PerPairOf<Tangential>::value)
         ft = tangential.update(n, v_contact, fn_plus, dt, h + tangential_offset, out.dissipated, pair);
       else
         ft = tangential.update(n, v_contact, fn_plus, dt, h + tangential_offset, out.dissipated);
-      const V3<T> nxf = cross(n, ft);
+      V3<T> nxf = cross(n, ft);
       out.fj = out.fj + ft;
       out.ti = nxf * (-ai);   // (a_i n) x (-f_j)
       out.tj = nxf * (-aj);   // (-a_j n) x f_j
       if constexpr (Rolling::history > 0) {   // a couple: torques only
-        const V3<T> tr =
+        V3<T> tr =
             rolling.update(RollingInput<T>{n, wi, wj, ai * aj / (ai + aj), fn_plus}, dt, h + rolling_offset, out.dissipated);
         out.ti = out.ti + tr;
         out.tj = out.tj - tr;

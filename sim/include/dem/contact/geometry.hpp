@@ -26,7 +26,7 @@ template <class M, class T> DEM_V3 V3<T> pick(M m, const V3<T>& a, const V3<T>& 
 }
 /// The one-dimensional springs (twisting) use the same slider: dot of scalars is their product.
 DEM_V3 double dot(double a, double b) { return a * b; }
-template <int W> DEM_V3 lanes::Lanes<W> dot(lanes::Lanes<W> a, lanes::Lanes<W> b) { return a * b; }
+template <class T, class = std::enable_if_t<lanes::is_lanes<T>>> DEM_V3 T dot(T a, T b) { return a * b; }
 inline V3<double> v3(const Vec3& a) { return {a.x, a.y, a.z}; }
 inline Vec3 vec3(const V3<double>& a) { return {a.x, a.y, a.z}; }
 #undef DEM_V3

@@ -8,67 +8,72 @@
 //                   loads, transposes and prefetches; the arithmetic is this body);
 //   T = Lanes<2|8>  two (generic x86-64) or eight (AVX-512) pairs: the kernels of the models
 //                   with history (forces/history_kernels.hpp) run every width from one source.
-// Lanes are GCC vector extensions, not intrinsics: their operators need no target attribute,
-// so the body inlines into a `target("avx2")` kernel and compiles to 256-bit instructions there,
-// while the same source gives scalar code elsewhere. Every operation is the IEEE operation of
-// the scalar code (no FMA: the kernels are built with -ffp-contract=off), so every lane gives
-// the scalar bits.
+// Lanes are GCC vector types (vector_size), not intrinsics: their built-in operators need no
+// target attribute, so the body inlines into a `target("avx2")` kernel and compiles to 256-bit
+// instructions there, while the same source gives scalar code elsewhere. Every operation is the
+// IEEE operation of the scalar code (no FMA: the kernels are built with -ffp-contract=off), so
+// every lane gives the scalar bits.
+//
+// Lanes<W> is the vector type itself, not a struct around it: GCC (12) keeps a struct around
+// a vector, and any `const` aggregate a kernel stores into, in memory (its scalar replacement
+// refuses both: "V_C_E under a different handled component", "store to a read-only decl"),
+// which made the history kernels copy every value through the stack. For the same reason a
+// lane body declares no `const` local of a struct type (V3<T>, SliderStep, NormalGeometry, ...):
+// `const T x` is fine, `const V3<T> v` is not (docs/benchmarks.md, "Friction on the vector
+// kernels, faster").
 #pragma once
 #include <cstdint>
+#include <type_traits>
+#include <utility>
 
 namespace dem::lanes {
 
-template <int W>
-struct Lanes {
-  typedef double V __attribute__((vector_size(8 * W)));
-  typedef std::int64_t M __attribute__((vector_size(8 * W)));   ///< mask: all ones = true
-  static constexpr int width = W;
-  V v;
+namespace detail {
+template <int W> struct LanesOf {
+  typedef double type __attribute__((vector_size(8 * W)));
+  typedef std::int64_t mask __attribute__((vector_size(8 * W)));
 };
+}  // namespace detail
 
+/// W doubles, one pair per lane.
+template <int W> using Lanes = typename detail::LanesOf<W>::type;
 using L2 = Lanes<2>;   ///< SSE2 (the generic kernel of the history models)
 using L4 = Lanes<4>;   ///< AVX2
 using L8 = Lanes<8>;   ///< AVX-512
 
-/// Pairs in one value of T: 1 for double.
+/// Pairs in one value of T: 1 for double; whether T is a lane type.
 template <class T> struct WidthOf { static constexpr int value = 1; };
-template <int W> struct WidthOf<Lanes<W>> { static constexpr int value = W; };
+template <> struct WidthOf<L2> { static constexpr int value = 2; };
+template <> struct WidthOf<L4> { static constexpr int value = 4; };
+template <> struct WidthOf<L8> { static constexpr int value = 8; };
+template <class T> inline constexpr int width = WidthOf<T>::value;
+template <class T> inline constexpr bool is_lanes = !std::is_same_v<T, double> && WidthOf<T>::value > 1;
 
 #define DEM_LANE __attribute__((always_inline)) inline
-template <int W> DEM_LANE Lanes<W> operator+(Lanes<W> a, Lanes<W> b) { return {a.v + b.v}; }
-template <int W> DEM_LANE Lanes<W> operator-(Lanes<W> a, Lanes<W> b) { return {a.v - b.v}; }
-template <int W> DEM_LANE Lanes<W> operator*(Lanes<W> a, Lanes<W> b) { return {a.v * b.v}; }
-template <int W> DEM_LANE Lanes<W> operator/(Lanes<W> a, Lanes<W> b) { return {a.v / b.v}; }
-template <int W> DEM_LANE Lanes<W> operator-(Lanes<W> a) { return {-a.v}; }   // flips the sign bit, as scalar -x
-
-/// The mask type of a lane type: bool for one pair.
-template <class T> struct MaskOf { using type = bool; };
-template <int W> struct MaskOf<Lanes<W>> { using type = typename Lanes<W>::M; };
+/// The mask type of a lane type (all ones = true): bool for one pair.
+template <class T> struct MaskOf { using type = typename detail::LanesOf<WidthOf<T>::value>::mask; };
+template <> struct MaskOf<double> { using type = bool; };
 template <class T> using Mask = typename MaskOf<T>::type;
 
 /// A constant in every lane.
+namespace detail {
+template <class T, std::size_t... L> DEM_LANE T broadcast(double x, std::index_sequence<L...>) { return T{((void)L, x)...}; }
+}  // namespace detail
 template <class T> DEM_LANE T splat(double x) {
-  T r;
-  for (int l = 0; l < T::width; ++l) r.v[l] = x;
-  return r;
+  if constexpr (std::is_same_v<T, double>) return x;
+  else return detail::broadcast<T>(x, std::make_index_sequence<width<T>>{});
 }
-template <> DEM_LANE double splat<double>(double x) { return x; }
-template <> DEM_LANE L4 splat<L4>(double x) { return {L4::V{x, x, x, x}}; }
 
-// Comparisons and selection.
-DEM_LANE bool less(double a, double b) { return a < b; }
-DEM_LANE bool greater(double a, double b) { return a > b; }
-template <int W> DEM_LANE typename Lanes<W>::M less(Lanes<W> a, Lanes<W> b) { return a.v < b.v; }
-template <int W> DEM_LANE typename Lanes<W>::M greater(Lanes<W> a, Lanes<W> b) { return a.v > b.v; }
-DEM_LANE bool less_equal(double a, double b) { return a <= b; }
-DEM_LANE bool greater_equal(double a, double b) { return a >= b; }
-DEM_LANE bool equal(double a, double b) { return a == b; }
-template <int W> DEM_LANE typename Lanes<W>::M less_equal(Lanes<W> a, Lanes<W> b) { return a.v <= b.v; }
-template <int W> DEM_LANE typename Lanes<W>::M greater_equal(Lanes<W> a, Lanes<W> b) { return a.v >= b.v; }
-template <int W> DEM_LANE typename Lanes<W>::M equal(Lanes<W> a, Lanes<W> b) { return a.v == b.v; }
+// Comparisons (lanes: all-ones masks) and selection. The built-in operators of the vector types
+// do the arithmetic: +, -, *, / and unary minus (which flips the sign bit, as scalar -x).
+template <class T> DEM_LANE Mask<T> less(T a, T b) { return a < b; }
+template <class T> DEM_LANE Mask<T> greater(T a, T b) { return a > b; }
+template <class T> DEM_LANE Mask<T> less_equal(T a, T b) { return a <= b; }
+template <class T> DEM_LANE Mask<T> greater_equal(T a, T b) { return a >= b; }
+template <class T> DEM_LANE Mask<T> equal(T a, T b) { return a == b; }
 /// m ? a : b, lane by lane.
 DEM_LANE double select(bool m, double a, double b) { return m ? a : b; }
-template <int W> DEM_LANE Lanes<W> select(typename Lanes<W>::M m, Lanes<W> a, Lanes<W> b) { return {m ? a.v : b.v}; }
+template <class M, class T, class = std::enable_if_t<is_lanes<T>>> DEM_LANE T select(M m, T a, T b) { return m ? a : b; }
 /// True in any lane.
 DEM_LANE bool any(bool m) { return m; }
 template <class M> DEM_LANE bool any(M m) {
@@ -78,16 +83,18 @@ template <class M> DEM_LANE bool any(M m) {
 }
 /// A scalar flag as a mask (true in every lane).
 template <class T> DEM_LANE Mask<T> mask_of(bool b) {
-  const Mask<T> none{};
-  return b ? ~none : none;
+  if constexpr (std::is_same_v<T, double>) return b;
+  else {
+    const Mask<T> none{};
+    return b ? ~none : none;
+  }
 }
-template <> DEM_LANE bool mask_of<double>(bool b) { return b; }
 
 /// Correctly rounded square root in every lane (GCC turns the lane loop into vsqrtpd).
 DEM_LANE double sqrt(double a) { return __builtin_sqrt(a); }
-template <int W> DEM_LANE Lanes<W> sqrt(Lanes<W> a) {
-  Lanes<W> r;
-  for (int l = 0; l < W; ++l) r.v[l] = __builtin_sqrt(a.v[l]);
+template <class T, class = std::enable_if_t<is_lanes<T>>> DEM_LANE T sqrt(T a) {
+  T r;
+  for (int l = 0; l < width<T>; ++l) r[l] = __builtin_sqrt(a[l]);
   return r;
 }
 #undef DEM_LANE

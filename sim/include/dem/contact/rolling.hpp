@@ -105,9 +105,9 @@ struct RollingSpring {
   /// gains the energy lost at the rolling limit [J] (as CundallStrack::update).
   template <class T>
   __attribute__((always_inline)) V3<T> update(const RollingInput<T>& c, T dt, T* h, T& dissipated) const {
-    const V3<T> vr = cross(c.wi - c.wj, c.n) * (-c.a_red);
-    const V3<T> start = CundallStrack::rotate_spring(V3<T>{h[0], h[1], h[2]}, c.n);
-    const SliderStep<T, V3<T>> s =
+    V3<T> vr = cross(c.wi - c.wj, c.n) * (-c.a_red);
+    V3<T> start = CundallStrack::rotate_spring(V3<T>{h[0], h[1], h[2]}, c.n);
+    SliderStep<T, V3<T>> s =
         slider_step(start, vr, dt, lanes::splat<T>(kr), lanes::splat<T>(gamma_r), lanes::splat<T>(mu_r) * c.fn);
     h[0] = s.spring.x; h[1] = s.spring.y; h[2] = s.spring.z;
     dissipated = dissipated + s.dissipated;
@@ -148,7 +148,7 @@ struct TwistingSpring {
   template <class T>
   __attribute__((always_inline)) T update(const RollingInput<T>& c, T dt, T* h, T& dissipated) const {
     const T vo = c.a_red * dot(c.wi - c.wj, c.n);
-    const SliderStep<T, T> s =
+    SliderStep<T, T> s =
         slider_step(h[0], vo, dt, lanes::splat<T>(ko), lanes::splat<T>(gamma_o), lanes::splat<T>(mu_o) * c.fn);
     h[0] = s.spring;
     dissipated = dissipated + s.dissipated;
@@ -172,7 +172,7 @@ struct RollingTwisting {
   /// One step: both springs; returns the torque on i [N m] (on j: its negative).
   template <class T>
   __attribute__((always_inline)) V3<T> update(const RollingInput<T>& c, T dt, T* h, T& dissipated) const {
-    const V3<T> tr = rolling.update(c, dt, h, dissipated);
+    V3<T> tr = rolling.update(c, dt, h, dissipated);
     const T fo = twisting.update(c, dt, h + RollingSpring::history, dissipated);
     return tr + c.n * (c.a_red * fo);
   }

@@ -30,16 +30,21 @@ struct SliderStep {
 template <class T, class V>
 __attribute__((always_inline)) inline SliderStep<T, V> slider_step(const V& start, const V& v, T dt, T k, T gamma,
                                                                  T limit) {
-  const V step = v * dt;
-  const V xi = start + step;
-  const V f = xi * (-k) - v * gamma;
+  V step = v * dt;
+  V xi = start + step;
+  V f = xi * (-k) - v * gamma;
   const T f2 = dot(f, f);
   const auto slip = lanes::greater(f2, limit * limit);
-  if (!lanes::any(slip)) return {f, xi, lanes::splat<T>(0.0), slip};   // all stick: what the picks give
-  const V fs = f * (limit / lanes::sqrt(f2));
-  const V xs = (fs + v * gamma) * (lanes::splat<T>(-1.0) / k);
-  const T e = lanes::splat<T>(0.5) * k * (dot(start + xs, step) - dot(xs, xs) + dot(start, start));
-  return {pick(slip, fs, f), pick(slip, xs, xi), pick(slip, e, lanes::splat<T>(0.0)), slip};
+  SliderStep<T, V> out{f, xi, lanes::splat<T>(0.0), slip};   // all stick: what the picks give
+  if (lanes::any(slip)) {   // rare: the sliding outcome, picked lane by lane (one return: no aggregate merge)
+    V fs = f * (limit / lanes::sqrt(f2));
+    V xs = (fs + v * gamma) * (lanes::splat<T>(-1.0) / k);
+    const T e = lanes::splat<T>(0.5) * k * (dot(start + xs, step) - dot(xs, xs) + dot(start, start));
+    out.force = pick(slip, fs, f);
+    out.spring = pick(slip, xs, xi);
+    out.dissipated = pick(slip, e, out.dissipated);
+  }
+  return out;
 }
 
 }  // namespace dem::contact

@@ -82,9 +82,9 @@ struct CundallStrack {
   __attribute__((always_inline)) static V3<T> rotate_spring(const V3<T>& xi, const V3<T>& n) {
     const T zero = lanes::splat<T>(0.0);
     const T len2 = dot(xi, xi);
-    const V3<T> p = tangent_part(xi, n);
+    V3<T> p = tangent_part(xi, n);
     const T p2 = dot(p, p);
-    const V3<T> rotated = pick(lanes::greater(p2, zero), p * lanes::sqrt(len2 / p2), V3<T>{zero, zero, zero});
+    V3<T> rotated = pick(lanes::greater(p2, zero), p * lanes::sqrt(len2 / p2), V3<T>{zero, zero, zero});
     return pick(lanes::equal(len2, zero), xi, rotated);
   }
 
@@ -95,10 +95,10 @@ struct CundallStrack {
   template <class T>
   __attribute__((always_inline)) V3<T> update(const V3<T>& n, const V3<T>& v_contact, T fn, T dt, T* h,
                                               T& dissipated) const {
-    const V3<T> vt = tangent_part(v_contact, n);
-    const V3<T> old{h[0], h[1], h[2]};
-    const V3<T> start = objective ? rotate_spring(old, n) : old;
-    const SliderStep<T, V3<T>> s =
+    V3<T> vt = tangent_part(v_contact, n);
+    V3<T> old{h[0], h[1], h[2]};
+    V3<T> start = objective ? rotate_spring(old, n) : old;
+    SliderStep<T, V3<T>> s =
         slider_step(start, vt, dt, lanes::splat<T>(kt), lanes::splat<T>(gamma_t), lanes::splat<T>(mu) * fn);
     h[0] = s.spring.x; h[1] = s.spring.y; h[2] = s.spring.z;
     h[3] = lanes::select(s.sliding, lanes::splat<T>(1.0), lanes::splat<T>(0.0));

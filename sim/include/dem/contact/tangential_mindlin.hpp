@@ -60,13 +60,13 @@ struct MindlinLaw {
                                               T& dissipated, const PairLanes<T>& p) const {
     using lanes::splat;
     const T kt = stiffness_of(p.delta, p.a12), zero = splat<T>(0.0);
-    const V3<T> vt = CundallStrack::tangent_part(v_contact, n);
+    V3<T> vt = CundallStrack::tangent_part(v_contact, n);   // not const: lanes.hpp
     V3<T> start = CundallStrack::rotate_spring(V3<T>{h[0], h[1], h[2]}, n);
     if constexpr (ForceKept) {   // the first step (k_t,old = 0) and a vanishing k_t keep xi
       const T k_old = h[4];
       start = start * lanes::select(lanes::greater(k_old * kt, zero), k_old / kt, splat<T>(1.0));
     }
-    const SliderStep<T, V3<T>> s = slider_step(start, vt, dt, kt, zero, splat<T>(mu) * fn);
+    SliderStep<T, V3<T>> s = slider_step(start, vt, dt, kt, zero, splat<T>(mu) * fn);
     h[0] = s.spring.x; h[1] = s.spring.y; h[2] = s.spring.z;
     h[3] = lanes::select(s.sliding, splat<T>(1.0), zero);
     h[4] = kt;
