@@ -36,8 +36,9 @@ MODELS = {
     "friction+rolling+twisting": ["contact.friction=0.5", "contact.rolling_friction=0.1",
                                   "contact.twisting_friction=0.1"],
     "luding": ["contact.normal=luding"],
+    "hertz_mindlin": ["contact.normal=hertz", "contact.tangential=mindlin", "contact.friction=0.5"],
 }
-LAMMPS_MODELS = ["frictionless", "frictional", "friction+rolling+twisting"]
+LAMMPS_MODELS = ["frictionless", "frictional", "friction+rolling+twisting", "hertz_mindlin"]
 
 
 def bench_cmd(dem, packing, model, steps):
@@ -76,7 +77,10 @@ def callgrind_per_function(dem, packing, model, n_particles, workdir):
     return {k: (totals[220][k] - totals[20].get(k, 0)) / scale for k in totals[220]}
 
 
-def lammps_deck(model, data, steps, tc):
+def lammps_deck(model, data, steps, tc, r_min):
+    if model == "hertz_mindlin":   # ours' defaults: E = 1e8 Pa, nu = 0.3, e = 0.9; t_c the Rayleigh time
+        tc = decks.rayleigh_time(r_min, 1e8, 0.3, 2000.0)
+        return decks.lammps_hertz_mindlin_deck(data, steps, run_benchmarks.RATE_TC / tc, 0.02 * tc)
     rate, dt = run_benchmarks.RATE_TC / tc, 0.02 * tc
     if model == "frictionless":
         return decks.lammps_deck(data, steps, rate, dt)
@@ -95,14 +99,19 @@ def main():
     ap.add_argument("--steps", type=int, default=1000, help="timed steps of ours")
     ap.add_argument("--lammps-steps", type=int, default=300)
     ap.add_argument("--callgrind", action="store_true")
+    ap.add_argument("--models", default=",".join(MODELS), help="comma-separated subset of: " + ", ".join(MODELS))
     args = ap.parse_args()
+    models = args.models.split(",")
+    unknown = [m for m in models if m not in MODELS]
+    if unknown:
+        ap.error(f"unknown model(s) {unknown}: choose from {', '.join(MODELS)}")
     bins = [tuple(d.split("=", 1)) for d in args.dem]
     cell, spheres = decks.read_packing(args.packing)
     n = len(spheres)
     work = tempfile.mkdtemp(prefix="history_speed")
     if args.callgrind:
         for label, dem in bins:
-            for model in MODELS:
+            for model in models:
                 per = callgrind_per_function(dem, args.packing, model, n, work)
                 print(f"{label} {model}: {per.pop('PROGRAM TOTALS'):.1f} instructions per particle-step")
                 for name, v in sorted(per.items(), key=lambda kv: -kv[1]):
@@ -120,19 +129,19 @@ def main():
 
     for r in range(args.rounds):
         print(f"round {r + 1}", flush=True)
-        for model in MODELS:
+        for model in models:
             for label, dem in bins:
                 t = task_clock_ms(bench_cmd(dem, args.packing, model, args.steps + 1)) - \
                     task_clock_ms(bench_cmd(dem, args.packing, model, 1))
                 record(f"{label} {model}", args.steps * n / t / 1e3)
         if not run_benchmarks.shutil.which("lmp"):
             continue
-        for model in LAMMPS_MODELS:
+        for model in [m for m in LAMMPS_MODELS if m in models]:
             ms = []
             for steps in (args.lammps_steps + 1, 1):
                 deck = os.path.join(work, f"in.{model}.{steps}")
                 with open(deck, "w") as fh:
-                    fh.write(lammps_deck(model, data, steps, tc))
+                    fh.write(lammps_deck(model, data, steps, tc, min(sp[3] for sp in spheres)))
                 ms.append(task_clock_ms(["lmp", "-in", deck, "-log", "none"], cwd=work))
             record(f"lammps {model}", args.lammps_steps * n / (ms[0] - ms[1]) / 1e3)
     print("medians (the rounds):")
