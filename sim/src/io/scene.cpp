@@ -329,13 +329,12 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
       else if (!builtin_mode(base, &dm))
         fail("rate = \"" + *name + "\" names no mode (built in: D2, D3, iso_compress, iso_expand, uniaxial_x/y/z, "
              "SS_xy/xz/yz, or a [modes] entry; \"-D2\" reverses D2)");
-      s.rate_shape = neg ? dm.rate_shape * -1.0 : dm.rate_shape;
-      s.shear_shape = neg ? dm.shear_shape * -1.0 : dm.shear_shape;
+      s.shape = neg ? dm.shape * -1.0 : dm.shape;
       if (s.name.empty()) s.name = *name;
     } else if (auto* a = r->as_array(); a && a->size() == 3 && (*a)[0].value<double>() && (*a)[1].value<double>() &&
                                         (*a)[2].value<double>()) {
-      s.rate_shape = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(), *(*a)[2].value<double>());
-      if (!std::isfinite(s.rate_shape.x) || !std::isfinite(s.rate_shape.y) || !std::isfinite(s.rate_shape.z))
+      s.shape.diag = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(), *(*a)[2].value<double>());
+      if (!std::isfinite(s.shape.diag.x) || !std::isfinite(s.shape.diag.y) || !std::isfinite(s.shape.diag.z))
         fail("rate = [rate_x, rate_y, rate_z] must be finite numbers (nan and inf are no rates)");
     } else if (a && a->size() == 3 && (*a)[0].as_array()) {
       // a velocity gradient [[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]], as in [modes]
@@ -355,8 +354,8 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
         fail("rate has entries below the diagonal (L_yx, L_zx or L_zy): the sheared cell is upper triangular, so "
              "name the axes such that the flow is v_x = L_xy y + L_xz z, v_y = L_yz z (e.g. v_z = g x is v_x = g z "
              "with x and z swapped; docs/simple_shear.md)");
-      s.rate_shape = Vec3(L[0][0], L[1][1], L[2][2]);
-      s.shear_shape = Vec3(L[0][1], L[0][2], L[1][2]);
+      s.shape.diag = Vec3(L[0][0], L[1][1], L[2][2]);
+      s.shape.shear = Vec3(L[0][1], L[0][2], L[1][2]);
     } else {
       fail("rate must be [rate_x, rate_y, rate_z] (multiples of protocol.deviatoric_rate_tc), a velocity gradient "
            "[[Lxx, Lxy, Lxz], [0, Lyy, Lyz], [0, 0, Lzz]] or a mode name");
@@ -477,7 +476,7 @@ bool builtin_mode(const std::string& name, DeformationMode* mode) {
   // about the third axis plus a spin, at the same eps_d rate.
   static const std::map<std::string, Vec3> shears = {{"SS_xy", {2, 0, 0}}, {"SS_xz", {0, 2, 0}}, {"SS_yz", {0, 0, 2}}};
   if (auto sh = shears.find(name); sh != shears.end()) {
-    if (mode) { mode->name = name; mode->rate_shape = Vec3{0, 0, 0}; mode->shear_shape = sh->second; }
+    if (mode) { mode->name = name; mode->shape = VelGrad(Vec3{0, 0, 0}, sh->second); }
     return true;
   }
   static const std::map<std::string, Vec3> modes = {
@@ -486,7 +485,7 @@ bool builtin_mode(const std::string& name, DeformationMode* mode) {
       {"uniaxial_z", {0, 0, -1}}};
   auto it = modes.find(name);
   if (it == modes.end()) return false;
-  if (mode) { mode->name = name; mode->rate_shape = it->second; }
+  if (mode) { mode->name = name; mode->shape = VelGrad(it->second); }
   return true;
 }
 
@@ -652,8 +651,8 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
       };
       double L[3][3];
       if (a && a->size() == 3 && (*a)[0].value<double>() && (*a)[1].value<double>() && (*a)[2].value<double>()) {
-        dm.rate_shape = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(), *(*a)[2].value<double>());
-        if (!std::isfinite(dm.rate_shape.x) || !std::isfinite(dm.rate_shape.y) || !std::isfinite(dm.rate_shape.z))
+        dm.shape.diag = Vec3(*(*a)[0].value<double>(), *(*a)[1].value<double>(), *(*a)[2].value<double>());
+        if (!std::isfinite(dm.shape.diag.x) || !std::isfinite(dm.shape.diag.y) || !std::isfinite(dm.shape.diag.z))
           throw SceneError(origin + ": modes." + key + " must be finite numbers (nan and inf are no rates)");
       } else if (a && a->size() == 3 && row_of((*a)[0], L[0]) && row_of((*a)[1], L[1]) && row_of((*a)[2], L[2])) {
         if (L[1][0] != 0 || L[2][0] != 0 || L[2][1] != 0)
@@ -662,8 +661,8 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
                            "flow is v_x = L_xy y + L_xz z, v_y = L_yz z (e.g. v_z = g x is v_x = g z with x and z "
                            "swapped); a symmetric (pure-shear) gradient is diagonal in its principal axes: give that "
                            "diagonal [rx, ry, rz] (docs/simple_shear.md)");
-        dm.rate_shape = Vec3(L[0][0], L[1][1], L[2][2]);
-        dm.shear_shape = Vec3(L[0][1], L[0][2], L[1][2]);
+        dm.shape.diag = Vec3(L[0][0], L[1][1], L[2][2]);
+        dm.shape.shear = Vec3(L[0][1], L[0][2], L[1][2]);
       } else {
         throw SceneError(origin + ": modes." + key +
                          " must be [rate_x, rate_y, rate_z] (diagonal strain-rate shape) or a velocity gradient "
@@ -723,12 +722,12 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
     }
   // A mode's or path stage's rate shape multiplies the deviatoric rate: bound the product the same way.
   for (const auto& mode : p.modes) {
-    std::vector<std::pair<std::string, std::pair<Vec3, Vec3>>> shapes;
-    if (mode.path.empty()) shapes.push_back({"modes." + mode.name, {mode.rate_shape, mode.shear_shape}});
-    for (const auto& st : mode.path) shapes.push_back({"paths." + mode.name + " stage '" + st.name + "'", {st.rate_shape, st.shear_shape}});
+    std::vector<std::pair<std::string, VelGrad>> shapes;
+    if (mode.path.empty()) shapes.push_back({"modes." + mode.name, mode.shape});
+    for (const auto& st : mode.path) shapes.push_back({"paths." + mode.name + " stage '" + st.name + "'", st.shape});
     for (const auto& [where, sh] : shapes) {
-      const double peak = std::max({std::fabs(sh.first.x), std::fabs(sh.first.y), std::fabs(sh.first.z),
-                                    std::fabs(sh.second.x), std::fabs(sh.second.y), std::fabs(sh.second.z)});
+      const double peak = std::max({std::fabs(sh.diag.x), std::fabs(sh.diag.y), std::fabs(sh.diag.z),
+                                    std::fabs(sh.shear.x), std::fabs(sh.shear.y), std::fabs(sh.shear.z)});
       if (peak * dev_tc > 1e-2) {
         char b[400];
         std::snprintf(b, sizeof b, "%s: %s: a rate entry of %g times protocol.deviatoric_rate_tc = %g deforms the box "

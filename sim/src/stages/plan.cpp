@@ -32,9 +32,9 @@ namespace {
 // Steps of one path stage: exact for eps_d and time stops without servo; otherwise an estimate
 // (a strain stop taken from 0, a stress or phi stop as eps_d_max of shear).
 double path_stage_steps(const Model& m, const PathStage& s) {
-  const Vec3& r = s.rate_shape;
+  const Vec3& r = s.shape.diag;
   const double unit = m.protocol.deviatoric_rate * m.dt;   // strain per step of a unit rate shape
-  const Vec3& g = s.shear_shape;
+  const Vec3& g = s.shape.shear;
   const double dev = s.sheared() ? deviatoric_magnitude_eig(Sym3{r.x, r.y, r.z, 0.5 * g.x, 0.5 * g.y, 0.5 * g.z})
                                  : deviatoric_magnitude(r.x, r.y, r.z);
   const double comp[3] = {r.x, r.y, r.z};
@@ -58,8 +58,8 @@ double mode_steps(const Model& m, const DeformationMode& mode) {
     for (const auto& s : mode.path) steps += path_stage_steps(m, s);
     return steps;
   }
-  const Vec3& r = mode.rate_shape;
-  const Vec3& g = mode.shear_shape;
+  const Vec3& r = mode.shape.diag;
+  const Vec3& g = mode.shape.shear;
   // A shear: the eps_d rate of D = sym(L) (the log strain's eps_d grows a little slower at large
   // shear: an estimate).
   const double dev = mode.sheared() ? deviatoric_magnitude_eig(Sym3{r.x, r.y, r.z, 0.5 * g.x, 0.5 * g.y, 0.5 * g.z})
