@@ -8,7 +8,7 @@
 #   scripts/bits_check.sh --compare A/sums.txt B/sums.txt
 #
 # Writes OUT/sums.txt ("sha256  case/relative/path", manifests and scene copies aside: they hold the
-# command line and the version). Small N and short strains: about a minute on one core.
+# command line and the version), and the fit tables of the frictional run (`dem fit`). Small N and short strains: about a minute on one core.
 set -euo pipefail
 if [[ "${1:-}" == "--compare" ]]; then
   if diff -u "$2" "$3"; then echo "bits_check: the same bytes ($(wc -l < "$2") files)"; exit 0; fi
@@ -29,6 +29,8 @@ S=(--set particles.count=200 --set integration.threads=1 --quiet)
 "$DEM" run "$ROOT/data/scenes/friction_example.toml" --out "$OUT/fr" "${S[@]}" --set output.vtk=true \
   --set 'protocol.checkpoints_unloading=[0.72]' --set 'protocol.modes=["D2","SS_xz"]' \
   --set protocol.eps_d_max=0.02 --set protocol.deviatoric_rate_tc=2e-4
+
+"$DEM" fit "$OUT/fr" > /dev/null   # the fit tables of its curves
 
 # 3. Loading paths (strain reversal, side-stress servo, simple shear at constant normal stress).
 "$DEM" run "$ROOT/data/scenes/paths_example.toml" --out "$OUT/paths" "${S[@]}" --set output.vtk=true \
@@ -82,6 +84,6 @@ demtk.run_stage(scene, st, "shear", [[0, 0, 2 * scene.deviatoric_rate], [0, 0, 0
 PY
 
 cd "$OUT"
-find . -type f \( -name '*.csv' -o -name '*.ckpt' -o -name '*.txt' -o -name '*.vtu' -o -name '*.pvd' \) \
+find . -type f \( -name '*.csv' -o -name '*.ckpt' -o -name '*.txt' -o -name '*.vtu' -o -name '*.pvd' -o -path './fr/fit/*' \) \
   ! -name sums.txt | LC_ALL=C sort | xargs sha256sum > sums.txt
 echo "bits_check: $(wc -l < sums.txt) files in $OUT/sums.txt" >&2

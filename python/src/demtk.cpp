@@ -858,7 +858,8 @@ PYBIND11_MODULE(_core, m) {
         "'relaxed') reaches `target`; on_checkpoint(phi, state_copy) at each of checkpoint_phis.");
   m.def("run_prep_stage", &run_prep_stage, py::arg("scene"), py::arg("state"), py::arg("stage"), py::arg("out"),
         py::arg("on_checkpoint") = py::none(), py::arg("quiet") = true, py::arg("force") = false,
-        "One named stage of the scene's preparation, as `dem run` runs it (0 steps: skipped, already past its target).");
+        "One named stage of the scene's preparation, as `dem run` runs it (run_prep_stage; stress-controlled stages "
+        "included); on_checkpoint(phi, state_copy) at its checkpoints. 0 steps: skipped, already past its target.");
   m.def("run_protocol", &run_protocol, py::arg("scene"), py::arg("out"), py::arg("stages") = "all",
         py::arg("force") = false, py::arg("quiet") = true, "What `dem run` does: the whole run folder.");
 
