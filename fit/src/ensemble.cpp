@@ -1,3 +1,4 @@
+#include "demfit/format.hpp"
 #include "demfit/ensemble.hpp"
 
 #include <gsl/gsl_cdf.h>
@@ -14,15 +15,6 @@
 namespace demfit {
 
 namespace {
-
-const double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-std::string fmt(double v) {
-  std::ostringstream o;
-  o.precision(3);
-  o << v;
-  return o.str();
-}
 
 // Mean over the members listed in `use` (indices, repeats allowed) at every grid point.
 std::vector<double> mean_of(const std::vector<std::vector<double>>& members, const std::vector<int>& use) {

@@ -1,3 +1,4 @@
+#include "demfit/format.hpp"
 #include "demfit/fit.hpp"
 
 #include <ceres/ceres.h>
@@ -27,15 +28,6 @@ void init_glog() {
 
 namespace {
 
-const double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-std::string fmt(double v) {
-  std::ostringstream o;
-  o.precision(4);
-  o << v;
-  return o.str();
-}
-
 void select_window(const std::vector<double>& e, const std::vector<double>& y, const FitOptions& o,
                    std::vector<double>& ew, std::vector<double>& yw) {
   if (e.size() != y.size()) throw std::invalid_argument("fit: strain and value arrays differ in length");
@@ -47,12 +39,12 @@ void select_window(const std::vector<double>& e, const std::vector<double>& y, c
   }
   if (static_cast<int>(ew.size()) < o.min_points)
     throw std::invalid_argument("fit: only " + std::to_string(ew.size()) + " points in the window [" +
-                                fmt(o.window_min) + ", " + fmt(o.window_max) + "]; need at least " +
+                                fmt(o.window_min, 4) + ", " + fmt(o.window_max, 4) + "]; need at least " +
                                 std::to_string(o.min_points) + " (sample the run more finely or widen the window)");
   const auto [lo, hi] = std::minmax_element(yw.begin(), yw.end());
   const double scale = std::max(std::fabs(*lo), std::fabs(*hi));
   if (*hi - *lo <= 1e-12 * scale || *hi == *lo)
-    throw std::invalid_argument("fit: the curve is flat (all values equal " + fmt(*lo) +
+    throw std::invalid_argument("fit: the curve is flat (all values equal " + fmt(*lo, 4) +
                                 "): no evolution to fit; was the run deformed at all?");
 }
 
@@ -217,24 +209,24 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
   if (r.ok && !beta_on_bound && !xmax_on_bound && r.jacobian_rcond < o.min_jacobian_rcond) {
     r.ok = false;
     r.se_x0 = r.se_x_max = r.se_beta = r.se_initial_slope = kNaN;
-    r.warnings.push_back("ill-conditioned covariance (reciprocal condition number " + fmt(r.jacobian_rcond) +
+    r.warnings.push_back("ill-conditioned covariance (reciprocal condition number " + fmt(r.jacobian_rcond, 4) +
                          " of the scaled Jacobian): the data do not determine all parameters (e.g. the curve saturates "
                          "within its first points); the values are not supported by the data (sample more finely or "
                          "fit a longer curve)");
   }
   if (o.residual_diagnostics && r.residual_autocorrelation > 0.5)
-    r.warnings.push_back("residuals are strongly correlated (lag-1 autocorrelation " + fmt(r.residual_autocorrelation) +
-                         (o.correct_autocorrelation ? "): standard errors inflated by " + fmt(r.se_inflation)
+    r.warnings.push_back("residuals are strongly correlated (lag-1 autocorrelation " + fmt(r.residual_autocorrelation, 4) +
+                         (o.correct_autocorrelation ? "): standard errors inflated by " + fmt(r.se_inflation, 4)
                                                     : "): standard errors assume independent points and are too small"));
   if (beta_on_bound)
-    r.warnings.push_back("rate beta sits on its bound " + fmt(r.beta) + ": no standard error quoted; " +
+    r.warnings.push_back("rate beta sits on its bound " + fmt(r.beta, 4) + ": no standard error quoted; " +
                          (r.beta >= o.beta_max * 0.9999
                               ? "the curve saturates before its first sampled strains (sample more finely)"
                               : "the curve shows no saturation in this window"));
   if (xmax_on_bound) r.warnings.push_back("asymptote x_max sits on its bound 0: no standard error quoted");
   if (r.eps_95 > r.e_last)
     r.warnings.push_back("curve stops before saturation: 95% of the approach is reached only at eps_d = " +
-                         fmt(r.eps_95) + " but the data end at " + fmt(r.e_last) +
+                         fmt(r.eps_95, 4) + " but the data end at " + fmt(r.e_last, 4) +
                          "; x_max and beta are extrapolations (run to larger eps_d)");
   // x0 and x_max are judged against the amplitude |x_max - x0| (a value near zero can be
   // well determined), beta against itself.
@@ -244,7 +236,7 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
   for (int a = 0; a < 3 && o.residual_diagnostics; ++a)
     if (std::isfinite(ses[a]) && scales[a] > 0 && ses[a] / scales[a] > o.max_relative_error)
       r.warnings.push_back(std::string(names[a]) + " is poorly determined (standard error " +
-                           fmt(100 * ses[a] / scales[a]) + "% of " + (a < 2 ? "the amplitude |x_max - x0|" : "its value") + ")");
+                           fmt(100 * ses[a] / scales[a], 4) + "% of " + (a < 2 ? "the amplitude |x_max - x0|" : "its value") + ")");
   // Non-monotone: a reversal after the extreme much larger than the point-to-point noise
   // (estimated from second differences: var(y[i+1] - 2y[i] + y[i-1]) = 6 sigma^2 for white noise).
   if (o.residual_diagnostics && y.size() >= 5) {
@@ -263,8 +255,8 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
     const double range = *std::max_element(y.begin(), y.end()) - *std::min_element(y.begin(), y.end());
     r.non_monotone = worst > 5 * noise && worst > 0.2 * range;
     if (r.non_monotone)
-      r.warnings.push_back("data are not monotone (a reversal of " + fmt(worst) + " after the extreme, " +
-                           fmt(worst / std::max(noise, 1e-300)) +
+      r.warnings.push_back("data are not monotone (a reversal of " + fmt(worst, 4) + " after the extreme, " +
+                           fmt(worst / std::max(noise, 1e-300), 4) +
                            " x the point-to-point noise): the saturating law does not describe this curve");
   }
   return r;

@@ -1,3 +1,4 @@
+#include "demfit/format.hpp"
 #include "demfit/model_fit.hpp"
 
 #include <ceres/ceres.h>
@@ -17,8 +18,6 @@
 namespace demfit::model {
 
 namespace {
-
-const double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 double median(std::vector<double> v) {
   v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !(x > 0) || !std::isfinite(x); }), v.end());

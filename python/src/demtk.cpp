@@ -23,7 +23,7 @@
 #include <thread>
 #include <vector>
 
-#include "dem/contact/contact_forces.hpp"
+#include "dem/forces/contact_forces.hpp"
 #include "dem/contact/registry.hpp"
 #include "dem/core/errors.hpp"
 #include "dem/core/model.hpp"

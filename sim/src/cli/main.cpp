@@ -23,7 +23,7 @@
 #include "dem/io/io.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/stages/plan.hpp"
-#include "dem/stages/preparation.hpp"
+#include "dem/io/preparation.hpp"
 #include "dem/stages/protocol.hpp"
 #include "dem/io/scene.hpp"
 #include "dem/io/sweep.hpp"

@@ -1,6 +1,6 @@
 #include "dem/engine/engine.hpp"
 #include "dem/engine/interrupt.hpp"
-#include "dem/engine/parallel.hpp"
+#include "dem/core/parallel.hpp"
 #include "dem/engine/step_team.hpp"
 
 #include "dem/measure/measure.hpp"

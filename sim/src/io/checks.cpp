@@ -1,5 +1,5 @@
 #include "dem/io/checks.hpp"
-#include "dem/stages/preparation.hpp"
+#include "dem/io/preparation.hpp"
 
 #include <unistd.h>
 

@@ -4,8 +4,8 @@
 #include "dem/contact/registry.hpp"
 #include "dem/io/io.hpp"
 #include "dem/measure/control.hpp"
-#include "dem/stages/plan.hpp"
-#include "dem/stages/preparation.hpp"
+#include "dem/io/work.hpp"
+#include "dem/io/preparation.hpp"
 #include "io/preparation_toml.hpp"
 #include "io/sweep_toml.hpp"
 

@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "dem/contact/contact_forces.hpp"
+#include "dem/forces/contact_forces.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/core/errors.hpp"
 

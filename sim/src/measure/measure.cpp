@@ -6,7 +6,7 @@
 #include <cmath>
 #include <cstdio>
 
-#include "dem/contact/contact_forces.hpp"
+#include "dem/forces/contact_forces.hpp"
 
 namespace dem {
 

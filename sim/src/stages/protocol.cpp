@@ -1,5 +1,5 @@
 #include "dem/stages/protocol.hpp"
-#include "dem/stages/preparation.hpp"
+#include "dem/io/preparation.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -15,14 +15,8 @@
 #include <sstream>
 
 #include "dem/io/checks.hpp"
-#include "dem/contact/contact_forces.hpp"
-#include "dem/stages/curve_file.hpp"
-#include "dem/engine/engine.hpp"
 #include "dem/io/io.hpp"
-#include "dem/io/vtk.hpp"
-#include "dem/measure/measure.hpp"
 #include "dem/io/scene.hpp"
-#include "stages/stage_common.hpp"
 
 namespace fs = std::filesystem;
 

@@ -5,7 +5,7 @@
 #include <iostream>
 
 #include "dem/io/checks.hpp"
-#include "dem/stages/preparation.hpp"
+#include "dem/io/preparation.hpp"
 #include "dem/stages/protocol.hpp"
 
 namespace dem {

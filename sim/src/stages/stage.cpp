@@ -7,7 +7,7 @@
 #include <functional>
 #include <iostream>
 
-#include "dem/contact/contact_forces.hpp"
+#include "dem/forces/contact_forces.hpp"
 #include "dem/engine/engine.hpp"
 #include "dem/io/checks.hpp"
 #include "dem/io/io.hpp"
