@@ -527,9 +527,8 @@ void run_protocol(const Scene& sc, const std::string& out, const std::string& st
   nogil_blowup([&] { dem::run_protocol(*sc.model, opt); return 0; });
 }
 
-}  // namespace
-
-PYBIND11_MODULE(_core, m) {
+// The binding of the module's doc, errors and version.
+void def_module(py::module_& m) {
   m.doc() = "demtk._core: the compiled part of demtk (use `import demtk`).";
 
   g_scene_error = py::exception<dem::SceneError>(m, "SceneError", PyExc_ValueError);
@@ -549,7 +548,10 @@ PYBIND11_MODULE(_core, m) {
   m.attr("version") = DEM_VERSION;
   m.def("_contact_models_json", [] { return dem::contact::registry_json().dump(); },
         "the contact sub-model registry as JSON text (demtk.contact_models() parses it)");
+}
 
+// The binding of Scene, its loaders.
+void def_scene(py::module_& m) {
   // ---- Scene
   py::class_<Scene>(m, "Scene", "A validated scene (the C++ Model): immutable. Build it with demtk.load_scene().")
       .def_property_readonly("toml", [](const Scene& s) { return s.toml; },
@@ -627,7 +629,10 @@ PYBIND11_MODULE(_core, m) {
       });
   m.def("_load_scene_text", &load_text, py::arg("text"), py::arg("overrides"), py::arg("origin"));
   m.def("_load_scene_file", &load_file, py::arg("path"), py::arg("overrides"));
+}
 
+// The binding of Box.
+void def_box(py::module_& m) {
   // ---- Box (a copy; the state's box is changed only by the engine)
   py::class_<dem::Box>(m, "Box", "The periodic cell (a copy of the state's box). Lengths [m], tilt [m], strains [-].")
       .def_property_readonly("lengths", [](const dem::Box& b) { return vec3(b.length); }, "edge lengths L_x, L_y, L_z [m]")
@@ -652,7 +657,10 @@ PYBIND11_MODULE(_core, m) {
           }, "cell matrix H (columns: the lattice vectors) [m]")
       .def_property_readonly("flips", [](const dem::Box& b) { return std::vector<int>{b.flips[0], b.flips[1], b.flips[2]}; },
                              "(xy, xz, yz) remaps of a sheared cell to its most orthogonal equivalent so far");
+}
 
+// The binding of State and the packing readers.
+void def_state(py::module_& m) {
   // ---- State
   py::class_<PyState>(m, "State",
                       "Particles and box. Array properties are numpy views of the engine's memory (no copy), rows "
@@ -746,7 +754,10 @@ PYBIND11_MODULE(_core, m) {
         *p.s = dem::random_packing(*sc.model, phi);
         return p;
       }, py::arg("scene"), py::arg("phi"), "random non-overlapping placement of the scene's N spheres (seeded)");
+}
 
+// The binding of Measurement and the column table.
+void def_measurement(py::module_& m) {
   // ---- Measurement
   py::class_<dem::Measurement>(m, "Measurement",
                                "What measure() returns: `columns` (every curve column by its CSV name), the tensors.")
@@ -790,7 +801,10 @@ PYBIND11_MODULE(_core, m) {
         },
         "every curve column: name, unit, meaning, group ('every', 'rotations': models with rotations, 'path', "
         "'path_sheared')");
+}
 
+// The binding of Engine.
+void def_engine(py::module_& m) {
   // ---- Engine
   py::class_<PyEngine>(m, "Engine",
                        "Engine(scene, state): the C++ time stepper over a state (modified in place). "
@@ -844,7 +858,10 @@ PYBIND11_MODULE(_core, m) {
                              "the pair loop's kernel (avx512, avx2, generic, reference: the same bits)")
       .def_property_readonly("velocity_gradient", [](const PyEngine& pe) { return velgrad_matrix(pe.last_rate); },
                              "of the last step [1/s]");
+}
 
+// The binding of the stage runners.
+void def_runners(py::module_& m) {
   // ---- Stage runners
   m.def("run_mode", &run_mode, py::arg("scene"), py::arg("state"), py::arg("mode"), py::arg("out"),
         py::arg("name") = "", py::arg("quiet") = true, py::arg("force") = false, py::arg("check") = true,
@@ -862,7 +879,10 @@ PYBIND11_MODULE(_core, m) {
         "included); on_checkpoint(phi, state_copy) at its checkpoints. 0 steps: skipped, already past its target.");
   m.def("run_protocol", &run_protocol, py::arg("scene"), py::arg("out"), py::arg("stages") = "all",
         py::arg("force") = false, py::arg("quiet") = true, "What `dem run` does: the whole run folder.");
+}
 
+// The binding of the fit.
+void def_fit(py::module_& m) {
   // ---- Fit
   py::class_<demfit::FitResult>(m, "FitResult", "The saturating fit x(e) = x_max - (x_max - x0) exp(-beta e).")
       .def_readonly("ok", &demfit::FitResult::ok)
@@ -913,4 +933,17 @@ PYBIND11_MODULE(_core, m) {
         "the value rounded to its standard error, as the fit tables print it: '0.197(2)', '3.7(11)e-4'");
   m.def("format_pm", &demfit::format_pm, py::arg("value"), py::arg("error"),
         "the same as '0.197 \u00b1 0.002', '(3.7 \u00b1 1.1)e-4'");
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+  def_module(m);
+  def_scene(m);
+  def_box(m);
+  def_state(m);
+  def_measurement(m);
+  def_engine(m);
+  def_runners(m);
+  def_fit(m);
 }

@@ -271,6 +271,189 @@ State initial_state(const Model& model, const std::function<void(const std::stri
   return state;
 }
 
+// What run_protocol decided before writing anything: which parts run, whether it resumes an
+// interrupted run and after which preparation stage, and the state the preparation starts from.
+struct RunStart {
+  bool want_prep = false, want_dev = false, resume = false;
+  std::vector<std::string> prep_names;
+  std::string resume_after;
+  std::size_t first_prep = 0;   // the first preparation stage this invocation runs
+  State start;
+};
+
+// The checks before anything is written (then --force's clearing): the folder is no ensemble's, a
+// finished run is not overwritten, memory, the resume point's physics, the checkpoints and kept
+// curves of a --stages deviatoric run; the starting state read and checked.
+RunStart check_before_writing(const Model& model, const RunOptions& opt, const fs::path& dir,
+                              const std::function<void(const std::string&)>& note) {
+  RunStart r;
+  r.want_prep = opt.stages == "all" || opt.stages == "prep";
+  r.want_dev = opt.stages == "all" || opt.stages == "deviatoric";
+  if (!r.want_prep && !r.want_dev)
+    throw SceneError("--stages must be all, prep or deviatoric (got '" + opt.stages + "')");
+  if (const std::string kind = ensemble_folder_kind(dir); !kind.empty())
+    throw std::runtime_error(dir.string() + " is " + kind + ", not a run folder: `dem run` would overwrite its "
+                             "scene.toml and, with --force, delete its fit/ and plots/ (the ensemble's fit tables and "
+                             "figures): choose another --out for a single run; continue the ensemble with `dem ensemble "
+                             "SCENE --out " + dir.string() + "`");
+  r.resume = r.want_prep && !opt.force && fs::exists(dir / "manifest.json");
+  if (r.resume && manifest_complete(dir / "manifest.json"))
+    throw std::runtime_error("results already exist in " + dir.string() + " (manifest.json: a finished run): choose "
+                             "another --out, or pass --force to replace them");
+  if (r.want_prep && !r.resume) check_memory(model);
+  r.prep_names = prep_stage_names(model);
+  r.resume_after = r.resume ? last_finished_prep_stage(dir, r.prep_names) : "";
+  if (!r.resume_after.empty()) r.start = resume_state(model, dir, r.resume_after);
+  if (!r.want_prep) check_checkpoints(model, dir);
+  if (r.want_dev && !opt.force) check_kept_curves(model, dir);
+  if (r.want_prep && r.resume_after.empty()) r.start = initial_state(model, note);
+  if (opt.force) clear_replaced(dir, r.want_prep, r.prep_names);
+  if (r.resume)
+    std::cerr << "dem: " << dir.string() << " holds an interrupted run (manifest.json: complete: false): resuming "
+              << (r.resume_after.empty() ? "the preparation from its start"
+                                         : "after the finished stage " + r.resume_after + " (prep/after_" +
+                                               r.resume_after + ".ckpt)")
+              << "; finished deviatoric curves are kept\n";
+  if (!r.resume_after.empty())
+    r.first_prep = std::find(r.prep_names.begin(), r.prep_names.end(), r.resume_after) - r.prep_names.begin() + 1;
+  return r;
+}
+
+// The run folder being written: its manifest (which says "not complete" until the end), where
+// each stage's files go, and the checkpoints.
+struct RunFolder {
+  const Model& model;
+  const RunOptions& opt;
+  const RunStart& run;
+  fs::path dir;
+  Manifest man;
+  std::string vtk_dir, prep_hash, shear_hash;
+  // The scene embedded in checkpoints without integration.threads (the bits do not depend on it,
+  // 1-4 threads): a run resumed with another thread count writes the same checkpoint bytes.
+  std::string ckpt_scene;
+  bool tilted_noted = false;
+
+  RunFolder(const Model& m, const RunOptions& o, const RunStart& r)
+      : model(m), opt(o), run(r), dir(o.out_dir),
+        man{(dir / "manifest.json").string(), o.scene_toml, o.command_line, {}, false},
+        prep_hash(physics_hash(preparation_physics(m))), shear_hash(physics_hash(shear_physics(m))),
+        ckpt_scene(scene_without_threads(o.scene_toml)) {
+    fs::create_directories(dir / "prep");
+    fs::create_directories(dir / "checkpoints");
+    fs::create_directories(dir / "deviatoric");
+    vtk_dir = model.output.vtk ? (dir / "vtk").string() : "";
+    if (model.output.vtk) fs::create_directories(dir / "vtk");
+    write_file_atomic((dir / "scene.toml").string(), opt.scene_toml);
+    // Outputs of earlier invocations that this one keeps.
+    for (const char* sub : {"prep", "deviatoric"})
+      for (const auto& name : csv_stems(dir / sub)) {
+        const bool rerun = run.want_prep && std::string(sub) == "prep" &&
+                           std::find(run.prep_names.begin() + run.first_prep, run.prep_names.end(), name) !=
+                               run.prep_names.end();
+        if ((!run.want_prep || run.resume) && !rerun)
+          record(sub, name, first_word(curve_physics_line(dir / sub / (name + ".csv"))));
+      }
+    man.save();
+  }
+  void note(const std::string& what) const {
+    if (!opt.quiet) std::cerr << "dem: " << what << "\n";
+  }
+  void record(const std::string& sub, const std::string& name, const std::string& physics) {
+    const std::string file = (fs::path(sub) / (name + ".csv")).string();
+    for (auto& st : man.stages)
+      if (st.file == file) { st.physics = physics; return; }
+    man.stages.push_back({name, file, physics});
+  }
+  std::string stage_csv(const std::string& sub, const std::string& name) {
+    const fs::path f = dir / sub / (name + ".csv");
+    if (fs::exists(f) && !opt.force && !run.resume)
+      throw std::runtime_error(f.string() + " exists: pass --force to overwrite finished results");
+    record(sub, name, sub == "deviatoric" ? shear_hash : prep_hash);
+    return f.string();
+  }
+  void record_time(const std::string& stage, std::int64_t steps, double wall, int n) {
+    for (auto& st : man.stages)
+      if (st.stage == stage) {
+        st.steps = steps;
+        st.wall_s = wall;
+        st.particle_steps_per_s = wall > 0 ? steps * double(n) / wall : 0.0;
+      }
+  }
+  // Runs a stage (run_prep_stage, run_mode) into DIR/sub/<name>.csv and records its steps and
+  // wall time in the manifest entry of that CSV.
+  void timed(const std::string& sub, const std::string& name, const State& state,
+             const std::function<std::int64_t(const StageOutput&)>& stage) {
+    const StageOutput out{stage_csv(sub, name), vtk_dir, (dir / ("failed_" + name + ".ckpt")).string(), opt.quiet,
+                          nullptr};
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::int64_t steps = stage(out);
+    record_time(name, steps, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+                state.count());
+  }
+  // checkpoints/<series>_phiX.XXX.ckpt and, for an untilted cell, its YADE text packing .txt.
+  void save_checkpoint(const std::string& series, double phi, const State& st) {
+    const std::string stem = checkpoint_stem(series, phi);
+    write_checkpoint((dir / "checkpoints" / (stem + ".ckpt")).string(),
+                     Checkpoint{ckpt_scene, series + " " + fmt_phi(phi), st});
+    if (st.box.tilted()) {   // the YADE text format has no tilt: the .ckpt alone holds the state
+      if (!tilted_noted)
+        std::cerr << "dem: note: the cell is tilted (a sheared packing): checkpoints are written as .ckpt only, "
+                     "without the .txt packing (its '##PERIODIC:: Lx Ly Lz' format cannot hold the tilt)\n";
+      tilted_noted = true;
+    } else {
+      write_packing((dir / "checkpoints" / (stem + ".txt")).string(), st);
+    }
+    note("checkpoint " + stem);
+  }
+};
+
+// The preparation stages from the first this invocation runs, each ending with its resume point.
+void run_preparation(RunFolder& f, State state) {
+  const Model& model = f.model;
+  const std::vector<std::string>& names = f.run.prep_names;
+  if (model.protocol.preparation_explicit && std::find(names.begin(), names.end(), "cycle_unloading") == names.end())
+    std::cerr << "dem: note: no preparation stage is named cycle_unloading: `dem fit` and `dem model` read the "
+                 "isotropic (unloading) branch from prep/cycle_unloading.csv, so they will have none; name the "
+                 "unloading stage you want fitted so\n";
+  const SaveCheckpoint save = [&](const std::string& series, double phi, const State& st) {
+    f.save_checkpoint(series, phi, st);
+  };
+  for (std::size_t i = f.run.first_prep; i < model.protocol.preparation.size(); ++i) {
+    const PrepStage& s = model.protocol.preparation[i];
+    if (prep_stage_skipped(s, state.volume_fraction()))
+      run_prep_stage(model, s, state, StageOutput{}, save);   // says so, writes nothing
+    else
+      f.timed("prep", s.name, state, [&](const StageOutput& out) { return run_prep_stage(model, s, state, out, save); });
+    write_checkpoint((f.dir / "prep" / ("after_" + names[i] + ".ckpt")).string(),
+                     Checkpoint{f.ckpt_scene, "end of stage " + names[i], state});
+    f.man.save();
+  }
+}
+
+// Every mode and path from every checkpoint of the series modes_from (curves finished by an
+// earlier invocation kept unless --force).
+void run_modes(RunFolder& f) {
+  const Model& model = f.model;
+  const Protocol& p = model.protocol;
+  for (double phi : checkpoints_to_run(p, f.dir)) {
+    const fs::path ck = f.dir / "checkpoints" / (checkpoint_stem(p.modes_from, phi) + ".ckpt");
+    if (!fs::exists(ck))
+      throw std::runtime_error("checkpoint " + ck.string() + " is missing: run --stages prep first");
+    for (const auto& mode : p.modes) {
+      const std::string name = mode.name + "_" + fmt_phi(phi);
+      if ((!f.run.want_prep || f.run.resume) && !f.opt.force && fs::exists(f.dir / "deviatoric" / (name + ".csv"))) {
+        f.note("deviatoric " + name + ": finished earlier, kept (--force recomputes it)");
+        continue;
+      }
+      Checkpoint c = read_checkpoint(ck.string());
+      State state = std::move(c.state);
+      f.note("deviatoric " + name + " from " + ck.filename().string());
+      f.timed("deviatoric", name, state, [&](const StageOutput& out) { return run_mode(model, state, mode, name, out); });
+      f.man.save();
+    }
+  }
+}
+
 }  // namespace
 
 void run_protocol(const Model& model, const RunOptions& opt) {
@@ -282,155 +465,16 @@ void run_protocol(const Model& model, const RunOptions& opt) {
     throw SceneError("ensemble.packings = " + std::to_string(model.ensemble_packings) +
                      ": this scene is an ensemble of independent packings; run it with `dem ensemble SCENE --out DIR` "
                      "(or pass --set ensemble.packings=1 for one packing)");
-  const fs::path dir(opt.out_dir);
-  const bool want_prep = opt.stages == "all" || opt.stages == "prep";
-  const bool want_dev = opt.stages == "all" || opt.stages == "deviatoric";
-  if (!want_prep && !want_dev)
-    throw SceneError("--stages must be all, prep or deviatoric (got '" + opt.stages + "')");
   auto note = [&](const std::string& what) {
     if (!opt.quiet) std::cerr << "dem: " << what << "\n";
   };
-
-  // 1. Checks, before anything is written.
-  if (const std::string kind = ensemble_folder_kind(dir); !kind.empty())
-    throw std::runtime_error(dir.string() + " is " + kind + ", not a run folder: `dem run` would overwrite its "
-                             "scene.toml and, with --force, delete its fit/ and plots/ (the ensemble's fit tables and "
-                             "figures): choose another --out for a single run; continue the ensemble with `dem ensemble "
-                             "SCENE --out " + dir.string() + "`");
-  const bool resume = want_prep && !opt.force && fs::exists(dir / "manifest.json");
-  if (resume && manifest_complete(dir / "manifest.json"))
-    throw std::runtime_error("results already exist in " + dir.string() + " (manifest.json: a finished run): choose "
-                             "another --out, or pass --force to replace them");
-  if (want_prep && !resume) check_memory(model);
-  const std::vector<std::string> prep_names = prep_stage_names(model);
-  const std::string resume_after = resume ? last_finished_prep_stage(dir, prep_names) : "";
-  State start;   // the state the preparation starts from: read and checked before writing
-  if (!resume_after.empty()) start = resume_state(model, dir, resume_after);
-  if (!want_prep) check_checkpoints(model, dir);
-  if (want_dev && !opt.force) check_kept_curves(model, dir);
-  if (want_prep && resume_after.empty()) start = initial_state(model, note);
-  if (opt.force) clear_replaced(dir, want_prep, prep_names);
-  if (resume)
-    std::cerr << "dem: " << dir.string() << " holds an interrupted run (manifest.json: complete: false): resuming "
-              << (resume_after.empty() ? "the preparation from its start"
-                                       : "after the finished stage " + resume_after + " (prep/after_" + resume_after + ".ckpt)")
-              << "; finished deviatoric curves are kept\n";
-
-  // 2. The folder, the scene and a manifest that says "not complete" until the end.
-  fs::create_directories(dir / "prep");
-  fs::create_directories(dir / "checkpoints");
-  fs::create_directories(dir / "deviatoric");
-  const std::string vtk_dir = model.output.vtk ? (dir / "vtk").string() : "";
-  if (model.output.vtk) fs::create_directories(dir / "vtk");
-  write_file_atomic((dir / "scene.toml").string(), opt.scene_toml);
-
-  Manifest man{(dir / "manifest.json").string(), opt.scene_toml, opt.command_line, {}, false};
-  const std::string prep_hash = physics_hash(preparation_physics(model)), shear_hash = physics_hash(shear_physics(model));
-  const Protocol& p = model.protocol;
-  auto record = [&](const std::string& sub, const std::string& name, const std::string& physics) {
-    const std::string file = (fs::path(sub) / (name + ".csv")).string();
-    for (auto& st : man.stages)
-      if (st.file == file) { st.physics = physics; return; }
-    man.stages.push_back({name, file, physics});
-  };
-  // Outputs of earlier invocations that this one keeps.
-  std::size_t first_prep = 0;
-  if (!resume_after.empty())
-    first_prep = std::find(prep_names.begin(), prep_names.end(), resume_after) - prep_names.begin() + 1;
-  for (const char* sub : {"prep", "deviatoric"})
-    for (const auto& name : csv_stems(dir / sub)) {
-      const bool rerun = want_prep && std::string(sub) == "prep" &&
-                         std::find(prep_names.begin() + first_prep, prep_names.end(), name) != prep_names.end();
-      if ((!want_prep || resume) && !rerun) record(sub, name, first_word(curve_physics_line(dir / sub / (name + ".csv"))));
-    }
-  man.save();
-
-  auto stage_csv = [&](const std::string& sub, const std::string& name) {
-    const fs::path f = dir / sub / (name + ".csv");
-    if (fs::exists(f) && !opt.force && !resume)
-      throw std::runtime_error(f.string() + " exists: pass --force to overwrite finished results");
-    record(sub, name, sub == "deviatoric" ? shear_hash : prep_hash);
-    return f.string();
-  };
-  auto record_time = [&](const std::string& stage, std::int64_t steps, double wall, int n) {
-    for (auto& st : man.stages)
-      if (st.stage == stage) {
-        st.steps = steps;
-        st.wall_s = wall;
-        st.particle_steps_per_s = wall > 0 ? steps * double(n) / wall : 0.0;
-      }
-  };
-  // Runs a stage (run_prep_stage, run_mode) into DIR/sub/<name>.csv and records its steps and
-  // wall time in the manifest entry of that CSV.
-  auto timed = [&](const std::string& sub, const std::string& name, const State& state,
-                   const std::function<std::int64_t(const StageOutput&)>& run) {
-    const StageOutput out{stage_csv(sub, name), vtk_dir, (dir / ("failed_" + name + ".ckpt")).string(), opt.quiet,
-                          nullptr};
-    const auto t0 = std::chrono::steady_clock::now();
-    const std::int64_t steps = run(out);
-    record_time(name, steps, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
-                state.count());
-  };
-
-  // The scene embedded in checkpoints without integration.threads (the bits do not depend on it,
-  // 1-4 threads): a run resumed with another thread count writes the same checkpoint bytes.
-  const std::string ckpt_scene = scene_without_threads(opt.scene_toml);
-  bool tilted_noted = false;
-  if (want_prep) {
-    State state = std::move(start);
-    const SaveCheckpoint save = [&](const std::string& series, double phi, const State& st) {
-      const std::string stem = checkpoint_stem(series, phi);
-      write_checkpoint((dir / "checkpoints" / (stem + ".ckpt")).string(),
-                       Checkpoint{ckpt_scene, series + " " + fmt_phi(phi), st});
-      if (st.box.tilted()) {   // the YADE text format has no tilt: the .ckpt alone holds the state
-        if (!tilted_noted)
-          std::cerr << "dem: note: the cell is tilted (a sheared packing): checkpoints are written as .ckpt only, "
-                       "without the .txt packing (its '##PERIODIC:: Lx Ly Lz' format cannot hold the tilt)\n";
-        tilted_noted = true;
-      } else {
-        write_packing((dir / "checkpoints" / (stem + ".txt")).string(), st);
-      }
-      note("checkpoint " + stem);
-    };
-    if (p.preparation_explicit &&
-        std::find(prep_names.begin(), prep_names.end(), "cycle_unloading") == prep_names.end())
-      std::cerr << "dem: note: no preparation stage is named cycle_unloading: `dem fit` and `dem model` read the "
-                   "isotropic (unloading) branch from prep/cycle_unloading.csv, so they will have none; name the "
-                   "unloading stage you want fitted so\n";
-    for (std::size_t i = first_prep; i < p.preparation.size(); ++i) {
-      const PrepStage& s = p.preparation[i];
-      if (prep_stage_skipped(s, state.volume_fraction()))
-        run_prep_stage(model, s, state, StageOutput{}, save);   // says so, writes nothing
-      else
-        timed("prep", s.name, state, [&](const StageOutput& out) { return run_prep_stage(model, s, state, out, save); });
-      write_checkpoint((dir / "prep" / ("after_" + prep_names[i] + ".ckpt")).string(),
-                       Checkpoint{ckpt_scene, "end of stage " + prep_names[i], state});
-      man.save();
-    }
-  }
-
-  if (want_dev) {
-    for (double phi : checkpoints_to_run(p, dir)) {
-      const fs::path ck = dir / "checkpoints" / (checkpoint_stem(p.modes_from, phi) + ".ckpt");
-      if (!fs::exists(ck))
-        throw std::runtime_error("checkpoint " + ck.string() + " is missing: run --stages prep first");
-      for (const auto& mode : p.modes) {
-        const std::string name = mode.name + "_" + fmt_phi(phi);
-        if ((!want_prep || resume) && !opt.force && fs::exists(dir / "deviatoric" / (name + ".csv"))) {
-          note("deviatoric " + name + ": finished earlier, kept (--force recomputes it)");
-          continue;
-        }
-        Checkpoint c = read_checkpoint(ck.string());
-        State state = std::move(c.state);
-        note("deviatoric " + name + " from " + ck.filename().string());
-        timed("deviatoric", name, state, [&](const StageOutput& out) { return run_mode(model, state, mode, name, out); });
-        man.save();
-      }
-    }
-  }
-  man.complete = true;
-  man.save();
-  note("done: results in " + dir.string());
+  RunStart run = check_before_writing(model, opt, fs::path(opt.out_dir), note);   // 1. before anything is written
+  RunFolder folder(model, opt, run);                                               // 2. the folder and its manifest
+  if (run.want_prep) run_preparation(folder, std::move(run.start));
+  if (run.want_dev) run_modes(folder);
+  folder.man.complete = true;
+  folder.man.save();
+  note("done: results in " + opt.out_dir);
 }
 
 }  // namespace dem
