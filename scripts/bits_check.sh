@@ -8,7 +8,8 @@
 #   scripts/bits_check.sh --compare A/sums.txt B/sums.txt
 #
 # Writes OUT/sums.txt ("sha256  case/relative/path", manifests and scene copies aside: they hold the
-# command line and the version), and the fit tables of the frictional run (`dem fit`). Small N and short strains: about a minute on one core.
+# command line and the version), the fit tables of the frictional run (`dem fit`), and `dem fit` and `dem model` on a copy of
+# data/figure3_n9261 (an ensemble: fit_ensemble, calibrate). Small N and short strains: about 40 s on one core.
 set -euo pipefail
 if [[ "${1:-}" == "--compare" ]]; then
   if diff -u "$2" "$3"; then echo "bits_check: the same bytes ($(wc -l < "$2") files)"; exit 0; fi
@@ -83,7 +84,13 @@ demtk.run_stage(scene, st, "shear", [[0, 0, 2 * scene.deviatoric_rate], [0, 0, 0
                 out=os.path.join(out, "shear.csv"), vtk_dir="")
 PY
 
+# 6. The ensemble fit (`dem fit` on an ensemble folder) and the constitutive model (`dem model`)
+# on a copy of the committed N = 9261 ensemble's member curves.
+mkdir -p "$OUT/ens" && cp -r "$ROOT/data/figure3_n9261/members" "$ROOT/data/figure3_n9261/ensemble" "$OUT/ens/"
+"$DEM" fit "$OUT/ens" --no-plots > /dev/null 2>&1
+"$DEM" model "$OUT/ens" --out "$OUT/model" --no-jackknife --no-plots > /dev/null 2>&1
+
 cd "$OUT"
-find . -type f \( -name '*.csv' -o -name '*.ckpt' -o -name '*.txt' -o -name '*.vtu' -o -name '*.pvd' -o -path './fr/fit/*' \) \
+find . -type f \( -name '*.csv' -o -name '*.ckpt' -o -name '*.txt' -o -name '*.vtu' -o -name '*.pvd' -o -path './fr/fit/*' -o -path './ens/fit/*' -o -path './ens/ensemble/*' -o -path './model/*' \) \
   ! -name sums.txt | LC_ALL=C sort | xargs sha256sum > sums.txt
 echo "bits_check: $(wc -l < sums.txt) files in $OUT/sums.txt" >&2
