@@ -223,25 +223,10 @@ void write_isotropic(const std::vector<std::string>& unloading_csvs, const std::
   write_table_all(iso, out_dir + "/isotropic", caption, tex);
 }
 
-int run_fit_command(const FitCommandOptions& o) {
-  const fs::path run(o.run_dir);
-  const fs::path dev = run / "deviatoric";
-  const fs::path out = run / "fit";
-  if (fs::exists(out / "parameters.csv") && !o.force) {
-    std::cerr << "dem fit: " << out << " already holds fit results: pass --force to overwrite\n";
-    return 1;
-  }
-  if (fs::is_directory(run / "members")) return run_ensemble_fit_command(o);
-  if (!fs::is_directory(dev)) {
-    std::cerr << "dem fit: " << dev << " does not exist: give a folder written by `dem run`\n";
-    return 1;
-  }
-  FitOptions fo;
-  fo.window_min = o.window_min;
-  fo.window_max = o.window_max;
-  fo.loss = o.loss == "huber" ? Loss::Huber : o.loss == "cauchy" ? Loss::Cauchy : Loss::None;
-  fo.correct_autocorrelation = !o.independent_errors;
+namespace {
 
+// The curves of a run folder (deviatoric/MODE_phiX.XXX.csv), loading paths left out (said).
+std::vector<Curve> read_run_curves(const fs::path& run) {
   // Curves named MODE_phiX.XXX.csv
   const std::regex name_re(R"(([A-Za-z0-9_-]+)_phi([0-9.]+)\.csv)");
   std::vector<Curve> curves;
@@ -257,18 +242,13 @@ int run_fit_command(const FitCommandOptions& o) {
     }
     curves.push_back({m[1], std::stod(m[2]), std::move(t)});
   }
-  if (curves.empty()) {
-    std::cerr << "dem fit: no MODE_phiX.XXX.csv curves in " << dev << " (is the run finished?)\n";
-    return 1;
-  }
-  check_one_physics(curves);
-  // The inputs are good: what this fit writes replaces all of fit/ (no table of an earlier fit,
-  // e.g. a shared-path test of a mode no longer there, survives beside the new ones).
-  fs::remove_all(out);
-  fs::create_directories(out);
-  std::sort(curves.begin(), curves.end(), [](auto& a, auto& b) { return a.mode != b.mode ? a.mode < b.mode : a.phi < b.phi; });
+  return curves;
+}
 
-  Table params({"mode", "nu", "quantity", "x0", "se_x0", "x_max", "se_x_max", "beta", "se_beta",
+// The single-curve fits of a run folder: the machine table, the rows for people, the usable fits
+// by mode and quantity (for the nu-laws), and the counts of the summary line.
+struct CurveFits {
+  Table params = Table({"mode", "nu", "quantity", "x0", "se_x0", "x_max", "se_x_max", "beta", "se_beta",
                 "corr_xmax_beta", "initial_slope", "se_initial_slope", "eps_95", "r_squared", "rmse", "n",
                 "eps_last", "gsl_max_rel_diff", "residual_autocorr", "se_inflation", "warnings", "usable",
                 "not_usable_because"});
@@ -276,69 +256,70 @@ int run_fit_command(const FitCommandOptions& o) {
   FitsByModeQuantity by_mode_q;
   int warnings = 0, usable = 0;
   std::map<std::string, int> not_usable;   // reason -> count, for the summary line
-  for (auto& c : curves) {
-    const auto& e = c.t.column("eps_d");
-    for (const char* q : {"s_dev", "F_dev"}) {
-      try {
-        FitResult r = fit_saturating(e, c.t.column(q), fo);
-        // Second, independent solver from the same start: the relative gap of the optima.
-        double gsl_gap = std::nan("");
-        try {
-          std::vector<double> ew, yw;
-          for (std::size_t i = 0; i < e.size(); ++i)
-            if (e[i] >= fo.window_min && e[i] <= fo.window_max) { ew.push_back(e[i]); yw.push_back(c.t.column(q)[i]); }
-          const auto g = fit_saturating_gsl(ew, yw, {r.x0, r.x_max, r.beta * 1.3});
-          const double scale = std::max(std::fabs(r.x_max), std::fabs(r.x0));
-          gsl_gap = std::max({std::fabs(g[0] - r.x0) / scale, std::fabs(g[1] - r.x_max) / scale,
-                              std::fabs(g[2] - r.beta) / r.beta});
-        } catch (const std::exception& ex) {
-          r.warnings.push_back(std::string("GSL cross-check failed: ") + ex.what());
-        }
-        if (gsl_gap > kMaxSolverGap)
-          r.warnings.push_back("Ceres and GSL optima differ by " + num(gsl_gap, 2) + " (relative, > " + num(kMaxSolverGap) +
-                               "): the data do not pin down the optimum; treat the values with caution");
-        if (!r.ok) throw std::runtime_error(join(r.warnings));
-        std::string w;
-        for (auto& s : r.warnings) {
-          w += (w.empty() ? "" : "; ") + s;
-          std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << s << "\n";
-          ++warnings;
-        }
-        const std::string why = unusable_reason(r);
-        params.add_row({c.mode, num(c.phi, 4), q, num(r.x0), num(r.se_x0), num(r.x_max), num(r.se_x_max),
-                        num(r.beta), num(r.se_beta), num(r.corr[1][2], 3), num(r.initial_slope),
-                        num(r.se_initial_slope), num(r.eps_95), num(r.r_squared, 5), num(r.rmse), std::to_string(r.n),
-                        num(r.e_last, 4), num(gsl_gap, 2), num(r.residual_autocorrelation, 3), num(r.se_inflation, 3), w,
-                        why.empty() ? "yes" : "no", why});
-        SummaryRow sr = summary_row(c.mode, c.phi, q, 0, r.x_max, r.se_x_max, r.beta, r.se_beta, r.initial_slope,
-                                    r.se_initial_slope, r.r_squared, r.warnings);
-        sr.not_usable = why;
-        summary.push_back(sr);
-        if (why.empty()) {
-          by_mode_q[{c.mode, q}].emplace_back(c.phi, r);
-          ++usable;
-        } else {
-          ++not_usable[why];
-        }
-      } catch (const std::exception& ex) {
-        std::cerr << "dem fit: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << ex.what() << "\n";
-        params.add_row({c.mode, num(c.phi, 4), q, "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan",
-                        "nan", "nan", "nan", "0", "nan", "nan", "nan", "nan", std::string("not fitted: ") + ex.what(),
-                        "no", std::string("not fitted: ") + ex.what()});
-        ++not_usable["not fitted"];
-        SummaryRow nf;
-        nf.mode = c.mode; nf.nu = c.phi; nf.quantity = q; nf.fitted = false;
-        nf.warnings = {std::string("not fitted: ") + ex.what()};
-        summary.push_back(nf);
-        ++warnings;
-      }
-    }
-  }
-  write_fit_tables(params, summary, (out / "parameters").string(),
-                   "Fitted saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d); standard errors from the "
-                   "curve's residuals (inflated for their autocorrelation)");
+};
 
-  // D2 vs D3 from the same volume fraction.
+// Fits quantity q of curve c (Ceres, with the GSL cross-check) into `fits`; a curve that cannot
+// be fitted gets a row saying why.
+void fit_curve_quantity(const Curve& c, const char* q, const FitOptions& fo, CurveFits& fits) {
+  const auto& e = c.t.column("eps_d");
+  try {
+    FitResult r = fit_saturating(e, c.t.column(q), fo);
+    // Second, independent solver from the same start: the relative gap of the optima.
+    double gsl_gap = std::nan("");
+    try {
+      std::vector<double> ew, yw;
+      for (std::size_t i = 0; i < e.size(); ++i)
+        if (e[i] >= fo.window_min && e[i] <= fo.window_max) { ew.push_back(e[i]); yw.push_back(c.t.column(q)[i]); }
+      const auto g = fit_saturating_gsl(ew, yw, {r.x0, r.x_max, r.beta * 1.3});
+      const double scale = std::max(std::fabs(r.x_max), std::fabs(r.x0));
+      gsl_gap = std::max({std::fabs(g[0] - r.x0) / scale, std::fabs(g[1] - r.x_max) / scale,
+                          std::fabs(g[2] - r.beta) / r.beta});
+    } catch (const std::exception& ex) {
+      r.warnings.push_back(std::string("GSL cross-check failed: ") + ex.what());
+    }
+    if (gsl_gap > kMaxSolverGap)
+      r.warnings.push_back("Ceres and GSL optima differ by " + num(gsl_gap, 2) + " (relative, > " + num(kMaxSolverGap) +
+                           "): the data do not pin down the optimum; treat the values with caution");
+    if (!r.ok) throw std::runtime_error(join(r.warnings));
+    std::string w;
+    for (auto& s : r.warnings) {
+      w += (w.empty() ? "" : "; ") + s;
+      std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << s << "\n";
+      ++fits.warnings;
+    }
+    const std::string why = unusable_reason(r);
+    fits.params.add_row({c.mode, num(c.phi, 4), q, num(r.x0), num(r.se_x0), num(r.x_max), num(r.se_x_max),
+                    num(r.beta), num(r.se_beta), num(r.corr[1][2], 3), num(r.initial_slope),
+                    num(r.se_initial_slope), num(r.eps_95), num(r.r_squared, 5), num(r.rmse), std::to_string(r.n),
+                    num(r.e_last, 4), num(gsl_gap, 2), num(r.residual_autocorrelation, 3), num(r.se_inflation, 3), w,
+                    why.empty() ? "yes" : "no", why});
+    SummaryRow sr = summary_row(c.mode, c.phi, q, 0, r.x_max, r.se_x_max, r.beta, r.se_beta, r.initial_slope,
+                                r.se_initial_slope, r.r_squared, r.warnings);
+    sr.not_usable = why;
+    fits.summary.push_back(sr);
+    if (why.empty()) {
+      fits.by_mode_q[{c.mode, q}].emplace_back(c.phi, r);
+      ++fits.usable;
+    } else {
+      ++fits.not_usable[why];
+    }
+  } catch (const std::exception& ex) {
+    std::cerr << "dem fit: " << c.mode << " nu=" << num(c.phi, 4) << " " << q << ": " << ex.what() << "\n";
+    fits.params.add_row({c.mode, num(c.phi, 4), q, "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan", "nan",
+                    "nan", "nan", "nan", "0", "nan", "nan", "nan", "nan", std::string("not fitted: ") + ex.what(),
+                    "no", std::string("not fitted: ") + ex.what()});
+    ++fits.not_usable["not fitted"];
+    SummaryRow nf;
+    nf.mode = c.mode; nf.nu = c.phi; nf.quantity = q; nf.fitted = false;
+    nf.warnings = {std::string("not fitted: ") + ex.what()};
+    fits.summary.push_back(nf);
+    ++fits.warnings;
+  }
+}
+
+// D2 vs D3 from the same volume fraction: the shared-path test of each quantity (shared_path.*).
+void write_shared_path_tests(const std::vector<Curve>& curves, const FitCommandOptions& o, const FitOptions& fo,
+                             const fs::path& out) {
   Table shared({"nu", "quantity", "mode_a", "mode_b", "f_statistic", "p_value", "max_gap", "same_path",
                 "x_max_shared", "beta_shared"});
   for (auto& a : curves)
@@ -369,16 +350,60 @@ int run_fit_command(const FitCommandOptions& o) {
     write_table_all(shared, (out / "shared_path").string(), caption, tex);
   }
 
-  write_nu_laws(by_mode_q, out.string());
+}
+
+}  // namespace
+
+int run_fit_command(const FitCommandOptions& o) {
+  const fs::path run(o.run_dir);
+  const fs::path dev = run / "deviatoric";
+  const fs::path out = run / "fit";
+  if (fs::exists(out / "parameters.csv") && !o.force) {
+    std::cerr << "dem fit: " << out << " already holds fit results: pass --force to overwrite\n";
+    return 1;
+  }
+  if (fs::is_directory(run / "members")) return run_ensemble_fit_command(o);
+  if (!fs::is_directory(dev)) {
+    std::cerr << "dem fit: " << dev << " does not exist: give a folder written by `dem run`\n";
+    return 1;
+  }
+  FitOptions fo;
+  fo.window_min = o.window_min;
+  fo.window_max = o.window_max;
+  fo.loss = o.loss == "huber" ? Loss::Huber : o.loss == "cauchy" ? Loss::Cauchy : Loss::None;
+  fo.correct_autocorrelation = !o.independent_errors;
+
+  std::vector<Curve> curves = read_run_curves(run);
+  if (curves.empty()) {
+    std::cerr << "dem fit: no MODE_phiX.XXX.csv curves in " << dev << " (is the run finished?)\n";
+    return 1;
+  }
+  check_one_physics(curves);
+  // The inputs are good: what this fit writes replaces all of fit/ (no table of an earlier fit,
+  // e.g. a shared-path test of a mode no longer there, survives beside the new ones).
+  fs::remove_all(out);
+  fs::create_directories(out);
+  std::sort(curves.begin(), curves.end(), [](auto& a, auto& b) { return a.mode != b.mode ? a.mode < b.mode : a.phi < b.phi; });
+
+  CurveFits fits;
+  for (auto& c : curves)
+    for (const char* q : {"s_dev", "F_dev"}) fit_curve_quantity(c, q, fo, fits);
+  write_fit_tables(fits.params, fits.summary, (out / "parameters").string(),
+                   "Fitted saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d); standard errors from the "
+                   "curve's residuals (inflated for their autocorrelation)");
+
+  write_shared_path_tests(curves, o, fo, out);
+
+  write_nu_laws(fits.by_mode_q, out.string());
   write_isotropic({(run / "prep" / "cycle_unloading.csv").string()}, out.string());
-  std::cerr << "dem fit: " << usable_summary(usable, params.rows.size(), not_usable) << ", written to " << out.string()
-            << " (" << warnings << " warnings)\n";
+  std::cerr << "dem fit: " << usable_summary(fits.usable, fits.params.rows.size(), fits.not_usable) << ", written to " << out.string()
+            << " (" << fits.warnings << " warnings)\n";
   if (!o.no_plots) {
     const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.plots \"" +
                             run.string() + "\" --fits";
     if (std::system(cmd.c_str()) != 0) std::cerr << "dem fit: plotting failed (tables are written)\n";
   }
-  if (not_usable.count("not fitted") && not_usable.at("not fitted") == static_cast<int>(params.rows.size())) {
+  if (fits.not_usable.count("not fitted") && fits.not_usable.at("not fitted") == static_cast<int>(fits.params.rows.size())) {
     std::cerr << "dem fit: no curve could be fitted (see the reasons above and in parameters.csv): nothing to report\n";
     return 1;
   }

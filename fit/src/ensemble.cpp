@@ -1,3 +1,4 @@
+#include "demfit/format.hpp"
 #include "demfit/ensemble.hpp"
 
 #include <gsl/gsl_cdf.h>
@@ -14,15 +15,6 @@
 namespace demfit {
 
 namespace {
-
-const double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-std::string fmt(double v) {
-  std::ostringstream o;
-  o.precision(3);
-  o << v;
-  return o.str();
-}
 
 // Mean over the members listed in `use` (indices, repeats allowed) at every grid point.
 std::vector<double> mean_of(const std::vector<std::vector<double>>& members, const std::vector<int>& use) {
@@ -142,6 +134,84 @@ Band band(const std::vector<std::vector<double>>& members, double level) {
   return b;
 }
 
+namespace {
+
+// Bootstrap over packings (cross-check; percentile interval): o.bootstrap resamples of the members.
+void bootstrap_errors(const std::vector<double>& grid, const std::vector<std::vector<double>>& members,
+                      const FitOptions& fo, const EnsembleFitOptions& o, EnsembleFit& r) {
+  if (o.bootstrap <= 0) return;
+  const int K = static_cast<int>(members.size());
+  std::mt19937_64 rng(o.seed);
+  std::uniform_int_distribution<int> pick(0, K - 1);
+  std::vector<std::vector<double>> bs(3);
+  for (int b = 0; b < o.bootstrap; ++b) {
+    std::vector<int> use(K);
+    for (int& u : use) u = pick(rng);
+    try {
+      const FitResult f = fit_saturating(grid, mean_of(members, use), fo);
+      if (!f.ok) continue;
+      bs[0].push_back(f.x0); bs[1].push_back(f.x_max); bs[2].push_back(f.beta);
+    } catch (const std::exception&) {
+    }
+  }
+  if (bs[0].size() >= 10)
+    for (int a = 0; a < 3; ++a) {
+      r.boot_se[a] = sample_sd(bs[a]);
+      r.boot_lo[a] = quantile(bs[a], 0.5 * (1 - o.level));
+      r.boot_hi[a] = quantile(bs[a], 0.5 * (1 + o.level));
+    }
+}
+
+// Each member alone: how much one packing scatters (reported, not used for the errors).
+void member_scatter(const std::vector<double>& grid, const std::vector<std::vector<double>>& members,
+                    const FitOptions& fo, const EnsembleFitOptions& o, EnsembleFit& r) {
+  if (!o.member_fits) return;
+  std::vector<std::vector<double>> mf(3);
+  for (const auto& m : members) {
+    try {
+      const FitResult f = fit_saturating(grid, m, fo);
+      if (!f.ok) continue;
+      mf[0].push_back(f.x0); mf[1].push_back(f.x_max); mf[2].push_back(f.beta);
+    } catch (const std::exception&) {
+    }
+  }
+  r.member_fits_ok = static_cast<int>(mf[0].size());
+  for (int a = 0; a < 3 && !mf[a].empty(); ++a) {
+    r.member_mean[a] = std::accumulate(mf[a].begin(), mf[a].end(), 0.0) / mf[a].size();
+    r.member_sd[a] = sample_sd(mf[a]);
+  }
+}
+
+// The warnings the ensemble supports: failed leave-one-out fits, two packings only, parameters
+// poorly determined between packings, a curve without its plateau.
+void ensemble_warnings(const std::vector<double>& grid, const std::vector<std::vector<double>>& members,
+                       const FitOptions& fo, int failed, const double se[4], EnsembleFit& r) {
+  const int K = static_cast<int>(members.size());
+  auto& w = r.fit.warnings;
+  if (failed > 0)
+    w.push_back(std::to_string(failed) + " of " + std::to_string(K) + " leave-one-out fits did not converge: the "
+                "errors are unreliable");
+  if (K == 2)
+    w.push_back("only 2 packings: intervals use t_1 = 12.7 and are wide; 4 or more packings make them useful");
+  const double amplitude = std::fabs(r.fit.x_max - r.fit.x0);
+  const char* names[3] = {"x0", "x_max", "beta"};
+  const double scales[3] = {amplitude, amplitude, r.fit.beta};
+  for (int a = 0; a < 3; ++a)
+    if (std::isfinite(se[a]) && scales[a] > 0 && se[a] / scales[a] > fo.max_relative_error)
+      w.push_back(std::string(names[a]) + " is poorly determined (standard error between packings " +
+                  fmt(100 * se[a] / scales[a]) + "% of " + (a < 2 ? "the amplitude |x_max - x0|" : "its value") + ")");
+  std::vector<double> ew;
+  std::vector<std::vector<double>> in_window(K);
+  for (std::size_t i = 0; i < grid.size(); ++i)
+    if (grid[i] >= fo.window_min && grid[i] <= fo.window_max) {
+      ew.push_back(grid[i]);
+      for (int k = 0; k < K; ++k) in_window[k].push_back(members[k][i]);
+    }
+  check_plateau(ew, in_window, r.fit, w);
+}
+
+}  // namespace
+
 EnsembleFit fit_ensemble(const std::vector<double>& grid, const std::vector<std::vector<double>>& members,
                          const EnsembleFitOptions& o) {
   const int K = static_cast<int>(members.size());
@@ -208,69 +278,9 @@ EnsembleFit fit_ensemble(const std::vector<double>& grid, const std::vector<std:
     }
   }
 
-  // Bootstrap over packings (cross-check; percentile interval).
-  if (o.bootstrap > 0) {
-    std::mt19937_64 rng(o.seed);
-    std::uniform_int_distribution<int> pick(0, K - 1);
-    std::vector<std::vector<double>> bs(3);
-    for (int b = 0; b < o.bootstrap; ++b) {
-      std::vector<int> use(K);
-      for (int& u : use) u = pick(rng);
-      try {
-        const FitResult f = fit_saturating(grid, mean_of(members, use), fo);
-        if (!f.ok) continue;
-        bs[0].push_back(f.x0); bs[1].push_back(f.x_max); bs[2].push_back(f.beta);
-      } catch (const std::exception&) {
-      }
-    }
-    if (bs[0].size() >= 10)
-      for (int a = 0; a < 3; ++a) {
-        r.boot_se[a] = sample_sd(bs[a]);
-        r.boot_lo[a] = quantile(bs[a], 0.5 * (1 - o.level));
-        r.boot_hi[a] = quantile(bs[a], 0.5 * (1 + o.level));
-      }
-  }
-
-  // Each member alone: how much one packing scatters (reported, not used for the errors).
-  if (o.member_fits) {
-    std::vector<std::vector<double>> mf(3);
-    for (const auto& m : members) {
-      try {
-        const FitResult f = fit_saturating(grid, m, fo);
-        if (!f.ok) continue;
-        mf[0].push_back(f.x0); mf[1].push_back(f.x_max); mf[2].push_back(f.beta);
-      } catch (const std::exception&) {
-      }
-    }
-    r.member_fits_ok = static_cast<int>(mf[0].size());
-    for (int a = 0; a < 3 && !mf[a].empty(); ++a) {
-      r.member_mean[a] = std::accumulate(mf[a].begin(), mf[a].end(), 0.0) / mf[a].size();
-      r.member_sd[a] = sample_sd(mf[a]);
-    }
-  }
-
-  // Warnings the ensemble supports.
-  auto& w = r.fit.warnings;
-  if (failed > 0)
-    w.push_back(std::to_string(failed) + " of " + std::to_string(K) + " leave-one-out fits did not converge: the "
-                "errors are unreliable");
-  if (K == 2)
-    w.push_back("only 2 packings: intervals use t_1 = 12.7 and are wide; 4 or more packings make them useful");
-  const double amplitude = std::fabs(r.fit.x_max - r.fit.x0);
-  const char* names[3] = {"x0", "x_max", "beta"};
-  const double scales[3] = {amplitude, amplitude, r.fit.beta};
-  for (int a = 0; a < 3; ++a)
-    if (std::isfinite(se[a]) && scales[a] > 0 && se[a] / scales[a] > fo.max_relative_error)
-      w.push_back(std::string(names[a]) + " is poorly determined (standard error between packings " +
-                  fmt(100 * se[a] / scales[a]) + "% of " + (a < 2 ? "the amplitude |x_max - x0|" : "its value") + ")");
-  std::vector<double> ew;
-  std::vector<std::vector<double>> in_window(K);
-  for (std::size_t i = 0; i < grid.size(); ++i)
-    if (grid[i] >= fo.window_min && grid[i] <= fo.window_max) {
-      ew.push_back(grid[i]);
-      for (int k = 0; k < K; ++k) in_window[k].push_back(members[k][i]);
-    }
-  check_plateau(ew, in_window, r.fit, w);
+  bootstrap_errors(grid, members, fo, o, r);
+  member_scatter(grid, members, fo, o, r);
+  ensemble_warnings(grid, members, fo, failed, se, r);
   return r;
 }
 

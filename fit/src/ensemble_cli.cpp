@@ -328,17 +328,11 @@ void write_members_table(const std::map<std::pair<std::string, double>, Cell>& c
   write_table_all(t, (dir / "members").string(), "Ensemble members per (mode, nu): used (complete) or left out, with the reason");
 }
 
-}  // namespace
-
-int run_ensemble_fit_command(const FitCommandOptions& o) {
-  const fs::path run(o.run_dir), out = run / "fit", ens = run / "ensemble";
-  // Complete or not: every task the scene plans must have left its status file.
-  if (!o.plan_error.empty()) {
-    std::cerr << "dem fit: " << run.string() << " looks like an ensemble folder (members/), but its scene.toml cannot "
-              << "be read, so it is unknown which tasks it should hold: " << o.plan_error
-              << "\n  (run `dem ensemble SCENE --out " << run.string() << "` to write it)\n";
-    return 1;
-  }
+// Whether every task the scene plans has left its result: "" if so, else the note the tables carry
+// ("ensemble incomplete: ..."). Sets `refuse` when the fit must not go on (incomplete without
+// --partial; said on stderr); `missing` counts the tasks without a result.
+std::string check_complete(const FitCommandOptions& o, const fs::path& run, bool& refuse, std::size_t& missing_count) {
+  refuse = false;
   std::vector<std::string> missing;
   const bool stored_copy = no_status_files(run, o.planned_tasks);
   for (const auto& t : o.planned_tasks)
@@ -355,30 +349,19 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
       std::cerr << "dem fit: " << run.string() << ": " << incomplete << " (" << list << "): nothing fitted; finish it "
                 << "with `dem ensemble " << (run / "scene.toml").string() << " --out " << run.string()
                 << "` (it continues where it stopped), or pass --partial to fit what is there\n";
-      return 1;
+      refuse = true;
+      return incomplete;
     }
     std::cerr << "dem fit: warning: " << incomplete << " (" << list << "); fitting what is there (--partial): the "
               << "tables say so in their warnings\n";
   }
-  auto cells = collect_cells(run);
-  if (cells.empty() && (!missing.empty() || o.planned_tasks.empty())) {
-    std::cerr << "dem fit: no finished mode runs under " << (run / "members") << " (is the ensemble workflow finished?)\n";
-    return 1;
-  }
-  // Every planned task finished, none a plain mode: an ensemble of loading paths only (e.g. the
-  // shear tester, docs/powders.md). Nothing to fit: the tables are written empty, and said so.
-  if (cells.empty())
-    std::cerr << "dem fit: " << run.string() << ": only loading paths, which are not fitted; the tables are empty "
-              << "(the paths' curves are in members/*/deviatoric/)\n";
-  for (const fs::path& d : {out, ens}) fs::remove_all(d);   // no stale tables or averages of another run
-  fs::create_directories(out);
-  fs::create_directories(ens);
-  write_members_table(cells, ens);
+  missing_count = missing.size();
+  return incomplete;
+}
 
-  EnsembleFitOptions eo;
-  eo.fit.window_min = o.window_min;
-  eo.fit.window_max = o.window_max;
-  eo.fit.loss = o.loss == "huber" ? Loss::Huber : o.loss == "cauchy" ? Loss::Cauchy : Loss::None;
+// The ensemble fits of a folder: the machine table and the rows for people, the usable fits by
+// mode and quantity (nu-laws) and by cell (the paired D2/D3 test), and the counts of the summary.
+struct EnsembleFits {
   Table params = parameter_table();
   std::vector<SummaryRow> summary;
   FitsByModeQuantity by_mode_q;
@@ -386,94 +369,85 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
   std::map<std::pair<std::string, double>, std::vector<std::string>> fitted_members;
   int warnings = 0, fitted = 0, usable = 0;
   std::map<std::string, int> not_usable;   // reason -> count, for the summary line
-  for (auto& [key, c] : cells) {
-    for (const auto& e : c.excluded)
-      std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << ": member " << e.member
-                << " left out (" << e.status << (e.message.empty() ? "" : ": " + e.message) << ")\n";
-    for (const auto& mw : c.warnings)
-      std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << ": " << mw << "\n";
-    if (c.members.empty()) continue;
-    const auto grid = common_grid(c);
-    write_ensemble_csv(c, grid, (ens / (c.mode + "_" + c.tag + ".csv")).string());
-    fitted_members[key] = c.members;
-    for (const char* q : {"s_dev", "F_dev"}) {
-      std::string w = incomplete.empty() ? "" : incomplete + " (--partial)";
-      for (const auto& mw : c.warnings) w += (w.empty() ? "" : "; ") + mw;
-      for (const auto& e : c.excluded) w += (w.empty() ? "" : "; ") + ("member " + e.member + " left out: " + e.status);
-      try {
-        const auto values = member_values(c, grid, q);
-        const EnsembleFit f = fit_ensemble(grid, values, eo);
-        const Choice ch = choose(grid, values, f, eo);
-        for (const auto& s : f.fit.warnings) {
-          w += (w.empty() ? "" : "; ") + s;
-          std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": " << s << "\n";
-          ++warnings;
-        }
-        const std::string why = row_unusable(f, ch);
-        auto row = parameter_row(c, q, f, w);
-        const auto extra = choice_cells(f, ch);
-        row.insert(row.end(), extra.begin(), extra.end());
-        row.push_back(why.empty() ? "yes" : "no");
-        row.push_back(why);
-        params.add_row(row);
-        if (ch.choice.model != "saturating")
-          std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": " << ch.choice.reason << "\n";
-        std::vector<std::string> notes;
-        for (const auto& e : c.excluded) notes.push_back("member " + e.member + " left out: " + e.status);
-        notes.insert(notes.end(), f.fit.warnings.begin(), f.fit.warnings.end());
-        const bool larger = ch.choice.model != "saturating";
-        if (larger) notes.insert(notes.end(), ch.peak.warnings.begin(), ch.peak.warnings.end());
-        SummaryRow sr = summary_row(c.mode, c.nu, q, f.packings, f.fit.x_max, f.fit.se_x_max, f.fit.beta, f.fit.se_beta,
-                                    f.fit.initial_slope, f.fit.se_initial_slope, f.fit.r_squared, notes);
-        sr.model = ch.choice.model;
-        sr.selection_p = ch.choice.p_value;
-        const bool reached = !larger || ch.peak.fit.critical_state_reached;
-        sr.x_crit = !reached ? std::nan("") : larger ? ch.peak.value[kPkXcs] : f.fit.x_max;
-        sr.se_x_crit = !reached ? std::nan("") : larger ? ch.peak.se[kPkXcs] : f.fit.se_x_max;
-        sr.x_peak = ch.peak.value[kPkXpeak];
-        sr.se_x_peak = ch.peak.se[kPkXpeak];
-        sr.eps_peak = ch.peak.value[kPkEpsPeak];
-        sr.se_eps_peak = ch.peak.se[kPkEpsPeak];
-        sr.not_usable = why;
-        summary.push_back(sr);
-        if (why.empty()) {
-          by_mode_q[{c.mode, q}].emplace_back(c.nu, f.fit);
-          fits[{c.mode, c.nu, q}] = f;
-          ++usable;
-        } else {
-          ++not_usable[why];
-          std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": not usable: " << why << "\n";
-        }
-        ++fitted;
-      } catch (const std::exception& ex) {
-        std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": not fitted: " << ex.what() << "\n";
-        SummaryRow nf;
-        nf.mode = c.mode; nf.nu = c.nu; nf.quantity = q; nf.packings = static_cast<int>(c.members.size());
-        nf.fitted = false;
-        nf.warnings = {std::string("not fitted: ") + ex.what()};
-        summary.push_back(nf);
-        ++not_usable["not fitted"];
-        ++warnings;
-      }
-    }
-  }
-  write_fit_tables(params, summary, (out / "parameters").string(),
-                  "Saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d) fitted to the ensemble mean; "
-                  "standard errors and 95% intervals (t, packings - 1 dof) from the jackknife over packings; per curve "
-                  "the model chosen between it and the peak-and-soften law (docs/model_selection.md)");
+};
 
-  // D2 vs D3 from the same checkpoints, paired by member.
+// The ensemble fit of quantity q of one (mode, nu) cell: both laws, the choice between them, its
+// rows; a cell that cannot be fitted gets a row saying why. `incomplete`: the folder's note.
+void fit_cell_quantity(const Cell& c, const std::vector<double>& grid, const char* q, const std::string& incomplete,
+                       const EnsembleFitOptions& eo, EnsembleFits& r) {
+  std::string w = incomplete.empty() ? "" : incomplete + " (--partial)";
+  for (const auto& mw : c.warnings) w += (w.empty() ? "" : "; ") + mw;
+  for (const auto& e : c.excluded) w += (w.empty() ? "" : "; ") + ("member " + e.member + " left out: " + e.status);
+  try {
+    const auto values = member_values(c, grid, q);
+    const EnsembleFit f = fit_ensemble(grid, values, eo);
+    const Choice ch = choose(grid, values, f, eo);
+    for (const auto& s : f.fit.warnings) {
+      w += (w.empty() ? "" : "; ") + s;
+      std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": " << s << "\n";
+      ++r.warnings;
+    }
+    const std::string why = row_unusable(f, ch);
+    auto row = parameter_row(c, q, f, w);
+    const auto extra = choice_cells(f, ch);
+    row.insert(row.end(), extra.begin(), extra.end());
+    row.push_back(why.empty() ? "yes" : "no");
+    row.push_back(why);
+    r.params.add_row(row);
+    if (ch.choice.model != "saturating")
+      std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": " << ch.choice.reason << "\n";
+    std::vector<std::string> notes;
+    for (const auto& e : c.excluded) notes.push_back("member " + e.member + " left out: " + e.status);
+    notes.insert(notes.end(), f.fit.warnings.begin(), f.fit.warnings.end());
+    const bool larger = ch.choice.model != "saturating";
+    if (larger) notes.insert(notes.end(), ch.peak.warnings.begin(), ch.peak.warnings.end());
+    SummaryRow sr = summary_row(c.mode, c.nu, q, f.packings, f.fit.x_max, f.fit.se_x_max, f.fit.beta, f.fit.se_beta,
+                                f.fit.initial_slope, f.fit.se_initial_slope, f.fit.r_squared, notes);
+    sr.model = ch.choice.model;
+    sr.selection_p = ch.choice.p_value;
+    const bool reached = !larger || ch.peak.fit.critical_state_reached;
+    sr.x_crit = !reached ? std::nan("") : larger ? ch.peak.value[kPkXcs] : f.fit.x_max;
+    sr.se_x_crit = !reached ? std::nan("") : larger ? ch.peak.se[kPkXcs] : f.fit.se_x_max;
+    sr.x_peak = ch.peak.value[kPkXpeak];
+    sr.se_x_peak = ch.peak.se[kPkXpeak];
+    sr.eps_peak = ch.peak.value[kPkEpsPeak];
+    sr.se_eps_peak = ch.peak.se[kPkEpsPeak];
+    sr.not_usable = why;
+    r.summary.push_back(sr);
+    if (why.empty()) {
+      r.by_mode_q[{c.mode, q}].emplace_back(c.nu, f.fit);
+      r.fits[{c.mode, c.nu, q}] = f;
+      ++r.usable;
+    } else {
+      ++r.not_usable[why];
+      std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": not usable: " << why << "\n";
+    }
+    ++r.fitted;
+  } catch (const std::exception& ex) {
+    std::cerr << "dem fit: " << c.mode << " nu=" << num(c.nu, 4) << " " << q << ": not fitted: " << ex.what() << "\n";
+    SummaryRow nf;
+    nf.mode = c.mode; nf.nu = c.nu; nf.quantity = q; nf.packings = static_cast<int>(c.members.size());
+    nf.fitted = false;
+    nf.warnings = {std::string("not fitted: ") + ex.what()};
+    r.summary.push_back(nf);
+    ++r.not_usable["not fitted"];
+    ++r.warnings;
+  }
+}
+
+// D2 vs D3 from the same checkpoints, paired by member (shared_path.*).
+void write_paired_shared_path(EnsembleFits& r, const fs::path& out) {
   Table shared({"nu", "quantity", "mode_a", "mode_b", "packings", "diff_x0", "se_diff_x0", "diff_x_max",
                 "se_diff_x_max", "diff_beta", "se_diff_beta", "p_value", "max_gap", "same_path"});
-  for (auto& [key, f2] : fits) {
+  for (auto& [key, f2] : r.fits) {
     const auto& [mode, nu, q] = key;
-    if (mode != "D2" || !fits.count({"D3", nu, q})) continue;
-    if (fitted_members[{"D2", nu}] != fitted_members[{"D3", nu}]) {
+    if (mode != "D2" || !r.fits.count({"D3", nu, q})) continue;
+    if (r.fitted_members[{"D2", nu}] != r.fitted_members[{"D3", nu}]) {
       std::cerr << "dem fit: shared-path test nu=" << num(nu, 4) << " " << q << ": D2 and D3 have different members; skipped\n";
       continue;
     }
     try {
-      const EnsembleSharedPath t = test_shared_path_ensemble(f2, fits.at({"D3", nu, q}));
+      const EnsembleSharedPath t = test_shared_path_ensemble(f2, r.fits.at({"D3", nu, q}));
       shared.add_row({num(nu, 4), q, "D2", "D3", std::to_string(t.packings), num(t.difference[0]), num(t.se[0]),
                       num(t.difference[1]), num(t.se[1]), num(t.difference[2]), num(t.se[2]), num(t.p_value, 3),
                       num(t.max_gap, 4), t.same_path ? "yes" : "no"});
@@ -495,21 +469,76 @@ int run_ensemble_fit_command(const FitCommandOptions& o) {
                  "the three differences.");
     write_table_all(shared, (out / "shared_path").string(), caption, tex);
   }
-  write_nu_laws(by_mode_q, out.string());
+}
+
+}  // namespace
+
+int run_ensemble_fit_command(const FitCommandOptions& o) {
+  const fs::path run(o.run_dir), out = run / "fit", ens = run / "ensemble";
+  // Complete or not: every task the scene plans must have left its status file.
+  if (!o.plan_error.empty()) {
+    std::cerr << "dem fit: " << run.string() << " looks like an ensemble folder (members/), but its scene.toml cannot "
+              << "be read, so it is unknown which tasks it should hold: " << o.plan_error
+              << "\n  (run `dem ensemble SCENE --out " << run.string() << "` to write it)\n";
+    return 1;
+  }
+  bool refuse = false;
+  std::size_t missing = 0;
+  const std::string incomplete = check_complete(o, run, refuse, missing);
+  if (refuse) return 1;
+  auto cells = collect_cells(run);
+  if (cells.empty() && (missing > 0 || o.planned_tasks.empty())) {
+    std::cerr << "dem fit: no finished mode runs under " << (run / "members") << " (is the ensemble workflow finished?)\n";
+    return 1;
+  }
+  // Every planned task finished, none a plain mode: an ensemble of loading paths only (e.g. the
+  // shear tester, docs/powders.md). Nothing to fit: the tables are written empty, and said so.
+  if (cells.empty())
+    std::cerr << "dem fit: " << run.string() << ": only loading paths, which are not fitted; the tables are empty "
+              << "(the paths' curves are in members/*/deviatoric/)\n";
+  for (const fs::path& d : {out, ens}) fs::remove_all(d);   // no stale tables or averages of another run
+  fs::create_directories(out);
+  fs::create_directories(ens);
+  write_members_table(cells, ens);
+
+  EnsembleFitOptions eo;
+  eo.fit.window_min = o.window_min;
+  eo.fit.window_max = o.window_max;
+  eo.fit.loss = o.loss == "huber" ? Loss::Huber : o.loss == "cauchy" ? Loss::Cauchy : Loss::None;
+  EnsembleFits r;
+  for (auto& [key, c] : cells) {
+    for (const auto& e : c.excluded)
+      std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << ": member " << e.member
+                << " left out (" << e.status << (e.message.empty() ? "" : ": " + e.message) << ")\n";
+    for (const auto& mw : c.warnings)
+      std::cerr << "dem fit: warning: " << c.mode << " nu=" << num(c.nu, 4) << ": " << mw << "\n";
+    if (c.members.empty()) continue;
+    const auto grid = common_grid(c);
+    write_ensemble_csv(c, grid, (ens / (c.mode + "_" + c.tag + ".csv")).string());
+    r.fitted_members[key] = c.members;
+    for (const char* q : {"s_dev", "F_dev"}) fit_cell_quantity(c, grid, q, incomplete, eo, r);
+  }
+  write_fit_tables(r.params, r.summary, (out / "parameters").string(),
+                  "Saturating law x(eps_d) = x_max - (x_max - x0) exp(-beta eps_d) fitted to the ensemble mean; "
+                  "standard errors and 95% intervals (t, packings - 1 dof) from the jackknife over packings; per curve "
+                  "the model chosen between it and the peak-and-soften law (docs/model_selection.md)");
+
+  write_paired_shared_path(r, out);
+  write_nu_laws(r.by_mode_q, out.string());
   std::vector<std::string> unloading;
   for (auto& d : fs::directory_iterator(run / "members"))   // prep/ of a task's member, or the earlier flat layout
     unloading.push_back((d.path() / (fs::is_directory(d.path() / "prep") ? "prep" : "") / "cycle_unloading.csv").string());
   std::sort(unloading.begin(), unloading.end());
   write_isotropic(unloading, out.string());
-  std::cerr << "dem fit: " << fitted << " ensemble fits written to " << out.string() << ": "
-            << usable_summary(usable, summary.size(), not_usable)
-            << " (" << warnings << " warnings)\n";
+  std::cerr << "dem fit: " << r.fitted << " ensemble fits written to " << out.string() << ": "
+            << usable_summary(r.usable, r.summary.size(), r.not_usable)
+            << " (" << r.warnings << " warnings)\n";
   if (!o.no_plots) {
     const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.ensemble_plots \"" +
                             run.string() + "\"";
     if (std::system(cmd.c_str()) != 0) std::cerr << "dem fit: plotting failed (tables are written)\n";
   }
-  return fitted > 0 || cells.empty() ? 0 : 1;   // an ensemble of paths only has nothing to fit: not an error
+  return r.fitted > 0 || cells.empty() ? 0 : 1;   // an ensemble of paths only has nothing to fit: not an error
 }
 
 }  // namespace demfit

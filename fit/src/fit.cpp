@@ -1,3 +1,4 @@
+#include "demfit/format.hpp"
 #include "demfit/fit.hpp"
 
 #include <ceres/ceres.h>
@@ -27,15 +28,6 @@ void init_glog() {
 
 namespace {
 
-const double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-std::string fmt(double v) {
-  std::ostringstream o;
-  o.precision(4);
-  o << v;
-  return o.str();
-}
-
 void select_window(const std::vector<double>& e, const std::vector<double>& y, const FitOptions& o,
                    std::vector<double>& ew, std::vector<double>& yw) {
   if (e.size() != y.size()) throw std::invalid_argument("fit: strain and value arrays differ in length");
@@ -47,12 +39,12 @@ void select_window(const std::vector<double>& e, const std::vector<double>& y, c
   }
   if (static_cast<int>(ew.size()) < o.min_points)
     throw std::invalid_argument("fit: only " + std::to_string(ew.size()) + " points in the window [" +
-                                fmt(o.window_min) + ", " + fmt(o.window_max) + "]; need at least " +
+                                fmt(o.window_min, 4) + ", " + fmt(o.window_max, 4) + "]; need at least " +
                                 std::to_string(o.min_points) + " (sample the run more finely or widen the window)");
   const auto [lo, hi] = std::minmax_element(yw.begin(), yw.end());
   const double scale = std::max(std::fabs(*lo), std::fabs(*hi));
   if (*hi - *lo <= 1e-12 * scale || *hi == *lo)
-    throw std::invalid_argument("fit: the curve is flat (all values equal " + fmt(*lo) +
+    throw std::invalid_argument("fit: the curve is flat (all values equal " + fmt(*lo, 4) +
                                 "): no evolution to fit; was the run deformed at all?");
 }
 
@@ -109,6 +101,139 @@ double saturating(double x0, double x_max, double beta, double e) {
   return x_max - (x_max - x0) * std::exp(-beta * e);
 }
 
+namespace {
+
+// The fit's residual statistics: cost, lag-1 autocorrelation and the error inflation it implies,
+// rmse, R^2, eps_95 and the initial slope. Returns the residual sum of squares.
+double residual_statistics(const std::vector<double>& e, const std::vector<double>& y, const FitOptions& o,
+                           FitResult& r) {
+  double rss = 0, mean = std::accumulate(y.begin(), y.end(), 0.0) / y.size(), tss = 0;
+  for (std::size_t i = 0; i < e.size(); ++i) {
+    const double res = y[i] - saturating(r.x0, r.x_max, r.beta, e[i]);
+    rss += res * res;
+    tss += (y[i] - mean) * (y[i] - mean);
+  }
+  r.cost = 0.5 * rss;
+  {
+    std::vector<double> res(e.size());
+    for (std::size_t i = 0; i < e.size(); ++i) res[i] = y[i] - saturating(r.x0, r.x_max, r.beta, e[i]);
+    double num = 0;
+    for (std::size_t i = 1; i < res.size(); ++i) num += res[i] * res[i - 1];
+    r.residual_autocorrelation = rss > 0 ? num / rss : 0.0;
+    // The lag-1 estimate is biased low on short series, by about (1 + 4 rho)/n (Kendall 1954;
+    // Marriott & Pope 1954); without the correction the inflated intervals of 30-point DEM
+    // curves held the truth in only 65 % of trials (docs/fit_identifiability.md).
+    const double rho_hat = r.residual_autocorrelation;
+    const double rho = std::min(rho_hat + (1 + 4 * rho_hat) / static_cast<double>(res.size()), 0.95);
+    if (o.correct_autocorrelation && rho > 0) r.se_inflation = std::sqrt((1 + rho) / (1 - rho));
+  }
+  r.rmse = std::sqrt(rss / r.n);
+  r.r_squared = tss > 0 ? 1.0 - rss / tss : 0.0;
+  r.eps_95 = std::log(20.0) / r.beta;
+  r.initial_slope = r.beta * (r.x_max - r.x0);
+
+  return rss;
+}
+
+// Standard errors from Ceres' covariance (times s^2 = RSS / (n - free), inflated for correlated
+// residuals), the correlations, the initial slope's error (delta method); none on a bound, and
+// none when the scaled Jacobian is ill-conditioned.
+void standard_errors(ceres::Problem& problem, std::vector<double>& p, double rss, int n_free, bool beta_on_bound,
+                     bool xmax_on_bound, const std::vector<double>& e, const FitOptions& o, FitResult& r) {
+  // Standard errors: unit-variance covariance times s^2 = RSS / (n - 3).
+  r.se_x0 = r.se_x_max = r.se_beta = r.se_initial_slope = kNaN;
+  ceres::Covariance::Options co;
+  co.algorithm_type = ceres::DENSE_SVD;
+  co.null_space_rank = -1;
+  ceres::Covariance cov(co);
+  std::vector<std::pair<const double*, const double*>> blocks = {{p.data(), p.data()}};
+  double c[9];
+  if (r.n > n_free && cov.Compute(blocks, &problem) && cov.GetCovarianceBlock(p.data(), p.data(), c)) {
+    const double s2 = rss / (r.n - n_free) * r.se_inflation * r.se_inflation;
+    for (double& v : c) v *= s2;
+    const double se[3] = {std::sqrt(std::max(c[0], 0.0)), std::sqrt(std::max(c[4], 0.0)),
+                          std::sqrt(std::max(c[8], 0.0))};
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) r.corr[a][b] = (se[a] > 0 && se[b] > 0) ? c[3 * a + b] / (se[a] * se[b]) : kNaN;
+    r.se_x0 = o.fix_x0 ? kNaN : se[0];
+    r.se_x_max = xmax_on_bound ? kNaN : se[1];
+    r.se_beta = beta_on_bound ? kNaN : se[2];
+    // Delta method for beta (x_max - x0): gradient (-beta, beta, x_max - x0).
+    const double g[3] = {-r.beta, r.beta, r.x_max - r.x0};
+    double var = 0;
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) var += g[a] * c[3 * a + b] * g[b];
+    r.se_initial_slope = std::sqrt(std::max(var, 0.0));
+  } else {
+    r.ok = false;
+    r.warnings.push_back("covariance could not be computed (the Jacobian is rank deficient): "
+                         "the data do not determine all three parameters");
+  }
+  r.jacobian_rcond = jacobian_rcond(e, r.x0, r.x_max, r.beta, o.fix_x0);
+  if (r.ok && !beta_on_bound && !xmax_on_bound && r.jacobian_rcond < o.min_jacobian_rcond) {
+    r.ok = false;
+    r.se_x0 = r.se_x_max = r.se_beta = r.se_initial_slope = kNaN;
+    r.warnings.push_back("ill-conditioned covariance (reciprocal condition number " + fmt(r.jacobian_rcond, 4) +
+                         " of the scaled Jacobian): the data do not determine all parameters (e.g. the curve saturates "
+                         "within its first points); the values are not supported by the data (sample more finely or "
+                         "fit a longer curve)");
+  }
+}
+
+// The warnings about what the data support: correlated residuals, parameters on their bounds, a
+// curve that stops before saturating, poorly determined parameters.
+void support_warnings(const FitOptions& o, bool beta_on_bound, bool xmax_on_bound, FitResult& r) {
+  if (o.residual_diagnostics && r.residual_autocorrelation > 0.5)
+    r.warnings.push_back("residuals are strongly correlated (lag-1 autocorrelation " + fmt(r.residual_autocorrelation, 4) +
+                         (o.correct_autocorrelation ? "): standard errors inflated by " + fmt(r.se_inflation, 4)
+                                                    : "): standard errors assume independent points and are too small"));
+  if (beta_on_bound)
+    r.warnings.push_back("rate beta sits on its bound " + fmt(r.beta, 4) + ": no standard error quoted; " +
+                         (r.beta >= o.beta_max * 0.9999
+                              ? "the curve saturates before its first sampled strains (sample more finely)"
+                              : "the curve shows no saturation in this window"));
+  if (xmax_on_bound) r.warnings.push_back("asymptote x_max sits on its bound 0: no standard error quoted");
+  if (r.eps_95 > r.e_last)
+    r.warnings.push_back("curve stops before saturation: 95% of the approach is reached only at eps_d = " +
+                         fmt(r.eps_95, 4) + " but the data end at " + fmt(r.e_last, 4) +
+                         "; x_max and beta are extrapolations (run to larger eps_d)");
+  // x0 and x_max are judged against the amplitude |x_max - x0| (a value near zero can be
+  // well determined), beta against itself.
+  const double amplitude = std::fabs(r.x_max - r.x0);
+  const char* names[3] = {"x0", "x_max", "beta"};
+  const double scales[3] = {amplitude, amplitude, r.beta}, ses[3] = {r.se_x0, r.se_x_max, r.se_beta};
+  for (int a = 0; a < 3 && o.residual_diagnostics; ++a)
+    if (std::isfinite(ses[a]) && scales[a] > 0 && ses[a] / scales[a] > o.max_relative_error)
+      r.warnings.push_back(std::string(names[a]) + " is poorly determined (standard error " +
+                           fmt(100 * ses[a] / scales[a], 4) + "% of " + (a < 2 ? "the amplitude |x_max - x0|" : "its value") + ")");
+}
+
+// Non-monotone: a reversal after the extreme much larger than the point-to-point noise
+// (estimated from second differences: var(y[i+1] - 2y[i] + y[i-1]) = 6 sigma^2 for white noise).
+void check_monotone(const std::vector<double>& y, const FitOptions& o, FitResult& r) {
+  if (!o.residual_diagnostics || y.size() < 5) return;
+  const bool rising = r.x_max >= r.x0;
+  double sum2 = 0;
+  for (std::size_t i = 1; i + 1 < y.size(); ++i) {
+    const double d2 = y[i + 1] - 2 * y[i] + y[i - 1];
+    sum2 += d2 * d2;
+  }
+  const double noise = std::sqrt(sum2 / (y.size() - 2) / 6.0);
+  double extreme = y[0], worst = 0;
+  for (double v : y) {
+    extreme = rising ? std::max(extreme, v) : std::min(extreme, v);
+    worst = std::max(worst, rising ? extreme - v : v - extreme);
+  }
+  const double range = *std::max_element(y.begin(), y.end()) - *std::min_element(y.begin(), y.end());
+  r.non_monotone = worst > 5 * noise && worst > 0.2 * range;
+  if (r.non_monotone)
+    r.warnings.push_back("data are not monotone (a reversal of " + fmt(worst, 4) + " after the extreme, " +
+                         fmt(worst / std::max(noise, 1e-300), 4) +
+                         " x the point-to-point noise): the saturating law does not describe this curve");
+}
+
+}  // namespace
+
 FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<double>& y_in,
                          const FitOptions& o) {
   init_glog();
@@ -157,116 +282,13 @@ FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<doub
   r.ok = summary.IsSolutionUsable();
   if (!r.ok) r.warnings.push_back("optimiser did not converge: " + summary.message);
 
-  double rss = 0, mean = std::accumulate(y.begin(), y.end(), 0.0) / y.size(), tss = 0;
-  for (std::size_t i = 0; i < e.size(); ++i) {
-    const double res = y[i] - saturating(r.x0, r.x_max, r.beta, e[i]);
-    rss += res * res;
-    tss += (y[i] - mean) * (y[i] - mean);
-  }
-  r.cost = 0.5 * rss;
-  {
-    std::vector<double> res(e.size());
-    for (std::size_t i = 0; i < e.size(); ++i) res[i] = y[i] - saturating(r.x0, r.x_max, r.beta, e[i]);
-    double num = 0;
-    for (std::size_t i = 1; i < res.size(); ++i) num += res[i] * res[i - 1];
-    r.residual_autocorrelation = rss > 0 ? num / rss : 0.0;
-    // The lag-1 estimate is biased low on short series, by about (1 + 4 rho)/n (Kendall 1954;
-    // Marriott & Pope 1954); without the correction the inflated intervals of 30-point DEM
-    // curves held the truth in only 65 % of trials (docs/fit_identifiability.md).
-    const double rho_hat = r.residual_autocorrelation;
-    const double rho = std::min(rho_hat + (1 + 4 * rho_hat) / static_cast<double>(res.size()), 0.95);
-    if (o.correct_autocorrelation && rho > 0) r.se_inflation = std::sqrt((1 + rho) / (1 - rho));
-  }
-  r.rmse = std::sqrt(rss / r.n);
-  r.r_squared = tss > 0 ? 1.0 - rss / tss : 0.0;
-  r.eps_95 = std::log(20.0) / r.beta;
-  r.initial_slope = r.beta * (r.x_max - r.x0);
+  const double rss = residual_statistics(e, y, o, r);
 
-  // Standard errors: unit-variance covariance times s^2 = RSS / (n - 3).
-  r.se_x0 = r.se_x_max = r.se_beta = r.se_initial_slope = kNaN;
   const bool beta_on_bound = r.beta <= o.beta_min * 1.0001 || r.beta >= o.beta_max * 0.9999;
   const bool xmax_on_bound = o.nonnegative_asymptote && r.x_max <= 1e-14;
-  ceres::Covariance::Options co;
-  co.algorithm_type = ceres::DENSE_SVD;
-  co.null_space_rank = -1;
-  ceres::Covariance cov(co);
-  std::vector<std::pair<const double*, const double*>> blocks = {{p.data(), p.data()}};
-  double c[9];
-  if (r.n > n_free && cov.Compute(blocks, &problem) && cov.GetCovarianceBlock(p.data(), p.data(), c)) {
-    const double s2 = rss / (r.n - n_free) * r.se_inflation * r.se_inflation;
-    for (double& v : c) v *= s2;
-    const double se[3] = {std::sqrt(std::max(c[0], 0.0)), std::sqrt(std::max(c[4], 0.0)),
-                          std::sqrt(std::max(c[8], 0.0))};
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b) r.corr[a][b] = (se[a] > 0 && se[b] > 0) ? c[3 * a + b] / (se[a] * se[b]) : kNaN;
-    r.se_x0 = o.fix_x0 ? kNaN : se[0];
-    r.se_x_max = xmax_on_bound ? kNaN : se[1];
-    r.se_beta = beta_on_bound ? kNaN : se[2];
-    // Delta method for beta (x_max - x0): gradient (-beta, beta, x_max - x0).
-    const double g[3] = {-r.beta, r.beta, r.x_max - r.x0};
-    double var = 0;
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b) var += g[a] * c[3 * a + b] * g[b];
-    r.se_initial_slope = std::sqrt(std::max(var, 0.0));
-  } else {
-    r.ok = false;
-    r.warnings.push_back("covariance could not be computed (the Jacobian is rank deficient): "
-                         "the data do not determine all three parameters");
-  }
-  r.jacobian_rcond = jacobian_rcond(e, r.x0, r.x_max, r.beta, o.fix_x0);
-  if (r.ok && !beta_on_bound && !xmax_on_bound && r.jacobian_rcond < o.min_jacobian_rcond) {
-    r.ok = false;
-    r.se_x0 = r.se_x_max = r.se_beta = r.se_initial_slope = kNaN;
-    r.warnings.push_back("ill-conditioned covariance (reciprocal condition number " + fmt(r.jacobian_rcond) +
-                         " of the scaled Jacobian): the data do not determine all parameters (e.g. the curve saturates "
-                         "within its first points); the values are not supported by the data (sample more finely or "
-                         "fit a longer curve)");
-  }
-  if (o.residual_diagnostics && r.residual_autocorrelation > 0.5)
-    r.warnings.push_back("residuals are strongly correlated (lag-1 autocorrelation " + fmt(r.residual_autocorrelation) +
-                         (o.correct_autocorrelation ? "): standard errors inflated by " + fmt(r.se_inflation)
-                                                    : "): standard errors assume independent points and are too small"));
-  if (beta_on_bound)
-    r.warnings.push_back("rate beta sits on its bound " + fmt(r.beta) + ": no standard error quoted; " +
-                         (r.beta >= o.beta_max * 0.9999
-                              ? "the curve saturates before its first sampled strains (sample more finely)"
-                              : "the curve shows no saturation in this window"));
-  if (xmax_on_bound) r.warnings.push_back("asymptote x_max sits on its bound 0: no standard error quoted");
-  if (r.eps_95 > r.e_last)
-    r.warnings.push_back("curve stops before saturation: 95% of the approach is reached only at eps_d = " +
-                         fmt(r.eps_95) + " but the data end at " + fmt(r.e_last) +
-                         "; x_max and beta are extrapolations (run to larger eps_d)");
-  // x0 and x_max are judged against the amplitude |x_max - x0| (a value near zero can be
-  // well determined), beta against itself.
-  const double amplitude = std::fabs(r.x_max - r.x0);
-  const char* names[3] = {"x0", "x_max", "beta"};
-  const double scales[3] = {amplitude, amplitude, r.beta}, ses[3] = {r.se_x0, r.se_x_max, r.se_beta};
-  for (int a = 0; a < 3 && o.residual_diagnostics; ++a)
-    if (std::isfinite(ses[a]) && scales[a] > 0 && ses[a] / scales[a] > o.max_relative_error)
-      r.warnings.push_back(std::string(names[a]) + " is poorly determined (standard error " +
-                           fmt(100 * ses[a] / scales[a]) + "% of " + (a < 2 ? "the amplitude |x_max - x0|" : "its value") + ")");
-  // Non-monotone: a reversal after the extreme much larger than the point-to-point noise
-  // (estimated from second differences: var(y[i+1] - 2y[i] + y[i-1]) = 6 sigma^2 for white noise).
-  if (o.residual_diagnostics && y.size() >= 5) {
-    const bool rising = r.x_max >= r.x0;
-    double sum2 = 0;
-    for (std::size_t i = 1; i + 1 < y.size(); ++i) {
-      const double d2 = y[i + 1] - 2 * y[i] + y[i - 1];
-      sum2 += d2 * d2;
-    }
-    const double noise = std::sqrt(sum2 / (y.size() - 2) / 6.0);
-    double extreme = y[0], worst = 0;
-    for (double v : y) {
-      extreme = rising ? std::max(extreme, v) : std::min(extreme, v);
-      worst = std::max(worst, rising ? extreme - v : v - extreme);
-    }
-    const double range = *std::max_element(y.begin(), y.end()) - *std::min_element(y.begin(), y.end());
-    r.non_monotone = worst > 5 * noise && worst > 0.2 * range;
-    if (r.non_monotone)
-      r.warnings.push_back("data are not monotone (a reversal of " + fmt(worst) + " after the extreme, " +
-                           fmt(worst / std::max(noise, 1e-300)) +
-                           " x the point-to-point noise): the saturating law does not describe this curve");
-  }
+  standard_errors(problem, p, rss, n_free, beta_on_bound, xmax_on_bound, e, o, r);
+  support_warnings(o, beta_on_bound, xmax_on_bound, r);
+  check_monotone(y, o, r);
   return r;
 }
 

@@ -418,18 +418,28 @@ void check_output_folder(const fs::path& out) {
   fs::remove(probe, ec);
 }
 
-int run(const ModelCommandOptions& o) {
-  const fs::path dir(o.dir);
-  if (!fs::is_directory(dir)) throw InputError(o.dir + " is not a folder: give an ensemble folder reduced by `dem fit`");
-  const fs::path out = o.out.empty() ? dir / "model" : fs::path(o.out);
-  if (fs::exists(out / "parameters.csv") && !o.force)
-    throw InputError(out.string() + " already holds model results: pass --force to overwrite, or --out another folder");
-  check_output_folder(out);
+// What `dem model` reads: the fitted and the other mean curves and path ensembles with their
+// files, the label of the fitted set, the members and the isotropic branch.
+struct ModelInputs {
+  std::vector<CurveData> fit_curves, other;
+  std::vector<CurveFile> fit_files, other_files;
+  std::vector<PathData> fit_paths, other_paths;
+  std::vector<CurveFile> fit_path_files, other_path_files;
+  std::string fit_label;
+  std::vector<fs::path> members;
+  std::vector<std::string> iso_files;
+  IsoData iso;
+  int K = 0;
+};
+
+// The ensemble folder's curves, path ensembles and isotropic branch, split by --calibrate-on.
+ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir) {
+  ModelInputs in;
+  auto& [fit_curves, other, fit_files, other_files, fit_paths, other_paths, fit_path_files, other_path_files,
+         fit_label, members_out, iso_files_out, iso_out, K_out] = in;
   const auto files = find_curves(dir);
   std::vector<std::string> fit_names = o.calibrate_on.empty() ? std::vector<std::string>{o.calibrate_mode} : o.calibrate_on;
   auto fitted = [&](const std::string& n) { return std::find(fit_names.begin(), fit_names.end(), n) != fit_names.end(); };
-  std::vector<CurveData> fit_curves, other;
-  std::vector<CurveFile> fit_files, other_files;
   std::vector<std::string> known;
   for (const auto& f : files) {
     CurveData c = read_curve(f.path.string(), f.mode, f.nu);
@@ -446,8 +456,6 @@ int run(const ModelCommandOptions& o) {
   if (!o.paths.empty() && !fs::is_directory(paths_dir))
     throw InputError("--paths " + o.paths + " is not a folder: give the output of `python3 -m demkit.path_ensemble` "
                      "(PATH_phiX.csv files)");
-  std::vector<PathData> fit_paths, other_paths;
-  std::vector<CurveFile> fit_path_files, other_path_files;
   if (fs::is_directory(paths_dir)) {
     const auto pf = find_paths(paths_dir);
     if (pf.empty() && !o.paths.empty())
@@ -463,10 +471,11 @@ int run(const ModelCommandOptions& o) {
     if (std::find(known.begin(), known.end(), n) == known.end())
       throw InputError("--calibrate-on " + n + ": no ensemble curve " + n + "_phiX.csv under " + (dir / "ensemble").string() +
                        " nor path ensemble under " + paths_dir.string());
-  std::string fit_label;
   for (const auto& n : fit_names) fit_label += (fit_label.empty() ? "" : "+") + n;
-  const auto members = member_dirs(dir);
-  std::vector<std::string> iso_files = o.isotropic;
+  members_out = member_dirs(dir);
+  const auto& members = members_out;
+  std::vector<std::string>& iso_files = iso_files_out;
+  iso_files = o.isotropic;
   if (iso_files.empty())
     for (const auto& m : members)
       if (!unloading_of(m).empty()) iso_files.push_back(unloading_of(m).string());
@@ -475,8 +484,14 @@ int run(const ModelCommandOptions& o) {
                      "exists; pass the unloading curves with --isotropic FILE...");
   for (const auto& f : iso_files)
     if (!fs::exists(f)) throw InputError("--isotropic " + f + " does not exist");
-  const IsoData iso = read_isotropic(iso_files);
+  iso_out = read_isotropic(iso_files);
 
+  K_out = fit_curves.front().packings;
+  return in;
+}
+
+// The calibration's options from the command's (--eps-max, --family, --surface checked).
+CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   CalibrationOptions co;
   co.eps_max = o.eps_max;
   if (o.family != "group" && o.family != "extended" && o.family != "auto")
@@ -486,12 +501,70 @@ int run(const ModelCommandOptions& o) {
   else if (o.surface == "mn") co.surface = Surface::MatsuokaNakai;
   else if (o.surface == "none") co.surface = Surface::None;
   else throw InputError("--surface " + o.surface + ": give ld (Lade-Duncan), mn (Matsuoka-Nakai) or none");
-  std::cerr << "dem model: fitting " << fit_curves.size() << " mode curves, " << fit_paths.size() << " path curves ("
-            << fit_label << ") and " << iso.nu.size() << " isotropic points\n";
-  const int K = fit_curves.front().packings;
-  // One family: calibration, jackknife over packings, and the held-out score of each left-out
-  // packing (its own fitted curves predicted by the fit without it).
-  auto fit_family = [&](bool extended) {
+  return co;
+}
+
+// Jackknife over packings: the same fit with each packing left out of every mean curve and of the
+// isotropic branch; the held-out score of each left-out packing (its own fitted curves predicted by
+// the fit without it).
+void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const ModelCommandOptions& o, FamilyFit& ff) {
+  const auto& fit_curves = in.fit_curves; const auto& fit_files = in.fit_files;
+  const auto& fit_paths = in.fit_paths; const auto& fit_path_files = in.fit_path_files;
+  const auto& members = in.members; const auto& iso_files = in.iso_files;
+  const int K = in.K;
+  Calibration& cal = ff.cal;
+  if (!o.jackknife || K < 2) return;
+  bool complete = static_cast<int>(members.size()) == K;
+  for (const auto& c : fit_curves) complete = complete && c.packings == K;
+  for (std::size_t j = 0; complete && j < fit_files.size(); ++j)
+    for (const auto& m : members) complete = complete && !member_curve(m, fit_files[j]).empty();
+  for (const auto& d : fit_paths) complete = complete && d.packings == K;
+  for (std::size_t j = 0; complete && j < fit_path_files.size(); ++j)
+    for (const auto& m : members) complete = complete && !member_path_curve(m, fit_path_files[j]).empty();
+  if (!complete) {
+    cal.warnings.push_back("jackknife skipped: DIR/members does not hold the " + std::to_string(K) +
+                           " member curves of every fitted mean; errors from the covariance instead");
+  } else {
+    std::vector<std::vector<double>>& est = ff.jack;   // leave-one-out estimates (for the jackknife correlations)
+    CalibrationOptions cj = co_f;
+    cj.start = &cal.params;
+    for (int k = 0; k < K; ++k) {
+      std::vector<CurveData> loo;
+      for (std::size_t j = 0; j < fit_curves.size(); ++j)
+        loo.push_back(leave_one_out(fit_curves[j], member_curve(members[k], fit_files[j])));
+      std::vector<std::string> iso_k;
+      const std::string own = unloading_of(members[k]).string();
+      for (const auto& f : iso_files) if (f != own) iso_k.push_back(f);
+      std::vector<PathData> loo_paths;
+      for (std::size_t j = 0; j < fit_paths.size(); ++j)
+        loo_paths.push_back(leave_one_out_path(fit_paths[j], member_path_curve(members[k], fit_path_files[j])));
+      const Calibration ck = calibrate(loo, read_isotropic(iso_k), cj, loo_paths);
+      est.push_back(ck.value);
+      ff.heldout.push_back(heldout_score(ck.params, fit_curves, fit_files, members[k], K, o.eps_max));
+      std::cerr << "dem model: jackknife " << k + 1 << "/" << K << " (" << members[k].filename().string()
+                << " left out): chi2/dof = " << num(ck.chi2_dof(), 4) << "\n";
+    }
+    cal.se_jackknife.assign(cal.value.size(), 0.0);
+    for (std::size_t i = 0; i < cal.value.size(); ++i) {
+      double mean = 0, ss = 0;
+      for (const auto& e : est) mean += e[i] / K;
+      for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
+      cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
+    }
+    if (K < 4) {   // as `dem fit` says for its fits
+      double worst = 1;
+      for (std::size_t i = 0; i < cal.value.size(); ++i)
+        if (cal.se_jackknife[i] > 0 && cal.se_cov[i] > 0) worst = std::max(worst, cal.se_cov[i] / cal.se_jackknife[i]);
+      cal.warnings.push_back("only " + std::to_string(K) + " packings: a jackknife over fewer than 4 packings is itself "
+                             "very uncertain (here up to " + num(worst, 3) + "x below the covariance errors) and its "
+                             "intervals under-cover; set [ensemble] packings >= 4 for errors between packings");
+    }
+  }
+}
+
+// One family: calibration, jackknife over packings, and the held-out score of each left-out packing.
+FamilyFit fit_family(const ModelInputs& in, const CalibrationOptions& co, const ModelCommandOptions& o, bool extended) {
+  const auto& fit_curves = in.fit_curves; const auto& fit_paths = in.fit_paths; const IsoData& iso = in.iso;
   FamilyFit ff;
   Calibration& cal = ff.cal;
   CalibrationOptions co_f = co;
@@ -504,71 +577,19 @@ int run(const ModelCommandOptions& o) {
   }
   std::cerr << "dem model: " << cal.message << "  chi2/dof = " << num(cal.chi2_dof(), 4) << "\n";
 
-  // Jackknife over packings: the same fit with each packing left out of every mean curve and
-  // of the isotropic branch.
-  std::vector<std::vector<double>>& jack_est = ff.jack;   // leave-one-out estimates (for the jackknife correlations)
-  if (o.jackknife && K >= 2) {
-    bool complete = static_cast<int>(members.size()) == K;
-    for (const auto& c : fit_curves) complete = complete && c.packings == K;
-    for (std::size_t j = 0; complete && j < fit_files.size(); ++j)
-      for (const auto& m : members) complete = complete && !member_curve(m, fit_files[j]).empty();
-    for (const auto& d : fit_paths) complete = complete && d.packings == K;
-    for (std::size_t j = 0; complete && j < fit_path_files.size(); ++j)
-      for (const auto& m : members) complete = complete && !member_path_curve(m, fit_path_files[j]).empty();
-    if (!complete) {
-      cal.warnings.push_back("jackknife skipped: DIR/members does not hold the " + std::to_string(K) +
-                             " member curves of every fitted mean; errors from the covariance instead");
-    } else {
-      std::vector<std::vector<double>>& est = jack_est;
-      CalibrationOptions cj = co_f;
-      cj.start = &cal.params;
-      for (int k = 0; k < K; ++k) {
-        std::vector<CurveData> loo;
-        for (std::size_t j = 0; j < fit_curves.size(); ++j)
-          loo.push_back(leave_one_out(fit_curves[j], member_curve(members[k], fit_files[j])));
-        std::vector<std::string> iso_k;
-        const std::string own = unloading_of(members[k]).string();
-        for (const auto& f : iso_files) if (f != own) iso_k.push_back(f);
-        std::vector<PathData> loo_paths;
-        for (std::size_t j = 0; j < fit_paths.size(); ++j)
-          loo_paths.push_back(leave_one_out_path(fit_paths[j], member_path_curve(members[k], fit_path_files[j])));
-        const Calibration ck = calibrate(loo, read_isotropic(iso_k), cj, loo_paths);
-        est.push_back(ck.value);
-        ff.heldout.push_back(heldout_score(ck.params, fit_curves, fit_files, members[k], K, o.eps_max));
-        std::cerr << "dem model: jackknife " << k + 1 << "/" << K << " (" << members[k].filename().string()
-                  << " left out): chi2/dof = " << num(ck.chi2_dof(), 4) << "\n";
-      }
-      cal.se_jackknife.assign(cal.value.size(), 0.0);
-      for (std::size_t i = 0; i < cal.value.size(); ++i) {
-        double mean = 0, ss = 0;
-        for (const auto& e : est) mean += e[i] / K;
-        for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
-        cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
-      }
-      if (K < 4) {   // as `dem fit` says for its fits
-        double worst = 1;
-        for (std::size_t i = 0; i < cal.value.size(); ++i)
-          if (cal.se_jackknife[i] > 0 && cal.se_cov[i] > 0) worst = std::max(worst, cal.se_cov[i] / cal.se_jackknife[i]);
-        cal.warnings.push_back("only " + std::to_string(K) + " packings: a jackknife over fewer than 4 packings is itself "
-                               "very uncertain (here up to " + num(worst, 3) + "x below the covariance errors) and its "
-                               "intervals under-cover; set [ensemble] packings >= 4 for errors between packings");
-      }
-    }
-  }
+  jackknife(in, co_f, o, ff);
 
   return ff;
-  };
+}
 
-  std::vector<std::string> fams = o.family == "auto" ? std::vector<std::string>{"group", "extended"}
-                                                     : std::vector<std::string>{o.family};
-  std::vector<FamilyFit> fits;
-  for (const auto& fam : fams) fits.push_back(fit_family(fam == "extended"));
-  std::size_t chosen = 0;
-  if (fits.size() == 2) {
-    chosen = write_selection(fits[0], fits[1], K, out) ? 1 : 0;
-    std::cerr << "dem model: held-out test chooses the " << fams[chosen] << " family (selection.md)\n";
-  }
-  auto write_results = [&](const FamilyFit& ff, const fs::path& out) {
+// One family's tables, curves and figures in `out`.
+void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& out, const ModelCommandOptions& o) {
+  const auto& fit_curves = in.fit_curves; const auto& fit_files = in.fit_files;
+  const auto& other = in.other; const auto& other_files = in.other_files;
+  const auto& fit_paths = in.fit_paths; const auto& fit_path_files = in.fit_path_files;
+  const auto& other_paths = in.other_paths; const auto& other_path_files = in.other_path_files;
+  const std::string& fit_label = in.fit_label;
+  const int K = in.K;
   const Calibration& cal = ff.cal;
   const std::vector<std::vector<double>>& jack_est = ff.jack;
   fs::create_directories(out / "curves");
@@ -626,11 +647,33 @@ int run(const ModelCommandOptions& o) {
                             out.string() + "\"";
     if (std::system(cmd.c_str()) != 0) std::cerr << "dem model: plotting failed (tables are written)\n";
   }
-  };
+}
+
+int run(const ModelCommandOptions& o) {
+  const fs::path dir(o.dir);
+  if (!fs::is_directory(dir)) throw InputError(o.dir + " is not a folder: give an ensemble folder reduced by `dem fit`");
+  const fs::path out = o.out.empty() ? dir / "model" : fs::path(o.out);
+  if (fs::exists(out / "parameters.csv") && !o.force)
+    throw InputError(out.string() + " already holds model results: pass --force to overwrite, or --out another folder");
+  check_output_folder(out);
+  const ModelInputs in = read_model_inputs(o, dir);
+  const CalibrationOptions co = calibration_options(o);
+  std::cerr << "dem model: fitting " << in.fit_curves.size() << " mode curves, " << in.fit_paths.size() << " path curves ("
+            << in.fit_label << ") and " << in.iso.nu.size() << " isotropic points\n";
+  const int K = in.K;
+  std::vector<std::string> fams = o.family == "auto" ? std::vector<std::string>{"group", "extended"}
+                                                     : std::vector<std::string>{o.family};
+  std::vector<FamilyFit> fits;
+  for (const auto& fam : fams) fits.push_back(fit_family(in, co, o, fam == "extended"));
+  std::size_t chosen = 0;
+  if (fits.size() == 2) {
+    chosen = write_selection(fits[0], fits[1], K, out) ? 1 : 0;
+    std::cerr << "dem model: held-out test chooses the " << fams[chosen] << " family (selection.md)\n";
+  }
   int rc = 0;
   for (std::size_t f = 0; f < fits.size(); ++f) {
     const fs::path dest = fits.size() == 2 && f != chosen ? out / fams[f] : out;
-    write_results(fits[f], dest);
+    write_results(in, fits[f], dest, o);
     if (f == chosen && !fits[f].cal.ok) rc = 1;
   }
   return rc;

@@ -1,3 +1,4 @@
+#include "demfit/format.hpp"
 #include "demfit/model_fit.hpp"
 
 #include <ceres/ceres.h>
@@ -17,8 +18,6 @@
 namespace demfit::model {
 
 namespace {
-
-const double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 double median(std::vector<double> v) {
   v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !(x > 0) || !std::isfinite(x); }), v.end());
@@ -385,6 +384,207 @@ PathData read_path(const std::string& path, const std::string& name, double nu) 
   return d;
 }
 
+namespace {
+
+// The residuals of the D2 ensemble curves: p*, s and F along each, weighted by their standard errors.
+void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& curves, const CalibrationOptions& o,
+                         double nu_ref, bool X, std::vector<double*>& blocks_all, int& n_res) {
+  for (const auto& c : curves) {
+    auto* f = new CurveResidual{c.eps, c.p, c.s, c.F, weights(c.se_p, o.se_floor, c.source + " p_star"),
+                                weights(c.se_s, o.se_floor, c.source + " s_dev"), weights(c.se_F, o.se_floor, c.source + " F_dev"),
+                                c.nu, c.p.front(), c.s.front(), c.F.front(), nu_ref, o.max_step};
+    f->extended = X; f->b = lode_b_of(c.mode); f->surface = o.surface;
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
+    cost->AddParameterBlock(kNumIso);
+    cost->AddParameterBlock(kNumShear);
+    if (X) cost->AddParameterBlock(kNumExt);
+    cost->SetNumResiduals(3 * static_cast<int>(c.eps.size()));
+    problem.AddResidualBlock(cost, nullptr, blocks_all);
+    n_res += 3 * static_cast<int>(c.eps.size());
+  }
+}
+
+// The residuals of the path ensembles (calibrate-on paths): p* or eps_v, s and F signed, row by
+// row, each weighted by its own standard errors; the forward D2 prefix left out when asked.
+void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& paths, const CalibrationOptions& o,
+                        double nu_ref, bool X, std::vector<double*>& blocks_all, int& n_res, double& numin) {
+  for (const auto& d : paths) {
+    check_path(d);
+    const std::size_t n = d.acc.size();
+    // sigma of the first residual: the SE of p* over the constant-volume rows, of eps_v over
+    // the isobaric rows (each floored at 0.25 x its own median), row by row.
+    std::vector<double> sp, sv;
+    for (std::size_t i = 1; i < n; ++i) {
+      if (d.isobaric[i]) sv.push_back(d.se_ev[i]);
+      else sp.push_back(d.se_p[i]);
+    }
+    std::vector<double> w1(n, 0.0);
+    const std::vector<double> wp = sp.empty() ? std::vector<double>() : weights(sp, o.se_floor, d.source + " p_star");
+    const std::vector<double> wv = sv.empty() ? std::vector<double>() : weights(sv, o.se_floor, d.source + " eps_v");
+    for (std::size_t i = 1, a = 0, b = 0; i < n; ++i) w1[i] = d.isobaric[i] ? wv[b++] : wp[a++];
+    w1[0] = 0.0;
+    std::vector<double> ws = weights(d.se_s, o.se_floor, d.source + " s_dev_signed");
+    std::vector<double> wF = weights(d.se_F, o.se_floor, d.source + " F_dev_signed");
+    std::size_t prefix = 0;   // rows 1..prefix: forward constant-volume shear from the start (a D2 run)
+    if (o.skip_d2_prefix)
+      while (prefix + 1 < n && d.direction[prefix + 1] > 0 && !d.isobaric[prefix + 1]) ++prefix;
+    for (std::size_t i = 1; i <= prefix; ++i) w1[i] = ws[i] = wF[i] = 0.0;
+    auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, ws, wF, d.direction, d.isobaric,
+                               d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
+    f->extended = X; f->b = lode_b_of(d.name); f->surface = o.surface;
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
+    cost->AddParameterBlock(kNumIso);
+    cost->AddParameterBlock(kNumShear);
+    if (X) cost->AddParameterBlock(kNumExt);
+    cost->SetNumResiduals(3 * static_cast<int>(n));
+    problem.AddResidualBlock(cost, nullptr, blocks_all);
+    n_res += 3 * static_cast<int>(n - 1 - prefix);   // weighted rows only
+    for (double v : d.nu_m) numin = std::min(numin, v);
+  }
+}
+
+// The isotropic branch's residuals (p*(nu), C(nu)), weighted by the branch's scatter about the
+// isotropic laws fitted alone; held constant when the branch is not fitted.
+void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const CalibrationOptions& o,
+                             std::vector<double>& isob, double numin, int& n_res) {
+  if (o.fit_isotropic) {
+    // Weights: the scatter of the branch about the isotropic laws fitted alone (reduced chi2 = 1
+    // for this block), so that neither block dominates by its number of points.
+    ceres::Problem pre;
+    std::vector<double> isopre = isob;
+    for (std::size_t i = 0; i < iso.nu.size(); ++i)
+      pre.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
+                               new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0, 1.0}), nullptr, isopre.data());
+    pre.SetParameterUpperBound(isopre.data(), kNuC, numin * (1 - 1e-6));
+    pre.SetParameterUpperBound(isopre.data(), kNuCC, numin * (1 - 1e-6));
+    pre.SetParameterLowerBound(isopre.data(), kAlpha, 0.05);
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::DENSE_QR;
+    so.max_num_iterations = 500;
+    ceres::Solver::Summary sum;
+    ceres::Solve(so, &pre, &sum);
+    double rp = 0, rc = 0;
+    for (std::size_t i = 0; i < iso.nu.size(); ++i) {
+      const double dp = isotropic_pressure(isopre.data(), iso.nu[i]) - iso.p[i];
+      const double dc = coordination(isopre.data(), iso.nu[i]) - iso.C[i];
+      rp += dp * dp; rc += dc * dc;
+    }
+    const double dof = std::max<double>(1.0, iso.nu.size() - kNumIso / 2.0);
+    const double sp = std::max(std::sqrt(rp / dof), 1e-12), sc = std::max(std::sqrt(rc / dof), 1e-12);
+    isob = isopre;
+    for (std::size_t i = 0; i < iso.nu.size(); ++i)
+      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
+                                   new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0 / sp, 1.0 / sc}),
+                               nullptr, isob.data());
+    n_res += 2 * static_cast<int>(iso.nu.size());
+  } else {
+    problem.SetParameterBlockConstant(isob.data());
+  }
+}
+
+// The parameters' bounds: jamming fractions below every start state, positive alpha and p0, the
+// rates' ranges (tighter for the frictional family, whose rate laws have stiff corners).
+void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
+                std::vector<double>& ext, double numin, bool X) {
+  problem.SetParameterUpperBound(isob.data(), kNuC, numin * (1 - 1e-6));
+  problem.SetParameterUpperBound(isob.data(), kNuCC, numin * (1 - 1e-6));
+  problem.SetParameterLowerBound(isob.data(), kAlpha, 0.05);
+  problem.SetParameterLowerBound(isob.data(), kP0, 1e-9);
+  for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
+    problem.SetParameterLowerBound(shear.data(), i, std::log(1e-3));
+    problem.SetParameterUpperBound(shear.data(), i, std::log(5e3));
+  }
+  if (X) {
+    // The frictional family reaches stiff corners of the rate laws (at mu = 1 a free fit took
+    // beta_p to 6600 at nu = 0.80, beyond RK4's stability at max_step 5e-4): the rates are kept
+    // at beta <= 300 at nu_ref and e^{+-40 (nu - nu_ref)} about it (<= 3300 at |nu - nu_ref| = 0.06).
+    for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
+      problem.SetParameterUpperBound(shear.data(), i, std::log(300.0));
+      problem.SetParameterLowerBound(shear.data(), i + 1, -40.0);
+      problem.SetParameterUpperBound(shear.data(), i + 1, 40.0);
+    }
+    problem.SetParameterLowerBound(ext.data(), kNFA, -1.0);
+    problem.SetParameterUpperBound(ext.data(), kNFA, 30.0);
+    problem.SetParameterLowerBound(ext.data(), kKappaA, -0.9);
+    problem.SetParameterUpperBound(ext.data(), kKappaA, 30.0);
+    problem.SetParameterLowerBound(ext.data(), kChiD, -1.0);
+    problem.SetParameterUpperBound(ext.data(), kChiD, 3.0);
+  }
+
+}
+
+// Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof).
+void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
+                       std::vector<double>& ext, const CalibrationOptions& o, bool X, Calibration& cal) {
+  const int np = kNumIso + kNumShear + (X ? kNumExt : 0);
+  cal.se_cov.assign(np, kNaN);
+  cal.corr.assign(np, std::vector<double>(np, kNaN));
+  ceres::Covariance::Options co;
+  co.algorithm_type = ceres::DENSE_SVD;
+  co.null_space_rank = -1;
+  ceres::Covariance cov(co);
+  std::vector<const double*> blocks = {shear.data()};
+  if (X) blocks.push_back(ext.data());
+  if (o.fit_isotropic) blocks.insert(blocks.begin(), isob.data());
+  if (cov.Compute(blocks, &problem)) {
+    std::vector<double> full(np * np, 0.0);
+    if (o.fit_isotropic) {
+      cov.GetCovarianceMatrix(blocks, full.data());
+    } else {
+      const int ns = np - kNumIso;
+      std::vector<double> sub(ns * ns);
+      cov.GetCovarianceMatrix(blocks, sub.data());
+      for (int a = 0; a < ns; ++a)
+        for (int b = 0; b < ns; ++b) full[(kNumIso + a) * np + kNumIso + b] = sub[a * ns + b];
+    }
+    const double scale = std::max(1.0, cal.chi2_dof());
+    for (int a = 0; a < np; ++a) {
+      const double v = full[a * np + a] * scale;
+      cal.se_cov[a] = (o.fit_isotropic || a >= kNumIso) ? std::sqrt(std::max(v, 0.0)) : kNaN;
+    }
+    for (int a = 0; a < np; ++a)
+      for (int b = 0; b < np; ++b) {
+        const double d = std::sqrt(full[a * np + a] * full[b * np + b]);
+        cal.corr[a][b] = d > 0 ? full[a * np + b] / d : kNaN;
+      }
+  } else {
+    cal.warnings.push_back("covariance could not be computed (rank-deficient Jacobian): some parameters are not "
+                           "determined by these curves");
+  }
+}
+
+// What the data leave undetermined: the nu-slopes from one start volume fraction, jamming
+// fractions on their bounds (no standard errors quoted for them).
+void calibration_warnings(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, const IsoData& iso,
+                          const CalibrationOptions& o, const std::vector<double>& isob, double numin, bool one_nu,
+                          bool X, Calibration& cal) {
+  if (one_nu) {
+    for (int i = 1; i < kNumShear; i += 2) cal.se_cov[kNumIso + i] = kNaN;
+    if (X)
+      for (int i : {kNFB, kKappaB, kDilB}) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
+    cal.warnings.push_back("one start volume fraction (nu = " + std::to_string(curves.empty() ? paths.front().nu : curves.front().nu) +
+                           "): the nu-slopes (*_b) are not determined by the data; held at 0 without standard errors, "
+                           "so the laws hold at this nu only. Calibrate on ensembles from several checkpoints "
+                           "(protocol.checkpoints_unloading)");
+  }
+  for (int i : {kNuC, kNuCC})
+    if (o.fit_isotropic && isob[i] >= numin * (1 - 2e-6)) {
+      cal.se_cov[i] = kNaN;
+      cal.warnings.push_back(std::string(iso_name(i)) + " sits on its bound (the lowest start volume fraction " +
+                             std::to_string(numin) + "): no standard error quoted");
+    }
+  if (o.fit_isotropic && !iso.nu.empty()) {
+    const double lowest = *std::min_element(iso.nu.begin(), iso.nu.end());
+    if (std::fabs(isob[kNuCC] - lowest) < 1e-9) {
+      cal.se_cov[kNuCC] = kNaN;
+      cal.warnings.push_back("nu_cC sits on the lowest jammed point of the isotropic branch (" + std::to_string(lowest) +
+                             "): the power law's onset is set by where the branch data start, no standard error quoted");
+    }
+  }
+}
+
+}  // namespace
+
 Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
                       const std::vector<PathData>& paths) {
   init_glog();
@@ -430,109 +630,10 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
 
   ceres::Problem problem;
   int n_res = 0;
-  for (const auto& c : curves) {
-    auto* f = new CurveResidual{c.eps, c.p, c.s, c.F, weights(c.se_p, o.se_floor, c.source + " p_star"),
-                                weights(c.se_s, o.se_floor, c.source + " s_dev"), weights(c.se_F, o.se_floor, c.source + " F_dev"),
-                                c.nu, c.p.front(), c.s.front(), c.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(c.mode); f->surface = o.surface;
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
-    cost->AddParameterBlock(kNumIso);
-    cost->AddParameterBlock(kNumShear);
-    if (X) cost->AddParameterBlock(kNumExt);
-    cost->SetNumResiduals(3 * static_cast<int>(c.eps.size()));
-    problem.AddResidualBlock(cost, nullptr, blocks_all);
-    n_res += 3 * static_cast<int>(c.eps.size());
-  }
-  for (const auto& d : paths) {
-    check_path(d);
-    const std::size_t n = d.acc.size();
-    // sigma of the first residual: the SE of p* over the constant-volume rows, of eps_v over
-    // the isobaric rows (each floored at 0.25 x its own median), row by row.
-    std::vector<double> sp, sv;
-    for (std::size_t i = 1; i < n; ++i) {
-      if (d.isobaric[i]) sv.push_back(d.se_ev[i]);
-      else sp.push_back(d.se_p[i]);
-    }
-    std::vector<double> w1(n, 0.0);
-    const std::vector<double> wp = sp.empty() ? std::vector<double>() : weights(sp, o.se_floor, d.source + " p_star");
-    const std::vector<double> wv = sv.empty() ? std::vector<double>() : weights(sv, o.se_floor, d.source + " eps_v");
-    for (std::size_t i = 1, a = 0, b = 0; i < n; ++i) w1[i] = d.isobaric[i] ? wv[b++] : wp[a++];
-    w1[0] = 0.0;
-    std::vector<double> ws = weights(d.se_s, o.se_floor, d.source + " s_dev_signed");
-    std::vector<double> wF = weights(d.se_F, o.se_floor, d.source + " F_dev_signed");
-    std::size_t prefix = 0;   // rows 1..prefix: forward constant-volume shear from the start (a D2 run)
-    if (o.skip_d2_prefix)
-      while (prefix + 1 < n && d.direction[prefix + 1] > 0 && !d.isobaric[prefix + 1]) ++prefix;
-    for (std::size_t i = 1; i <= prefix; ++i) w1[i] = ws[i] = wF[i] = 0.0;
-    auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, ws, wF, d.direction, d.isobaric,
-                               d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(d.name); f->surface = o.surface;
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
-    cost->AddParameterBlock(kNumIso);
-    cost->AddParameterBlock(kNumShear);
-    if (X) cost->AddParameterBlock(kNumExt);
-    cost->SetNumResiduals(3 * static_cast<int>(n));
-    problem.AddResidualBlock(cost, nullptr, blocks_all);
-    n_res += 3 * static_cast<int>(n - 1 - prefix);   // weighted rows only
-    for (double v : d.nu_m) numin = std::min(numin, v);
-  }
-  if (o.fit_isotropic) {
-    // Weights: the scatter of the branch about the isotropic laws fitted alone (reduced chi2 = 1
-    // for this block), so that neither block dominates by its number of points.
-    ceres::Problem pre;
-    std::vector<double> isopre = isob;
-    for (std::size_t i = 0; i < iso.nu.size(); ++i)
-      pre.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
-                               new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0, 1.0}), nullptr, isopre.data());
-    pre.SetParameterUpperBound(isopre.data(), kNuC, numin * (1 - 1e-6));
-    pre.SetParameterUpperBound(isopre.data(), kNuCC, numin * (1 - 1e-6));
-    pre.SetParameterLowerBound(isopre.data(), kAlpha, 0.05);
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_QR;
-    so.max_num_iterations = 500;
-    ceres::Solver::Summary sum;
-    ceres::Solve(so, &pre, &sum);
-    double rp = 0, rc = 0;
-    for (std::size_t i = 0; i < iso.nu.size(); ++i) {
-      const double dp = isotropic_pressure(isopre.data(), iso.nu[i]) - iso.p[i];
-      const double dc = coordination(isopre.data(), iso.nu[i]) - iso.C[i];
-      rp += dp * dp; rc += dc * dc;
-    }
-    const double dof = std::max<double>(1.0, iso.nu.size() - kNumIso / 2.0);
-    const double sp = std::max(std::sqrt(rp / dof), 1e-12), sc = std::max(std::sqrt(rc / dof), 1e-12);
-    isob = isopre;
-    for (std::size_t i = 0; i < iso.nu.size(); ++i)
-      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
-                                   new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0 / sp, 1.0 / sc}),
-                               nullptr, isob.data());
-    n_res += 2 * static_cast<int>(iso.nu.size());
-  } else {
-    problem.SetParameterBlockConstant(isob.data());
-  }
-  problem.SetParameterUpperBound(isob.data(), kNuC, numin * (1 - 1e-6));
-  problem.SetParameterUpperBound(isob.data(), kNuCC, numin * (1 - 1e-6));
-  problem.SetParameterLowerBound(isob.data(), kAlpha, 0.05);
-  problem.SetParameterLowerBound(isob.data(), kP0, 1e-9);
-  for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
-    problem.SetParameterLowerBound(shear.data(), i, std::log(1e-3));
-    problem.SetParameterUpperBound(shear.data(), i, std::log(5e3));
-  }
-  if (X) {
-    // The frictional family reaches stiff corners of the rate laws (at mu = 1 a free fit took
-    // beta_p to 6600 at nu = 0.80, beyond RK4's stability at max_step 5e-4): the rates are kept
-    // at beta <= 300 at nu_ref and e^{+-40 (nu - nu_ref)} about it (<= 3300 at |nu - nu_ref| = 0.06).
-    for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
-      problem.SetParameterUpperBound(shear.data(), i, std::log(300.0));
-      problem.SetParameterLowerBound(shear.data(), i + 1, -40.0);
-      problem.SetParameterUpperBound(shear.data(), i + 1, 40.0);
-    }
-    problem.SetParameterLowerBound(ext.data(), kNFA, -1.0);
-    problem.SetParameterUpperBound(ext.data(), kNFA, 30.0);
-    problem.SetParameterLowerBound(ext.data(), kKappaA, -0.9);
-    problem.SetParameterUpperBound(ext.data(), kKappaA, 30.0);
-    problem.SetParameterLowerBound(ext.data(), kChiD, -1.0);
-    problem.SetParameterUpperBound(ext.data(), kChiD, 3.0);
-  }
+  add_curve_residuals(problem, curves, o, nu_ref, X, blocks_all, n_res);
+  add_path_residuals(problem, paths, o, nu_ref, X, blocks_all, n_res, numin);
+  add_isotropic_residuals(problem, iso, o, isob, numin, n_res);
+  set_bounds(problem, isob, shear, ext, numin, X);
 
   // One start volume fraction: (nu - nu_ref) is zero on every curve, so the nu-slopes (*_b) are not
   // determined by the data: held at 0, quoted without errors, and said.
@@ -576,65 +677,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   if (X)
     for (int i = 0; i < kNumExt; ++i) { cal.names.push_back(ext_name(i)); cal.value.push_back(ext[i]); }
 
-  // Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof).
-  const int np = kNumIso + kNumShear + (X ? kNumExt : 0);
-  cal.se_cov.assign(np, kNaN);
-  cal.corr.assign(np, std::vector<double>(np, kNaN));
-  ceres::Covariance::Options co;
-  co.algorithm_type = ceres::DENSE_SVD;
-  co.null_space_rank = -1;
-  ceres::Covariance cov(co);
-  std::vector<const double*> blocks = {shear.data()};
-  if (X) blocks.push_back(ext.data());
-  if (o.fit_isotropic) blocks.insert(blocks.begin(), isob.data());
-  if (cov.Compute(blocks, &problem)) {
-    std::vector<double> full(np * np, 0.0);
-    if (o.fit_isotropic) {
-      cov.GetCovarianceMatrix(blocks, full.data());
-    } else {
-      const int ns = np - kNumIso;
-      std::vector<double> sub(ns * ns);
-      cov.GetCovarianceMatrix(blocks, sub.data());
-      for (int a = 0; a < ns; ++a)
-        for (int b = 0; b < ns; ++b) full[(kNumIso + a) * np + kNumIso + b] = sub[a * ns + b];
-    }
-    const double scale = std::max(1.0, cal.chi2_dof());
-    for (int a = 0; a < np; ++a) {
-      const double v = full[a * np + a] * scale;
-      cal.se_cov[a] = (o.fit_isotropic || a >= kNumIso) ? std::sqrt(std::max(v, 0.0)) : kNaN;
-    }
-    for (int a = 0; a < np; ++a)
-      for (int b = 0; b < np; ++b) {
-        const double d = std::sqrt(full[a * np + a] * full[b * np + b]);
-        cal.corr[a][b] = d > 0 ? full[a * np + b] / d : kNaN;
-      }
-  } else {
-    cal.warnings.push_back("covariance could not be computed (rank-deficient Jacobian): some parameters are not "
-                           "determined by these curves");
-  }
-  if (one_nu) {
-    for (int i = 1; i < kNumShear; i += 2) cal.se_cov[kNumIso + i] = kNaN;
-    if (X)
-      for (int i : {kNFB, kKappaB, kDilB}) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
-    cal.warnings.push_back("one start volume fraction (nu = " + std::to_string(curves.empty() ? paths.front().nu : curves.front().nu) +
-                           "): the nu-slopes (*_b) are not determined by the data; held at 0 without standard errors, "
-                           "so the laws hold at this nu only. Calibrate on ensembles from several checkpoints "
-                           "(protocol.checkpoints_unloading)");
-  }
-  for (int i : {kNuC, kNuCC})
-    if (o.fit_isotropic && isob[i] >= numin * (1 - 2e-6)) {
-      cal.se_cov[i] = kNaN;
-      cal.warnings.push_back(std::string(iso_name(i)) + " sits on its bound (the lowest start volume fraction " +
-                             std::to_string(numin) + "): no standard error quoted");
-    }
-  if (o.fit_isotropic && !iso.nu.empty()) {
-    const double lowest = *std::min_element(iso.nu.begin(), iso.nu.end());
-    if (std::fabs(isob[kNuCC] - lowest) < 1e-9) {
-      cal.se_cov[kNuCC] = kNaN;
-      cal.warnings.push_back("nu_cC sits on the lowest jammed point of the isotropic branch (" + std::to_string(lowest) +
-                             "): the power law's onset is set by where the branch data start, no standard error quoted");
-    }
-  }
+  covariance_errors(problem, isob, shear, ext, o, X, cal);
+  calibration_warnings(curves, paths, iso, o, isob, numin, one_nu, X, cal);
   return cal;
 }
 

@@ -1,3 +1,4 @@
+#include "demfit/format.hpp"
 #include "demfit/model_selection.hpp"
 
 #include <gsl/gsl_cdf.h>
@@ -12,15 +13,6 @@
 namespace demfit {
 
 namespace {
-
-const double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-std::string fmt(double v) {
-  std::ostringstream o;
-  o.precision(3);
-  o << v;
-  return o.str();
-}
 
 std::vector<double> mean_without(const std::vector<std::vector<double>>& members, int skip) {
   std::vector<double> m(members.front().size(), 0.0);

@@ -1,3 +1,4 @@
+#include "demfit/format.hpp"
 #include "demfit/peak.hpp"
 
 #include <ceres/ceres.h>
@@ -12,15 +13,6 @@
 namespace demfit {
 
 namespace {
-
-const double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-std::string fmt(double v) {
-  std::ostringstream o;
-  o.precision(3);
-  o << v;
-  return o.str();
-}
 
 // The points inside the window; the same refusals as fit_saturating (sizes, non-finite, too few, flat).
 void window(const std::vector<double>& e, const std::vector<double>& y, const FitOptions& o, std::vector<double>& ew,

@@ -12,6 +12,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -22,7 +23,7 @@
 #include <thread>
 #include <vector>
 
-#include "dem/contact/contact_forces.hpp"
+#include "dem/forces/contact_forces.hpp"
 #include "dem/contact/registry.hpp"
 #include "dem/core/errors.hpp"
 #include "dem/core/model.hpp"
@@ -437,15 +438,20 @@ auto nogil_blowup(F&& f) {
   }
 }
 
-dem::StageSpec mode_spec(const dem::Model& model, const dem::DeformationMode& m, const std::string& name) {
-  return dem::StageSpec{name.empty() ? m.name : name, m.rate_shape * model.protocol.deviatoric_rate,
-                        dem::StopKind::DeviatoricStrain, model.protocol.eps_d_max, {}, 0, 0,
-                        dem::mode_definition(model, m), m.shear_shape * model.protocol.deviatoric_rate};
-}
-
 void check_out(const std::string& out, bool force) {
   if (!force && fs::exists(out))
     throw std::runtime_error(out + " exists; pass force=True to overwrite it");
+}
+
+// A Python callback on_checkpoint(phi, state_copy), called from a stage runner without the GIL.
+std::function<void(double, const dem::State&)> checkpoint_callback(const py::object& on_checkpoint) {
+  if (on_checkpoint.is_none()) return nullptr;
+  return [on_checkpoint](double phi, const dem::State& now) {
+    py::gil_scoped_acquire acquire;
+    PyState copy;
+    *copy.s = now;
+    on_checkpoint(phi, copy);
+  };
 }
 
 long run_mode(const Scene& sc, PyState& ps, const std::string& mode, const std::string& out, const std::string& name,
@@ -456,11 +462,7 @@ long run_mode(const Scene& sc, PyState& ps, const std::string& mode, const std::
   UseGuard guard(ps.use);
   check_written(*ps.s);
   if (check) dem::check_packing(model, *ps.s, "state");
-  const dem::StageSpec spec = mode_spec(model, m, name);
-  return nogil_blowup([&] {
-    return static_cast<long>(m.path.empty() ? dem::run_stage(model, *ps.s, spec, out, "", nullptr, quiet)
-                                            : dem::run_path(model, *ps.s, m, spec.name, out, quiet));
-  });
+  return nogil_blowup([&] { return static_cast<long>(dem::run_mode(model, *ps.s, m, name, dem::StageOutput{out, "", "", quiet})); });
 }
 
 dem::StopKind stop_kind(const std::string& s) {
@@ -478,20 +480,21 @@ long run_stage_py(const Scene& sc, PyState& ps, const std::string& name, const p
   check_out(out, force);
   UseGuard guard(ps.use);
   check_written(*ps.s);
-  const dem::VelGrad L = to_velgrad(velocity_gradient);
-  dem::StageSpec spec{name, L.diag, stop_kind(stop), target, checkpoint_phis, ke_ratio, max_time, "", L.shear};
-  std::function<void(double, const dem::State&)> cb;
-  if (!on_checkpoint.is_none())
-    cb = [&](double phi, const dem::State& st) {
-      py::gil_scoped_acquire acquire;
-      PyState copy;
-      *copy.s = st;
-      on_checkpoint(phi, copy);
-    };
-  return nogil_blowup([&] { return static_cast<long>(dem::run_stage(*sc.model, *ps.s, spec, out, vtk_dir, cb, quiet)); });
+  dem::StageSpec spec;
+  spec.name = name;
+  spec.gradient = to_velgrad(velocity_gradient);
+  spec.stop = stop_kind(stop);
+  spec.target = target;
+  spec.checkpoint_phis = checkpoint_phis;
+  spec.ke_ratio = ke_ratio;
+  spec.max_time = max_time;
+  const auto cb = checkpoint_callback(on_checkpoint);
+  return nogil_blowup([&] {
+    return static_cast<long>(dem::run_stage(*sc.model, *ps.s, spec, dem::StageOutput{out, vtk_dir, "", quiet}, cb));
+  });
 }
 
-// One stage of the scene's preparation list, as run_protocol runs it (protocol.cpp: run_prep_stage).
+// One stage of the scene's preparation list: run_prep_stage, as run_protocol runs it.
 long run_prep_stage(const Scene& sc, PyState& ps, const std::string& stage, const std::string& out,
                     const py::object& on_checkpoint, bool quiet, bool force) {
   const dem::Model& model = *sc.model;
@@ -505,37 +508,12 @@ long run_prep_stage(const Scene& sc, PyState& ps, const std::string& stage, cons
   check_out(out, force);
   UseGuard guard(ps.use);
   check_written(*ps.s);
-  std::function<void(double, const dem::State&)> cb;
-  if (!on_checkpoint.is_none())
-    cb = [&](double phi, const dem::State& now) {
-      py::gil_scoped_acquire acquire;
-      PyState copy;
-      *copy.s = now;
-      on_checkpoint(phi, copy);
-    };
-  if (st->kind == dem::PrepStage::Kind::Pressure || st->kind == dem::PrepStage::Kind::Uniaxial)
-    throw dem::SceneError("preparation stage '" + stage + "' is stress controlled (kind pressure or uniaxial): run it "
-                          "with `dem run SCENE --stages prep` (not from Python yet)");
-  if (st->kind == dem::PrepStage::Kind::Relax) {
-    dem::StageSpec spec{st->name, dem::Vec3{0, 0, 0}, dem::StopKind::Relaxed, 0, {}, st->ke_ratio, st->max_time, ""};
-    return nogil_blowup([&] { return static_cast<long>(dem::run_stage(model, *ps.s, spec, out, "", cb, quiet)); });
-  }
-  const bool up = st->kind == dem::PrepStage::Kind::Compress;
-  const double phi0 = ps.s->volume_fraction();
-  if (up ? phi0 >= st->phi : phi0 <= st->phi) return 0;   // skipped, as run_protocol does
-  dem::StageSpec spec{st->name, dem::Vec3{1, 1, 1} * (up ? -st->rate : st->rate),
-                      up ? dem::StopKind::VolumeFractionUp : dem::StopKind::VolumeFractionDown, st->phi, {}, 0, 0, ""};
-  auto same = [](double a, double b) { return std::fabs(a - b) <= 1e-9 * b; };
-  std::vector<double> at_start, at_end;
-  for (double cp : st->checkpoints) {
-    if (same(cp, phi0)) at_start.push_back(cp);
-    else if (same(cp, st->phi)) at_end.push_back(cp);
-    else if (up ? (cp > phi0 && cp < st->phi) : (cp < phi0 && cp > st->phi)) spec.checkpoint_phis.push_back(cp);
-  }
-  for (double cp : at_start) if (cb) cb(cp, *ps.s);
-  const long steps = nogil_blowup([&] { return static_cast<long>(dem::run_stage(model, *ps.s, spec, out, "", cb, quiet)); });
-  for (double cp : at_end) if (cb) cb(cp, *ps.s);
-  return steps;
+  const auto cb = checkpoint_callback(on_checkpoint);
+  const dem::SaveCheckpoint save = [&](const std::string&, double phi, const dem::State& now) { if (cb) cb(phi, now); };
+  const long steps = nogil_blowup([&] {
+    return static_cast<long>(dem::run_prep_stage(model, *st, *ps.s, dem::StageOutput{out, "", "", quiet}, save));
+  });
+  return std::max(steps, 0L);   // -1: skipped
 }
 
 void run_protocol(const Scene& sc, const std::string& out, const std::string& stages, bool force, bool quiet) {
@@ -549,9 +527,8 @@ void run_protocol(const Scene& sc, const std::string& out, const std::string& st
   nogil_blowup([&] { dem::run_protocol(*sc.model, opt); return 0; });
 }
 
-}  // namespace
-
-PYBIND11_MODULE(_core, m) {
+// The binding of the module's doc, errors and version.
+void def_module(py::module_& m) {
   m.doc() = "demtk._core: the compiled part of demtk (use `import demtk`).";
 
   g_scene_error = py::exception<dem::SceneError>(m, "SceneError", PyExc_ValueError);
@@ -571,7 +548,10 @@ PYBIND11_MODULE(_core, m) {
   m.attr("version") = DEM_VERSION;
   m.def("_contact_models_json", [] { return dem::contact::registry_json().dump(); },
         "the contact sub-model registry as JSON text (demtk.contact_models() parses it)");
+}
 
+// The binding of Scene, its loaders.
+void def_scene(py::module_& m) {
   // ---- Scene
   py::class_<Scene>(m, "Scene", "A validated scene (the C++ Model): immutable. Build it with demtk.load_scene().")
       .def_property_readonly("toml", [](const Scene& s) { return s.toml; },
@@ -635,7 +615,7 @@ PYBIND11_MODULE(_core, m) {
             if (!m) throw dem::SceneError("mode '" + mode + "' is neither built in nor in this scene's protocol.modes");
             if (!m->path.empty()) throw dem::SceneError("'" + mode + "' is a loading path, not a constant velocity gradient");
             const double r = rate.is_none() ? s.model->protocol.deviatoric_rate : rate.cast<double>();
-            return velgrad_matrix(dem::VelGrad(m->rate_shape * r, m->shear_shape * r));
+            return velgrad_matrix(m->shape * r);
           }, py::arg("mode"), py::arg("rate") = py::none(),
           "The velocity gradient L [1/s] (3x3) of a mode at `rate` [1/s] (default: the scene's deviatoric_rate), "
           "exactly as `dem mode` applies it.")
@@ -649,7 +629,10 @@ PYBIND11_MODULE(_core, m) {
       });
   m.def("_load_scene_text", &load_text, py::arg("text"), py::arg("overrides"), py::arg("origin"));
   m.def("_load_scene_file", &load_file, py::arg("path"), py::arg("overrides"));
+}
 
+// The binding of Box.
+void def_box(py::module_& m) {
   // ---- Box (a copy; the state's box is changed only by the engine)
   py::class_<dem::Box>(m, "Box", "The periodic cell (a copy of the state's box). Lengths [m], tilt [m], strains [-].")
       .def_property_readonly("lengths", [](const dem::Box& b) { return vec3(b.length); }, "edge lengths L_x, L_y, L_z [m]")
@@ -674,7 +657,10 @@ PYBIND11_MODULE(_core, m) {
           }, "cell matrix H (columns: the lattice vectors) [m]")
       .def_property_readonly("flips", [](const dem::Box& b) { return std::vector<int>{b.flips[0], b.flips[1], b.flips[2]}; },
                              "(xy, xz, yz) remaps of a sheared cell to its most orthogonal equivalent so far");
+}
 
+// The binding of State and the packing readers.
+void def_state(py::module_& m) {
   // ---- State
   py::class_<PyState>(m, "State",
                       "Particles and box. Array properties are numpy views of the engine's memory (no copy), rows "
@@ -768,7 +754,10 @@ PYBIND11_MODULE(_core, m) {
         *p.s = dem::random_packing(*sc.model, phi);
         return p;
       }, py::arg("scene"), py::arg("phi"), "random non-overlapping placement of the scene's N spheres (seeded)");
+}
 
+// The binding of Measurement and the column table.
+void def_measurement(py::module_& m) {
   // ---- Measurement
   py::class_<dem::Measurement>(m, "Measurement",
                                "What measure() returns: `columns` (every curve column by its CSV name), the tensors.")
@@ -812,7 +801,10 @@ PYBIND11_MODULE(_core, m) {
         },
         "every curve column: name, unit, meaning, group ('every', 'rotations': models with rotations, 'path', "
         "'path_sheared')");
+}
 
+// The binding of Engine.
+void def_engine(py::module_& m) {
   // ---- Engine
   py::class_<PyEngine>(m, "Engine",
                        "Engine(scene, state): the C++ time stepper over a state (modified in place). "
@@ -866,7 +858,10 @@ PYBIND11_MODULE(_core, m) {
                              "the pair loop's kernel (avx512, avx2, generic, reference: the same bits)")
       .def_property_readonly("velocity_gradient", [](const PyEngine& pe) { return velgrad_matrix(pe.last_rate); },
                              "of the last step [1/s]");
+}
 
+// The binding of the stage runners.
+void def_runners(py::module_& m) {
   // ---- Stage runners
   m.def("run_mode", &run_mode, py::arg("scene"), py::arg("state"), py::arg("mode"), py::arg("out"),
         py::arg("name") = "", py::arg("quiet") = true, py::arg("force") = false, py::arg("check") = true,
@@ -880,10 +875,14 @@ PYBIND11_MODULE(_core, m) {
         "'relaxed') reaches `target`; on_checkpoint(phi, state_copy) at each of checkpoint_phis.");
   m.def("run_prep_stage", &run_prep_stage, py::arg("scene"), py::arg("state"), py::arg("stage"), py::arg("out"),
         py::arg("on_checkpoint") = py::none(), py::arg("quiet") = true, py::arg("force") = false,
-        "One named stage of the scene's preparation, as `dem run` runs it (0 steps: skipped, already past its target).");
+        "One named stage of the scene's preparation, as `dem run` runs it (run_prep_stage; stress-controlled stages "
+        "included); on_checkpoint(phi, state_copy) at its checkpoints. 0 steps: skipped, already past its target.");
   m.def("run_protocol", &run_protocol, py::arg("scene"), py::arg("out"), py::arg("stages") = "all",
         py::arg("force") = false, py::arg("quiet") = true, "What `dem run` does: the whole run folder.");
+}
 
+// The binding of the fit.
+void def_fit(py::module_& m) {
   // ---- Fit
   py::class_<demfit::FitResult>(m, "FitResult", "The saturating fit x(e) = x_max - (x_max - x0) exp(-beta e).")
       .def_readonly("ok", &demfit::FitResult::ok)
@@ -934,4 +933,17 @@ PYBIND11_MODULE(_core, m) {
         "the value rounded to its standard error, as the fit tables print it: '0.197(2)', '3.7(11)e-4'");
   m.def("format_pm", &demfit::format_pm, py::arg("value"), py::arg("error"),
         "the same as '0.197 \u00b1 0.002', '(3.7 \u00b1 1.1)e-4'");
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+  def_module(m);
+  def_scene(m);
+  def_box(m);
+  def_state(m);
+  def_measurement(m);
+  def_engine(m);
+  def_runners(m);
+  def_fit(m);
 }

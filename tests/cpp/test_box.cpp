@@ -39,9 +39,9 @@ TEST(Box, D2AndD3ConserveVolumeAndGiveTheirEpsD) {
     ASSERT_TRUE(dem::builtin_mode(name, &dm));
     const double rate = 1e-3 / m.t_contact;
     dem::Engine e(m, s);
-    for (int k = 0; k < 20000; ++k) e.step(dm.rate_shape * rate);
+    for (int k = 0; k < 20000; ++k) e.step(dm.shape.diag * rate);
     EXPECT_NEAR(s.box.volume() / v0, 1.0, 1e-12) << name;
-    const auto q = dem::measure(m, s, e.neighbor_list(), dm.rate_shape * rate);
+    const auto q = dem::measure(m, s, e.neighbor_list(), dm.shape.diag * rate);
     const double eps = rate * s.time;   // magnitude of the rate-1 axis strain
     // eps_d = sqrt(((a-b)^2+(b-c)^2+(c-a)^2)/2): D2 (1,0,-1) -> sqrt(3) eps, D3 (1/2,1/2,-1) -> 3/2 eps
     const double expected = std::string(name) == "D2" ? std::sqrt(3.0) * eps : 1.5 * eps;

@@ -11,7 +11,7 @@
 
 #include "dem/io/checks.hpp"
 #include "dem/io/io.hpp"
-#include "dem/stages/preparation.hpp"
+#include "dem/io/preparation.hpp"
 #include "dem/io/scene.hpp"
 #include "demfit/fit.hpp"
 #include "test_support.hpp"

@@ -95,7 +95,7 @@ TEST(Kinematics, EnergyBalanceErrorIsSecondOrderInTheTimeStep) {
 TEST(Kinematics, EnergyBalanceUnderAServoControlledStage) {
   // A pressure servo (isobaric D2) changes the box rate every step from the measured stress.
   dem::PathStage stage;
-  stage.rate_shape = Vec3{1, 0, -1};
+  stage.shape.diag = Vec3{1, 0, -1};
   dem::ServoOptions opt;
   opt.waves = 1;
   opt.rate_max = kRate;
@@ -104,7 +104,7 @@ TEST(Kinematics, EnergyBalanceUnderAServoControlledStage) {
   const Balance b = run_balance(true, 0.02, 4000, [&](const dem::AxisResponse& r, const dem::Model& m, const dem::State& s) {
     if (!servo) {
       stage.pressure = 1.5 * r.p();
-      servo = std::make_unique<dem::Servo>(stage, stage.rate_shape * kRate, opt);
+      servo = std::make_unique<dem::Servo>(stage, stage.shape.diag * kRate, opt);
       servo->start(r, m, s);
     }
     ++calls;
@@ -118,7 +118,7 @@ TEST(Kinematics, EnergyBalanceUnderSimpleShearAtConstantNormalStress) {
   // SS_xz prescribed, a servo on sigma_zz (target 1.5x the start) acting on L_zz: the work is
   // -int V sigma:L dt with the shear term, and the servo changes L_zz every step.
   dem::PathStage stage;
-  stage.shear_shape = Vec3{0, 2, 0};
+  stage.shape.shear = Vec3{0, 2, 0};
   dem::ServoOptions opt;
   opt.waves = 1;
   opt.rate_max = kRate;
@@ -127,7 +127,7 @@ TEST(Kinematics, EnergyBalanceUnderSimpleShearAtConstantNormalStress) {
   const Balance b = run_balance(true, 0.01, 8000, [&](const dem::AxisResponse& r, const dem::Model& m, const dem::State& s) {
     if (!servo) {
       stage.sigma = Vec3{NAN, NAN, 1.5 * r.stress.zz};
-      servo = std::make_unique<dem::Servo>(stage, VelGrad(Vec3{0, 0, 0}, stage.shear_shape * kRate), opt);
+      servo = std::make_unique<dem::Servo>(stage, VelGrad(Vec3{0, 0, 0}, stage.shape.shear * kRate), opt);
       servo->start(r, m, s);
     }
     const VelGrad L = servo->update(r, m.dt);
@@ -209,7 +209,7 @@ TEST(Servo, ShearStiffnessInATiltedCellPredictsTheAffineStressRate) {
 
 TEST(Servo, PrescribedAxesKeepTheirRateAndTheLimitHolds) {
   dem::PathStage stage;
-  stage.rate_shape = Vec3{0, 0, -1};
+  stage.shape.diag = Vec3{0, 0, -1};
   stage.sigma = Vec3{1e6, 1e6, NAN};
   dem::ServoOptions opt;
   opt.rate_max = 10;
@@ -276,13 +276,13 @@ TEST(Servo, PathStagesTakeAVelocityGradientOrAShearModeAndItsReverse) {
       "     { rate = [0, 0, -1], until = { eps_zz = -0.1 } }]\n");
   const auto& p = m.protocol.modes.at(0).path;
   ASSERT_EQ(p.size(), 3u);
-  EXPECT_EQ(p[0].shear_shape.y, 2);
+  EXPECT_EQ(p[0].shape.shear.y, 2);
   EXPECT_EQ(p[0].sigma.z, 1);
-  EXPECT_EQ(p[1].shear_shape.y, -2);
+  EXPECT_EQ(p[1].shape.shear.y, -2);
   EXPECT_EQ(p[1].name, "-SS_xz");
-  EXPECT_EQ(p[2].shear_shape.z, 1);
-  EXPECT_EQ(p[2].rate_shape.x, 0);
-  EXPECT_EQ(m.protocol.modes.at(1).path[0].shear_shape.x, 0.5);
+  EXPECT_EQ(p[2].shape.shear.z, 1);
+  EXPECT_EQ(p[2].shape.diag.x, 0);
+  EXPECT_EQ(m.protocol.modes.at(1).path[0].shape.shear.x, 0.5);
   EXPECT_TRUE(m.protocol.modes.at(1).path[0].has_servo());
   EXPECT_FALSE(m.protocol.modes.at(1).path[1].sheared());
 }

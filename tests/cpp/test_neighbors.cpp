@@ -33,7 +33,7 @@ TEST(NeighborList, ForcesEqualAllPairsOracleOnShearedConfigurations) {
       dem::State s = dem_test::random_state(400, 0.38, 2.0, seed);
       dem::DeformationMode dm;
       ASSERT_TRUE(dem::builtin_mode(mode, &dm));
-      const Vec3 rate = dm.rate_shape * (2e-3 / m.t_contact);   // fast: the box deforms by 10%
+      const Vec3 rate = dm.shape.diag * (2e-3 / m.t_contact);   // fast: the box deforms by 10%
       dem::Engine e(m, s);
       for (int k = 0; k < 2500; ++k) e.step(rate);
       // Same positions and velocities for both paths (the engine's stored forces belong to
@@ -72,7 +72,7 @@ TEST(NeighborList, BlockSplitPairLoopEqualsAllPairsOracle) {
   dem::State s = dem_test::random_state(600, 0.40, 2.0, 11);
   dem::DeformationMode dm;
   ASSERT_TRUE(dem::builtin_mode("D2", &dm));
-  const Vec3 rate = dm.rate_shape * (1e-3 / m.t_contact);
+  const Vec3 rate = dm.shape.diag * (1e-3 / m.t_contact);
   dem::Engine e(m, s);
   for (int k = 0; k < 500; ++k) e.step(rate);
   dem::State oracle = s;

@@ -99,7 +99,7 @@ TEST(Scene, OverridesReachEveryKeyAndTheResolvedSceneReloads) {
 TEST(Scene, CustomModesAreDiagonalRateTensors) {
   const dem::Model m = dem::load_scene("[modes]\nshear_xy = [1.0, -1.0, 0.0]\n[protocol]\nmodes = [\"shear_xy\", \"D2\"]\n");
   ASSERT_EQ(m.protocol.modes.size(), 2u);
-  EXPECT_EQ(m.protocol.modes[0].rate_shape.y, -1.0);
+  EXPECT_EQ(m.protocol.modes[0].shape.diag.y, -1.0);
   EXPECT_TRUE(has(error_of("[modes]\nbad = [1.0, 2.0]\n"), "modes.bad must be"));
 }
 

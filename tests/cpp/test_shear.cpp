@@ -37,7 +37,7 @@ int contacts_all_pairs(const dem::State& s) {
 VelGrad mode_gradient(const char* name, double rate) {
   dem::DeformationMode dm;
   EXPECT_TRUE(dem::builtin_mode(name, &dm)) << name;
-  return VelGrad(dm.rate_shape, dm.shear_shape) * rate;
+  return dm.shape * rate;
 }
 
 // The list's forces against the oracle's for the state's current positions and velocities.
@@ -58,11 +58,11 @@ TEST(Shear, BuiltinSimpleShearHasTheStretchingOfD2) {
   ASSERT_TRUE(dem::builtin_mode("SS_xz", &ss));
   ASSERT_TRUE(dem::builtin_mode("D2", &d2));
   EXPECT_TRUE(ss.sheared());
-  EXPECT_EQ(ss.shear_shape.y, 2.0);
+  EXPECT_EQ(ss.shape.shear.y, 2.0);
   double a[3], b[3];
   Vec3 va[3], vb[3];
-  dem::principal(Sym3{0, 0, 0, 0, 0.5 * ss.shear_shape.y, 0}, a, va);
-  dem::principal(Sym3{d2.rate_shape.x, d2.rate_shape.y, d2.rate_shape.z, 0, 0, 0}, b, vb);
+  dem::principal(Sym3{0, 0, 0, 0, 0.5 * ss.shape.shear.y, 0}, a, va);
+  dem::principal(Sym3{d2.shape.diag.x, d2.shape.diag.y, d2.shape.diag.z, 0, 0, 0}, b, vb);
   for (int k = 0; k < 3; ++k) EXPECT_NEAR(a[k], b[k], 1e-15);
   // the compressive direction of simple shear v_x = g z is (1, 0, -1)/sqrt 2
   EXPECT_NEAR(dem::axis_angle_deg(va[0], Vec3(1, 0, -1)), 0.0, 1e-6);
@@ -394,8 +394,8 @@ TEST(Shear, ScenesTakeAVelocityGradientAndRefuseEntriesBelowTheDiagonal) {
                                        "[protocol]\nmodes = [\"SS_xz\", \"myshear\", \"D2\"]\n",
                                        {}, nullptr, "test");
   ASSERT_EQ(m.protocol.modes.size(), 3u);
-  EXPECT_EQ(m.protocol.modes[0].shear_shape.y, 2.0);
-  EXPECT_EQ(m.protocol.modes[1].shear_shape.y, 1.5);
+  EXPECT_EQ(m.protocol.modes[0].shape.shear.y, 2.0);
+  EXPECT_EQ(m.protocol.modes[1].shape.shear.y, 1.5);
   EXPECT_FALSE(m.protocol.modes[2].sheared());
   EXPECT_NE(dem::mode_definition(m, m.protocol.modes[1]).find("shear_shape=[0,1.5,0]"), std::string::npos);
   EXPECT_EQ(dem::mode_definition(m, m.protocol.modes[2]).find("shear_shape"), std::string::npos)
@@ -412,7 +412,7 @@ TEST(Shear, ScenesTakeAVelocityGradientAndRefuseEntriesBelowTheDiagonal) {
   const dem::Model p = dem::load_scene("[paths]\np = [{ rate = \"SS_xz\", until = { eps_d = 0.1 } }]\n"
                                        "q = [{ rate = \"D2\", until = { eps_d = 0.1 } }]\n[protocol]\nmodes = [\"p\", \"q\"]\n",
                                        {}, nullptr, "test");
-  EXPECT_EQ(p.protocol.modes[0].path.at(0).shear_shape.y, 2);
+  EXPECT_EQ(p.protocol.modes[0].path.at(0).shape.shear.y, 2);
   EXPECT_NE(dem::mode_definition(p, p.protocol.modes[0]).find(":shear_shape=[0,2,0]"), std::string::npos);
   EXPECT_EQ(dem::mode_definition(p, p.protocol.modes[1]).find("shear_shape"), std::string::npos);
 }
@@ -425,10 +425,11 @@ TEST(Shear, ModeStageRunsSimpleShearToItsStrainAcrossAFlip) {
   dem::DeformationMode dm;
   ASSERT_TRUE(dem::builtin_mode("SS_xz", &dm));
   const double rate = 5e-3 / m.t_contact;
-  dem::StageSpec spec{"SS_xz", dm.rate_shape * rate, dem::StopKind::DeviatoricStrain, 0.6, {}, 0, 0,
-                      dem::mode_definition(m, dm), dm.shear_shape * rate};
+  dem::StageSpec spec = dem::mode_stage(m, dm);
+  spec.gradient = dm.shape * rate;
+  spec.target = 0.6;
   const std::string path = (std::filesystem::temp_directory_path() / "dem_ss_stage.csv").string();
-  dem::run_stage(m, s, spec, path, "", nullptr, true);
+  dem::run_stage(m, s, spec, dem::StageOutput{path});
   std::ifstream in(path);
   std::string line, header, last;
   bool sheared_note = false;

@@ -122,6 +122,51 @@ def test_run_protocol_equals_dem_run(tiny, tmp_path):
         assert (tmp_path / "py" / f).read_bytes() == (tmp_path / "cli" / f).read_bytes(), f
 
 
+# A preparation list with a stress-controlled stage (a one-stage path) between two strain stages.
+PRESS = """
+[particles]
+count = 200
+seed = 4
+[integration]
+threads = 1
+[protocol]
+initial_phi = 0.3
+preparation = [
+  { name = "gas", kind = "compress", rate_tc = 1e-3, until = { phi = 0.5 }, checkpoint_name = "gas", checkpoints = [0.4, 0.5] },
+  { name = "press", kind = "pressure", target_Pa = 1e5, rate_tc = 1e-3, until = { ke_ratio = 1e-3 }, max_time_tc = 200, checkpoint_name = "pressed" },
+  { name = "relax", kind = "relax", until = { ke_ratio = 1e-4 }, max_time_tc = 100 },
+]
+modes_from = "pressed"
+modes = ["D2"]
+[output]
+vtk = false
+"""
+
+
+def test_every_preparation_stage_from_python_is_dem_runs_byte_for_byte(tmp_path):
+    # One runner for both doors (run_prep_stage): compress with checkpoints at its end and on the
+    # way, a stress-controlled stage (refused from Python before the runner was shared), a relax.
+    path = tmp_path / "press.toml"
+    path.write_text(PRESS)
+    run_dem("run", path, "--out", tmp_path / "cli", "--stages", "prep", "--quiet", check=True)
+    scene = demtk.load_scene(path)
+    state = demtk.random_packing(scene, 0.3)
+    saved = []
+    for name in scene.preparation:
+        out = tmp_path / f"{name}.csv"
+        demtk.run_prep_stage(scene, state, name, str(out), on_checkpoint=lambda phi, st: saved.append((phi, st)))
+        assert out.read_bytes() == (tmp_path / "cli" / "prep" / f"{name}.csv").read_bytes(), name
+    cli = sorted((tmp_path / "cli" / "checkpoints").glob("*.ckpt"))
+    assert [p.stem for p in cli] == sorted(f"{s}_phi{phi:.3f}" for s, (phi, _) in
+                                           zip(["gas", "gas", "pressed"], saved))
+    for p in cli:
+        phi = float(p.stem.split("_phi")[1])
+        st = next(st for q, st in saved if f"{q:.3f}" == f"{phi:.3f}")
+        np.testing.assert_array_equal(st.positions, demtk.read_checkpoint(p).state.positions)
+    np.testing.assert_array_equal(state.positions,
+                                  demtk.read_checkpoint(tmp_path / "cli" / "prep" / "after_relax.ckpt").state.positions)
+
+
 # ---- scenes ------------------------------------------------------------------------------------
 
 def test_scene_from_dict_equals_the_file_and_derived_quantities(tiny):

@@ -23,7 +23,7 @@
 #include "dem/io/io.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/stages/plan.hpp"
-#include "dem/stages/preparation.hpp"
+#include "dem/io/preparation.hpp"
 #include "dem/stages/protocol.hpp"
 #include "dem/io/scene.hpp"
 #include "dem/io/sweep.hpp"
@@ -139,11 +139,11 @@ void print_info(const dem::Model& m) {
     }
     if (mode.sheared())
       std::printf("mode %-13s  velocity gradient [[%g, %g, %g], [0, %g, %g], [0, 0, %g]]: %.3g steps to eps_d = %g\n",
-                  mode.name.c_str(), mode.rate_shape.x, mode.shear_shape.x, mode.shear_shape.y, mode.rate_shape.y,
-                  mode.shear_shape.z, mode.rate_shape.z, dem::mode_steps(m, mode), p.eps_d_max);
+                  mode.name.c_str(), mode.shape.diag.x, mode.shape.shear.x, mode.shape.shear.y, mode.shape.diag.y,
+                  mode.shape.shear.z, mode.shape.diag.z, dem::mode_steps(m, mode), p.eps_d_max);
     else
       std::printf("mode %-13s  rate shape (%g, %g, %g): %.3g steps to eps_d = %g\n", mode.name.c_str(),
-                  mode.rate_shape.x, mode.rate_shape.y, mode.rate_shape.z, dem::mode_steps(m, mode), p.eps_d_max);
+                  mode.shape.diag.x, mode.shape.diag.y, mode.shape.diag.z, dem::mode_steps(m, mode), p.eps_d_max);
   }
 }
 
@@ -514,15 +514,11 @@ struct ModeCommand {
                                                                 : dem::read_packing(packing, model.density);
     dem::check_packing(model, state, packing);
     const auto& m = model.protocol.modes.front();
-    const dem::StageSpec spec{stage_name.empty() ? m.name : stage_name, m.rate_shape * model.protocol.deviatoric_rate,
-                              dem::StopKind::DeviatoricStrain, model.protocol.eps_d_max, {}, 0, 0,
-                              dem::mode_definition(model, m), m.shear_shape * model.protocol.deviatoric_rate};
     if (!quiet) print_info(model);
     else warn_time_step(model);
     const auto t0 = std::chrono::steady_clock::now();
     dem::RebuildStats list_stats;
-    const auto steps = m.path.empty() ? dem::run_stage(model, state, spec, out, "", nullptr, quiet, "", &list_stats)
-                                      : dem::run_path(model, state, m, spec.name, out, quiet, "", &list_stats);
+    const auto steps = dem::run_mode(model, state, m, stage_name, dem::StageOutput{out, "", "", quiet, &list_stats});
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     // The run summary's neighbour-list entry (demkit.task copies this line into the task's JSON).
     std::fprintf(stderr, "dem mode: neighbor_list %s\n", list_stats.json(wall, model.skin_over_rmin * model.radius_min).c_str());

@@ -1,6 +1,6 @@
 #include "dem/engine/engine.hpp"
 #include "dem/engine/interrupt.hpp"
-#include "dem/engine/parallel.hpp"
+#include "dem/core/parallel.hpp"
 #include "dem/engine/step_team.hpp"
 
 #include "dem/measure/measure.hpp"
@@ -297,12 +297,12 @@ void Engine::evaluate_forces() {
   state_.friction_dissipated = dissipated;
 }
 
-void Engine::step(const VelGrad& strain_rate) {
+void Engine::step(const VelGrad& rate) {
   poll_interrupt();   // before anything changes: an interrupt leaves the last full step
-  rate_ = strain_rate;
-  const bool affine = !strain_rate.zero();
+  rate_ = rate;
+  const bool affine = !rate.zero();
   bool flipped = false;
-  const AffineMap map = affine ? deform_box(strain_rate, &flipped) : AffineMap{};
+  const AffineMap map = affine ? deform_box(rate, &flipped) : AffineMap{};
   StalenessTest test = staleness_test(state_, list_);   // box of this step, list of the last
   if (flipped) { test.limit2 = -1; ++flips_; }        // new lattice vectors: rebuild
   flipped_ = flipped;

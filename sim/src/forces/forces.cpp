@@ -2,7 +2,7 @@
 // ABI is crossed.
 #pragma GCC diagnostic ignored "-Wpsabi"
 #include "dem/forces/forces.hpp"
-#include "dem/engine/parallel.hpp"
+#include "dem/core/parallel.hpp"
 #include "forces/history_kernels.hpp"
 #include "forces/pair_kernels.hpp"
 

@@ -1,5 +1,5 @@
 #include "dem/io/checks.hpp"
-#include "dem/stages/preparation.hpp"
+#include "dem/io/preparation.hpp"
 
 #include <unistd.h>
 
@@ -181,11 +181,11 @@ std::string vec(const Vec3& v) {
 
 std::string mode_definition(const Model& m, const DeformationMode& mode) {
   if (mode.path.empty())
-    return "rate_shape=" + vec(mode.rate_shape) + (mode.sheared() ? ";shear_shape=" + vec(mode.shear_shape) : "") +
+    return "rate_shape=" + vec(mode.shape.diag) + (mode.sheared() ? ";shear_shape=" + vec(mode.shape.shear) : "") +
            ";eps_d_max=" + physics_number(m.protocol.eps_d_max);
   std::string d = "path=";
   for (const auto& s : mode.path)
-    d += s.name + ":rate=" + vec(s.rate_shape) + (s.sheared() ? ":shear_shape=" + vec(s.shear_shape) : "") + ":sigma=" + vec(s.sigma) + ":pressure=" + physics_number(s.pressure) +
+    d += s.name + ":rate=" + vec(s.shape.diag) + (s.sheared() ? ":shear_shape=" + vec(s.shape.shear) : "") + ":sigma=" + vec(s.sigma) + ":pressure=" + physics_number(s.pressure) +
          (s.relative ? ":p0" : ":Pa") + (s.constant_volume ? ":constant_volume" : "") + ":stop" +
          std::to_string(static_cast<int>(s.stop)) + "=" + physics_number(s.until) + (s.until_relative ? "p0" : "") +
          (s.max_time > 0 ? ":max_time_tc=" + physics_number(s.max_time / m.t_contact) : "") + "/";

@@ -7,7 +7,7 @@
 #include <map>
 #include <sstream>
 
-#include "dem/contact/contact_forces.hpp"
+#include "dem/forces/contact_forces.hpp"
 #include "dem/io/io.hpp"
 
 namespace dem {

@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "dem/contact/contact_forces.hpp"
+#include "dem/forces/contact_forces.hpp"
 #include "dem/measure/measure.hpp"
 #include "dem/core/errors.hpp"
 
@@ -169,7 +169,7 @@ void validate_path(const std::string& path_name, const std::vector<PathStage>& p
     auto fail = [&](const std::string& what) { throw SceneError(where + ": " + what); };
     int stressed = 0;
     for (int a = 0; a < 3; ++a) {
-      const double t = component(s.sigma, a), rate = component(s.rate_shape, a);
+      const double t = component(s.sigma, a), rate = component(s.shape.diag, a);
       if (std::isnan(t)) continue;
       ++stressed;
       if (!(t > 0) || !std::isfinite(t))
@@ -179,12 +179,12 @@ void validate_path(const std::string& path_name, const std::vector<PathStage>& p
         fail(std::string("axis ") + "xyz"[a] + " is stress controlled, so its rate must be 0 (it is " +
              std::to_string(rate) + "): an axis is either strain-rate or stress controlled");
     }
-    const double trace = s.rate_shape.x + s.rate_shape.y + s.rate_shape.z;
+    const double trace = s.shape.diag.x + s.shape.diag.y + s.shape.diag.z;
     // The shear entries (strain controlled) add to the deviatoric rate: eps_d of D = sym L.
-    const Vec3& g = s.shear_shape;
-    const double dev = s.sheared() ? deviatoric_magnitude_eig(Sym3{s.rate_shape.x, s.rate_shape.y, s.rate_shape.z,
+    const Vec3& g = s.shape.shear;
+    const double dev = s.sheared() ? deviatoric_magnitude_eig(Sym3{s.shape.diag.x, s.shape.diag.y, s.shape.diag.z,
                                                                     0.5 * g.x, 0.5 * g.y, 0.5 * g.z})
-                                   : deviatoric_magnitude(s.rate_shape.x, s.rate_shape.y, s.rate_shape.z);
+                                   : deviatoric_magnitude(s.shape.diag.x, s.shape.diag.y, s.shape.diag.z);
     if (!std::isnan(s.pressure)) {
       if (!(s.pressure > 0) || !std::isfinite(s.pressure))
         fail("the pressure target must be a positive number (compression)");
@@ -217,11 +217,11 @@ void validate_path(const std::string& path_name, const std::vector<PathStage>& p
         break;
       case PathStop::EpsXX: case PathStop::EpsYY: case PathStop::EpsZZ: {
         const int a = s.stop == PathStop::EpsXX ? 0 : s.stop == PathStop::EpsYY ? 1 : 2;
-        if (component(s.rate_shape, a) == 0)
+        if (component(s.shape.diag, a) == 0)
           fail(std::string("until.") + stop_name(s.stop) + ": axis " + "xyz"[a] + " has no prescribed rate" +
                (std::isfinite(component(s.sigma, a)) ? " (it is stress controlled)" : "") +
                ", so its strain may never reach the target: stop on a strain-controlled axis");
-        if (k == 0 && (s.until - 0) * component(s.rate_shape, a) <= 0)
+        if (k == 0 && (s.until - 0) * component(s.shape.diag, a) <= 0)
           fail(std::string("until.") + stop_name(s.stop) + " = " + std::to_string(s.until) +
                " lies behind the first stage's rate (the path starts at strain 0): change the sign of the target or the rate");
         break;

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <cstdio>
 
-#include "dem/contact/contact_forces.hpp"
+#include "dem/forces/contact_forces.hpp"
 
 namespace dem {
 
@@ -91,6 +91,49 @@ std::vector<char> rattler_flags(int n, const std::vector<std::pair<int, int>>& p
   return rattler;
 }
 
+namespace {
+
+// The rattlers (rattler_flags) and the coordination of the particles that carry force.
+void set_rattlers(Measurement& m, int n, const std::vector<std::pair<int, int>>& pairs) {
+  const std::vector<char> rattler = rattler_flags(n, pairs);
+  long n_rattlers = 0, contacts_nr = 0;
+  for (int i = 0; i < n; ++i) n_rattlers += rattler[i];
+  for (auto& pr : pairs) contacts_nr += (!rattler[pr.first] && !rattler[pr.second]);
+  m.rattler_fraction = static_cast<double>(n_rattlers) / n;
+  m.C_nonrattler = n_rattlers < n ? 2.0 * contacts_nr / (n - n_rattlers) : 0.0;
+}
+
+// The objective (eigenvalue) measures and the non-coaxiality of stress, fabric and stretching; in a
+// sheared cell, or under a shear rate, the curve's deviatoric measures are the objective ones.
+void set_objective_measures(Measurement& m, const State& s, const VelGrad& rate) {
+  m.eps_d_eig = deviatoric_magnitude_eig(m.strain_tensor);
+  m.sigma_dev_eig = deviatoric_magnitude_eig(m.stress);
+  m.s_dev_eig = m.p != 0 ? m.sigma_dev_eig / std::fabs(m.p) : 0.0;
+  m.F_dev_eig = deviatoric_magnitude_eig(m.fabric);
+  {
+    const Sym3 D{rate.diag.x, rate.diag.y, rate.diag.z, 0.5 * rate.shear.x, 0.5 * rate.shear.y, 0.5 * rate.shear.z};
+    Vec3 ns, nf, nd;
+    const bool has_s = extreme_direction(m.stress, true, &ns);
+    const bool has_f = extreme_direction(m.fabric, true, &nf);
+    const bool has_d = extreme_direction(D, false, &nd);
+    if (has_s && has_f) m.angle_sigma_F = axis_angle_deg(ns, nf);
+    if (has_s && has_d) m.angle_sigma_D = axis_angle_deg(ns, nd);
+    if (has_f && has_d) m.angle_F_D = axis_angle_deg(nf, nd);
+  }
+
+  // In a sheared cell (or under a shear rate) the diagonal forms depend on the frame: the curve's
+  // eps_d, sigma_dev, s_dev, F_dev are the objective ones there, so that everything keyed to
+  // them (stops, sampling, dem fit, ensembles) works for simple shear. Diagonal runs: unchanged.
+  if (s.box.sheared() || rate.sheared()) {
+    m.eps_d = m.eps_d_eig;
+    m.sigma_dev = m.sigma_dev_eig;
+    m.s_dev = m.s_dev_eig;
+    m.F_dev = m.F_dev_eig;
+  }
+}
+
+}  // namespace
+
 Measurement measure(const Model& model, const State& s, const NeighborList& list,
                     const VelGrad& rate) {
   Measurement m;
@@ -167,38 +210,9 @@ Measurement measure(const Model& model, const State& s, const NeighborList& list
   m.F_dev = deviatoric_magnitude(m.fabric.xx, m.fabric.yy, m.fabric.zz);
   m.C = 2.0 * m.contacts / n;
 
-  const std::vector<char> rattler = rattler_flags(n, pairs);
-  long n_rattlers = 0, contacts_nr = 0;
-  for (int i = 0; i < n; ++i) n_rattlers += rattler[i];
-  for (auto& pr : pairs) contacts_nr += (!rattler[pr.first] && !rattler[pr.second]);
-  m.rattler_fraction = static_cast<double>(n_rattlers) / n;
-  m.C_nonrattler = n_rattlers < n ? 2.0 * contacts_nr / (n - n_rattlers) : 0.0;
+  set_rattlers(m, n, pairs);
 
-  // Objective measures and non-coaxiality.
-  m.eps_d_eig = deviatoric_magnitude_eig(m.strain_tensor);
-  m.sigma_dev_eig = deviatoric_magnitude_eig(m.stress);
-  m.s_dev_eig = m.p != 0 ? m.sigma_dev_eig / std::fabs(m.p) : 0.0;
-  m.F_dev_eig = deviatoric_magnitude_eig(m.fabric);
-  {
-    const Sym3 D{rate.diag.x, rate.diag.y, rate.diag.z, 0.5 * rate.shear.x, 0.5 * rate.shear.y, 0.5 * rate.shear.z};
-    Vec3 ns, nf, nd;
-    const bool has_s = extreme_direction(m.stress, true, &ns);
-    const bool has_f = extreme_direction(m.fabric, true, &nf);
-    const bool has_d = extreme_direction(D, false, &nd);
-    if (has_s && has_f) m.angle_sigma_F = axis_angle_deg(ns, nf);
-    if (has_s && has_d) m.angle_sigma_D = axis_angle_deg(ns, nd);
-    if (has_f && has_d) m.angle_F_D = axis_angle_deg(nf, nd);
-  }
-
-  // In a sheared cell (or under a shear rate) the diagonal forms depend on the frame: the curve's
-  // eps_d, sigma_dev, s_dev, F_dev are the objective ones there, so that everything keyed to
-  // them (stops, sampling, dem fit, ensembles) works for simple shear. Diagonal runs: unchanged.
-  if (s.box.sheared() || rate.sheared()) {
-    m.eps_d = m.eps_d_eig;
-    m.sigma_dev = m.sigma_dev_eig;
-    m.s_dev = m.s_dev_eig;
-    m.F_dev = m.F_dev_eig;
-  }
+  set_objective_measures(m, s, rate);
 
   const double rate_max = std::max({std::fabs(rate.diag.x), std::fabs(rate.diag.y), std::fabs(rate.diag.z),
                                     std::fabs(rate.shear.x), std::fabs(rate.shear.y), std::fabs(rate.shear.z)});

@@ -178,84 +178,94 @@ std::string extra_row(const VelGrad& L, const Servo& servo, const Sym3& stress, 
 
 // Everything one stage of a path needs from the path.
 struct PathRun {
-  const Model& model;
-  State& state;
-  Engine& engine;
-  CurveFile& csv;
+  StageLoop& loop;
   const std::string& label;
   bool quiet;
-  double e_floor;
-  double prev_ekin;
-  double max_inertial = 0;
-  State last_good;
-  std::int64_t steps = 0;
   double accumulated = 0;   // eps_d travelled along the whole path (sum of |d eps_d| per step)
   bool sheared = false;     // the path has a shear stage (extra columns)
 };
 
-// Runs one stage to its stop condition, writing rows; returns nothing, throws on failure.
-void run_path_stage(PathRun& run, const PathStage& stage) {
-  const Model& model = run.model;
-  State& state = run.state;
-  const double dt = model.dt;
-  // Rates re-based so opposite stages cancel exactly; strains keep counting from the path start.
-  state.box.reference = state.box.length;
-  state.box.log_strain = Vec3{0, 0, 0};
-  const VelGrad prescribed = stage.gradient_shape() * model.protocol.deviatoric_rate;
-  Servo servo(stage, prescribed, model.protocol.servo);
-  const bool needs_response = servo.active() || stage.stop == PathStop::Pressure || stage.stop == PathStop::SDev ||
-                              stage.stop == PathStop::TauXY || stage.stop == PathStop::TauXZ || stage.stop == PathStop::TauYZ;
-  AxisResponse resp = axis_response(model, state, run.engine.neighbor_list(), prescribed);
-  servo.start(resp, model, state);
-  const std::int64_t every = servo.active() ? std::max<std::int64_t>(1, std::llround(servo.tau() / (20 * dt)))
-                                            : (needs_response ? 50 : 0);
-  VelGrad rate = servo.update(resp, 0);
-  StopProbe probe{stage, state.box.true_strain(), state.time};
-  if (stage.sheared() || state.box.sheared()) {
-    probe.tensor = true;
-    probe.F0_inverse = deformation(state.box).inverse();
-  }
-  const double x_start = probe.value(state, resp);
-  double increment = probe.landable() ? probe.increment(prescribed, dt) : 0;
-  // Strains under shear are not linear in time: land with the last full step's increment (as a
-  // sheared mode does), except eps_v (ln det F, linear) and time.
-  const bool nonlinear_stop = probe.tensor && stage.stop != PathStop::EpsV && stage.stop != PathStop::Time;
-  // The sampling variable: the stop value itself for an eps_d stop without servo (as run_stage),
-  // else the strain travelled (deviatoric or volumetric, whichever moved more), plus a row every
-  // relax_sample_steps steps in a stage without prescribed rate.
-  const bool sample_on_x = stage.stop == PathStop::EpsD && !servo.active();
-  const bool time_rows = prescribed.zero();   // a servo-only stage
-  double travel = 0, last_sample = sample_on_x ? x_start : 0.0;
-  const double rate_floor = std::min(model.protocol.servo.rate_max, model.protocol.deviatoric_rate);
-  const double time_limit = 4.0 / rate_floor;
-  Vec3 e_prev = state.box.true_strain();
+// One stage of a path on the stage loop (stage_common.hpp): the servo, the stop probe, the
+// landing on a linear stop, sampling by the strain travelled (or the stop value).
+struct PathStageRun {
+  PathRun& run;
+  const PathStage& stage;
+  const Model& model;
+  State& state;
+  const double dt;
+  const VelGrad gradient;   // the prescribed velocity gradient [1/s]
+  Servo servo;
+  bool needs_response;
+  AxisResponse resp;
+  std::int64_t every;
+  VelGrad rate;             // the box's velocity gradient: prescribed + the servo's [1/s]
+  StopProbe probe;
+  double x_start, increment;
+  bool nonlinear_stop, sample_on_x, time_rows;
+  double travel = 0, last_sample;
+  double time_limit;
+  Vec3 e_prev;
   std::int64_t stage_steps = 0;
-  auto wall0 = std::chrono::steady_clock::now(), last_progress = wall0;
-  Measurement last_m;
-  bool done = false;
-  while (!done) {
-    double scale = 1.0;
+  std::chrono::steady_clock::time_point last_progress = std::chrono::steady_clock::now();
+  double scale = 1, x_before = 0;
+
+  PathStageRun(PathRun& r, const PathStage& st)
+      : run(r), stage(st), model(r.loop.model), state(r.loop.state), dt(model.dt),
+        gradient(st.shape * model.protocol.deviatoric_rate), servo(st, gradient, model.protocol.servo),
+        probe{st, Vec3{}, 0} {
+    // Rates re-based so opposite stages cancel exactly; strains keep counting from the path start.
+    state.box.reference = state.box.length;
+    state.box.log_strain = Vec3{0, 0, 0};
+    needs_response = servo.active() || stage.stop == PathStop::Pressure || stage.stop == PathStop::SDev ||
+                     stage.stop == PathStop::TauXY || stage.stop == PathStop::TauXZ || stage.stop == PathStop::TauYZ;
+    resp = axis_response(model, state, run.loop.engine.neighbor_list(), gradient);
+    servo.start(resp, model, state);
+    every = servo.active() ? std::max<std::int64_t>(1, std::llround(servo.tau() / (20 * dt)))
+                           : (needs_response ? 50 : 0);
+    rate = servo.update(resp, 0);
+    probe.strain0 = state.box.true_strain();
+    probe.time0 = state.time;
+    if (stage.sheared() || state.box.sheared()) {
+      probe.tensor = true;
+      probe.F0_inverse = deformation(state.box).inverse();
+    }
+    x_start = probe.value(state, resp);
+    increment = probe.landable() ? probe.increment(gradient, dt) : 0;
+    // Strains under shear are not linear in time: land with the last full step's increment (as a
+    // sheared mode does), except eps_v (ln det F, linear) and time.
+    nonlinear_stop = probe.tensor && stage.stop != PathStop::EpsV && stage.stop != PathStop::Time;
+    // The sampling variable: the stop value itself for an eps_d stop without servo (as run_stage),
+    // else the strain travelled (deviatoric or volumetric, whichever moved more), plus a row every
+    // relax_sample_steps steps in a stage without prescribed rate.
+    sample_on_x = stage.stop == PathStop::EpsD && !servo.active();
+    time_rows = gradient.zero();   // a servo-only stage
+    last_sample = sample_on_x ? x_start : 0.0;
+    const double rate_floor = std::min(model.protocol.servo.rate_max, model.protocol.deviatoric_rate);
+    time_limit = 4.0 / rate_floor;
+    e_prev = state.box.true_strain();
+  }
+  const std::string& name() const { return stage.name; }
+  VelGrad next_rate() {
+    scale = 1.0;
     if (increment > 0) {
       const double remaining = std::fabs(probe.target() - probe.value(state, resp));
       if (remaining < increment) scale = remaining / increment;
     }
-    const double x_before = increment > 0 && nonlinear_stop ? probe.value(state, resp) : 0.0;
-    try {
-      run.engine.step(rate * scale);
-    } catch (const BlowUp&) {
-      throw;
-    } catch (const std::runtime_error& e) {
-      // The box got too thin for the neighbour grid before the stop came: that is the stop
-      // condition not met (the documented error), the geometry only its symptom.
-      throw std::runtime_error("path " + run.label + ", stage '" + stage.name + "': its stop condition was not met after "
-                               "a strain of " + std::to_string(travel) + ", when the box could deform no further (" +
-                               e.what() + "): the target may be beyond what this packing reaches (e.g. an s_dev above "
-                               "its critical state); change the stop condition");
-    }
-    ++run.steps;
+    x_before = increment > 0 && nonlinear_stop ? probe.value(state, resp) : 0.0;
+    return rate * scale;
+  }
+  // The box got too thin for the neighbour grid before the stop came: that is the stop
+  // condition not met (the documented error), the geometry only its symptom.
+  [[noreturn]] void step_failed(const std::runtime_error& e) const {
+    throw std::runtime_error("path " + run.label + ", stage '" + stage.name + "': its stop condition was not met after "
+                             "a strain of " + std::to_string(travel) + ", when the box could deform no further (" +
+                             e.what() + "): the target may be beyond what this packing reaches (e.g. an s_dev above "
+                             "its critical state); change the stop condition");
+  }
+  StepOutcome after_step() {
     ++stage_steps;
     if (increment > 0 && nonlinear_stop && scale == 1.0)
-      increment = std::max(std::fabs(probe.value(state, resp) - x_before), 1e-3 * probe.increment(prescribed, dt));
+      increment = std::max(std::fabs(probe.value(state, resp) - x_before), 1e-3 * probe.increment(gradient, dt));
     const Vec3 e = state.box.true_strain();
     const Vec3 de = e - e_prev;
     e_prev = e;
@@ -265,61 +275,63 @@ void run_path_stage(PathRun& run, const PathStage& stage) {
     travel += std::max(dd, std::fabs(de.x + de.y + de.z) / 3.0);
     run.accumulated += dd;
     if (every > 0 && stage_steps % every == 0) {
-      resp = axis_response(model, state, run.engine.neighbor_list(), rate);
+      resp = axis_response(model, state, run.loop.engine.neighbor_list(), rate);
       if (servo.active()) rate = servo.update(resp, every * dt);
     }
     const double x = probe.value(state, resp);
-    if (increment > 0) done = scale < 1.0;
-    else done = (every == 0 || stage_steps % every == 0 || !needs_response) && probe.reached(x, x_start);
+    StepOutcome o;
+    if (increment > 0) o.done = scale < 1.0;
+    else o.done = (every == 0 || stage_steps % every == 0 || !needs_response) && probe.reached(x, x_start);
     const double sx = sample_on_x ? x : travel;
-    bool sample = std::fabs(sx - last_sample) >= model.output.sample_strain * (1 - 1e-9) ||
-                  (time_rows && stage_steps % model.output.relax_sample_steps == 0);
+    o.sample = std::fabs(sx - last_sample) >= model.output.sample_strain * (1 - 1e-9) ||
+               (time_rows && stage_steps % model.output.relax_sample_steps == 0);
     const bool relaxed_stop = stage.stop == PathStop::Relaxed;
     if (relaxed_stop && stage.max_time > 0 && state.time - probe.time0 >= stage.max_time) {
-      done = true;
+      o.done = true;
       std::cerr << "dem: warning: path " << run.label << ", stage '" << stage.name << "': not relaxed (E_kin < "
                 << stage.until << " E_pot, targets within 1 %) after max_time; it ends there\n";
     }
-    if (!done && !(relaxed_stop && stage.max_time > 0) && (travel > 4 || state.time - probe.time0 > time_limit) &&
+    if (!o.done && !(relaxed_stop && stage.max_time > 0) && (travel > 4 || state.time - probe.time0 > time_limit) &&
         stage.stop != PathStop::Time)
       throw std::runtime_error("path " + run.label + ", stage '" + stage.name + "': its stop condition was not met after "
                                "a strain of " + std::to_string(travel) + " (or 4 / rate limit in time): the target "
                                "may be beyond what this packing reaches (e.g. an s_dev above its critical state); "
                                "change the stop condition");
-    if (sample || done) {
-      run.engine.check_sanity();
-      last_m = measure(model, state, run.engine.neighbor_list(), servo.active() ? rate : prescribed);
-      check_finite_measurement(model, state, last_m);
-      check_kinetic_energy(model, state, last_m, run.e_floor, run.prev_ekin);
-      run.prev_ekin = last_m.E_kin;
-      run.max_inertial = std::max(run.max_inertial, last_m.inertial_number);
-      // A Relaxed stop: the row that finds the packing at rest with its targets held is the last.
-      if (relaxed_stop && !done)
-        done = last_m.E_kin < stage.until * std::max(last_m.E_pot, run.e_floor) &&
-               servo.relative_error(last_m.stress) < kRelaxedTolerance;
-      run.csv.row(curve_row(last_m) + extra_row(rate, servo, last_m.stress, run.accumulated, run.sheared),
-                  stage.name);
-      run.csv.check(stage.name);
-      last_sample = sample_on_x ? probe.value(state, resp) : travel;
-      run.last_good = state;
-    }
-    const auto now = std::chrono::steady_clock::now();
-    if (!run.quiet && (std::chrono::duration<double>(now - last_progress).count() >= model.output.progress_seconds || done)) {
-      last_progress = now;
-      char line[400];
-      std::snprintf(line, sizeof line, "[%s/%s] step %lld  eps_d %.4f  eps_v %.4f  p %.3e Pa  s_dev %.4f  error %.2g%s\n",
-                    run.label.c_str(), stage.name.c_str(), static_cast<long long>(stage_steps), last_m.eps_d,
-                    last_m.eps_v, last_m.p, last_m.s_dev, servo.relative_error(last_m.stress), done ? "  (stage done)" : "");
-      std::cerr << line << std::flush;
-    }
+    return o;
   }
+  VelGrad row_rate() const { return servo.active() ? rate : gradient; }
+  std::string row(const Measurement& m, bool& done) {
+    // A Relaxed stop: the row that finds the packing at rest with its targets held is the last.
+    if (stage.stop == PathStop::Relaxed && !done)
+      done = m.E_kin < stage.until * std::max(m.E_pot, run.loop.e_floor) &&
+             servo.relative_error(m.stress) < kRelaxedTolerance;
+    last_sample = sample_on_x ? probe.value(state, resp) : travel;
+    return curve_row(m) + extra_row(rate, servo, m.stress, run.accumulated, run.sheared);
+  }
+  void progress_line(bool done) {
+    const auto now = std::chrono::steady_clock::now();
+    if (run.quiet || (std::chrono::duration<double>(now - last_progress).count() < model.output.progress_seconds && !done))
+      return;
+    last_progress = now;
+    const Measurement& m = run.loop.last;
+    char line[400];
+    std::snprintf(line, sizeof line, "[%s/%s] step %lld  eps_d %.4f  eps_v %.4f  p %.3e Pa  s_dev %.4f  error %.2g%s\n",
+                  run.label.c_str(), stage.name.c_str(), static_cast<long long>(stage_steps), m.eps_d, m.eps_v, m.p,
+                  m.s_dev, servo.relative_error(m.stress), done ? "  (stage done)" : "");
+    std::cerr << line << std::flush;
+  }
+};
+
+// Runs one stage to its stop condition, writing rows; returns nothing, throws on failure.
+void run_path_stage(PathRun& run, const PathStage& stage) {
+  PathStageRun st(run, stage);
+  run_stage_loop(run.loop, st);
 }
 
 }  // namespace
 
 std::int64_t run_path(const Model& model, State& state, const DeformationMode& mode, const std::string& label,
-                      const std::string& csv_path, bool quiet, const std::string& failed_checkpoint,
-                      RebuildStats* stats) {
+                      const StageOutput& out) {
   // Strains from the path start.
   state.box.zero_strain();
   state.box.reference = state.box.length;
@@ -328,21 +340,22 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
   const bool sheared = path_sheared(mode);
   std::vector<std::string> extra = columns_of(sheared);
   if (model.contact.frictional()) extra.insert(extra.begin(), friction_columns().begin(), friction_columns().end());
-  CurveFile csv(csv_path, curve_preamble(model, label, shear_physics(model), mode_definition(model, mode)), extra);
+  CurveFile csv(out.csv, curve_preamble(model, label, shear_physics(model), mode_definition(model, mode)), extra);
   // p0: the pressure of the first row (the dashpots see the first stage's prescribed rate).
-  const VelGrad rate0 = mode.path.front().gradient_shape() * model.protocol.deviatoric_rate;
+  const VelGrad rate0 = mode.path.front().shape * model.protocol.deviatoric_rate;
   const double p0 = axis_response(model, state, engine.neighbor_list(), rate0).p();
   for (const PathStage& st : mode.path)
     if ((st.relative && st.has_servo()) || st.until_relative)
       if (!(p0 > 0))
         throw std::runtime_error("path " + label + ": targets are multiples of p0, the pressure at the path start, "
                                  "but it is " + std::to_string(p0) + " Pa (no contacts): give targets in Pa (*_Pa)");
-  PathRun run{model, state, engine, csv, label, quiet, energy_floor(model, state), 0, 0, state, 0};
+  StageLoop loop{model, state, engine, csv, energy_floor(model, state), 0, state, 0, 0, Measurement{}};
+  PathRun run{loop, label, out.quiet};
   run.sheared = sheared;
   // The first row: the start state, with the first stage's name.
   const Measurement m0 = measure(model, state, engine.neighbor_list(), rate0);
   check_finite_measurement(model, state, m0);
-  run.prev_ekin = m0.E_kin;
+  loop.prev_ekin = m0.E_kin;
   {
     const PathStage first = resolve(model, mode.path.front(), p0);
     Servo servo(first, rate0, model.protocol.servo);
@@ -351,20 +364,17 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
   try {
     for (const PathStage& st : mode.path) run_path_stage(run, resolve(model, st, p0));
   } catch (const BlowUp& e) {
-    csv.abandon();
-    const std::string failed = failed_checkpoint.empty() ? csv_path + ".failed.ckpt" : failed_checkpoint;
-    write_checkpoint(failed, Checkpoint{"", "last good state of path " + label, run.last_good});
-    throw BlowUp(blow_up_message(model, e.what()) + "\n     the last good state of path " + label + " was saved as " + failed);
+    loop.fail(e, out, "path " + label);
   } catch (...) {
     csv.abandon();
     throw;
   }
   csv.commit(label);
-  if (run.max_inertial > kQuasiStaticInertial)
-    std::cerr << "dem: warning: path " << label << " reached an inertial number of " << run.max_inertial << " (> "
+  if (loop.max_inertial > kQuasiStaticInertial)
+    std::cerr << "dem: warning: path " << label << " reached an inertial number of " << loop.max_inertial << " (> "
               << kQuasiStaticInertial << "): not quasi-static; lower protocol.deviatoric_rate_tc or servo.rate_max_tc\n";
-  if (stats) *stats = engine.rebuild_stats();
-  return run.steps;
+  if (out.stats) *out.stats = engine.rebuild_stats();
+  return loop.steps;
 }
 
 }  // namespace dem

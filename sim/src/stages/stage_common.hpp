@@ -1,6 +1,9 @@
-// Pieces shared by the stage runners (protocol.cpp: run_stage, path.cpp: run_path).
+// Pieces shared by the stage runners (stage.cpp: run_stage, path.cpp: run_path), and the one
+// stage loop both run (run_stage_loop).
 #pragma once
 #include <cmath>
+#include <cstdint>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -8,7 +11,10 @@
 #include "dem/engine/engine.hpp"
 #include "dem/core/errors.hpp"
 #include "dem/io/checks.hpp"
+#include "dem/io/io.hpp"
 #include "dem/measure/measure.hpp"
+#include "dem/stages/curve_file.hpp"
+#include "dem/stages/protocol.hpp"
 
 namespace dem {
 
@@ -81,6 +87,88 @@ inline void check_finite_measurement(const Model& model, const State& state, con
     if (!std::isfinite(v))
       throw BlowUp("the measured " + std::string(name) + " is " + physics_number(v) + " at step " +
                    std::to_string(state.step) + " (not a result): " + overflow_cause(model));
+}
+
+/// What a stage loop carries from step to step whatever the stage: the engine, the curve, the
+/// energy reference of the blow-up check, the largest inertial number, the last good state (the
+/// state of the last row) and the steps taken.
+struct StageLoop {
+  const Model& model;
+  State& state;
+  Engine& engine;
+  CurveFile& csv;
+  double e_floor;
+  double prev_ekin;            ///< E_kin of the last row (the blow-up check compares with it)
+  State last_good;
+  double max_inertial = 0;
+  std::int64_t steps = 0;
+  Measurement last;            ///< the last row's measurement
+
+  /// A row's measurement at `rate`, after the engine's sanity checks, checked finite and against
+  /// an explosion of the kinetic energy.
+  const Measurement& measure_checked(const VelGrad& rate) {
+    engine.check_sanity();
+    last = measure(model, state, engine.neighbor_list(), rate);
+    check_finite_measurement(model, state, last);
+    check_kinetic_energy(model, state, last, e_floor, prev_ekin);
+    prev_ekin = last.E_kin;
+    max_inertial = std::max(max_inertial, last.inertial_number);
+    return last;
+  }
+  /// Writes a sampled row (checked) and keeps the state as the last good one.
+  void write(const std::string& row, const std::string& stage) {
+    csv.row(row, stage);
+    csv.check(stage);
+    last_good = state;
+  }
+  /// After a blow-up: the curve left as .part, the last good state saved (out.failed_checkpoint,
+  /// or the curve's path + ".failed.ckpt"), and the error rethrown naming both (`what`: "stage
+  /// NAME" or "path LABEL").
+  [[noreturn]] void fail(const BlowUp& e, const StageOutput& out, const std::string& what) {
+    csv.abandon();
+    const std::string failed = out.failed_checkpoint.empty() ? out.csv + ".failed.ckpt" : out.failed_checkpoint;
+    write_checkpoint(failed, Checkpoint{"", "last good state of " + what, last_good});
+    throw BlowUp(blow_up_message(model, e.what()) + "\n     the last good state of " + what + " was saved as " + failed);
+  }
+};
+
+/// What a step decided: a sampled row now, and whether the stage ends with it.
+struct StepOutcome {
+  bool sample = false, done = false;
+};
+
+/// The loop of every stage (a constant velocity gradient, run_stage; a stage of a path,
+/// run_path): step, let the stage judge the step (events, sampling, its stop), write the sampled
+/// rows, say the progress. What differs is the Stage:
+///   VelGrad next_rate()                            the velocity gradient of the next step [1/s]
+///   void step_failed(const std::runtime_error&)    the engine refused the step (may throw its own error)
+///   StepOutcome after_step()                       after the step
+///   VelGrad row_rate() const                       the rate the row's measurement sees
+///   std::string row(const Measurement&, bool& done)  the row's text; a stop judged on rows sets done
+///   void progress_line(bool done)                     the progress line
+///   const std::string& name() const                the stage column
+template <class Stage>
+void run_stage_loop(StageLoop& loop, Stage& stage) {
+  bool done = false;
+  while (!done) {
+    try {
+      loop.engine.step(stage.next_rate());
+    } catch (const BlowUp&) {
+      throw;
+    } catch (const std::runtime_error& e) {
+      stage.step_failed(e);
+      throw;
+    }
+    ++loop.steps;
+    const StepOutcome o = stage.after_step();
+    done = o.done;
+    if (o.sample || done) {
+      const Measurement& m = loop.measure_checked(stage.row_rate());
+      const std::string row = stage.row(m, done);
+      loop.write(row, stage.name());
+    }
+    stage.progress_line(done);
+  }
 }
 
 }  // namespace dem

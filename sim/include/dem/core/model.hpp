@@ -107,17 +107,17 @@ enum class PathStop {
 };
 
 /// One stage of a loading path (strain reversal, cyclic shear, mixed control). Each axis is
-/// either strain-rate controlled (its `rate_shape` entry, times protocol.deviatoric_rate) or
+/// either strain-rate controlled (its entry of `shape`, times protocol.deviatoric_rate) or
 /// stress controlled (a finite `sigma` entry: a servo drives sigma_ii to it). Alternatively
 /// `pressure` holds the mean pressure at a target with the prescribed rate as the deviatoric
 /// direction (isobaric shear). Targets are in pascals after the path start has resolved
 /// multiples of p0 (the pressure at the path start; PathStage::relative).
 struct PathStage {
   std::string name;                     ///< label in the curve's `stage` column
-  Vec3 rate_shape{0, 0, 0};             ///< prescribed strain-rate shape [-] (the diagonal of L)
-  /// Prescribed upper entries (L_xy, L_xz, L_yz) of the velocity-gradient shape: simple shear in
-  /// a sheared cell (docs/simple_shear.md). Always strain controlled; a servo acts on the diagonal.
-  Vec3 shear_shape{0, 0, 0};
+  /// The prescribed velocity-gradient shape [-] (times protocol.deviatoric_rate: L [1/s]): its
+  /// diagonal the strain-rate shape, its upper entries (L_xy, L_xz, L_yz) simple shear in a
+  /// sheared cell (docs/simple_shear.md), always strain controlled; a servo acts on the diagonal.
+  VelGrad shape;
   Vec3 sigma{NAN, NAN, NAN};            ///< normal-stress target per axis (NaN: strain controlled), compression > 0
   double pressure = NAN;                ///< mean-pressure target (NaN: none)
   bool relative = true;                 ///< sigma, pressure (and a Pressure stop) in multiples of p0, else [Pa]
@@ -126,9 +126,7 @@ struct PathStage {
   double until = 0;                     ///< stop value (see PathStop); a Pressure or Tau stop in Pa once resolved
   bool until_relative = false;          ///< a Pressure or Tau stop given in multiples of p0
   double max_time = 0;                  ///< a Relaxed stop ends (with a warning) after this [s]; 0: no limit but the path's
-  bool sheared() const { return shear_shape.x != 0 || shear_shape.y != 0 || shear_shape.z != 0; }
-  /// The prescribed velocity-gradient shape (diagonal + upper entries).
-  VelGrad gradient_shape() const { return {rate_shape, shear_shape}; }
+  bool sheared() const { return shape.sheared(); }
   bool has_servo() const { return std::isfinite(pressure) || std::isfinite(sigma.x) || std::isfinite(sigma.y) ||
                                   std::isfinite(sigma.z); }
 };
@@ -138,12 +136,12 @@ struct PathStage {
 /// a loading path ([paths] in the scene) is a list of stages, written as one curve.
 struct DeformationMode {
   std::string name;             ///< e.g. "D2", "D3", "iso", "uniaxial_z", or a [paths] name
-  Vec3 rate_shape{0, 0, 0};     ///< dimensionless direction, multiplied by the mode rate [1/s]
-  /// Upper entries (L_xy, L_xz, L_yz) of the velocity-gradient shape (simple shear; a sheared
-  /// cell, docs/simple_shear.md), multiplied by the mode rate like rate_shape.
-  Vec3 shear_shape{0, 0, 0};
-  bool sheared() const { return shear_shape.x != 0 || shear_shape.y != 0 || shear_shape.z != 0; }
-  std::vector<PathStage> path;  ///< non-empty: a loading path (rate_shape unused)
+  /// The velocity-gradient shape [-], multiplied by the mode rate (protocol.deviatoric_rate: L
+  /// [1/s]): the diagonal a strain-rate direction, the upper entries (L_xy, L_xz, L_yz) simple
+  /// shear (a sheared cell, docs/simple_shear.md).
+  VelGrad shape;
+  bool sheared() const { return shape.sheared(); }
+  std::vector<PathStage> path;  ///< non-empty: a loading path (shape unused)
 };
 
 /// The stress servo of path stages (control.hpp): a PI law on the stress error with its gain
@@ -194,7 +192,7 @@ struct Protocol {
   bool preparation_explicit = false; ///< true: the scene lists protocol.preparation
   std::string modes_from = "unloading";        ///< the checkpoint series the modes start from
   std::vector<DeformationMode> modes;          ///< run from every checkpoint of `modes_from`
-  double deviatoric_rate = 0;        ///< mode rate [1/s] (multiplies rate_shape)
+  double deviatoric_rate = 0;        ///< mode rate [1/s] (multiplies a mode's shape)
   double eps_d_max = 0.4;            ///< deviatoric runs stop at this eps_d (or |eps| for others)
   ServoOptions servo;                ///< stress control of loading-path stages
 };

@@ -50,7 +50,7 @@ class Engine {
   /// current positions unless `forces_are_current` (checkpoint restart).
   Engine(const Model& model, State& state, bool forces_are_current = false);
 
-  /// One time step of model.dt with the box true-strain rate `strain_rate` [1/s] (diagonal):
+  /// One time step of model.dt with the box true-strain rate `rate` [1/s] (diagonal):
   ///  1. kick       v += a*dt*F/m            (a = 1/2 Verlet, 1 symplectic Euler)
   ///  2. drift      x += dt*v                (fluctuation motion)
   ///  3. deform     L *= exp(rate*dt), x *= exp(rate*dt)   (affine motion of box and particles);
@@ -63,14 +63,14 @@ class Engine {
   /// 5-6 as another, to read each particle's data from memory once per pass; the arithmetic
   /// is exactly that of the list. With threads > 1 each thread runs the passes on its own
   /// block of particles (ForceScratch), with one barrier before and one after the pair loop.
-  void step(const Vec3& strain_rate) { step(VelGrad(strain_rate)); }
-  /// The same with a velocity gradient L (upper triangular): the cell H follows dH/dt = L H
+  void step(const Vec3& rate) { step(VelGrad(rate)); }
+  /// The same with a velocity gradient `rate` = L [1/s] (upper triangular): the cell H follows dH/dt = L H
   /// (H_new = exp(L dt) H, its diagonal from the accumulated log strain as above), particles
   /// the affine map A = H_new H_old^-1, and SLLOD's fluctuation velocities A^-1 v' (the
   /// exact solution of dv'/dt = -L v'). A tilt beyond half an edge is flipped to the most
   /// orthogonal cell (Box), which rebuilds the neighbour list in the same step. A diagonal L
   /// in an untilted box is exactly step(Vec3).
-  void step(const VelGrad& velocity_gradient);
+  void step(const VelGrad& rate);
 
   /// Runs the sanity checks now; throws BlowUp on failure. Called by step() every
   /// model.check_every_steps steps.

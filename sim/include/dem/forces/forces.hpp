@@ -88,7 +88,7 @@ void partition_pairs(const NeighborList& list, int blocks, ForceScratch& scratch
 /// per-contact history of the block's pairs (state.history, in list order) and puts the energy
 /// its Coulomb limits removed in scratch.dissipated[b].
 void accumulate_pair_forces(const Model& model, State& state, const NeighborList& list,
-                            const VelGrad& strain_rate, int b, ForceScratch& scratch, Vec3* force);
+                            const VelGrad& rate, int b, ForceScratch& scratch, Vec3* force);
 
 /// Copies positions, radii and velocities of particles [begin, end) into scratch.packed (the
 /// records the vectorised kernels read). Call after the particles move and before
@@ -114,12 +114,12 @@ void end_pair_loop(State& state, const ForceScratch& scratch);
 /// Computes state.force for the current positions and fluctuation velocities:
 ///  - every listed pair in contact: normal force from the contact law, equal and opposite;
 ///    the overlap rate uses the full relative velocity, fluctuation plus affine flow
-///    L branch vector  [1/s . m] (L = strain_rate; a diagonal rate: rate (.) branch);
+///    L branch vector  [1/s . m] (L = rate; a diagonal rate: rate (.) branch);
 ///  - background damping -gamma_b * v on every particle [N], added after the pair forces.
 /// Pairs are summed in list order within `blocks` blocks (ForceScratch; block_count()), run
 /// by `threads` threads: deterministic for a given block count, whatever the thread count.
 void compute_forces(const Model& model, State& state, const NeighborList& list,
-                    const VelGrad& strain_rate, int threads, int blocks, ForceScratch& scratch);
+                    const VelGrad& rate, int threads, int blocks, ForceScratch& scratch);
 
 /// The oracle: the same forces from a loop over all N(N-1)/2 pairs with the minimum-image
 /// convention (valid when every box edge exceeds 2 * (2 r_max)). In a tilted cell the image is
@@ -130,7 +130,7 @@ void compute_forces(const Model& model, State& state, const NeighborList& list,
 /// keeps in `history` keyed by the pair's particle ids (id_i, id_j) with i < j by id; it must
 /// then be given (tests pass the list's history converted with history_by_ids()).
 using PairHistoryMap = std::map<std::pair<std::int32_t, std::int32_t>, std::vector<double>>;
-void compute_forces_all_pairs(const Model& model, State& state, const VelGrad& strain_rate,
+void compute_forces_all_pairs(const Model& model, State& state, const VelGrad& rate,
                               PairHistoryMap* history = nullptr);
 
 /// The state's history records with any non-zero entry, keyed by (smaller id, larger id),

@@ -74,11 +74,11 @@ double axis_angle_deg(const Vec3& a, const Vec3& b);
 std::vector<char> rattler_flags(int n, const std::vector<std::pair<int, int>>& pairs);
 
 /// Measures a state. `list` must be current for the state (it is after every Engine step).
-/// `strain_rate` [1/s] enters the dashpot forces, the inertial number (max |L_ij|) and the
+/// `rate` [1/s] enters the dashpot forces, the inertial number (max |L_ij|) and the
 /// non-coaxiality angles. Strain columns: ln(L/L0) for an untilted box (diagonal modes, as
 /// always), the components of the log strain tensor in a sheared one.
 Measurement measure(const Model& model, const State& state, const NeighborList& list,
-                    const VelGrad& strain_rate);
+                    const VelGrad& rate);
 
 /// Which curves have a column: every curve, curves of a model with rotations (a tangential
 /// sub-model: its SubModelInfo::curve_columns names this group), loading-path curves, and

@@ -1,4 +1,4 @@
-#include "dem/stages/preparation.hpp"
+#include "dem/io/preparation.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -8,7 +8,6 @@
 #include <set>
 
 #include "dem/io/checks.hpp"
-#include "dem/stages/protocol.hpp"
 #include "dem/core/errors.hpp"
 #include "io/preparation_toml.hpp"
 
