@@ -299,11 +299,11 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
                            const std::map<std::string, DeformationMode>& custom) {
   auto fail = [&](const std::string& what) { throw SceneError(where + ": " + what); };
   static const std::set<std::string> keys = {"name", "rate", "sigma_p0", "sigma_Pa", "pressure_p0", "pressure_Pa",
-                                             "constant_volume", "until", "max_time_tc"};
+                                             "lode_b", "constant_volume", "until", "max_time_tc"};
   for (auto&& [k, v] : t)
     if (!keys.count(std::string(k.str())))
       fail("unknown key '" + std::string(k.str()) + "'; a stage has name, rate, sigma_p0 or sigma_Pa, "
-           "pressure_p0 or pressure_Pa, constant_volume, until, max_time_tc (with until.ke_ratio)");
+           "pressure_p0 or pressure_Pa, lode_b (with a pressure), constant_volume, until, max_time_tc (with until.ke_ratio)");
   // A stress target is present (the key is there) and then must be a positive finite number;
   // in multiples of p0 at most 1e6 (so that the target in pascals, p0 times it, stays finite).
   auto check_target = [&](const std::string& key, double v, bool relative) {
@@ -387,6 +387,11 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
       check_target(key, *v, key[9] == 'p');
       s.pressure = *v;
     }
+  if (const toml::node* n = t.get("lode_b")) {
+    auto v = n->value<double>();
+    if (!v || !std::isfinite(*v)) fail("lode_b must be a number in [0, 1]: b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3)");
+    s.lode_b = *v;
+  }
   if (const toml::node* n = t.get("constant_volume")) {
     auto v = n->value_exact<bool>();
     if (!v) fail("constant_volume must be true or false");
