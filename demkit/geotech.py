@@ -197,6 +197,9 @@ def curve_values(c):
         "servo_error_max": float(np.max(err)) if err.size else math.nan,
         "inertial_max": float(np.max(c["inertial_number"])) if "inertial_number" in c else math.nan,
     }
+    # the shear box's reading, tau / sigma_n on the shear plane (simple shear SS_xz only)
+    sheared = "rate_xz_1_s" in c and np.any(c["rate_xz_1_s"] != 0)
+    v["tau_over_sn_cs"] = float(np.mean(-c["sigma_xz_Pa"][end] / c["sigma_zz_Pa"][end])) if sheared else math.nan
     v["rowe"] = (ratio[mid], dil[:, 1], x[mid]) if len(mid) else (np.zeros(0),) * 3
     v["rowe_K"], v["rowe_phi_f_deg"] = rowe_fit(*v["rowe"], eps_from=v["eps_d_peak"] / 2)
     return v
@@ -229,7 +232,7 @@ def mean_ci(values):
 
 SCALARS = ("phi_peak_deg", "eps_d_peak", "phi_cs_deg", "q_over_p_cs", "b_cs", "nu_0", "nu_cs", "p0_Pa", "p_cs_Pa",
            "dilatancy_end", "drift_end", "psi_max_deg", "eps_vol_end", "rowe_K", "rowe_phi_f_deg",
-           "servo_error_mean", "servo_error_max", "inertial_max", "eps_d_end")
+           "servo_error_mean", "servo_error_max", "inertial_max", "eps_d_end", "tau_over_sn_cs")
 
 
 def critical_state_reached(summary):
@@ -366,7 +369,8 @@ SUMMARY_COLUMNS = [("phi_peak_deg", "phi_peak_deg"), ("phi_cs_deg", "phi_cs_deg"
                    ("dilatancy_end", "dilatancy_end"), ("drift_end", "drift_end_1"), ("rowe_K", "rowe_K"),
                    ("rowe_phi_f_deg", "rowe_phi_f_deg"), ("eps_d_peak", "eps_d_peak"),
                    ("servo_error_mean", "servo_error_mean_rel"), ("servo_error_max", "servo_error_max_rel"),
-                   ("inertial_max", "inertial_number_max"), ("eps_d_end", "eps_d_end")]
+                   ("inertial_max", "inertial_number_max"), ("eps_d_end", "eps_d_end"),
+                   ("tau_over_sn_cs", "tau_over_sigma_n_cs")]
 
 
 def fmt(v):
