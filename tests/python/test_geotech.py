@@ -96,5 +96,14 @@ def test_the_ensemble_recovers_a_mohr_coulomb_material_against_b():
 def test_fewer_than_two_packings_give_no_interval():
     m, h, k = geotech.mean_ci([1.0])
     assert m == 1.0 and math.isnan(h) and k == 1
-    assert geotech.critical_state_reached({"dilatancy_end": 0, "dilatancy_end_ci95": math.nan,
-                                           "drift_end": 0, "drift_end_ci95": 0}) == "not determined"
+    s = geotech.summarise([{q: 0.0 for q in geotech.SCALARS}])
+    assert s["volume_stationary"] == "not determined" and s["critical_state"] == "not determined"
+
+
+def test_the_critical_state_flag_says_yes_no_or_not_determined():
+    assert geotech.stationary(0.01, 0.02, 0.05) == "yes"
+    assert geotech.stationary(0.2, 0.05, 0.05) == "no"          # still dilating, surely
+    assert geotech.stationary(0.04, 0.05, 0.05) == "not determined"
+    assert geotech.critical_state_reached({"volume_stationary": "yes", "stress_stationary": "no"}) == "no"
+    assert geotech.critical_state_reached({"volume_stationary": "yes", "stress_stationary": "not determined"}) == \
+        "not determined"
