@@ -186,6 +186,7 @@ std::string mode_definition(const Model& m, const DeformationMode& mode) {
   std::string d = "path=";
   for (const auto& s : mode.path)
     d += s.name + ":rate=" + vec(s.shape.diag) + (s.sheared() ? ":shear_shape=" + vec(s.shape.shear) : "") + ":sigma=" + vec(s.sigma) + ":pressure=" + physics_number(s.pressure) +
+         (std::isfinite(s.lode_b) ? ":lode_b=" + physics_number(s.lode_b) : "") +
          (s.relative ? ":p0" : ":Pa") + (s.constant_volume ? ":constant_volume" : "") + ":stop" +
          std::to_string(static_cast<int>(s.stop)) + "=" + physics_number(s.until) + (s.until_relative ? "p0" : "") +
          (s.max_time > 0 ? ":max_time_tc=" + physics_number(s.max_time / m.t_contact) : "") + "/";

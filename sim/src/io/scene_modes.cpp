@@ -121,6 +121,11 @@ void read_stage_targets(const toml::table& t, PathStage& s, const Fail& fail) {
       check_target(key, *v, key[9] == 'p');
       s.pressure = *v;
     }
+  if (const toml::node* n = t.get("lode_b")) {
+    auto v = n->value<double>();
+    if (!v || !std::isfinite(*v)) fail("lode_b must be a number in [0, 1]: b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3)");
+    s.lode_b = *v;
+  }
   if (const toml::node* n = t.get("constant_volume")) {
     auto v = n->value_exact<bool>();
     if (!v) fail("constant_volume must be true or false");
@@ -168,11 +173,11 @@ PathStage parse_path_stage(const toml::table& t, const std::string& where,
                            const std::map<std::string, DeformationMode>& custom) {
   const Fail fail = [&](const std::string& what) { throw SceneError(where + ": " + what); };
   static const std::set<std::string> keys = {"name", "rate", "sigma_p0", "sigma_Pa", "pressure_p0", "pressure_Pa",
-                                             "constant_volume", "until", "max_time_tc"};
+                                             "lode_b", "constant_volume", "until", "max_time_tc"};
   for (auto&& [k, v] : t)
     if (!keys.count(std::string(k.str())))
       fail("unknown key '" + std::string(k.str()) + "'; a stage has name, rate, sigma_p0 or sigma_Pa, "
-           "pressure_p0 or pressure_Pa, constant_volume, until, max_time_tc (with until.ke_ratio)");
+           "pressure_p0 or pressure_Pa, lode_b (with a pressure), constant_volume, until, max_time_tc (with until.ke_ratio)");
   PathStage s;
   if (auto n = t["name"].value<std::string>()) s.name = *n;
   else if (t.contains("name")) fail("name must be a string");

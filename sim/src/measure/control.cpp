@@ -75,7 +75,15 @@ constexpr double kIntegralTimes = 4;   // T_i / tau
 
 Servo::Servo(const PathStage& stage, const VelGrad& prescribed, const ServoOptions& options)
     : prescribed_(prescribed), options_(options) {
-  if (std::isfinite(stage.pressure)) {
+  if (std::isfinite(stage.lode_b)) {   // true triaxial: sigma_1 on the compressed axis k (validate_path)
+    const int k = stage.shape.diag.x != 0 ? 0 : stage.shape.diag.y != 0 ? 1 : 2;
+    const int a3 = (k + 1) % 3, a2 = (k + 2) % 3;
+    const double b = stage.lode_b;
+    rows_.push_back({Vec3{1, 1, 1} * (1.0 / 3.0), axis(a3), stage.pressure, 0, stage.pressure});
+    // sigma_2 - sigma_3 - b (sigma_1 - sigma_3) = 0
+    rows_.push_back({axis(a2) + axis(a3) * (b - 1) - axis(k) * b, axis(a2), 0.0, 0, stage.pressure});
+    pressure_target_ = stage.pressure;
+  } else if (std::isfinite(stage.pressure)) {
     rows_.push_back({Vec3{1, 1, 1} * (1.0 / 3.0), Vec3{1, 1, 1}, stage.pressure});
     pressure_target_ = stage.pressure;
   }
@@ -132,7 +140,8 @@ VelGrad Servo::update(const AxisResponse& r, double elapsed) {
 
 double Servo::relative_error(const Sym3& stress) const {
   double worst = 0;
-  for (const Row& row : rows_) worst = std::max(worst, std::fabs(output(row, stress) - row.target) / row.target);
+  for (const Row& row : rows_)
+    worst = std::max(worst, std::fabs(output(row, stress) - row.target) / (row.scale > 0 ? row.scale : row.target));
   return worst;
 }
 
@@ -189,7 +198,7 @@ void validate_path(const std::string& path_name, const std::vector<PathStage>& p
       if (!(s.pressure > 0) || !std::isfinite(s.pressure))
         fail("the pressure target must be a positive number (compression)");
       if (stressed) fail("a pressure target with per-axis stress targets over-constrains the box: use one or the other");
-      if (std::fabs(trace) > 1e-12 * (dev + 1e-300))
+      if (std::isnan(s.lode_b) && std::fabs(trace) > 1e-12 * (dev + 1e-300))
         fail("under pressure control the prescribed rate is the deviatoric direction, but it has a volumetric part "
              "(rate_x + rate_y + rate_z = " + std::to_string(trace) + "): make it trace-free, e.g. [1, 0, -1]");
     }
@@ -199,6 +208,19 @@ void validate_path(const std::string& path_name, const std::vector<PathStage>& p
         !(s.sheared() && (s.stop == PathStop::TauXY || s.stop == PathStop::TauXZ || s.stop == PathStop::TauYZ)))
       fail(std::string("all three axes are stress controlled, so no strain is prescribed and a stop on ") +
            stop_name(s.stop) + " may never come: stop on time_tc, p, s_dev or phi (or eps_d with a prescribed shear)");
+    if (!std::isnan(s.lode_b)) {
+      const int prescribed = (s.shape.diag.x != 0) + (s.shape.diag.y != 0) + (s.shape.diag.z != 0);
+      if (std::isnan(s.pressure))
+        fail("lode_b holds b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3) at a constant mean pressure: give pressure_p0 "
+             "or pressure_Pa too");
+      if (!(s.lode_b >= 0 && s.lode_b <= 1))
+        fail("lode_b = " + std::to_string(s.lode_b) + ": b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3) lies in [0, 1] "
+             "(0: triaxial compression, 1: extension)");
+      if (s.sheared() || prescribed != 1 ||
+          s.shape.diag.x + s.shape.diag.y + s.shape.diag.z >= 0)
+        fail("with lode_b the rate compresses one axis only, the sigma_1 axis (e.g. rate = [0, 0, -1]: sigma_3 on x, "
+             "sigma_2 on y); the servo sets the other two");
+    }
     const bool servo = s.has_servo();
     if (s.constant_volume && servo)
       fail("constant_volume fixes tr(E_dot) = 0, and the stress targets set the rates of the same axes: the box is "

@@ -120,6 +120,11 @@ struct PathStage {
   VelGrad shape;
   Vec3 sigma{NAN, NAN, NAN};            ///< normal-stress target per axis (NaN: strain controlled), compression > 0
   double pressure = NAN;                ///< mean-pressure target (NaN: none)
+  /// With `pressure` and one compressed axis k (the only non-zero `shape.diag` entry, sigma_1):
+  /// the true-triaxial test at constant p and fixed b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3),
+  /// sigma_3 on axis k+1, sigma_2 on axis k+2 (cyclic; z compressed: sigma_3 = x, sigma_2 = y),
+  /// both servo controlled (NaN: none). b = 0 is triaxial compression, 1 extension, at constant p.
+  double lode_b = NAN;
   bool relative = true;                 ///< sigma, pressure (and a Pressure stop) in multiples of p0, else [Pa]
   bool constant_volume = false;         ///< asserts tr(rate) = 0 and no servo (checked)
   PathStop stop = PathStop::EpsD;

@@ -30,7 +30,9 @@ struct AxisResponse {
 AxisResponse axis_response(const Model& model, const State& state, const NeighborList& list, const VelGrad& rate);
 
 /// The servo of one path stage: each controlled quantity y (a normal stress sigma_ii, or the mean
-/// pressure p) has an actuator direction b (the axis, or (1,1,1)) and a target y*. With
+/// pressure p) has an actuator direction b (the axis, or (1,1,1)) and a target y*. A true-triaxial
+/// stage (PathStage::lode_b) controls p by the sigma_3 axis and sigma_2 - sigma_3 - b (sigma_1 -
+/// sigma_3) = 0 by the sigma_2 axis; its relative error is measured against p. With
 /// e = y - y* (positive: too compressed) and G = C M B the affine gain matrix, the servo rate is
 ///     u = G^-1 (e + I / T_i) / tau,    I = integral of e dt,    T_i = 8 tau,
 /// so that the closed loop de/dt = -(e + I/T_i)/tau is a damped second-order system (damping
@@ -62,7 +64,8 @@ class Servo {
   double relative_error(const Sym3& stress) const;
 
  private:
-  struct Row { Vec3 c; Vec3 b; double target; double integral = 0; };
+  // scale: the denominator of the relative error (0: the target itself; the b row's target is 0)
+  struct Row { Vec3 c; Vec3 b; double target; double integral = 0; double scale = 0; };
   static double output(const Row& row, const Sym3& stress);
   std::vector<Row> rows_;
   VelGrad prescribed_;
