@@ -170,6 +170,25 @@ const char* stop_name(PathStop s) {
 
 }  // namespace
 
+namespace {
+
+/// A true-triaxial stage (lode_b): b in [0, 1], a pressure target, one compressed axis.
+template <class Fail> void check_lode_b(const PathStage& s, const Fail& fail) {
+  const int prescribed = (s.shape.diag.x != 0) + (s.shape.diag.y != 0) + (s.shape.diag.z != 0);
+  if (std::isnan(s.pressure))
+    fail("lode_b holds b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3) at a constant mean pressure: give pressure_p0 "
+         "or pressure_Pa too");
+  if (!(s.lode_b >= 0 && s.lode_b <= 1))
+    fail("lode_b = " + std::to_string(s.lode_b) + ": b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3) lies in [0, 1] "
+         "(0: triaxial compression, 1: extension)");
+  if (s.sheared() || prescribed != 1 ||
+      s.shape.diag.x + s.shape.diag.y + s.shape.diag.z >= 0)
+    fail("with lode_b the rate compresses one axis only, the sigma_1 axis (e.g. rate = [0, 0, -1]: sigma_3 on x, "
+         "sigma_2 on y); the servo sets the other two");
+}
+
+}  // namespace
+
 void validate_path(const std::string& path_name, const std::vector<PathStage>& path) {
   if (path.empty()) throw SceneError("paths." + path_name + " lists no stages: give at least one");
   for (std::size_t k = 0; k < path.size(); ++k) {
@@ -208,19 +227,7 @@ void validate_path(const std::string& path_name, const std::vector<PathStage>& p
         !(s.sheared() && (s.stop == PathStop::TauXY || s.stop == PathStop::TauXZ || s.stop == PathStop::TauYZ)))
       fail(std::string("all three axes are stress controlled, so no strain is prescribed and a stop on ") +
            stop_name(s.stop) + " may never come: stop on time_tc, p, s_dev or phi (or eps_d with a prescribed shear)");
-    if (!std::isnan(s.lode_b)) {
-      const int prescribed = (s.shape.diag.x != 0) + (s.shape.diag.y != 0) + (s.shape.diag.z != 0);
-      if (std::isnan(s.pressure))
-        fail("lode_b holds b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3) at a constant mean pressure: give pressure_p0 "
-             "or pressure_Pa too");
-      if (!(s.lode_b >= 0 && s.lode_b <= 1))
-        fail("lode_b = " + std::to_string(s.lode_b) + ": b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3) lies in [0, 1] "
-             "(0: triaxial compression, 1: extension)");
-      if (s.sheared() || prescribed != 1 ||
-          s.shape.diag.x + s.shape.diag.y + s.shape.diag.z >= 0)
-        fail("with lode_b the rate compresses one axis only, the sigma_1 axis (e.g. rate = [0, 0, -1]: sigma_3 on x, "
-             "sigma_2 on y); the servo sets the other two");
-    }
+    if (!std::isnan(s.lode_b)) check_lode_b(s, fail);
     const bool servo = s.has_servo();
     if (s.constant_volume && servo)
       fail("constant_volume fixes tr(E_dot) = 0, and the stress targets set the rates of the same axes: the box is "
