@@ -224,7 +224,7 @@ def plot_fits(run, outdir):
             if r and r[0]["x0"] != "nan":
                 p = [float(r[0][n]) for n in ("x0", "x_max", "beta")]
                 se = [float(r[0]["se_" + n]) for n in ("x0", "x_max", "beta")]
-                axes[0, k].plot(e, law(*p, e), "r-" if usable(r[0]) else ":", color=None if usable(r[0]) else "0.5",
+                axes[0, k].plot(e, law(*p, e), "-" if usable(r[0]) else ":", color="r" if usable(r[0]) else "0.5",
                                 label=fit_label(r[0], f"fit: $x_0$ = {paren(p[0], se[0])}, "
                                                       f"$x_\\mathrm{{max}}$ = {paren(p[1], se[1])}, "
                                                       f"$\\beta$ = {paren(p[2], se[2])}"))
