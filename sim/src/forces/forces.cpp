@@ -189,12 +189,29 @@ void pair_loop_vector(PairKernel kernel, const ContactLaw& law, const State& s, 
   if (p_begin < p_end) f[current] += fi;
 }
 
+// The forces and torques on j of the chunk's pairs `spilled` (j a particle of another block),
+// queued for its owner in list order (nonzero ones only: +-0 is a no-op).
+template <bool Spin>
+void spill_pairs(const std::int32_t* pj, const kernels::HistoryChunk& c, const int* spilled, int count,
+                 std::vector<std::vector<SpilledForce>>& spill, std::vector<std::vector<SpilledForce>>& spill_torque,
+                 const std::uint16_t* block_of) {
+  for (int k = 0; k < count; ++k) {
+    const int q = spilled[k], j = pj[q];
+    const Vec3 fj{c.fx[q], c.fy[q], c.fz[q]};
+    if (fj.x != 0.0 || fj.y != 0.0 || fj.z != 0.0) queue_spill(spill[block_of[j]], j, fj);
+    const Vec3 tj{c.tjx[q], c.tjy[q], c.tjz[q]};
+    if (Spin && (tj.x != 0.0 || tj.y != 0.0 || tj.z != 0.0)) queue_spill(spill_torque[block_of[j]], j, tj);
+  }
+}
+
 // Pass 2 of a chunk of a model with history: forces, torques and dissipation in list order, as
 // pair_loop_history adds them (a pair out of contact carries -0.0 everywhere: no change).
 // `current`, `fi`, `ti` carry the running sums of particle `current` across chunks.
 // The running sums are copied into locals for the loop: through the references (one of them
 // into ForceScratch, which may alias f and tq for all the compiler knows) every pair stored and
-// reloaded them, a store-to-load chain that was a quarter of this pass's time.
+// reloaded them, a store-to-load chain that was a quarter of this pass's time. The pairs whose j
+// another block owns are queued after the loop (spill_pairs): with the queueing (and its
+// possible reallocation, a call) in the loop, GCC kept each pair's force on j in memory.
 template <bool Spin>
 void add_history_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, const kernels::HistoryChunk& c, int end,
                        Vec3* f, Vec3* tq, std::vector<std::vector<SpilledForce>>& spill,
@@ -203,6 +220,7 @@ void add_history_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, co
   int current = current_sum;
   Vec3 fi = fi_sum, ti = ti_sum;
   double dissipated = dissipated_sum;
+  int spilled[kernels::kChunk], count = 0;   // pairs whose j another block owns: queued after the loop
   for (int q = 0; q < n; ++q) {
     const int i = pi[q], j = pj[q];
     if (i != current) {
@@ -217,9 +235,7 @@ void add_history_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, co
       f[j] += fj;
       if (Spin) tq[j] += Vec3{c.tjx[q], c.tjy[q], c.tjz[q]};
     } else {
-      if (fj.x != 0.0 || fj.y != 0.0 || fj.z != 0.0) queue_spill(spill[block_of[j]], j, fj);   // +-0: no-op
-      const Vec3 tj{c.tjx[q], c.tjy[q], c.tjz[q]};
-      if (Spin && (tj.x != 0.0 || tj.y != 0.0 || tj.z != 0.0)) queue_spill(spill_torque[block_of[j]], j, tj);
+      spilled[count++] = q;
     }
     fi -= fj;
     if (Spin) ti += Vec3{c.tix[q], c.tiy[q], c.tiz[q]};
@@ -229,6 +245,7 @@ void add_history_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, co
   fi_sum = fi;
   ti_sum = ti;
   dissipated_sum = dissipated;
+  spill_pairs<Spin>(pj, c, spilled, count, spill, spill_torque, block_of);
 }
 
 // The pair loop of a model with history on a vector kernel (history_kernels.hpp): the same bits
