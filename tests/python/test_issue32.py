@@ -328,6 +328,17 @@ def snakemakes_in(out):
     return pids
 
 
+def open_files(pid):
+    """The paths of a process's open files; a descriptor closed while they are read is left out."""
+    paths = []
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            paths.append(os.readlink(f"/proc/{pid}/fd/{fd}"))
+        except FileNotFoundError:
+            pass
+    return paths
+
+
 @pytest.mark.skipif(not __import__("shutil").which("snakemake"), reason="snakemake is not installed")
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
 def test_killing_dem_ensemble_stops_its_snakemake(tmp_path, sig):
@@ -344,8 +355,7 @@ def test_killing_dem_ensemble_stops_its_snakemake(tmp_path, sig):
         assert pids, "Snakemake did not start"
         # Snakemake holds the folder lock itself: no second `dem ensemble` starts while it lives.
         lock = str(out / ".dem-ensemble.lock")
-        held = [os.readlink(f"/proc/{pids[0]}/fd/{fd}") for fd in os.listdir(f"/proc/{pids[0]}/fd")]
-        assert lock in held, held
+        assert lock in open_files(pids[0]), open_files(pids[0])
         p.send_signal(sig)                       # the driver only, not its process group
         p.wait(30)
         deadline = time.time() + 60
