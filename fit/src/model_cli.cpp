@@ -158,7 +158,7 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   Table c(h);
   for (std::size_t a = 0; a < cal.names.size(); ++a) {
     std::vector<std::string> r = {cal.names[a]};
-    for (std::size_t b = 0; b < cal.names.size(); ++b) r.push_back(num(cal.corr[a][b], 3));
+    for (std::size_t b = 0; b < cal.names.size(); ++b) r.push_back(correlation_number(cal.corr[a][b]));
     c.add_row(r);
   }
   write_table_all(c, (out / "correlations").string(), "Correlations of the model parameters (covariance of the joint fit)");
@@ -255,7 +255,7 @@ void write_identifiability(const Calibration& cal, const std::vector<std::vector
     const Local<double> L = local(cal.params.shear, grid[g], cal.params.nu_ref);
     t.add_row({fit_label, num(grid[g], 4) + (g == 0 ? " (nu_ref)" : ""), num(L.a_A), num(std::sqrt(std::max(vx, 0.0))), num(sx),
                num(std::log(L.beta_p)), num(std::sqrt(std::max(vy, 0.0))), num(sy),
-               num(vx > 0 && vy > 0 ? cxy / std::sqrt(vx * vy) : std::nan(""), 3), num(rj, 3)});
+               correlation_number(vx > 0 && vy > 0 ? cxy / std::sqrt(vx * vy) : std::nan("")), correlation_number(rj)});
   }
   write_table_all(t, (out / "identifiability").string(),
                   "Identifiability of the anisotropy modulus a_A and the pressure relaxation rate beta_p at each nu: "

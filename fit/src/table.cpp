@@ -600,6 +600,15 @@ std::string table_number(double v, int prec) {
   return b;
 }
 
+std::string correlation_number(double rho) {
+  if (!std::isfinite(rho)) return "nan";
+  double r = std::round(rho * 1000.0) / 1000.0;
+  if (r == 0.0) r = 0.0;   // -0 -> 0: the sign of a zero correlation is rounding
+  char b[32];
+  std::snprintf(b, sizeof b, "%.3f", r);
+  return b;
+}
+
 void write_text_file(const std::string& path, const std::string& content) { dem::write_file_atomic(path, content); }
 
 }  // namespace demfit

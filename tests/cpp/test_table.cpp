@@ -215,3 +215,16 @@ TEST(SummaryTable, AFitThatIsNotUsableShowsItsReasonNotItsNumbers) {
   EXPECT_NE(tex.find("not usable: ill-conditioned"), std::string::npos) << tex;
   EXPECT_EQ(tex.find("0.1645(4)"), std::string::npos) << tex;
 }
+
+// A zero correlation from a numerical covariance is a rounding residue of either sign whose value
+// depends on heap alignment: it must print the same whatever the residue (dem model's bytes).
+TEST(CorrelationNumber, ThreeDecimalsAndRoundingResiduesOfZeroPrintAsOneZero) {
+  EXPECT_EQ(demfit::correlation_number(3.5e-14), "0.000");
+  EXPECT_EQ(demfit::correlation_number(-9.8e-16), "0.000");
+  EXPECT_EQ(demfit::correlation_number(-0.0), "0.000");
+  EXPECT_EQ(demfit::correlation_number(-0.0004), "0.000");
+  EXPECT_EQ(demfit::correlation_number(0.98765), "0.988");
+  EXPECT_EQ(demfit::correlation_number(-1.0), "-1.000");
+  EXPECT_EQ(demfit::correlation_number(-0.1236), "-0.124");
+  EXPECT_EQ(demfit::correlation_number(std::nan("")), "nan");
+}

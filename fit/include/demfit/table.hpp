@@ -31,6 +31,12 @@ Table read_table(const std::string& path);
 Table parse_table(std::istream& in, const std::string& source);
 /// A number for a table cell: %.{prec}g, "nan" for non-finite values.
 std::string table_number(double v, int prec = 6);
+/// A correlation coefficient for a table cell: three decimals ("%.3f"), "nan" for non-finite
+/// values, and no "-0.000". A correlation that is zero in exact arithmetic comes out of a numerical
+/// covariance as a rounding residue (1e-16..1e-13) whose value depends on the heap's alignment (the
+/// vectorised reductions inside Eigen/Ceres peel differently), so printed in %g it made `dem model`'s
+/// bytes depend on the output folder's path; three decimals are all a correlation carries.
+std::string correlation_number(double rho);
 /// A table cell as JSON: an integer, a finite number, null for NaN or an infinity (JSON has no
 /// such numbers), else the text.
 nlohmann::ordered_json json_cell(const std::string& cell);
