@@ -148,7 +148,8 @@ void standard_errors(ceres::Problem& problem, std::vector<double>& p, double rss
   ceres::Covariance cov(co);
   std::vector<std::pair<const double*, const double*>> blocks = {{p.data(), p.data()}};
   double c[9];
-  if (r.n > n_free && cov.Compute(blocks, &problem) && cov.GetCovarianceBlock(p.data(), p.data(), c)) {
+  if (r.n > n_free && covariance_safe(problem) && cov.Compute(blocks, &problem) &&
+      cov.GetCovarianceBlock(p.data(), p.data(), c)) {
     const double s2 = rss / (r.n - n_free) * r.se_inflation * r.se_inflation;
     for (double& v : c) v *= s2;
     const double se[3] = {std::sqrt(std::max(c[0], 0.0)), std::sqrt(std::max(c[4], 0.0)),
@@ -166,7 +167,7 @@ void standard_errors(ceres::Problem& problem, std::vector<double>& p, double rss
     r.se_initial_slope = std::sqrt(std::max(var, 0.0));
   } else {
     r.ok = false;
-    r.warnings.push_back("covariance could not be computed (the Jacobian is rank deficient): "
+    r.warnings.push_back("covariance could not be computed (the Jacobian is rank deficient, or not finite for absurd data): "
                          "the data do not determine all three parameters");
   }
   r.jacobian_rcond = jacobian_rcond(e, r.x0, r.x_max, r.beta, o.fix_x0);
@@ -233,6 +234,17 @@ void check_monotone(const std::vector<double>& y, const FitOptions& o, FitResult
 }
 
 }  // namespace
+
+bool covariance_safe(ceres::Problem& problem) {
+  constexpr double kMax = 1e150;   // below sqrt(DBL_MAX): squares and sums of squares stay finite
+  double cost = 0;
+  std::vector<double> residuals;
+  ceres::CRSMatrix J;
+  if (!problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, &residuals, nullptr, &J)) return false;
+  auto ok = [](double v) { return std::isfinite(v) && std::fabs(v) < kMax; };
+  return std::isfinite(cost) && std::all_of(residuals.begin(), residuals.end(), ok) &&
+         std::all_of(J.values.begin(), J.values.end(), ok);
+}
 
 FitResult fit_saturating(const std::vector<double>& e_in, const std::vector<double>& y_in,
                          const FitOptions& o) {
@@ -491,7 +503,8 @@ CurveFit fit_law(const std::string& model, const std::vector<double>& x, const s
   ceres::Covariance cov(co);
   std::vector<double> c(np * np);
   std::vector<std::pair<const double*, const double*>> blocks = {{p.data(), p.data()}};
-  if (out.n > np && cov.Compute(blocks, &problem) && cov.GetCovarianceBlock(p.data(), p.data(), c.data())) {
+  if (out.n > np && covariance_safe(problem) && cov.Compute(blocks, &problem) &&
+      cov.GetCovarianceBlock(p.data(), p.data(), c.data())) {
     // With sigma given, residuals are weighted: the cost is a chi^2 and needs no rescaling
     // only if sigma is trusted; we rescale by the reduced chi^2 in both cases (conservative).
     double wrss = 2 * summary.final_cost;

@@ -526,7 +526,7 @@ void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::
   std::vector<const double*> blocks = {shear.data()};
   if (X) blocks.push_back(ext.data());
   if (o.fit_isotropic) blocks.insert(blocks.begin(), isob.data());
-  if (cov.Compute(blocks, &problem)) {
+  if (covariance_safe(problem) && cov.Compute(blocks, &problem)) {
     std::vector<double> full(np * np, 0.0);
     if (o.fit_isotropic) {
       cov.GetCovarianceMatrix(blocks, full.data());
@@ -548,7 +548,7 @@ void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::
         cal.corr[a][b] = d > 0 ? full[a * np + b] / d : kNaN;
       }
   } else {
-    cal.warnings.push_back("covariance could not be computed (rank-deficient Jacobian): some parameters are not "
+    cal.warnings.push_back("covariance could not be computed (rank-deficient or non-finite Jacobian): some parameters are not "
                            "determined by these curves");
   }
 }

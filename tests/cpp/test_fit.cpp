@@ -183,3 +183,20 @@ TEST(Fit, CorrelatedResidualsInflateTheStandardErrors) {
   EXPECT_TRUE(has_warning(b, "strongly correlated"));
   EXPECT_DOUBLE_EQ(a.x_max, b.x_max);   // the optimum itself does not change
 }
+
+// Found by tests/fuzz/fuzz_demtk.py (seed 1, input 547): finite but absurd values (1e308, a strain
+// out of order) crashed the fit (SIGSEGV inside the optimiser's aftermath) and with it a Python
+// session. Such input must give an exception or a fit marked not usable, never a crash.
+TEST(Fit, AbsurdButFiniteInputsDoNotCrash) {
+  const std::vector<double> e = {0.0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07, -1.0, 0.09, 0.1, 0.11};
+  const std::vector<double> y = {-1e308, 0.0952, 0.1813, 0.2592, 0.3297, 0.3935, 0.4512, 3, -22025.47, 0.5934,
+                                 0.6321, 0.6671};
+  demfit::FitOptions o;
+  o.window_min = -2147483648.0;
+  o.window_max = 1e308;
+  try {
+    const auto r = demfit::fit_saturating(e, y, o);
+    EXPECT_FALSE(demfit::unusable_reason(r).empty());
+  } catch (const std::invalid_argument&) {
+  }
+}

@@ -7,7 +7,15 @@
 #include <string>
 #include <vector>
 
+namespace ceres { class Problem; }
+
 namespace demfit {
+
+/// True when the residuals and the Jacobian of `problem` at its current parameters are finite and
+/// below sqrt(DBL_MAX) in magnitude (their squares do not overflow). ceres::Covariance's dense SVD
+/// must only be asked on such a problem: Eigen's SVD of a matrix with NaN or inf in it crashes
+/// (SIGSEGV) instead of failing, which took a Python session down with it (tests/fuzz/fuzz_demtk.py).
+bool covariance_safe(ceres::Problem& problem);
 
 /// The model as a small templated functor usable by Ceres' autodiff.
 /// Parameters p = {x0, x_max, beta}; residual = y - x(e).
