@@ -80,7 +80,7 @@ def steady_state(path):
     i_rows = np.abs(c["rate_xz_1_s"][end]) * d * np.sqrt(rho / sn)
     eps_vol = -3.0 * c["eps_v"]
     return {
-        "mu": float(np.mean(-c["sigma_xz_Pa"][end] / sn)), "inertial": float(np.mean(i_rows)),
+        "tau_over_sigma_n": float(np.mean(-c["sigma_xz_Pa"][end] / sn)), "inertial": float(np.mean(i_rows)),
         "nu": float(np.mean(c["nu"][end])), "sigma_n_Pa": float(np.mean(sn)),
         "p_over_sigma_n": float(np.mean(c["p_Pa"][end] / sn)) if "p_Pa" in c else math.nan,
         "dilatancy_end": geotech.slope(x[end], -eps_vol[end]), "eps_d_end": float(x[-1]),
@@ -107,6 +107,8 @@ def fit_mu_i(i, mu):
     """Least-squares (mu_s, mu_2, I_0) of mu(I) through the points; NaNs where it fails or I_0
     sits at a bound of LOG_I0_BOUNDS."""
     i, mu = np.asarray(i, float), np.asarray(mu, float)
+    if i.size < 4:
+        return (math.nan,) * 3
     f = lambda p: mu_of_i(i, p[0], p[1], math.exp(p[2])) - mu
     best = None
     for log_i0 in np.log([1e-3, 1e-2, 1e-1, 1.0]):       # starts across the range: the fit is not convex
@@ -125,6 +127,8 @@ def fit_mu_i(i, mu):
 
 def fit_nu_i(i, nu):
     """Least-squares (nu_max, a) of nu = nu_max - a I."""
+    if len(i) < 3:
+        return math.nan, math.nan
     slope, icpt = np.polyfit(np.asarray(i, float), np.asarray(nu, float), 1)
     return float(icpt), float(-slope)
 
@@ -158,7 +162,7 @@ def chi2_dof(i_mean, mu_mean, mu_half, k, params):
 # ------------------------------------------------------------------------------------------
 # Analysis
 
-STEADY_KEYS = ("inertial", "mu", "nu", "sigma_n_Pa", "p_over_sigma_n", "dilatancy_end", "eps_d_end", "servo_error_mean")
+STEADY_KEYS = ("inertial", "tau_over_sigma_n", "nu", "sigma_n_Pa", "p_over_sigma_n", "dilatancy_end", "eps_d_end", "servo_error_mean")
 
 
 def rate_table(groups):
@@ -188,11 +192,14 @@ def law_fits(members):
         pts = lambda y: {pk: (np.array([r["inertial"] for r in rows if r["packing"] == pk]),
                               np.array([r[y] for r in rows if r["packing"] == pk]))
                          for pk in {r["packing"] for r in rows}}
-        (mu_s, mu_2, i_0), h_mu = jackknife(pts("mu"), fit_mu_i)
-        (nu_max, a), h_nu = jackknife(pts("nu"), fit_nu_i)
+        n_rates = len({r["rate_tc"] for r in rows})
+        nan = lambda n: (np.full(n, math.nan), np.full(n, math.nan))
+        # three parameters need four rates; a line three
+        (mu_s, mu_2, i_0), h_mu = jackknife(pts("tau_over_sigma_n"), fit_mu_i) if n_rates >= 4 else nan(3)
+        (nu_max, a), h_nu = jackknife(pts("nu"), fit_nu_i) if n_rates >= 3 else nan(2)
         i_all = [r["inertial"] for r in rows]
-        out.append({"mu": cell[0], "prep": cell[1], "level": cell[2], "K": len(pts("mu")),
-                    "rates": len({r["rate_tc"] for r in rows}), "I_min": min(i_all), "I_max": max(i_all),
+        out.append({"mu": cell[0], "prep": cell[1], "level": cell[2], "K": len(pts("nu")),
+                    "rates": n_rates, "I_min": min(i_all), "I_max": max(i_all),
                     "mu_s": mu_s, "mu_s_ci95": h_mu[0], "mu_2": mu_2, "mu_2_ci95": h_mu[1],
                     "I_0": i_0, "I_0_ci95": h_mu[2], "nu_max": nu_max, "nu_max_ci95": h_nu[0],
                     "a": a, "a_ci95": h_nu[1]})
@@ -202,8 +209,8 @@ def law_fits(members):
 def add_chi2(fits, means):
     for f in fits:
         rows = [r for r in means if (r["mu"], r["prep"], r["level"], r["test"]) == (f["mu"], f["prep"], f["level"], "SS_cns")]
-        f["chi2_dof"] = chi2_dof(np.array([r["inertial"] for r in rows]), np.array([r["mu"] for r in rows]),
-                                 np.array([r["mu_ci95"] for r in rows]), f["K"], (f["mu_s"], f["mu_2"], f["I_0"]))
+        f["chi2_dof"] = chi2_dof(np.array([r["inertial"] for r in rows]), np.array([r["tau_over_sigma_n"] for r in rows]),
+                                 np.array([r["tau_over_sigma_n_ci95"] for r in rows]), f["K"], (f["mu_s"], f["mu_2"], f["I_0"]))
     return fits
 
 
@@ -251,7 +258,7 @@ def write_report(fits, means, pairs, out):
              "|---|---|---|---|---|---|---|---|---|---|"]
     for r in (r for r in means if r["test"] == "SS_cns"):
         lines.append(f"| {r['mu']} | {r['prep']} | {r['level']} | {r['rate_tc']} | {r['K']} | "
-                     f"{pm(r['inertial'], r['inertial_ci95'])} | {pm(r['mu'], r['mu_ci95'])} | "
+                     f"{pm(r['inertial'], r['inertial_ci95'])} | {pm(r['tau_over_sigma_n'], r['tau_over_sigma_n_ci95'])} | "
                      f"{pm(r['nu'], r['nu_ci95'])} | {pm(r['dilatancy_end'], r['dilatancy_end_ci95'], 2)} | "
                      f"{r['volume_stationary']} |")
     lines += ["", "## mu(I) = mu_s + (mu_2 - mu_s)/(1 + I_0/I) and nu = nu_max - a I (jackknife over packings)", "",
@@ -282,7 +289,7 @@ def plot(fits, members, out):
     for k, f in enumerate(fits):
         rows = [r for r in members if (r["mu"], r["prep"], r["level"], r["test"]) == (f["mu"], f["prep"], f["level"], "SS_cns")]
         col, lab = f"C{k}", f"μ = {f['mu']}, {f['prep']}, {f['level']}"
-        i, m, n = (np.array([r[q] for r in rows]) for q in ("inertial", "mu", "nu"))
+        i, m, n = (np.array([r[q] for r in rows]) for q in ("inertial", "tau_over_sigma_n", "nu"))
         ax.plot(i, m, "o", ms=3, color=col, label=lab)
         bx.plot(i, n, "o", ms=3, color=col, label=lab)
         g = np.geomspace(i.min(), i.max(), 100)
@@ -298,7 +305,7 @@ def plot(fits, members, out):
     bx.set_title("lines: ν = ν_max − a I fitted", fontsize=8)
     fig.tight_layout()
     tmp = os.path.join(out, ".mu_i.png.tmp")
-    fig.savefig(tmp, dpi=110)
+    fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
     os.replace(tmp, os.path.join(out, "mu_i.png"))
 

@@ -80,7 +80,7 @@ def test_steady_state_of_a_hand_built_shear_curve(tmp_path):
         for k in range(n):
             fh.write(",".join(repr(float(v[k])) for v in cols.values()) + "\n")
     s = gr.steady_state(path)
-    assert s["mu"] == pytest.approx(0.4)
+    assert s["tau_over_sigma_n"] == pytest.approx(0.4)
     assert s["inertial"] == pytest.approx(100 * 2e-3 * math.sqrt(2000 / 1e6))
     assert s["p_over_sigma_n"] == pytest.approx(1.1)
     assert s["dilatancy_end"] == pytest.approx(0.0, abs=1e-12)
