@@ -125,12 +125,18 @@ def fit_mu_i(i, mu):
     return float(best.x[0]), float(best.x[1]), float(math.exp(best.x[2]))
 
 
-def fit_nu_i(i, nu):
-    """Least-squares (nu_max, a) of nu = nu_max - a I."""
+def fit_line(i, y):
+    """Least-squares (intercept, slope) of y = y_0 + b I; NaNs with fewer than 3 points."""
     if len(i) < 3:
         return math.nan, math.nan
-    slope, icpt = np.polyfit(np.asarray(i, float), np.asarray(nu, float), 1)
-    return float(icpt), float(-slope)
+    slope, icpt = np.polyfit(np.asarray(i, float), np.asarray(y, float), 1)
+    return float(icpt), float(slope)
+
+
+def fit_nu_i(i, nu):
+    """Least-squares (nu_max, a) of nu = nu_max - a I (da Cruz et al. 2005)."""
+    nu_max, slope = fit_line(i, nu)
+    return nu_max, -slope
 
 
 def jackknife(points, fit):
@@ -169,7 +175,8 @@ def rate_table(groups):
     """Per (mu, prep, level, test, rate): the steady states per packing and their means with
     95 % intervals. Returns (member rows, mean rows)."""
     members, means = [], []
-    for key in sorted(groups, key=lambda k: (k[:4], float(k[4]))):
+    shear = [k for k in groups if k[3] == "SS_cns"]
+    for key in sorted(shear, key=lambda k: (k[:4], float(k[4]))):
         states = {pk: steady_state(path) for pk, path in sorted(groups[key].items())}
         for pk, s in states.items():
             members.append({**dict(zip(("mu", "prep", "level", "test", "rate_tc"), key)), "packing": pk, **s})
@@ -197,12 +204,14 @@ def law_fits(members):
         # three parameters need four rates; a line three
         (mu_s, mu_2, i_0), h_mu = jackknife(pts("tau_over_sigma_n"), fit_mu_i) if n_rates >= 4 else nan(3)
         (nu_max, a), h_nu = jackknife(pts("nu"), fit_nu_i) if n_rates >= 3 else nan(2)
+        (mu_0, b), h_lin = jackknife(pts("tau_over_sigma_n"), fit_line) if n_rates >= 3 else nan(2)
         i_all = [r["inertial"] for r in rows]
         out.append({"mu": cell[0], "prep": cell[1], "level": cell[2], "K": len(pts("nu")),
                     "rates": n_rates, "I_min": min(i_all), "I_max": max(i_all),
                     "mu_s": mu_s, "mu_s_ci95": h_mu[0], "mu_2": mu_2, "mu_2_ci95": h_mu[1],
                     "I_0": i_0, "I_0_ci95": h_mu[2], "nu_max": nu_max, "nu_max_ci95": h_nu[0],
-                    "a": a, "a_ci95": h_nu[1]})
+                    "a": a, "a_ci95": h_nu[1], "mu_0_lin": mu_0, "mu_0_lin_ci95": h_lin[0],
+                    "b_lin": b, "b_lin_ci95": h_lin[1]})
     return out
 
 
@@ -261,13 +270,14 @@ def write_report(fits, means, pairs, out):
                      f"{pm(r['inertial'], r['inertial_ci95'])} | {pm(r['tau_over_sigma_n'], r['tau_over_sigma_n_ci95'])} | "
                      f"{pm(r['nu'], r['nu_ci95'])} | {pm(r['dilatancy_end'], r['dilatancy_end_ci95'], 2)} | "
                      f"{r['volume_stationary']} |")
-    lines += ["", "## mu(I) = mu_s + (mu_2 - mu_s)/(1 + I_0/I) and nu = nu_max - a I (jackknife over packings)", "",
-              "| mu | prep | p level | K | rates | I range | μ_s | μ_2 | I_0 | χ²/dof | ν_max | a |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines += ["", "## mu(I) = mu_s + (mu_2 - mu_s)/(1 + I_0/I), the line mu_0 + b I, and nu = nu_max - a I (jackknife over packings)", "",
+              "| mu | prep | p level | K | rates | I range | μ_s | μ_2 | I_0 | χ²/dof | μ_0 + b I: μ_0 | b | ν_max | a |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for f in fits:
         lines.append(f"| {f['mu']} | {f['prep']} | {f['level']} | {f['K']} | {f['rates']} | "
                      f"{f['I_min']:.2g}–{f['I_max']:.2g} | {pm(f['mu_s'], f['mu_s_ci95'])} | "
                      f"{pm(f['mu_2'], f['mu_2_ci95'])} | {pm(f['I_0'], f['I_0_ci95'], 2)} | {f['chi2_dof']:.2g} | "
+                     f"{pm(f['mu_0_lin'], f['mu_0_lin_ci95'])} | {pm(f['b_lin'], f['b_lin_ci95'], 2)} | "
                      f"{pm(f['nu_max'], f['nu_max_ci95'], 4)} | {pm(f['a'], f['a_ci95'], 3)} |")
     if pairs:
         lines += ["", "## Rate checks (slower minus faster, paired per packing, mean ± 95 %)", "",
@@ -311,16 +321,20 @@ def plot(fits, members, out):
 
 
 def store(groups, out):
-    """Trimmed copies (STORE_COLUMNS) of the curves: `analyse OUT/curves` gives the same tables."""
+    """Trimmed copies of the curves (simple shear: STORE_COLUMNS; other tests: demkit.geotech's
+    TRIM): `analyse OUT/curves` gives the same tables."""
     for key, paths in groups.items():
+        mu, prep, level, test, rate = key
         for pk, src in paths.items():
+            dst = os.path.join(out, "curves", f"mu_{mu}", prep, level, test, f"r{rate}", pk + ".csv")
+            os.makedirs(os.path.dirname(dst), exist_ok=True)
+            if test != "SS_cns":
+                geotech.trim_curve(src, dst)
+                continue
             comments, header, rows = read_text(src)
             keep = [header.index(c) for c in STORE_COLUMNS if c in header]
             text = "\n".join(comments) + "\n" + ",".join(header[k] for k in keep) + "\n"
             text += "".join(",".join(r[k] for k in keep) + "\n" for r in rows)
-            mu, prep, level, test, rate = key
-            dst = os.path.join(out, "curves", f"mu_{mu}", prep, level, test, f"r{rate}", pk + ".csv")
-            os.makedirs(os.path.dirname(dst), exist_ok=True)
             write_atomic(dst, text)
 
 
