@@ -190,12 +190,23 @@ def rate_table(groups):
     return members, means
 
 
-def law_fits(members):
-    """Per (mu, prep, level) of the simple-shear rows: mu(I) and nu(I) with jackknife intervals."""
+def unsteady(means):
+    """The (mu, prep, level, test, rate) whose volume is still changing at the end (stationary
+    'no': the interval of d eps_vol/d eps_d wholly outside the tolerance): no steady state, left
+    out of the fits."""
+    return {tuple(r[k] for k in ("mu", "prep", "level", "test", "rate_tc")) for r in means
+            if r["volume_stationary"] == "no"}
+
+
+def law_fits(members, skip=frozenset()):
+    """Per (mu, prep, level) of the simple-shear rows not in skip: mu(I) and nu(I) with jackknife
+    intervals."""
     out = []
+    key = lambda r: tuple(r[k] for k in ("mu", "prep", "level", "test", "rate_tc"))
     cells = sorted({(r["mu"], r["prep"], r["level"]) for r in members if r["test"] == "SS_cns"})
     for cell in cells:
-        rows = [r for r in members if (r["mu"], r["prep"], r["level"]) == cell and r["test"] == "SS_cns"]
+        rows = [r for r in members if (r["mu"], r["prep"], r["level"]) == cell and r["test"] == "SS_cns"
+                and key(r) not in skip]
         pts = lambda y: {pk: (np.array([r["inertial"] for r in rows if r["packing"] == pk]),
                               np.array([r[y] for r in rows if r["packing"] == pk]))
                          for pk in {r["packing"] for r in rows}}
@@ -217,7 +228,8 @@ def law_fits(members):
 
 def add_chi2(fits, means):
     for f in fits:
-        rows = [r for r in means if (r["mu"], r["prep"], r["level"], r["test"]) == (f["mu"], f["prep"], f["level"], "SS_cns")]
+        rows = [r for r in means if (r["mu"], r["prep"], r["level"], r["test"]) == (f["mu"], f["prep"], f["level"], "SS_cns")
+                and r["volume_stationary"] != "no"]
         f["chi2_dof"] = chi2_dof(np.array([r["inertial"] for r in rows]), np.array([r["tau_over_sigma_n"] for r in rows]),
                                  np.array([r["tau_over_sigma_n_ci95"] for r in rows]), f["K"], (f["mu_s"], f["mu_2"], f["I_0"]))
     return fits
@@ -263,13 +275,13 @@ def pm(v, h, digits=3):
 def write_report(fits, means, pairs, out):
     lines = ["# Rate-dependent tests (demkit.geotech_rate analyse; docs/geotech.md)", "",
              "## Steady states of simple shear at constant normal stress (mean ± 95 % over packings)", "",
-             "| mu | prep | p level | rate·t_c | K | I | τ/σ_n | ν | dε_vol/dε_d | volume stationary |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "| mu | prep | p level | rate·t_c | K | I | τ/σ_n | ν | dε_vol/dε_d | volume stationary (fitted if not 'no') | servo error mean |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in (r for r in means if r["test"] == "SS_cns"):
         lines.append(f"| {r['mu']} | {r['prep']} | {r['level']} | {r['rate_tc']} | {r['K']} | "
                      f"{pm(r['inertial'], r['inertial_ci95'])} | {pm(r['tau_over_sigma_n'], r['tau_over_sigma_n_ci95'])} | "
                      f"{pm(r['nu'], r['nu_ci95'])} | {pm(r['dilatancy_end'], r['dilatancy_end_ci95'], 2)} | "
-                     f"{r['volume_stationary']} |")
+                     f"{r['volume_stationary']} | {100 * r['servo_error_mean']:.1f} % |")
     lines += ["", "## mu(I) = mu_s + (mu_2 - mu_s)/(1 + I_0/I), the line mu_0 + b I, and nu = nu_max - a I (jackknife over packings)", "",
               "| mu | prep | p level | K | rates | I range | μ_s | μ_2 | I_0 | χ²/dof | μ_0 + b I: μ_0 | b | ν_max | a |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -291,7 +303,7 @@ def write_report(fits, means, pairs, out):
     write_atomic(os.path.join(out, "report.md"), "\n".join(lines) + "\n")
 
 
-def plot(fits, members, out):
+def plot(fits, members, out, skip=frozenset()):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -300,8 +312,10 @@ def plot(fits, members, out):
         rows = [r for r in members if (r["mu"], r["prep"], r["level"], r["test"]) == (f["mu"], f["prep"], f["level"], "SS_cns")]
         col, lab = f"C{k}", f"μ = {f['mu']}, {f['prep']}, {f['level']}"
         i, m, n = (np.array([r[q] for r in rows]) for q in ("inertial", "tau_over_sigma_n", "nu"))
-        ax.plot(i, m, "o", ms=3, color=col, label=lab)
-        bx.plot(i, n, "o", ms=3, color=col, label=lab)
+        left = np.array([tuple(r[k] for k in ("mu", "prep", "level", "test", "rate_tc")) in skip for r in rows], bool)
+        for a, y in ((ax, m), (bx, n)):
+            a.plot(i[~left], y[~left], "o", ms=3, color=col, label=lab)
+            a.plot(i[left], y[left], "o", ms=4, mfc="none", color=col)   # not steady: not fitted
         g = np.geomspace(i.min(), i.max(), 100)
         if math.isfinite(f["I_0"]):
             ax.plot(g, mu_of_i(g, f["mu_s"], f["mu_2"], f["I_0"]), "-", color=col, lw=1)
@@ -311,7 +325,7 @@ def plot(fits, members, out):
         a.set_xlabel("inertial number I = γ̇ d √(ρ/σ_n)")
         a.set_ylabel(y)
     ax.legend(fontsize=7)
-    ax.set_title("points: packings; lines: μ(I) of Jop et al. fitted", fontsize=8)
+    ax.set_title("points: packings (open: volume not steady, not fitted); lines: fits", fontsize=8)
     bx.set_title("lines: ν = ν_max − a I fitted", fontsize=8)
     fig.tight_layout()
     tmp = os.path.join(out, ".mu_i.png.tmp")
@@ -344,7 +358,7 @@ def analyse(root, out, plots=True):
         raise SystemExit(f"no curves under {root}/mu_*/PREP/LEVEL/TEST/rRATE/mS.csv: run `run` first")
     os.makedirs(out, exist_ok=True)
     members, means = rate_table(groups)
-    fits = add_chi2(law_fits(members), means)
+    fits = add_chi2(law_fits(members, unsteady(means)), means)
     pairs = rate_pairs(groups)
     write_rows(os.path.join(out, "steady_members.csv"), members)
     write_rows(os.path.join(out, "steady_states.csv"), means)
@@ -352,7 +366,7 @@ def analyse(root, out, plots=True):
     write_rows(os.path.join(out, "rate_checks.csv"), pairs)
     write_report(fits, means, pairs, out)
     if plots and fits:
-        plot(fits, members, out)
+        plot(fits, members, out, unsteady(means))
     return fits, means, pairs
 
 

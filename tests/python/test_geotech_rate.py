@@ -92,3 +92,23 @@ def test_a_curve_without_the_physics_line_is_refused(tmp_path):
         fh.write("eps_d,eps_v,nu,sigma_zz_Pa,sigma_xz_Pa,rate_xz_1_s\n0,0,0.6,1,0,1\n")
     with pytest.raises(ValueError, match="radius_min_m"):
         gr.steady_state(path)
+
+
+def test_unsteady_rates_are_left_out_of_the_fits():
+    # exact points on the law at 8 rates, plus a ninth whose volume is still changing and whose
+    # tau/sigma_n is far off: with it left out the law comes back exactly
+    rates = [f"r{k}" for k in range(9)]
+    i_values = np.append(RATES_I[:8], 2.0)
+    members = [{"mu": "0.5", "prep": "loose", "level": "iso_hi", "test": "SS_cns", "rate_tc": r, "packing": f"m{j}",
+                "inertial": i, "tau_over_sigma_n": (gr.mu_of_i(i, *TRUE) if r != "r8" else 5.0),
+                "nu": 0.62 - 0.3 * i} for j in range(3) for r, i in zip(rates, i_values)]
+    means = [{"mu": "0.5", "prep": "loose", "level": "iso_hi", "test": "SS_cns", "rate_tc": r,
+              "volume_stationary": "no" if r == "r8" else "yes"} for r in rates]
+    skip = gr.unsteady(means)
+    assert skip == {("0.5", "loose", "iso_hi", "SS_cns", "r8")}
+    (fit,) = gr.law_fits(members, skip)
+    assert fit["rates"] == 8
+    assert (fit["mu_s"], fit["mu_2"], fit["I_0"]) == pytest.approx(TRUE, rel=1e-5)
+    assert (fit["nu_max"], fit["a"]) == pytest.approx((0.62, 0.3))
+    (with_it,) = gr.law_fits(members)
+    assert with_it["rates"] == 9 and with_it["mu_s"] != pytest.approx(TRUE[0], rel=1e-3)
