@@ -316,16 +316,18 @@ def plot(fits, members, out, skip=frozenset()):
         for a, y in ((ax, m), (bx, n)):
             a.plot(i[~left], y[~left], "o", ms=3, color=col, label=lab)
             a.plot(i[left], y[left], "o", ms=4, mfc="none", color=col)   # not steady: not fitted
-        g = np.geomspace(i.min(), i.max(), 100)
+        g = np.geomspace(i[~left].min(), i[~left].max(), 100)       # over the fitted range
         if math.isfinite(f["I_0"]):
             ax.plot(g, mu_of_i(g, f["mu_s"], f["mu_2"], f["I_0"]), "-", color=col, lw=1)
+        elif math.isfinite(f["b_lin"]):                              # Jop's law not determined: the line
+            ax.plot(g, f["mu_0_lin"] + f["b_lin"] * g, "--", color=col, lw=1)
         bx.plot(g, f["nu_max"] - f["a"] * g, "-", color=col, lw=1)
     for a, y in ((ax, "τ/σ_n (steady)"), (bx, "ν (steady)")):
         a.set_xscale("log")
         a.set_xlabel("inertial number I = γ̇ d √(ρ/σ_n)")
         a.set_ylabel(y)
     ax.legend(fontsize=7)
-    ax.set_title("points: packings (open: volume not steady, not fitted); lines: fits", fontsize=8)
+    ax.set_title("points: packings (open: volume not steady, not fitted)\nsolid: Jop et al.'s μ(I); dashed: μ_0 + b I where it is not determined", fontsize=8)
     bx.set_title("lines: ν = ν_max − a I fitted", fontsize=8)
     fig.tight_layout()
     tmp = os.path.join(out, ".mu_i.png.tmp")
