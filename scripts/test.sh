@@ -1,9 +1,15 @@
 #!/usr/bin/env bash
-# All tests: C++ (ctest) and the pipeline (pytest). Needs scripts/setup.sh first.
+# All tests: C++ (ctest) and the pipeline (pytest). Needs scripts/setup.sh first. Installs the
+# tests' own packages (YADE, Slurm, pytest, ...; install-deps.sh --only test) while the C++ tests
+# build; DEM_INSTALL_OPTS=--no-yade leaves YADE out (its cross-checks are then skipped).
 # Extra checks, not run here: the sanitizer build and the fuzzers (README, "Keeping it correct").
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cmake --build build -j"$(nproc)" >/dev/null
+cmake --build build -j"$(nproc)" > build/test-build.log 2>&1 &
+builder=$!
+# shellcheck disable=SC2086
+bash scripts/install-deps.sh --only test ${DEM_INSTALL_OPTS:-} || { kill "$builder" 2>/dev/null; exit 1; }
+wait "$builder" || { tail -40 build/test-build.log >&2; echo "test.sh: the build failed (build/test-build.log)" >&2; exit 1; }
 (cd build && ctest --output-on-failure)
 # build/python: the Python module demtk (docs/python.md), for the tests and the notebook's kernel.
 export PYTHONPATH="$PWD/build/python${PYTHONPATH:+:$PYTHONPATH}"
