@@ -781,7 +781,7 @@ TEST(Luding, RestitutionOfImpactsMatchesTheClosedFormAndAdhesionSticks) {
 // spring-dashpot with contact.allow_attractive = true (the linear law's default clamps the sum
 // at zero; Luding's kc = 0 does not: the dashpot may pull). The law needs kp > k1: at kp =
 // nextafter(k1) the increment (kp - k1) delta_max / delta* is below k1's last bit for every
-// overlap (delta* ~ 1e15 phi_f 2 a12), so k2 rounds to k1, delta0 to 0 and the force to the
+// overlap (delta* ~ 7e15 phi_f 2 a12 at k1 = 1e8 N/m), so k2 rounds to k1, delta0 to 0 and the force to the
 // bits of k1 delta. The curves are then the same bits; dt is taken from the linear model (t_c
 // of kp and of k1 may differ in the last bit).
 namespace {
