@@ -190,6 +190,18 @@ def run_cost(run):
     return float(sum(o["steps"] for o in timed)), float(sum(o["wall_s"] for o in timed))
 
 
+def cpu_seconds(run):
+    """User + system CPU seconds of a run from RUN/cpu_time.txt ("USER SYS", as `/usr/bin/time -f
+    "%U %S" -o RUN/cpu_time.txt` writes it around `dem run`; the runs' loop in data/powders/README.md);
+    NaN where there is none."""
+    try:
+        with open(os.path.join(run, "cpu_time.txt")) as fh:
+            user, sys_ = fh.read().split()[-2:]
+        return float(user) + float(sys_)
+    except (OSError, ValueError):
+        return math.nan
+
+
 def analyse_run(run):
     path = find_curve(run)
     points, pre, extra = shear_test_points(read_curve(path), path)
@@ -198,6 +210,7 @@ def analyse_run(run):
     out["run"] = run
     out["steps"], out["wall_s"] = run_cost(run) if os.path.isdir(run) else (math.nan, math.nan)
     out["dt_over_tc"] = scene_value(run, "integration", "dt_over_tc", 0.02) if os.path.isdir(run) else math.nan
+    out["cpu_s"] = cpu_seconds(run)
     return out
 
 
@@ -225,7 +238,7 @@ def mean_ci(values):
 
 QUANTITIES = ("sigma_pre_Pa", "tau_pre_Pa", "sigma_1_Pa", "sigma_c_Pa", "c_Pa", "phi_lin_deg", "phi_e_deg",
               "nu", "C", "overlap_mean_rel", "servo_error_mean", "servo_error_max", "steps", "wall_s", "I_preshear",
-              "I_shear", "dt_over_tc")
+              "I_shear", "dt_over_tc", "cpu_s")
 
 
 def summarise(members, label="", extra=None):
@@ -586,29 +599,36 @@ def welch_diff(a, b):
     return float(a.mean() - b.mean()), float(stats.t.ppf(0.975, dof) * se)
 
 
-def dt_rows(levels, reference=None):
-    """{name: [run folders]} of one adhesion level at several time steps: per dt the mean and 95 %
-    interval of each DT_QUANTITIES entry, its difference to the reference dt (the finest, unless
-    given) with a Welch interval, whether its mean lies outside the reference's 95 % interval, and
-    the cost (steps, wall time) per packing. Runs that did not finish count as failed."""
+VARY = {"dt": ("integration", "dt_over_tc", 0.02, "dt/t_c"),
+        "rate": ("protocol", "deviatoric_rate_tc", 1e-4, "rate·t_c")}
+
+
+def dt_rows(levels, reference=None, vary="dt"):
+    """{name: [run folders]} of one adhesion level at several time steps (or rates: vary =
+    "rate"): per value the mean and 95 % interval of each DT_QUANTITIES entry, its difference to
+    the reference (the smallest value, unless given) with a Welch interval, whether its mean lies
+    outside the reference's 95 % interval, the inertial numbers and the cost (steps, wall and CPU
+    time) per packing. Runs that did not finish count as failed."""
+    section, key, default, _ = VARY[vary]
     per = {}
     for name, runs in levels.items():
         ok = [r for r in runs if finished(r)]
         rows = [analyse_run(r) for r in ok]
-        dt = scene_value(runs[0], "integration", "dt_over_tc", 0.02)
+        x = scene_value(runs[0], section, key, default)
         n = scene_value(runs[0], "particles", "count", 500)
-        per[name] = {"dt_over_tc": dt, "members": rows, "failed": len(runs) - len(ok), "N": n}
+        per[name] = {"x": x, "members": rows, "failed": len(runs) - len(ok), "N": n}
     usable = {k: v for k, v in per.items() if len(v["members"]) >= 2}
-    ref = reference or min(usable, key=lambda k: usable[k]["dt_over_tc"])
+    ref = reference or min(usable, key=lambda k: usable[k]["x"])
     out = []
-    for name, v in sorted(per.items(), key=lambda kv: -kv[1]["dt_over_tc"]):
-        row = {"label": name, "dt_over_tc": v["dt_over_tc"], "K": len(v["members"]), "failed": v["failed"],
+    for name, v in sorted(per.items(), key=lambda kv: -kv[1]["x"]):
+        row = {"label": name, "x": v["x"], "x_name": VARY[vary][3], "K": len(v["members"]), "failed": v["failed"],
                "reference": name == ref, "N": v["N"]}
-        for q in ("steps", "wall_s") + tuple(q for q, _, _ in DT_QUANTITIES):
-            vals = [m[q] for m in v["members"]]
+        for q in ("steps", "wall_s", "cpu_s", "I_preshear", "I_shear") + tuple(q for q, _, _ in DT_QUANTITIES):
+            vals = [m.get(q, math.nan) for m in v["members"]]
+            ref_vals = [m.get(q, math.nan) for m in per[ref]["members"]]
             row[q], row[q + "_ci95"], _, _ = mean_ci(vals)
-            rm, rh, _, _ = mean_ci([m[q] for m in per[ref]["members"]])
-            row[q + "_diff"], row[q + "_diff_ci95"] = welch_diff(vals, [m[q] for m in per[ref]["members"]])
+            rm, rh, _, _ = mean_ci(ref_vals)
+            row[q + "_diff"], row[q + "_diff_ci95"] = welch_diff(vals, ref_vals)
             row[q + "_outside"] = bool(math.isfinite(rh) and abs(row[q] - rm) > rh)
         out.append(row)
     return out, ref
@@ -616,26 +636,30 @@ def dt_rows(levels, reference=None):
 
 def write_dt_chart(rows, ref, out, level_text):
     """dt_cost.csv (units in the header), dt_cost.md and dt_cost.{png,svg}."""
-    cols = ["label", "dt_over_tc", "K", "failed"] + [c for q, _, _ in DT_QUANTITIES for c in
+    cols = ["label", "x_name", "x", "K", "failed"] + [c for q, _, _ in DT_QUANTITIES for c in
                                                      (q, q + "_ci95", q + "_diff", q + "_diff_ci95", q + "_outside")]
-    cols += ["steps", "wall_s", "wall_s_ci95"]
+    cols += ["I_preshear", "I_shear", "steps", "wall_s", "wall_s_ci95", "cpu_s", "cpu_s_ci95"]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(cols)
     for r in rows:
         w.writerow([r[c] if isinstance(r[c], (str, bool)) else f"{r[c]:.6g}" for c in cols])
     write_atomic(os.path.join(out, "dt_cost.csv"), buf.getvalue())
-    head = "| dt/t_c | K | " + " | ".join(lbl for _, lbl, _ in DT_QUANTITIES) + " | steps per packing | wall [s] |"
-    lines = [f"Level: {level_text}; reference dt = t_c × {next(r['dt_over_tc'] for r in rows if r['reference']):g}; "
+    xn = rows[0]["x_name"]
+    head = (f"| {xn} | K | " + " | ".join(lbl for _, lbl, _ in DT_QUANTITIES) +
+            " | I pre-shear | I shear | steps per packing | wall [s] | CPU [s] |")
+    lines = [f"Level: {level_text}; reference {xn} = {next(r['x'] for r in rows if r['reference']):g}; "
              "± 95 % over packings; * the mean lies outside the reference's 95 % interval.", "", head,
-             "|" + "---|" * (len(DT_QUANTITIES) + 4)]
+             "|" + "---|" * (len(DT_QUANTITIES) + 7)]
     for r in rows:
         cells = []
         for q, _, scale in DT_QUANTITIES:
             cells.append(fmt(r[q] * scale, r[q + "_ci95"] * scale) + (" *" if r[q + "_outside"] else ""))
         fail = f" ({r['failed']} failed)" if r["failed"] else ""
-        lines.append(f"| {r['dt_over_tc']:g}{' (ref)' if r['reference'] else ''} | {r['K']}{fail} | " +
-                     " | ".join(cells) + f" | {r['steps']:.3g} | {fmt(r['wall_s'], r['wall_s_ci95'])} |")
+        lines.append(f"| {r['x']:g}{' (ref)' if r['reference'] else ''} | {r['K']}{fail} | " +
+                     " | ".join(cells) + f" | {r['I_preshear']:.2g} | {r['I_shear']:.2g} | {r['steps']:.3g} | "
+                     f"{fmt(r['wall_s'], r['wall_s_ci95'])} | "
+                     f"{fmt(r['cpu_s'], r['cpu_s_ci95'])} |")
     write_atomic(os.path.join(out, "dt_cost.md"), "\n".join(lines) + "\n")
     plot_dt_chart(rows, out, level_text)
 
@@ -649,7 +673,7 @@ def plot_dt_chart(rows, out, level_text):
     rows = [r for r in rows if r["K"] > 0]
     ref = next(r for r in rows if r["reference"])
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4))
-    dts = np.array([r["dt_over_tc"] for r in rows])
+    dts = np.array([r["x"] for r in rows])
     for k, (q, lbl, _) in enumerate(DT_QUANTITIES[:4]):
         y = np.array([r[q] for r in rows]) / ref[q]
         e = np.nan_to_num(np.array([r[q + "_ci95"] for r in rows]) / abs(ref[q]))
@@ -659,18 +683,21 @@ def plot_dt_chart(rows, out, level_text):
             ax.axhspan(1 - h, 1 + h, color="0.85", zorder=0, label="reference 95 % (1/ffc)")
     ax.axhline(1, color="0.5", lw=0.8)
     ax.set_xscale("log")
-    ax.set_xlabel("dt / t_c")
-    ax.set_ylabel("value / value at the reference dt")
+    ax.set_xlabel(rows[0]["x_name"])
+    ax.set_ylabel("value / value at the reference")
     ax.set_title(f"accuracy: {level_text}", fontsize=9)
     ax.legend(fontsize=7)
     bx.loglog(dts, [r["steps"] * r["N"] for r in rows], "ks-", label="particle-steps per packing")
-    bx.set_xlabel("dt / t_c")
+    bx.set_xlabel(rows[0]["x_name"])
     bx.set_ylabel("particle-steps per packing")
     b2 = bx.twinx()
     b2.errorbar(dts, [r["wall_s"] for r in rows], yerr=np.nan_to_num([r["wall_s_ci95"] for r in rows]), fmt="o",
                 color="C3", capsize=2, label="wall time (loaded machine)")
+    b2.errorbar(dts, [r["cpu_s"] for r in rows], yerr=np.nan_to_num([r["cpu_s_ci95"] for r in rows]), fmt="^",
+                color="C1", capsize=2, label="CPU time (user + sys)")
+    b2.legend(loc="lower left", fontsize=7)
     b2.set_yscale("log")
-    b2.set_ylabel("wall time per packing [s]", color="C3")
+    b2.set_ylabel("time per packing [s]", color="C3")
     bx.set_title(f"cost per packing (N = {ref['N']:.0f})", fontsize=9)
     bx.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
@@ -704,7 +731,8 @@ def bond_rows(table_dirs, labels):
                               ("inv_ffc", [m["inv_ffc"] for m in mem])):
                 row[key], row[key + "_ci95"], _, _ = mean_ci(vals)
             rows.append({k: (math.nan if v is None else v) for k, v in row.items()})
-    return rows
+    order = {label: k for k, label in enumerate(labels)}
+    return sorted(rows, key=lambda r: (order[r["series"]], r["Bo"] if math.isfinite(r["Bo"]) else -1.0))
 
 
 def write_bond(rows, out):
@@ -856,6 +884,8 @@ def main(argv=None):
                     help="RUNS are level folders of one adhesion at several dt (LEVEL/s*/): the dt/cost chart")
     ap.add_argument("--reference", default="", help="with --dt-chart: the level folder name of the reference dt "
                     "(default: the finest)")
+    ap.add_argument("--vary", default="dt", choices=sorted(VARY),
+                    help="with --dt-chart: what differs between the level folders (dt or the shear rate)")
     ap.add_argument("--bond", action="store_true",
                     help="RUNS are table folders (levels/*/summary.json), one per series: friction, cohesion against Bo")
     ap.add_argument("--series", default="", help="with --bond: comma-separated series labels, one per folder")
@@ -869,7 +899,7 @@ def main(argv=None):
         if a.dt_chart:
             levels = {os.path.basename(os.path.normpath(d)): sorted(
                 r for r in glob.glob(os.path.join(d, "*")) if os.path.isdir(r)) for d in a.runs}
-            rows, ref = dt_rows(levels, a.reference or None)
+            rows, ref = dt_rows(levels, a.reference or None, a.vary)
             write_dt_chart(rows, ref, a.out, a.label or ref)
             print(open(os.path.join(a.out, "dt_cost.md")).read())
             return 0
