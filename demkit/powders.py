@@ -608,7 +608,8 @@ def dt_rows(levels, reference=None, vary="dt"):
     "rate"): per value the mean and 95 % interval of each DT_QUANTITIES entry, its difference to
     the reference (the smallest value, unless given) with a Welch interval, whether its mean lies
     outside the reference's 95 % interval, the inertial numbers and the cost (steps, wall and CPU
-    time) per packing. Runs that did not finish count as failed."""
+    time) per packing. Runs that stopped early (a failed_*.ckpt: the run blew up) count as
+    failed; runs without a complete manifest otherwise (still running) are left out."""
     section, key, default, _ = VARY[vary]
     per = {}
     for name, runs in levels.items():
@@ -616,7 +617,8 @@ def dt_rows(levels, reference=None, vary="dt"):
         rows = [analyse_run(r) for r in ok]
         x = scene_value(runs[0], section, key, default)
         n = scene_value(runs[0], "particles", "count", 500)
-        per[name] = {"x": x, "members": rows, "failed": len(runs) - len(ok), "N": n}
+        failed = sum(1 for r in runs if glob.glob(os.path.join(r, "failed_*.ckpt")))
+        per[name] = {"x": x, "members": rows, "failed": failed, "N": n}
     usable = {k: v for k, v in per.items() if len(v["members"]) >= 2}
     ref = reference or min(usable, key=lambda k: usable[k]["x"])
     out = []
