@@ -672,23 +672,30 @@ def plot_dt_chart(rows, out, level_text):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.transforms
+    failed = [r for r in rows if r["K"] == 0 and r["failed"] > 0]
     rows = [r for r in rows if r["K"] > 0]
     ref = next(r for r in rows if r["reference"])
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4))
     dts = np.array([r["x"] for r in rows])
-    for k, (q, lbl, _) in enumerate(DT_QUANTITIES[:4]):
+    shown = [d for d in DT_QUANTITIES if d[0] != "c_Pa"]
+    for k, (q, lbl, _) in enumerate(shown):
         y = np.array([r[q] for r in rows]) / ref[q]
         e = np.nan_to_num(np.array([r[q + "_ci95"] for r in rows]) / abs(ref[q]))
-        ax.errorbar(dts * (1 + 0.025 * (k - 1.5)), y, yerr=e, fmt="o-", ms=4, capsize=2, label=lbl)
+        ax.errorbar(dts * (1 + 0.025 * (k - 2)), y, yerr=e, fmt="o-", ms=4, capsize=2, label=lbl)
         if k == 0:
             h = ref[q + "_ci95"] / ref[q]
             ax.axhspan(1 - h, 1 + h, color="0.85", zorder=0, label="reference 95 % (1/ffc)")
     ax.axhline(1, color="0.5", lw=0.8)
+    for r in failed:
+        ax.axvline(r["x"], color="C3", ls=":", lw=1)
+        ax.text(r["x"], 0.03, f"blew up ({r['failed']} of {r['failed']}) ", color="C3", fontsize=7, va="bottom",
+                ha="right", transform=matplotlib.transforms.blended_transform_factory(ax.transData, ax.transAxes))
     ax.set_xscale("log")
     ax.set_xlabel(rows[0]["x_name"])
     ax.set_ylabel("value / value at the reference")
     ax.set_title(f"accuracy: {level_text}", fontsize=9)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper left")
     bx.loglog(dts, [r["steps"] * r["N"] for r in rows], "ks-", label="particle-steps per packing")
     bx.set_xlabel(rows[0]["x_name"])
     bx.set_ylabel("particle-steps per packing")
