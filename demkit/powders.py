@@ -659,7 +659,7 @@ def write_dt_chart(rows, ref, out, level_text):
             cells.append(fmt(r[q] * scale, r[q + "_ci95"] * scale) + (" *" if r[q + "_outside"] else ""))
         fail = f" ({r['failed']} failed)" if r["failed"] else ""
         lines.append(f"| {r['x']:g}{' (ref)' if r['reference'] else ''} | {r['K']}{fail} | " +
-                     " | ".join(cells) + f" | {r['I_preshear']:.2g} | {r['I_shear']:.2g} | {r['steps']:.3g} | "
+                     " | ".join(cells) + f" | {fmt(r['I_preshear'])} | {fmt(r['I_shear'])} | {fmt(r['steps'])} | "
                      f"{fmt(r['wall_s'], r['wall_s_ci95'])} | "
                      f"{fmt(r['cpu_s'], r['cpu_s_ci95'])} |")
     write_atomic(os.path.join(out, "dt_cost.md"), "\n".join(lines) + "\n")
