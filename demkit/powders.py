@@ -149,10 +149,22 @@ def shear_test_points(curve, path="curve"):
         raise CurveError(f"{path}: needs stages preshear* and two or more shear_* (has {', '.join(names)})")
     tail = np.concatenate(tails)
     extra = {"overlap_mean_rel": float(curve["overlap_mean_rel"][tail].mean()), "C": float(curve["C"][tail].mean()),
+             **inertial_numbers(curve, tail),
              "nu": float(curve["nu"][tail].mean()),
              "servo_error_mean": float(np.mean(err)) if err else math.nan,
              "servo_error_max": float(np.max(err)) if err else math.nan}
     return points, tuple(np.mean(pre, axis=0)), extra
+
+
+def inertial_numbers(curve, preshear_rows):
+    """The inertial number I (curve column inertial_number) averaged over the steady pre-shear rows
+    and over the shear-to-failure stages (NaN where the curve has no such column)."""
+    if "inertial_number" not in curve:
+        return {"I_preshear": math.nan, "I_shear": math.nan}
+    inertial = curve["inertial_number"]
+    shear = np.array([s.startswith("shear_") for s in curve["stage"]])
+    return {"I_preshear": float(inertial[preshear_rows].mean()),
+            "I_shear": float(inertial[shear].mean()) if shear.any() else math.nan}
 
 
 def find_curve(run):
@@ -178,6 +190,18 @@ def run_cost(run):
     return float(sum(o["steps"] for o in timed)), float(sum(o["wall_s"] for o in timed))
 
 
+def cpu_seconds(run):
+    """User + system CPU seconds of a run from RUN/cpu_time.txt ("USER SYS", as `/usr/bin/time -f
+    "%U %S" -o RUN/cpu_time.txt` writes it around `dem run`; the runs' loop in data/powders/README.md);
+    NaN where there is none."""
+    try:
+        with open(os.path.join(run, "cpu_time.txt")) as fh:
+            user, sys_ = fh.read().split()[-2:]
+        return float(user) + float(sys_)
+    except (OSError, ValueError):
+        return math.nan
+
+
 def analyse_run(run):
     path = find_curve(run)
     points, pre, extra = shear_test_points(read_curve(path), path)
@@ -185,7 +209,16 @@ def analyse_run(run):
     out.update(extra)
     out["run"] = run
     out["steps"], out["wall_s"] = run_cost(run) if os.path.isdir(run) else (math.nan, math.nan)
+    out["dt_over_tc"] = scene_value(run, "integration", "dt_over_tc", 0.02) if os.path.isdir(run) else math.nan
+    out["cpu_s"] = cpu_seconds(run)
     return out
+
+
+def scene_value(run, section, key, default):
+    """A number of a run folder's scene.toml (default where the key is absent)."""
+    import tomllib
+    with open(os.path.join(run, "scene.toml"), "rb") as fh:
+        return float(tomllib.load(fh).get(section, {}).get(key, default))
 
 
 # ------------------------------------------------------------------------------------------
@@ -204,14 +237,15 @@ def mean_ci(values):
 
 
 QUANTITIES = ("sigma_pre_Pa", "tau_pre_Pa", "sigma_1_Pa", "sigma_c_Pa", "c_Pa", "phi_lin_deg", "phi_e_deg",
-              "nu", "C", "overlap_mean_rel", "servo_error_mean", "servo_error_max", "steps", "wall_s")
+              "nu", "C", "overlap_mean_rel", "servo_error_mean", "servo_error_max", "steps", "wall_s", "I_preshear",
+              "I_shear", "dt_over_tc", "cpu_s")
 
 
 def summarise(members, label="", extra=None):
     """Mean and 95 % interval of every quantity over the packings; ffc through 1/ffc."""
     s = {"label": label, "K": len(members)}
     for q in QUANTITIES + ("inv_ffc",):
-        m, h, sd, _ = mean_ci([r[q] for r in members])
+        m, h, sd, _ = mean_ci([r.get(q, math.nan) for r in members])
         s[q], s[q + "_ci95"], s[q + "_sd"] = m, h, sd
     inv, h = s["inv_ffc"], s["inv_ffc_ci95"]
     s["ffc"] = 1 / inv if inv > 0 else math.inf
@@ -546,6 +580,228 @@ def plot_compaction(per_level, out):
     plt.close(fig)
 
 
+# ------------------------------------------------------------------------------------------
+# The time step against accuracy and cost (the adhesive runs' dt chart, docs/powders.md)
+
+DT_QUANTITIES = (("inv_ffc", "1/ffc", 1.0), ("sigma_c_Pa", "σ_c [MPa]", 1e-6), ("sigma_1_Pa", "σ₁ [MPa]", 1e-6),
+                 ("phi_e_deg", "φ_e [°]", 1.0), ("c_Pa", "c [MPa]", 1e-6), ("nu", "ν", 1.0))
+
+
+def welch_diff(a, b):
+    """(mean(a) - mean(b), half-width of its 95 % Welch interval) of two samples (NaN if either has < 2)."""
+    a = np.asarray([x for x in a if math.isfinite(x)], float)
+    b = np.asarray([x for x in b if math.isfinite(x)], float)
+    if a.size < 2 or b.size < 2:
+        return math.nan, math.nan
+    va, vb = a.var(ddof=1) / a.size, b.var(ddof=1) / b.size
+    se = math.sqrt(va + vb)
+    dof = (va + vb) ** 2 / (va * va / (a.size - 1) + vb * vb / (b.size - 1)) if se > 0 else a.size + b.size - 2
+    return float(a.mean() - b.mean()), float(stats.t.ppf(0.975, dof) * se)
+
+
+VARY = {"dt": ("integration", "dt_over_tc", 0.02, "dt/t_c"),
+        "rate": ("protocol", "deviatoric_rate_tc", 1e-4, "rate·t_c")}
+
+
+def dt_rows(levels, reference=None, vary="dt"):
+    """{name: [run folders]} of one adhesion level at several time steps (or rates: vary =
+    "rate"): per value the mean and 95 % interval of each DT_QUANTITIES entry, its difference to
+    the reference (the smallest value, unless given) with a Welch interval, whether its mean lies
+    outside the reference's 95 % interval, the inertial numbers and the cost (steps, wall and CPU
+    time) per packing. Runs that stopped early (a failed_*.ckpt: the run blew up) count as
+    failed; runs without a complete manifest otherwise (still running) are left out."""
+    section, key, default, _ = VARY[vary]
+    per = {}
+    for name, runs in levels.items():
+        ok = [r for r in runs if finished(r)]
+        rows = [analyse_run(r) for r in ok]
+        x = scene_value(runs[0], section, key, default)
+        n = scene_value(runs[0], "particles", "count", 500)
+        failed = sum(1 for r in runs if glob.glob(os.path.join(r, "failed_*.ckpt")))
+        per[name] = {"x": x, "members": rows, "failed": failed, "N": n}
+    usable = {k: v for k, v in per.items() if len(v["members"]) >= 2}
+    ref = reference or min(usable, key=lambda k: usable[k]["x"])
+    out = []
+    for name, v in sorted(per.items(), key=lambda kv: -kv[1]["x"]):
+        row = {"label": name, "x": v["x"], "x_name": VARY[vary][3], "K": len(v["members"]), "failed": v["failed"],
+               "reference": name == ref, "N": v["N"]}
+        for q in ("steps", "wall_s", "cpu_s", "I_preshear", "I_shear") + tuple(q for q, _, _ in DT_QUANTITIES):
+            vals = [m.get(q, math.nan) for m in v["members"]]
+            ref_vals = [m.get(q, math.nan) for m in per[ref]["members"]]
+            row[q], row[q + "_ci95"], _, _ = mean_ci(vals)
+            rm, rh, _, _ = mean_ci(ref_vals)
+            row[q + "_diff"], row[q + "_diff_ci95"] = welch_diff(vals, ref_vals)
+            row[q + "_outside"] = bool(math.isfinite(rh) and abs(row[q] - rm) > rh)
+        out.append(row)
+    return out, ref
+
+
+def write_dt_chart(rows, ref, out, level_text):
+    """dt_cost.csv (units in the header), dt_cost.md and dt_cost.{png,svg}."""
+    cols = ["label", "x_name", "x", "K", "failed"] + [c for q, _, _ in DT_QUANTITIES for c in
+                                                     (q, q + "_ci95", q + "_diff", q + "_diff_ci95", q + "_outside")]
+    cols += ["I_preshear", "I_shear", "steps", "wall_s", "wall_s_ci95", "cpu_s", "cpu_s_ci95"]
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(cols)
+    for r in rows:
+        w.writerow([r[c] if isinstance(r[c], (str, bool)) else f"{r[c]:.6g}" for c in cols])
+    write_atomic(os.path.join(out, "dt_cost.csv"), buf.getvalue())
+    xn = rows[0]["x_name"]
+    head = (f"| {xn} | K | " + " | ".join(lbl for _, lbl, _ in DT_QUANTITIES) +
+            " | I pre-shear | I shear | steps per packing | wall [s] | CPU [s] |")
+    lines = [f"Level: {level_text}; reference {xn} = {next(r['x'] for r in rows if r['reference']):g}; "
+             "± 95 % over packings; * the mean lies outside the reference's 95 % interval.", "", head,
+             "|" + "---|" * (len(DT_QUANTITIES) + 7)]
+    for r in rows:
+        cells = []
+        for q, _, scale in DT_QUANTITIES:
+            cells.append(fmt(r[q] * scale, r[q + "_ci95"] * scale) + (" *" if r[q + "_outside"] else ""))
+        fail = f" ({r['failed']} failed)" if r["failed"] else ""
+        lines.append(f"| {r['x']:g}{' (ref)' if r['reference'] else ''} | {r['K']}{fail} | " +
+                     " | ".join(cells) + f" | {fmt(r['I_preshear'])} | {fmt(r['I_shear'])} | {fmt(r['steps'])} | "
+                     f"{fmt(r['wall_s'], r['wall_s_ci95'])} | "
+                     f"{fmt(r['cpu_s'], r['cpu_s_ci95'])} |")
+    write_atomic(os.path.join(out, "dt_cost.md"), "\n".join(lines) + "\n")
+    plot_dt_chart(rows, out, level_text)
+
+
+def plot_dt_chart(rows, out, level_text):
+    """Left: each quantity over its reference value against dt (95 % intervals; grey band: the
+    reference's interval of 1/ffc). Right: steps and wall time per packing against dt."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.transforms
+    failed = [r for r in rows if r["K"] == 0 and r["failed"] > 0]
+    rows = [r for r in rows if r["K"] > 0]
+    ref = next(r for r in rows if r["reference"])
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4))
+    dts = np.array([r["x"] for r in rows])
+    shown = [d for d in DT_QUANTITIES if d[0] != "c_Pa"]
+    for k, (q, lbl, _) in enumerate(shown):
+        y = np.array([r[q] for r in rows]) / ref[q]
+        e = np.nan_to_num(np.array([r[q + "_ci95"] for r in rows]) / abs(ref[q]))
+        ax.errorbar(dts * (1 + 0.025 * (k - 2)), y, yerr=e, fmt="o-", ms=4, capsize=2, label=lbl)
+        if k == 0:
+            h = ref[q + "_ci95"] / ref[q]
+            ax.axhspan(1 - h, 1 + h, color="0.85", zorder=0, label="reference 95 % (1/ffc)")
+    ax.axhline(1, color="0.5", lw=0.8)
+    for r in failed:
+        ax.axvline(r["x"], color="C3", ls=":", lw=1)
+        ax.text(r["x"], 0.03, f"blew up ({r['failed']} of {r['failed']}) ", color="C3", fontsize=7, va="bottom",
+                ha="right", transform=matplotlib.transforms.blended_transform_factory(ax.transData, ax.transAxes))
+    ax.set_xscale("log")
+    ax.set_xlabel(rows[0]["x_name"])
+    ax.set_ylabel("value / value at the reference")
+    ax.set_title(f"accuracy: {level_text}", fontsize=9)
+    ax.legend(fontsize=7, loc="upper left")
+    bx.loglog(dts, [r["steps"] * r["N"] for r in rows], "ks-", label="particle-steps per packing")
+    bx.set_xlabel(rows[0]["x_name"])
+    bx.set_ylabel("particle-steps per packing")
+    b2 = bx.twinx()
+    b2.errorbar(dts, [r["wall_s"] for r in rows], yerr=np.nan_to_num([r["wall_s_ci95"] for r in rows]), fmt="o",
+                color="C3", capsize=2, label="wall time (loaded machine)")
+    b2.errorbar(dts, [r["cpu_s"] for r in rows], yerr=np.nan_to_num([r["cpu_s_ci95"] for r in rows]), fmt="^",
+                color="C1", capsize=2, label="CPU time (user + sys)")
+    b2.legend(loc="lower left", fontsize=7)
+    b2.set_yscale("log")
+    b2.set_ylabel("time per packing [s]", color="C3")
+    bx.set_title(f"cost per packing (N = {ref['N']:.0f})", fontsize=9)
+    bx.legend(loc="upper right", fontsize=7)
+    fig.tight_layout()
+    for ext in ("png", "svg"):
+        buf = io.BytesIO()
+        fig.savefig(buf, format=ext, dpi=120)
+        write_atomic(os.path.join(out, f"dt_cost.{ext}"), buf.getvalue())
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------------------------
+# Friction and cohesion against the Bond number, one series per contact friction
+
+
+def bond_rows(table_dirs, labels):
+    """One row per level of each table folder (its levels/*/summary.json): the series label, Bo,
+    the steady pre-shear friction tau_pre/sigma_pre, phi_lin, phi_e and c/sigma_pre, with 95 %
+    intervals over packings (the ratio's from the packings' ratios)."""
+    rows = []
+    for folder, label in zip(table_dirs, labels):
+        for path in sorted(glob.glob(os.path.join(folder, "levels", "*", "summary.json"))):
+            with open(path) as fh:
+                js = json.load(fh)
+            s, mem = js["summary"], js["members"]
+            row = {"series": label, "level": s["label"], "K": s["K"], "kc_over_k1": s.get("kc_over_k1"),
+                   "sigma_pre_Pa": s["sigma_pre_Pa"], "Bo": s.get("Bo"), "Bo_ci95": s.get("Bo_ci95")}
+            for key, vals in (("mu_steady", [m["tau_pre_Pa"] / m["sigma_pre_Pa"] for m in mem]),
+                              ("c_over_sigma_pre", [m["c_Pa"] / m["sigma_pre_Pa"] for m in mem]),
+                              ("phi_lin_deg", [m["phi_lin_deg"] for m in mem]),
+                              ("phi_e_deg", [m["phi_e_deg"] for m in mem]),
+                              ("inv_ffc", [m["inv_ffc"] for m in mem])):
+                row[key], row[key + "_ci95"], _, _ = mean_ci(vals)
+            rows.append({k: (math.nan if v is None else v) for k, v in row.items()})
+    order = {label: k for k, label in enumerate(labels)}
+    return sorted(rows, key=lambda r: (order[r["series"]], r["Bo"] if math.isfinite(r["Bo"]) else -1.0))
+
+
+def write_bond(rows, out):
+    """bond.csv, bond.md and bond.{png,svg}: friction and cohesion against Bo per series."""
+    cols = list(rows[0].keys())
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(cols)
+    for r in rows:
+        w.writerow([r[c] if isinstance(r[c], str) else f"{r[c]:.6g}" for c in cols])
+    write_atomic(os.path.join(out, "bond.csv"), buf.getvalue())
+    lines = ["| series | level | σ_pre [MPa] | K | Bo | τ_pre/σ_pre | φ_lin [°] | φ_e [°] | c/σ_pre | ffc |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        ffc = 1 / r["inv_ffc"] if r["inv_ffc"] > 0 else math.inf
+        lines.append(f"| {r['series']} | {r['level']} | {r['sigma_pre_Pa'] / 1e6:.0f} | {r['K']} | "
+                     f"{fmt(r['Bo'], r['Bo_ci95'])} | {fmt(r['mu_steady'], r['mu_steady_ci95'])} | "
+                     f"{fmt(r['phi_lin_deg'], r['phi_lin_deg_ci95'])} | {fmt(r['phi_e_deg'], r['phi_e_deg_ci95'])} | "
+                     f"{fmt(r['c_over_sigma_pre'], r['c_over_sigma_pre_ci95'])} | {fmt(ffc)} |")
+    write_atomic(os.path.join(out, "bond.md"), "\n".join(lines) + "\n")
+    plot_bond(rows, out)
+
+
+def plot_bond(rows, out):
+    """Macroscopic friction (steady tau/sigma, tan phi_lin) and cohesion c/sigma_pre against Bo
+    (log axis; Bo = 0 drawn at the left edge)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4))
+    pos = [r["Bo"] for r in rows if r["Bo"] > 0]
+    left = min(pos) / 3 if pos else 1e-2
+    for k, series in enumerate(dict.fromkeys(r["series"] for r in rows)):
+        sr = sorted((r for r in rows if r["series"] == series), key=lambda r: r["Bo"])
+        bo = np.array([max(r["Bo"], left) for r in sr])
+        for key, style, name in (("mu_steady", "o-", "τ_pre/σ_pre (steady)"), ("phi_lin_deg", "s--", "tan φ_lin")):
+            y = np.array([r[key] for r in sr])
+            e = np.nan_to_num([r[key + "_ci95"] for r in sr])
+            if key == "phi_lin_deg":
+                y, e = np.tan(np.radians(y)), np.nan_to_num(e * np.pi / 180 / np.cos(np.radians(y)) ** 2)
+            ax.errorbar(bo, y, yerr=e, fmt=style, color=f"C{k}", ms=4, capsize=2, label=f"{series}: {name}")
+        bx.errorbar(bo, [r["c_over_sigma_pre"] for r in sr], yerr=np.nan_to_num([r["c_over_sigma_pre_ci95"] for r in sr]),
+                    fmt="o-", color=f"C{k}", ms=4, capsize=2, label=series)
+    for a in (ax, bx):
+        a.set_xscale("log")
+        a.axvline(left * 1.5, color="0.8", lw=0.8)
+        a.set_xlabel("Bo = f_pull(δ̄)/(σ_pre d²)  (leftmost: Bo = 0)")
+    ax.set_ylabel("macroscopic friction")
+    bx.set_ylabel("cohesion c / σ_pre")
+    bx.axhline(0, color="0.5", lw=0.8)
+    ax.legend(fontsize=7)
+    bx.legend(fontsize=7)
+    fig.tight_layout()
+    for ext in ("png", "svg"):
+        buf = io.BytesIO()
+        fig.savefig(buf, format=ext, dpi=120)
+        write_atomic(os.path.join(out, f"bond.{ext}"), buf.getvalue())
+    plt.close(fig)
+
+
 def sweep_levels(folder):
     """{row name: [member run folders]} of a `dem ensemble --sweep` folder (rows/NAME/members/mKKK)
     or of a plain ensemble folder (members/mKKK: one level named after the folder)."""
@@ -633,12 +889,35 @@ def main(argv=None):
                     help="RUNS are level folders of powder_compaction.toml runs (LEVEL/s*/): compaction and tensile tables")
     ap.add_argument("--levels", action="store_true",
                     help="RUNS are level folders of shear_tester.toml runs (LEVEL/s*/): every level, then the table")
+    ap.add_argument("--dt-chart", action="store_true",
+                    help="RUNS are level folders of one adhesion at several dt (LEVEL/s*/): the dt/cost chart")
+    ap.add_argument("--reference", default="", help="with --dt-chart: the level folder name of the reference dt "
+                    "(default: the finest)")
+    ap.add_argument("--vary", default="dt", choices=sorted(VARY),
+                    help="with --dt-chart: what differs between the level folders (dt or the shear rate)")
+    ap.add_argument("--bond", action="store_true",
+                    help="RUNS are table folders (levels/*/summary.json), one per series: friction, cohesion against Bo")
+    ap.add_argument("--series", default="", help="with --bond: comma-separated series labels, one per folder")
     ap.add_argument("--luding", default="", help="k1,kp,kc,phi_f,d (N/m, -, m) for the Bond number of a level")
     a = ap.parse_args(argv)
     try:
         if a.compaction:
             compaction_levels(a.runs, a.out)
             print(open(os.path.join(a.out, "compaction.md")).read())
+            return 0
+        if a.dt_chart:
+            levels = {os.path.basename(os.path.normpath(d)): sorted(
+                r for r in glob.glob(os.path.join(d, "*")) if os.path.isdir(r)) for d in a.runs}
+            rows, ref = dt_rows(levels, a.reference or None, a.vary)
+            write_dt_chart(rows, ref, a.out, a.label or ref)
+            print(open(os.path.join(a.out, "dt_cost.md")).read())
+            return 0
+        if a.bond:
+            labels = a.series.split(",") if a.series else [os.path.basename(os.path.normpath(d)) for d in a.runs]
+            if len(labels) != len(a.runs):
+                raise ValueError(f"--series has {len(labels)} labels for {len(a.runs)} folders: give one per folder")
+            write_bond(bond_rows(a.runs, labels), a.out)
+            print(open(os.path.join(a.out, "bond.md")).read())
             return 0
         if a.levels:
             analyse_levels({os.path.basename(os.path.normpath(d)): sorted(

@@ -773,3 +773,121 @@ TEST(Luding, RestitutionOfImpactsMatchesTheClosedFormAndAdhesionSticks) {
   const double gap = norm(dem::minimum_image(s.box, s.position[0], s.position[1])) - 2 * r;
   EXPECT_LT(gap, 0.0) << "the pair should stick";
 }
+
+// Zero adhesion gives the non-adhesive bits (issue 35). Luding's law is f = k1 delta on virgin
+// loading, k2 (delta - delta0) with delta0 = (1 - k1/k2) delta_max on unloading, -kc delta at
+// the adhesive limit, plus the same dashpot, and (a history law) no no-tension clamp. With
+// kc = 0 and k2 = k1 it is f = k1 delta + gamma d(delta)/dt on every branch: the linear
+// spring-dashpot with contact.allow_attractive = true (the linear law's default clamps the sum
+// at zero; Luding's kc = 0 does not: the dashpot may pull). The law needs kp > k1: at kp =
+// nextafter(k1) the increment (kp - k1) delta_max / delta* is below k1's last bit for every
+// overlap (delta* ~ 7e15 phi_f 2 a12 at k1 = 1e8 N/m), so k2 rounds to k1, delta0 to 0 and the force to the
+// bits of k1 delta. The curves are then the same bits; dt is taken from the linear model (t_c
+// of kp and of k1 may differ in the last bit).
+namespace {
+
+struct Witness {
+  dem::State s;
+  std::vector<std::vector<Vec3>> positions, forces;
+};
+
+Witness run_witness(const dem::Model& m, const dem::State& start, int steps, const VelGrad& rate) {
+  Witness w{start, {}, {}};
+  dem::Engine e(m, w.s);
+  for (int k = 0; k < steps; ++k) {
+    e.step(rate);
+    if (k % 100 == 99) { w.positions.push_back(w.s.position); w.forces.push_back(w.s.force); }
+  }
+  return w;
+}
+
+bool same_curves(const Witness& a, const Witness& b) {
+  if (a.positions.size() != b.positions.size()) return false;
+  for (std::size_t k = 0; k < a.positions.size(); ++k)
+    if (!dem_test::same_bits(a.positions[k], b.positions[k]) || !dem_test::same_bits(a.forces[k], b.forces[k]))
+      return false;
+  return dem_test::same_bits(a.s.velocity, b.s.velocity) && a.s.box.length.x == b.s.box.length.x;
+}
+
+// Luding with kc = 0 and kp = nextafter(k1) (k2 = k1 in floating point), dt of the linear model.
+dem::Model luding_as_linear(const std::vector<std::string>& more) {
+  std::vector<std::string> o = {"contact.normal=luding", "contact.luding_kc_N_m=0"};
+  o.insert(o.end(), more.begin(), more.end());
+  dem::Model m = dem_test::model_with(o);
+  const double k1 = m.contact.get("stiffness_N_m");
+  m.contact.set("luding_kp_N_m", std::nextafter(k1, 2 * k1));
+  return m;
+}
+
+}  // namespace
+
+TEST(Luding, ZeroAdhesionAndNoPlasticityGiveTheLinearLawsBits) {
+  // 300 spheres at 0.38 with small overlaps and random velocities, compressed and sheared: contacts
+  // load, unload (the dashpot pulling on some) and open.
+  const dem::State start = dem_test::random_state(300, 0.38, 1.0, 7);
+  for (const std::string mu : {"0", "0.5"}) {
+    const std::vector<std::string> common = {"contact.friction=" + mu, "contact.damping_kg_s=1"};
+    std::vector<std::string> lin = common, clamped = common;
+    lin.push_back("contact.allow_attractive=true");
+    const dem::Model linear = dem_test::model_with(lin), linear_clamped = dem_test::model_with(clamped);
+    dem::Model luding = luding_as_linear(common);
+    ASSERT_NE(luding.contact.get("luding_kp_N_m"), luding.contact.get("stiffness_N_m"));
+    luding.dt = linear.dt;
+    const VelGrad rate{Vec3{-0.05, -0.05, -0.05} * (1.0 / (2000 * linear.dt)), Vec3{0, 0.1 / (2000 * linear.dt), 0}};
+    const Witness a = run_witness(linear, start, 2000, rate);
+    const Witness b = run_witness(luding, start, 2000, rate);
+    EXPECT_TRUE(same_curves(a, b)) << "mu = " << mu;
+    EXPECT_GT(dem_test::max_force(a.s), 0.0);
+    // The witnesses discriminate: the clamped linear law differs where a dashpot pulls, and the
+    // runs' plasticity (kp = 5 k1) where a contact unloads.
+    EXPECT_FALSE(same_curves(a, run_witness(linear_clamped, start, 2000, rate))) << "mu = " << mu;
+    dem::Model plastic = luding;
+    plastic.contact.set("luding_kp_N_m", 5 * plastic.contact.get("stiffness_N_m"));
+    EXPECT_FALSE(same_curves(a, run_witness(plastic, start, 2000, rate))) << "mu = " << mu;
+  }
+}
+
+// With the runs' plasticity (kp = 5 k1, kc = 0) the law is still k1 delta on virgin loading: a
+// head-on impact gives the linear law's forces bit for bit while the overlap grows, and less
+// (k2 (delta - delta0) < k1 delta) from the first step it shrinks.
+TEST(Luding, ZeroAdhesionGivesTheLinearForcesBitForBitWhileEveryContactLoads) {
+  const double r = 0.5e-3;
+  const std::vector<std::string> common = {"contact.damping_kg_s=0.5", "contact.background_damping_kg_s=0",
+                                           "contact.allow_attractive=true"};
+  std::vector<std::string> lud = common;
+  lud.insert(lud.end(), {"contact.normal=luding", "contact.luding_kc_N_m=0", "contact.luding_kp_N_m=5e8",
+                         "contact.luding_plasticity_depth=0.05"});
+  const dem::Model linear = dem_test::model_with(common);
+  dem::Model luding = dem_test::model_with(lud);
+  luding.dt = linear.dt;
+  dem::State s = dem_test::make_state(Vec3{20e-3, 20e-3, 20e-3},
+                                      {Vec3{5e-3, 10e-3, 10e-3}, Vec3{5e-3 + 2 * r - 1e-9, 10e-3, 10e-3}}, {r, r});
+  s.velocity[0] = Vec3{1.0, 0, 0};
+  s.velocity[1] = Vec3{-1.0, 0, 0};
+  dem::State sa = s, sb = s;
+  dem::Engine ea(linear, sa), eb(luding, sb);
+  double deepest = 0;
+  int loading = 0, unloading = 0;
+  for (int k = 0; k < 400 && unloading == 0; ++k) {
+    ea.step(Vec3{0, 0, 0});
+    eb.step(Vec3{0, 0, 0});
+    // the forces of this step are those of the positions it reached
+    ASSERT_TRUE(dem_test::same_bits(sa.position, sb.position)) << "step " << k;
+    const double overlap = 2 * r - norm(dem::minimum_image(sa.box, sa.position[0], sa.position[1]));
+    if (overlap >= deepest) {   // virgin loading: delta = delta_max
+      ++loading;
+      deepest = overlap;
+      ASSERT_EQ(sa.force[1].x, sb.force[1].x) << "step " << k;
+      ASSERT_GT(sa.force[1].x, 0.0);   // particle 1 (right) is pushed along +x
+    } else {   // the first unloading step: k2 (delta - delta0) < k1 delta at the same overlap
+      ++unloading;
+      EXPECT_LT(sb.force[1].x, sa.force[1].x) << "step " << k;
+      const double k1 = 1e8, kp = 5e8, dstar = kp / (kp - k1) * 0.05 * 2 * (r / 2);
+      const double k2 = k1 + (kp - k1) * deepest / dstar, fb = k2 * (overlap - (1 - k1 / k2) * deepest);
+      const double dashpot = sa.force[1].x - k1 * overlap;   // the same dashpot in both
+      EXPECT_NEAR(sb.force[1].x, fb + dashpot, 1e-9 * k1 * deepest);
+    }
+  }
+  EXPECT_GT(loading, 10);
+  EXPECT_EQ(unloading, 1);
+}

@@ -121,3 +121,45 @@ def test_two_particle_pull_off_through_the_engine_equals_the_closed_form(dmax_ov
     # the overlap moves delta*/4000 per step: the discrete minimum misses the corner by < kc of that
     assert -f_min == pytest.approx(expected, rel=0, abs=kc * law.delta_star / 4000 + 1e-9 * expected)
     assert max(d for _, d, _ in rows) == pytest.approx(dmax_over_star * law.delta_star, rel=1e-6)
+
+
+def test_welch_interval_matches_scipys_welch_test():
+    """The half-width h of the difference's 95 % Welch interval: a difference of exactly h is
+    significant at 5 % by scipy's Welch t-test (ttest_ind, equal_var=False)."""
+    from scipy import stats
+    a, b = [1.0, 1.4, 0.8, 1.3, 1.1], [0.5, 0.9, 0.2, 1.6, 0.7, 0.4, 1.1, 0.6]
+    d, h = powders.welch_diff(a, b)
+    assert d == pytest.approx(np.mean(a) - np.mean(b))
+    shifted = np.asarray(a) - d + h   # the difference moved to the interval's end
+    assert stats.ttest_ind(shifted, b, equal_var=False).pvalue == pytest.approx(0.05, rel=1e-9)
+    assert math.isnan(powders.welch_diff([1.0], b)[1])
+
+
+def _fake_level(tmp_path, name, dt, values, monkeypatch_store):
+    """A level folder of runs whose analysis gives `values` (inv_ffc per packing, others fixed)."""
+    runs = []
+    for k, v in enumerate(values):
+        run = tmp_path / name / f"s{k + 1}"
+        run.mkdir(parents=True)
+        (run / "scene.toml").write_text(f"[integration]\ndt_over_tc = {dt}\n[particles]\ncount = 100\n")
+        (run / "manifest.json").write_text('{"complete": true}')
+        monkeypatch_store[str(run)] = v
+        runs.append(str(run))
+    return runs
+
+
+def test_dt_rows_take_the_finest_dt_as_reference_and_flag_means_outside_its_interval(tmp_path, monkeypatch):
+    store = {}
+    levels = {"fine": _fake_level(tmp_path, "fine", 0.05, [0.30, 0.32, 0.28, 0.31], store),
+              "mid": _fake_level(tmp_path, "mid", 0.2, [0.31, 0.29, 0.30, 0.33], store),
+              "coarse": _fake_level(tmp_path, "coarse", 0.5, [0.45, 0.47, 0.44, 0.46], store)}
+    base = {q: 1.0 for q, _, _ in powders.DT_QUANTITIES} | {"steps": 1000.0, "wall_s": 1.0}
+    monkeypatch.setattr(powders, "analyse_run", lambda r: base | {"inv_ffc": store[r]})
+    rows, ref = powders.dt_rows(levels)
+    assert ref == "fine"
+    by = {r["label"]: r for r in rows}
+    assert [r["label"] for r in rows] == ["coarse", "mid", "fine"]   # coarsest first
+    assert by["fine"]["reference"] and not by["fine"]["inv_ffc_outside"]
+    assert not by["mid"]["inv_ffc_outside"] and by["coarse"]["inv_ffc_outside"]
+    assert by["coarse"]["inv_ffc_diff"] == pytest.approx(0.455 - 0.3025)
+    assert by["mid"]["N"] == 100
