@@ -4,7 +4,9 @@
 // Sign conventions: stress compression positive [Pa]; strain rate extension positive [1/s].
 // Compressing an axis raises its stress, so d sigma_ii = -sum_j M_ij d eps_j.
 #pragma once
+#include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "dem/core/model.hpp"
@@ -56,16 +58,21 @@ class Servo {
   VelGrad update(const AxisResponse& r, double elapsed);
   /// Servo time constant tau [s] (0 before start()).
   double tau() const { return tau_; }
+  /// Steps between control updates (1 before start()).
+  std::int64_t update_steps() const { return every_; }
   /// Target normal stress per axis [Pa] (NaN where the axis is not stress controlled) and the
   /// mean-pressure target (NaN: none).
   Vec3 sigma_target() const { return sigma_target_; }
   double pressure_target() const { return pressure_target_; }
   /// Largest |y - y*| / y* over the controlled quantities of a stress [Pa] (0 without a servo).
   double relative_error(const Sym3& stress) const;
+  /// The same per controlled quantity, named as in the curve summary: sigma_xx, sigma_yy, sigma_zz
+  /// (relative to their targets), p (to its target), b (the lode_b row, relative to the p target).
+  std::vector<std::pair<std::string, double>> component_errors(const Sym3& stress) const;
 
  private:
   // scale: the denominator of the relative error (0: the target itself; the b row's target is 0)
-  struct Row { Vec3 c; Vec3 b; double target; double integral = 0; double scale = 0; };
+  struct Row { Vec3 c; Vec3 b; double target; double integral = 0; double scale = 0; const char* name = ""; };
   static double output(const Row& row, const Sym3& stress);
   std::vector<Row> rows_;
   VelGrad prescribed_;
@@ -73,6 +80,8 @@ class Servo {
   double pressure_target_ = NAN;
   ServoOptions options_;
   double tau_ = 0;
+  double t_i_ = 0;
+  std::int64_t every_ = 1;
 };
 
 /// Checks a loading path before anything runs; throws SceneError naming the stage, the problem
