@@ -36,12 +36,12 @@ AxisResponse axis_response(const Model& model, const State& state, const Neighbo
 /// stage (PathStage::lode_b) controls p by the sigma_3 axis and sigma_2 - sigma_3 - b (sigma_1 -
 /// sigma_3) = 0 by the sigma_2 axis; its relative error is measured against p. With
 /// e = y - y* (positive: too compressed) and G = C M B the affine gain matrix, the servo rate is
-///     u = G^-1 (e + I / T_i) / tau,    I = integral of e dt,    T_i = 8 tau,
-/// so that the closed loop de/dt = -(e + I/T_i)/tau is a damped second-order system (damping
-/// ratio sqrt(2) for the affine gain; still > 0.4 if the true stiffness is 10x softer) whose
-/// integral term removes the lag behind a steadily loading axis. tau = options.waves x the
-/// time an elastic wave (speed sqrt(M/rho_bulk)) takes to cross the longest box edge, fixed at
-/// the stage start. |B u| is limited to options.rate_max; the integral is frozen while limited
+///     u = G^-1 (e + I / T_i) / tau,    I = integral of e dt,    T_i = 4 tau,
+/// updated every update_steps() steps (about t_loop / 40, t_loop = options.waves x the time an
+/// elastic wave crosses the longest box edge, at the stage start), with tau = that interval: a
+/// dead-beat law on the affine response (the box deforms affinely, so that response is immediate;
+/// the slower non-affine relaxation is corrected at the next updates). |B u| is limited to
+/// options.rate_max; the integral is frozen while limited
 /// (anti-windup). The box rate is prescribed + B u. The prescribed part may carry shear entries
 /// (L_xy, L_xz, L_yz: simple shear at constant normal stress); they are strain controlled, the
 /// servo acts on the diagonal only, and their affine stress rate (AxisResponse::S) enters the
