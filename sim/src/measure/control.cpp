@@ -72,6 +72,7 @@ double shear_gain(const Vec3& c, const double S[3][3], const Vec3& g) {
 }  // namespace
 
 constexpr double kIntegralTimes = 4;   // T_i / tau
+constexpr double kFullRateError = 5e-3;   // the relative error that drives the servo at its rate limit
 
 // Steps between control updates for a loop time t_loop = waves x the wave crossing time [s]: one
 // update every t_loop / 40, but not more often than every kMinUpdateSteps steps unless the old
@@ -120,7 +121,15 @@ void Servo::start(const AxisResponse& r, const Model& model, const State& state)
   // No contacts (a dilute state): no wave speed; let the rate limit govern (an update every 25 steps).
   const double t_wave = m_max > 0 ? L / std::sqrt(m_max / rho_bulk) : 1000 * model.dt / options_.waves;
   every_ = update_interval(options_.waves * t_wave, model.dt);
-  tau_ = every_ * model.dt;   // dead-beat: the affine error closed in one update interval
+  // Dead-beat (tau = the update interval), but no faster than an error of kFullRateError of the
+  // target drives the servo at its rate limit: a stiff packing's own stress noise would otherwise
+  // set the box rate (at N = 2000, nu = 0.80: +-4x the test rate, docs/control.md).
+  tau_ = every_ * model.dt;
+  for (const Row& row : rows_) {
+    const double g = gain(row.c, r.M, row.b);
+    const double scale = row.scale > 0 ? row.scale : row.target;
+    if (g > 0) tau_ = std::max(tau_, kFullRateError * scale / (g * options_.rate_max));
+  }
   t_i_ = kIntegralTimes * tau_;
   for (Row& row : rows_) row.integral = 0;
 }

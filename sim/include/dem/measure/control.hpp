@@ -40,7 +40,9 @@ AxisResponse axis_response(const Model& model, const State& state, const Neighbo
 /// updated every update_steps() steps (about t_loop / 40, t_loop = options.waves x the time an
 /// elastic wave crosses the longest box edge, at the stage start), with tau = that interval: a
 /// dead-beat law on the affine response (the box deforms affinely, so that response is immediate;
-/// the slower non-affine relaxation is corrected at the next updates). |B u| is limited to
+/// the slower non-affine relaxation is corrected at the next updates), but at least the time in
+/// which an error of 0.5 % of the target drives the servo at its rate limit (the packing's stress
+/// noise must not set the box rate). |B u| is limited to
 /// options.rate_max; the integral is frozen while limited
 /// (anti-windup). The box rate is prescribed + B u. The prescribed part may carry shear entries
 /// (L_xy, L_xz, L_yz: simple shear at constant normal stress); they are strain controlled, the
