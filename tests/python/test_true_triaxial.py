@@ -38,7 +38,10 @@ def test_true_triaxial_holds_p_and_b_while_the_axial_strain_advances(small_run, 
     assert p_err.mean() < 0.015 and p_err.max() < 0.05, p_err
     assert b_err.mean() < 0.015 and b_err.max() < 0.05, b_err
     # z is sigma_1 and loads; x is sigma_3; b measured where sigma_1 - sigma_3 is well developed
-    assert np.all(sz > sx) and sz.mean() > 1.1 * p0
+    # (frictionless, b = 0.5: sigma_1 only ~10 % above p; the mean over the rows was 1.101 p0 with
+    # dem <= 0.9's servo and 1.096 p0 with the dead-beat one, which holds p and b 10x tighter: a
+    # 1.1 bound sat on the chaos of 400 spheres)
+    assert np.all(sz > sx) and sz.mean() > 1.05 * p0
     big = (sz - sx) > 0.2 * p0
     assert big.sum() > 10 and np.mean((sy - sx)[big] / (sz - sx)[big]) == pytest.approx(b, abs=0.05)
     assert c["eps_zz"][-1] == pytest.approx(-0.08, abs=1e-4)

@@ -422,9 +422,9 @@ static void set_protocol_rates(Model& m, const ProtocolRates& r, const std::stri
   p.cycle_rate = r.cycle_tc / m.t_contact;
   p.deviatoric_rate = r.dev_tc / m.t_contact;
   p.relax_max_time = r.relax_max_tc * m.t_contact;
-  if (p.servo.rate_max_tc == 0) p.servo.rate_max_tc = 2 * r.dev_tc;
+  if (p.servo.rate_max_tc == 0) p.servo.rate_max_tc = 4 * r.dev_tc;
   if (!(p.servo.rate_max_tc > 0) || !std::isfinite(p.servo.rate_max_tc))
-    throw SceneError(origin + ": servo.rate_max_tc must be a positive number (0: twice protocol.deviatoric_rate_tc)");
+    throw SceneError(origin + ": servo.rate_max_tc must be a positive number (0: 4 x protocol.deviatoric_rate_tc)");
   if (!(p.servo.waves >= 0.1) || !std::isfinite(p.servo.waves))
     throw SceneError(origin + ": servo.waves must be >= 0.1 (the servo time in elastic-wave crossings of the box; "
                      "shorter makes the servo fight the packing's own dynamics)");

@@ -72,6 +72,20 @@ double shear_gain(const Vec3& c, const double S[3][3], const Vec3& g) {
 }  // namespace
 
 constexpr double kIntegralTimes = 4;   // T_i / tau
+constexpr double kFullRateError = 5e-3;   // the relative error that drives the servo at its rate limit
+
+// Steps between control updates for a loop time t_loop = waves x the wave crossing time [s]: one
+// update every t_loop / 40, but not more often than every kMinUpdateSteps steps unless the old
+// interval t_loop / 20 (dem <= 0.9) already was: the update's pass over the contacts costs about
+// one time step (callgrind), so the halving adds at most ~10 % to a run (docs/control.md).
+namespace {
+constexpr std::int64_t kMinUpdateSteps = 5;
+std::int64_t update_interval(double t_loop, double dt) {
+  const std::int64_t old = std::max<std::int64_t>(1, std::llround(t_loop / (20 * dt)));
+  const std::int64_t halved = std::max<std::int64_t>(1, std::llround(t_loop / (40 * dt)));
+  return std::min(old, std::max(halved, kMinUpdateSteps));
+}
+}  // namespace
 
 Servo::Servo(const PathStage& stage, const VelGrad& prescribed, const ServoOptions& options)
     : prescribed_(prescribed), options_(options) {
@@ -79,16 +93,17 @@ Servo::Servo(const PathStage& stage, const VelGrad& prescribed, const ServoOptio
     const int k = stage.shape.diag.x != 0 ? 0 : stage.shape.diag.y != 0 ? 1 : 2;
     const int a3 = (k + 1) % 3, a2 = (k + 2) % 3;
     const double b = stage.lode_b;
-    rows_.push_back({Vec3{1, 1, 1} * (1.0 / 3.0), axis(a3), stage.pressure, 0, stage.pressure});
+    rows_.push_back({Vec3{1, 1, 1} * (1.0 / 3.0), axis(a3), stage.pressure, 0, stage.pressure, "p"});
     // sigma_2 - sigma_3 - b (sigma_1 - sigma_3) = 0
-    rows_.push_back({axis(a2) + axis(a3) * (b - 1) - axis(k) * b, axis(a2), 0.0, 0, stage.pressure});
+    rows_.push_back({axis(a2) + axis(a3) * (b - 1) - axis(k) * b, axis(a2), 0.0, 0, stage.pressure, "b"});
     pressure_target_ = stage.pressure;
   } else if (std::isfinite(stage.pressure)) {
-    rows_.push_back({Vec3{1, 1, 1} * (1.0 / 3.0), Vec3{1, 1, 1}, stage.pressure});
+    rows_.push_back({Vec3{1, 1, 1} * (1.0 / 3.0), Vec3{1, 1, 1}, stage.pressure, 0, 0, "p"});
     pressure_target_ = stage.pressure;
   }
   for (int a = 0; a < 3; ++a)
-    if (std::isfinite(component(stage.sigma, a))) rows_.push_back({axis(a), axis(a), component(stage.sigma, a)});
+    if (std::isfinite(component(stage.sigma, a)))
+      rows_.push_back({axis(a), axis(a), component(stage.sigma, a), 0, 0, a == 0 ? "sigma_xx" : a == 1 ? "sigma_yy" : "sigma_zz"});
   sigma_target_ = stage.sigma;
 }
 
@@ -103,16 +118,26 @@ void Servo::start(const AxisResponse& r, const Model& model, const State& state)
   for (int a = 0; a < 3; ++a) m_max = std::max(m_max, r.M[a][a]);
   const double rho_bulk = model.density * state.volume_fraction();
   const double L = std::max({state.box.length.x, state.box.length.y, state.box.length.z});
-  // No contacts (a dilute state): no wave speed; let the rate limit govern, with tau of 1000 steps.
+  // No contacts (a dilute state): no wave speed; let the rate limit govern (an update every 25 steps).
   const double t_wave = m_max > 0 ? L / std::sqrt(m_max / rho_bulk) : 1000 * model.dt / options_.waves;
-  tau_ = std::max(options_.waves * t_wave, 20 * model.dt);
+  every_ = update_interval(options_.waves * t_wave, model.dt);
+  // Dead-beat (tau = the update interval), but no faster than an error of kFullRateError of the
+  // target drives the servo at its rate limit: a stiff packing's own stress noise would otherwise
+  // set the box rate (at N = 2000, nu = 0.80: +-4x the test rate, docs/control.md).
+  tau_ = every_ * model.dt;
+  for (const Row& row : rows_) {
+    const double g = gain(row.c, r.M, row.b);
+    const double scale = row.scale > 0 ? row.scale : row.target;
+    if (g > 0) tau_ = std::max(tau_, kFullRateError * scale / (g * options_.rate_max));
+  }
+  t_i_ = kIntegralTimes * tau_;
   for (Row& row : rows_) row.integral = 0;
 }
 
 VelGrad Servo::update(const AxisResponse& r, double elapsed) {
   if (!active()) return prescribed_;
   const int m = static_cast<int>(rows_.size());
-  const double t_i = kIntegralTimes * tau_;
+  const double t_i = t_i_;
   Eigen::MatrixXd G(m, m);
   Eigen::VectorXd rhs(m), err(m);
   for (int a = 0; a < m; ++a) {
@@ -140,9 +165,15 @@ VelGrad Servo::update(const AxisResponse& r, double elapsed) {
 
 double Servo::relative_error(const Sym3& stress) const {
   double worst = 0;
-  for (const Row& row : rows_)
-    worst = std::max(worst, std::fabs(output(row, stress) - row.target) / (row.scale > 0 ? row.scale : row.target));
+  for (const auto& [name, e] : component_errors(stress)) worst = std::max(worst, e);
   return worst;
+}
+
+std::vector<std::pair<std::string, double>> Servo::component_errors(const Sym3& stress) const {
+  std::vector<std::pair<std::string, double>> e;
+  for (const Row& row : rows_)
+    e.emplace_back(row.name, std::fabs(output(row, stress) - row.target) / (row.scale > 0 ? row.scale : row.target));
+  return e;
 }
 
 // ---------------------------------------------------------------------------------------

@@ -176,6 +176,48 @@ std::string extra_row(const VelGrad& L, const Servo& servo, const Sym3& stress, 
   return b;
 }
 
+// The servo's hold on its targets, per controlled component, over a path's rows: the start-up
+// rows (less than kStartupEpsD of eps_d_accumulated past their stage's start) apart from the rest.
+constexpr double kStartupEpsD = 0.02;
+struct ServoSummary {
+  struct Component { long rows = 0, startup_rows = 0; double max = 0, sum_sq = 0, startup_max = 0; };
+  std::vector<std::pair<std::string, Component>> components;   // in order of first appearance
+  void add(const Servo& servo, const Sym3& stress, double stage_eps_d) {
+    for (const auto& [name, e] : servo.component_errors(stress)) {
+      auto it = std::find_if(components.begin(), components.end(), [&](const auto& c) { return c.first == name; });
+      if (it == components.end()) it = components.insert(components.end(), {name, Component{}});
+      Component& c = it->second;
+      if (stage_eps_d < kStartupEpsD) { ++c.startup_rows; c.startup_max = std::max(c.startup_max, e); }
+      else { ++c.rows; c.max = std::max(c.max, e); c.sum_sq += e * e; }
+    }
+  }
+  // Two comment lines after the rows (docs/control.md, "The servo's summary"); none without a servo.
+  void write(CurveFile& csv) const {
+    if (components.empty()) return;
+    char head[300];
+    std::snprintf(head, sizeof head, "servo: |measured - target| / scale per controlled component (scale: the target; "
+                  "b: the p target), rows with eps_d_accumulated >= %g past their stage's start (the start-up: "
+                  "startup_*), as servo_summary below", kStartupEpsD);
+    csv.comment(head);
+    std::string s = "servo_summary: {\"startup_eps_d\": " + number(kStartupEpsD) + ", \"components\": {";
+    for (std::size_t k = 0; k < components.size(); ++k) {
+      const Component& c = components[k].second;
+      const double rms = c.rows > 0 ? std::sqrt(c.sum_sq / c.rows) : NAN;
+      s += (k ? ", \"" : "\"") + components[k].first + "\": {\"max_rel\": " + number(c.rows ? c.max : NAN) +
+           ", \"rms_rel\": " + number(rms) + ", \"rows\": " + std::to_string(c.rows) +
+           ", \"startup_max_rel\": " + number(c.startup_rows ? c.startup_max : NAN) +
+           ", \"startup_rows\": " + std::to_string(c.startup_rows) + "}";
+    }
+    csv.comment(s + "}}");
+  }
+  static std::string number(double x) {   // JSON: a missing value (no rows) is null
+    if (!std::isfinite(x)) return "null";
+    char b[40];
+    std::snprintf(b, sizeof b, "%.6g", x);
+    return b;
+  }
+};
+
 // Everything one stage of a path needs from the path.
 struct PathRun {
   StageLoop& loop;
@@ -183,6 +225,7 @@ struct PathRun {
   bool quiet;
   double accumulated = 0;   // eps_d travelled along the whole path (sum of |d eps_d| per step)
   bool sheared = false;     // the path has a shear stage (extra columns)
+  ServoSummary summary;
 };
 
 // One stage of a path on the stage loop (stage_common.hpp): the servo, the stop probe, the
@@ -208,11 +251,12 @@ struct PathStageRun {
   std::int64_t stage_steps = 0;
   std::chrono::steady_clock::time_point last_progress = std::chrono::steady_clock::now();
   double scale = 1, x_before = 0;
+  double accumulated0;      // run.accumulated at the stage start
 
   PathStageRun(PathRun& r, const PathStage& st)
       : run(r), stage(st), model(r.loop.model), state(r.loop.state), dt(model.dt),
         gradient(st.shape * model.protocol.deviatoric_rate), servo(st, gradient, model.protocol.servo),
-        probe{st, Vec3{}, 0} {
+        probe{st, Vec3{}, 0}, accumulated0(r.accumulated) {
     // Rates re-based so opposite stages cancel exactly; strains keep counting from the path start.
     state.box.reference = state.box.length;
     state.box.log_strain = Vec3{0, 0, 0};
@@ -220,7 +264,7 @@ struct PathStageRun {
                      stage.stop == PathStop::TauXY || stage.stop == PathStop::TauXZ || stage.stop == PathStop::TauYZ;
     resp = axis_response(model, state, run.loop.engine.neighbor_list(), gradient);
     servo.start(resp, model, state);
-    every = servo.active() ? std::max<std::int64_t>(1, std::llround(servo.tau() / (20 * dt)))
+    every = servo.active() ? servo.update_steps()
                            : (needs_response ? 50 : 0);
     rate = servo.update(resp, 0);
     probe.strain0 = state.box.true_strain();
@@ -306,6 +350,7 @@ struct PathStageRun {
       done = m.E_kin < stage.until * std::max(m.E_pot, run.loop.e_floor) &&
              servo.relative_error(m.stress) < kRelaxedTolerance;
     last_sample = sample_on_x ? probe.value(state, resp) : travel;
+    run.summary.add(servo, m.stress, run.accumulated - accumulated0);
     return curve_row(m) + extra_row(rate, servo, m.stress, run.accumulated, run.sheared);
   }
   void progress_line(bool done) {
@@ -350,7 +395,7 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
         throw std::runtime_error("path " + label + ": targets are multiples of p0, the pressure at the path start, "
                                  "but it is " + std::to_string(p0) + " Pa (no contacts): give targets in Pa (*_Pa)");
   StageLoop loop{model, state, engine, csv, energy_floor(model, state), 0, state, 0, 0, Measurement{}};
-  PathRun run{loop, label, out.quiet};
+  PathRun run{loop, label, out.quiet, 0.0, false, ServoSummary{}};
   run.sheared = sheared;
   // The first row: the start state, with the first stage's name.
   const Measurement m0 = measure(model, state, engine.neighbor_list(), rate0);
@@ -360,6 +405,7 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
     const PathStage first = resolve(model, mode.path.front(), p0);
     Servo servo(first, rate0, model.protocol.servo);
     csv.row(curve_row(m0) + extra_row(rate0, servo, m0.stress, 0.0, sheared), first.name);
+    run.summary.add(servo, m0.stress, 0.0);
   }
   try {
     for (const PathStage& st : mode.path) run_path_stage(run, resolve(model, st, p0));
@@ -369,6 +415,7 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
     csv.abandon();
     throw;
   }
+  run.summary.write(csv);
   csv.commit(label);
   if (loop.max_inertial > kQuasiStaticInertial)
     std::cerr << "dem: warning: path " << label << " reached an inertial number of " << loop.max_inertial << " (> "

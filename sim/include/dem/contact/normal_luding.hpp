@@ -96,8 +96,11 @@ struct LudingNormal {
     return 0.5 * k2 * d * d;
   }
   double stiffness() const { return kp; }
-  /// The servo's affine stiffness of a contact [N/m]: k1, the loading branch's.
-  double tangent_stiffness(double, double, const double*) const { return k1; }
+  /// The servo's affine stiffness of a contact [N/m]
+  /// (k2 of the contact's delta_max, k1 <= k2 <= kp: its un-/reloading stiffness. An upper bound of
+  /// the response on any branch but the adhesive one, so that a dead-beat servo never overshoots:
+  /// with k1 the servo's gain was up to kp/k1 = 5x too high on reloaded contacts, docs/control.md.)
+  double tangent_stiffness(double, double a12, const double* h) const { return h ? k2_of(h[0], a12) : k1; }
 
   static const SubModelInfo& info() {
     static const SubModelInfo i = [] {

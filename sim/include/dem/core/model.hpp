@@ -155,7 +155,7 @@ struct DeformationMode {
 struct ServoOptions {
   double waves = 1;             ///< servo time constant / time for an elastic wave to cross the box
   double rate_max = 0;          ///< |servo strain rate| limit [1/s] (derived: rate_max_tc / t_c)
-  double rate_max_tc = 0;       ///< scene value; 0: 2 x protocol.deviatoric_rate_tc
+  double rate_max_tc = 0;       ///< scene value; 0: 4 x protocol.deviatoric_rate_tc
 };
 
 /// One stage of the preparation (`protocol.preparation` in a scene, or the built-in list made

@@ -4,7 +4,9 @@
 // Sign conventions: stress compression positive [Pa]; strain rate extension positive [1/s].
 // Compressing an axis raises its stress, so d sigma_ii = -sum_j M_ij d eps_j.
 #pragma once
+#include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "dem/core/model.hpp"
@@ -34,12 +36,14 @@ AxisResponse axis_response(const Model& model, const State& state, const Neighbo
 /// stage (PathStage::lode_b) controls p by the sigma_3 axis and sigma_2 - sigma_3 - b (sigma_1 -
 /// sigma_3) = 0 by the sigma_2 axis; its relative error is measured against p. With
 /// e = y - y* (positive: too compressed) and G = C M B the affine gain matrix, the servo rate is
-///     u = G^-1 (e + I / T_i) / tau,    I = integral of e dt,    T_i = 8 tau,
-/// so that the closed loop de/dt = -(e + I/T_i)/tau is a damped second-order system (damping
-/// ratio sqrt(2) for the affine gain; still > 0.4 if the true stiffness is 10x softer) whose
-/// integral term removes the lag behind a steadily loading axis. tau = options.waves x the
-/// time an elastic wave (speed sqrt(M/rho_bulk)) takes to cross the longest box edge, fixed at
-/// the stage start. |B u| is limited to options.rate_max; the integral is frozen while limited
+///     u = G^-1 (e + I / T_i) / tau,    I = integral of e dt,    T_i = 4 tau,
+/// updated every update_steps() steps (about t_loop / 40, t_loop = options.waves x the time an
+/// elastic wave crosses the longest box edge, at the stage start), with tau = that interval: a
+/// dead-beat law on the affine response (the box deforms affinely, so that response is immediate;
+/// the slower non-affine relaxation is corrected at the next updates), but at least the time in
+/// which an error of 0.5 % of the target drives the servo at its rate limit (the packing's stress
+/// noise must not set the box rate). |B u| is limited to
+/// options.rate_max; the integral is frozen while limited
 /// (anti-windup). The box rate is prescribed + B u. The prescribed part may carry shear entries
 /// (L_xy, L_xz, L_yz: simple shear at constant normal stress); they are strain controlled, the
 /// servo acts on the diagonal only, and their affine stress rate (AxisResponse::S) enters the
@@ -56,16 +60,21 @@ class Servo {
   VelGrad update(const AxisResponse& r, double elapsed);
   /// Servo time constant tau [s] (0 before start()).
   double tau() const { return tau_; }
+  /// Steps between control updates (1 before start()).
+  std::int64_t update_steps() const { return every_; }
   /// Target normal stress per axis [Pa] (NaN where the axis is not stress controlled) and the
   /// mean-pressure target (NaN: none).
   Vec3 sigma_target() const { return sigma_target_; }
   double pressure_target() const { return pressure_target_; }
   /// Largest |y - y*| / y* over the controlled quantities of a stress [Pa] (0 without a servo).
   double relative_error(const Sym3& stress) const;
+  /// The same per controlled quantity, named as in the curve summary: sigma_xx, sigma_yy, sigma_zz
+  /// (relative to their targets), p (to its target), b (the lode_b row, relative to the p target).
+  std::vector<std::pair<std::string, double>> component_errors(const Sym3& stress) const;
 
  private:
   // scale: the denominator of the relative error (0: the target itself; the b row's target is 0)
-  struct Row { Vec3 c; Vec3 b; double target; double integral = 0; double scale = 0; };
+  struct Row { Vec3 c; Vec3 b; double target; double integral = 0; double scale = 0; const char* name = ""; };
   static double output(const Row& row, const Sym3& stress);
   std::vector<Row> rows_;
   VelGrad prescribed_;
@@ -73,6 +82,8 @@ class Servo {
   double pressure_target_ = NAN;
   ServoOptions options_;
   double tau_ = 0;
+  double t_i_ = 0;
+  std::int64_t every_ = 1;
 };
 
 /// Checks a loading path before anything runs; throws SceneError naming the stage, the problem

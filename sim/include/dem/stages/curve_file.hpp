@@ -22,6 +22,9 @@ class CurveFile {
   CurveFile(const std::string& path, const std::string& preamble, const std::vector<std::string>& extra = {});
   /// Appends `row` (no newline, no stage) and `stage`.
   void row(const std::string& row, const std::string& stage);
+  /// Appends a comment line `# text` (after the rows: a summary known only at the end; every
+  /// reader of curves skips '#' lines wherever they are).
+  void comment(const std::string& text) { out_ << "# " << text << "\n"; }
   /// Flushes and throws std::runtime_error (naming `stage`) if any write failed (disk full?).
   void check(const std::string& stage);
   /// Closes, checks, and renames PATH.part to PATH.
