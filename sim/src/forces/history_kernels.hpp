@@ -15,6 +15,8 @@
 // reference bits. (2) A scalar pass adds them in list order as pair_loop_history does; the
 // dissipation is summed in the same order.
 #pragma once
+#include <immintrin.h>
+
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
@@ -89,6 +91,38 @@ template <class Rows> struct Shifted {
   DEM_HK auto operator[](int l) const { return rows[first + l]; }
 };
 
+/// Width 4 by hand (AVX2 intrinsics, as the frictionless kernel's load4): with GCC's vector
+/// shuffles, GCC 12 loads each upper half into a register and inserts it (two instructions);
+/// its intrinsics fold the load into vinsertf128. Not always_inline (an always_inline function
+/// cannot carry a target the generic templates calling it lack): the kernels that reach it
+/// (history_avx2, history_avx512) are `flatten`, so it is inlined there.
+#define DEM_HK_AVX2 __attribute__((target("avx2"))) inline
+/// Doubles 0-3 of rows r0 .. r3 as the columns a b c d.
+DEM_HK_AVX2 void rows4(const double* r0, const double* r1, const double* r2, const double* r3, lanes::L4& a,
+                       lanes::L4& b, lanes::L4& c, lanes::L4& d) {
+  const __m256d t0 = _mm256_insertf128_pd(_mm256_castpd128_pd256(_mm_loadu_pd(r0)), _mm_loadu_pd(r2), 1);
+  const __m256d t1 = _mm256_insertf128_pd(_mm256_castpd128_pd256(_mm_loadu_pd(r1)), _mm_loadu_pd(r3), 1);
+  const __m256d t2 = _mm256_insertf128_pd(_mm256_castpd128_pd256(_mm_loadu_pd(r0 + 2)), _mm_loadu_pd(r2 + 2), 1);
+  const __m256d t3 = _mm256_insertf128_pd(_mm256_castpd128_pd256(_mm_loadu_pd(r1 + 2)), _mm_loadu_pd(r3 + 2), 1);
+  a = (lanes::L4)_mm256_unpacklo_pd(t0, t1);   // r0[0] r1[0] r2[0] r3[0]
+  b = (lanes::L4)_mm256_unpackhi_pd(t0, t1);
+  c = (lanes::L4)_mm256_unpacklo_pd(t2, t3);
+  d = (lanes::L4)_mm256_unpackhi_pd(t2, t3);
+}
+/// Doubles 0-2 of rows r0 .. r3 (Vec3: no fourth double to read) as the columns a b c.
+DEM_HK_AVX2 void rows4_3(const double* r0, const double* r1, const double* r2, const double* r3, lanes::L4& a,
+                         lanes::L4& b, lanes::L4& c) {
+  const __m256d t0 = _mm256_insertf128_pd(_mm256_castpd128_pd256(_mm_loadu_pd(r0)), _mm_loadu_pd(r2), 1);
+  const __m256d t1 = _mm256_insertf128_pd(_mm256_castpd128_pd256(_mm_loadu_pd(r1)), _mm_loadu_pd(r3), 1);
+  const __m128d lo = _mm_loadh_pd(_mm_load_sd(r0 + 2), r1 + 2), hi = _mm_loadh_pd(_mm_load_sd(r2 + 2), r3 + 2);
+  a = (lanes::L4)_mm256_unpacklo_pd(t0, t1);
+  b = (lanes::L4)_mm256_unpackhi_pd(t0, t1);
+  c = (lanes::L4)_mm256_insertf128_pd(_mm256_castpd128_pd256(lo), hi, 1);
+}
+
+/// Whether any of four lanes is set: one vmovmskpd (lanes::any's OR of the lanes: nine).
+DEM_HK_AVX2 bool any4(lanes::Mask<lanes::L4> m) { return _mm256_movemask_pd((__m256d)m) != 0; }
+
 /// Four consecutive doubles of each lane's row (row[l], l < W) as four lane values a b c d
 /// (column 0 .. 3): two-double halves transposed with GCC's vector shuffles (as the
 /// frictionless AVX2 kernel's load4), so that one source serves every width; 8 lanes are two
@@ -103,14 +137,7 @@ template <class T, class Rows> DEM_HK void load_block(const Rows& row, T& a, T& 
     c = __builtin_shufflevector(c0, c1, 0, 1, 2, 3, 4, 5, 6, 7);
     d = __builtin_shufflevector(d0, d1, 0, 1, 2, 3, 4, 5, 6, 7);
   } else if constexpr (lanes::width<T> == 4) {
-    for (int half = 0; half < 2; ++half) {   // columns 0-1, then 2-3
-      const V2 h0 = load_unaligned<V2>(row[0] + 2 * half), h1 = load_unaligned<V2>(row[1] + 2 * half);
-      const V2 h2 = load_unaligned<V2>(row[2] + 2 * half), h3 = load_unaligned<V2>(row[3] + 2 * half);
-      const T t0 = __builtin_shufflevector(h0, h2, 0, 1, 2, 3);   // r0 r0 r2 r2
-      const T t1 = __builtin_shufflevector(h1, h3, 0, 1, 2, 3);   // r1 r1 r3 r3
-      (half ? c : a) = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
-      (half ? d : b) = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
-    }
+    rows4(row[0], row[1], row[2], row[3], a, b, c, d);
   } else {
     static_assert(lanes::width<T> == 2);
     for (int half = 0; half < 2; ++half) {
@@ -157,19 +184,19 @@ template <class T, class Rows> DEM_HK void load_block3(const Rows& row, T& a, T&
     b = __builtin_shufflevector(b0, b1, 0, 1, 2, 3, 4, 5, 6, 7);
     c = __builtin_shufflevector(c0, c1, 0, 1, 2, 3, 4, 5, 6, 7);
   } else if constexpr (lanes::width<T> == 4) {
-    const V2 h0 = load_unaligned<V2>(row[0]), h1 = load_unaligned<V2>(row[1]);
-    const V2 h2 = load_unaligned<V2>(row[2]), h3 = load_unaligned<V2>(row[3]);
-    const T t0 = __builtin_shufflevector(h0, h2, 0, 1, 2, 3);
-    const T t1 = __builtin_shufflevector(h1, h3, 0, 1, 2, 3);
-    a = __builtin_shufflevector(t0, t1, 0, 4, 2, 6);
-    b = __builtin_shufflevector(t0, t1, 1, 5, 3, 7);
-    c = __builtin_shufflevector(V2{row[0][2], row[1][2]}, V2{row[2][2], row[3][2]}, 0, 1, 2, 3);
+    rows4_3(row[0], row[1], row[2], row[3], a, b, c);
   } else {
     const V2 h0 = load_unaligned<V2>(row[0]), h1 = load_unaligned<V2>(row[1]);
     a = __builtin_shufflevector(h0, h1, 0, 2);
     b = __builtin_shufflevector(h0, h1, 1, 3);
     c = T{row[0][2], row[1][2]};
   }
+}
+
+/// Whether any lane of a mask is set (width 4: any4).
+template <class M> DEM_HK bool any_lane(M m) {
+  if constexpr (sizeof(M) == 32) return any4(m);
+  else return lanes::any(m);
 }
 
 /// The history of W consecutive pairs (rows of CM::history doubles from H) into lanes h[k], and
@@ -210,29 +237,24 @@ DEM_HK void history_group(const HistoryInputs<CM>& in, const CM& model, const co
   using lanes::select;
   constexpr int W = lanes::width<T>, kw = CM::history;
   const T mz = lanes::splat<T>(-0.0), zero = lanes::splat<T>(0.0);
+  // Each particle's record and angular velocity are loaded together (one address per lane),
+  // and every group runs the body: a group without contact (rare) gives only lanes the
+  // selects below discard. (With an early exit for it, GCC moved the loads of what only the
+  // contact path reads past the exit and kept the indices, or halves of the loads, on the stack.)
   const double* P = in.packed;
-  T xi, yi, zi, ri, xj, yj, zj, rj, ox, oy, oz, pad;
+  T xi, yi, zi, ri, xj, yj, zj, rj, ox, oy, oz, pad, vxi, vyi, vzi, vxj, vyj, vzj;
+  contact::V3<T> wi{zero, zero, zero}, wj{zero, zero, zero};
   load_block(Indexed<std::int32_t>{P, I, 8}, xi, yi, zi, ri);
+  load_block(Indexed<std::int32_t>{P + 4, I, 8}, vxi, vyi, vzi, pad);
+  if constexpr (CM::rotations) load_block3(Indexed<std::int32_t>{&in.w[0].x, I, 3}, wi.x, wi.y, wi.z);
   load_block(Indexed<std::int32_t>{P, J, 8}, xj, yj, zj, rj);
+  load_block(Indexed<std::int32_t>{P + 4, J, 8}, vxj, vyj, vzj, pad);
+  if constexpr (CM::rotations) load_block3(Indexed<std::int32_t>{&in.w[0].x, J, 3}, wj.x, wj.y, wj.z);
   load_block(Indexed<Image>{in.off, C, 4}, ox, oy, oz, pad);
   contact::Separation<T> sep = contact::separation(xi, yi, zi, ri, xj + ox, yj + oy, zj + oz, rj);
   const auto touch = contact::touching(sep);
-  if (!lanes::any(touch)) {   // no contact in the group: nothing to add, the springs end
-    for (double* a : {out.fx, out.fy, out.fz, out.tix, out.tiy, out.tiz, out.tjx, out.tjy, out.tjz, out.d})
-      store(a + q, mz);
-    std::fill(H, H + kw * W, 0.0);
-    return;
-  }
   T h[kw > 0 ? kw : 1];
   load_history<T, kw>(H, h);
-  contact::V3<T> wi{zero, zero, zero}, wj{zero, zero, zero};
-  if constexpr (CM::rotations) {
-    load_block3(Indexed<std::int32_t>{&in.w[0].x, I, 3}, wi.x, wi.y, wi.z);
-    load_block3(Indexed<std::int32_t>{&in.w[0].x, J, 3}, wj.x, wj.y, wj.z);
-  }
-  T vxi, vyi, vzi, vxj, vyj, vzj;   // velocities: entries 4-7 of the records
-  load_block(Indexed<std::int32_t>{P + 4, I, 8}, vxi, vyi, vzi, pad);
-  load_block(Indexed<std::int32_t>{P + 4, J, 8}, vxj, vyj, vzj, pad);
   T mi = zero, mj = zero;   // masses: read only by a sub-model of the pair (per_pair: Hertz)
   if constexpr (CM::per_pair)
     for (int l = 0; l < W; ++l) mi[l] = in.mass[I[l]], mj[l] = in.mass[J[l]];
@@ -282,6 +304,7 @@ DEM_HK void history_body(const HistoryInputs<CM>& in, long p0, int n, HistoryChu
   std::copy(H, H + kw * valid, in.history + kw * (p0 + whole));
 }
 #undef DEM_HK
+#undef DEM_HK_AVX2
 
 template <class CM>
 using HistoryKernelFn = void (*)(const HistoryInputs<CM>&, long p0, int n, HistoryChunk& out);
@@ -292,11 +315,11 @@ void history_generic(const HistoryInputs<CM>& in, long p0, int n, HistoryChunk& 
   history_body<lanes::L2, Sheared>(in, p0, n, out);
 }
 template <bool Sheared, class CM>
-__attribute__((target("avx2"))) void history_avx2(const HistoryInputs<CM>& in, long p0, int n, HistoryChunk& out) {
+__attribute__((target("avx2"), flatten)) void history_avx2(const HistoryInputs<CM>& in, long p0, int n, HistoryChunk& out) {
   history_body<lanes::L4, Sheared>(in, p0, n, out);
 }
 template <bool Sheared, class CM>
-__attribute__((target("avx512f,avx512vl,avx512dq"))) void history_avx512(const HistoryInputs<CM>& in, long p0, int n,
+__attribute__((target("avx512f,avx512vl,avx512dq"), flatten)) void history_avx512(const HistoryInputs<CM>& in, long p0, int n,
                                                                             HistoryChunk& out) {
   history_body<lanes::L8, Sheared>(in, p0, n, out);
 }
