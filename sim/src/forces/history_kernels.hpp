@@ -120,13 +120,9 @@ DEM_HK_AVX2 void rows4_3(const double* r0, const double* r1, const double* r2, c
   c = (lanes::L4)_mm256_insertf128_pd(_mm256_castpd128_pd256(lo), hi, 1);
 }
 
-/// Whether any of four lanes is set: one vmovmskpd (lanes::any's OR of the lanes: nine).
-DEM_HK_AVX2 bool any4(lanes::Mask<lanes::L4> m) { return _mm256_movemask_pd((__m256d)m) != 0; }
-
 /// Four consecutive doubles of each lane's row (row[l], l < W) as four lane values a b c d
-/// (column 0 .. 3): two-double halves transposed with GCC's vector shuffles (as the
-/// frictionless AVX2 kernel's load4), so that one source serves every width; 8 lanes are two
-/// groups of 4 joined.
+/// (column 0 .. 3): two-double halves transposed (as the frictionless AVX2 kernel's load4): 4
+/// lanes by rows4, 2 lanes with GCC's vector shuffles; 8 lanes are two groups of 4 joined.
 template <class T, class Rows> DEM_HK void load_block(const Rows& row, T& a, T& b, T& c, T& d) {
   if constexpr (lanes::width<T> == 8) {
     V4 a0, b0, c0, d0, a1, b1, c1, d1;
@@ -191,12 +187,6 @@ template <class T, class Rows> DEM_HK void load_block3(const Rows& row, T& a, T&
     b = __builtin_shufflevector(h0, h1, 1, 3);
     c = T{row[0][2], row[1][2]};
   }
-}
-
-/// Whether any lane of a mask is set (width 4: any4).
-template <class M> DEM_HK bool any_lane(M m) {
-  if constexpr (sizeof(M) == 32) return any4(m);
-  else return lanes::any(m);
 }
 
 /// The history of W consecutive pairs (rows of CM::history doubles from H) into lanes h[k], and
