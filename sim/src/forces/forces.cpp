@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <type_traits>
 
 namespace dem {
@@ -144,11 +145,27 @@ inline void queue_spill(std::vector<SpilledForce>& to, int j, const Vec3& f) {
   s.f = f;
 }
 
+// Whether a force is not zero (+-0 in every component: adding it changes nothing), as
+// `x != 0 || y != 0 || z != 0` (a NaN counts as not zero), from the bits without the sign: GCC
+// compiles the comparisons to three ucomisd/setp/cmovne triples.
+inline bool nonzero(double x, double y, double z) {
+  std::uint64_t a, b, c;
+  std::memcpy(&a, &x, 8);
+  std::memcpy(&b, &y, 8);
+  std::memcpy(&c, &z, 8);
+  return ((a | b | c) << 1) != 0;
+}
+
 // Pass 2 of a chunk: the forces in list order, as pair_loop_reference adds them. `fi` and
-// `current` carry the running sum of the pairs of particle `current` across chunks.
+// `current` carry the running sum of the pairs of particle `current` across chunks. The pairs
+// whose j another block owns are queued after the loop, in list order (as add_history_chunk:
+// with the queueing in the loop GCC keeps each pair's force in memory).
 inline void add_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, const double* fx, const double* fy,
                       const double* fz, int end, Vec3* f, std::vector<std::vector<SpilledForce>>& spill,
-                      const std::uint16_t* block_of, int& current, Vec3& fi) {
+                      const std::uint16_t* block_of, int& current_sum, Vec3& fi_sum) {
+  int current = current_sum;
+  Vec3 fi = fi_sum;
+  int spilled[kernels::kChunk], count = 0;
   for (int q = 0; q < n; ++q) {
     const int i = pi[q], j = pj[q];
     if (i != current) {   // f[i] += 0 (a particle without pairs) would change nothing: skipped
@@ -158,8 +175,14 @@ inline void add_chunk(const std::int32_t* pi, const std::int32_t* pj, int n, con
     }
     const Vec3 fj{fx[q], fy[q], fz[q]};
     if (j < end) f[j] += fj;
-    else if (fj.x != 0.0 || fj.y != 0.0 || fj.z != 0.0) queue_spill(spill[block_of[j]], j, fj);   // +-0: no-op
+    else spilled[count++] = q;
     fi -= fj;
+  }
+  current_sum = current;
+  fi_sum = fi;
+  for (int k = 0; k < count; ++k) {
+    const int q = spilled[k], j = pj[q];
+    if (nonzero(fx[q], fy[q], fz[q])) queue_spill(spill[block_of[j]], j, Vec3{fx[q], fy[q], fz[q]});   // +-0: no-op
   }
 }
 
@@ -197,10 +220,9 @@ void spill_pairs(const std::int32_t* pj, const kernels::HistoryChunk& c, const i
                  const std::uint16_t* block_of) {
   for (int k = 0; k < count; ++k) {
     const int q = spilled[k], j = pj[q];
-    const Vec3 fj{c.fx[q], c.fy[q], c.fz[q]};
-    if (fj.x != 0.0 || fj.y != 0.0 || fj.z != 0.0) queue_spill(spill[block_of[j]], j, fj);
-    const Vec3 tj{c.tjx[q], c.tjy[q], c.tjz[q]};
-    if (Spin && (tj.x != 0.0 || tj.y != 0.0 || tj.z != 0.0)) queue_spill(spill_torque[block_of[j]], j, tj);
+    if (nonzero(c.fx[q], c.fy[q], c.fz[q])) queue_spill(spill[block_of[j]], j, Vec3{c.fx[q], c.fy[q], c.fz[q]});
+    if (Spin && nonzero(c.tjx[q], c.tjy[q], c.tjz[q]))
+      queue_spill(spill_torque[block_of[j]], j, Vec3{c.tjx[q], c.tjy[q], c.tjz[q]});
   }
 }
 
