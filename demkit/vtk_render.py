@@ -176,6 +176,11 @@ def main(argv=None):
     ap.add_argument("--out", required=True, help="PNG to write")
     ap.add_argument("--size", type=int, default=900, help="image size in pixels")
     a = ap.parse_args(argv)
+    try:
+        import vtk  # noqa: F401
+    except ImportError:
+        raise SystemExit("vtk_render: needs Debian's python3-vtk9 (and xvfb without a display), which come with the "
+                         "tests' packages: bash scripts/install-deps.sh --only test")
     ensure_display(argv)
     info = render(a.stage, a.frame, a.out, a.size)
     print(f"vtk_render: frame {info['frame']}: {info['particles']} particles, {info['contacts']} contacts -> {a.out}",
