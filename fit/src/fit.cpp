@@ -4,6 +4,7 @@
 #include <ceres/ceres.h>
 #include <gsl/gsl_blas.h>
 #include <gsl/gsl_cdf.h>
+#include <gsl/gsl_errno.h>
 #include <gsl/gsl_linalg.h>
 #include <gsl/gsl_multifit_nlinear.h>
 #include <gsl/gsl_vector.h>
@@ -17,6 +18,13 @@
 #include <stdexcept>
 
 namespace demfit {
+
+// GSL's default error handler aborts the process (a Python session with it): every GSL call here
+// checks its status instead. Set once when a process loads demfit (the CLI, the tests, demtk).
+[[maybe_unused]] const bool kGslErrorsReturned = [] {
+  gsl_set_error_handler_off();
+  return true;
+}();
 
 void init_glog() {
   static std::once_flag once;
@@ -83,10 +91,14 @@ double jacobian_rcond(const std::vector<double>& e, double x0, double x_max, dou
     gsl_matrix_set(J, i, c++, (1 - ex) * amp);
     gsl_matrix_set(J, i, c, (x_max - x0) * e[i] * ex * beta);
   }
-  gsl_linalg_SV_decomp(J, V, S, work);
+  bool finite = true;
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t c = 0; c < p; ++c) finite = finite && std::isfinite(gsl_matrix_get(J, i, c));
+  // A failed SVD (no convergence on absurd data) reads as "not determined": rcond 0.
+  const int status = finite ? gsl_linalg_SV_decomp(J, V, S, work) : GSL_EDOM;
   const double smax = gsl_vector_get(S, 0), smin = gsl_vector_get(S, p - 1);
   gsl_matrix_free(J); gsl_matrix_free(V); gsl_vector_free(S); gsl_vector_free(work);
-  return smax > 0 && std::isfinite(smin) ? smin / smax : 0.0;
+  return status == GSL_SUCCESS && smax > 0 && std::isfinite(smin) ? smin / smax : 0.0;
 }
 
 double mad_scale(std::vector<double> r) {

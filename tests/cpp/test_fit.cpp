@@ -200,3 +200,20 @@ TEST(Fit, AbsurdButFiniteInputsDoNotCrash) {
   } catch (const std::invalid_argument&) {
   }
 }
+
+// Found by tests/fuzz/fuzz_demtk.py (seed 2, input 22759): one point at 1e308 made GSL's SVD of the
+// scaled Jacobian fail to converge, and GSL's default error handler aborted the process (SIGABRT).
+// GSL errors are returned in every process that links demfit; a failed SVD reads as "not determined".
+TEST(Fit, AGslFailureIsNotAnAbort) {
+  std::vector<double> e, y;
+  for (int i = 0; i < 12; ++i) { e.push_back(0.01 * i); y.push_back(1 - std::exp(-0.1 * i)); }
+  y[10] = 1e308;
+  demfit::FitOptions o;
+  o.window_min = -1e308;
+  o.window_max = 9.2e18;
+  try {
+    const auto r = demfit::fit_saturating(e, y, o);
+    EXPECT_FALSE(demfit::unusable_reason(r).empty());
+  } catch (const std::invalid_argument&) {
+  }
+}

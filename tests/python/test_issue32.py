@@ -83,6 +83,9 @@ def test_ctrl_c_stops_a_long_run_with_the_state_intact(call, tmp_path):
         import math, os, signal, threading, time
         import numpy as np
         import demtk
+        # A process started in the background by a non-interactive shell inherits SIGINT ignored, and
+        # Python then installs no KeyboardInterrupt handler: what is tested is the handler's path.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         sc = demtk.load_scene({SMALL!r})
         st = demtk.random_packing(sc, 0.3)
         threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
