@@ -20,7 +20,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
-from report import write_markdown  # noqa: E402
+from report import save_figure, write_markdown  # noqa: E402
 
 DEM = os.path.join(ROOT, "build", "dem")
 CSV = os.path.join(HERE, "ensemble_coverage.csv")
@@ -63,8 +63,7 @@ def chart(rows, stem):
     for a in axes:
         a.set_xscale("log", base=2); a.set_xlabel("packings K"); a.grid(alpha=0.3); a.legend(fontsize=6)
     fig.tight_layout()
-    fig.savefig(stem + ".png", dpi=110)
-    fig.savefig(stem + ".svg")
+    save_figure(fig, stem, dpi=110)
 
 
 def main():

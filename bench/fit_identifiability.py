@@ -18,7 +18,7 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
-from report import write_markdown  # noqa: E402
+from report import save_figure, write_markdown  # noqa: E402
 
 DEM = os.path.join(ROOT, "build", "dem")
 CSV = os.path.join(HERE, "fit_identifiability.csv")
@@ -81,8 +81,7 @@ def main():
     fig.suptitle(f"Identifiability of the saturating-law fit (red line: median error of β = {LOST:.0%}; "
                  "★ the N = 9261 paper-scene s_dev curve)", fontsize=11)
     fig.tight_layout()
-    for ext in ("png", "svg"):
-        fig.savefig(os.path.join(ROOT, "docs", f"fit_identifiability.{ext}"), dpi=110)
+    save_figure(fig, os.path.join(ROOT, "docs", "fit_identifiability"), dpi=110)
 
     def cell(L, s, rho):
         return next(r for r in rows if r["length_beta_eps"] == L and r["noise_over_amplitude"] == s

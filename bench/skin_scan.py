@@ -30,7 +30,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
-from report import write_markdown  # noqa: E402
+from report import save_figure, write_markdown  # noqa: E402
 
 DEM = os.path.join(ROOT, "build", "dem")
 DTS = (0.2, 0.1, 0.05, 0.02)
@@ -132,7 +132,7 @@ def figure(runs, c, path):
     axes[0].legend(fontsize=8, title="points: median (bars: range) of the rounds;\nlines: cost model; dotted: auto",
                    title_fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, exts=("png",))
 
 
 def report(res):
@@ -188,7 +188,7 @@ def main():
                "dropped": dropped, "best": {str(k): v for k, v in best_skins(runs, c).items()}}
         with open(jpath, "w") as fh:
             json.dump(res, fh, indent=2)
-    figure(res["runs"], res["cost_ns"], os.path.join(ROOT, "docs", "skin_scan.png"))
+    figure(res["runs"], res["cost_ns"], os.path.join(ROOT, "docs", "skin_scan"))
     report(res)
 
 

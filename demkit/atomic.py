@@ -31,6 +31,21 @@ def write_atomic(path, data):
     os.replace(tmp, path)
 
 
+def write_figure(fig, stem, exts=("png", "svg"), dpi=120, metadata=None, close=True):
+    """stem.EXT for each of exts, each rendered in memory and written atomically (a failed or
+    interrupted save leaves the previous file, never half a figure). metadata: {ext: dict} passed
+    to savefig (PNG text chunks, SVG Dublin Core). Closes the figure unless close=False."""
+    import io
+    for ext in exts:
+        buf = io.BytesIO()
+        kw = {"metadata": metadata[ext]} if metadata and ext in metadata else {}
+        fig.savefig(buf, format=ext, dpi=dpi, **kw)
+        write_atomic(f"{stem}.{ext}", buf.getvalue())
+    if close:
+        import matplotlib.pyplot as plt
+        plt.close(fig)
+
+
 def write_json_atomic(path, obj, indent=1):
     """JSON of `obj`; NaN and infinities become null (they are not JSON numbers)."""
     write_atomic(path, json.dumps(finite_or_null(obj), indent=indent, allow_nan=False) + "\n")

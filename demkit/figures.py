@@ -12,6 +12,8 @@ import sys
 
 import numpy as np
 
+from demkit.atomic import write_figure
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # Curve columns and fit parameters as a paper prints them (dimensionless unless a unit is given).
@@ -116,16 +118,14 @@ def save(fig, stem, run=None, dpi=150):
     """stem.png and stem.svg with the provenance in their metadata: PNG text chunks Software
     (toolkit version), Source (scene sha256 and physics hash), Title; SVG Dublin Core Creator,
     Source, Title."""
-    import matplotlib.pyplot as plt
     p = provenance(os.path.abspath(run) if run else None)
     source = f"scene sha256:{p['scene'] or 'none'}; physics {p['physics'] or 'none'}"
     title = os.path.basename(stem)
     SAVED.append({"stem": stem, "empty": len(empty_axes(fig)), "title": fig._suptitle.get_text() if fig._suptitle else "",
                   "axes": sum(1 for ax in fig.axes if ax.get_visible())})
-    fig.savefig(stem + ".png", dpi=dpi, metadata={"Software": p["version"], "Source": source, "Title": title})
-    fig.savefig(stem + ".svg", metadata={"Creator": p["version"], "Source": source, "Title": title,
-                                         "Date": None})
-    plt.close(fig)
+    write_figure(fig, stem, dpi=dpi, metadata={
+        "png": {"Software": p["version"], "Source": source, "Title": title},
+        "svg": {"Creator": p["version"], "Source": source, "Title": title, "Date": None}})
 
 
 def legend_if_any(ax, **kw):

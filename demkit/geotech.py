@@ -31,7 +31,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from scipy import optimize, stats
 
-from demkit.atomic import write_atomic
+from demkit.atomic import write_atomic, write_figure
 from demkit.curves import read_curve, require
 
 # The window (in eps_d, the curves' deviatoric strain: 1.5 x the soil-mechanics eps_q) over which
@@ -521,8 +521,7 @@ def plot_curves(results, out, plt):
         axes[1, 0].set_ylabel("ε_vol (compression +)")
         fig.suptitle(f"μ = {mu}, {level}")
         fig.tight_layout()
-        fig.savefig(os.path.join(out, f"curves_mu{mu}_{level}.png"), dpi=110)
-        plt.close(fig)
+        write_figure(fig, os.path.join(out, f"curves_mu{mu}_{level}"), exts=("png",), dpi=110)
 
 
 def plot_rowe(results, out, plt):
@@ -538,8 +537,7 @@ def plot_rowe(results, out, plt):
     ax.set_ylabel("σ₁/σ₃")
     ax.set_title("Rowe: triaxial compression (blue dense, red loose)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(os.path.join(out, "rowe.png"), dpi=110)
-    plt.close(fig)
+    write_figure(fig, os.path.join(out, "rowe"), exts=("png",), dpi=110)
 
 
 def plot_surface(surface, out, plt):
@@ -559,8 +557,7 @@ def plot_surface(surface, out, plt):
     ax.set_title("critical state; lines: MN (solid), LD (dashed) from b = 0", fontsize=9)
     ax.legend(fontsize=6)
     fig.tight_layout()
-    fig.savefig(os.path.join(out, "failure_surface_b.png"), dpi=110)
-    plt.close(fig)
+    write_figure(fig, os.path.join(out, "failure_surface_b"), exts=("png",), dpi=110)
 
 
 def analyse(root, out, plots=True):

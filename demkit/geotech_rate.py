@@ -26,7 +26,6 @@ freedom). A parameter is "not determined" (NaN) where a replicate fails to conve
 to a bound (the data do not reach the plateau it names).
 """
 import argparse
-import csv
 import glob
 import math
 import os
@@ -38,7 +37,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from demkit import geotech
-from demkit.atomic import write_atomic
+from demkit.atomic import write_atomic, write_figure
 from demkit.curves import read_curve, read_text, require
 
 END_WINDOW = geotech.END_WINDOW       # eps_d window of the steady state (0.2)
@@ -330,10 +329,7 @@ def plot(fits, members, out, skip=frozenset()):
     ax.set_title("points: packings (open: volume not steady, not fitted)\nsolid: Jop et al.'s μ(I); dashed: μ_0 + b I where it is not determined", fontsize=8)
     bx.set_title("lines: ν = ν_max − a I fitted", fontsize=8)
     fig.tight_layout()
-    tmp = os.path.join(out, ".mu_i.png.tmp")
-    fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    os.replace(tmp, os.path.join(out, "mu_i.png"))
+    write_figure(fig, os.path.join(out, "mu_i"), exts=("png",), dpi=110)
 
 
 def store(groups, out):

@@ -39,7 +39,7 @@ import sys
 import numpy as np
 from scipy import stats
 
-from demkit.atomic import write_atomic, write_json_atomic
+from demkit.atomic import write_atomic, write_figure, write_json_atomic
 from demkit.curves import CurveError, read_curve, require
 
 CLASSES = ((1.0, "not flowing"), (2.0, "very cohesive"), (4.0, "cohesive"), (10.0, "easy-flowing"),
@@ -423,11 +423,7 @@ def plot_loci(summaries, out):
         ax.set_title(f"{s['label']} (kc/k1 = {s.get('kc_over_k1', math.nan):g}): ffc = {fmt(s['ffc'])}", fontsize=9)
         ax.legend(fontsize=6, loc="upper left")
     fig.tight_layout()
-    for ext in ("png", "svg"):
-        buf = io.BytesIO()
-        fig.savefig(buf, format=ext, dpi=120)
-        write_atomic(os.path.join(out, f"yield_loci.{ext}"), buf.getvalue())
-    plt.close(fig)
+    write_figure(fig, os.path.join(out, "yield_loci"))
 
 
 def plot_flow_function(summaries, out):
@@ -461,11 +457,7 @@ def plot_flow_function(summaries, out):
     ax.set_title("flow function (95 % intervals over packings)", fontsize=9)
     ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
-    for ext in ("png", "svg"):
-        buf = io.BytesIO()
-        fig.savefig(buf, format=ext, dpi=120)
-        write_atomic(os.path.join(out, f"flow_function.{ext}"), buf.getvalue())
-    plt.close(fig)
+    write_figure(fig, os.path.join(out, "flow_function"))
 
 
 def level_extra(members, scene_keys):
@@ -573,11 +565,7 @@ def plot_compaction(per_level, out):
     ax.set_title("confined compaction in load steps, at rest (▲: the loose state)", fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    for ext in ("png", "svg"):
-        buf = io.BytesIO()
-        fig.savefig(buf, format=ext, dpi=120)
-        write_atomic(os.path.join(out, f"compaction.{ext}"), buf.getvalue())
-    plt.close(fig)
+    write_figure(fig, os.path.join(out, "compaction"))
 
 
 # ------------------------------------------------------------------------------------------
@@ -710,11 +698,7 @@ def plot_dt_chart(rows, out, level_text):
     bx.set_title(f"cost per packing (N = {ref['N']:.0f})", fontsize=9)
     bx.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
-    for ext in ("png", "svg"):
-        buf = io.BytesIO()
-        fig.savefig(buf, format=ext, dpi=120)
-        write_atomic(os.path.join(out, f"dt_cost.{ext}"), buf.getvalue())
-    plt.close(fig)
+    write_figure(fig, os.path.join(out, "dt_cost"))
 
 
 # ------------------------------------------------------------------------------------------
@@ -795,11 +779,7 @@ def plot_bond(rows, out):
     ax.legend(fontsize=7)
     bx.legend(fontsize=7)
     fig.tight_layout()
-    for ext in ("png", "svg"):
-        buf = io.BytesIO()
-        fig.savefig(buf, format=ext, dpi=120)
-        write_atomic(os.path.join(out, f"bond.{ext}"), buf.getvalue())
-    plt.close(fig)
+    write_figure(fig, os.path.join(out, "bond"))
 
 
 def sweep_levels(folder):
