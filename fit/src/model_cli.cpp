@@ -504,8 +504,10 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   else throw InputError("--surface " + o.surface + ": give ld (Lade-Duncan), mn (Matsuoka-Nakai) or none");
   if (o.fabric_lode == "principal") co.fabric = FabricLode::Principal;
   else if (o.fabric_lode == "norm") co.fabric = FabricLode::Norm;
+  else if (o.fabric_lode == "opening") co.fabric = FabricLode::Opening;
   else throw InputError("--fabric-lode " + o.fabric_lode + ": give principal (the largest principal deviatoric fabric "
-                        "saturates at every Lode angle) or norm (F_dev saturates at F_max at every Lode angle)");
+                        "saturates at every Lode angle), norm (F_dev saturates at F_max at every Lode angle) or opening "
+                        "(principal, and the fabric gated by the minor principal stress)");
   return co;
 }
 
@@ -704,7 +706,8 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
   app.add_option("--surface", o.surface, "Lode-angle surface of the extended family: ld (Lade-Duncan), mn "
                  "(Matsuoka-Nakai), none");
   app.add_option("--fabric-lode", o.fabric_lode, "Lode rule of the extended family's fabric limit: principal (the "
-                 "largest principal deviatoric fabric saturates at every Lode angle), norm (F_dev saturates at F_max)");
+                 "largest principal deviatoric fabric saturates at every Lode angle), norm (F_dev saturates at F_max), opening "
+                 "(principal, and the fabric gated by the minor principal stress; docs/model.md)");
   app.add_flag("--force", o.force, "overwrite an existing output folder");
 }
 

@@ -301,7 +301,9 @@ const char* surface_name(Surface s) {
   return s == Surface::MatsuokaNakai ? "Matsuoka-Nakai" : s == Surface::LadeDuncan ? "Lade-Duncan" : "none";
 }
 
-const char* fabric_lode_name(FabricLode f) { return f == FabricLode::Principal ? "principal" : "norm"; }
+const char* fabric_lode_name(FabricLode f) {
+  return f == FabricLode::Principal ? "principal" : f == FabricLode::Opening ? "opening" : "norm";
+}
 
 CurveData read_curve(const std::string& path, const std::string& mode, double nu) {
   const Table t = read_table(path);

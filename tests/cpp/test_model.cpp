@@ -720,6 +720,33 @@ TEST(ModelFriction, FabricLimitHoldsTheLargestPrincipalComponent) {
   EXPECT_NEAR(far("D3", FabricLode::Norm), F_max, 1e-6);
 }
 
+// The opening rule's gate: the minor principal component of a unit deviator (hand-built as in the
+// test above: -F/sqrt(3) in D2, -F/3 in axisymmetric compression); at b_ref the rule is the
+// principal rule bit for bit, in D3 the fabric grows later than under the principal rule but
+// reaches the same limit, and the stress ratio and pressure paths are those of the principal
+// rule until the fabric differs (the gate acts on the fabric only).
+TEST(ModelFriction, OpeningRuleGatesTheFabricByTheMinorPrincipalStress) {
+  EXPECT_NEAR(minor_fraction(0.5), 1 / std::sqrt(3.0), 1e-15);
+  EXPECT_NEAR(minor_fraction(0.0), 1.0 / 3.0, 1e-15);
+  EXPECT_NEAR(minor_fraction(1.0), 2.0 / 3.0, 1e-15);
+  const Parameters P = frictional_truth();
+  const auto iso = P.iso();
+  const double nu = 0.74, p0 = isotropic_pressure(iso.data(), nu);
+  std::vector<double> eps;
+  for (int i = 0; i <= 300; ++i) eps.push_back(0.01 * i);
+  auto run = [&](const char* mode, FabricLode f) {
+    return monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, eps, 2e-3,
+                                  Ext<double>{P.ext, lode_b_of(mode), P.surface, f});
+  };
+  const auto d2o = run("D2", FabricLode::Opening), d2p = run("D2", FabricLode::Principal);
+  for (std::size_t i = 0; i < eps.size(); ++i) EXPECT_EQ(d2o[i].F, d2p[i].F) << i;
+  const auto d3o = run("D3", FabricLode::Opening), d3p = run("D3", FabricLode::Principal);
+  const double F_max = local(P.shear, nu, P.nu_ref).F_max;
+  EXPECT_LT(d3o[20].F - d3o[0].F, 0.8 * (d3p[20].F - d3p[0].F));   // eps_d = 0.2: later
+  EXPECT_NEAR(d3o.back().F, std::sqrt(3.0) / 2 * F_max, 1e-4);       // the same limit
+  EXPECT_EQ(d3o[1].s, d3p[1].s);
+}
+
 // Synthetic D2 ensembles made by the frictional family with known parameters (K = 8, three
 // volume fractions, AR(1) noise rho = 0.9): the calibration recovers the extension's
 // coefficients within 3 jackknife standard errors, and the active terms (n_F, kappa_s) are

@@ -181,7 +181,7 @@ def test_bad_family_and_surface_are_refused(tmp_path):
     r = run(ENSEMBLE, "--out", str(tmp_path / "s"), "--family", "extended", "--surface", "tresca", "--no-plots")
     assert r.returncode == 2 and "--surface" in r.stderr and "ld" in r.stderr, r.stderr
     r = run(ENSEMBLE, "--out", str(tmp_path / "l"), "--family", "extended", "--fabric-lode", "max", "--no-plots")
-    assert r.returncode == 2 and "--fabric-lode max" in r.stderr and "principal" in r.stderr and "norm" in r.stderr, r.stderr
+    assert r.returncode == 2 and "--fabric-lode max" in r.stderr and "principal" in r.stderr and "opening" in r.stderr, r.stderr
     assert not os.path.exists(tmp_path / "l")
 
 

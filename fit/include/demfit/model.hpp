@@ -67,7 +67,12 @@ constexpr double kLodeBD2 = 0.5;
 /// max_i |F_i - tr F/3| saturates at the same value at every Lode angle (a hexagonal, Tresca-like
 /// limit in the deviatoric plane), so the norm's limit is F_max c(b_ref)/c(b), c(b) the largest
 /// |principal component| of a unit deviator at b (fabric_lode_factor). docs/model.md.
-enum class FabricLode { Norm = 0, Principal };
+///
+/// `Opening`: the limit as `Principal`, and the fabric's gate r^n_F driven by the minor principal
+/// deviatoric stress ratio |sigma_3 - p|/p (contacts opening along the extension directions)
+/// over its value at the D2 limit, instead of by s/s_lim: the same at b_ref, slower in
+/// axisymmetric compression, where the minor deviator is s/3 against D2's s/sqrt(3).
+enum class FabricLode { Norm = 0, Principal, Opening };
 
 /// Named view of all parameters (double), with units; `iso()`/`shear()` give the Ceres blocks.
 struct Parameters {
@@ -210,6 +215,10 @@ inline double principal_fraction(double b) {
   return std::max(2.0 - b, 1.0 + b) / (3.0 * std::sqrt(1.0 - b + b * b));
 }
 
+/// Size of the minor (most negative) principal component of a unit deviator at b:
+/// (1 + b) / (3 sqrt(1 - b + b^2)); 1/3 at b = 0, 1/sqrt(3) at b = 1/2, 2/3 at b = 1.
+inline double minor_fraction(double b) { return (1.0 + b) / (3.0 * std::sqrt(1.0 - b + b * b)); }
+
 /// The fabric limit at b over the one at b_ref: 1 for `Norm`, c(b_ref)/c(b) for `Principal`
 /// (sqrt(3)/2 for axisymmetric compression against D2).
 inline double fabric_lode_factor(FabricLode f, double b, double b_ref = kLodeBD2) {
@@ -311,7 +320,12 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   T r = T(sigma) * y.s / s_lim;
   if (!(r > T(1e-6))) r = T(1e-6);
   using std::pow;
-  const T gate_F = m.ext.p ? pow(r, X.n_F) : T(1.0);                     // fabric follows the mobilisation
+  // The fabric's gate: the mobilisation r, or under the `Opening` rule the minor principal
+  // deviatoric stress ratio over its value at the D2 limit (r itself at b_ref).
+  T r_F = r;
+  if (m.ext.fabric == FabricLode::Opening && m.ext.b != kLodeBD2)
+    r_F = r * s_lim * T(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2)) / L.s_max;
+  const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
   const T shape_s = T(1.0) + X.kappa_s * r;                               // stress ratio: linear for longer
   // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
   const T F_lim = m.ext.p ? L.F_max * T(fabric_lode_factor(m.ext.fabric, m.ext.b)) : L.F_max;
