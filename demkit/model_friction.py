@@ -135,15 +135,15 @@ def summary_rows(folder):
     return rows, chi2
 
 
-def table(work, mus, norm_work=None):
+def table(work, mus, norm_work=None, middle="norm"):
     """WORK/before_after.{md,csv}: per curve the group model (before) and the extended family (after);
     with norm_work (a run with --fabric-lode norm) also the extended family under the norm rule (the
-    first round's), between them."""
+    first round's), between them; `middle` names that column (the rule it was run with)."""
     head = ["mu", "mode", "nu", "role", "quantity", "group_rms_over_band [-]"]
     if norm_work:
-        head.append("extended_norm_rms_over_band [-]")
+        head.append(f"extended_{middle}_rms_over_band [-]")
     head.append("extended_rms_over_band [-]")
-    arrow = "before → norm rule → after" if norm_work else "before → after"
+    arrow = f"before → {middle} rule → after" if norm_work else "before → after"
     out_rows = []
     md = [f"| μ | curve | ν | role | p* (ε_v isobaric): {arrow} | s_dev | F_dev |", "|---|---|---|---|---|---|---|"]
     chis = []
@@ -197,6 +197,7 @@ def main(argv=None):
     ap.add_argument("--fabric-lode", default="principal", choices=("principal", "norm", "opening"),
                     help="the extended family's fabric-limit rule (norm: the first round's numbers)")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
+    ap.add_argument("--middle-rule", default="norm", help="the --fabric-lode of --norm-work's run (its column name)")
     ap.add_argument("--norm-work", default=None,
                     help="a WORK folder of the same command with --fabric-lode norm: its extended family is put "
                          "between before and after in the table")
@@ -218,7 +219,7 @@ def main(argv=None):
         with open(os.path.join(dst, "model.log"), "w") as log:
             if subprocess.call(cmd, stderr=log) not in (0, 1):
                 raise SystemExit(f"model_friction: {' '.join(cmd)} failed (see {dst}/model.log)")
-    table(a.out, a.mu, a.norm_work)
+    table(a.out, a.mu, a.norm_work, a.middle_rule)
 
 
 if __name__ == "__main__":
