@@ -186,6 +186,28 @@ def table(work, mus, norm_work=None, middle="norm"):
     print("\n".join(md))
 
 
+def parameter_table(work, mus):
+    """WORK/parameters_all.md: every coefficient of the extended family per mu, value +- its
+    jackknife SE (the covariance SE where no jackknife ran, marked c)."""
+    cols, names = [], []
+    for mu in mus:
+        x_dir = family_dirs(os.path.join(work, f"mu_{mu}", "model"))[1]
+        c = read_csv(os.path.join(x_dir, "parameters.csv"))
+        vals = {}
+        for i, n in enumerate(c["parameter"]):
+            v, jk, cov = (float(c[k][i]) for k in ("value", "se_jackknife", "se_covariance"))
+            se, mark = (jk, "") if np.isfinite(jk) else (cov, " c")
+            vals[n] = f"{v:.4g} ± {se:.2g}{mark}" if np.isfinite(se) else f"{v:.4g}"
+            if n not in names:
+                names.append(n)
+        cols.append(vals)
+    md = ["| parameter | " + " | ".join(f"μ = {mu}" for mu in mus) + " |", "|---|" + "---|" * len(mus)]
+    md += [f"| {n} | " + " | ".join(c.get(n, "") for c in cols) + " |" for n in names]
+    write_atomic(os.path.join(work, "parameters_all.md"),
+                 "<!-- the extended family's coefficients per mu, value ± jackknife SE over the packings (c: covariance "
+                 "SE); demkit/model_friction.py -->\n" + "\n".join(md) + "\n")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", required=True, help="working folder (copies of the stored ensembles and the model results)")
@@ -220,6 +242,7 @@ def main(argv=None):
             if subprocess.call(cmd, stderr=log) not in (0, 1):
                 raise SystemExit(f"model_friction: {' '.join(cmd)} failed (see {dst}/model.log)")
     table(a.out, a.mu, a.norm_work, a.middle_rule)
+    parameter_table(a.out, a.mu)
 
 
 if __name__ == "__main__":
