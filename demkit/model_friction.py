@@ -2,6 +2,7 @@
 table of issue 31 (docs/model.md, "The frictional extension"; docs/friction.md).
 
     python3 -m demkit.model_friction --out WORK [--dem build/dem] [--mu 0 0.5 ...] [--no-jackknife] [--surface ld]
+        [--fabric-lode principal|norm|opening]
 
 For every mu: WORK/mu_MU/ is a working copy of data/friction_n1000/mu_MU (ensemble means, isotropic
 branches, member D2/D3 curves) plus WORK/mu_MU/paths/isobaric_phiX.csv, the ensemble of the
@@ -134,44 +135,77 @@ def summary_rows(folder):
     return rows, chi2
 
 
-def table(work, mus):
-    head = ["mu", "mode", "nu", "role", "quantity", "group [band]", "extended [band]"]
+def table(work, mus, norm_work=None, middle="norm"):
+    """WORK/before_after.{md,csv}: per curve the group model (before) and the extended family (after);
+    with norm_work (a run with --fabric-lode norm) also the extended family under the norm rule (the
+    first round's), between them; `middle` names that column (the rule it was run with)."""
+    head = ["mu", "mode", "nu", "role", "quantity", "group_rms_over_band [-]"]
+    if norm_work:
+        head.append(f"extended_{middle}_rms_over_band [-]")
+    head.append("extended_rms_over_band [-]")
+    arrow = f"before → {middle} rule → after" if norm_work else "before → after"
     out_rows = []
-    md = ["| μ | curve | ν | role | p* (ε_v isobaric): before → after | s_dev | F_dev |", "|---|---|---|---|---|---|---|"]
+    md = [f"| μ | curve | ν | role | p* (ε_v isobaric): {arrow} | s_dev | F_dev |", "|---|---|---|---|---|---|---|"]
     chis = []
+    nan4 = [float("nan")] * 4
     for mu in mus:
         g_dir, x_dir, chosen = family_dirs(os.path.join(work, f"mu_{mu}", "model"))
         g, g_chi = summary_rows(g_dir)
         x, x_chi = summary_rows(x_dir)
+        n = summary_rows(family_dirs(os.path.join(norm_work, f"mu_{mu}", "model"))[1])[0] if norm_work else None
         chis.append((mu, g_chi, x_chi, chosen))
         for key in sorted(g, key=lambda k: ({"D2": 0, "D3": 1}.get(k[0], 2), k[1])):
             role, gv = g[key]
-            xv = x.get(key, (role, [float("nan")] * 4))[1]
-            cells = []
+            cols = [gv] + ([n.get(key, (role, nan4))[1]] if n is not None else []) + [x.get(key, (role, nan4))[1]]
             for q, name in ((0, "p_star"), (1, "eps_v"), (2, "s_dev"), (3, "F_dev")):
-                if np.isfinite(gv[q]) or np.isfinite(xv[q]):
-                    out_rows.append([mu, key[0], f"{key[1]:.2f}", role, name, fmt(gv[q]), fmt(xv[q])])
+                if any(np.isfinite(c[q]) for c in cols):
+                    out_rows.append([mu, key[0], f"{key[1]:.2f}", role, name] + [fmt(c[q]) for c in cols])
             first = 1 if key[0] == "isobaric" else 0
-            for q in (first, 2, 3):
-                cells.append(f"{gv[q]:.2f} → {xv[q]:.2f}")
+            cells = [" → ".join(f"{c[q]:.2f}" for c in cols) for q in (first, 2, 3)]
             md.append(f"| {mu} | {key[0]} | {key[1]:.2f} | {role} | " + " | ".join(cells) + " |")
     md += ["", "| μ | χ²/dof group | χ²/dof extended | held-out test chooses |", "|---|---|---|---|"]
     md += [f"| {mu} | {gc:.3g} | {xc:.3g} | {ch} |" for mu, gc, xc, ch in chis]
-    # Compact: per mu the worst curve of each kind, before -> after.
-    md += ["", "| μ | χ²/dof before → after | worst fitted D2 | worst predicted D3 | worst predicted isobaric | chosen |",
-           "|---|---|---|---|---|---|"]
+    # Compact: per mu the worst curve of each kind, before -> (norm rule ->) after.
+    md += ["", f"| μ | χ²/dof before → after | worst fitted D2 | worst predicted D3 ({arrow}) | worst predicted isobaric "
+           "| chosen |", "|---|---|---|---|---|---|"]
     for mu, gc, xc, ch in chis:
         cells = []
         for mode in ("D2", "D3", "isobaric"):
-            g = [float(r[5]) for r in out_rows if r[0] == mu and r[1] == mode and np.isfinite(float(r[5]))]
-            x = [float(r[6]) for r in out_rows if r[0] == mu and r[1] == mode and np.isfinite(float(r[6]))]
-            cells.append(f"{max(g):.2f} → {max(x):.2f}" if g and x else "–")
+            sel = [r for r in out_rows if r[0] == mu and r[1] == mode]
+            worst = []
+            for c in range(5, len(head)):
+                v = [float(r[c]) for r in sel if np.isfinite(float(r[c]))]
+                worst.append(max(v) if v else float("nan"))
+            if mode != "D3":
+                worst = [worst[0], worst[-1]]   # the rule changes D3 only
+            cells.append(" → ".join(f"{w:.2f}" for w in worst) if sel else "–")
         md.append(f"| {mu} | {gc:.3g} → {xc:.3g} | " + " | ".join(cells) + f" | {ch} |")
-    text = ["mu,mode,nu,role,quantity,group_rms_over_band [-],extended_rms_over_band [-]\n"]
-    text += [",".join(r) + "\n" for r in out_rows]
+    text = [",".join(head) + "\n"] + [",".join(r) + "\n" for r in out_rows]
     write_atomic(os.path.join(work, "before_after.csv"), "".join(text))
     write_atomic(os.path.join(work, "before_after.md"), "\n".join(md) + "\n")
     print("\n".join(md))
+
+
+def parameter_table(work, mus):
+    """WORK/parameters_all.md: every coefficient of the extended family per mu, value +- its
+    jackknife SE (the covariance SE where no jackknife ran, marked c)."""
+    cols, names = [], []
+    for mu in mus:
+        x_dir = family_dirs(os.path.join(work, f"mu_{mu}", "model"))[1]
+        c = read_csv(os.path.join(x_dir, "parameters.csv"))
+        vals = {}
+        for i, n in enumerate(c["parameter"]):
+            v, jk, cov = (float(c[k][i]) for k in ("value", "se_jackknife", "se_covariance"))
+            se, mark = (jk, "") if np.isfinite(jk) else (cov, " c")
+            vals[n] = f"{v:.4g} ± {se:.2g}{mark}" if np.isfinite(se) else f"{v:.4g}"
+            if n not in names:
+                names.append(n)
+        cols.append(vals)
+    md = ["| parameter | " + " | ".join(f"μ = {mu}" for mu in mus) + " |", "|---|" + "---|" * len(mus)]
+    md += [f"| {n} | " + " | ".join(c.get(n, "") for c in cols) + " |" for n in names]
+    write_atomic(os.path.join(work, "parameters_all.md"),
+                 "<!-- the extended family's coefficients per mu, value ± jackknife SE over the packings (c: covariance "
+                 "SE); demkit/model_friction.py -->\n" + "\n".join(md) + "\n")
 
 
 def main(argv=None):
@@ -182,7 +216,13 @@ def main(argv=None):
     ap.add_argument("--mu", nargs="+", default=list(MUS))
     ap.add_argument("--no-jackknife", action="store_true")
     ap.add_argument("--surface", default="ld")
+    ap.add_argument("--fabric-lode", default="principal", choices=("principal", "norm", "opening"),
+                    help="the extended family's fabric-limit rule (norm: the first round's numbers)")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
+    ap.add_argument("--middle-rule", default="norm", help="the --fabric-lode of --norm-work's run (its column name)")
+    ap.add_argument("--norm-work", default=None,
+                    help="a WORK folder of the same command with --fabric-lode norm: its extended family is put "
+                         "between before and after in the table")
     a = ap.parse_args(argv)
     for mu in a.mu:
         src = os.path.join(a.store, f"mu_{mu}")
@@ -193,14 +233,16 @@ def main(argv=None):
             raise SystemExit(f"model_friction: {src} does not exist (--store: the friction study's folder)")
         copy_tree(src, dst)
         isobaric_paths(src, dst)
-        cmd = [a.dem, "model", dst, "--family", "auto", "--surface", a.surface, "--force", "--no-plots"]
+        cmd = [a.dem, "model", dst, "--family", "auto", "--surface", a.surface, "--fabric-lode", a.fabric_lode, "--force",
+               "--no-plots"]
         if a.no_jackknife:
             cmd.append("--no-jackknife")
         print("model_friction:", " ".join(cmd), file=sys.stderr)
         with open(os.path.join(dst, "model.log"), "w") as log:
             if subprocess.call(cmd, stderr=log) not in (0, 1):
                 raise SystemExit(f"model_friction: {' '.join(cmd)} failed (see {dst}/model.log)")
-    table(a.out, a.mu)
+    table(a.out, a.mu, a.norm_work, a.middle_rule)
+    parameter_table(a.out, a.mu)
 
 
 if __name__ == "__main__":

@@ -394,7 +394,8 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
   t.add_row({"calibration", "nan", "chi2/dof " + num(cal.chi2_dof(), 4), "nan", "nan", "nan", "nan", num(worst_all, 3)});
   write_table_all(t, (out / "summary").string(),
                   std::string("RMS of model - DEM mean over the mean 95 % band half-width per curve (") +
-                      (cal.params.extended ? std::string("extended family, ") + surface_name(cal.params.surface) + " surface"
+                      (cal.params.extended ? std::string("extended family, ") + surface_name(cal.params.surface) + " surface, fabric limit " +
+                                                  fabric_lode_name(cal.params.fabric)
                                            : "group model") +
                       ", calibrated on " + fit_label + "); p_star on constant-volume rows, eps_v where p is held");
 }
@@ -490,7 +491,7 @@ ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir)
   return in;
 }
 
-// The calibration's options from the command's (--eps-max, --family, --surface checked).
+// The calibration's options from the command's (--eps-max, --family, --surface, --fabric-lode checked).
 CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   CalibrationOptions co;
   co.eps_max = o.eps_max;
@@ -501,6 +502,12 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   else if (o.surface == "mn") co.surface = Surface::MatsuokaNakai;
   else if (o.surface == "none") co.surface = Surface::None;
   else throw InputError("--surface " + o.surface + ": give ld (Lade-Duncan), mn (Matsuoka-Nakai) or none");
+  if (o.fabric_lode == "principal") co.fabric = FabricLode::Principal;
+  else if (o.fabric_lode == "norm") co.fabric = FabricLode::Norm;
+  else if (o.fabric_lode == "opening") co.fabric = FabricLode::Opening;
+  else throw InputError("--fabric-lode " + o.fabric_lode + ": give principal (the largest principal deviatoric fabric "
+                        "saturates at every Lode angle), norm (F_dev saturates at F_max at every Lode angle) or opening "
+                        "(principal, and the fabric gated by the minor principal stress)");
   return co;
 }
 
@@ -655,9 +662,9 @@ int run(const ModelCommandOptions& o) {
   const fs::path out = o.out.empty() ? dir / "model" : fs::path(o.out);
   if (fs::exists(out / "parameters.csv") && !o.force)
     throw InputError(out.string() + " already holds model results: pass --force to overwrite, or --out another folder");
+  const CalibrationOptions co = calibration_options(o);   // bad options refused before anything is written
   check_output_folder(out);
   const ModelInputs in = read_model_inputs(o, dir);
-  const CalibrationOptions co = calibration_options(o);
   std::cerr << "dem model: fitting " << in.fit_curves.size() << " mode curves, " << in.fit_paths.size() << " path curves ("
             << in.fit_label << ") and " << in.iso.nu.size() << " isotropic points\n";
   const int K = in.K;
@@ -698,6 +705,9 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "extension: docs/model.md) or auto (both; the held-out test chooses, the other goes to OUT/FAMILY)");
   app.add_option("--surface", o.surface, "Lode-angle surface of the extended family: ld (Lade-Duncan), mn "
                  "(Matsuoka-Nakai), none");
+  app.add_option("--fabric-lode", o.fabric_lode, "Lode rule of the extended family's fabric limit: principal (the "
+                 "largest principal deviatoric fabric saturates at every Lode angle), norm (F_dev saturates at F_max), opening "
+                 "(principal, and the fabric gated by the minor principal stress; docs/model.md)");
   app.add_flag("--force", o.force, "overwrite an existing output folder");
 }
 

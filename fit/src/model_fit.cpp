@@ -49,9 +49,10 @@ struct CurveResidual {
   bool extended = false;
   double b = kLodeBD2;
   Surface surface = Surface::None;
+  FabricLode fabric = FabricLode::Norm;
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None};
+    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric};
     const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -83,9 +84,10 @@ struct PathResidual {
   bool extended = false;
   double b = kLodeBD2;
   Surface surface = Surface::None;
+  FabricLode fabric = FabricLode::Norm;
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None};
+    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric};
     const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step, ext);
     const std::size_t n = acc.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -210,6 +212,7 @@ struct StressFabricResidual {
   std::vector<double> eps, s, F, ws, wF;
   double nu, p0, s0, F0, b, max_step;
   Surface surface;
+  FabricLode fabric;
   std::vector<double> iso;
   template <class T>
   bool operator()(T const* const* par, T* r) const {
@@ -219,7 +222,7 @@ struct StressFabricResidual {
     for (int i = 0; i < kNumExt; ++i) ex[i] = T(0.0);
     for (int i = 0; i < kNumIso; ++i) isoT[i] = T(iso[i]);
     sh[kSmaxA] = x[0]; sh[kLnBetaSA] = x[1]; ex[kKappaA] = x[2]; sh[kFmaxA] = x[3]; sh[kLnBetaFA] = x[4]; ex[kNFA] = x[5];
-    const auto st = monotone_shear<T>(isoT, sh, nu, nu, p0, s0, F0, eps, max_step, Ext<T>{ex, b, surface});
+    const auto st = monotone_shear<T>(isoT, sh, nu, nu, p0, s0, F0, eps, max_step, Ext<T>{ex, b, surface, fabric});
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
       r[i] = (st[i].s - T(s[i])) * T(ws[i]);
@@ -257,7 +260,7 @@ Parameters extended_start(const std::vector<CurveData>& curves, const Parameters
                      1.1 * *std::max_element(c.F.begin(), c.F.end()), std::log(10.0), n0};
       auto* f = new StressFabricResidual{c.eps, c.s, c.F, weights(c.se_s, o.se_floor, c.source + " s_dev"),
                                          weights(c.se_F, o.se_floor, c.source + " F_dev"), c.nu, c.p.front(), c.s.front(),
-                                         c.F.front(), lode_b_of(c.mode), 2e-3, o.surface, iso};
+                                         c.F.front(), lode_b_of(c.mode), 2e-3, o.surface, o.fabric, iso};
       auto* cost = new ceres::DynamicAutoDiffCostFunction<StressFabricResidual, 6>(f);
       cost->AddParameterBlock(6);
       cost->SetNumResiduals(2 * static_cast<int>(c.eps.size()));
@@ -296,6 +299,10 @@ double lode_b_of(const std::string& mode) {
 
 const char* surface_name(Surface s) {
   return s == Surface::MatsuokaNakai ? "Matsuoka-Nakai" : s == Surface::LadeDuncan ? "Lade-Duncan" : "none";
+}
+
+const char* fabric_lode_name(FabricLode f) {
+  return f == FabricLode::Principal ? "principal" : f == FabricLode::Opening ? "opening" : "norm";
 }
 
 CurveData read_curve(const std::string& path, const std::string& mode, double nu) {
@@ -393,7 +400,7 @@ void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& 
     auto* f = new CurveResidual{c.eps, c.p, c.s, c.F, weights(c.se_p, o.se_floor, c.source + " p_star"),
                                 weights(c.se_s, o.se_floor, c.source + " s_dev"), weights(c.se_F, o.se_floor, c.source + " F_dev"),
                                 c.nu, c.p.front(), c.s.front(), c.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(c.mode); f->surface = o.surface;
+    f->extended = X; f->b = lode_b_of(c.mode); f->surface = o.surface; f->fabric = o.fabric;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -431,7 +438,7 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     for (std::size_t i = 1; i <= prefix; ++i) w1[i] = ws[i] = wF[i] = 0.0;
     auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, ws, wF, d.direction, d.isobaric,
                                d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(d.name); f->surface = o.surface;
+    f->extended = X; f->b = lode_b_of(d.name); f->surface = o.surface; f->fabric = o.fabric;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -669,6 +676,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   std::copy(ext.begin(), ext.end(), cal.params.ext);
   cal.params.extended = X;
   cal.params.surface = X ? o.surface : Surface::None;
+  cal.params.fabric = X ? o.fabric : FabricLode::Norm;
   cal.chi2 = 2 * sum.final_cost;
   cal.n_residuals = n_res;
   cal.n_free = (o.fit_isotropic ? kNumIso : 0) + kNumShear + (X ? kNumExt - (one_nu ? 3 : 0) : 0);
@@ -687,7 +695,7 @@ ModelCurve predict_curve(const Parameters& params, const CurveData& c, double ep
   if (t.eps.empty() || std::fabs(t.eps.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + c.source + " does not start at eps_d = 0");
   const std::vector<double> iso = params.iso();
-  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface};
+  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface, params.fabric};
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
                                          t.F.front(), t.eps, max_step, ext);
   ModelCurve m;
@@ -734,7 +742,7 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
   if (d.acc.empty() || std::fabs(d.acc.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + d.source + " does not start at eps_d_accumulated = 0");
   const std::vector<double> iso = params.iso();
-  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface};
+  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric};
   const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
                                          d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
   PathPrediction m;

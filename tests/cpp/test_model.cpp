@@ -170,7 +170,7 @@ Synthetic synthetic(const Parameters& P, const std::vector<double>& nus, int K, 
   for (int i = 0; i <= 100; ++i) eps.push_back(0.004 * i);
   for (double nu : nus) {
     const double p0 = isotropic_pressure(iso.data(), nu);
-    const Ext<double> ext{P.extended ? P.ext : nullptr, lode_b_of(mode), P.surface};
+    const Ext<double> ext{P.extended ? P.ext : nullptr, lode_b_of(mode), P.surface, P.fabric};
     const auto st = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.01, 0.01, eps, 1e-3, ext);
     std::vector<CurveData> mem;
     for (int k = 0; k < K; ++k) {
@@ -605,6 +605,7 @@ Parameters frictional_truth() {
   std::copy(ex, ex + kNumExt, P.ext);
   P.extended = true;
   P.surface = Surface::LadeDuncan;
+  P.fabric = FabricLode::Principal;
   return P;
 }
 
@@ -637,6 +638,22 @@ TEST(ModelFriction, NeutralExtensionIsTheGroupModelBitForBit) {
       EXPECT_EQ(group[i].state.F, o->state.F) << i;
       EXPECT_EQ(group[i].eps_vol, o->eps_vol) << i;
     }
+  // The principal fabric rule is the identity at the calibration test's own b (D2), and the group
+  // model (no extension block) ignores it at any b, D3 included: where the held-out test keeps the
+  // group model (mu = 0) its numbers are today's, whatever --fabric-lode says.
+  const Parameters Xp = frictional_truth();
+  const auto norm_d2 = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, mixed_path(),
+                                         Ext<double>{Xp.ext, kLodeBD2, Surface::LadeDuncan, FabricLode::Norm});
+  const auto princ_d2 = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, mixed_path(),
+                                          Ext<double>{Xp.ext, kLodeBD2, Surface::LadeDuncan, FabricLode::Principal});
+  const auto group_d3 = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, mixed_path(),
+                                          Ext<double>{nullptr, 0.0, Surface::None, FabricLode::Principal});
+  for (std::size_t i = 0; i < group.size(); ++i) {
+    EXPECT_EQ(norm_d2[i].state.F, princ_d2[i].state.F) << i;
+    EXPECT_EQ(norm_d2[i].state.p, princ_d2[i].state.p) << i;
+    EXPECT_EQ(group[i].state.F, group_d3[i].state.F) << i;
+    EXPECT_EQ(group[i].state.p, group_d3[i].state.p) << i;
+  }
   // ... and an active extension does change them (the comparison above could fail).
   const Parameters X = frictional_truth();
   const auto active = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, mixed_path(),
@@ -664,6 +681,70 @@ TEST(ModelFriction, LodeLimitMatchesClosedForms) {
     EXPECT_GT(x, s);   // compression holds a larger stress ratio than b = 1/2
   }
   EXPECT_EQ(lode_limit(0.7, 0.0, Surface::None), 0.7);
+}
+
+// The principal fabric rule against geometry built by hand: a deviator of magnitude F (sigma_dev
+// convention, sqrt(((a-b)^2 + (b-c)^2 + (c-a)^2)/2)) with principal values along D2's Lode angle,
+// (F/sqrt(3), 0, -F/sqrt(3)), or along axisymmetric compression, (2F/3, -F/3, -F/3). Holding the
+// largest principal value fixed, D3's fabric limit is sqrt(3)/2 of D2's; and the model's fabric,
+// integrated far along D2 and D3 at constant volume, reaches those two limits.
+TEST(ModelFriction, FabricLimitHoldsTheLargestPrincipalComponent) {
+  auto magnitude = [](double a, double b, double c) {
+    return std::sqrt(((a - b) * (a - b) + (b - c) * (b - c) + (c - a) * (c - a)) / 2);
+  };
+  const double F = 0.3;
+  const double d2[3] = {F / std::sqrt(3.0), 0.0, -F / std::sqrt(3.0)}, d3[3] = {2 * F / 3, -F / 3, -F / 3};
+  EXPECT_NEAR(magnitude(d2[0], d2[1], d2[2]), F, 1e-15);
+  EXPECT_NEAR(magnitude(d3[0], d3[1], d3[2]), F, 1e-15);
+  EXPECT_NEAR(principal_fraction(0.5), d2[0] / F, 1e-15);
+  EXPECT_NEAR(principal_fraction(0.0), d3[0] / F, 1e-15);
+  EXPECT_NEAR(principal_fraction(1.0), 2.0 / 3.0, 1e-15);   // extension: the minor one, -2F/3, is largest in size
+  const double factor = fabric_lode_factor(FabricLode::Principal, 0.0);
+  EXPECT_NEAR(factor * F * d3[0] / F, d2[0], 1e-15);        // the same largest principal fabric
+  EXPECT_NEAR(factor, std::sqrt(3.0) / 2, 1e-15);
+  EXPECT_EQ(fabric_lode_factor(FabricLode::Norm, 0.0), 1.0);
+  EXPECT_EQ(fabric_lode_factor(FabricLode::Principal, kLodeBD2), 1.0);
+
+  const Parameters P = frictional_truth();
+  const auto iso = P.iso();
+  const double nu = 0.74, p0 = isotropic_pressure(iso.data(), nu);
+  std::vector<double> eps;
+  for (int i = 0; i <= 300; ++i) eps.push_back(0.01 * i);   // to eps_d = 3: every law saturated
+  auto far = [&](const char* mode, FabricLode f) {
+    return monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, eps, 2e-3,
+                                  Ext<double>{P.ext, lode_b_of(mode), P.surface, f}).back().F;
+  };
+  const double F_max = local(P.shear, nu, P.nu_ref).F_max;
+  EXPECT_NEAR(far("D2", FabricLode::Principal), F_max, 1e-6);
+  EXPECT_NEAR(far("D3", FabricLode::Principal), std::sqrt(3.0) / 2 * F_max, 1e-6);
+  EXPECT_NEAR(far("D3", FabricLode::Norm), F_max, 1e-6);
+}
+
+// The opening rule's gate: the minor principal component of a unit deviator (hand-built as in the
+// test above: -F/sqrt(3) in D2, -F/3 in axisymmetric compression); at b_ref the rule is the
+// principal rule bit for bit, in D3 the fabric grows later than under the principal rule but
+// reaches the same limit, and the stress ratio and pressure paths are those of the principal
+// rule until the fabric differs (the gate acts on the fabric only).
+TEST(ModelFriction, OpeningRuleGatesTheFabricByTheMinorPrincipalStress) {
+  EXPECT_NEAR(minor_fraction(0.5), 1 / std::sqrt(3.0), 1e-15);
+  EXPECT_NEAR(minor_fraction(0.0), 1.0 / 3.0, 1e-15);
+  EXPECT_NEAR(minor_fraction(1.0), 2.0 / 3.0, 1e-15);
+  const Parameters P = frictional_truth();
+  const auto iso = P.iso();
+  const double nu = 0.74, p0 = isotropic_pressure(iso.data(), nu);
+  std::vector<double> eps;
+  for (int i = 0; i <= 300; ++i) eps.push_back(0.01 * i);
+  auto run = [&](const char* mode, FabricLode f) {
+    return monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, eps, 2e-3,
+                                  Ext<double>{P.ext, lode_b_of(mode), P.surface, f});
+  };
+  const auto d2o = run("D2", FabricLode::Opening), d2p = run("D2", FabricLode::Principal);
+  for (std::size_t i = 0; i < eps.size(); ++i) EXPECT_EQ(d2o[i].F, d2p[i].F) << i;
+  const auto d3o = run("D3", FabricLode::Opening), d3p = run("D3", FabricLode::Principal);
+  const double F_max = local(P.shear, nu, P.nu_ref).F_max;
+  EXPECT_LT(d3o[20].F - d3o[0].F, 0.8 * (d3p[20].F - d3p[0].F));   // eps_d = 0.2: later
+  EXPECT_NEAR(d3o.back().F, std::sqrt(3.0) / 2 * F_max, 1e-4);       // the same limit
+  EXPECT_EQ(d3o[1].s, d3p[1].s);
 }
 
 // Synthetic D2 ensembles made by the frictional family with known parameters (K = 8, three

@@ -180,6 +180,27 @@ def test_bad_family_and_surface_are_refused(tmp_path):
     assert r.returncode == 2 and "--family" in r.stderr and "auto" in r.stderr, r.stderr
     r = run(ENSEMBLE, "--out", str(tmp_path / "s"), "--family", "extended", "--surface", "tresca", "--no-plots")
     assert r.returncode == 2 and "--surface" in r.stderr and "ld" in r.stderr, r.stderr
+    r = run(ENSEMBLE, "--out", str(tmp_path / "l"), "--family", "extended", "--fabric-lode", "max", "--no-plots")
+    assert r.returncode == 2 and "--fabric-lode max" in r.stderr and "principal" in r.stderr and "opening" in r.stderr, r.stderr
+    assert not os.path.exists(tmp_path / "l")
+
+
+def test_group_model_at_mu_0_ignores_the_fabric_rule(tmp_path):
+    """mu = 0, where the held-out test keeps the group model (docs/model.md): its numbers, the
+    whole summary, are the same bytes whatever --fabric-lode says (the rule lives in the extension)."""
+    from demkit import model_friction
+    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0")
+    work = str(tmp_path / "mu_0")
+    model_friction.copy_tree(src, work)
+    texts = []
+    for rule in ("principal", "norm"):
+        out = str(tmp_path / rule)
+        r = run(work, "--out", out, "--family", "group", "--fabric-lode", rule, "--no-jackknife", "--no-plots")
+        assert r.returncode == 0, r.stderr
+        with open(os.path.join(out, "summary.md")) as fh:
+            texts.append(fh.read())
+    assert texts[0] == texts[1]
+    assert "group model" in texts[0] and "| D3 |" in texts[0]
 
 
 def test_frictional_family_fits_the_mu_0_5_ensemble(tmp_path):
@@ -201,3 +222,15 @@ def test_frictional_family_fits_the_mu_0_5_ensemble(tmp_path):
     for s in summary:
         if s["mode"] == "D2":
             assert float(s["worst [band]"]) < 1, s
+    # The principal fabric rule: D2 (fitted, b = 1/2) is the same as without it, D3's fabric
+    # plateau at nu = 0.69 is predicted within a band (2.7 band widths with the norm rule).
+    out_n = str(tmp_path / "model_norm")
+    r = run(work, "--out", out_n, "--family", "extended", "--fabric-lode", "norm", "--no-jackknife", "--no-plots")
+    assert r.returncode == 0, r.stderr
+    norm = {(s["mode"], s["nu [-]"]): s for s in rows(os.path.join(out_n, "summary.csv"))}
+    for s in summary:
+        key = (s["mode"], s["nu [-]"])
+        if s["mode"] == "D2":
+            assert s["F_dev [band]"] == norm[key]["F_dev [band]"]
+        if s["mode"] == "D3" and float(s["nu [-]"]) < 0.7:
+            assert float(s["F_dev [band]"]) < 1 < float(norm[key]["F_dev [band]"]), (s, norm[key])

@@ -62,6 +62,18 @@ enum class Surface { None = 0, MatsuokaNakai, LadeDuncan };
 /// curves carry no intermediate stress). docs/model.md.
 constexpr double kLodeBD2 = 0.5;
 
+/// Lode-angle dependence of the fabric limit: `Norm`, the deviatoric norm F_dev saturates at
+/// F_max whatever the Lode angle; `Principal`, the largest principal deviatoric fabric
+/// max_i |F_i - tr F/3| saturates at the same value at every Lode angle (a hexagonal, Tresca-like
+/// limit in the deviatoric plane), so the norm's limit is F_max c(b_ref)/c(b), c(b) the largest
+/// |principal component| of a unit deviator at b (fabric_lode_factor). docs/model.md.
+///
+/// `Opening`: the limit as `Principal`, and the fabric's gate r^n_F driven by the minor principal
+/// deviatoric stress ratio |sigma_3 - p|/p (contacts opening along the extension directions)
+/// over its value at the D2 limit, instead of by s/s_lim: the same at b_ref, slower in
+/// axisymmetric compression, where the minor deviator is s/3 against D2's s/sqrt(3).
+enum class FabricLode { Norm = 0, Principal, Opening };
+
 /// Named view of all parameters (double), with units; `iso()`/`shear()` give the Ceres blocks.
 struct Parameters {
   double p0 = 0.04;        ///< [-] p* prefactor of the isotropic pressure law
@@ -76,6 +88,7 @@ struct Parameters {
   double ext[kNumExt] = {0, 0, 0, 0, 0, 0, 0};   ///< frictional extension (all 0: the group model)
   bool extended = false;   ///< the frictional family (ext fitted, Lode surface `surface`)
   Surface surface = Surface::None;   ///< Lode-angle surface of the extended family
+  FabricLode fabric = FabricLode::Norm;   ///< Lode rule of the extended family's fabric limit
   double nu_ref = 0.74;    ///< [-] volume fraction the nu-laws are centred on
   std::vector<double> iso() const { return {p0, nu_c, gamma_p, C0, C1, nu_cC, alpha}; }
   void set_iso(const double* v) { p0 = v[0]; nu_c = v[1]; gamma_p = v[2]; C0 = v[3]; C1 = v[4]; nu_cC = v[5]; alpha = v[6]; }
@@ -194,13 +207,34 @@ T lode_limit(const T& s_ref, double b, Surface f, double b_ref = kLodeBD2) {
   return s;
 }
 
+
+/// Largest |principal component| of a deviator of unit magnitude (sigma_dev convention of
+/// docs/definitions.md) with intermediate ratio b: max(2 - b, 1 + b) / (3 sqrt(1 - b + b^2));
+/// 2/3 at b = 0 and 1, 1/sqrt(3) at b = 1/2.
+inline double principal_fraction(double b) {
+  return std::max(2.0 - b, 1.0 + b) / (3.0 * std::sqrt(1.0 - b + b * b));
+}
+
+/// Size of the minor (most negative) principal component of a unit deviator at b:
+/// (1 + b) / (3 sqrt(1 - b + b^2)); 1/3 at b = 0, 1/sqrt(3) at b = 1/2, 2/3 at b = 1.
+inline double minor_fraction(double b) { return (1.0 + b) / (3.0 * std::sqrt(1.0 - b + b * b)); }
+
+/// The fabric limit at b over the one at b_ref: 1 for `Norm`, c(b_ref)/c(b) for `Principal`
+/// (sqrt(3)/2 for axisymmetric compression against D2).
+inline double fabric_lode_factor(FabricLode f, double b, double b_ref = kLodeBD2) {
+  if (f == FabricLode::Norm || b == b_ref) return 1.0;
+  return principal_fraction(b_ref) / principal_fraction(b);
+}
+
 /// What the frictional family adds to a run: its parameter block (null: the group model), the
-/// test's intermediate-stress ratio b and the Lode surface.
+/// test's intermediate-stress ratio b, the Lode surface of the stress ratio and the Lode rule of
+/// the fabric limit.
 template <class T>
 struct Ext {
   const T* p = nullptr;
   double b = kLodeBD2;
   Surface surface = Surface::None;
+  FabricLode fabric = FabricLode::Norm;
 };
 
 /// State of the material point.
@@ -286,9 +320,16 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   T r = T(sigma) * y.s / s_lim;
   if (!(r > T(1e-6))) r = T(1e-6);
   using std::pow;
-  const T gate_F = m.ext.p ? pow(r, X.n_F) : T(1.0);                     // fabric follows the mobilisation
+  // The fabric's gate: the mobilisation r, or under the `Opening` rule the minor principal
+  // deviatoric stress ratio over its value at the D2 limit (r itself at b_ref).
+  T r_F = r;
+  if (m.ext.fabric == FabricLode::Opening && m.ext.b != kLodeBD2)
+    r_F = r * s_lim * T(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2)) / L.s_max;
+  const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
   const T shape_s = T(1.0) + X.kappa_s * r;                               // stress ratio: linear for longer
-  const T dil = m.ext.p ? X.d_D * (r - X.chi_D) * (T(1.0) - T(sigma) * y.F / L.F_max) : T(0.0);   // plastic dilatancy
+  // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
+  const T F_lim = m.ext.p ? L.F_max * T(fabric_lode_factor(m.ext.fabric, m.ext.b)) : L.F_max;
+  const T dil = m.ext.p ? X.d_D * (r - X.chi_D) * (T(1.0) - T(sigma) * y.F / F_lim) : T(0.0);   // plastic dilatancy
   const T relax = L.beta_p * (y.p - p_ref);          // excess pressure relaxing with |d eps_d|
   T dvol;                                            // d eps_vol per |d eps_d|
   // The deviatoric source of ds. The rate is scaled by s_max/s_lim so that the initial shear
@@ -307,7 +348,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   }
   d.ln_nu = -dvol;
   d.p = -B * dvol + A * T(sigma) - relax + B * dil;
-  d.F = L.beta_F * (T(sigma) * L.F_max - y.F) * gate_F;
+  d.F = L.beta_F * (T(sigma) * F_lim - y.F) * gate_F;
   d.s = shear - (A - y.s * B) / y.p * dvol;
   return d;
 }

@@ -48,12 +48,16 @@ struct CalibrationOptions {
   /// stress-ratio limit on `surface` at each test's Lode angle (lode_b_of).
   bool extended = false;
   Surface surface = Surface::LadeDuncan;
+  /// The fabric limit's Lode rule of the frictional family (FabricLode; `Norm` before issue 31's
+  /// second round, `Principal` since: the largest principal deviatoric fabric saturates).
+  FabricLode fabric = FabricLode::Principal;
 };
 
 /// Intermediate-stress ratio b the model assumes for a mode or path name: 0 for D3 and
 /// triaxial paths (axisymmetric compression), kLodeBD2 otherwise (D2 and paths made of D2).
 double lode_b_of(const std::string& mode);
 const char* surface_name(Surface s);
+const char* fabric_lode_name(FabricLode f);   ///< "norm" or "principal" (the --fabric-lode words)
 
 /// Result of a calibration. Parameter order: the 7 isotropic, the 12 shear coefficients, then
 /// (frictional family) the 7 extension coefficients.
