@@ -278,8 +278,13 @@ DEM_HK void history_group(const HistoryInputs<CM>& in, const CM& model, const co
 /// (only its own pairs' history is written back: the pairs after it belong to the next chunk
 /// or to another block's thread).
 template <class T, bool Sheared, class CM>
-DEM_HK void history_body(const HistoryInputs<CM>& in, long p0, int n, HistoryChunk& out) {
+DEM_HK void history_body(const HistoryInputs<CM>& given, long p0, int n, HistoryChunk& out) {
   constexpr int W = lanes::width<T>, kw = CM::history;
+  // A local copy (not const: GCC keeps const aggregates in memory): through the reference GCC
+  // reloaded every pointer of the inputs after each group's stores (the history's and the
+  // chunk's may alias `given` for all it knows); a local whose address does not escape they
+  // cannot.
+  HistoryInputs<CM> in = given;
   contact::RateLanes<T> rate = contact::rate_lanes<T>(in.rate);   // not const: GCC keeps const aggregates in memory
   const T dt = lanes::splat<T>(in.dt);
   const CM model = in.model;   // a local copy: its constants (k, -1/k, ...) leave the loop
