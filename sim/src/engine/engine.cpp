@@ -171,7 +171,7 @@ double Engine::advance_particles(int begin, int end, const AffineMap& map, bool 
     }
     f[i] = Vec3{0, 0, 0};                          //    (forces are summed afresh in 5)
     if (test.limit2 >= 0) worst = std::max(worst, displacement2_since_build(state_, test, i));
-    if (packed) pack_particle(x[i], rad[i], v[i], packed + 8L * i);   // the pair kernels' records
+    if (packed) pack_particle(x[i], rad[i], v[i], m[i], packed + 8L * i);   // the pair kernels' records
   }
   return worst;
 }
