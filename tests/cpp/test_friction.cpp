@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -890,4 +891,32 @@ TEST(Luding, ZeroAdhesionGivesTheLinearForcesBitForBitWhileEveryContactLoads) {
   }
   EXPECT_GT(loading, 10);
   EXPECT_EQ(unloading, 1);
+}
+
+TEST(Friction, TheVectorAngularKickGivesTheScalarBits) {
+  // kick_angular four particles at a time (AVX2) against one at a time, on random masses, radii,
+  // torques and spins, for ranges that start and end off a multiple of four.
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0), pos(0.2, 3.0);
+  const int n = 103;
+  std::vector<dem::Vec3> t(n), w0(n);
+  std::vector<double> m(n), r(n);
+  for (int i = 0; i < n; ++i) {
+    t[i] = {u(rng) * 1e-6, u(rng) * 1e-6, u(rng) * 1e-6};
+    w0[i] = {u(rng) * 1e3, u(rng) * 1e3, u(rng) * 1e3};
+    m[i] = pos(rng) * 1e-6;
+    r[i] = pos(rng) * 1e-3;
+  }
+  for (int begin : {0, 1, 3}) {
+    for (int end : {n, n - 2, begin + 5}) {
+      std::vector<dem::Vec3> a = w0, b = w0;
+      dem::kick_angular(a.data(), t.data(), m.data(), r.data(), begin, end, 0.37e-7, true);
+      dem::kick_angular(b.data(), t.data(), m.data(), r.data(), begin, end, 0.37e-7, false);
+      EXPECT_EQ(std::memcmp(a.data(), b.data(), n * sizeof(dem::Vec3)), 0) << begin << " " << end;
+      EXPECT_NE(std::memcmp(a.data(), w0.data(), n * sizeof(dem::Vec3)), 0);   // it kicked
+      // untouched outside [begin, end)
+      for (int i = 0; i < n; ++i)
+        if (i < begin || i >= end) EXPECT_EQ(std::memcmp(&a[i], &w0[i], sizeof(dem::Vec3)), 0) << i;
+    }
+  }
 }

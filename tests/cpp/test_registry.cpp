@@ -130,3 +130,24 @@ TEST(Registry, RecordsOfTheDefaultModelsKeepTheirKeysAndOrder) {
                                          "contact.tangential_damping_kg_s"};
   EXPECT_EQ(std::vector<std::string>(rough.end() - 4, rough.end()), tail);
 }
+
+TEST(Registry, DemInfoSaysWhichTangentialLawFrictionAloneSelects) {
+  // With the Hertz normal law, contact.friction > 0 alone selects Cundall-Strack's linear
+  // spring, not Mindlin's: `dem info` (describe_contact) says so and names the laws the scene
+  // could select instead; with the linear normal law there is no other to name.
+  auto lines = [](const std::vector<std::string>& o) {
+    const dem::Model m = dem_test::model_with(o);
+    std::string all;
+    for (const std::string& l : dem::contact::describe_contact(m.contact, dem::contact::pair_scale(m.contact, m.radius_min, m.density)))
+      all += l + "\n";
+    return all;
+  };
+  const std::string hertz = lines({"contact.normal=\"hertz\"", "contact.friction=0.5"});
+  EXPECT_NE(hertz.find("tangential       cundall_strack:"), std::string::npos) << hertz;
+  EXPECT_NE(hertz.find("contact.friction > 0 selects when contact.tangential is not given"), std::string::npos) << hertz;
+  EXPECT_NE(hertz.find("\"mindlin\" or \"mindlin_force\""), std::string::npos) << hertz;
+  const std::string linear = lines({"contact.friction=0.5"});
+  EXPECT_EQ(linear.find("is not given"), std::string::npos) << linear;
+  const std::string mindlin = lines({"contact.normal=\"hertz\"", "contact.tangential=\"mindlin\"", "contact.friction=0.5"});
+  EXPECT_EQ(mindlin.find("is not given"), std::string::npos) << mindlin;
+}

@@ -341,12 +341,40 @@ std::vector<std::pair<std::string, std::string>> record_defaults(const std::func
   return out;
 }
 
+namespace {
+
+// The other sub-models of m's slot that the law's other choices accept (their `check` passes
+// with them selected instead of m), as "\"a\" or \"b\"": what the slot's selector
+// could name instead. The slot's default ("none") is left out.
+std::string accepted_alternatives(const SubModelInfo& m, const ContactLaw& law) {
+  std::string out;
+  for (const SubModelInfo* o : submodels()) {
+    if (o->slot != m.slot || o == &m || o == &slot_default(m.slot)) continue;
+    ContactLaw with = law;
+    with.select(m.slot, o->name);
+    if (o->check && !o->check(with).empty()) continue;
+    out += (out.empty() ? "\"" : " or \"") + o->name + "\"";
+  }
+  return out;
+}
+
+}  // namespace
+
 std::vector<std::string> describe_contact(const ContactLaw& law, const PairScale& s) {
   std::vector<std::string> out;
   for (const SubModelInfo* m : chosen_submodels(law)) {
     std::string name = slot_name(m->slot);
     name.resize(17, ' ');
     out.push_back("  " + name + m->name + ": " + m->describe(law, s));
+    // A sub-model a key implies (friction > 0 alone selects cundall_strack): say so where the
+    // other choices accept another law of the slot (e.g. Mindlin's with the Hertz normal law),
+    // which the scene would have to name.
+    if (m->implied_by.empty() || slot_selector(m->slot).empty()) continue;
+    if (const std::string others = accepted_alternatives(*m, law); !others.empty())
+      out.push_back("  " + std::string(17, ' ') + "(\"" + m->name + "\" is what contact." + m->implied_by +
+                    " > 0 selects when contact." + slot_selector(m->slot) + " is not given; with the " +
+                    law.model(Slot::Normal) + " normal law contact." + slot_selector(m->slot) + " may also be " +
+                    others + "; dem info --contact-models describes them)");
   }
   return out;
 }

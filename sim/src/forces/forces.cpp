@@ -286,8 +286,7 @@ void pair_loop_history_vector(PairKernel kernel, const CM& cm, State& s, const N
   }
   const long p_begin = list.first[begin], p_end = list.first[end];
   const kernels::HistoryInputs<CM> in{packed, pair_i, list.partner.data(), list.image.data(), off,
-                                      s.angular_velocity.data(), cm, rate, dt, s.history.values.data(),
-                                      s.mass.data()};
+                                      s.angular_velocity.data(), cm, rate, dt, s.history.values.data()};
   const kernels::HistoryKernelFn<CM> run = kernels::history_kernel_of<Sheared, CM>(kernel);
   static thread_local kernels::HistoryChunk chunk;
   Vec3* tq = s.torque.data();
@@ -421,7 +420,7 @@ void end_pair_loop(State& s, const ForceScratch& scratch) {
 void pack_particles(const State& s, int begin, int end, ForceScratch& scratch) {
   if (scratch.packed.size() != 8 * static_cast<std::size_t>(s.count())) return;   // sized by partition_pairs
   double* P = scratch.packed.data();
-  for (int i = begin; i < end; ++i) pack_particle(s.position[i], s.radius[i], s.velocity[i], P + 8L * i);
+  for (int i = begin; i < end; ++i) pack_particle(s.position[i], s.radius[i], s.velocity[i], s.mass[i], P + 8L * i);
 }
 
 void compute_forces(const Model& model, State& s, const NeighborList& list,

@@ -42,7 +42,7 @@ struct HistoryChunk {
 
 template <class CM>
 struct HistoryInputs {
-  const double* packed;        ///< per particle: x y z r vx vy vz 0 (ForceScratch::packed) [m, m/s]
+  const double* packed;        ///< per particle: x y z r vx vy vz m (ForceScratch::packed) [m, m/s, kg]
   const std::int32_t* pair_i;  ///< i of each pair
   const std::int32_t* partner;
   const std::uint8_t* image;
@@ -52,7 +52,6 @@ struct HistoryInputs {
   VelGrad rate;                ///< [1/s]
   double dt;                   ///< [s]
   double* history;             ///< State::history.values (CM::history per listed pair)
-  const double* mass;          ///< per particle [kg] (read when a sub-model is per_pair)
 };
 
 #define DEM_HK __attribute__((always_inline)) inline
@@ -251,12 +250,12 @@ DEM_HK void history_group(const HistoryInputs<CM>& in, const CM& model, const co
     load_block3(Indexed<std::int32_t>{&in.w[0].x, I, 3}, wi.x, wi.y, wi.z);
     load_block3(Indexed<std::int32_t>{&in.w[0].x, J, 3}, wj.x, wj.y, wj.z);
   }
-  T vxi, vyi, vzi, vxj, vyj, vzj;   // velocities: entries 4-7 of the records
-  load_block(Indexed<std::int32_t>{P + 4, I, 8}, vxi, vyi, vzi, pad);
-  load_block(Indexed<std::int32_t>{P + 4, J, 8}, vxj, vyj, vzj, pad);
-  T mi = zero, mj = zero;   // masses: read only by a sub-model of the pair (per_pair: Hertz)
-  if constexpr (CM::per_pair)
-    for (int l = 0; l < W; ++l) mi[l] = in.mass[I[l]], mj[l] = in.mass[J[l]];
+  T vxi, vyi, vzi, vxj, vyj, vzj, mi, mj;   // velocities and masses: entries 4-7 of the records
+  load_block(Indexed<std::int32_t>{P + 4, I, 8}, vxi, vyi, vzi, mi);
+  load_block(Indexed<std::int32_t>{P + 4, J, 8}, vxj, vyj, vzj, mj);
+  // (the masses are read only by a sub-model of the pair, per_pair: Hertz; they came lane by lane
+  // from State::mass before: the Hertz-Mindlin kernel 546.2 -> 523.3 instructions per
+  // particle-step, docs/benchmarks.md)
   contact::PairForces<T> c =
       model.template advance<Sheared>(sep, ri, rj, mi, mj, vxj - vxi, vyj - vyi, vzj - vzi, wi, wj, rate, dt, h);
   store(out.fx + q, select(touch, c.fj.x, mz));
@@ -278,8 +277,13 @@ DEM_HK void history_group(const HistoryInputs<CM>& in, const CM& model, const co
 /// (only its own pairs' history is written back: the pairs after it belong to the next chunk
 /// or to another block's thread).
 template <class T, bool Sheared, class CM>
-DEM_HK void history_body(const HistoryInputs<CM>& in, long p0, int n, HistoryChunk& out) {
+DEM_HK void history_body(const HistoryInputs<CM>& given, long p0, int n, HistoryChunk& out) {
   constexpr int W = lanes::width<T>, kw = CM::history;
+  // A local copy (not const: GCC keeps const aggregates in memory): through the reference GCC
+  // reloaded every pointer of the inputs after each group's stores (the history's and the
+  // chunk's may alias `given` for all it knows); a local whose address does not escape they
+  // cannot.
+  HistoryInputs<CM> in = given;
   contact::RateLanes<T> rate = contact::rate_lanes<T>(in.rate);   // not const: GCC keeps const aggregates in memory
   const T dt = lanes::splat<T>(in.dt);
   const CM model = in.model;   // a local copy: its constants (k, -1/k, ...) leave the loop

@@ -18,7 +18,7 @@ namespace dem::kernels {
 constexpr int kChunk = 256;
 
 struct KernelInputs {
-  const double* packed;       ///< per particle: x y z r vx vy vz 0 (ForceScratch::packed) [m, m/s]
+  const double* packed;       ///< per particle: x y z r vx vy vz m (ForceScratch::packed) [m, m/s, kg]
   const std::int32_t* pair_i; ///< i of each pair
   const std::int32_t* partner;
   const std::uint8_t* image;

@@ -41,6 +41,12 @@ struct RebuildStats {
   std::string json(double wall_s, double skin_m) const;
 };
 
+/// The angular half-kick w_i += t_i h/I_i, I_i = 2/5 m_i r_i^2, for particles [begin, end): four
+/// at a time with AVX2 where the CPU has it and `vector`, else one by one; the same bits either
+/// way (tests/cpp/test_friction.cpp).
+void kick_angular(Vec3* w, const Vec3* t, const double* m, const double* r, int begin, int end, double h,
+                  bool vector);
+
 class Engine {
  public:
   /// Binds to a validated model and a state. The state must hold N >= 2 particles.

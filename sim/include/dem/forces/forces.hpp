@@ -66,7 +66,8 @@ struct ForceScratch {
   std::vector<double> dissipated;
   std::vector<std::int32_t> pair_i;                           ///< i of each listed pair
   /// One 64-byte record per particle for the vectorised kernels: x y z [m] r [m] vx vy vz
-  /// [m/s] 0 (pack_particles fills it; sized by partition_pairs).
+  /// [m/s] m [kg] (pack_particles fills it; sized by partition_pairs). The mass rides in the
+  /// slot the velocities' block loads anyway (the history kernels' per-pair laws read it).
   std::vector<double, AlignedAllocator<double, 64>> packed;
   std::int64_t list_builds = -1;                              ///< list.builds the split was made for
   PairKernel kernel = best_pair_kernel();                     ///< the pair loop's implementation
@@ -90,15 +91,15 @@ void partition_pairs(const NeighborList& list, int blocks, ForceScratch& scratch
 void accumulate_pair_forces(const Model& model, State& state, const NeighborList& list,
                             const VelGrad& rate, int b, ForceScratch& scratch, Vec3* force);
 
-/// Copies positions, radii and velocities of particles [begin, end) into scratch.packed (the
+/// Copies positions, radii, velocities and masses of particles [begin, end) into scratch.packed (the
 /// records the vectorised kernels read). Call after the particles move and before
 /// accumulate_pair_forces; a no-op until partition_pairs has sized the records.
 void pack_particles(const State& state, int begin, int end, ForceScratch& scratch);
 
 /// The record of particle i (pack_particles' body, for passes that move particles anyway).
-inline void pack_particle(const Vec3& x, double r, const Vec3& v, double* record) {
+inline void pack_particle(const Vec3& x, double r, const Vec3& v, double m, double* record) {
   record[0] = x.x; record[1] = x.y; record[2] = x.z; record[3] = r;
-  record[4] = v.x; record[5] = v.y; record[6] = v.z; record[7] = 0.0;
+  record[4] = v.x; record[5] = v.y; record[6] = v.z; record[7] = m;
 }
 
 /// Adds to force[] the queued forces aimed at block b, from blocks 0..b-1 in order (and the
