@@ -3,7 +3,7 @@ and (b) the frictionless N = 9261 Figure 3 at the nearest nu: per-packing levels
 friction study's definitions, demkit.friction_study), mean +- SE over packings, their differences
 with the combined SE, the curve-wise difference in combined SEs, and two figures with 95 % bands.
 
-    PYTHONPATH=. /usr/bin/python3 data/headline_mu0.5_n9261/compare.py \
+    PYTHONPATH=. /usr/bin/python3 data/headline_mu0.5_n9261/compare.py [--store runs/headline_mu0.5] \
         --headline data/headline_mu0.5_n9261 --n1000 data/friction_n1000/mu_0.5 \
         --frictionless data/figure3_n9261 --out data/headline_mu0.5_n9261/compare
 
@@ -23,7 +23,8 @@ import numpy as np
 
 from demkit import figures
 from demkit.curves import read_curve
-from demkit.friction_study import t975, window_mean, peak
+from demkit import friction_study
+from demkit.friction_study import window_mean, peak
 
 WINDOWS = {"cs": (0.25, 0.30), "late": (0.35, 0.40)}
 QUANTITIES = ("s_dev", "F_dev", "p_star")
@@ -192,6 +193,17 @@ def write_csv(path, rows):
     os.replace(path + ".part", path)
 
 
+def store(run, dst):
+    """A trimmed copy of the ensemble folder run in dst (demkit.friction_study.store: scene, ensemble
+    means, fit tables, each member's unloading branch and mode curves, here with the inertial number
+    and the kinetic pressure kept), and its plots/."""
+    import shutil
+    friction_study.KEEP.extend(k for k in ("inertial_number", "p_kin_Pa") if k not in friction_study.KEEP)
+    friction_study.store(run, dst)
+    if os.path.isdir(os.path.join(run, "plots")):
+        shutil.copytree(os.path.join(run, "plots"), os.path.join(dst, "plots"), dirs_exist_ok=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--headline", required=True)
@@ -199,7 +211,10 @@ def main(argv=None):
     ap.add_argument("--frictionless", required=True)
     ap.add_argument("--out", required=True)
     ap.add_argument("--no-plots", action="store_true")
+    ap.add_argument("--store", metavar="RUN", help="first copy the ensemble folder RUN (dem ensemble --out), trimmed, to --headline")
     a = ap.parse_args(argv)
+    if a.store:
+        store(a.store, a.headline)
     for f in (a.headline, a.n1000, a.frictionless):
         if not os.path.isdir(os.path.join(f, "ensemble")):
             sys.exit(f"compare: {f} has no ensemble/ folder: give a stored ensemble (dem ensemble --out or data/...)")
