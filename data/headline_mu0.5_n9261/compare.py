@@ -98,8 +98,8 @@ def curve_difference(fa, fb, mode, nu_a, nu_b, q, emax):
 
 
 def table_finite_size(head, n1000):
-    rows, lines = [], ["| mode | ν | quantity | N = 9261 (K) | N = 1000 (K) | difference ± combined SE | z | curve: max, RMS of |Δ|/SE |",
-                       "|---|---|---|---|---|---|---|---|"]
+    rows, lines = [], ["| mode | ν | quantity | N = 9261 (K) | N = 1000 (K) | difference ± combined SE | z | curve: max, RMS of |Δ|/SE | SD ratio 1000/9261 |",
+                       "|---|---|---|---|---|---|---|---|---|"]
     for mode in ("D2", "D3"):
         for nu in NUS:
             a, b = cell(head, mode, nu), cell(n1000, mode, nu)
@@ -108,11 +108,14 @@ def table_finite_size(head, n1000):
                     continue
                 d, s, z = diff(a[key], b[key])
                 zc = curve_difference(head, n1000, mode, nu, nu, q, 0.30) if q else (math.nan, math.nan)
+                # spread between packings: sqrt(9261/1000) = 3.04 if it falls as 1/sqrt(N)
+                sd_ratio = (b[key][1] * math.sqrt(b[key][2])) / (a[key][1] * math.sqrt(a[key][2]))
                 rows.append({"mode": mode, "nu": nu, "quantity": key, "mean_9261": a[key][0], "se_9261": a[key][1],
                              "K_9261": a[key][2], "mean_1000": b[key][0], "se_1000": b[key][1], "K_1000": b[key][2],
-                             "difference": d, "se_difference": s, "z": z, "curve_max_z": zc[0], "curve_rms_z": zc[1]})
+                             "difference": d, "se_difference": s, "z": z, "curve_max_z": zc[0], "curve_rms_z": zc[1],
+                             "sd_ratio": sd_ratio})
                 lines.append(f"| {mode} | {nu} | {key} | {fmt(*a[key][:2])} ({a[key][2]}) | {fmt(*b[key][:2])} ({b[key][2]}) "
-                             f"| {fmt(d, s)} | {z:.1f} | {zc[0]:.1f}, {zc[1]:.1f} |")
+                             f"| {fmt(d, s)} | {z:.1f} | {zc[0]:.1f}, {zc[1]:.1f} | {sd_ratio:.1f} |")
     return rows, lines
 
 
