@@ -197,13 +197,14 @@ def test_oblique_impact_with_friction_yade_equals_ours(angle, r2):
 
 
 # `dem compare`'s checked measures, and YADE's distance allowed in units of the largest ours-ours distance:
-# about 1.2x the ratio measured when stored (data/yade_friction/summary.md). Below 1.5: within our chaos
-# floor (D2: p, F_dev, C, sliding fraction; triax: F_dev, sliding fraction). Above: the systematic
-# offsets docs/yade.md reports (YADE's s_dev +0.8 % in D2, p +0.5 % and s_dev +1.6 % under constant side
-# stress, where our dt-perturbed runs barely separate), pinned so that a change in either code shows.
+# about 1.2x the ratio measured when stored (data/yade_friction/summary.md; ours regenerated in December 2026
+# with the dead-beat servo). Below 1.5: within our chaos floor (D2: p, F_dev, C, sliding fraction; triax:
+# F_dev, C, sliding fraction). Above: the systematic offsets docs/yade.md reports (YADE's s_dev +0.8 % in D2
+# (2.65x), p +0.5 % and s_dev +1.5 % under constant side stress (10x, 7x), where our dt-perturbed runs
+# separate little), pinned so that a change in either code shows.
 CHECKED = [("p_Pa", "max_rel"), ("s_dev", "rms_rel"), ("F_dev", "rms_rel"), ("C", "rms_abs"), ("sliding_fraction", "rms_abs")]
-MARGIN = {"D2": {"p_Pa": 1.5, "s_dev": 2.4, "F_dev": 1.5, "C": 1.6, "sliding_fraction": 1.5},
-          "triax": {"p_Pa": 35, "s_dev": 20, "F_dev": 1.7, "C": 2.3, "sliding_fraction": 1.8, "eps_v": 24}}
+MARGIN = {"D2": {"p_Pa": 1.5, "s_dev": 3.2, "F_dev": 1.5, "C": 1.5, "sliding_fraction": 1.5},
+          "triax": {"p_Pa": 13, "s_dev": 8.5, "F_dev": 1.5, "C": 1.5, "sliding_fraction": 1.5, "eps_v": 9}}
 
 
 def _distances(a, b):
@@ -213,10 +214,34 @@ def _distances(a, b):
     return res
 
 
-def _floor(mode):
-    ours = [read_curve(f) for f in [os.path.join(FRIC, f"ours_{mode}_dt0.04.csv")] +
-            sorted(glob.glob(os.path.join(FRIC, f"perturbed_{mode}_dt*.csv")))]
-    return ours, read_curve(os.path.join(FRIC, f"yade_{mode}_phi0.700.csv"))
+def _floor(mode, folder=FRIC):
+    ours = [read_curve(f) for f in [os.path.join(folder, f"ours_{mode}_dt0.04.csv")] +
+            sorted(glob.glob(os.path.join(folder, f"perturbed_{mode}_dt*.csv")))]
+    return ours, read_curve(os.path.join(folder, f"yade_{mode}_phi0.700.csv"))
+
+
+# Hertz-Mindlin (data/yade_hm, docs/contact_models.md): the same packing and method; YADE's distance over
+# the largest ours-ours one, about 1.2x that measured when stored (summary.md there). Under constant side
+# stress the floor has not decorrelated at this strain (ours-ours 0.1 % in p): the offsets are systematic.
+HM_MARGIN = {"D2": {"p_Pa": 2.0, "s_dev": 3.0, "F_dev": 1.5, "C": 1.5, "sliding_fraction": 1.5},
+             "triax": {"p_Pa": 6.5, "s_dev": 13, "F_dev": 1.8, "C": 1.6, "sliding_fraction": 2.7, "eps_v": 8.5}}
+
+
+@pytest.mark.parametrize("mode", ["D2", "triax"])
+def test_stored_hertz_mindlin_reference_against_our_floor(mode):
+    ours, yade = _floor(mode, os.path.join(ROOT, "data", "yade_hm"))
+    assert len(ours) >= 5
+    assert abs(ours[0]["E_pot_J"][0] / yade["E_pot_J"][0] - 1) < 1e-9
+    assert abs(ours[0]["p_Pa"][0] / yade["p_Pa"][0] - 1) < 1e-5
+    checked = CHECKED + ([("eps_v", "rms_abs")] if mode == "triax" else [])
+    pairs = [_distances(a, b) for a, b in itertools.permutations(ours, 2)]
+    floor = {q: max(r[q][k] for r in pairs) for q, k in checked}
+    res = _distances(ours[0], yade)
+    for q, k in checked:
+        assert res[q][k] < HM_MARGIN[mode][q] * floor[q], (q, res[q][k], floor[q])
+    # the plateaus within 0.5 % in p and s_dev, and inside `dem compare`'s default tolerances by 5x
+    assert res["p_Pa"]["max_rel"] < 0.006 and res["s_dev"]["rms_rel"] < 0.03 and res["F_dev"]["rms_rel"] < 0.05
+    assert res["C"]["rms_abs"] < 0.03 and res["eps_v"]["rms_abs"] < 1e-4
 
 
 @pytest.mark.parametrize("mode", ["D2", "triax"])
