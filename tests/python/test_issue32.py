@@ -372,3 +372,20 @@ def test_killing_dem_ensemble_stops_its_snakemake(tmp_path, sig):
             os.killpg(p.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+
+
+def test_empty_arrays_into_an_empty_state_copy_nothing_and_do_not_crash():
+    # fuzz_demtk under UBSan (tests/SANITIZE.md): a (0, 3) array copied into a state of no particles
+    # passed vector::data() == nullptr to memcpy (undefined behaviour; the sanitizer build aborts the
+    # interpreter). Spellings: from_arrays with empty positions, velocities and ids; set_positions and
+    # set_velocities of empty rows; each either gives a state of 0 particles or a clear Python error.
+    e3, e1 = np.zeros((0, 3)), np.zeros(0)
+    for kw in ({}, {"velocities": e3}, {"ids": np.zeros(0, dtype=np.int32)}, {"velocities": e3, "ids": []}):
+        try:
+            st = demtk.State.from_arrays(e3, e1, [0.01, 0.01, 0.01], density=2000.0, **kw)
+        except (ValueError, RuntimeError) as err:
+            assert str(err)
+            continue
+        assert st.count == 0
+        st.set_positions(e3)
+        st.set_velocities(e3)
