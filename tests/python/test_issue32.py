@@ -389,3 +389,13 @@ def test_empty_arrays_into_an_empty_state_copy_nothing_and_do_not_crash():
         assert st.count == 0
         st.set_positions(e3)
         st.set_velocities(e3)
+
+
+def test_an_error_that_underflows_next_to_its_value_is_formatted_not_cast_from_minus_inf():
+    # fuzz_demtk under UBSan: round_to_error scaled 5e-324 by 1e-308 to 0 and cast floor(log10(0)) = -inf
+    # to int (undefined behaviour). Such an error is far below the value's precision: the value is
+    # written to 15 digits, as when the rounded value exceeds 1e15.
+    for v, e in ((1e308, 5e-324), (-1e308, 5e-324), (1e300, 1e-320), (2e5, 5e-324)):
+        for fmt in (demtk.format_paren, demtk.format_pm):
+            s = fmt(v, e)
+            assert isinstance(s, str) and s.lstrip("(-")[:1] in ("1", "2"), (v, e, s)
