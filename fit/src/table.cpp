@@ -218,17 +218,19 @@ Rounded round_to_error(double v, double e) {
   if (!std::isfinite(v)) { r.value = "nan"; return r; }
   if (!(std::isfinite(e) && e > 0)) { r.value = sig3(v); return r; }
   const double av = std::fabs(v);
-  if (av >= 1e5 || (av < 1e-3 && e < 1e-3)) {
-    r.exponent = static_cast<int>(std::floor(std::log10(std::max(av, e))));
-    v /= pow10i(r.exponent);
-    e /= pow10i(r.exponent);
-  }
-  auto below_precision = [&] {        // an error far below the value's precision: no rounding to speak of
+  auto below_precision = [&] {        // an error far below the value's precision, or powers of ten
+                                      // that underflow (below 1e-290): written unrounded
     r.value = table_number(v, 15);
     r.error_abs = table_number(e, 2);
     r.error = r.error_abs;
     return r;
   };
+  if (std::max(av, e) < 1e-290) return below_precision();
+  if (av >= 1e5 || (av < 1e-3 && e < 1e-3)) {
+    r.exponent = static_cast<int>(std::floor(std::log10(std::max(av, e))));
+    v /= pow10i(r.exponent);
+    e /= pow10i(r.exponent);
+  }
   if (!(e > 0)) return below_precision();   // e.g. 5e-324 next to 1e308 underflows to 0 (log10: -inf)
   int d = static_cast<int>(std::floor(std::log10(e)));
   double lead = e / pow10i(d);

@@ -399,3 +399,8 @@ def test_an_error_that_underflows_next_to_its_value_is_formatted_not_cast_from_m
         for fmt in (demtk.format_paren, demtk.format_pm):
             s = fmt(v, e)
             assert isinstance(s, str) and s.lstrip("(-")[:1] in ("1", "2"), (v, e, s)
+    # Powers of ten that underflow (an error or a value below 1e-290): written unrounded, no cast of inf.
+    for v, e in ((0.0, 5e-324), (5e-324, 1e-300), (1e-300, 5e-324), (-3e-295, 2e-300)):
+        for fmt in (demtk.format_paren, demtk.format_pm):
+            s = fmt(v, e)
+            assert isinstance(s, str) and s and "inf" not in s, (v, e, s)
