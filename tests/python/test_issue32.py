@@ -404,3 +404,17 @@ def test_an_error_that_underflows_next_to_its_value_is_formatted_not_cast_from_m
         for fmt in (demtk.format_paren, demtk.format_pm):
             s = fmt(v, e)
             assert isinstance(s, str) and s and "inf" not in s, (v, e, s)
+
+
+def test_a_state_far_outside_its_cells_is_binned_without_casting_inf_to_int():
+    # fuzz_demtk under UBSan: the neighbour list's cell index cast x / cell_size = inf to int (a box of
+    # 1e-300 m, a position of 1e308 m). Each spelling is refused with a Python error or builds an engine.
+    cases = [([[0, 0, 0], [1e308, 0, 0]], [1e-3, 1e-3], [0.01] * 3),
+             ([[0, 0, 0], [-1e308, 1e308, 0]], [1e-3, 1e-3], [0.01] * 3),
+             ([[0, 0, 0], [1e-301, 0, 0]], [1e-302, 1e-302], [1e-300] * 3)]
+    for pos, rad, box in cases:
+        try:
+            st = demtk.State.from_arrays(np.array(pos, float), np.array(rad, float), box, density=2000.0)
+            demtk.Engine(demtk.load_scene(None, set={"particles.count": 2, "integration.threads": 1}), st)
+        except (demtk.SceneError, demtk.BlowUp, ValueError, RuntimeError) as err:
+            assert str(err)
