@@ -218,11 +218,20 @@ Rounded round_to_error(double v, double e) {
   if (!std::isfinite(v)) { r.value = "nan"; return r; }
   if (!(std::isfinite(e) && e > 0)) { r.value = sig3(v); return r; }
   const double av = std::fabs(v);
+  auto below_precision = [&] {        // an error far below the value's precision, or powers of ten
+                                      // that underflow (below 1e-290): written unrounded
+    r.value = table_number(v, 15);
+    r.error_abs = table_number(e, 2);
+    r.error = r.error_abs;
+    return r;
+  };
+  if (std::max(av, e) < 1e-290) return below_precision();
   if (av >= 1e5 || (av < 1e-3 && e < 1e-3)) {
     r.exponent = static_cast<int>(std::floor(std::log10(std::max(av, e))));
     v /= pow10i(r.exponent);
     e /= pow10i(r.exponent);
   }
+  if (!(e > 0)) return below_precision();   // e.g. 5e-324 next to 1e308 underflows to 0 (log10: -inf)
   int d = static_cast<int>(std::floor(std::log10(e)));
   double lead = e / pow10i(d);
   if (lead >= 10) { ++d; lead /= 10; }
@@ -231,12 +240,7 @@ Rounded round_to_error(double v, double e) {
   const int place = d - sig + 1;      // power of ten of the last digit kept
   const double scale = place < 0 ? pow10i(-place) : 1 / pow10i(place);
   const double nv = std::round(v * scale), ne = std::round(e * scale);
-  if (std::fabs(nv) > 1e15) {         // an error far below the value's precision: no rounding to speak of
-    r.value = table_number(v, 15);
-    r.error_abs = table_number(e, 2);
-    r.error = r.error_abs;
-    return r;
-  }
+  if (std::fabs(nv) > 1e15) return below_precision();
   const long long N = static_cast<long long>(nv), U = static_cast<long long>(ne);
   r.value = fixed_from_int(N, -place);
   r.error = place < 0 ? std::to_string(U) : fixed_from_int(U, -place);

@@ -206,6 +206,12 @@ py::array view(std::vector<T>& v, const py::object& owner, bool writable) {
   return a;
 }
 
+// memcpy with a count of 0 still needs valid pointers, and an empty vector's data() may be null
+// (UBSan, tests/SANITIZE.md): every copy into a state's arrays goes through here.
+void copy_bytes(void* dst, const void* src, std::size_t bytes) {
+  if (bytes > 0) std::memcpy(dst, src, bytes);
+}
+
 void copy_rows(std::vector<dem::Vec3>& dst, const py::object& src, const char* what) {
   auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(src);
   if (!a || a.ndim() != 2 || a.shape(1) != 3 || static_cast<std::size_t>(a.shape(0)) != dst.size())
@@ -215,7 +221,7 @@ void copy_rows(std::vector<dem::Vec3>& dst, const py::object& src, const char* w
     if (!std::isfinite(d[k]))
       throw py::value_error(std::string(what) + ": row " + std::to_string(k / 3) + " has a non-finite value (" +
                             std::to_string(d[k]) + "); nothing was copied: give finite values");
-  std::memcpy(static_cast<void*>(dst.data()), a.data(), dst.size() * sizeof(dem::Vec3));
+  copy_bytes(static_cast<void*>(dst.data()), a.data(), dst.size() * sizeof(dem::Vec3));
 }
 
 std::vector<double> to_doubles(const py::object& o, std::size_t n, const char* what) {
@@ -247,7 +253,7 @@ PyState state_from_arrays(const py::object& positions, const py::object& radii, 
   if (!ids.is_none()) {
     auto a = py::array_t<std::int32_t, py::array::c_style | py::array::forcecast>::ensure(ids);
     if (!a || a.ndim() != 1 || a.shape(0) != n) throw py::value_error("ids: expected " + std::to_string(n) + " integers");
-    std::memcpy(s.id.data(), a.data(), n * sizeof(std::int32_t));
+    copy_bytes(s.id.data(), a.data(), n * sizeof(std::int32_t));
   } else
     for (int i = 0; i < n; ++i) s.id[i] = i;
   s.list_valid = false;

@@ -84,3 +84,28 @@ TEST(Sweep, JsonOfThePlanAndTheSweepParsesBack) {
   EXPECT_EQ(j["rows"][0]["folder"], "rows/q");
   EXPECT_EQ(j["base_overrides"][0], "output.vtk=false");
 }
+
+// fuzz_sweep finding (2026-12-02, UBSan): scene_sweep handed the raw scene text to toml++, which
+// reaches __builtin_unreachable on non-ASCII bytes (the loader's ASCII guard was not on this door).
+// Each spelling must be a SceneError from the guard; under the sanitizer build (tests/sanitize.sh)
+// the old path stops with "execution reached an unreachable program point".
+TEST(Sweep, ASceneSweepIsReadThroughTheAsciiGuard) {
+  const std::string sweep = "[sweep]\nkeys = [\"contact.friction\"]\n";
+  const std::pair<std::string, std::string> cases[] = {
+      {"\xd0\x8e\x13\n", "control character"},                                  // the fuzzer's input
+      {std::string(kScene) + sweep + "values = [[\xce\xa3" "0.5]]\n", "non-ASCII"},      // after '='
+      {std::string(kScene) + sweep + "values = [[0.5]]\nnames = [\"\xc2\xb5\"]\n", "non-ASCII"},   // in a string
+      {std::string(kScene) + sweep + "values = [[0.5]]\nnames = [\"a\n", "not closed"}};
+  for (const auto& [text, why] : cases) {
+    try {
+      dem::scene_sweep(write_temp("sw_ascii.toml", text));
+      ADD_FAILURE() << "accepted: " << text;
+    } catch (const dem::SceneError& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  }
+  // A comment may hold any bytes: the sweep is still read.
+  const auto s = dem::scene_sweep(write_temp("sw_ascii_ok.toml", std::string(kScene) + "# \xc2\xb5 = 0.5\n" + sweep +
+                                                                  "values = [[0.5], [0.25]]\n"));
+  EXPECT_EQ(s.rows.size(), 2u);
+}

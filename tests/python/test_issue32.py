@@ -372,3 +372,49 @@ def test_killing_dem_ensemble_stops_its_snakemake(tmp_path, sig):
             os.killpg(p.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+
+
+def test_empty_arrays_into_an_empty_state_copy_nothing_and_do_not_crash():
+    # fuzz_demtk under UBSan (tests/SANITIZE.md): a (0, 3) array copied into a state of no particles
+    # passed vector::data() == nullptr to memcpy (undefined behaviour; the sanitizer build aborts the
+    # interpreter). Spellings: from_arrays with empty positions, velocities and ids; set_positions and
+    # set_velocities of empty rows; each either gives a state of 0 particles or a clear Python error.
+    e3, e1 = np.zeros((0, 3)), np.zeros(0)
+    for kw in ({}, {"velocities": e3}, {"ids": np.zeros(0, dtype=np.int32)}, {"velocities": e3, "ids": []}):
+        try:
+            st = demtk.State.from_arrays(e3, e1, [0.01, 0.01, 0.01], density=2000.0, **kw)
+        except (ValueError, RuntimeError) as err:
+            assert str(err)
+            continue
+        assert st.count == 0
+        st.set_positions(e3)
+        st.set_velocities(e3)
+
+
+def test_an_error_that_underflows_next_to_its_value_is_formatted_not_cast_from_minus_inf():
+    # fuzz_demtk under UBSan: round_to_error scaled 5e-324 by 1e-308 to 0 and cast floor(log10(0)) = -inf
+    # to int (undefined behaviour). Such an error is far below the value's precision: the value is
+    # written to 15 digits, as when the rounded value exceeds 1e15.
+    for v, e in ((1e308, 5e-324), (-1e308, 5e-324), (1e300, 1e-320), (2e5, 5e-324)):
+        for fmt in (demtk.format_paren, demtk.format_pm):
+            s = fmt(v, e)
+            assert isinstance(s, str) and s.lstrip("(-")[:1] in ("1", "2"), (v, e, s)
+    # Powers of ten that underflow (an error or a value below 1e-290): written unrounded, no cast of inf.
+    for v, e in ((0.0, 5e-324), (5e-324, 1e-300), (1e-300, 5e-324), (-3e-295, 2e-300)):
+        for fmt in (demtk.format_paren, demtk.format_pm):
+            s = fmt(v, e)
+            assert isinstance(s, str) and s and "inf" not in s, (v, e, s)
+
+
+def test_a_state_far_outside_its_cells_is_binned_without_casting_inf_to_int():
+    # fuzz_demtk under UBSan: the neighbour list's cell index cast x / cell_size = inf to int (a box of
+    # 1e-300 m, a position of 1e308 m). Each spelling is refused with a Python error or builds an engine.
+    cases = [([[0, 0, 0], [1e308, 0, 0]], [1e-3, 1e-3], [0.01] * 3),
+             ([[0, 0, 0], [-1e308, 1e308, 0]], [1e-3, 1e-3], [0.01] * 3),
+             ([[0, 0, 0], [1e-301, 0, 0]], [1e-302, 1e-302], [1e-300] * 3)]
+    for pos, rad, box in cases:
+        try:
+            st = demtk.State.from_arrays(np.array(pos, float), np.array(rad, float), box, density=2000.0)
+            demtk.Engine(demtk.load_scene(None, set={"particles.count": 2, "integration.threads": 1}), st)
+        except (demtk.SceneError, demtk.BlowUp, ValueError, RuntimeError) as err:
+            assert str(err)

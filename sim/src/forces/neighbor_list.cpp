@@ -34,19 +34,16 @@ struct CellGrid {
   int n[3];
   double inv_size[3];
   const Box* tilted = nullptr;   ///< the cell when it is tilted: cells are slabs of fractional coordinates
+  // Clamped while still a double: a cast of inf or NaN to int is undefined (UBSan: a box of 1e-300
+  // or a position of 1e308 from demtk, tests/SANITIZE.md); in range the same cell as before.
+  static int clamp_cell(double f, int cells) { return !(f >= 0) ? 0 : f >= cells ? cells - 1 : static_cast<int>(f); }
   int index_of(const Vec3& x) const {
     int c[3];
     if (tilted) {
       const Vec3 s = tilted->fractional(x);
-      for (int k = 0; k < 3; ++k) {
-        c[k] = static_cast<int>(std::floor(s[k] * n[k]));
-        c[k] = std::min(std::max(c[k], 0), n[k] - 1);
-      }
+      for (int k = 0; k < 3; ++k) c[k] = clamp_cell(std::floor(s[k] * n[k]), n[k]);
     } else {
-      for (int k = 0; k < 3; ++k) {
-        c[k] = static_cast<int>(x[k] * inv_size[k]);
-        c[k] = std::min(std::max(c[k], 0), n[k] - 1);
-      }
+      for (int k = 0; k < 3; ++k) c[k] = clamp_cell(x[k] * inv_size[k], n[k]);
     }
     return (c[0] * n[1] + c[1]) * n[2] + c[2];
   }

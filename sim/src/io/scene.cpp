@@ -8,6 +8,7 @@
 #include "dem/io/preparation.hpp"
 #include "io/preparation_toml.hpp"
 #include "io/scene_modes.hpp"
+#include "io/scene_text.hpp"
 #include "io/sweep_toml.hpp"
 
 #include <toml++/toml.h>
@@ -296,6 +297,10 @@ const toml::array* explicit_preparation(toml::table& root, const std::string& or
 }
 
 }  // namespace
+
+std::string scene_text_for_toml(const std::string& text, const std::string& origin) {
+  return ascii_scene(text, origin);
+}
 
 // [contact]: the sub-models and their keys, as the registry's descriptions say (contact/registry.hpp).
 static void read_contact_section(KeyReader& r, ContactLaw& c, const std::string& origin, toml::table& root) {

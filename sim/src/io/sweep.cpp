@@ -15,6 +15,7 @@
 #include "dem/core/errors.hpp"
 #include "dem/io/io.hpp"
 #include "dem/io/scene.hpp"
+#include "io/scene_text.hpp"
 #include "io/sweep_toml.hpp"
 
 namespace dem {
@@ -218,7 +219,7 @@ Sweep scene_sweep(const std::string& scene_path) {
   const std::string text = read_regular_file(scene_path, "scene file", std::size_t(1) << 24);
   toml::table root;
   try {
-    root = toml::parse(text, scene_path);
+    root = toml::parse(scene_text_for_toml(text, scene_path), scene_path);   // not raw text: toml++'s UB on non-ASCII
   } catch (const toml::parse_error&) {
     load_scene(text, {}, nullptr, scene_path);   // reports the syntax error as the loader words it
     throw;

@@ -184,7 +184,8 @@ struct ServoSummary {
   std::vector<std::pair<std::string, Component>> components;   // in order of first appearance
   void add(const Servo& servo, const Sym3& stress, double stage_eps_d) {
     for (const auto& [name, e] : servo.component_errors(stress)) {
-      auto it = std::find_if(components.begin(), components.end(), [&](const auto& c) { return c.first == name; });
+      // (a structured binding cannot be captured before C++20: clang refuses it)
+      auto it = std::find_if(components.begin(), components.end(), [&n = name](const auto& c) { return c.first == n; });
       if (it == components.end()) it = components.insert(components.end(), {name, Component{}});
       Component& c = it->second;
       if (stage_eps_d < kStartupEpsD) { ++c.startup_rows; c.startup_max = std::max(c.startup_max, e); }
