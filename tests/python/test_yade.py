@@ -227,29 +227,11 @@ HM_MARGIN = {"D2": {"p_Pa": 2.0, "s_dev": 3.0, "F_dev": 1.5, "C": 1.5, "sliding_
              "triax": {"p_Pa": 6.5, "s_dev": 13, "F_dev": 1.8, "C": 1.6, "sliding_fraction": 2.7, "eps_v": 8.5}}
 
 
-@pytest.mark.parametrize("mode", ["D2", "triax"])
-def test_stored_hertz_mindlin_reference_against_our_floor(mode):
-    ours, yade = _floor(mode, os.path.join(ROOT, "data", "yade_hm"))
-    assert len(ours) >= 5
-    assert abs(ours[0]["E_pot_J"][0] / yade["E_pot_J"][0] - 1) < 1e-9
-    assert abs(ours[0]["p_Pa"][0] / yade["p_Pa"][0] - 1) < 1e-5
-    checked = CHECKED + ([("eps_v", "rms_abs")] if mode == "triax" else [])
-    pairs = [_distances(a, b) for a, b in itertools.permutations(ours, 2)]
-    floor = {q: max(r[q][k] for r in pairs) for q, k in checked}
-    res = _distances(ours[0], yade)
-    for q, k in checked:
-        assert res[q][k] < HM_MARGIN[mode][q] * floor[q], (q, res[q][k], floor[q])
-    # the plateaus within 0.5 % in p and s_dev, and inside `dem compare`'s default tolerances by 5x
-    assert res["p_Pa"]["max_rel"] < 0.006 and res["s_dev"]["rms_rel"] < 0.03 and res["F_dev"]["rms_rel"] < 0.05
-    assert res["C"]["rms_abs"] < 0.03 and res["eps_v"]["rms_abs"] < 1e-4
-
-
-@pytest.mark.parametrize("mode", ["D2", "triax"])
-def test_stored_friction_reference_against_our_floor(mode):
-    # data/yade_friction (docs/yade.md, "Friction"): the stored YADE curve of the frictional packing against
-    # the stored spread of our own dt-perturbed runs. The same packing as loaded; then YADE's distance to
-    # our run is within the largest ours-ours distance, times a margin for a floor of 6 runs.
-    ours, yade = _floor(mode)
+def _yade_against_floor(mode, folder, margin):
+    """The stored YADE curve of `folder` against the stored spread of our own dt-perturbed runs: the same
+    packing as loaded; then YADE's distance to our run is within the largest ours-ours distance, times a
+    margin for a floor of 6 runs. Returns (ours, yade, YADE's distances)."""
+    ours, yade = _floor(mode, folder)
     assert len(ours) >= 5
     assert abs(ours[0]["E_pot_J"][0] / yade["E_pot_J"][0] - 1) < 1e-9
     assert abs(ours[0]["p_Pa"][0] / yade["p_Pa"][0] - 1) < 1e-5
@@ -259,7 +241,22 @@ def test_stored_friction_reference_against_our_floor(mode):
     floor = {q: max(r[q][k] for r in pairs) for q, k in checked}
     res = _distances(ours[0], yade)
     for q, k in checked:
-        assert res[q][k] < MARGIN[mode][q] * floor[q], (q, res[q][k], floor[q])
+        assert res[q][k] < margin[mode][q] * floor[q], (q, res[q][k], floor[q])
+    return ours, yade, res
+
+
+@pytest.mark.parametrize("mode", ["D2", "triax"])
+def test_stored_hertz_mindlin_reference_against_our_floor(mode):
+    _, _, res = _yade_against_floor(mode, os.path.join(ROOT, "data", "yade_hm"), HM_MARGIN)
+    # the plateaus within 0.5 % in p and s_dev, and inside `dem compare`'s default tolerances by 5x
+    assert res["p_Pa"]["max_rel"] < 0.006 and res["s_dev"]["rms_rel"] < 0.03 and res["F_dev"]["rms_rel"] < 0.05
+    assert res["C"]["rms_abs"] < 0.03 and res["eps_v"]["rms_abs"] < 1e-4
+
+
+@pytest.mark.parametrize("mode", ["D2", "triax"])
+def test_stored_friction_reference_against_our_floor(mode):
+    # data/yade_friction (docs/yade.md, "Friction")
+    ours, yade, res = _yade_against_floor(mode, FRIC, MARGIN)
     # and within `dem compare`'s default tolerances (docs/yade.md)
     assert res["p_Pa"]["max_rel"] < 0.03 and res["s_dev"]["rms_rel"] < 0.15 and res["F_dev"]["rms_rel"] < 0.25
     assert res["C"]["rms_abs"] < 0.15 and res["eps_v"]["rms_abs"] < 5e-4
