@@ -649,30 +649,42 @@ def run(args):
             print(f"{' '.join(map(str, job))}: {'ok' if rc == 0 else f'failed ({rc})'}", flush=True)
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="demkit.geotech", description=__doc__.split("\n\n")[0])
+def cli(prog, description, run_help, analyse_help, packings=3, out_help=None, root_help=None):
+    """The `run` / `analyse` command line shared by demkit.geotech and demkit.geotech_rate: the parser
+    and the `run` subparser (the caller adds its own run options)."""
+    ap = argparse.ArgumentParser(prog=prog, description=description)
     sub = ap.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("run", help="prepare packings and run every test")
-    r.add_argument("--out", required=True)
+    r = sub.add_parser("run", help=run_help)
+    r.add_argument("--out", required=True, help=out_help)
     r.add_argument("--scene", default="data/scenes/geotech.toml")
     r.add_argument("--dem", default="build/dem")
-    r.add_argument("--packings", type=int, default=3)
+    r.add_argument("--packings", type=int, default=packings)
     r.add_argument("--first-seed", type=int, default=1)
-    r.add_argument("--mu", nargs="+", default=["0.5"])
-    r.add_argument("--tests", default="", help="comma-separated [paths] names (default: all of the scene's)")
     r.add_argument("--jobs", type=int, default=2)
-    a = sub.add_parser("analyse", help="reduce a run folder to the tables and figures")
-    a.add_argument("root")
+    a = sub.add_parser("analyse", help=analyse_help)
+    a.add_argument("root", help=root_help)
     a.add_argument("--out", required=True)
     a.add_argument("--store", action="store_true", help="also copy trimmed curves to OUT/curves")
     a.add_argument("--no-plots", action="store_true")
-    args = ap.parse_args(argv)
+    return ap, r
+
+
+def dispatch(args, run_fn, analyse_fn, store_fn):
+    """Runs the subcommand `cli`'s parser chose."""
     if args.cmd == "run":
-        run(args)
-    else:
-        analyse(args.root, args.out, plots=not args.no_plots)
-        if args.store:
-            store_curves(args.root, args.out)
+        run_fn(args)
+        return
+    analyse_fn(args.root, args.out, plots=not args.no_plots)
+    if args.store:
+        store_fn(args.root, args.out)
+
+
+def main(argv=None):
+    ap, r = cli("demkit.geotech", __doc__.split("\n\n")[0], "prepare packings and run every test",
+                "reduce a run folder to the tables and figures")
+    r.add_argument("--mu", nargs="+", default=["0.5"])
+    r.add_argument("--tests", default="", help="comma-separated [paths] names (default: all of the scene's)")
+    dispatch(ap.parse_args(argv), run, analyse, store_curves)
 
 
 if __name__ == "__main__":

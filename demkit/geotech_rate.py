@@ -25,7 +25,6 @@ out, refit; SE^2 = (K-1)/K sum (theta_k - theta_mean)^2, Student t with K - 1 de
 freedom). A parameter is "not determined" (NaN) where a replicate fails to converge or I_0 runs
 to a bound (the data do not reach the plateau it names).
 """
-import argparse
 import glob
 import math
 import os
@@ -404,32 +403,16 @@ def run(args):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="demkit.geotech_rate", description=__doc__.split("\n\n")[0])
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("run", help="run one test of the scene at several rates")
-    r.add_argument("--out", required=True, help="the demkit.geotech run folder (its prep/ is reused)")
-    r.add_argument("--scene", default="data/scenes/geotech.toml")
-    r.add_argument("--dem", default="build/dem")
+    ap, r = geotech.cli("demkit.geotech_rate", __doc__.split("\n\n")[0], "run one test of the scene at several rates",
+                        "steady states, the mu(I) and nu(I) fits, rate checks", packings=4,
+                        out_help="the demkit.geotech run folder (its prep/ is reused)",
+                        root_help="OUT/rate of `run`, or a stored copy's curves/ folder")
     r.add_argument("--mu", default="0.5")
     r.add_argument("--prep", default="loose", choices=sorted(geotech.PREPS))
     r.add_argument("--level", default="iso_hi", choices=geotech.LEVELS)
     r.add_argument("--test", default="SS_cns")
     r.add_argument("--rates", required=True, help="comma-separated rates times t_c, e.g. 1e-5,3e-5,1e-4")
-    r.add_argument("--packings", type=int, default=4)
-    r.add_argument("--first-seed", type=int, default=1)
-    r.add_argument("--jobs", type=int, default=2)
-    a = sub.add_parser("analyse", help="steady states, the mu(I) and nu(I) fits, rate checks")
-    a.add_argument("root", help="OUT/rate of `run`, or a stored copy's curves/ folder")
-    a.add_argument("--out", required=True)
-    a.add_argument("--store", action="store_true", help="also copy trimmed curves to OUT/curves")
-    a.add_argument("--no-plots", action="store_true")
-    args = ap.parse_args(argv)
-    if args.cmd == "run":
-        run(args)
-    else:
-        analyse(args.root, args.out, plots=not args.no_plots)
-        if args.store:
-            store(collect(args.root), args.out)
+    geotech.dispatch(ap.parse_args(argv), run, analyse, lambda root, out: store(collect(root), out))
 
 
 if __name__ == "__main__":
