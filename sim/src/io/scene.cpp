@@ -10,6 +10,7 @@
 #include "io/scene_modes.hpp"
 #include "io/scene_text.hpp"
 #include "io/sweep_toml.hpp"
+#include "dem/io/toml_write.hpp"
 
 #include <toml++/toml.h>
 
@@ -523,9 +524,7 @@ Model load_scene(const std::string& text, const std::vector<std::string>& overri
   if (m.skin_auto) cap_auto_skin(m);
   check_work(m, origin);
   if (resolved) {
-    std::ostringstream o;
-    o << root;
-    *resolved = o.str();
+    *resolved = toml_write(root);   // toml++'s bytes without its writer's undefined behaviour
   }
   return m;
 }

@@ -17,6 +17,7 @@
 #include "dem/io/scene.hpp"
 #include "io/scene_text.hpp"
 #include "io/sweep_toml.hpp"
+#include "dem/io/toml_write.hpp"
 
 namespace dem {
 
@@ -75,13 +76,7 @@ std::string toml_text(const toml::node& v) {
     std::string t = b;
     return t.find_first_of(".e") == std::string::npos ? t + ".0" : t;   // still a TOML float
   }
-  toml::table t;
-  t.insert("v", v);
-  std::ostringstream o;
-  o << t;
-  std::string s = o.str();
-  const auto eq = s.find('=');
-  return trim(eq == std::string::npos ? s : s.substr(eq + 1));
+  return toml_value_text(v);
 }
 
 }  // namespace
