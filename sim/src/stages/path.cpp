@@ -227,7 +227,22 @@ struct PathRun {
   double accumulated = 0;   // eps_d travelled along the whole path (sum of |d eps_d| per step)
   bool sheared = false;     // the path has a shear stage (extra columns)
   ServoSummary summary;
+  // The largest inertial number of the rows, the servo's start-up rows (kStartupEpsD) apart: the
+  // servo at its rate limit while it finds its targets is not the flow the warning is about.
+  double inertial_flow = 0, inertial_startup = 0;
 };
+
+// The quasi-static warning, on the rows past the servo's start-up; a start-up above the bound
+// alone is a note (the servo at its rate limit, servo.rate_max_tc), not a warning.
+void warn_inertial(const PathRun& run) {
+  if (run.inertial_flow > kQuasiStaticInertial)
+    std::cerr << "dem: warning: path " << run.label << " reached an inertial number of " << run.inertial_flow << " (> "
+              << kQuasiStaticInertial << "): not quasi-static; lower protocol.deviatoric_rate_tc or servo.rate_max_tc\n";
+  else if (run.inertial_startup > kQuasiStaticInertial && !run.quiet)
+    std::cerr << "dem: note: path " << run.label << ": inertial number " << run.inertial_startup << " (> "
+              << kQuasiStaticInertial << ") only in the servo's start-up (the first " << kStartupEpsD
+              << " of eps_d of a stage), " << run.inertial_flow << " after it; servo.rate_max_tc bounds it\n";
+}
 
 // One stage of a path on the stage loop (stage_common.hpp): the servo, the stop probe, the
 // landing on a linear stop, sampling by the strain travelled (or the stop value).
@@ -352,6 +367,9 @@ struct PathStageRun {
              servo.relative_error(m.stress) < kRelaxedTolerance;
     last_sample = sample_on_x ? probe.value(state, resp) : travel;
     run.summary.add(servo, m.stress, run.accumulated - accumulated0);
+    const bool startup = servo.active() && run.accumulated - accumulated0 < kStartupEpsD;
+    double& inertial = startup ? run.inertial_startup : run.inertial_flow;
+    inertial = std::max(inertial, m.inertial_number);
     return curve_row(m) + extra_row(rate, servo, m.stress, run.accumulated, run.sheared);
   }
   void progress_line(bool done) {
@@ -418,9 +436,7 @@ std::int64_t run_path(const Model& model, State& state, const DeformationMode& m
   }
   run.summary.write(csv);
   csv.commit(label);
-  if (loop.max_inertial > kQuasiStaticInertial)
-    std::cerr << "dem: warning: path " << label << " reached an inertial number of " << loop.max_inertial << " (> "
-              << kQuasiStaticInertial << "): not quasi-static; lower protocol.deviatoric_rate_tc or servo.rate_max_tc\n";
+  warn_inertial(run);
   if (out.stats) *out.stats = engine.rebuild_stats();
   return loop.steps;
 }
