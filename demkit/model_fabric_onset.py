@@ -85,11 +85,11 @@ COLS = (("p_star", "p*(0)"), ("overlap", "delta/d"), ("on_D2", "eps_on D2"), ("o
         ("ratio_slope", "D3/D2 largest slope"))
 
 
-def summary(store, level):
+def summary(store, level, mus=MUS, nus=NUS):
     out = []
-    for mu in MUS:
+    for mu in mus:
         members = sorted(glob.glob(os.path.join(store, f"mu_{mu}", "members", "m*")))
-        for nu in NUS:
+        for nu in nus:
             rows = [packing_row(m, nu, level) for m in members]
             rec = {"mu": mu, "nu": nu, "K": len(rows)}
             for key, _ in COLS:
