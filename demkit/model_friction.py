@@ -2,7 +2,7 @@
 table of issue 31 (docs/model.md, "The frictional extension"; docs/friction.md).
 
     python3 -m demkit.model_friction --out WORK [--dem build/dem] [--mu 0 0.5 ...] [--no-jackknife] [--surface ld]
-        [--fabric-lode principal|norm|opening]
+        [--fabric-lode principal|norm|opening|overlap]
 
 For every mu: WORK/mu_MU/ is a working copy of data/friction_n1000/mu_MU (ensemble means, isotropic
 branches, member D2/D3 curves) plus WORK/mu_MU/paths/isobaric_phiX.csv, the ensemble of the
@@ -147,13 +147,17 @@ def table(work, mus, norm_work=None, middle="norm"):
     out_rows = []
     md = [f"| μ | curve | ν | role | p* (ε_v isobaric): {arrow} | s_dev | F_dev |", "|---|---|---|---|---|---|---|"]
     chis = []
+    d2_moves = False   # does the after rule change D2 (the overlap rule does; norm/principal/opening do not)
     nan4 = [float("nan")] * 4
     for mu in mus:
         g_dir, x_dir, chosen = family_dirs(os.path.join(work, f"mu_{mu}", "model"))
         g, g_chi = summary_rows(g_dir)
         x, x_chi = summary_rows(x_dir)
-        n = summary_rows(family_dirs(os.path.join(norm_work, f"mu_{mu}", "model"))[1])[0] if norm_work else None
-        chis.append((mu, g_chi, x_chi, chosen))
+        n, n_chi = summary_rows(family_dirs(os.path.join(norm_work, f"mu_{mu}", "model"))[1]) if norm_work else (None, None)
+        if n is not None and any(not np.array_equal(n.get(k, (r, nan4))[1], v, equal_nan=True)
+                                 for k, (r, v) in x.items() if k[0] == "D2"):
+            d2_moves = True
+        chis.append((mu, g_chi, x_chi, chosen, n_chi))
         for key in sorted(g, key=lambda k: ({"D2": 0, "D3": 1}.get(k[0], 2), k[1])):
             role, gv = g[key]
             cols = [gv] + ([n.get(key, (role, nan4))[1]] if n is not None else []) + [x.get(key, (role, nan4))[1]]
@@ -164,11 +168,15 @@ def table(work, mus, norm_work=None, middle="norm"):
             cells = [" → ".join(f"{c[q]:.2f}" for c in cols) for q in (first, 2, 3)]
             md.append(f"| {mu} | {key[0]} | {key[1]:.2f} | {role} | " + " | ".join(cells) + " |")
     md += ["", "| μ | χ²/dof group | χ²/dof extended | held-out test chooses |", "|---|---|---|---|"]
-    md += [f"| {mu} | {gc:.3g} | {xc:.3g} | {ch} |" for mu, gc, xc, ch in chis]
+    md += [f"| {mu} | {gc:.3g} | {xc:.3g} | {ch} |" for mu, gc, xc, ch, _ in chis]
     # Compact: per mu the worst curve of each kind, before -> (norm rule ->) after.
-    md += ["", f"| μ | χ²/dof before → after | worst fitted D2 | worst predicted D3 ({arrow}) | worst predicted isobaric "
-           "| chosen |", "|---|---|---|---|---|---|"]
-    for mu, gc, xc, ch in chis:
+    if d2_moves:
+        md += ["", f"| μ | χ²/dof ({arrow}) | worst fitted D2 | worst predicted D3 | worst predicted isobaric "
+               "| chosen |", "|---|---|---|---|---|---|"]
+    else:
+        md += ["", f"| μ | χ²/dof before → after | worst fitted D2 | worst predicted D3 ({arrow}) | worst predicted "
+               "isobaric | chosen |", "|---|---|---|---|---|---|"]
+    for mu, gc, xc, ch, nc in chis:
         cells = []
         for mode in ("D2", "D3", "isobaric"):
             sel = [r for r in out_rows if r[0] == mu and r[1] == mode]
@@ -176,10 +184,11 @@ def table(work, mus, norm_work=None, middle="norm"):
             for c in range(5, len(head)):
                 v = [float(r[c]) for r in sel if np.isfinite(float(r[c]))]
                 worst.append(max(v) if v else float("nan"))
-            if mode != "D3":
+            if mode != "D3" and not d2_moves:
                 worst = [worst[0], worst[-1]]   # the rule changes D3 only
             cells.append(" → ".join(f"{w:.2f}" for w in worst) if sel else "–")
-        md.append(f"| {mu} | {gc:.3g} → {xc:.3g} | " + " | ".join(cells) + f" | {ch} |")
+        chi = f"{gc:.3g} → {nc:.3g} → {xc:.3g}" if d2_moves else f"{gc:.3g} → {xc:.3g}"
+        md.append(f"| {mu} | {chi} | " + " | ".join(cells) + f" | {ch} |")
     text = [",".join(head) + "\n"] + [",".join(r) + "\n" for r in out_rows]
     write_atomic(os.path.join(work, "before_after.csv"), "".join(text))
     write_atomic(os.path.join(work, "before_after.md"), "\n".join(md) + "\n")
@@ -216,7 +225,7 @@ def main(argv=None):
     ap.add_argument("--mu", nargs="+", default=list(MUS))
     ap.add_argument("--no-jackknife", action="store_true")
     ap.add_argument("--surface", default="ld")
-    ap.add_argument("--fabric-lode", default="principal", choices=("principal", "norm", "opening"),
+    ap.add_argument("--fabric-lode", default="principal", choices=("principal", "norm", "opening", "overlap"),
                     help="the extended family's fabric-limit rule (norm: the first round's numbers)")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
     ap.add_argument("--middle-rule", default="norm", help="the --fabric-lode of --norm-work's run (its column name)")

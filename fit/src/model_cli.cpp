@@ -505,9 +505,11 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   if (o.fabric_lode == "principal") co.fabric = FabricLode::Principal;
   else if (o.fabric_lode == "norm") co.fabric = FabricLode::Norm;
   else if (o.fabric_lode == "opening") co.fabric = FabricLode::Opening;
+  else if (o.fabric_lode == "overlap") co.fabric = FabricLode::Overlap;
   else throw InputError("--fabric-lode " + o.fabric_lode + ": give principal (the largest principal deviatoric fabric "
-                        "saturates at every Lode angle), norm (F_dev saturates at F_max at every Lode angle) or opening "
-                        "(principal, and the fabric gated by the minor principal stress)");
+                        "saturates at every Lode angle), norm (F_dev saturates at F_max at every Lode angle), opening "
+                        "(principal, and the fabric gated by the minor principal stress) or overlap (principal, and the "
+                        "fabric gated by the fraction of contacts opened by the extension strain)");
   return co;
 }
 
@@ -707,7 +709,8 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "(Matsuoka-Nakai), none");
   app.add_option("--fabric-lode", o.fabric_lode, "Lode rule of the extended family's fabric limit: principal (the "
                  "largest principal deviatoric fabric saturates at every Lode angle), norm (F_dev saturates at F_max), opening "
-                 "(principal, and the fabric gated by the minor principal stress; docs/model.md)");
+                 "(principal, and the fabric gated by the minor principal stress), overlap (principal, and the fabric "
+                 "gated by the fraction of contacts opened by the extension strain; docs/model.md)");
   app.add_flag("--force", o.force, "overwrite an existing output folder");
 }
 

@@ -182,6 +182,7 @@ def test_bad_family_and_surface_are_refused(tmp_path):
     assert r.returncode == 2 and "--surface" in r.stderr and "ld" in r.stderr, r.stderr
     r = run(ENSEMBLE, "--out", str(tmp_path / "l"), "--family", "extended", "--fabric-lode", "max", "--no-plots")
     assert r.returncode == 2 and "--fabric-lode max" in r.stderr and "principal" in r.stderr and "opening" in r.stderr, r.stderr
+    assert "overlap" in r.stderr, r.stderr
     assert not os.path.exists(tmp_path / "l")
 
 
@@ -193,13 +194,13 @@ def test_group_model_at_mu_0_ignores_the_fabric_rule(tmp_path):
     work = str(tmp_path / "mu_0")
     model_friction.copy_tree(src, work)
     texts = []
-    for rule in ("principal", "norm"):
+    for rule in ("principal", "norm", "overlap"):
         out = str(tmp_path / rule)
         r = run(work, "--out", out, "--family", "group", "--fabric-lode", rule, "--no-jackknife", "--no-plots")
         assert r.returncode == 0, r.stderr
         with open(os.path.join(out, "summary.md")) as fh:
             texts.append(fh.read())
-    assert texts[0] == texts[1]
+    assert texts[0] == texts[1] == texts[2]
     assert "group model" in texts[0] and "| D3 |" in texts[0]
 
 
@@ -234,3 +235,44 @@ def test_frictional_family_fits_the_mu_0_5_ensemble(tmp_path):
             assert s["F_dev [band]"] == norm[key]["F_dev [band]"]
         if s["mode"] == "D3" and float(s["nu [-]"]) < 0.7:
             assert float(s["F_dev [band]"]) < 1 < float(norm[key]["F_dev [band]"]), (s, norm[key])
+
+
+def test_overlap_rule_predicts_the_late_d3_fabric_at_mu_0_5(tmp_path):
+    """The overlap rule (docs/model.md, "The fabric's onset"): calibrated on D2 alone, every fitted
+    D2 curve within a band, and the D3 fabric at nu = 0.80, 5.1 band widths off under the principal
+    rule, within 2.5 (1.87 when stored)."""
+    from demkit import model_friction
+    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
+    work = str(tmp_path / "mu_0.5")
+    model_friction.copy_tree(src, work)
+    out = str(tmp_path / "model")
+    r = run(work, "--out", out, "--family", "extended", "--fabric-lode", "overlap", "--no-jackknife", "--no-plots")
+    assert r.returncode == 0, r.stderr
+    summary = {(s["mode"], float(s["nu [-]"])): s for s in rows(os.path.join(out, "summary.csv")) if s["mode"] != "calibration"}
+    for (mode, nu), s in summary.items():
+        if mode == "D2":
+            assert float(s["worst [band]"]) < 1, s
+    assert float(summary[("D3", 0.8)]["F_dev [band]"]) < 2.5, summary[("D3", 0.8)]
+
+
+def test_fabric_onset_of_a_curve_stretched_by_the_extension_strain(tmp_path):
+    """demkit.model_fabric_onset against curves built by hand: D3's fabric is D2's with the strain
+    stretched by sqrt(3) (the same extension principal strain, eps/sqrt(3) against eps/3), so the
+    onset ratio is sqrt(3) and the extension strain at the onsets over the overlap pi p*/(C nu)
+    is the same; a D3 curve that never rises gives no onset (nan, counted out)."""
+    import numpy as np
+    from demkit import model_fabric_onset as mfo
+    eps = np.linspace(0.0, 0.3, 101)
+    rise = lambda e: 0.25 * (1 - np.exp(-(e / 0.05) ** 3))
+    head = "eps_d,p_star,s_dev,F_dev,C\n"
+    for k, d3_rises in enumerate((True, True, False)):
+        m = tmp_path / "mu_0.5" / "members" / f"m00{k}" / "deviatoric"
+        m.mkdir(parents=True)
+        for mode, F in (("D2", 0.03 + rise(eps)), ("D3", 0.03 + (rise(eps / np.sqrt(3)) if d3_rises else 0 * eps))):
+            text = head + "".join(f"{e},0.1,{0.5 + e},{f},8\n" for e, f in zip(eps, F))
+            (m / f"{mode}_phi0.800.csv").write_text("# hand-built\n" + text)
+    (rec,) = mfo.summary(str(tmp_path), 0.2, mus=("0.5",), nus=("0.800",))
+    assert rec["ratio_on"][2] == 2                                   # the third packing never reaches it
+    assert abs(rec["ratio_on"][0] - np.sqrt(3)) < 0.02, rec["ratio_on"]
+    assert abs(rec["ext_D3_over_overlap"][0] / rec["ext_D2_over_overlap"][0] - 1) < 0.02
+    assert abs(rec["overlap"][0] - np.pi * 0.1 / (8 * 0.8)) < 1e-12

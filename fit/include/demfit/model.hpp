@@ -72,7 +72,15 @@ constexpr double kLodeBD2 = 0.5;
 /// deviatoric stress ratio |sigma_3 - p|/p (contacts opening along the extension directions)
 /// over its value at the D2 limit, instead of by s/s_lim: the same at b_ref, slower in
 /// axisymmetric compression, where the minor deviator is s/3 against D2's s/sqrt(3).
-enum class FabricLode { Norm = 0, Principal, Opening };
+///
+/// `Overlap` (issue 31, third round): the limit as `Principal`; the gate is the fraction of contacts
+/// opened along the extension directions, r_F = 1 - exp(-e_3/delta), e_3 = c_3(b) l the minor
+/// (extension) principal strain since the loading start or the last reversal (l: |eps_d| accumulated
+/// since then), delta = pi p* / (C(nu) nu) the mean contact overlap over the diameter of the packing
+/// (Hookean contacts, from p = C nu k delta/(pi d^2)), so that a contact of overlap delta_c opens at
+/// e_3 = delta_c/d and, with exponentially distributed forces, a fraction 1 - exp(-e_3/delta) has
+/// opened. No parameter; D2 changes too (its gate is no longer the mobilisation). docs/model.md.
+enum class FabricLode { Norm = 0, Principal, Opening, Overlap };
 
 /// Named view of all parameters (double), with units; `iso()`/`shear()` give the Ceres blocks.
 struct Parameters {
@@ -226,6 +234,30 @@ inline double fabric_lode_factor(FabricLode f, double b, double b_ref = kLodeBD2
   return principal_fraction(b_ref) / principal_fraction(b);
 }
 
+/// Mean contact overlap over the particle diameter, delta/d = pi p* / (C nu) [-]: Hookean contacts
+/// f = k delta, branch vectors of length d, p = (1/3V) sum f d = C nu k delta / (pi d^2) with
+/// N C/2 contacts in V = N pi d^3/(6 nu), and p* = d p / k (docs/definitions.md). C from the
+/// coordination law. Polydispersity and the spread of branch lengths are neglected.
+template <class T>
+T mean_overlap(const T* iso, const T& nu, const T& p) {
+  return T(3.14159265358979323846) * p / (coordination(iso, nu) * nu);
+}
+
+/// The `Overlap` rule's gate variable: the fraction of contacts opened along the extension
+/// directions, 1 - exp(-e_3/delta), e_3 = minor_fraction(b) l the extension principal strain
+/// after |eps_d| = l since the loading start (D2: l/sqrt(3); axisymmetric compression: l/3) and
+/// delta = mean_overlap (exponential force distribution, Radjai et al. 1996). Floored at 1e-6 like
+/// the mobilisation; 1 where the overlap is not positive.
+template <class T>
+T opened_fraction(const T* iso, const T& nu, const T& p, const T& l, double b) {
+  using std::exp;
+  const T delta = mean_overlap(iso, nu, p);
+  if (!(delta > T(0.0))) return T(1.0);
+  T f = T(1.0) - exp(-T(minor_fraction(b)) * l / delta);
+  if (!(f > T(1e-6))) f = T(1e-6);
+  return f;
+}
+
 /// What the frictional family adds to a run: its parameter block (null: the group model), the
 /// test's intermediate-stress ratio b, the Lode surface of the stress ratio and the Lode rule of
 /// the fabric limit.
@@ -244,6 +276,7 @@ struct State {
   T p;       ///< pressure p* [-]
   T s;       ///< stress ratio sigma_dev/p [-], signed along the first loading direction
   T F;       ///< deviatoric fabric [-], signed likewise
+  T l = T(0.0);   ///< |eps_d| accumulated since the loading start or the last reversal [-] (FabricLode::Overlap)
 };
 
 /// How the volume is controlled during a segment.
@@ -311,6 +344,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
     d.p = -B * dev;
     d.s = -(A - y.s * B) / y.p * dev;
     d.F = T(0.0);
+    d.l = T(0.0);
     return d;
   }
   // The frictional extension (docs/model.md): r the mobilised stress ratio on the test's Lode
@@ -325,6 +359,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   T r_F = r;
   if (m.ext.fabric == FabricLode::Opening && m.ext.b != kLodeBD2)
     r_F = r * s_lim * T(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2)) / L.s_max;
+  if (m.ext.fabric == FabricLode::Overlap) r_F = opened_fraction(m.iso, nu, y.p, y.l, m.ext.b);
   const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
   const T shape_s = T(1.0) + X.kappa_s * r;                               // stress ratio: linear for longer
   // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
@@ -349,13 +384,14 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   d.ln_nu = -dvol;
   d.p = -B * dvol + A * T(sigma) - relax + B * dil;
   d.F = L.beta_F * (T(sigma) * F_lim - y.F) * gate_F;
+  d.l = T(1.0);
   d.s = shear - (A - y.s * B) / y.p * dvol;
   return d;
 }
 
 template <class T>
 State<T> axpy(const State<T>& y, const State<T>& d, double h) {
-  return {y.ln_nu + T(h) * d.ln_nu, y.p + T(h) * d.p, y.s + T(h) * d.s, y.F + T(h) * d.F};
+  return {y.ln_nu + T(h) * d.ln_nu, y.p + T(h) * d.p, y.s + T(h) * d.s, y.F + T(h) * d.F, y.l + T(h) * d.l};
 }
 
 /// One classical RK4 step of length h (in |eps_d|, or |eps_vol| for a volumetric segment).
@@ -370,6 +406,7 @@ State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const S
   out.p += T(h / 6) * (k1.p + T(2) * k2.p + T(2) * k3.p + k4.p);
   out.s += T(h / 6) * (k1.s + T(2) * k2.s + T(2) * k3.s + k4.s);
   out.F += T(h / 6) * (k1.F + T(2) * k2.F + T(2) * k3.F + k4.F);
+  out.l += T(h / 6) * (k1.l + T(2) * k2.l + T(2) * k3.l + k4.l);
   return out;
 }
 
@@ -385,7 +422,7 @@ std::vector<Point<T>> integrate(const T* iso, const T* shear, double nu_ref, dou
   Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0)), ext};
   State<T> y{T(log(nu0)), T(p0), T(s0), T(F0)};
   T eps_vol = T(0.0);
-  double acc = 0, eps_d = 0;
+  double acc = 0, eps_d = 0, last_sigma = 1.0;
   std::vector<Point<T>> out{{0.0, 0.0, eps_vol, y}};
   for (const Segment& seg : path) {
     const bool vol = seg.eps_d == 0.0;
@@ -396,6 +433,8 @@ std::vector<Point<T>> integrate(const T* iso, const T* shear, double nu_ref, dou
     const double dl = length / seg.outputs;
     const int sub = std::max(1, static_cast<int>(std::ceil(dl / seg.max_step)));
     const double h = dl / sub;
+    if (sigma != 0.0 && sigma != last_sigma) y.l = T(0.0);   // a reversal: the opening restarts
+    if (sigma != 0.0) last_sigma = sigma;
     for (int o = 0; o < seg.outputs; ++o) {
       for (int k = 0; k < sub; ++k) {
         const State<T> y1 = rk4_step(m, y, sigma, seg, h);
@@ -434,6 +473,7 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
   Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0)), ext};
   State<T> y{T(std::log(nu0)), T(p0), T(s0), T(F0)};
   T eps_vol = T(0.0);
+  double last_sigma = 1.0;
   std::vector<RowState<T>> out;
   out.reserve(acc.size());
   out.push_back({y, eps_vol});
@@ -444,6 +484,8 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
       Segment seg;
       seg.control = isobaric[i] == 2 ? Control::Triaxial : isobaric[i] ? Control::Isobaric : Control::Volume;
       const double sigma = direction[i] > 0 ? 1.0 : -1.0;
+      if (sigma != last_sigma) y.l = T(0.0);   // a reversal: the opening restarts
+      last_sigma = sigma;
       const int sub = std::max(1, static_cast<int>(std::ceil(dl / max_step)));
       for (int k = 0; k < sub; ++k) {
         const State<T> y1 = rk4_step(m, y, sigma, seg, dl / sub);

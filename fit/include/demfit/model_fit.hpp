@@ -57,7 +57,7 @@ struct CalibrationOptions {
 /// triaxial paths (axisymmetric compression), kLodeBD2 otherwise (D2 and paths made of D2).
 double lode_b_of(const std::string& mode);
 const char* surface_name(Surface s);
-const char* fabric_lode_name(FabricLode f);   ///< "norm" or "principal" (the --fabric-lode words)
+const char* fabric_lode_name(FabricLode f);   ///< "norm", "principal", "opening", "overlap" (the --fabric-lode words)
 
 /// Result of a calibration. Parameter order: the 7 isotropic, the 12 shear coefficients, then
 /// (frictional family) the 7 extension coefficients.
