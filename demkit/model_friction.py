@@ -2,7 +2,7 @@
 table of issue 31 (docs/model.md, "The frictional extension"; docs/friction.md).
 
     python3 -m demkit.model_friction --out WORK [--dem build/dem] [--mu 0 0.5 ...] [--no-jackknife] [--surface ld]
-        [--fabric-lode principal|norm|opening|overlap]
+        [--fabric-lode overlap|principal|norm|opening|extension]
 
 For every mu: WORK/mu_MU/ is a working copy of data/friction_n1000/mu_MU (ensemble means, isotropic
 branches, member D2/D3 curves) plus WORK/mu_MU/paths/isobaric_phiX.csv, the ensemble of the
@@ -225,7 +225,7 @@ def main(argv=None):
     ap.add_argument("--mu", nargs="+", default=list(MUS))
     ap.add_argument("--no-jackknife", action="store_true")
     ap.add_argument("--surface", default="ld")
-    ap.add_argument("--fabric-lode", default="principal", choices=("principal", "norm", "opening", "overlap"),
+    ap.add_argument("--fabric-lode", default="overlap", choices=("principal", "norm", "opening", "overlap", "extension"),
                     help="the extended family's fabric-limit rule (norm: the first round's numbers)")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
     ap.add_argument("--middle-rule", default="norm", help="the --fabric-lode of --norm-work's run (its column name)")

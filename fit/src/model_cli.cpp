@@ -506,10 +506,12 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   else if (o.fabric_lode == "norm") co.fabric = FabricLode::Norm;
   else if (o.fabric_lode == "opening") co.fabric = FabricLode::Opening;
   else if (o.fabric_lode == "overlap") co.fabric = FabricLode::Overlap;
+  else if (o.fabric_lode == "extension") co.fabric = FabricLode::Extension;
   else throw InputError("--fabric-lode " + o.fabric_lode + ": give principal (the largest principal deviatoric fabric "
                         "saturates at every Lode angle), norm (F_dev saturates at F_max at every Lode angle), opening "
-                        "(principal, and the fabric gated by the minor principal stress) or overlap (principal, and the "
-                        "fabric gated by the fraction of contacts opened by the extension strain)");
+                        "(principal, and the fabric gated by the minor principal stress), overlap (the default: principal, "
+                        "and the fabric gated by the fraction of contacts opened by the extension strain) or extension "
+                        "(overlap, and the fabric's rate per unit extension strain)");
   return co;
 }
 
@@ -709,8 +711,9 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "(Matsuoka-Nakai), none");
   app.add_option("--fabric-lode", o.fabric_lode, "Lode rule of the extended family's fabric limit: principal (the "
                  "largest principal deviatoric fabric saturates at every Lode angle), norm (F_dev saturates at F_max), opening "
-                 "(principal, and the fabric gated by the minor principal stress), overlap (principal, and the fabric "
-                 "gated by the fraction of contacts opened by the extension strain; docs/model.md)");
+                 "(principal, and the fabric gated by the minor principal stress), overlap (the default: principal, and "
+                 "the fabric gated by the fraction of contacts opened by the extension strain), extension (overlap, and "
+                 "the fabric's rate per unit extension strain; docs/model.md)");
   app.add_flag("--force", o.force, "overwrite an existing output folder");
 }
 

@@ -303,7 +303,8 @@ const char* surface_name(Surface s) {
 
 const char* fabric_lode_name(FabricLode f) {
   return f == FabricLode::Principal ? "principal" : f == FabricLode::Opening ? "opening"
-         : f == FabricLode::Overlap ? "overlap" : "norm";
+         : f == FabricLode::Overlap ? "overlap"
+         : f == FabricLode::Extension ? "extension" : "norm";
 }
 
 CurveData read_curve(const std::string& path, const std::string& mode, double nu) {

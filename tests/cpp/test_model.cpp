@@ -886,6 +886,60 @@ TEST(ModelFriction, RecoversExtensionWithinJackknifeErrors) { recover_extension(
 // mobilisation): the coefficients, n_F among them, are recovered within 3 jackknife SE from D2 alone.
 TEST(ModelFriction, RecoversExtensionUnderTheOverlapRule) { recover_extension(FabricLode::Overlap); }
 
+// The extension rule (issue 31, fourth round): the overlap rule's gate and limit with the fabric's
+// rate per unit extension (minor principal) strain. (i) The rate factor c3(b)/c3(1/2) against the
+// deviators' minor components by hand: 1 in D2, (1/3)/(1/sqrt(3)) = 1/sqrt(3) in axisymmetric
+// compression. (ii) D2 is the overlap rule's bit for bit (the factor is 1 at b = 1/2). (iii) D3's
+// fabric right-hand side is the overlap rule's over sqrt(3) at the same state. (iv) With n_F = 0 (no
+// gate) the D3 fabric at constant volume is the relaxation solved in closed form,
+// F = F_lim + (F0 - F_lim) exp(-beta_F eps/sqrt(3)), F_lim = sqrt(3)/2 F_max (RK4 to 1e-9).
+TEST(ModelFriction, ExtensionRuleRatesTheFabricPerUnitExtensionStrain) {
+  EXPECT_EQ(fabric_rate_factor(FabricLode::Extension, 0.5), 1.0);
+  EXPECT_NEAR(fabric_rate_factor(FabricLode::Extension, 0.0), 1.0 / std::sqrt(3.0), 1e-15);
+  for (FabricLode f : {FabricLode::Norm, FabricLode::Principal, FabricLode::Opening, FabricLode::Overlap})
+    EXPECT_EQ(fabric_rate_factor(f, 0.0), 1.0);
+  const Parameters P = frictional_truth();
+  const auto iso = P.iso();
+  const double nu = 0.78, p0 = isotropic_pressure(iso.data(), nu);
+  std::vector<double> eps;
+  for (int i = 0; i <= 60; ++i) eps.push_back(0.005 * i);
+  auto run = [&](const double* ext, const char* mode, FabricLode f) {
+    return monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, eps, 2e-3,
+                                  Ext<double>{ext, lode_b_of(mode), P.surface, f});
+  };
+  const auto e2 = run(P.ext, "D2", FabricLode::Extension), o2 = run(P.ext, "D2", FabricLode::Overlap);
+  for (std::size_t i = 0; i < eps.size(); ++i) {
+    EXPECT_EQ(e2[i].F, o2[i].F) << i;
+    EXPECT_EQ(e2[i].p, o2[i].p) << i;
+    EXPECT_EQ(e2[i].s, o2[i].s) << i;
+  }
+  State<double> y{std::log(nu), 0.1, 0.3, 0.05};
+  y.l = 0.05;
+  auto rhs_at = [&](FabricLode f) {
+    const Material<double> m{iso.data(), P.shear, P.nu_ref, 1.0, Ext<double>{P.ext, 0.0, Surface::LadeDuncan, f}};
+    return rhs(m, y, 1.0, Segment{});
+  };
+  const State<double> de = rhs_at(FabricLode::Extension), dov = rhs_at(FabricLode::Overlap);
+  EXPECT_NEAR(de.F, dov.F / std::sqrt(3.0), 1e-14 * std::fabs(dov.F));
+  EXPECT_EQ(de.s, dov.s);
+  EXPECT_EQ(de.p, dov.p);
+
+  double flat[kNumExt];
+  std::copy(P.ext, P.ext + kNumExt, flat);
+  flat[kNFA] = flat[kNFB] = 0.0;
+  const auto e3 = run(flat, "D3", FabricLode::Extension);
+  const Local<double> L = local(P.shear, nu, P.nu_ref);
+  const double F_lim = std::sqrt(3.0) / 2 * L.F_max;
+  for (std::size_t i = 0; i < eps.size(); ++i) {
+    const double want = F_lim + (0.01 - F_lim) * std::exp(-L.beta_F * eps[i] / std::sqrt(3.0));
+    EXPECT_NEAR(e3[i].F, want, 1e-9) << i;
+  }
+}
+
+// Synthetic D2 under the extension rule: D2 is the overlap rule's, so the same recovery; D3 from the
+// same truth (rate per unit extension strain) predicted within a band.
+TEST(ModelFriction, RecoversExtensionUnderTheExtensionRule) { recover_extension(FabricLode::Extension); }
+
 // The Lode surface moves the limit, not the initial stiffness: from s = 0 the stress ratio rises
 // at G/p = beta_s s_max in D2 (b = 1/2) and in D3 (b = 0) alike, and tends to s_max and to the
 // surface's s_lim(b = 0) respectively (kappa_s = 0 here: the plain relaxation law, solved).

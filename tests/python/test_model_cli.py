@@ -211,7 +211,7 @@ def test_frictional_family_fits_the_mu_0_5_ensemble(tmp_path):
     model_friction.copy_tree(src, work)
     model_friction.isobaric_paths(src, work)
     out = str(tmp_path / "model")
-    r = run(work, "--out", out, "--family", "extended", "--no-jackknife", "--no-plots")
+    r = run(work, "--out", out, "--family", "extended", "--fabric-lode", "principal", "--no-jackknife", "--no-plots")
     assert r.returncode == 0, r.stderr
     params = {p["parameter"]: p for p in rows(os.path.join(out, "parameters.csv"))}
     assert len(params) == 19 + 7 + 2
@@ -253,6 +253,31 @@ def test_overlap_rule_predicts_the_late_d3_fabric_at_mu_0_5(tmp_path):
         if mode == "D2":
             assert float(s["worst [band]"]) < 1, s
     assert float(summary[("D3", 0.8)]["F_dev [band]"]) < 2.5, summary[("D3", 0.8)]
+
+
+def test_extension_rule_keeps_d2_and_slows_the_dense_d3_fabric_at_mu_0_5(tmp_path):
+    """The default rule is overlap (a run without --fabric-lode gives its summary, the same bytes); the
+    extension rule (docs/model.md, "The fabric's rate") changes nothing at b = 1/2, so every D2 row of
+    the summary is the overlap rule's, and rates the D3 fabric per unit extension strain: at
+    nu = 0.80, where the overlap rule's D3 fabric grows too fast (1.87 band widths when stored), it is
+    predicted within a band (0.42 when stored)."""
+    from demkit import model_friction
+    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
+    work = str(tmp_path / "mu_0.5")
+    model_friction.copy_tree(src, work)
+    out_d, out_x = str(tmp_path / "default"), str(tmp_path / "extension")
+    r = run(work, "--out", out_d, "--family", "extended", "--no-jackknife", "--no-plots")
+    assert r.returncode == 0, r.stderr
+    r = run(work, "--out", out_x, "--family", "extended", "--fabric-lode", "extension", "--no-jackknife", "--no-plots")
+    assert r.returncode == 0, r.stderr
+    with open(os.path.join(out_d, "summary.md")) as fh:
+        assert "fabric limit overlap" in fh.read()
+    dflt = {(s["mode"], float(s["nu [-]"])): s for s in rows(os.path.join(out_d, "summary.csv")) if s["mode"] != "calibration"}
+    ext = {(s["mode"], float(s["nu [-]"])): s for s in rows(os.path.join(out_x, "summary.csv")) if s["mode"] != "calibration"}
+    for key, s in ext.items():
+        if key[0] == "D2":
+            assert s == dflt[key], (s, dflt[key])
+    assert float(ext[("D3", 0.8)]["F_dev [band]"]) < 1 < float(dflt[("D3", 0.8)]["F_dev [band]"])
 
 
 def test_fabric_onset_of_a_curve_stretched_by_the_extension_strain(tmp_path):

@@ -80,7 +80,12 @@ constexpr double kLodeBD2 = 0.5;
 /// (Hookean contacts, from p = C nu k delta/(pi d^2)), so that a contact of overlap delta_c opens at
 /// e_3 = delta_c/d and, with exponentially distributed forces, a fraction 1 - exp(-e_3/delta) has
 /// opened. No parameter; D2 changes too (its gate is no longer the mobilisation). docs/model.md.
-enum class FabricLode { Norm = 0, Principal, Opening, Overlap };
+///
+/// `Extension` (issue 31, fourth round): the gate and the limit as `Overlap`, and the fabric's rate per
+/// unit extension (minor principal) strain instead of per unit |eps_d|: beta_F c_3(b)/c_3(b_ref), so
+/// 1/sqrt(3) of D2's in axisymmetric compression. Identity at b_ref (D2 is `Overlap`'s, bit for bit).
+/// No parameter. docs/model.md, "The fabric's rate".
+enum class FabricLode { Norm = 0, Principal, Opening, Overlap, Extension };
 
 /// Named view of all parameters (double), with units; `iso()`/`shear()` give the Ceres blocks.
 struct Parameters {
@@ -234,6 +239,13 @@ inline double fabric_lode_factor(FabricLode f, double b, double b_ref = kLodeBD2
   return principal_fraction(b_ref) / principal_fraction(b);
 }
 
+/// The fabric's rate at b over the one at b_ref: c_3(b)/c_3(b_ref) for `Extension` (the rate per unit
+/// extension strain; 1/sqrt(3) in axisymmetric compression against D2), 1 otherwise and at b_ref.
+inline double fabric_rate_factor(FabricLode f, double b, double b_ref = kLodeBD2) {
+  if (f != FabricLode::Extension || b == b_ref) return 1.0;
+  return minor_fraction(b) / minor_fraction(b_ref);
+}
+
 /// Mean contact overlap over the particle diameter, delta/d = pi p* / (C nu) [-]: Hookean contacts
 /// f = k delta, branch vectors of length d, p = (1/3V) sum f d = C nu k delta / (pi d^2) with
 /// N C/2 contacts in V = N pi d^3/(6 nu), and p* = d p / k (docs/definitions.md). C from the
@@ -359,7 +371,8 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   T r_F = r;
   if (m.ext.fabric == FabricLode::Opening && m.ext.b != kLodeBD2)
     r_F = r * s_lim * T(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2)) / L.s_max;
-  if (m.ext.fabric == FabricLode::Overlap) r_F = opened_fraction(m.iso, nu, y.p, y.l, m.ext.b);
+  const bool opened = m.ext.fabric == FabricLode::Overlap || m.ext.fabric == FabricLode::Extension;
+  if (opened) r_F = opened_fraction(m.iso, nu, y.p, y.l, m.ext.b);
   const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
   const T shape_s = T(1.0) + X.kappa_s * r;                               // stress ratio: linear for longer
   // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
@@ -383,7 +396,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   }
   d.ln_nu = -dvol;
   d.p = -B * dvol + A * T(sigma) - relax + B * dil;
-  d.F = L.beta_F * (T(sigma) * F_lim - y.F) * gate_F;
+  d.F = L.beta_F * T(fabric_rate_factor(m.ext.fabric, m.ext.b)) * (T(sigma) * F_lim - y.F) * gate_F;
   d.l = T(1.0);
   d.s = shear - (A - y.s * B) / y.p * dvol;
   return d;

@@ -21,7 +21,7 @@ struct ModelCommandOptions {
   bool force = false;                     ///< overwrite an existing output folder
   std::string family = "group";           ///< group, extended or auto (docs/model.md, "The frictional extension")
   std::string surface = "ld";             ///< Lode surface of the extended family: ld, mn, none
-  std::string fabric_lode = "principal";  ///< Lode rule of the extended family's fabric limit: principal, norm
+  std::string fabric_lode = "overlap";  ///< Lode rule of the extended family's fabric: overlap (default), principal, norm, opening, extension
 };
 
 void add_model_options(CLI::App& app, ModelCommandOptions& o);
