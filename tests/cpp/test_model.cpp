@@ -927,6 +927,9 @@ TEST(ModelFriction, ExtensionRuleRatesTheFabricPerUnitExtensionStrain) {
   double flat[kNumExt];
   std::copy(P.ext, P.ext + kNumExt, flat);
   flat[kNFA] = flat[kNFB] = 0.0;
+  // The group model (no extension block) ignores the rule, D3 included.
+  const auto g3 = run(nullptr, "D3", FabricLode::Extension), gn = run(nullptr, "D3", FabricLode::Norm);
+  for (std::size_t i = 0; i < eps.size(); ++i) EXPECT_EQ(g3[i].F, gn[i].F) << i;
   const auto e3 = run(flat, "D3", FabricLode::Extension);
   const Local<double> L = local(P.shear, nu, P.nu_ref);
   const double F_lim = std::sqrt(3.0) / 2 * L.F_max;

@@ -194,13 +194,13 @@ def test_group_model_at_mu_0_ignores_the_fabric_rule(tmp_path):
     work = str(tmp_path / "mu_0")
     model_friction.copy_tree(src, work)
     texts = []
-    for rule in ("principal", "norm", "overlap"):
+    for rule in ("principal", "norm", "overlap", "extension"):
         out = str(tmp_path / rule)
         r = run(work, "--out", out, "--family", "group", "--fabric-lode", rule, "--no-jackknife", "--no-plots")
         assert r.returncode == 0, r.stderr
         with open(os.path.join(out, "summary.md")) as fh:
             texts.append(fh.read())
-    assert texts[0] == texts[1] == texts[2]
+    assert texts[0] == texts[1] == texts[2] == texts[3]
     assert "group model" in texts[0] and "| D3 |" in texts[0]
 
 

@@ -396,7 +396,8 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   }
   d.ln_nu = -dvol;
   d.p = -B * dvol + A * T(sigma) - relax + B * dil;
-  d.F = L.beta_F * T(fabric_rate_factor(m.ext.fabric, m.ext.b)) * (T(sigma) * F_lim - y.F) * gate_F;
+  const T rate_F = m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
+  d.F = L.beta_F * rate_F * (T(sigma) * F_lim - y.F) * gate_F;
   d.l = T(1.0);
   d.s = shear - (A - y.s * B) / y.p * dvol;
   return d;
