@@ -301,3 +301,29 @@ def test_fabric_onset_of_a_curve_stretched_by_the_extension_strain(tmp_path):
     assert abs(rec["ratio_on"][0] - np.sqrt(3)) < 0.02, rec["ratio_on"]
     assert abs(rec["ext_D3_over_overlap"][0] / rec["ext_D2_over_overlap"][0] - 1) < 0.02
     assert abs(rec["overlap"][0] - np.pi * 0.1 / (8 * 0.8)) < 1e-12
+
+
+def test_fabric_rate_and_stress_peak_of_curves_built_by_hand(tmp_path):
+    """demkit.model_fabric_rate against curves built by hand: D3's fabric is D2's with the strain
+    stretched by sqrt(3), so at equal extension strain the D3/D2 rise is 1 and at equal eps_d it is
+    rise(0.3/sqrt(3))/rise(0.3); a stress ratio that peaks at 1 near eps_d = 0.15 and then loses
+    0.1 per 0.15 of strain has a drop 0.1 x 0.9 against its mean over 0.27-0.3; p* = 0.1 (1 + eps)."""
+    import numpy as np
+    from demkit import model_fabric_rate as mfr
+    eps = np.linspace(0.0, 0.3, 301)
+    rise = lambda e: 0.25 * (1 - np.exp(-(e / 0.05) ** 3))
+    s = 1 - np.exp(-eps / 0.005) - 0.1 * np.clip((eps - 0.15) / 0.15, 0, None)
+    head = "eps_d,p_star,s_dev,F_dev,nu\n"
+    for k in range(3):
+        m = tmp_path / "mu_0.5" / "members" / f"m00{k}" / "deviatoric"
+        m.mkdir(parents=True)
+        for mode, F in (("D2", 0.03 + rise(eps)), ("D3", 0.03 + rise(eps / np.sqrt(3))), ("isobaric_D2", 0.03 + rise(eps))):
+            text = head + "".join(f"{e},{0.1 * (1 + e)},{x},{f},0.8\n" for e, x, f in zip(eps, s, F))
+            (m / f"{mode}_phi0.800.csv").write_text("# hand-built\n" + text)
+    rate, peak = mfr.tables(str(tmp_path), mus=("0.5",), nus=("0.800",))
+    (_, _, m, _), = rate
+    assert abs(m[1] - 1) < 0.01, m
+    assert abs(m[0] - rise(0.3 / np.sqrt(3)) / rise(0.3)) < 0.01, m
+    for _, _, curve, pm, _ in peak:
+        assert abs(pm[0] - 0.09) < 0.005 and abs(pm[1] - 0.15) < 0.01, (curve, pm)
+        assert abs(pm[4] - (1 + 0.285)) < 0.002, (curve, pm)
