@@ -58,6 +58,27 @@ Vec3 cell_widths(const Box& b) {
   return {V / norm(bc), V / norm(ca), Lz};
 }
 
+// At most kMaxCells cells. A box many cutoffs wide (a dilute gas far beyond any scene's, or an
+// absurd box handed to demtk: fuzz_demtk under UBSan, tests/SANITIZE.md) would overflow the int
+// cell index (n[0] n[1] n[2]) and allocate without bound. Fewer, wider cells find the same pairs (a
+// cell only has to be at least the cutoff wide), so the cap changes no result; below it (every
+// scene of the repository by orders of magnitude: 16.7 M cells) the grid is the one it always was.
+constexpr std::int64_t kMaxCells = std::int64_t{1} << 24;
+
+// Cells along one edge: floor(width / cutoff), clamped while a double (no cast of inf or NaN).
+int cells_along(double q) {
+  return !(q >= 1) ? 1 : q >= double(kMaxCells) ? int(kMaxCells) : static_cast<int>(q);
+}
+
+// Halves the longest edge's count until the grid has at most kMaxCells cells.
+void cap_cell_count(int n[3]) {
+  auto count = [&] { return std::int64_t{n[0]} * n[1] * n[2]; };
+  while (count() > kMaxCells) {
+    int* widest = std::max_element(n, n + 3);
+    *widest = std::max(1, *widest / 2);
+  }
+}
+
 // The grid of the box `b` (kept by pointer when tilted: b must outlive the grid).
 CellGrid make_grid(const Box& b, double cutoff) {
   CellGrid g{};
@@ -69,9 +90,10 @@ CellGrid make_grid(const Box& b, double cutoff) {
           std::string(tilted ? "perpendicular width of the tilted cell " : "box edge ") + std::to_string(width[k]) +
           " m is shorter than twice the neighbour cutoff " + std::to_string(cutoff) +
           " m: use more particles or a smaller skin (integration.skin_over_rmin, in units of the smallest radius)");
-    g.n[k] = std::max(1, static_cast<int>(width[k] / cutoff));
-    g.inv_size[k] = g.n[k] / b.length[k];
+    g.n[k] = cells_along(width[k] / cutoff);
   }
+  cap_cell_count(g.n);
+  for (int k = 0; k < 3; ++k) g.inv_size[k] = g.n[k] / b.length[k];
   if (tilted) g.tilted = &b;
   return g;
 }
