@@ -85,11 +85,16 @@ TEST(Kinematics, PlainSchemeMissesExactlyTheKineticStressWork) {
 }
 
 TEST(Kinematics, EnergyBalanceErrorIsSecondOrderInTheTimeStep) {
-  const Balance coarse = run_balance(true, 0.08, 1000, &iso);
-  const Balance fine = run_balance(true, 0.04, 2000, &iso);
+  // 20 t_c at dt = t_c/12.5 and t_c/50: a time step 4x smaller should shrink the error about 16x.
+  // Not longer, and not a 2x step: the gas is chaotic, so over 80 t_c the two runs become
+  // different trajectories and their ratio a random number (GCC: 6.2; clang 14: 17.8 for the same
+  // code, tests/SANITIZE.md). Measured at 10-40 t_c (GCC): 14.8, 13.5, 14.8. A first-order error
+  // gives 4, one that does not shrink (the plain scheme's kinetic stress) about 1.
+  const Balance coarse = run_balance(true, 0.08, 250, &iso);
+  const Balance fine = run_balance(true, 0.02, 1000, &iso);
   const double ratio = std::fabs(coarse.delta_e - coarse.work) / std::fabs(fine.delta_e - fine.work);
-  EXPECT_GT(ratio, 2.5);
-  EXPECT_LT(ratio, 6.5);
+  EXPECT_GT(ratio, 8.0) << "coarse " << coarse.delta_e - coarse.work << " fine " << fine.delta_e - fine.work << " J";
+  EXPECT_LT(ratio, 32.0) << "coarse " << coarse.delta_e - coarse.work << " fine " << fine.delta_e - fine.work << " J";
 }
 
 TEST(Kinematics, EnergyBalanceUnderAServoControlledStage) {

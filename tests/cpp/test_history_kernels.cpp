@@ -75,7 +75,8 @@ ShearRun run(const Composed& c, PairKernel kernel, int threads, int steps) {
 
 bool same_history(const dem::State& a, const dem::State& b) {
   return a.history.values.size() == b.history.values.size() &&
-         0 == std::memcmp(a.history.values.data(), b.history.values.data(), a.history.values.size() * sizeof(double));
+         (a.history.values.empty() ||   // data() may be null: memcmp must not get it (UBSan)
+          0 == std::memcmp(a.history.values.data(), b.history.values.data(), a.history.values.size() * sizeof(double)));
 }
 
 ::testing::AssertionResult same_run(const dem::State& a, const dem::State& b) {

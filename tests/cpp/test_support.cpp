@@ -58,7 +58,8 @@ double max_force_difference(const dem::State& a, const dem::State& b) {
 }
 
 bool same_bits(const std::vector<dem::Vec3>& a, const std::vector<dem::Vec3>& b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(dem::Vec3)) == 0;
+  // An empty vector's data() may be null, which memcmp must not get even for 0 bytes (UBSan).
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(dem::Vec3)) == 0);
 }
 
 }  // namespace dem_test
