@@ -1,6 +1,7 @@
 """The true-triaxial path stage at constant p and fixed b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3)
 (`lode_b`, issue 31, docs/control.md): it holds both targets while the axial strain advances, on
-a frictionless and a frictional packing, and bad input is refused before anything runs."""
+a frictionless and a frictional packing, driven by a compressed sigma_1 axis or by an extended
+sigma_3 axis, and bad input is refused before anything runs."""
 import numpy as np
 import pytest
 
@@ -10,16 +11,17 @@ from demkit.curves import read_curve
 PATHS = """
 [paths]
 TT = [ { rate = [0, 0, -1], pressure_p0 = 1.0, lode_b = {b}, until = { eps_zz = -0.08 } } ]
+TE = [ { rate = [0, 0, 1], pressure_p0 = 1.0, lode_b = {b}, until = { eps_zz = 0.08 } } ]
 """
 TRANSIENT_EPS_D = 0.03
 
 
-def run_tt(small_run, tmp_path, b, mu):
+def run_tt(small_run, tmp_path, b, mu, mode="TT"):
     scene = tmp_path / "tt.toml"
     scene.write_text(SMALL_SCENE + PATHS.replace("{b}", str(b)))
     out = tmp_path / "tt.csv"
     r = run_dem("mode", "--scene", scene, "--packing", small_run["dir"] / "checkpoints" / "unloading_phi0.720.ckpt",
-                "--mode", "TT", "--out", out, "--threads", "1", "--quiet", "--set", f"contact.friction={mu}")
+                "--mode", mode, "--out", out, "--threads", "1", "--quiet", "--set", f"contact.friction={mu}")
     assert r.returncode == 0, r.stderr
     return read_curve(out)
 
@@ -48,11 +50,32 @@ def test_true_triaxial_holds_p_and_b_while_the_axial_strain_advances(small_run, 
     assert c["eps_d"][-1] > 0.1                                   # eps_1 advanced
 
 
+@pytest.mark.parametrize("b,mu", [(1.0, 0), (1.0, 0.5), (0.5, 0)])
+def test_true_triaxial_driven_by_its_extended_sigma_3_axis(small_run, tmp_path, b, mu):
+    """rate = [0, 0, 1]: z is sigma_3 (extended at the prescribed rate), x sigma_1, y sigma_2; the
+    servo moves x and y together for p and apart for b. b = 1 is extension at constant p, the test
+    whose free sigma_3 axis outran the rate limit when it was driven by compressing sigma_1."""
+    c = run_tt(small_run, tmp_path, b, mu, mode="TE")
+    p0 = c["p_Pa"][0]
+    after = c["eps_d"] >= TRANSIENT_EPS_D
+    sx, sy, sz = c["sigma_xx_Pa"][after], c["sigma_yy_Pa"][after], c["sigma_zz_Pa"][after]
+    p_err = np.abs(c["p_Pa"][after] / p0 - 1)
+    b_err = np.abs(sy - sz - b * (sx - sz)) / p0          # sigma_2 - sigma_3 - b (sigma_1 - sigma_3)
+    assert np.allclose(c["control_error_rel"][after], np.maximum(p_err, b_err), atol=1e-6)
+    assert p_err.mean() < 0.015 and p_err.max() < 0.05, p_err
+    assert b_err.mean() < 0.015 and b_err.max() < 0.05, b_err
+    assert np.all(sz < sx) and sz.mean() < 0.95 * p0               # z unloads: the minor stress
+    assert c["eps_zz"][-1] == pytest.approx(0.08, abs=1e-4)
+    # x and y both shorten (the volume is nearly kept), each at less than the prescribed rate
+    assert c["eps_xx"][-1] < 0 and c["eps_yy"][-1] < 0
+    assert max(abs(c["eps_xx"][-1]), abs(c["eps_yy"][-1])) < 0.08
+
+
 @pytest.mark.parametrize("stage,needle", [
     ('{ rate = [0, 0, -1], lode_b = 0.5, until = { eps_zz = -0.1 } }', "give pressure_p0"),
     ('{ rate = [0, 0, -1], pressure_p0 = 1, lode_b = 1.5, until = { eps_zz = -0.1 } }', "lies in [0, 1]"),
-    ('{ rate = [1, 0, -1], pressure_p0 = 1, lode_b = 0.5, until = { eps_zz = -0.1 } }', "compresses one axis only"),
-    ('{ rate = [0, 0, 1], pressure_p0 = 1, lode_b = 0.5, until = { eps_zz = 0.1 } }', "compresses one axis only"),
+    ('{ rate = [1, 0, -1], pressure_p0 = 1, lode_b = 0.5, until = { eps_zz = -0.1 } }', "drives one axis only"),
+    ('{ rate = "SS_xz", pressure_p0 = 1, lode_b = 0.5, until = { eps_d = 0.1 } }', "drives one axis only"),
 ])
 def test_bad_true_triaxial_input_is_refused(small_run, tmp_path, stage, needle):
     scene = tmp_path / "bad.toml"

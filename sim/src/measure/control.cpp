@@ -89,13 +89,19 @@ std::int64_t update_interval(double t_loop, double dt) {
 
 Servo::Servo(const PathStage& stage, const VelGrad& prescribed, const ServoOptions& options)
     : prescribed_(prescribed), options_(options) {
-  if (std::isfinite(stage.lode_b)) {   // true triaxial: sigma_1 on the compressed axis k (validate_path)
+  if (std::isfinite(stage.lode_b)) {   // true triaxial: the one prescribed axis k (validate_path)
     const int k = stage.shape.diag.x != 0 ? 0 : stage.shape.diag.y != 0 ? 1 : 2;
-    const int a3 = (k + 1) % 3, a2 = (k + 2) % 3;
     const double b = stage.lode_b;
-    rows_.push_back({Vec3{1, 1, 1} * (1.0 / 3.0), axis(a3), stage.pressure, 0, stage.pressure, "p"});
-    // sigma_2 - sigma_3 - b (sigma_1 - sigma_3) = 0
-    rows_.push_back({axis(a2) + axis(a3) * (b - 1) - axis(k) * b, axis(a2), 0.0, 0, stage.pressure, "b"});
+    if (component(stage.shape.diag, k) < 0) {   // compressed: sigma_1 on k, sigma_3 next, sigma_2 after
+      const int a3 = (k + 1) % 3, a2 = (k + 2) % 3;
+      rows_.push_back({Vec3{1, 1, 1} * (1.0 / 3.0), axis(a3), stage.pressure, 0, stage.pressure, "p"});
+      // sigma_2 - sigma_3 - b (sigma_1 - sigma_3) = 0
+      rows_.push_back({axis(a2) + axis(a3) * (b - 1) - axis(k) * b, axis(a2), 0.0, 0, stage.pressure, "b"});
+    } else {   // extended: sigma_3 on k, sigma_1 next, sigma_2 after; p by both, b by their difference
+      const int a1 = (k + 1) % 3, a2 = (k + 2) % 3;
+      rows_.push_back({Vec3{1, 1, 1} * (1.0 / 3.0), axis(a1) + axis(a2), stage.pressure, 0, stage.pressure, "p"});
+      rows_.push_back({axis(a2) + axis(k) * (b - 1) - axis(a1) * b, axis(a2) - axis(a1), 0.0, 0, stage.pressure, "b"});
+    }
     pressure_target_ = stage.pressure;
   } else if (std::isfinite(stage.pressure)) {
     rows_.push_back({Vec3{1, 1, 1} * (1.0 / 3.0), Vec3{1, 1, 1}, stage.pressure, 0, 0, "p"});
@@ -203,7 +209,8 @@ const char* stop_name(PathStop s) {
 
 namespace {
 
-/// A true-triaxial stage (lode_b): b in [0, 1], a pressure target, one compressed axis.
+/// A true-triaxial stage (lode_b): b in [0, 1], a pressure target, one prescribed axis (compressed:
+/// sigma_1 on it; extended: sigma_3 on it).
 template <class Fail> void check_lode_b(const PathStage& s, const Fail& fail) {
   const int prescribed = (s.shape.diag.x != 0) + (s.shape.diag.y != 0) + (s.shape.diag.z != 0);
   if (std::isnan(s.pressure))
@@ -212,10 +219,10 @@ template <class Fail> void check_lode_b(const PathStage& s, const Fail& fail) {
   if (!(s.lode_b >= 0 && s.lode_b <= 1))
     fail("lode_b = " + std::to_string(s.lode_b) + ": b = (sigma_2 - sigma_3)/(sigma_1 - sigma_3) lies in [0, 1] "
          "(0: triaxial compression, 1: extension)");
-  if (s.sheared() || prescribed != 1 ||
-      s.shape.diag.x + s.shape.diag.y + s.shape.diag.z >= 0)
-    fail("with lode_b the rate compresses one axis only, the sigma_1 axis (e.g. rate = [0, 0, -1]: sigma_3 on x, "
-         "sigma_2 on y); the servo sets the other two");
+  if (s.sheared() || prescribed != 1)
+    fail("with lode_b the rate drives one axis only: compressed, it is the sigma_1 axis (e.g. rate = [0, 0, -1]: "
+         "sigma_3 on x, sigma_2 on y); extended, the sigma_3 axis (e.g. [0, 0, 1]: sigma_1 on x, sigma_2 on y); "
+         "the servo sets the other two");
 }
 
 }  // namespace

@@ -33,8 +33,10 @@ AxisResponse axis_response(const Model& model, const State& state, const Neighbo
 
 /// The servo of one path stage: each controlled quantity y (a normal stress sigma_ii, or the mean
 /// pressure p) has an actuator direction b (the axis, or (1,1,1)) and a target y*. A true-triaxial
-/// stage (PathStage::lode_b) controls p by the sigma_3 axis and sigma_2 - sigma_3 - b (sigma_1 -
-/// sigma_3) = 0 by the sigma_2 axis; its relative error is measured against p. With
+/// stage (PathStage::lode_b) with a compressed axis (sigma_1) controls p by the sigma_3 axis and
+/// sigma_2 - sigma_3 - b (sigma_1 - sigma_3) = 0 by the sigma_2 axis; with an extended axis
+/// (sigma_3) p by the other two together and the b row by their difference; its relative error is
+/// measured against p. With
 /// e = y - y* (positive: too compressed) and G = C M B the affine gain matrix, the servo rate is
 ///     u = G^-1 (e + I / T_i) / tau,    I = integral of e dt,    T_i = 4 tau,
 /// updated every update_steps() steps (about t_loop / 40, t_loop = options.waves x the time an
