@@ -1,6 +1,9 @@
 """Input decks for LAMMPS and LIGGGHTS generated from a packing and our scene's physics, so the
 benchmark runs the same scene everywhere (see docs/benchmarks.md for what still differs)."""
+import functools
 import math
+import os
+import subprocess
 
 
 def read_packing(path):
@@ -46,14 +49,41 @@ thermo 1000
 """ + runs
 
 
-def lammps_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4, warmup=0):
-    # pair granular: hooke normal force k*delta with absolute velocity damping (damping velocity:
-    # eta_n = gamma), no tangential force; fix viscous: -gamma_b v on every atom; fix deform
-    # trate: true strain rate (D2), remap x: positions follow the box, velocities stay peculiar.
-    # neighbor skin bin + neigh_modify delay 0 every 1 check yes: the list (pairs within
-    # r_i + r_j + skin) is rebuilt as soon as an atom has moved skin/2 since the last build, as
-    # ours. warmup: untimed steps before the timed run (see _motion).
-    return f"""units si
+DEM = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "build", "dem")
+SCENE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data", "scenes", "quickstart.toml")
+
+
+@functools.lru_cache(maxsize=None)
+def pair_coeff(sets=(), dem=DEM, scene=SCENE):
+    """The LAMMPS `pair_coeff * * ...` line of our contact law for the scene with `sets` (a tuple of
+    "key=value" overrides, as `dem --set`), from the sub-models' own counterparts in the registry
+    (`dem info SCENE --lammps`): e.g. `hooke k gamma tangential linear_history k_t 0 mu damping
+    velocity limit_damping` for the linear law with Cundall-Strack friction (LAMMPS' limit_damping is
+    ours' no-tension clamp, contact.allow_attractive = false; Hertz's e' is the value whose LAMMPS
+    polynomial alpha(e') equals ours' alpha, docs/contact_models.md). Raises RuntimeError with
+    dem's message when a chosen sub-model has no LAMMPS counterpart (Luding's law)."""
+    cmd = [dem, "info", scene, "--lammps"]
+    for kv in sets:
+        cmd += ["--set", kv]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode:
+        raise RuntimeError(f"{' '.join(cmd)}: {r.stderr.strip()}")
+    return r.stdout.strip()
+
+
+def lammps_deck(data, steps, rate, dt, sets=(), k=None, gamma=None, gamma_b=0.1, skin=2e-4, warmup=0, thermo=False):
+    # pair granular with the pair_coeff line of ours' contact law (pair_coeff above; k, gamma, if
+    # given, override the scene's contact.stiffness_N_m and contact.damping_kg_s); fix viscous:
+    # -gamma_b v on every atom; fix deform trate: true strain rate (D2), remap x: positions follow
+    # the box, velocities stay peculiar. atom_style sphere gives I = 2/5 m r^2 and fix nve/sphere
+    # integrates the rotations of a frictional law. neighbor skin bin + neigh_modify delay 0 every
+    # 1 check yes: the list (pairs within r_i + r_j + skin) is rebuilt as soon as an atom has moved
+    # skin/2 since the last build, as ours. warmup: untimed steps before the timed run (see
+    # _motion). thermo: a line every 1000 steps with the total kinetic and rotational energy [J],
+    # the virial pressure and its diagonal [Pa] (the parity check of the frictional decks).
+    sets = tuple(sets) + ((f"contact.stiffness_N_m={k!r}",) if k is not None else ()) + \
+        ((f"contact.damping_kg_s={gamma!r}",) if gamma is not None else ())
+    head = f"""units si
 atom_style sphere
 atom_modify map array
 boundary p p p
@@ -61,115 +91,17 @@ newton off
 comm_modify vel yes
 read_data {data}
 pair_style granular
-pair_coeff * * hooke {k} {gamma} tangential linear_nohistory 0 0 damping velocity
+{pair_coeff(sets)}
 neighbor {skin!r} bin
 neigh_modify delay 0 every 1 check yes
-""" + _motion(dt, rate, gamma_b, steps, warmup)
-
-
-def lammps_friction_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4, mu=0.5, kt_ratio=2 / 7):
-    # As lammps_deck, with Cundall-Strack friction as ours' contact.friction = mu:
-    # `tangential linear_history k_t x_gamma_t mu_s` takes k_t itself [N/m] (ours: k_t =
-    # contact.tangential_stiffness_ratio x k), x_gamma_t the tangential damping as a multiple of
-    # the normal eta_n (0: no tangential dashpot, ours' default tangential_damping_kg_s = 0) and
-    # mu_s the Coulomb coefficient, the critical force mu_s |F_n| (F_n: spring + dashpot). The
-    # spring xi is rotated into the tangent plane keeping its length and reset to the cone on
-    # slip, as ours (Luding 2008, eqs. 17-20). atom_style sphere gives I = 2/5 m r^2; fix
-    # nve/sphere integrates the rotations. The thermo line every 1000 steps (total kinetic and
-    # rotational energy [J], the virial pressure and its diagonal [Pa]) is the parity check.
-    return f"""units si
-atom_style sphere
-atom_modify map array
-boundary p p p
-newton off
-comm_modify vel yes
-read_data {data}
-pair_style granular
-pair_coeff * * hooke {k} {gamma} tangential linear_history {kt_ratio * k!r} 0 {mu} damping velocity
-neighbor {skin} bin
-neigh_modify delay 0 every 1 check yes
-compute erot all erotate/sphere
+"""
+    if thermo:
+        head += """compute erot all erotate/sphere
 compute prs all pressure NULL virial
 thermo_style custom step ke c_erot c_prs c_prs[1] c_prs[2] c_prs[3]
 thermo_modify format float %.10g
-""" + _motion(dt, rate, gamma_b, steps)
-
-
-def tsuji_restitution_of_alpha(alpha, h=2e-3):
-    """The restitution of the dimensionless Hertz impact with Tsuji's dashpot,
-    x'' = -max(x^1.5 + alpha x^0.25 x', 0), x(0) = 0, x'(0) = 1 (RK4): ours' HertzNormal::restitution_of_alpha."""
-    def acc(x, u):
-        if x <= 0:
-            return 0.0
-        f = x * math.sqrt(x) + alpha * math.sqrt(math.sqrt(x)) * u
-        return -f if f > 0 else 0.0
-    x, u = 0.0, 1.0
-    for _ in range(1000000):
-        k1x, k1u = u, acc(x, u)
-        k2x, k2u = u + 0.5 * h * k1u, acc(x + 0.5 * h * k1x, u + 0.5 * h * k1u)
-        k3x, k3u = u + 0.5 * h * k2u, acc(x + 0.5 * h * k2x, u + 0.5 * h * k2u)
-        k4x, k4u = u + h * k3u, acc(x + h * k3x, u + h * k3u)
-        xn = x + h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
-        un = u + h / 6 * (k1u + 2 * k2u + 2 * k3u + k4u)
-        if xn < 0 and un < 0:
-            return -(u + (un - u) * x / (x - xn))
-        x, u = xn, un
-    return 0.0
-
-
-def _bisect(f, target, lo, hi, decreasing=True, it=48):
-    for _ in range(it):
-        mid = 0.5 * (lo + hi)
-        if (f(mid) > target) == decreasing:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
-def lammps_tsuji_alpha(e):
-    """LAMMPS' `damping tsuji` polynomial alpha(e) (gran_sub_mod_damping.cpp)."""
-    c = [1.2728, -4.2783, 11.087, -22.348, 27.467, -18.022, 4.8218]
-    return sum(ci * e ** k for k, ci in enumerate(c))
-
-
-def lammps_hertz_restitution(e):
-    """The e' to give LAMMPS' `hertz/material E e' nu ... damping tsuji` so that its polynomial
-    alpha(e') equals the alpha ours solves for the restitution e (contact.restitution): LAMMPS'
-    fit does not give e back (docs/contact_models.md, Hertz)."""
-    if e >= 1.0:
-        return 1.0
-    alpha = _bisect(tsuji_restitution_of_alpha, e, 0.0, 64.0)   # e(alpha) falls with alpha
-    return _bisect(lammps_tsuji_alpha, alpha, 0.0, 1.0)          # alpha(e') falls with e'
-
-
-def lammps_hertz_mindlin_deck(data, steps, rate, dt, E=1e8, nu=0.3, e=0.9, mu=0.5, rule="mindlin", gamma_b=0.1,
-                              skin=2e-4, warmup=0):
-    # Ours' contact.normal = "hertz" (E, nu, e) + contact.tangential = "mindlin" | "mindlin_force" (mu):
-    # `hertz/material E e' nu` is 4/3 E* sqrt(R* delta) delta with E* = E/(2(1 - nu^2)) (mixing of
-    # two equal materials), `damping tsuji` alpha(e') sqrt(m* F_el/delta) d(delta)/dt with e' from
-    # lammps_hertz_restitution (so alpha equals ours), `limit_damping` the no-tension clamp (ours'
-    # default contact.allow_attractive = false); `tangential mindlin NULL 0 mu` (k_t = 8 G*
-    # sqrt(R* delta) from E and nu, no tangential damping) keeps the displacement when k_t changes,
-    # `mindlin/force` the force (incremental), as ours' two rules. See lammps_friction_deck for the rest.
-    lammps_rule = {"mindlin": "mindlin", "mindlin_force": "mindlin/force"}[rule]
-    e_lammps = lammps_hertz_restitution(e)
-    return f"""units si
-atom_style sphere
-atom_modify map array
-boundary p p p
-newton off
-comm_modify vel yes
-read_data {data}
-pair_style granular
-pair_coeff * * hertz/material {E!r} {e_lammps!r} {nu!r} tangential {lammps_rule} NULL 0 {mu!r} damping tsuji limit_damping
-neighbor {skin!r} bin
-neigh_modify delay 0 every 1 check yes
-compute erot all erotate/sphere
-compute prs all pressure NULL virial
-thermo_style custom step ke c_erot c_prs c_prs[1] c_prs[2] c_prs[3]
-thermo_modify format float %.10g
-""" + _motion(dt, rate, gamma_b, steps, warmup)
+"""
+    return head + _motion(dt, rate, gamma_b, steps, warmup)
 
 
 def rayleigh_time(r_min, E, nu, density):

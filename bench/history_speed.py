@@ -78,17 +78,13 @@ def callgrind_per_function(dem, packing, model, n_particles, workdir):
 
 
 def lammps_deck(model, data, steps, tc, r_min):
-    if model == "hertz_mindlin":   # ours' defaults: E = 1e8 Pa, nu = 0.3, e = 0.9; t_c the Rayleigh time
+    """LAMMPS' deck of one of MODELS: the pair_coeff line from ours' registry (decks.pair_coeff) with
+    the model's --set keys, at ours' dt = 0.02 t_c (Hertz: t_c the Rayleigh time, ours' defaults
+    E = 1e8 Pa, nu = 0.3)."""
+    if model == "hertz_mindlin":
         tc = decks.rayleigh_time(r_min, 1e8, 0.3, 2000.0)
-        return decks.lammps_hertz_mindlin_deck(data, steps, run_benchmarks.RATE_TC / tc, 0.02 * tc)
-    rate, dt = run_benchmarks.RATE_TC / tc, 0.02 * tc
-    if model == "frictionless":
-        return decks.lammps_deck(data, steps, rate, dt)
-    deck = decks.lammps_friction_deck(data, steps, rate, dt)
-    if model == "friction+rolling+twisting":   # ours' defaults: k_r = k_o = 2/7 k, no dashpots, mu = 0.1
-        kr = 2 / 7 * 1e8
-        deck = deck.replace("damping velocity", f"rolling sds {kr!r} 0 0.1 twisting sds {kr!r} 0 0.1 damping velocity")
-    return deck
+    return decks.lammps_deck(data, steps, run_benchmarks.RATE_TC / tc, 0.02 * tc, sets=tuple(MODELS[model]),
+                             thermo=model != "frictionless")
 
 
 def main():

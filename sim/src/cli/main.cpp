@@ -340,7 +340,7 @@ void print_columns(bool json) {
 struct InfoCommand {
   CLI::App* cmd = nullptr;
   std::string scene;
-  bool json = false, no_probe = false, contact_models = false, columns = false;
+  bool json = false, no_probe = false, contact_models = false, columns = false, lammps = false;
   void add(CLI::App& app, std::vector<std::string>& overrides) {
     cmd = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates, each contact sub-model's "
                                      "values and stability limits); --contact-models: every contact sub-model");
@@ -354,6 +354,8 @@ struct InfoCommand {
     cmd->add_flag("--json", json, "print the run plan as JSON instead: members (seeds), checkpoints, modes, "
                                   "estimated particle-steps per task (read by workflow/Snakefile)");
     cmd->add_flag("--no-probe", no_probe, "no wall-time estimate (it times about a second of steps on a dense packing)");
+    cmd->add_flag("--lammps", lammps, "print the scene's contact law as a LAMMPS `pair granular` pair_coeff line, "
+                                      "made from each sub-model's counterpart in the registry (bench/decks.py reads it)");
   }
   int run(const std::vector<std::string>& overrides) const {
     if (contact_models) {
@@ -367,6 +369,10 @@ struct InfoCommand {
     }
     if (scene.empty()) throw ArgumentError("dem info needs a scene file (or --contact-models, --columns)");
     const dem::Model model = dem::load_scene_file(scene, overrides);
+    if (lammps) {
+      std::printf("%s\n", dem::contact::lammps_pair_coeff(model.contact).c_str());
+      return 0;
+    }
     if (json) std::printf("%s", dem::plan_json(model).c_str());
     else {
       print_info(model);

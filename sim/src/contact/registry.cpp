@@ -17,6 +17,12 @@ std::string g_num(double v) {
   return b;
 }
 
+std::string exact_num(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
+
 namespace {
 
 // The "off" entries of the rolling and twisting slots.
@@ -26,6 +32,7 @@ SubModelInfo off_info(Slot slot, const std::string& what) {
   d.name = "none";
   d.title = "no " + what + " resistance";
   d.yade = d.lammps = "none";
+  d.lammps_words = [](const ContactLaw&) { return std::string(); };   // LAMMPS: leave the keyword out
   d.describe = [](const ContactLaw&, const PairScale&) { return std::string("off"); };
   return d;
 }
@@ -377,6 +384,25 @@ std::vector<std::string> describe_contact(const ContactLaw& law, const PairScale
                     others + "; dem info --contact-models describes them)");
   }
   return out;
+}
+
+std::string lammps_pair_coeff(const ContactLaw& law) {
+  const std::vector<const SubModelInfo*> chosen = chosen_submodels(law);
+  std::string line = "pair_coeff * *";
+  for (const SubModelInfo* m : chosen) {
+    if (!m->lammps_words)
+      throw SceneError("contact." + slot_name(m->slot) + " = \"" + m->name + "\" has no LAMMPS pair granular counterpart: " +
+                       m->lammps);
+    std::string words;
+    try {
+      words = m->lammps_words(law);
+    } catch (const std::invalid_argument& e) {
+      throw SceneError(e.what());
+    }
+    if (!words.empty()) line += " " + words;
+  }
+  if (chosen.front()->lammps_tail) line += " " + chosen.front()->lammps_tail(law);
+  return line;
 }
 
 std::string contact_preamble(const ContactLaw& law, const PairScale& s) {

@@ -47,6 +47,18 @@ struct HertzNormal {
     for (double ci : c) { a += ci * p; p *= e; }
     return a;
   }
+  /// The e' to give LAMMPS' `hertz/material E e' nu ... damping tsuji` so that its polynomial
+  /// alpha(e') equals tsuji_alpha(e), this law's alpha (bisection; alpha(e') falls with e').
+  static double lammps_restitution(double e) {
+    if (e >= 1.0) return 1.0;
+    const double alpha = tsuji_alpha(e);
+    double lo = 0.0, hi = 1.0;
+    for (int it = 0; it < 60; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      (lammps_tsuji_alpha(mid) > alpha ? lo : hi) = mid;
+    }
+    return 0.5 * (lo + hi);
+  }
   /// The restitution of the dimensionless impact x'' = -max(x^(3/2) + alpha x^(1/4) x', 0),
   /// x(0) = 0, x'(0) = 1 (m* = 1, 4/3 E* sqrt(R*) = 1, unit speed: every Hertz impact with
   /// Tsuji's dashpot scales to it, so e depends on alpha alone). Classical RK4, the exit
@@ -151,6 +163,13 @@ inline const SubModelInfo& HertzNormal::info() {
              "Law2_ScGeom_MindlinPhys_Mindlin (its damping: alpha from en after Antypov 2011, not this alpha)";
     d.lammps = "pair granular: hertz/material E e' nu, damping tsuji, with e' the value whose polynomial alpha(e') "
                "equals this law's alpha (LAMMPS' fit does not give e' back)";
+    d.lammps_words = [](const ContactLaw& law) {
+      return "hertz/material " + exact_num(law.get("youngs_modulus_Pa")) + " " +
+             exact_num(lammps_restitution(law.get("restitution"))) + " " + exact_num(law.get("poisson_ratio"));
+    };
+    d.lammps_tail = [](const ContactLaw& law) {
+      return std::string("damping tsuji") + (law.allow_attractive() ? "" : " limit_damping");
+    };
     d.vtk_fields = {"normal_force_N", "overlap_m", "normal"};
     d.describe = [](const ContactLaw& law, const PairScale& s) {
       const double es = effective_modulus(law.get("youngs_modulus_Pa"), law.get("poisson_ratio"));

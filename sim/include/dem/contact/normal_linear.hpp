@@ -54,6 +54,13 @@ struct LinearSpring {
       d.yade = "ViscElMat + Law2_ScGeom_ViscElPhys_Basic (kn, cn); in a deforming cell FrictMat with young = k/r "
                "+ Law2_ScGeom_FrictPhys_CundallStrack (no dashpot)";
       d.lammps = "pair granular: hooke k gamma, damping velocity";
+      d.lammps_words = [](const ContactLaw& law) {
+        return "hooke " + exact_num(law.get("stiffness_N_m")) + " " + exact_num(law.get("damping_kg_s"));
+      };
+      // limit_damping: LAMMPS' no-tension clamp, ours' default (contact.allow_attractive = false)
+      d.lammps_tail = [](const ContactLaw& law) {
+        return std::string("damping velocity") + (law.allow_attractive() ? "" : " limit_damping");
+      };
       d.vtk_fields = {"normal_force_N", "overlap_m", "normal"};
       d.describe = [](const ContactLaw& law, const PairScale&) {
         return "linear spring-dashpot: k = " + g_num(law.get("stiffness_N_m")) + " N/m, gamma = " +

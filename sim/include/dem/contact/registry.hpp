@@ -80,5 +80,10 @@ std::string contact_preamble(const ContactLaw& law, const PairScale& s);
 nlohmann::json registry_json();
 /// The same for people (`dem info --contact-models`).
 std::string registry_text();
+/// The LAMMPS `pair granular` line of this law, `pair_coeff * * ...`, from the chosen sub-models'
+/// `lammps_words` (normal, tangential, rolling, twisting, then the normal's `lammps_tail`), for
+/// the benchmark decks (`dem info SCENE --lammps`). Throws SceneError naming the sub-model that
+/// has no LAMMPS counterpart.
+std::string lammps_pair_coeff(const ContactLaw& law);
 
 }  // namespace dem::contact

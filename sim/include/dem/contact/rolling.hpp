@@ -46,6 +46,10 @@ inline SubModelInfo sds_info(Slot slot, const std::string& what, const std::stri
             {what + "_damping_kg_s", "kg/s", 0.0, "", 0, 0, false, "gamma_" + sym + ", its dashpot, e.g. 0"}};
   d.rotations = true;
   d.lammps = what == "rolling" ? "rolling sds k_r gamma_r mu_r" : "twisting sds k_o gamma_o mu_o";
+  d.lammps_words = [what](const ContactLaw& law) {
+    return what + " sds " + exact_num(law.get(what + "_stiffness_ratio") * law.reference_stiffness()) + " " +
+           exact_num(law.get(what + "_damping_kg_s")) + " " + exact_num(law.get(what + "_friction"));
+  };
   d.yade = "none with this spring-dashpot-slider (CohFrictMat's moment law is elastic-plastic without a dashpot)";
   d.describe = [what, sym](const ContactLaw& law, const PairScale&) {
     return "mu_" + sym + " = " + g_num(law.get(what + "_friction")) + ", k_" + sym + "/k = " +

@@ -51,6 +51,8 @@ using Slot = ContactSlot;
 
 /// printf-style %g of a number (for the description texts).
 std::string g_num(double v);
+/// A number with every digit it has (%.17g), for input decks of other codes.
+std::string exact_num(double v);
 
 struct SubModelInfo {
   Slot slot;
@@ -69,6 +71,12 @@ struct SubModelInfo {
   bool rotations = false;    ///< needs angular velocities and torques (6 degrees of freedom)
   std::string yade;          ///< the YADE counterpart (classes), or "none"
   std::string lammps;        ///< the LAMMPS `pair granular` counterpart, or "none"
+  /// Its words in a LAMMPS `pair granular` `pair_coeff` line with this law's values (a normal
+  /// sub-model: its normal model; the others: their keyword and coefficients; "" for a slot left
+  /// empty), SI units; null: no counterpart (`lammps` says why). `lammps_pair_coeff` joins them.
+  std::function<std::string(const ContactLaw&)> lammps_words;
+  /// A normal sub-model's words after every other slot's (its damping model, limit_damping).
+  std::function<std::string(const ContactLaw&)> lammps_tail;
   /// Groups of curve columns it adds (the column table's groups, measure.hpp: "rotations").
   std::vector<std::string> column_groups;
   std::vector<std::string> vtk_fields;      ///< contact-network fields it adds

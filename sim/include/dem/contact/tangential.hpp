@@ -4,6 +4,7 @@
 // the equations and sources.
 #pragma once
 #include <cmath>
+#include <stdexcept>
 
 #include "dem/contact/submodel.hpp"
 #include "dem/contact/slider.hpp"
@@ -37,6 +38,7 @@ struct NoTangential {
       d.title = "frictionless: no tangential force, no rotations (3 degrees of freedom per particle)";
       d.yade = "FrictMat with frictionAngle = 0 and blockedDOFs = \"XYZ\", or ViscElMat with ks = cs = 0";
       d.lammps = "tangential linear_nohistory 0 0";
+      d.lammps_words = [](const ContactLaw&) { return std::string("tangential linear_nohistory 0 0"); };
       d.describe = [](const ContactLaw&, const PairScale&) { return std::string("frictionless, no rotations"); };
       return d;
     }();
@@ -135,6 +137,15 @@ inline const SubModelInfo& CundallStrack::info() {
     d.rotations = true;
     d.yade = "FrictMat (young = k/r, poisson = k_t/k, frictionAngle = atan(mu)) + Law2_ScGeom_FrictPhys_CundallStrack";
     d.lammps = "tangential linear_history k_t x_gamma_t mu";
+    // x_gamma_t is LAMMPS' tangential dashpot as a multiple of the normal one's (damping velocity)
+    d.lammps_words = [](const ContactLaw& law) {
+      const double gt = law.get("tangential_damping_kg_s"), gn = law.get_or("damping_kg_s", 0.0);
+      if (gt > 0 && !(gn > 0))
+        throw std::invalid_argument("contact.tangential_damping_kg_s > 0 with no normal dashpot has no LAMMPS "
+                                    "counterpart (x_gamma_t multiplies the normal dashpot)");
+      return "tangential linear_history " + exact_num(law.get("tangential_stiffness_ratio") * law.reference_stiffness()) +
+             " " + exact_num(gt > 0 ? gt / gn : 0.0) + " " + exact_num(law.get("friction"));
+    };
     d.column_groups = {"rotations"};
     d.vtk_fields = {"sliding", "tangential_force_N"};
     d.describe = [](const ContactLaw& law, const PairScale& s) {

@@ -116,6 +116,10 @@ inline const SubModelInfo& MindlinLaw<ForceKept>::info() {
                        : "none (YADE's Law2_ScGeom_MindlinPhys_Mindlin is incremental: use \"mindlin_force\")";
     d.lammps = ForceKept ? "tangential mindlin/force NULL 0 mu (k_t from E and nu, no tangential damping)"
                          : "tangential mindlin NULL 0 mu (k_t from E and nu, no tangential damping)";
+    d.lammps_words = [](const ContactLaw& law) {
+      return std::string(ForceKept ? "tangential mindlin/force" : "tangential mindlin") + " NULL 0 " +
+             exact_num(law.get("friction"));
+    };
     d.column_groups = {"rotations"};
     d.vtk_fields = {"sliding", "tangential_force_N"};
     d.describe = [](const ContactLaw& law, const PairScale&) {
