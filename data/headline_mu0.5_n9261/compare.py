@@ -1,11 +1,12 @@
-"""The N = 9261 mu = 0.5 headline against (a) the N = 1000 mu = 0.5 friction study at the same nu
-and (b) the frictionless N = 9261 Figure 3 at the nearest nu: per-packing levels (model-free, the
-friction study's definitions, demkit.friction_study), mean +- SE over packings, their differences
-with the combined SE, the curve-wise difference in combined SEs, and two figures with 95 % bands.
+"""An N = 9261 frictional headline (mu = 0.5, or --mu) against (a) the N = 1000 friction study at
+the same mu and nu and (b) the frictionless N = 9261 Figure 3 at the nearest nu: per-packing levels
+(model-free, the friction study's definitions, demkit.friction_study), mean +- SE over packings,
+their differences with the combined SE, the curve-wise difference in combined SEs, D3 - D2 paired
+per packing (the same packing sheared both ways) at both N, and two figures with 95 % bands.
 
     PYTHONPATH=. /usr/bin/python3 data/headline_mu0.5_n9261/compare.py [--store runs/headline_mu0.5] \
         --headline data/headline_mu0.5_n9261 --n1000 data/friction_n1000/mu_0.5 \
-        --frictionless data/figure3_n9261 --out data/headline_mu0.5_n9261/compare
+        --frictionless data/figure3_n9261 --out data/headline_mu0.5_n9261/compare [--mu 0.5]
 
 Levels per packing: s_cs, F_cs, p*_cs = window means over eps_d in [0.25, 0.30] (the friction
 study's critical-state window); the same over [0.35, 0.40] where both curves reach 0.4 (the
@@ -31,6 +32,7 @@ QUANTITIES = ("s_dev", "F_dev", "p_star")
 NUS = ("0.690", "0.740", "0.800")
 # Figure 3's checkpoints nearest to ours (0.80: 0.819 is 0.019 away, 0.78 is 0.020; both shown in the table)
 NEAREST_FRICTIONLESS = {"0.690": ["0.690"], "0.740": ["0.750", "0.720"], "0.800": ["0.819", "0.780"]}
+MU = "0.5"   # the headline's friction coefficient, for the labels (--mu)
 
 
 def member_curves(folder, mode, nu):
@@ -120,7 +122,7 @@ def table_finite_size(head, n1000):
 
 
 def table_frictionless(head, fig3):
-    rows, lines = [], ["| mode | ν (μ = 0.5) | ν (μ = 0) | quantity | μ = 0.5, N = 9261 | μ = 0, N = 9261 | ratio |",
+    rows, lines = [], [f"| mode | ν (μ = {MU}) | ν (μ = 0) | quantity | μ = {MU}, N = 9261 | μ = 0, N = 9261 | ratio |",
                        "|---|---|---|---|---|---|---|"]
     for mode in ("D2", "D3"):
         for nu in NUS:
@@ -131,8 +133,8 @@ def table_frictionless(head, fig3):
                     if key not in a or key not in b:
                         continue
                     r = a[key][0] / b[key][0] if b[key][0] else math.nan
-                    rows.append({"mode": mode, "nu": nu, "nu_frictionless": nu0, "quantity": key, "mean_mu0.5": a[key][0],
-                                 "se_mu0.5": a[key][1], "K_mu0.5": a[key][2], "mean_mu0": b[key][0], "se_mu0": b[key][1],
+                    rows.append({"mode": mode, "nu": nu, "nu_frictionless": nu0, "quantity": key, f"mean_mu{MU}": a[key][0],
+                                 f"se_mu{MU}": a[key][1], f"K_mu{MU}": a[key][2], "mean_mu0": b[key][0], "se_mu0": b[key][1],
                                  "K_mu0": b[key][2], "ratio": r})
                     lines.append(f"| {mode} | {nu} | {nu0} | {key} | {fmt(*a[key][:2])} | {fmt(*b[key][:2])} | {r:.2f} |")
     return rows, lines
@@ -166,15 +168,35 @@ def fit_cell(r):
 
 
 def table_fits(head, fig3):
-    """The fitted saturation levels (dem fit, jackknife SE) of s_dev and F_dev, mu = 0.5 against mu = 0."""
+    """The fitted saturation levels (dem fit, jackknife SE) of s_dev and F_dev, the headline's mu against mu = 0."""
     a, b = fit_rows(head), fit_rows(fig3)
-    lines = ["| mode | ν (μ = 0.5) | ν (μ = 0) | quantity | x_max, μ = 0.5 | x_max, μ = 0 |", "|---|---|---|---|---|---|"]
+    lines = [f"| mode | ν (μ = {MU}) | ν (μ = 0) | quantity | x_max, μ = {MU} | x_max, μ = 0 |", "|---|---|---|---|---|---|"]
     for mode in ("D2", "D3"):
         for nu in NUS:
             for nu0 in NEAREST_FRICTIONLESS[nu][:1]:
                 for q in ("s_dev", "F_dev"):
                     lines.append(f"| {mode} | {nu} | {nu0} | {q} | {fit_cell(a.get((mode, nu, q)))} | {fit_cell(b.get((mode, nu0, q)))} |")
     return lines
+
+
+def table_d3_minus_d2(folders):
+    """D3 - D2 of each level, paired per packing (member k of D2 and of D3 is the same packing from the
+    same checkpoint): mean +- SE over the packings and z, for each (label, folder)."""
+    rows, lines = [], ["| N | ν | quantity | D3 − D2 (paired, mean ± SE) | K | z |", "|---|---|---|---|---|---|"]
+    for label, folder in folders:
+        for nu in NUS:
+            d2 = [levels(c) for c in member_curves(folder, "D2", nu)]
+            d3 = [levels(c) for c in member_curves(folder, "D3", nu)]
+            if len(d2) != len(d3):
+                continue
+            for key in ("s_dev_cs", "F_dev_cs", "p_star_cs", "s_dev_late", "F_dev_late"):
+                m, se, k = stats_of([b.get(key, math.nan) - a.get(key, math.nan) for a, b in zip(d2, d3)])
+                if k < 2:
+                    continue
+                z = m / se if se > 0 else math.nan
+                rows.append({"N": label, "nu": nu, "quantity": key, "d3_minus_d2": m, "se": se, "K": k, "z": z})
+                lines.append(f"| {label} | {nu} | {key} | {fmt(m, se)} | {k} | {z:.1f} |")
+    return rows, lines
 
 
 def inertial(head):
@@ -253,8 +275,11 @@ def main(argv=None):
     ap.add_argument("--frictionless", required=True)
     ap.add_argument("--out", required=True)
     ap.add_argument("--no-plots", action="store_true")
+    ap.add_argument("--mu", default="0.5", help="the headline's friction coefficient, for the labels")
     ap.add_argument("--store", metavar="RUN", help="first copy the ensemble folder RUN (dem ensemble --out), trimmed, to --headline")
     a = ap.parse_args(argv)
+    global MU
+    MU = a.mu
     if a.store:
         store(a.store, a.headline)
     for f in (a.headline, a.n1000, a.frictionless):
@@ -265,25 +290,28 @@ def main(argv=None):
     fl_rows, fl_lines = table_frictionless(a.headline, a.frictionless)
     in_rows, in_lines = inertial(a.headline)
     fit_lines = table_fits(a.headline, a.frictionless)
+    dd_rows, dd_lines = table_d3_minus_d2([("9261", a.headline), ("1000", a.n1000)])
     write_csv(os.path.join(a.out, "finite_size.csv"), fs_rows)
     write_csv(os.path.join(a.out, "vs_frictionless.csv"), fl_rows)
-    text = ["# N = 9261 against N = 1000 at μ = 0.5 (same scene but N; levels: means over ε_d ∈ [0.25, 0.30] per packing)",
+    write_csv(os.path.join(a.out, "d3_minus_d2.csv"), dd_rows)
+    text = [f"# N = 9261 against N = 1000 at μ = {MU} (same scene but N; levels: means over ε_d ∈ [0.25, 0.30] per packing)",
             "", *fs_lines, "",
-            "# μ = 0.5 against μ = 0 (Figure 3), both N = 9261 (_cs: ε_d ∈ [0.25, 0.30], _late: [0.35, 0.40])",
+            f"# D3 − D2 at μ = {MU}, paired per packing (_late: ε_d ∈ [0.35, 0.40], N = 9261 only)", "", *dd_lines, "",
+            f"# μ = {MU} against μ = 0 (Figure 3), both N = 9261 (_cs: ε_d ∈ [0.25, 0.30], _late: [0.35, 0.40])",
             "", *fl_lines, "",
             "# Fitted levels (dem fit: the saturating law's x_max ± jackknife SE; the chosen model, its peak and critical state; ⚠: the fit warns, parameters.md)",
             "", *fit_lines, "", "# Inertial number of the headline (quasi-static warning above 1e-3)", "", *in_lines, ""]
     write(os.path.join(a.out, "compare.md"), "\n".join(text))
     write(os.path.join(a.out, "compare.json"), json.dumps(
-        {"finite_size": fs_rows, "vs_frictionless": fl_rows, "inertial": in_rows}, indent=1,
+        {"finite_size": fs_rows, "d3_minus_d2": dd_rows, "vs_frictionless": fl_rows, "inertial": in_rows}, indent=1,
         default=lambda x: None))
     if not a.no_plots:
         same = {nu: nu for nu in NUS}
         near = {nu: v[0] for nu, v in NEAREST_FRICTIONLESS.items()}
         plot([(a.n1000, same, "--", "N = 1000 (K = 8)"), (a.headline, same, "-", "N = 9261 (K = 4)")], a.out,
-             "finite_size", a.headline, {nu: rf"$\mu$ = 0.5, $\nu$ = {nu}" for nu in NUS})
-        plot([(a.frictionless, near, "--", r"$\mu$ = 0"), (a.headline, same, "-", r"$\mu$ = 0.5")], a.out,
-             "vs_frictionless", a.headline, {nu: rf"N = 9261, $\nu$ = {nu} ($\mu$ = 0.5), {near[nu]} ($\mu$ = 0)" for nu in NUS})
+             "finite_size", a.headline, {nu: rf"$\mu$ = {MU}, $\nu$ = {nu}" for nu in NUS})
+        plot([(a.frictionless, near, "--", r"$\mu$ = 0"), (a.headline, same, "-", rf"$\mu$ = {MU}")], a.out,
+             "vs_frictionless", a.headline, {nu: rf"N = 9261, $\nu$ = {nu} ($\mu$ = {MU}), {near[nu]} ($\mu$ = 0)" for nu in NUS})
     print("\n".join(text))
 
 
