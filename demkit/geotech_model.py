@@ -2,6 +2,7 @@
 (issue 31; docs/model.md, "Calibrated on drained triaxial tests").
 
     python3 -m demkit.geotech_model --curves data/geotech/curves --mu 0.5 --out DIR [--tests T1,T2] [--force]
+    python3 -m demkit.geotech_model --collect ROOT      # ROOT/{blind,lab}_PREP/summary.csv -> ROOT/comparison.{md,csv}
 
 CURVES/mu_MU/PREP/LEVEL/TEST/mS.csv   the stored test curves (docs/geotech.md), one per packing
 DIR/ensemble_PREP/paths/TEST_PREP_phiX.csv          ensemble of the K packings, the format of
@@ -140,16 +141,68 @@ def convert(curves, mu, out, tests, force=False, friction=None):
     return made
 
 
+def read_summary(path):
+    """{(mode, nu): row} of a `dem model` summary.csv."""
+    import csv
+    with open(path, newline="") as fh:
+        return {(r["mode"], r["nu [-]"]): r for r in csv.DictReader(fh) if r["mode"] != "calibration"}
+
+
+def chi2_of(path):
+    import csv
+    with open(path, newline="") as fh:
+        for r in csv.DictReader(fh):
+            if r["mode"] == "calibration":
+                return r["role"].replace("chi2/dof ", "")
+    return "nan"
+
+
+def collect(root):
+    """ROOT/{blind,lab}_PREP/summary.csv -> ROOT/comparison.{md,csv}: per curve the RMS error over the
+    band half-width (p*, eps_v, s_dev, F_dev, worst) of the blind prediction (friction-study calibration)
+    and of the laboratory calibration (TC_s3 + the isotropic states), side by side."""
+    q = ("p_star [band]", "eps_v [band]", "s_dev [band]", "F_dev [band]", "worst [band]")
+    head = ["prep", "mode", "nu [-]"] + [f"blind {c}" for c in q] + ["lab role"] + [f"lab {c}" for c in q]
+    rows, chi = [], {}
+    for prep in ("dense", "loose"):
+        b_path, l_path = (os.path.join(root, f"{k}_{prep}", "summary.csv") for k in ("blind", "lab"))
+        if not (os.path.exists(b_path) and os.path.exists(l_path)):
+            raise SystemExit(f"geotech_model: --collect needs {b_path} and {l_path} (the README's `dem model` runs)")
+        b, lab = read_summary(b_path), read_summary(l_path)
+        chi[prep] = (chi2_of(b_path), chi2_of(l_path))
+        for key in list(lab) + [k for k in b if k not in lab]:
+            rb, rl = b.get(key, {}), lab.get(key, {})
+            rows.append([prep, key[0], key[1]] + [rb.get(c, "") or "" for c in q] + [rl.get("role", "")]
+                        + [rl.get(c, "") for c in q])
+    csv_text = ",".join(head) + "\n" + "".join(",".join(r) + "\n" for r in rows)
+    write_atomic(os.path.join(root, "comparison.csv"), csv_text)
+    md = ["<!-- RMS of model - DEM mean over the mean 95 % band half-width per curve: blind = the friction study's "
+          "mu = 0.5 calibration (constant-volume D2, nu = 0.69-0.80), lab = calibrated on TC_s3 at both pressures + "
+          "the isotropic states of the same preparation; nan: not a quantity of that curve; empty: not in that run; "
+          f"chi2/dof blind / lab: dense {chi['dense'][0]} / {chi['dense'][1]}, loose {chi['loose'][0]} / {chi['loose'][1]} -->\n",
+          "| " + " | ".join(head) + " |\n", "|" + "---|" * len(head) + "\n"]
+    md += ["| " + " | ".join(r) + " |\n" for r in rows]
+    write_atomic(os.path.join(root, "comparison.md"), "".join(md))
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--curves", default="data/geotech/curves", help="folder of the stored geotech curves")
     ap.add_argument("--mu", default="0.5", help="friction coefficient as in the folder name mu_MU")
-    ap.add_argument("--out", required=True, help="output folder (ensemble_PREP/ written in it)")
+    ap.add_argument("--out", help="output folder (ensemble_PREP/ written in it)")
+    ap.add_argument("--collect", help="instead: write ROOT/comparison.{md,csv} from ROOT/{blind,lab}_{dense,loose}/summary.csv")
     ap.add_argument("--tests", default=",".join(TESTS), help="comma-separated tests (default: every monotone test)")
     ap.add_argument("--force", action="store_true", help="replace existing ensemble_PREP folders")
     ap.add_argument("--friction", help="also copy this friction-study folder's D2/D3 ensemble means into "
                     "ensemble_PREP/ensemble/ (predicted by `dem model`), e.g. data/friction_n1000/mu_0.5")
     a = ap.parse_args(argv)
+    if a.collect:
+        collect(a.collect)
+        return 0
+    if not a.out:
+        print("geotech_model: give --out DIR (or --collect ROOT)", file=sys.stderr)
+        return 2
     tests = [t for t in a.tests.split(",") if t]
     bad = [t for t in tests if t not in TESTS]
     if bad:

@@ -121,3 +121,24 @@ def test_paths_only_calibration_options_are_refused_with_the_fix(tree, tmp_path)
     bad.write_text("parameter,law,value\np0,law,0.04\n")
     r = subprocess.run(base + ["--out", str(tmp_path / "f"), "--start", str(bad)], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "nu_c" in r.stderr, r.stderr
+
+
+def test_collect_puts_blind_and_lab_side_by_side(tmp_path):
+    head = "mode,nu [-],role,p_star [band],eps_v [band],s_dev [band],F_dev [band],worst [band]\n"
+    for kind, v in (("blind", "5.5"), ("lab", "0.5")):
+        for prep in ("dense", "loose"):
+            d = tmp_path / f"{kind}_{prep}"
+            d.mkdir()
+            (d / "summary.csv").write_text(head + f"TC_s3_{prep},0.66,{'predicted' if kind == 'blind' else 'fitted'},"
+                                           f"1,{v},2,3,{v}\ncalibration,nan,chi2/dof 7.5,nan,nan,nan,nan,{v}\n")
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--collect", str(tmp_path)], capture_output=True,
+                       text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    rows = read(tmp_path / "comparison.csv")
+    assert [(x["prep"], x["mode"], x["blind eps_v [band]"], x["lab eps_v [band]"], x["lab role"]) for x in rows] == [
+        ("dense", "TC_s3_dense", "5.5", "0.5", "fitted"), ("loose", "TC_s3_loose", "5.5", "0.5", "fitted")]
+    assert "chi2/dof blind / lab: dense 7.5 / 7.5" in (tmp_path / "comparison.md").read_text()
+    (tmp_path / "lab_loose" / "summary.csv").unlink()
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--collect", str(tmp_path)], capture_output=True,
+                       text=True, cwd=ROOT)
+    assert r.returncode != 0 and "lab_loose" in r.stderr, r.stderr
