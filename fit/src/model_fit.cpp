@@ -740,9 +740,11 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   add_curve_residuals(problem, curves, o, nu_ref, X, blocks_all, n_res);
   add_path_residuals(problem, paths, o, nu_ref, X, blocks_all, n_res, numin);
   // Start values inside the jamming fractions' bounds (a start from another calibration may lie
-  // above this data's lowest volume fraction; Ceres refuses an infeasible start).
+  // above this data's lowest volume fraction; Ceres refuses an infeasible start): moved to 0.005
+  // below it, not onto it, where the coordination law's cusp (nu/nu_cC - 1)^alpha would sit on the
+  // start state itself (an unbounded B there; a held nu_cC would stay on it).
   for (int i : {kNuC, kNuCC})
-    if (isob[i] > numin * (1 - 1e-6)) isob[i] = numin * (1 - 2e-6);
+    if (isob[i] > numin * (1 - 1e-6)) isob[i] = numin - 0.005;
   add_isotropic_residuals(problem, iso, o, isob, numin, n_res);
   set_bounds(problem, isob, shear, ext, numin, X);
   if (o.fit_isotropic && !held.empty())

@@ -1016,6 +1016,44 @@ TEST(ModelFit, CalibratesOnTriaxialPathsAloneFromAStart) {
     EXPECT_LT(std::fabs(cal.value[kNumIso + i] - P.shear[i]), 5 * cal.se_cov[kNumIso + i]) << shear_name(i);
   EXPECT_LT(std::fabs(cal.value[kP0] - iso[kP0]), 0.03 * iso[kP0]) << "p0 from 15 % off";
   EXPECT_LT(cal.chi2_dof(), 3.0);
+  // A held jamming fraction above the data's lowest nu (a start from denser packings) is moved 0.005
+  // below it, not onto it, where the coordination law's cusp would sit on the start state.
+  Parameters high = start;
+  high.nu_cC = 0.75;
+  o.start = &high;
+  o.max_iterations = 5;
+  const Calibration c2 = calibrate({}, br, o, paths);
+  double numin = 1e9;
+  for (const auto& d : paths) for (double v : d.nu_m) numin = std::min(numin, v);
+  EXPECT_NEAR(c2.value[kNuCC], numin - 0.005, 1e-12);
+}
+
+// The fabric gate's exponent n_F is a line in nu; where it is extrapolated below 0 the gate is off
+// (exponent 0), not an accelerator 1e6^|n_F| at the floor of the opened fraction: the same curve,
+// bit for bit, as n_F = 0, and a fabric that rises at the rate beta_F (F_lim - F) from the start.
+TEST(ModelFriction, NegativeGateExponentIsNoGate) {
+  Parameters P = frictional_truth();
+  const auto iso = P.iso();
+  double neg[kNumExt], zero[kNumExt];
+  std::copy(P.ext, P.ext + kNumExt, neg);
+  std::copy(P.ext, P.ext + kNumExt, zero);
+  neg[kNFA] = -0.7; neg[kNFB] = 0.0;
+  zero[kNFA] = 0.0; zero[kNFB] = 0.0;
+  const std::vector<double> eps = {0.0, 0.001, 0.01, 0.1};
+  const double nu0 = 0.74, p0 = isotropic_pressure(iso.data(), nu0);
+  for (FabricLode f : {FabricLode::Principal, FabricLode::Overlap}) {
+    const auto a = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.0, 0.0, eps, 5e-4,
+                                          Ext<double>{neg, kLodeBD2, Surface::LadeDuncan, f});
+    const auto b = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.0, 0.0, eps, 5e-4,
+                                          Ext<double>{zero, kLodeBD2, Surface::LadeDuncan, f});
+    for (std::size_t i = 0; i < eps.size(); ++i) {
+      EXPECT_EQ(a[i].F, b[i].F);
+      EXPECT_EQ(a[i].s, b[i].s);
+      EXPECT_EQ(a[i].p, b[i].p);
+    }
+    const Local<double> L = local(P.shear, nu0, P.nu_ref);
+    EXPECT_NEAR(a[1].F, L.F_max * (1 - std::exp(-L.beta_F * 0.001)), 1e-9);   // F0 = 0, no gate: the closed form
+  }
 }
 
 // A parameters.csv as `dem model` writes it (quoted laws with commas) read back; re-centring the
