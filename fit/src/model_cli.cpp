@@ -388,9 +388,9 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
       const int q = r.quantity == "p_star" ? 0 : r.quantity == "eps_v" ? 1 : r.quantity.rfind("s_dev", 0) == 0 ? 2 : 3;
       v[q] = r.rms_over_band;
     }
-    double worst = 0;
-    for (double x : v) if (std::isfinite(x)) worst = std::max(worst, x);
-    worst_all = std::max(worst_all, worst);
+    double worst = std::nan("");   // nan: no quantity judged (a path the model could not integrate)
+    for (double x : v) if (std::isfinite(x)) worst = std::isfinite(worst) ? std::max(worst, x) : x;
+    if (std::isfinite(worst)) worst_all = std::max(worst_all, worst);
     t.add_row({mode, num(nu, 4), role, num(v[0], 3), num(v[1], 3), num(v[2], 3), num(v[3], 3), num(worst, 3)});
   }
   t.add_row({"calibration", "nan", "chi2/dof " + num(cal.chi2_dof(), 4), "nan", "nan", "nan", "nan", num(worst_all, 3)});
