@@ -1028,34 +1028,6 @@ TEST(ModelFit, CalibratesOnTriaxialPathsAloneFromAStart) {
   EXPECT_NEAR(c2.value[kNuCC], numin - 0.005, 1e-12);
 }
 
-// The fabric gate's exponent n_F is a line in nu; where it is extrapolated below 0 the gate is off
-// (exponent 0), not an accelerator 1e6^|n_F| at the floor of the opened fraction: the same curve,
-// bit for bit, as n_F = 0, and a fabric that rises at the rate beta_F (F_lim - F) from the start.
-TEST(ModelFriction, NegativeGateExponentIsNoGate) {
-  Parameters P = frictional_truth();
-  const auto iso = P.iso();
-  double neg[kNumExt], zero[kNumExt];
-  std::copy(P.ext, P.ext + kNumExt, neg);
-  std::copy(P.ext, P.ext + kNumExt, zero);
-  neg[kNFA] = -0.7; neg[kNFB] = 0.0;
-  zero[kNFA] = 0.0; zero[kNFB] = 0.0;
-  const std::vector<double> eps = {0.0, 0.001, 0.01, 0.1};
-  const double nu0 = 0.74, p0 = isotropic_pressure(iso.data(), nu0);
-  for (FabricLode f : {FabricLode::Principal, FabricLode::Overlap}) {
-    const auto a = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.0, 0.0, eps, 5e-4,
-                                          Ext<double>{neg, kLodeBD2, Surface::LadeDuncan, f});
-    const auto b = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.0, 0.0, eps, 5e-4,
-                                          Ext<double>{zero, kLodeBD2, Surface::LadeDuncan, f});
-    for (std::size_t i = 0; i < eps.size(); ++i) {
-      EXPECT_EQ(a[i].F, b[i].F);
-      EXPECT_EQ(a[i].s, b[i].s);
-      EXPECT_EQ(a[i].p, b[i].p);
-    }
-    const Local<double> L = local(P.shear, nu0, P.nu_ref);
-    EXPECT_NEAR(a[1].F, L.F_max * (1 - std::exp(-L.beta_F * 0.001)), 1e-9);   // F0 = 0, no gate: the closed form
-  }
-}
-
 // A parameters.csv as `dem model` writes it (quoted laws with commas) read back; re-centring the
 // nu-laws leaves every law the same at any nu; the laboratory tests' Lode parameter b from their
 // names; a start state below the isotropic law's jamming fraction is refused, not integrated.

@@ -373,12 +373,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
     r_F = r * s_lim * T(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2)) / L.s_max;
   const bool opened = m.ext.fabric == FabricLode::Overlap || m.ext.fabric == FabricLode::Extension;
   if (opened) r_F = opened_fraction(m.iso, nu, y.p, y.l, m.ext.b);
-  // The gate's exponent is a line in nu; below 0 (a line extrapolated past its data, as at the geotech
-  // packings' nu = 0.59-0.62) the gate would accelerate the fabric where no contact has opened yet
-  // (r_F^n_F -> 1e6^|n_F| at the floor): held at 0 there, i.e. no gate. The identity for n_F > 0.
-  T n_F = X.n_F;
-  if (!(n_F > T(0.0))) n_F = T(0.0);
-  const T gate_F = m.ext.p ? pow(r_F, n_F) : T(1.0);                     // fabric follows the mobilisation
+  const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
   const T shape_s = T(1.0) + X.kappa_s * r;                               // stress ratio: linear for longer
   // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
   const T F_lim = m.ext.p ? L.F_max * T(fabric_lode_factor(m.ext.fabric, m.ext.b)) : L.F_max;
