@@ -96,12 +96,20 @@ def signed_member(path):
     return m
 
 
+def member_name(f, by_stem=False):
+    """RAW/mNNN/PATH_phiX.csv -> mNNN; with by_stem, DIR/mS.csv -> mS (demkit.geotech_model)."""
+    return os.path.splitext(os.path.basename(f))[0] if by_stem else os.path.basename(os.path.dirname(f))
+
+
 def interp(acc, y, grid):
     return np.interp(grid, acc, y)
 
 
-def reduce_path(files, name, nu_tag, out_dir, members_out):
-    mem = [signed_member(f) for f in files]
+def reduce_path(files, name, nu_tag, out_dir, members_out, mem=None):
+    """Reduce the member curves `files` (or, when given, the member dicts `mem` built from them, with
+    the keys of signed_member; the member name is the file's folder, or its stem when `mem` is given)."""
+    named_by_stem = mem is not None
+    mem = [signed_member(f) for f in files] if mem is None else mem
     K = len(mem)
     if K < 2:
         raise SystemExit(f"path_ensemble: {name}_phi{nu_tag}: {K} member curve(s); an ensemble needs >= 2")
@@ -146,7 +154,7 @@ def reduce_path(files, name, nu_tag, out_dir, members_out):
         head += [f"{q}_{s}" for s in ("mean", "sd", "se", "lo95", "hi95")]
     lines = [
         f"# dem path ensemble: {name} from nu = {nu_tag}, {K} packings "
-        f"({' '.join(os.path.basename(os.path.dirname(f)) for f in files)})\n",
+        f"({' '.join(member_name(f, named_by_stem) for f in files)})\n",
         "# each member resampled (linear) on the common eps_d_accumulated grid; X_mean, X_sd (sample), "
         "X_se = X_sd/sqrt(K), X_lo95/X_hi95 = X_mean -/+ t_{K-1,0.975} X_se (95% band of the mean)\n",
         "# signed along the first loading direction: eps_d_signed = eps_d sign(eps_xx - eps_zz), "
@@ -164,7 +172,7 @@ def reduce_path(files, name, nu_tag, out_dir, members_out):
     write_atomic(os.path.join(out_dir, f"{name}_phi{nu_tag}.csv"), "".join(lines))
     if members_out:
         for f, m in zip(files, mem):
-            member = os.path.basename(os.path.dirname(f))
+            member = member_name(f, named_by_stem)
             q_out = ("nu", "eps_v", "p_star", "s_dev_signed", "F_dev_signed")
             text = [f"# dem path member curve: {name} from nu = {nu_tag}, {member}, resampled on the ensemble grid; "
                     "signs as in the ensemble file\n", "eps_d_accumulated," + ",".join(q_out) + "\n"]

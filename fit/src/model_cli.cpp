@@ -50,11 +50,13 @@ std::vector<CurveFile> curves_in(const fs::path& dir) {
   return out;
 }
 
-std::vector<CurveFile> find_curves(const fs::path& dir) {
+std::vector<CurveFile> find_curves(const fs::path& dir, bool optional = false) {
   const fs::path ens = dir / "ensemble";
+  if (optional && !fs::is_directory(ens)) return {};
   if (!fs::is_directory(ens))
     throw InputError(ens.string() + " does not exist: give an ensemble folder reduced by `dem fit DIR` "
-                     "(it writes DIR/ensemble/MODE_phiX.csv)");
+                     "(it writes DIR/ensemble/MODE_phiX.csv), or calibrate on path ensembles alone with --start "
+                     "PARAMETERS.csv (a monotone mode gives the start values otherwise)");
   return curves_in(ens);
 }
 
@@ -386,9 +388,9 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
       const int q = r.quantity == "p_star" ? 0 : r.quantity == "eps_v" ? 1 : r.quantity.rfind("s_dev", 0) == 0 ? 2 : 3;
       v[q] = r.rms_over_band;
     }
-    double worst = 0;
-    for (double x : v) if (std::isfinite(x)) worst = std::max(worst, x);
-    worst_all = std::max(worst_all, worst);
+    double worst = std::nan("");   // nan: no quantity judged (a path the model could not integrate)
+    for (double x : v) if (std::isfinite(x)) worst = std::isfinite(worst) ? std::max(worst, x) : x;
+    if (std::isfinite(worst)) worst_all = std::max(worst_all, worst);
     t.add_row({mode, num(nu, 4), role, num(v[0], 3), num(v[1], 3), num(v[2], 3), num(v[3], 3), num(worst, 3)});
   }
   t.add_row({"calibration", "nan", "chi2/dof " + num(cal.chi2_dof(), 4), "nan", "nan", "nan", "nan", num(worst_all, 3)});
@@ -438,7 +440,9 @@ ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir)
   ModelInputs in;
   auto& [fit_curves, other, fit_files, other_files, fit_paths, other_paths, fit_path_files, other_path_files,
          fit_label, members_out, iso_files_out, iso_out, K_out] = in;
-  const auto files = find_curves(dir);
+  // With --start the path ensembles alone may be the calibration (the laboratory set of issue 31):
+  // DIR need not hold ensemble curves then.
+  const auto files = find_curves(dir, !o.start.empty());
   std::vector<std::string> fit_names = o.calibrate_on.empty() ? std::vector<std::string>{o.calibrate_mode} : o.calibrate_on;
   auto fitted = [&](const std::string& n) { return std::find(fit_names.begin(), fit_names.end(), n) != fit_names.end(); };
   std::vector<std::string> known;
@@ -448,10 +452,11 @@ ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir)
     if (fitted(f.mode)) { fit_curves.push_back(c); fit_files.push_back(f); }
     else { other.push_back(c); other_files.push_back(f); }
   }
-  if (fit_curves.empty())
+  if (fit_curves.empty() && o.start.empty())
     throw InputError("no ensemble curve of the fitted modes (" + o.calibrate_mode + ", --calibrate-on) under " +
                      (dir / "ensemble").string() + ": run the ensemble with mode D2 (or pick another with --calibrate-mode); "
-                     "paths alone cannot be the calibration, a monotone mode gives the start values");
+                     "paths alone cannot be the calibration (a monotone mode gives the start values) unless --start "
+                     "PARAMETERS.csv gives them");
   // Path ensembles (demkit/path_ensemble.py): --paths, or DIR/paths when it exists.
   fs::path paths_dir = o.paths.empty() ? dir / "paths" : fs::path(o.paths);
   if (!o.paths.empty() && !fs::is_directory(paths_dir))
@@ -472,6 +477,9 @@ ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir)
     if (std::find(known.begin(), known.end(), n) == known.end())
       throw InputError("--calibrate-on " + n + ": no ensemble curve " + n + "_phiX.csv under " + (dir / "ensemble").string() +
                        " nor path ensemble under " + paths_dir.string());
+  if (fit_curves.empty() && fit_paths.empty())
+    throw InputError("--calibrate-on names no curve or path ensemble under " + dir.string() + ": give the paths to fit "
+                     "(e.g. --calibrate-on TC_s3_dense)");
   for (const auto& n : fit_names) fit_label += (fit_label.empty() ? "" : "+") + n;
   members_out = member_dirs(dir);
   const auto& members = members_out;
@@ -487,14 +495,37 @@ ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir)
     if (!fs::exists(f)) throw InputError("--isotropic " + f + " does not exist");
   iso_out = read_isotropic(iso_files);
 
-  K_out = fit_curves.front().packings;
+  K_out = fit_curves.empty() ? fit_paths.front().packings : fit_curves.front().packings;
   return in;
 }
+
+Parameters start_params;   // --start, read once (CalibrationOptions::start points at it)
 
 // The calibration's options from the command's (--eps-max, --family, --surface, --fabric-lode checked).
 CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   CalibrationOptions co;
   co.eps_max = o.eps_max;
+  if (o.max_iterations < 1) throw InputError("--max-iterations " + std::to_string(o.max_iterations) + ": give a positive number");
+  co.max_iterations = o.max_iterations;
+  if (!o.start.empty()) {
+    if (!fs::is_regular_file(o.start))
+      throw InputError("--start " + o.start + " is not a file: give the parameters.csv of a `dem model` run");
+    try {
+      start_params = read_parameters(o.start);
+    } catch (const std::runtime_error& e) {
+      throw InputError(std::string("--start: ") + e.what());
+    }
+    co.start = &start_params;
+  }
+  for (const auto& n : o.hold_isotropic) {
+    const int i = iso_index(n);
+    if (i < 0)
+      throw InputError("--hold-isotropic " + n + ": not an isotropic parameter; give some of p0, nu_c, gamma_p, C0, C1, "
+                       "nu_cC, alpha");
+    if (o.start.empty())
+      throw InputError("--hold-isotropic needs --start PARAMETERS.csv (the values they are held at)");
+    co.hold_iso.push_back(i);
+  }
   if (o.family != "group" && o.family != "extended" && o.family != "auto")
     throw InputError("--family " + o.family + ": give group (the incremental anisotropic model), extended (with the "
                      "frictional extension) or auto (both, chosen by the held-out test)");
@@ -607,6 +638,8 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
   write_parameter_tables(cal, K, out, fit_label);
   std::vector<double> nus;
   for (const auto& c : fit_curves) nus.push_back(c.nu);
+  if (fit_curves.empty())
+    for (const auto& d : fit_paths) nus.push_back(d.nu);
   write_laws_table(cal.params, nus, out);
 
   Table pred({"mode", "nu", "role", "quantity", "n", "rms [quantity]", "max_abs [quantity]", "bias [quantity]",
@@ -627,7 +660,17 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
   for (std::size_t j = 0; j < fit_curves.size(); ++j) evaluate(fit_curves[j], fit_files[j], "fitted");
   for (std::size_t j = 0; j < other.size(); ++j) evaluate(other[j], other_files[j], "predicted");
   auto evaluate_path = [&](const PathData& d, const CurveFile& f, const std::string& role) {
-    const PathPrediction m = predict_path(cal.params, d);
+    PathPrediction m;
+    try {
+      m = predict_path(cal.params, d);
+    } catch (const std::invalid_argument& e) {   // a start state the calibrated laws cannot hold (nu0 <= nu_c)
+      if (role == "fitted") throw InputError(e.what());
+      std::cerr << "dem model: warning: " << e.what() << "\n";
+      summary.push_back({d.name, d.nu, role + ", not integrable (nu0 <= nu_c)", "s_dev", std::nan("")});
+      pred.add_row({d.name, num(d.nu, 4), role + ", not integrable (nu0 <= nu_c)", "all", "0", "nan", "nan", "nan", "nan",
+                    "nan", "nan", "nan"});
+      return;
+    }
     fs::create_directories(out / "curves" / "paths");
     write_path_curve(m, d, role, out / "curves" / "paths" / (f.mode + "_" + f.tag + ".csv"));
     for (const auto& e : path_errors(m, d)) {
@@ -714,6 +757,12 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "(principal, and the fabric gated by the minor principal stress), overlap (the default: principal, and "
                  "the fabric gated by the fraction of contacts opened by the extension strain), extension (overlap, and "
                  "the fabric's rate per unit extension strain; docs/model.md)");
+  app.add_option("--max-iterations", o.max_iterations, "Ceres iterations of each fit (default 300)");
+  app.add_option("--start", o.start, "parameters.csv of another `dem model` run: the start values (re-centred on "
+                 "this data's nu_ref); with it the path ensembles alone may be calibrated (--calibrate-on PATHS)");
+  app.add_option("--hold-isotropic", o.hold_isotropic, "isotropic parameters held at their --start values, "
+                 "comma-separated (e.g. gamma_p,nu_cC,alpha: a branch of two pressure levels fixes two of the pressure "
+                 "law's three)")->delimiter(',')->default_str("");
   app.add_flag("--force", o.force, "overwrite an existing output folder");
 }
 

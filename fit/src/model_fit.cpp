@@ -5,7 +5,10 @@
 #include <glog/logging.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <map>
+#include <fstream>
 #include <set>
 #include <limits>
 #include <mutex>
@@ -292,8 +295,85 @@ Parameters extended_start(const std::vector<CurveData>& curves, const Parameters
 
 }  // namespace
 
+int iso_index(const std::string& name) {
+  for (int i = 0; i < kNumIso; ++i)
+    if (name == iso_name(i)) return i;
+  return -1;
+}
+
+namespace {
+// One CSV line split into fields, "..." quoting with commas inside (as write_table_all writes).
+std::vector<std::string> csv_fields(const std::string& line) {
+  std::vector<std::string> out(1);
+  bool quoted = false;
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (c == '"') {
+      if (quoted && i + 1 < line.size() && line[i + 1] == '"') { out.back() += '"'; ++i; }
+      else quoted = !quoted;
+    } else if (c == ',' && !quoted) {
+      out.emplace_back();
+    } else if (c != '\r') {
+      out.back() += c;
+    }
+  }
+  return out;
+}
+}  // namespace
+
+Parameters read_parameters(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + " cannot be read: give the parameters.csv of a `dem model` run");
+  std::string line;
+  std::map<std::string, double> v;
+  int col = -1;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    const auto f = csv_fields(line);
+    if (col < 0) {
+      for (std::size_t i = 0; i < f.size(); ++i) if (f[i] == "value") col = static_cast<int>(i);
+      if (col < 0 || f.front() != "parameter")
+        throw std::runtime_error(path + " has no header 'parameter,...,value': give the parameters.csv of a `dem model` run");
+      continue;
+    }
+    if (static_cast<int>(f.size()) > col) v[f.front()] = std::strtod(f[col].c_str(), nullptr);
+  }
+  auto get = [&](const std::string& n) {
+    const auto it = v.find(n);
+    if (it == v.end() || !std::isfinite(it->second))
+      throw std::runtime_error(path + " has no value for " + n + ": give the parameters.csv of a `dem model` run");
+    return it->second;
+  };
+  Parameters P;
+  double isov[kNumIso];
+  for (int i = 0; i < kNumIso; ++i) isov[i] = get(iso_name(i));
+  P.set_iso(isov);
+  for (int i = 0; i < kNumShear; ++i) P.shear[i] = get(shear_name(i));
+  P.nu_ref = get("nu_ref");
+  P.extended = v.count(ext_name(0)) > 0;
+  if (P.extended)
+    for (int i = 0; i < kNumExt; ++i) P.ext[i] = get(ext_name(i));
+  return P;
+}
+
+Parameters recentred(const Parameters& P, double nu_ref) {
+  Parameters Q = P;
+  const double d = nu_ref - P.nu_ref;
+  for (int i = 0; i + 1 < kNumShear; i += 2) Q.shear[i] = P.shear[i] + P.shear[i + 1] * d;
+  for (int i : {kNFA, kKappaA, kDilA}) Q.ext[i] = P.ext[i] + P.ext[i + 1] * d;
+  Q.nu_ref = nu_ref;
+  return Q;
+}
+
 double lode_b_of(const std::string& mode) {
   if (mode == "D3" || mode.find("triaxial") != std::string::npos) return 0.0;
+  // The laboratory tests of data/geotech (demkit/geotech_model.py names them TEST_PREP): triaxial
+  // compression (constant sigma_3 or p) b = 0, extension b = 1, true triaxial TT_bNNN b = NNN/100.
+  if (mode.rfind("TC_", 0) == 0) return 0.0;
+  if (mode.rfind("TE_", 0) == 0) return 1.0;
+  if (mode.rfind("TT_b", 0) == 0 && mode.size() >= 7 && std::isdigit(static_cast<unsigned char>(mode[4])) &&
+      std::isdigit(static_cast<unsigned char>(mode[5])) && std::isdigit(static_cast<unsigned char>(mode[6])))
+    return std::stoi(mode.substr(4, 3)) / 100.0;
   return kLodeBD2;
 }
 
@@ -467,6 +547,10 @@ void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const 
     pre.SetParameterUpperBound(isopre.data(), kNuC, numin * (1 - 1e-6));
     pre.SetParameterUpperBound(isopre.data(), kNuCC, numin * (1 - 1e-6));
     pre.SetParameterLowerBound(isopre.data(), kAlpha, 0.05);
+    if (!o.hold_iso.empty()) {
+      const std::set<int> held(o.hold_iso.begin(), o.hold_iso.end());
+      pre.SetManifold(isopre.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
+    }
     ceres::Solver::Options so;
     so.linear_solver_type = ceres::DENSE_QR;
     so.max_num_iterations = 500;
@@ -478,7 +562,8 @@ void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const 
       const double dc = coordination(isopre.data(), iso.nu[i]) - iso.C[i];
       rp += dp * dp; rc += dc * dc;
     }
-    const double dof = std::max<double>(1.0, iso.nu.size() - kNumIso / 2.0);
+    const double free_iso = kNumIso - static_cast<double>(std::set<int>(o.hold_iso.begin(), o.hold_iso.end()).size());
+    const double dof = std::max<double>(1.0, iso.nu.size() - free_iso / 2.0);
     const double sp = std::max(std::sqrt(rp / dof), 1e-12), sc = std::max(std::sqrt(rc / dof), 1e-12);
     isob = isopre;
     for (std::size_t i = 0; i < iso.nu.size(); ++i)
@@ -597,16 +682,29 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
 Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
                       const std::vector<PathData>& paths) {
   init_glog();
-  if (curves_in.empty()) throw std::invalid_argument("model calibration: no curves to fit (need D2 ensemble curves)");
-  if (o.fit_isotropic && iso.nu.size() < 8)
+  if (curves_in.empty() && (paths.empty() || !o.start))
+    throw std::invalid_argument("model calibration: no curves to fit (need D2 ensemble curves, or path ensembles "
+                                "with start values: --start PARAMETERS.csv)");
+  for (int i : o.hold_iso)
+    if (i < 0 || i >= kNumIso) throw std::invalid_argument("model calibration: hold_iso index out of range");
+  if (!o.hold_iso.empty() && !o.start)
+    throw std::invalid_argument("model calibration: isotropic parameters can only be held at given start values "
+                                "(--hold-isotropic needs --start PARAMETERS.csv)");
+  std::set<int> held(o.hold_iso.begin(), o.hold_iso.end());
+  const std::size_t need_iso = held.empty() ? 8 : kNumIso - held.size() + 2;
+  if (o.fit_isotropic && iso.nu.size() < need_iso)
     throw std::invalid_argument("model calibration: only " + std::to_string(iso.nu.size()) +
-                                " isotropic-branch points (need >= 8 jammed points of cycle_unloading.csv with p* > 0)");
+                                " isotropic-branch points (need >= " + std::to_string(need_iso) +
+                                " jammed points of cycle_unloading.csv with p* > 0" +
+                                (held.empty() ? ", or hold some isotropic parameters" : "") + ")");
   std::vector<CurveData> curves;
   double nu_mean = 0;
   for (const auto& c : curves_in) { curves.push_back(truncated(c, o.eps_max)); check_curve(curves.back()); nu_mean += c.nu; }
-  nu_mean /= curves.size();
+  if (curves.empty())
+    for (const auto& d : paths) nu_mean += d.nu;
+  nu_mean /= curves.empty() ? paths.size() : curves.size();
   const double nu_ref = o.nu_ref > 0 ? o.nu_ref : nu_mean;
-  Parameters start = o.start ? *o.start : start_values(curves, iso, nu_ref);
+  Parameters start = o.start ? recentred(*o.start, nu_ref) : start_values(curves, iso, nu_ref);
   const bool X = o.extended;
   if (X && !o.start) {
     // The frictional family starts from the group model's calibration (its nested case) with a
@@ -641,8 +739,16 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   int n_res = 0;
   add_curve_residuals(problem, curves, o, nu_ref, X, blocks_all, n_res);
   add_path_residuals(problem, paths, o, nu_ref, X, blocks_all, n_res, numin);
+  // Start values inside the jamming fractions' bounds (a start from another calibration may lie
+  // above this data's lowest volume fraction; Ceres refuses an infeasible start): moved to 0.005
+  // below it, not onto it, where the coordination law's cusp (nu/nu_cC - 1)^alpha would sit on the
+  // start state itself (an unbounded B there; a held nu_cC would stay on it).
+  for (int i : {kNuC, kNuCC})
+    if (isob[i] > numin * (1 - 1e-6)) isob[i] = numin - 0.005;
   add_isotropic_residuals(problem, iso, o, isob, numin, n_res);
   set_bounds(problem, isob, shear, ext, numin, X);
+  if (o.fit_isotropic && !held.empty())
+    problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 
   // One start volume fraction: (nu - nu_ref) is zero on every curve, so the nu-slopes (*_b) are not
   // determined by the data: held at 0, quoted without errors, and said.
@@ -681,13 +787,14 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   cal.params.fabric = X ? o.fabric : FabricLode::Norm;
   cal.chi2 = 2 * sum.final_cost;
   cal.n_residuals = n_res;
-  cal.n_free = (o.fit_isotropic ? kNumIso : 0) + kNumShear + (X ? kNumExt - (one_nu ? 3 : 0) : 0);
+  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear + (X ? kNumExt - (one_nu ? 3 : 0) : 0);
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(isob[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(shear[i]); }
   if (X)
     for (int i = 0; i < kNumExt; ++i) { cal.names.push_back(ext_name(i)); cal.value.push_back(ext[i]); }
 
   covariance_errors(problem, isob, shear, ext, o, X, cal);
+  for (int i : held) cal.se_cov[i] = kNaN;   // held at the start value: no error of its own
   calibration_warnings(curves, paths, iso, o, isob, numin, one_nu, X, cal);
   return cal;
 }
@@ -740,10 +847,21 @@ std::vector<PredictionError> prediction_errors(const ModelCurve& m, const CurveD
   return out;
 }
 
+void check_start_scale(const std::vector<double>& iso, double nu0, const std::string& source) {
+  const double p_iso = isotropic_pressure(iso.data(), nu0);
+  if (!(p_iso > 0))
+    throw std::invalid_argument("model prediction: " + source + " starts at nu = " + std::to_string(nu0) +
+                                ", at or below the isotropic law's jamming fraction nu_c = " + std::to_string(iso[kNuC]) +
+                                ": p_iso(nu0) <= 0, so the start scale k = p0/p_iso(nu0) and the bulk modulus are not "
+                                "positive and the path cannot be integrated; calibrate on an isotropic branch that "
+                                "reaches below this nu (docs/model.md)");
+}
+
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step) {
   if (d.acc.empty() || std::fabs(d.acc.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + d.source + " does not start at eps_d_accumulated = 0");
   const std::vector<double> iso = params.iso();
+  check_start_scale(iso, d.nu, d.source);
   const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric};
   const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
                                          d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);

@@ -21,6 +21,9 @@ struct ModelCommandOptions {
   bool force = false;                     ///< overwrite an existing output folder
   std::string family = "group";           ///< group, extended or auto (docs/model.md, "The frictional extension")
   std::string surface = "ld";             ///< Lode surface of the extended family: ld, mn, none
+  int max_iterations = 300;               ///< Ceres iterations of each fit
+  std::string start;                      ///< parameters.csv of another `dem model` run: start values (paths-only calibration)
+  std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs start)
   std::string fabric_lode = "overlap";  ///< Lode rule of the extended family's fabric: overlap (default), principal, norm, opening, extension
 };
 

@@ -51,10 +51,26 @@ struct CalibrationOptions {
   /// The fabric limit's Lode rule of the frictional family (FabricLode; `Norm` before issue 31's
   /// second round, `Principal` since: the largest principal deviatoric fabric saturates).
   FabricLode fabric = FabricLode::Principal;
+  /// Isotropic parameters (IsoIndex) held at their start values while the rest of the block is
+  /// fitted: a laboratory's isotropic branch of a few pressure levels cannot fix all seven (issue 31,
+  /// "Calibrated on drained triaxial tests"). Needs `start`.
+  std::vector<int> hold_iso;
 };
 
+/// Parameters from a `parameters.csv` of `dem model` (the names of its first column, the value
+/// column, nu_ref; the extension block when its names are there, then `extended`). Throws
+/// std::runtime_error naming the file and the missing parameter.
+Parameters read_parameters(const std::string& path);
+
+/// The same laws re-centred on another nu_ref: a' = a + b (nu_ref_new - nu_ref_old), b unchanged.
+Parameters recentred(const Parameters& P, double nu_ref);
+
+/// Index of an isotropic parameter name (p0, nu_c, gamma_p, C0, C1, nu_cC, alpha), -1 if none.
+int iso_index(const std::string& name);
+
 /// Intermediate-stress ratio b the model assumes for a mode or path name: 0 for D3 and
-/// triaxial paths (axisymmetric compression), kLodeBD2 otherwise (D2 and paths made of D2).
+/// triaxial paths (axisymmetric compression), and for the laboratory tests of data/geotech
+/// (demkit/geotech_model.py: TC_* 0, TE_* 1, TT_bNNN NNN/100), kLodeBD2 otherwise (D2 and paths made of D2).
 double lode_b_of(const std::string& mode);
 const char* surface_name(Surface s);
 const char* fabric_lode_name(FabricLode f);   ///< "norm", "principal", "opening", "overlap" (the --fabric-lode words)
@@ -101,7 +117,9 @@ struct PathData {
 /// Reads a path ensemble CSV; throws std::runtime_error naming the file and a missing column.
 PathData read_path(const std::string& path, const std::string& name, double nu);
 
-/// The joint fit. Throws std::invalid_argument for unusable input (no curves, too few points,
+/// The joint fit. Without curves the path ensembles alone are fitted (with the isotropic branch),
+/// which needs `o.start` (a monotone mode gives the start values otherwise).
+/// Throws std::invalid_argument for unusable input (no curves and no start, too few points,
 /// curves that do not start at eps_d = 0, non-positive pressure) with a message naming the fix.
 /// `paths`: path ensembles fitted as well (residuals of p* on constant-volume rows, eps_v on
 /// isobaric rows, s and F signed on every row; sigma as for the curves).
@@ -131,6 +149,10 @@ struct PathPrediction {
   std::vector<double> acc, p, s, F, nu, ev;   ///< as PathData; ev = eps_vol/3 (the curves' eps_v) [-]
 };
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4);
+
+/// Throws std::invalid_argument (naming `source`) when nu0 lies at or below the isotropic law's
+/// jamming fraction, where p_iso(nu0) <= 0 makes the start scale k = p0/p_iso(nu0) non-positive.
+void check_start_scale(const std::vector<double>& iso, double nu0, const std::string& source);
 
 /// Errors of a path prediction: s_dev and F_dev (signed), p_star where the volume was
 /// prescribed, eps_v where p was held (the model's dilatancy); rows after the first.

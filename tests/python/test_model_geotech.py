@@ -1,0 +1,144 @@
+"""The laboratory tests of data/geotech as path ensembles for `dem model` (demkit.geotech_model),
+on hand-built curves; and the refusals of the paths-only calibration options (--start,
+--hold-isotropic, --max-iterations). docs/model.md, "Calibrated on drained triaxial tests"."""
+import csv
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import DEM, ROOT
+
+COLS = ["eps_xx", "eps_yy", "eps_zz", "eps_v", "eps_d", "nu", "p_Pa", "p_star", "sigma_xx_Pa", "sigma_yy_Pa",
+        "sigma_zz_Pa", "s_dev", "F_dev", "C", "target_xx_Pa", "target_yy_Pa", "target_zz_Pa", "target_p_Pa", "stage"]
+
+
+def write_curve(path, test, nu0, p0, scale):
+    """A monotone axisymmetric test: TC (z compressed) or TE (z extended) at constant side stress."""
+    sign = -1.0 if test.startswith("TC") else 1.0
+    n = 21
+    ezz = sign * np.linspace(0.0, 0.2, n)
+    exx = -0.45 * ezz
+    epsd = np.abs(exx - ezz)
+    s = scale * 0.8 * (1 - np.exp(-20 * epsd)) + 0.02
+    F = scale * 0.3 * (1 - np.exp(-10 * epsd)) + 0.02
+    # side stress held at p0: sigma_a = p0 + q, q = s p, p = p0 (1 + s/3) for TC; extension: sigma_a below
+    p = p0 / (1 - (-sign) * s / 3)
+    q = (-sign) * s * p
+    sxx = np.full(n, p0)
+    szz = sxx + q
+    rows = []
+    for i in range(n):
+        ev = (2 * exx[i] + ezz[i]) / 3
+        rows.append([exx[i], exx[i], ezz[i], ev, epsd[i], nu0 * np.exp(-3 * ev), p[i], p[i] * 1e-3 / p0, sxx[i], sxx[i],
+                     szz[i], s[i], F[i], 6.0, p0, p0, "nan", "nan", "s1"])
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w") as fh:
+        fh.write("# dem curve: hand-built\n" + ",".join(COLS) + "\n")
+        for r in rows:
+            fh.write(",".join(x if isinstance(x, str) else repr(float(x)) for x in r) + "\n")
+
+
+@pytest.fixture(scope="module")
+def tree(tmp_path_factory):
+    root = tmp_path_factory.mktemp("geo")
+    for level, nu0, p0 in (("iso_lo", 0.60, 5e7), ("iso_hi", 0.62, 5e8)):
+        for test in ("TC_s3", "TE_s3"):
+            for k, scale in (("m1", 0.9), ("m2", 1.1)):
+                write_curve(str(root / "curves" / "mu_0.5" / "loose" / level / test / f"{k}.csv"), test, nu0 + (0.001 if k == "m2" else 0), p0, scale)
+    out = root / "model"
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", str(root / "curves"), "--mu", "0.5",
+                        "--out", str(out), "--tests", "TC_s3,TE_s3"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    return root, out / "ensemble_loose"
+
+
+def read(path):
+    with open(path) as fh:
+        return list(csv.DictReader(line for line in fh if not line.startswith("#")))
+
+
+def test_ensembles_are_the_means_with_signs_and_controls(tree):
+    _, ens = tree
+    names = sorted(os.listdir(ens / "paths"))
+    assert names == ["TC_s3_loose_phi0.601.csv", "TC_s3_loose_phi0.621.csv", "TE_s3_loose_phi0.601.csv",
+                     "TE_s3_loose_phi0.621.csv"], names
+    tc = read(ens / "paths" / "TC_s3_loose_phi0.601.csv")
+    te = read(ens / "paths" / "TE_s3_loose_phi0.601.csv")
+    last = tc[-1]
+    eps = float(last["eps_d_accumulated"])
+    assert eps == pytest.approx(0.29, abs=1e-9)   # |e_xx - e_zz| = 1.45 x 0.2
+    s_mean = 0.8 * (1 - np.exp(-20 * eps)) + 0.02   # the mean of scales 0.9 and 1.1 is 1
+    assert float(last["s_dev_signed_mean"]) == pytest.approx(s_mean, rel=1e-6)
+    assert float(last["F_dev_signed_mean"]) == pytest.approx(0.3 * (1 - np.exp(-10 * eps)) + 0.02, rel=1e-6)
+    assert all(r["triaxial"] == "1" and r["isobaric"] == "0" for r in tc)
+    assert all(r["direction"] == "1" for r in tc)
+    # extension: the deviators and the strain against D2's first loading direction
+    assert all(r["direction"] == "-1" for r in te[1:])
+    assert float(te[-1]["s_dev_signed_mean"]) == pytest.approx(-s_mean, rel=1e-6)
+    assert float(te[-1]["F_dev_signed_mean"]) < -0.2
+    assert float(te[-1]["eps_d_signed_mean"] if "eps_d_signed_mean" in te[-1] else te[-1]["eps_d_signed"]) < 0
+    assert float(tc[0]["nu_mean"]) == pytest.approx(0.6005, abs=1e-9)
+    # members on the grid, and the isotropic states at both levels
+    m1 = read(ens / "members" / "m1" / "paths" / "TC_s3_loose_phi0.601.csv")
+    assert len(m1) == len(tc)
+    iso = read(ens / "members" / "m2" / "prep" / "cycle_unloading.csv")
+    assert [float(r["nu"]) for r in iso] == pytest.approx([0.601, 0.621])
+    assert [float(r["p_star"]) for r in iso] == pytest.approx([1e-3 / (1 - 0.02 / 3)] * 2)   # row 0: s = 0.02
+
+
+def test_converter_refuses_what_the_model_cannot_integrate(tree, tmp_path):
+    root, _ = tree
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", str(root / "curves"), "--out",
+                        str(tmp_path / "o"), "--tests", "SS_cns"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 2 and "SS_cns" in r.stderr and "rotates" in r.stderr, r.stderr
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", str(root / "curves"), "--out",
+                        str(root / "model"), "--tests", "TC_s3"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode != 0 and "--force" in r.stderr, r.stderr
+
+
+def test_paths_only_calibration_options_are_refused_with_the_fix(tree, tmp_path):
+    _, ens = tree
+    start = os.path.join(ROOT, "data", "friction_n1000", "model_friction", "mu_0.5", "parameters.csv")
+    base = [DEM, "model", str(ens), "--no-plots", "--no-jackknife", "--family", "extended", "--calibrate-on", "TC_s3_loose"]
+    r = subprocess.run(base + ["--out", str(tmp_path / "a")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "monotone mode" in r.stderr and "--start" in r.stderr, r.stderr
+    r = subprocess.run(base + ["--out", str(tmp_path / "b"), "--start", str(tmp_path / "none.csv")], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 2 and "--start" in r.stderr and "parameters.csv" in r.stderr, r.stderr
+    r = subprocess.run(base + ["--out", str(tmp_path / "c"), "--start", start, "--hold-isotropic", "gamma_p,kappa"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "--hold-isotropic kappa" in r.stderr and "nu_cC" in r.stderr, r.stderr
+    r = subprocess.run(base + ["--out", str(tmp_path / "d"), "--hold-isotropic", "gamma_p"], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 2 and "--start" in r.stderr, r.stderr
+    r = subprocess.run(base + ["--out", str(tmp_path / "e"), "--start", start, "--max-iterations", "0"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "--max-iterations" in r.stderr, r.stderr
+    bad = tmp_path / "bad.csv"
+    bad.write_text("parameter,law,value\np0,law,0.04\n")
+    r = subprocess.run(base + ["--out", str(tmp_path / "f"), "--start", str(bad)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "nu_c" in r.stderr, r.stderr
+
+
+def test_collect_puts_blind_and_lab_side_by_side(tmp_path):
+    head = "mode,nu [-],role,p_star [band],eps_v [band],s_dev [band],F_dev [band],worst [band]\n"
+    for kind, v in (("blind", "5.5"), ("lab", "0.5")):
+        for prep in ("dense", "loose"):
+            d = tmp_path / f"{kind}_{prep}"
+            d.mkdir()
+            (d / "summary.csv").write_text(head + f"TC_s3_{prep},0.66,{'predicted' if kind == 'blind' else 'fitted'},"
+                                           f"1,{v},2,3,{v}\ncalibration,nan,chi2/dof 7.5,nan,nan,nan,nan,{v}\n")
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--collect", str(tmp_path)], capture_output=True,
+                       text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    rows = read(tmp_path / "comparison.csv")
+    assert [(x["prep"], x["mode"], x["blind eps_v [band]"], x["lab eps_v [band]"], x["lab role"]) for x in rows] == [
+        ("dense", "TC_s3_dense", "5.5", "0.5", "fitted"), ("loose", "TC_s3_loose", "5.5", "0.5", "fitted")]
+    assert "chi2/dof blind / lab: dense 7.5 / 7.5" in (tmp_path / "comparison.md").read_text()
+    (tmp_path / "lab_loose" / "summary.csv").unlink()
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--collect", str(tmp_path)], capture_output=True,
+                       text=True, cwd=ROOT)
+    assert r.returncode != 0 and "lab_loose" in r.stderr, r.stderr
