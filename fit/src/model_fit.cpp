@@ -677,11 +677,10 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
   }
 }
 
-}  // namespace
-
-Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
-                      const std::vector<PathData>& paths) {
-  init_glog();
+/// The calibration's inputs checked (curves or paths with start values, held isotropic indices,
+/// enough isotropic points); returns the held isotropic parameters.
+std::set<int> checked_inputs(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
+                             const std::vector<PathData>& paths) {
   if (curves_in.empty() && (paths.empty() || !o.start))
     throw std::invalid_argument("model calibration: no curves to fit (need D2 ensemble curves, or path ensembles "
                                 "with start values: --start PARAMETERS.csv)");
@@ -697,6 +696,26 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
                                 " isotropic-branch points (need >= " + std::to_string(need_iso) +
                                 " jammed points of cycle_unloading.csv with p* > 0" +
                                 (held.empty() ? ", or hold some isotropic parameters" : "") + ")");
+  return held;
+}
+
+/// The extended family's start inside the bounds set_bounds sets (Ceres refuses an infeasible start).
+void clamp_extended_start(std::vector<double>& shear, std::vector<double>& ext) {
+  for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
+    shear[i] = std::min(std::max(shear[i], std::log(1e-3)), std::log(300.0));
+    shear[i + 1] = std::min(std::max(shear[i + 1], -40.0), 40.0);
+  }
+  ext[kNFA] = std::min(std::max(ext[kNFA], -1.0), 30.0);
+  ext[kKappaA] = std::min(std::max(ext[kKappaA], -0.9), 30.0);
+  ext[kChiD] = std::min(std::max(ext[kChiD], -1.0), 3.0);
+}
+
+}  // namespace
+
+Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
+                      const std::vector<PathData>& paths) {
+  init_glog();
+  const std::set<int> held = checked_inputs(curves_in, iso, o, paths);
   std::vector<CurveData> curves;
   double nu_mean = 0;
   for (const auto& c : curves_in) { curves.push_back(truncated(c, o.eps_max)); check_curve(curves.back()); nu_mean += c.nu; }
@@ -719,15 +738,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   std::vector<double> isob = start.iso();
   std::vector<double> shear(start.shear, start.shear + kNumShear);
   std::vector<double> ext(start.ext, start.ext + kNumExt);
-  if (X) {   // the start inside the bounds set below (Ceres refuses an infeasible start)
-    for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
-      shear[i] = std::min(std::max(shear[i], std::log(1e-3)), std::log(300.0));
-      shear[i + 1] = std::min(std::max(shear[i + 1], -40.0), 40.0);
-    }
-    ext[kNFA] = std::min(std::max(ext[kNFA], -1.0), 30.0);
-    ext[kKappaA] = std::min(std::max(ext[kKappaA], -0.9), 30.0);
-    ext[kChiD] = std::min(std::max(ext[kChiD], -1.0), 3.0);
-  }
+  if (X) clamp_extended_start(shear, ext);
   std::vector<double*> blocks_all = {isob.data(), shear.data()};
   if (X) blocks_all.push_back(ext.data());
   double numin = 1e9;
