@@ -87,14 +87,19 @@ MODES = {"D2": (1.0, 0.0, -1.0), "D3": (0.5, 0.5, -1.0), "iso_compress": (-1.0, 
 SHEARS = {"SS_xy": (0, 1), "SS_xz": (0, 2), "SS_yz": (1, 2)}
 
 
+def _dem_binary():
+    import os
+    root = os.path.dirname(os.path.dirname(os.path.abspath(sys.argv[0])))
+    return os.environ.get("DEM_BIN", os.path.join(root, "build", "dem"))
+
+
 def _column_table():
     """The curve columns as ours defines them, once (sim/src/measure/measure.cpp, column_table):
     `dem info --columns --json` of the build beside this script (or $DEM_BIN)."""
     import json
     import os
     import subprocess
-    root = os.path.dirname(os.path.dirname(os.path.abspath(sys.argv[0])))
-    dem = os.environ.get("DEM_BIN", os.path.join(root, "build", "dem"))
+    dem = _dem_binary()
     try:
         out = subprocess.run([dem, "info", "--columns", "--json"], capture_output=True, text=True, check=True).stdout
     except (OSError, subprocess.CalledProcessError) as e:
@@ -142,8 +147,43 @@ def log_strain(F):
     return v @ np.diag(0.5 * np.log(w)) @ v.T
 
 
+def scene_options(argv):
+    """--scene SCENE [--set KEY=VALUE ...]: the scene as this script's options, `dem info SCENE
+    --yade` (the YADE law from each contact sub-model's counterpart in ours' registry, then density,
+    t_c radius, dt, rate, sampling, background damping), put before the other options so that an
+    option given on the command line wins. Returns (argv without --scene/--set, the scene's)."""
+    import shlex
+    import subprocess
+    rest, scene, sets, i = [], None, [], 0
+    while i < len(argv):
+        if argv[i] in ("--scene", "--set") and i + 1 < len(argv):
+            if argv[i] == "--scene":
+                scene = argv[i + 1]
+            else:
+                sets += ["--set", argv[i + 1]]
+            i += 2
+            continue
+        rest.append(argv[i])
+        i += 1
+    if scene is None:
+        if sets:
+            sys.exit("run_mode.py: --set needs --scene SCENE (it overrides a key of that scene)")
+        return rest, []
+    p = subprocess.run([_dem_binary(), "info", scene, "--yade"] + sets, capture_output=True, text=True)
+    if p.returncode:
+        sys.exit(f"run_mode.py: --scene {scene}: {p.stderr.strip() or p.stdout.strip()}")
+    if p.stderr.strip():
+        sys.stderr.write(p.stderr)
+    return rest, shlex.split(p.stdout)
+
+
 def parse():
+    argv, from_scene = scene_options(sys.argv[1:])
     ap = argparse.ArgumentParser(prog="run_mode.py")
+    ap.add_argument("--scene", help="ours' scene TOML: its contact law, density, t_c radius, dt, rate, sampling and "
+                                    "background damping as the options below (`dem info SCENE --yade`); options "
+                                    "given here win")
+    ap.add_argument("--set", action="append", help="with --scene: override a scene key, KEY=VALUE (as ours)")
     ap.add_argument("--packing", required=True)
     ap.add_argument("--mode", default="D2", choices=sorted(MODES) + sorted(SHEARS))
     ap.add_argument("--rate-tc", type=float, default=5e-6, help="rate times t_c of the smallest pair")
@@ -178,7 +218,7 @@ def parse():
                     help="viscel: ViscElMat + Law2_ScGeom_ViscElPhys_Basic (normal dashpot; its shift velocity has the wrong "
                          "sign: wrong for friction across the boundary of a deforming cell); frictphys: FrictMat per body + "
                          "Law2_ScGeom_FrictPhys_CundallStrack (no dashpot: needs --gamma 0)")
-    return ap.parse_args(sys.argv[1:])
+    return ap.parse_args(from_scene + argv)
 
 
 def read_packing(path):

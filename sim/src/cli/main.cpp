@@ -337,10 +337,23 @@ void print_columns(bool json) {
   std::printf("| `stage` | text | every | the stage or path-stage name |\n");
 }
 
+// The scene as yade_ref/run_mode.py options: the contact law from the registry, then the scene's
+// scales. YADE's NewtonIntegrator is ours' symplectic_euler: another integrator is said on stderr.
+std::string yade_run_mode_line(const dem::Model& model) {
+  using dem::contact::exact_num;
+  if (model.integrator != dem::Integrator::SymplecticEuler)
+    std::fprintf(stderr, "dem info --yade: note: YADE integrates with NewtonIntegrator's leapfrog, ours' "
+                         "integration.integrator = \"symplectic_euler\"; this scene uses another integrator\n");
+  return dem::contact::yade_run_mode_options(model.contact) + " --density " + exact_num(model.density) +
+         " --r-min " + exact_num(model.radius_min) + " --dt-over-tc " + exact_num(model.dt_over_tc) +
+         " --rate-tc " + exact_num(model.protocol.deviatoric_rate * model.t_contact) + " --sample-strain " +
+         exact_num(model.output.sample_strain) + " --gamma-b " + exact_num(model.background_damping);
+}
+
 struct InfoCommand {
   CLI::App* cmd = nullptr;
   std::string scene;
-  bool json = false, no_probe = false, contact_models = false, columns = false, lammps = false;
+  bool json = false, no_probe = false, contact_models = false, columns = false, lammps = false, yade = false;
   void add(CLI::App& app, std::vector<std::string>& overrides) {
     cmd = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates, each contact sub-model's "
                                      "values and stability limits); --contact-models: every contact sub-model");
@@ -356,6 +369,9 @@ struct InfoCommand {
     cmd->add_flag("--no-probe", no_probe, "no wall-time estimate (it times about a second of steps on a dense packing)");
     cmd->add_flag("--lammps", lammps, "print the scene's contact law as a LAMMPS `pair granular` pair_coeff line, "
                                       "made from each sub-model's counterpart in the registry (bench/decks.py reads it)");
+    cmd->add_flag("--yade", yade, "print the scene as options of yade_ref/run_mode.py (its YADE law from each "
+                                  "sub-model's counterpart in the registry; density, t_c radius, dt, rate, sampling, "
+                                  "background damping); run_mode.py --scene reads it");
   }
   int run(const std::vector<std::string>& overrides) const {
     if (contact_models) {
@@ -371,6 +387,10 @@ struct InfoCommand {
     const dem::Model model = dem::load_scene_file(scene, overrides);
     if (lammps) {
       std::printf("%s\n", dem::contact::lammps_pair_coeff(model.contact).c_str());
+      return 0;
+    }
+    if (yade) {
+      std::printf("%s\n", yade_run_mode_line(model).c_str());
       return 0;
     }
     if (json) std::printf("%s", dem::plan_json(model).c_str());

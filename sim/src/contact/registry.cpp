@@ -1,6 +1,7 @@
 #include "dem/contact/registry.hpp"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <limits>
 #include <set>
@@ -19,8 +20,8 @@ std::string g_num(double v) {
 
 std::string exact_num(double v) {
   char b[40];
-  std::snprintf(b, sizeof b, "%.17g", v);
-  return b;
+  const std::to_chars_result r = std::to_chars(b, b + sizeof b, v);   // the shortest text that reads back as v
+  return std::string(b, r.ptr);
 }
 
 namespace {
@@ -33,6 +34,7 @@ SubModelInfo off_info(Slot slot, const std::string& what) {
   d.title = "no " + what + " resistance";
   d.yade = d.lammps = "none";
   d.lammps_words = [](const ContactLaw&) { return std::string(); };   // LAMMPS: leave the keyword out
+  d.yade_words = [](const ContactLaw&) { return std::string(); };     // YADE: nothing to say
   d.describe = [](const ContactLaw&, const PairScale&) { return std::string("off"); };
   return d;
 }
@@ -402,6 +404,55 @@ std::string lammps_pair_coeff(const ContactLaw& law) {
     if (!words.empty()) line += " " + words;
   }
   if (chosen.front()->lammps_tail) line += " " + chosen.front()->lammps_tail(law);
+  return line;
+}
+
+namespace {
+
+std::string join_words(const std::vector<std::string>& v) {
+  std::string o;
+  for (const std::string& w : v) o += (o.empty() ? "" : ", ") + w;
+  return o;
+}
+
+// The run_mode.py --law every chosen sub-model accepts, the normal sub-model's preference first.
+std::string common_yade_law(const std::vector<const SubModelInfo*>& chosen, const ContactLaw& law) {
+  std::vector<std::string> laws = chosen.front()->yade_laws(law);
+  std::string why = "contact.normal = \"" + chosen.front()->name + "\" works with --law " + join_words(laws) + " (" +
+                    chosen.front()->yade + ")";
+  for (const SubModelInfo* m : chosen) {
+    if (!m->yade_laws || m == chosen.front()) continue;
+    const std::vector<std::string> ok = m->yade_laws(law);
+    if (ok.empty()) continue;
+    laws.erase(std::remove_if(laws.begin(), laws.end(),
+                              [&](const std::string& l) { return std::find(ok.begin(), ok.end(), l) == ok.end(); }),
+               laws.end());
+    why += ", contact." + slot_name(m->slot) + " = \"" + m->name + "\" with " + join_words(ok) + " (" + m->yade + ")";
+  }
+  if (laws.empty())
+    throw SceneError("no YADE law of yade_ref/run_mode.py takes this contact law: " + why +
+                     "; change the scene so that one law takes every sub-model (e.g. a dashpot FrictMat lacks set to 0)");
+  return laws.front();
+}
+
+}  // namespace
+
+std::string yade_run_mode_options(const ContactLaw& law) {
+  const std::vector<const SubModelInfo*> chosen = chosen_submodels(law);
+  for (const SubModelInfo* m : chosen)
+    if (!m->yade_words)
+      throw SceneError("contact." + slot_name(m->slot) + " = \"" + m->name +
+                       "\" has no counterpart in yade_ref/run_mode.py: " + m->yade);
+  std::string line = "--law " + common_yade_law(chosen, law);
+  for (const SubModelInfo* m : chosen) {
+    std::string words;
+    try {
+      words = m->yade_words(law);
+    } catch (const std::invalid_argument& e) {
+      throw SceneError(e.what());
+    }
+    if (!words.empty()) line += " " + words;
+  }
   return line;
 }
 

@@ -161,6 +161,11 @@ inline const SubModelInfo& HertzNormal::info() {
                "e, the normal restitution coefficient the damping gives at every impact speed, in (0, 1]"}};
     d.yade = "FrictMat (young = E, poisson = nu) + Ip2_FrictMat_FrictMat_MindlinPhys (en = e) + "
              "Law2_ScGeom_MindlinPhys_Mindlin (its damping: alpha from en after Antypov 2011, not this alpha)";
+    d.yade_laws = [](const ContactLaw&) { return std::vector<std::string>{"mindlin"}; };
+    d.yade_words = [](const ContactLaw& law) {
+      return "--young " + exact_num(law.get("youngs_modulus_Pa")) + " --poisson " + exact_num(law.get("poisson_ratio")) +
+             " --en " + exact_num(law.get("restitution"));
+    };
     d.lammps = "pair granular: hertz/material E e' nu, damping tsuji, with e' the value whose polynomial alpha(e') "
                "equals this law's alpha (LAMMPS' fit does not give e' back)";
     d.lammps_words = [](const ContactLaw& law) {

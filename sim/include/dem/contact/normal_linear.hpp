@@ -53,6 +53,14 @@ struct LinearSpring {
                  "gamma, the normal dashpot's constant viscosity (not mass-scaled), e.g. 1"}};
       d.yade = "ViscElMat + Law2_ScGeom_ViscElPhys_Basic (kn, cn); in a deforming cell FrictMat with young = k/r "
                "+ Law2_ScGeom_FrictPhys_CundallStrack (no dashpot)";
+      // run_mode.py: ViscElMat (kn, cn); without a dashpot also FrictMat (FrictPhys has none)
+      d.yade_laws = [](const ContactLaw& law) {
+        return law.get("damping_kg_s") > 0 ? std::vector<std::string>{"viscel"}
+                                           : std::vector<std::string>{"viscel", "frictphys"};
+      };
+      d.yade_words = [](const ContactLaw& law) {
+        return "--k " + exact_num(law.get("stiffness_N_m")) + " --gamma " + exact_num(law.get("damping_kg_s"));
+      };
       d.lammps = "pair granular: hooke k gamma, damping velocity";
       d.lammps_words = [](const ContactLaw& law) {
         return "hooke " + exact_num(law.get("stiffness_N_m")) + " " + exact_num(law.get("damping_kg_s"));

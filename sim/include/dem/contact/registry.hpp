@@ -85,5 +85,10 @@ std::string registry_text();
 /// the benchmark decks (`dem info SCENE --lammps`). Throws SceneError naming the sub-model that
 /// has no LAMMPS counterpart.
 std::string lammps_pair_coeff(const ContactLaw& law);
+/// This law as options of yade_ref/run_mode.py, `--law L ...`: L the first of the normal
+/// sub-model's `yade_laws` every other chosen sub-model accepts, then each one's `yade_words`
+/// (`dem info SCENE --yade`). Throws SceneError naming the sub-model with no YADE counterpart, or
+/// the sub-models whose YADE laws exclude each other.
+std::string yade_run_mode_options(const ContactLaw& law);
 
 }  // namespace dem::contact

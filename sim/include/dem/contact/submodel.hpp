@@ -51,7 +51,7 @@ using Slot = ContactSlot;
 
 /// printf-style %g of a number (for the description texts).
 std::string g_num(double v);
-/// A number with every digit it has (%.17g), for input decks of other codes.
+/// A number as the shortest text that reads back as the same double, for input decks of other codes.
 std::string exact_num(double v);
 
 struct SubModelInfo {
@@ -77,6 +77,12 @@ struct SubModelInfo {
   std::function<std::string(const ContactLaw&)> lammps_words;
   /// A normal sub-model's words after every other slot's (its damping model, limit_damping).
   std::function<std::string(const ContactLaw&)> lammps_tail;
+  /// Its YADE counterpart as options of yade_ref/run_mode.py (`dem info SCENE --yade`): the
+  /// `--law` values (run_mode.py's YADE law families) it works with for this law's values, in
+  /// order of preference (empty: any), and its options with this law's values ("" for none);
+  /// `yade_words` null: no counterpart (`yade` says why). `yade_run_mode_options` joins them.
+  std::function<std::vector<std::string>(const ContactLaw&)> yade_laws;
+  std::function<std::string(const ContactLaw&)> yade_words;
   /// Groups of curve columns it adds (the column table's groups, measure.hpp: "rotations").
   std::vector<std::string> column_groups;
   std::vector<std::string> vtk_fields;      ///< contact-network fields it adds

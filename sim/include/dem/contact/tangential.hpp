@@ -37,6 +37,7 @@ struct NoTangential {
       d.name = name;
       d.title = "frictionless: no tangential force, no rotations (3 degrees of freedom per particle)";
       d.yade = "FrictMat with frictionAngle = 0 and blockedDOFs = \"XYZ\", or ViscElMat with ks = cs = 0";
+      d.yade_words = [](const ContactLaw&) { return std::string(); };   // run_mode.py's default: --friction 0
       d.lammps = "tangential linear_nohistory 0 0";
       d.lammps_words = [](const ContactLaw&) { return std::string("tangential linear_nohistory 0 0"); };
       d.describe = [](const ContactLaw&, const PairScale&) { return std::string("frictionless, no rotations"); };
@@ -136,6 +137,16 @@ inline const SubModelInfo& CundallStrack::info() {
     d.history_text = "the spring xi (3 doubles [m], odd under i <-> j) and a slip flag";
     d.rotations = true;
     d.yade = "FrictMat (young = k/r, poisson = k_t/k, frictionAngle = atan(mu)) + Law2_ScGeom_FrictPhys_CundallStrack";
+    // run_mode.py: FrictMat + CundallStrack only (ViscEl's periodic shift velocity is wrong in a
+    // deforming cell, docs/yade.md); FrictPhys has no tangential dashpot
+    d.yade_laws = [](const ContactLaw&) { return std::vector<std::string>{"frictphys"}; };
+    d.yade_words = [](const ContactLaw& law) {
+      if (law.get("tangential_damping_kg_s") > 0)
+        throw std::invalid_argument("contact.tangential_damping_kg_s > 0 has no counterpart in yade_ref/run_mode.py: "
+                                    "FrictPhys has no tangential dashpot (set it to 0 for the YADE comparison)");
+      return "--friction " + exact_num(law.get("friction")) + " --kt-ratio " +
+             exact_num(law.get("tangential_stiffness_ratio")) + " --gamma-t 0";
+    };
     d.lammps = "tangential linear_history k_t x_gamma_t mu";
     // x_gamma_t is LAMMPS' tangential dashpot as a multiple of the normal one's (damping velocity)
     d.lammps_words = [](const ContactLaw& law) {

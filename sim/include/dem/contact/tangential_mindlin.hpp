@@ -114,6 +114,10 @@ inline const SubModelInfo& MindlinLaw<ForceKept>::info() {
     d.yade = ForceKept ? "FrictMat (young = E, poisson = nu, frictionAngle = atan(mu)) + Ip2_FrictMat_FrictMat_MindlinPhys "
                          "+ Law2_ScGeom_MindlinPhys_Mindlin (incremental shear force)"
                        : "none (YADE's Law2_ScGeom_MindlinPhys_Mindlin is incremental: use \"mindlin_force\")";
+    if (ForceKept) {
+      d.yade_laws = [](const ContactLaw&) { return std::vector<std::string>{"mindlin"}; };
+      d.yade_words = [](const ContactLaw& law) { return "--friction " + exact_num(law.get("friction")); };
+    }
     d.lammps = ForceKept ? "tangential mindlin/force NULL 0 mu (k_t from E and nu, no tangential damping)"
                          : "tangential mindlin NULL 0 mu (k_t from E and nu, no tangential damping)";
     d.lammps_words = [](const ContactLaw& law) {
