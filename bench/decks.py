@@ -110,10 +110,28 @@ def rayleigh_time(r_min, E, nu, density):
     return math.pi * r_min * math.sqrt(density / G) / (0.1631 * nu + 0.8766)
 
 
-def liggghts_deck(data, steps, rate, dt, k=1e8, gamma=1.0, gamma_b=0.1, skin=2e-4):
-    # gran model hooke/stiffness: kn, gamman given directly; absolute_damping on: gamman is
-    # the damping coefficient itself (not times the effective mass); limitForce on: no
-    # attraction (our default); tangential no_history with kt = gammat = 0.
+@functools.lru_cache(maxsize=None)
+def liggghts_lines(sets=(), dem=DEM, scene=SCENE):
+    """The LIGGGHTS lines of our contact law for the scene with `sets`, from each sub-model's
+    counterpart in the registry (`dem info SCENE --liggghts`): a `fix property/global` per
+    coefficient, `pair_style gran model hooke/stiffness tangential ... absolute_damping on limitForce
+    on` (absolute_damping: gamma is the dashpot itself, not times the effective mass; limitForce:
+    ours' no-tension clamp) and `pair_coeff * *`. Raises RuntimeError with dem's message when a
+    chosen sub-model has no LIGGGHTS counterpart declared (Hertz, Mindlin, rolling, Luding)."""
+    cmd = [dem, "info", scene, "--liggghts"]
+    for kv in sets:
+        cmd += ["--set", kv]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode:
+        raise RuntimeError(f"{' '.join(cmd)}: {r.stderr.strip()}")
+    return r.stdout.strip()
+
+
+def liggghts_deck(data, steps, rate, dt, sets=(), k=None, gamma=None, gamma_b=0.1, skin=2e-4):
+    # gran model hooke/stiffness etc. from the registry (liggghts_lines); k, gamma, if given,
+    # override the scene's contact.stiffness_N_m and contact.damping_kg_s, as lammps_deck.
+    sets = tuple(sets) + ((f"contact.stiffness_N_m={k!r}",) if k is not None else ()) + \
+        ((f"contact.damping_kg_s={gamma!r}",) if gamma is not None else ())
     return f"""atom_style granular
 atom_modify map array
 boundary p p p
@@ -124,13 +142,7 @@ read_data {data}
 neighbor {skin} bin
 neigh_modify delay 0
 hard_particles yes
-fix m1 all property/global kn peratomtypepair 1 {k}
-fix m2 all property/global kt peratomtypepair 1 0.0
-fix m3 all property/global gamman_abs peratomtypepair 1 {gamma}
-fix m4 all property/global gammat_abs peratomtypepair 1 0.0
-fix m5 all property/global coefficientFriction peratomtypepair 1 0.0
-pair_style gran model hooke/stiffness tangential no_history absolute_damping on limitForce on
-pair_coeff * *
+{liggghts_lines(sets)}
 """ + _motion(dt, rate, gamma_b, steps)
 
 

@@ -39,6 +39,7 @@ MODELS = {
     "hertz_mindlin": ["contact.normal=hertz", "contact.tangential=mindlin", "contact.friction=0.5"],
 }
 LAMMPS_MODELS = ["frictionless", "frictional", "friction+rolling+twisting", "hertz_mindlin"]
+LIGGGHTS_MODELS = ["frictionless", "frictional"]   # the laws with a LIGGGHTS counterpart in the registry
 
 
 def bench_cmd(dem, packing, model, steps):
@@ -117,6 +118,8 @@ def main():
     tc = decks.tc_smallest(spheres)
     data = os.path.join(work, "lmp.data")
     decks.write_lammps_data(data, cell, spheres, 2000.0, "sphere")
+    data_granular = os.path.join(work, "liggghts.data")
+    decks.write_lammps_data(data_granular, cell, spheres, 2000.0, "granular")
     rates = {}
 
     def record(key, rate):
@@ -130,9 +133,7 @@ def main():
                 t = task_clock_ms(bench_cmd(dem, args.packing, model, args.steps + 1)) - \
                     task_clock_ms(bench_cmd(dem, args.packing, model, 1))
                 record(f"{label} {model}", args.steps * n / t / 1e3)
-        if not run_benchmarks.shutil.which("lmp"):
-            continue
-        for model in [m for m in LAMMPS_MODELS if m in models]:
+        for model in [m for m in LAMMPS_MODELS if m in models and run_benchmarks.shutil.which("lmp")]:
             ms = []
             for steps in (args.lammps_steps + 1, 1):
                 deck = os.path.join(work, f"in.{model}.{steps}")
@@ -140,6 +141,15 @@ def main():
                     fh.write(lammps_deck(model, data, steps, tc, min(sp[3] for sp in spheres)))
                 ms.append(task_clock_ms(["lmp", "-in", deck, "-log", "none"], cwd=work))
             record(f"lammps {model}", args.lammps_steps * n / (ms[0] - ms[1]) / 1e3)
+        for model in [m for m in LIGGGHTS_MODELS if m in models and run_benchmarks.shutil.which("liggghts")]:
+            ms = []
+            for steps in (args.lammps_steps + 1, 1):
+                deck = os.path.join(work, f"in.liggghts.{model}.{steps}")
+                with open(deck, "w") as fh:
+                    fh.write(decks.liggghts_deck(data_granular, steps, run_benchmarks.RATE_TC / tc, 0.02 * tc,
+                                                 sets=tuple(MODELS[model])))
+                ms.append(task_clock_ms(["liggghts", "-in", deck, "-log", "none"], cwd=work))
+            record(f"liggghts {model}", args.lammps_steps * n / (ms[0] - ms[1]) / 1e3)
     print("medians (the rounds):")
     for key, v in rates.items():
         print(f"  {key}: {statistics.median(v):.2f} ({', '.join(f'{x:.2f}' for x in v)})")

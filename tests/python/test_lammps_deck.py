@@ -118,3 +118,59 @@ def test_bench_decks_use_the_registry_line(tmp_path):
     same(coeff.split()[3:], ["hooke", 2e8, GAMMA, "tangential", "linear_history", 2 / 7 * 2e8, 0.0, 0.5,
                              "damping", "velocity", "limit_damping"])
     assert "compute erot all erotate/sphere" in deck and "run 100" in deck
+
+
+# LIGGGHTS (`dem info SCENE --liggghts`): the gran model hooke/stiffness documentation's meaning of
+# each global property: kn, kt absolute [N/m]; gamman_abs, gammat_abs the dashpots themselves
+# [kg/s] (absolute_damping on); coefficientFriction mu; limitForce on = no attraction (ours' clamp).
+def liggghts(*sets):
+    args = ["info", SCENE, "--liggghts"]
+    for kv in sets:
+        args += ["--set", kv]
+    return run_dem(*args)
+
+
+def liggghts_properties(out):
+    props, style = {}, None
+    for ln in out.splitlines():
+        w = ln.split()
+        if w[:1] == ["fix"]:
+            assert w[2:4] == ["all", "property/global"] and w[5:7] == ["peratomtypepair", "1"], ln
+            props[w[4]] = float(w[7])
+        elif w[:1] == ["pair_style"]:
+            style = w[1:]
+    return props, style
+
+
+def test_liggghts_frictionless_is_the_hand_written_deck():
+    r = liggghts()
+    assert r.returncode == 0, r.stderr
+    props, style = liggghts_properties(r.stdout)
+    assert props == {"kn": K, "gamman_abs": GAMMA, "kt": 0.0, "gammat_abs": 0.0, "coefficientFriction": 0.0}
+    assert style == ["gran", "model", "hooke/stiffness", "tangential", "no_history", "absolute_damping", "on",
+                     "limitForce", "on"]
+    assert r.stdout.rstrip().endswith("pair_coeff * *")
+
+
+def test_liggghts_cundall_strack():
+    r = liggghts("contact.friction=0.4", "contact.tangential_stiffness_ratio=0.5", "contact.tangential_damping_kg_s=0.3",
+                 "contact.allow_attractive=true")
+    assert r.returncode == 0, r.stderr
+    props, style = liggghts_properties(r.stdout)
+    assert props["kt"] == pytest.approx(0.5 * K, rel=1e-15) and props["gammat_abs"] == 0.3
+    assert props["coefficientFriction"] == 0.4 and props["kn"] == K
+    assert style[2:5] == ["hooke/stiffness", "tangential", "history"] and "limitForce" not in style
+
+
+@pytest.mark.parametrize("sets,named", [(("contact.normal=hertz",), 'contact.normal = "hertz"'),
+                                        (("contact.normal=luding",), 'contact.normal = "luding"'),
+                                        (("contact.friction=0.5", "contact.rolling_friction=0.1"), 'contact.rolling = "sds"')])
+def test_liggghts_refuses_laws_without_counterpart(sets, named):
+    r = liggghts(*sets)
+    assert r.returncode != 0 and named in r.stderr and "LIGGGHTS" in r.stderr, r.stderr
+
+
+def test_liggghts_deck_uses_the_registry_lines():
+    deck = decks.liggghts_deck("packing.data", 100, 1.0, 1e-9, sets=("contact.friction=0.5",))
+    assert "pair_style gran model hooke/stiffness tangential history" in deck
+    assert "coefficientFriction peratomtypepair 1 0.5" in deck

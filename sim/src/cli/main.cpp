@@ -353,7 +353,7 @@ std::string yade_run_mode_line(const dem::Model& model) {
 struct InfoCommand {
   CLI::App* cmd = nullptr;
   std::string scene;
-  bool json = false, no_probe = false, contact_models = false, columns = false, lammps = false, yade = false;
+  bool json = false, no_probe = false, contact_models = false, columns = false, lammps = false, yade = false, liggghts = false;
   void add(CLI::App& app, std::vector<std::string>& overrides) {
     cmd = app.add_subcommand("info", "print derived quantities of a scene (t_c, dt, rates, each contact sub-model's "
                                      "values and stability limits); --contact-models: every contact sub-model");
@@ -369,6 +369,8 @@ struct InfoCommand {
     cmd->add_flag("--no-probe", no_probe, "no wall-time estimate (it times about a second of steps on a dense packing)");
     cmd->add_flag("--lammps", lammps, "print the scene's contact law as a LAMMPS `pair granular` pair_coeff line, "
                                       "made from each sub-model's counterpart in the registry (bench/decks.py reads it)");
+    cmd->add_flag("--liggghts", liggghts, "print the scene's contact law as LIGGGHTS lines (fix property/global, "
+                                          "pair_style gran, pair_coeff) from the registry (bench/decks.py reads them)");
     cmd->add_flag("--yade", yade, "print the scene as options of yade_ref/run_mode.py (its YADE law from each "
                                   "sub-model's counterpart in the registry; density, t_c radius, dt, rate, sampling, "
                                   "background damping); run_mode.py --scene reads it");
@@ -387,6 +389,10 @@ struct InfoCommand {
     const dem::Model model = dem::load_scene_file(scene, overrides);
     if (lammps) {
       std::printf("%s\n", dem::contact::lammps_pair_coeff(model.contact).c_str());
+      return 0;
+    }
+    if (liggghts) {
+      std::printf("%s\n", dem::contact::liggghts_pair_style(model.contact).c_str());
       return 0;
     }
     if (yade) {

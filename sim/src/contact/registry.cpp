@@ -35,6 +35,8 @@ SubModelInfo off_info(Slot slot, const std::string& what) {
   d.yade = d.lammps = "none";
   d.lammps_words = [](const ContactLaw&) { return std::string(); };   // LAMMPS: leave the keyword out
   d.yade_words = [](const ContactLaw&) { return std::string(); };     // YADE: nothing to say
+  d.liggghts = "none";
+  d.liggghts_words = [](const ContactLaw&) { return std::string(); };
   d.describe = [](const ContactLaw&, const PairScale&) { return std::string("off"); };
   return d;
 }
@@ -454,6 +456,26 @@ std::string yade_run_mode_options(const ContactLaw& law) {
     if (!words.empty()) line += " " + words;
   }
   return line;
+}
+
+std::string liggghts_pair_style(const ContactLaw& law) {
+  const std::vector<const SubModelInfo*> chosen = chosen_submodels(law);
+  std::string fixes, style = "pair_style gran";
+  int n = 0;
+  for (const SubModelInfo* m : chosen) {
+    if (!m->liggghts_words)
+      throw SceneError("contact." + slot_name(m->slot) + " = \"" + m->name + "\" has no LIGGGHTS pair gran counterpart here: " +
+                       m->liggghts);
+    if (const std::string words = m->liggghts_words(law); !words.empty()) style += " " + words;
+    if (m->liggghts_properties)
+      for (const std::string& p : m->liggghts_properties(law)) {
+        const std::size_t sp = p.find(' ');
+        fixes += "fix m" + std::to_string(++n) + " all property/global " + p.substr(0, sp) + " peratomtypepair 1" +
+                 p.substr(sp) + "\n";
+      }
+  }
+  if (chosen.front()->liggghts_tail) style += " " + chosen.front()->liggghts_tail(law);
+  return fixes + style + "\npair_coeff * *";
 }
 
 std::string contact_preamble(const ContactLaw& law, const PairScale& s) {

@@ -161,6 +161,8 @@ inline const SubModelInfo& HertzNormal::info() {
                "e, the normal restitution coefficient the damping gives at every impact speed, in (0, 1]"}};
     d.yade = "FrictMat (young = E, poisson = nu) + Ip2_FrictMat_FrictMat_MindlinPhys (en = e) + "
              "Law2_ScGeom_MindlinPhys_Mindlin (its damping: alpha from en after Antypov 2011, not this alpha)";
+    d.liggghts = "not declared: LIGGGHTS' model hertz damps with its own beta(e) (coefficientRestitution), not this "
+                 "law's Tsuji alpha, so only e = 1 would match";
     d.yade_laws = [](const ContactLaw&) { return std::vector<std::string>{"mindlin"}; };
     d.yade_words = [](const ContactLaw& law) {
       return "--young " + exact_num(law.get("youngs_modulus_Pa")) + " --poisson " + exact_num(law.get("poisson_ratio")) +

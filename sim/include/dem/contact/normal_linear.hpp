@@ -62,6 +62,15 @@ struct LinearSpring {
         return "--k " + exact_num(law.get("stiffness_N_m")) + " --gamma " + exact_num(law.get("damping_kg_s"));
       };
       d.lammps = "pair granular: hooke k gamma, damping velocity";
+      d.liggghts = "pair gran: model hooke/stiffness, kn, gamman_abs (absolute_damping on)";
+      d.liggghts_words = [](const ContactLaw&) { return std::string("model hooke/stiffness"); };
+      d.liggghts_tail = [](const ContactLaw& law) {   // limitForce: ours' no-tension clamp
+        return std::string("absolute_damping on") + (law.allow_attractive() ? "" : " limitForce on");
+      };
+      d.liggghts_properties = [](const ContactLaw& law) {
+        return std::vector<std::string>{"kn " + exact_num(law.get("stiffness_N_m")),
+                                        "gamman_abs " + exact_num(law.get("damping_kg_s"))};
+      };
       d.lammps_words = [](const ContactLaw& law) {
         return "hooke " + exact_num(law.get("stiffness_N_m")) + " " + exact_num(law.get("damping_kg_s"));
       };

@@ -121,6 +121,7 @@ struct LudingNormal {
       d.yade = "LudingMat + Law2_ScGeom_LudingPhys_Basic (its periodic shift velocity is wrong in a deforming cell: "
                "compare pair by pair)";
       d.lammps = "none (pair granular has no elasto-plastic adhesive normal law; the closest is jkr or dmt)";
+      d.liggghts = "none (pair gran's cohesion models are not Luding's elasto-plastic law)";
       d.vtk_fields = {"delta_max_m"};
       d.describe = [](const ContactLaw& law, const PairScale&) {
         const double k1 = law.get("stiffness_N_m"), kp = law.get("luding_kp_N_m"), kc = law.get("luding_kc_N_m");

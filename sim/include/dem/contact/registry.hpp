@@ -85,6 +85,11 @@ std::string registry_text();
 /// the benchmark decks (`dem info SCENE --lammps`). Throws SceneError naming the sub-model that
 /// has no LAMMPS counterpart.
 std::string lammps_pair_coeff(const ContactLaw& law);
+/// The LIGGGHTS lines of this law: a `fix mN all property/global NAME peratomtypepair 1 VALUE` per
+/// property the chosen sub-models read, then `pair_style gran ...` (each one's `liggghts_words`,
+/// the normal's `liggghts_tail`) and `pair_coeff * *` (`dem info SCENE --liggghts`, bench/decks.py).
+/// Throws SceneError naming the sub-model with no LIGGGHTS counterpart declared.
+std::string liggghts_pair_style(const ContactLaw& law);
 /// This law as options of yade_ref/run_mode.py, `--law L ...`: L the first of the normal
 /// sub-model's `yade_laws` every other chosen sub-model accepts, then each one's `yade_words`
 /// (`dem info SCENE --yade`). Throws SceneError naming the sub-model with no YADE counterpart, or

@@ -50,6 +50,7 @@ inline SubModelInfo sds_info(Slot slot, const std::string& what, const std::stri
     return what + " sds " + exact_num(law.get(what + "_stiffness_ratio") * law.reference_stiffness()) + " " +
            exact_num(law.get(what + "_damping_kg_s")) + " " + exact_num(law.get(what + "_friction"));
   };
+  d.liggghts = "none with this spring-dashpot-slider (LIGGGHTS' rolling_friction cdt/epsd2 are other laws)";
   d.yade = "none with this spring-dashpot-slider (CohFrictMat's moment law is elastic-plastic without a dashpot)";
   d.describe = [what, sym](const ContactLaw& law, const PairScale&) {
     return "mu_" + sym + " = " + g_num(law.get(what + "_friction")) + ", k_" + sym + "/k = " +

@@ -83,6 +83,15 @@ struct SubModelInfo {
   /// `yade_words` null: no counterpart (`yade` says why). `yade_run_mode_options` joins them.
   std::function<std::vector<std::string>(const ContactLaw&)> yade_laws;
   std::function<std::string(const ContactLaw&)> yade_words;
+  /// Its LIGGGHTS `pair_style gran` counterpart: its words there ("model hooke/stiffness",
+  /// "tangential history"; "" for a slot left empty), a normal sub-model's keywords after every
+  /// slot's (`liggghts_tail`: "absolute_damping on limitForce on"), and the global properties it
+  /// reads, "NAME VALUE" each (a `fix property/global NAME peratomtypepair 1 VALUE`), SI units;
+  /// `liggghts_words` null: no counterpart declared (`liggghts` says why). `liggghts_pair_style` joins them.
+  std::string liggghts = "none declared";
+  std::function<std::string(const ContactLaw&)> liggghts_words;
+  std::function<std::string(const ContactLaw&)> liggghts_tail;
+  std::function<std::vector<std::string>(const ContactLaw&)> liggghts_properties;
   /// Groups of curve columns it adds (the column table's groups, measure.hpp: "rotations").
   std::vector<std::string> column_groups;
   std::vector<std::string> vtk_fields;      ///< contact-network fields it adds

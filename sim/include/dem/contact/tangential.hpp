@@ -40,6 +40,11 @@ struct NoTangential {
       d.yade_words = [](const ContactLaw&) { return std::string(); };   // run_mode.py's default: --friction 0
       d.lammps = "tangential linear_nohistory 0 0";
       d.lammps_words = [](const ContactLaw&) { return std::string("tangential linear_nohistory 0 0"); };
+      d.liggghts = "pair gran: tangential no_history with kt = gammat_abs = coefficientFriction = 0";
+      d.liggghts_words = [](const ContactLaw&) { return std::string("tangential no_history"); };
+      d.liggghts_properties = [](const ContactLaw&) {
+        return std::vector<std::string>{"kt 0", "gammat_abs 0", "coefficientFriction 0"};
+      };
       d.describe = [](const ContactLaw&, const PairScale&) { return std::string("frictionless, no rotations"); };
       return d;
     }();
@@ -148,6 +153,13 @@ inline const SubModelInfo& CundallStrack::info() {
              exact_num(law.get("tangential_stiffness_ratio")) + " --gamma-t 0";
     };
     d.lammps = "tangential linear_history k_t x_gamma_t mu";
+    d.liggghts = "pair gran: tangential history (with model hooke/stiffness: kt, gammat_abs, coefficientFriction)";
+    d.liggghts_words = [](const ContactLaw&) { return std::string("tangential history"); };
+    d.liggghts_properties = [](const ContactLaw& law) {
+      return std::vector<std::string>{
+          "kt " + exact_num(law.get("tangential_stiffness_ratio") * law.reference_stiffness()),
+          "gammat_abs " + exact_num(law.get("tangential_damping_kg_s")), "coefficientFriction " + exact_num(law.get("friction"))};
+    };
     // x_gamma_t is LAMMPS' tangential dashpot as a multiple of the normal one's (damping velocity)
     d.lammps_words = [](const ContactLaw& law) {
       const double gt = law.get("tangential_damping_kg_s"), gn = law.get_or("damping_kg_s", 0.0);

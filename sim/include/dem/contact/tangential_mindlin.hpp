@@ -114,6 +114,7 @@ inline const SubModelInfo& MindlinLaw<ForceKept>::info() {
     d.yade = ForceKept ? "FrictMat (young = E, poisson = nu, frictionAngle = atan(mu)) + Ip2_FrictMat_FrictMat_MindlinPhys "
                          "+ Law2_ScGeom_MindlinPhys_Mindlin (incremental shear force)"
                        : "none (YADE's Law2_ScGeom_MindlinPhys_Mindlin is incremental: use \"mindlin_force\")";
+    d.liggghts = "not declared (LIGGGHTS' tangential history with model hertz; no benchmark uses it)";
     if (ForceKept) {
       d.yade_laws = [](const ContactLaw&) { return std::vector<std::string>{"mindlin"}; };
       d.yade_words = [](const ContactLaw& law) { return "--friction " + exact_num(law.get("friction")); };
