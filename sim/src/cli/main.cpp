@@ -360,7 +360,7 @@ struct InfoCommand {
     cmd->add_option("scene", scene, "scene TOML file (not needed with --contact-models)")->check(CLI::ExistingFile);
     cmd->add_flag("--contact-models", contact_models, "list every contact sub-model of the registry: its scene keys "
                                                       "(units, defaults, bounds, meaning), history, curve columns, "
-                                                      "YADE and LAMMPS counterparts (with --json: as JSON)");
+                                                      "YADE, LAMMPS and LIGGGHTS counterparts (with --json: as JSON)");
     cmd->add_flag("--columns", columns, "list every curve column: name, unit, meaning and which curves have it "
                                         "(with --json: as JSON; docs/curve_columns.md is made from it)");
     add_set_option(*cmd, overrides, "override a scene key");

@@ -498,7 +498,7 @@ nlohmann::json registry_json() {
                                                          : "contact." + m->switch_key + " > 0"},
                    {"reference", m->reference}, {"keys", keys}, {"history", m->history},
                    {"history_text", m->history_text}, {"rotations", m->rotations}, {"yade", m->yade},
-                   {"lammps", m->lammps}, {"column_groups", m->column_groups}, {"vtk_fields", m->vtk_fields}});
+                   {"lammps", m->lammps}, {"liggghts", m->liggghts}, {"column_groups", m->column_groups}, {"vtk_fields", m->vtk_fields}});
   }
   return all;
 }
@@ -519,7 +519,7 @@ std::string registry_text() {
       for (const auto& n : m->column_groups) c += (c.empty() ? "" : ", ") + n;
       o += "    curve columns: the \"" + c + "\" group (dem info --columns)\n";
     }
-    o += "    YADE: " + m->yade + "\n    LAMMPS: " + m->lammps + "\n";
+    o += "    YADE: " + m->yade + "\n    LAMMPS: " + m->lammps + "\n    LIGGGHTS: " + m->liggghts + "\n";
   }
   return o;
 }
