@@ -227,6 +227,9 @@ def main(argv=None):
     ap.add_argument("--surface", default="ld")
     ap.add_argument("--fabric-lode", default="overlap", choices=("principal", "norm", "opening", "overlap", "extension"),
                     help="the extended family's fabric-limit rule (norm: the first round's numbers)")
+    ap.add_argument("--state-limit", default="none", choices=("none", "pressure"),
+                    help="the extended family's stress-ratio limit (pressure: the state-dependent limit of issue 31's "
+                         "fifth round, n_psi fitted)")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
     ap.add_argument("--middle-rule", default="norm", help="the --fabric-lode of --norm-work's run (its column name)")
     ap.add_argument("--norm-work", default=None,
@@ -246,6 +249,8 @@ def main(argv=None):
                "--no-plots"]
         if a.no_jackknife:
             cmd.append("--no-jackknife")
+        if a.state_limit != "none":
+            cmd += ["--state-limit", a.state_limit]
         print("model_friction:", " ".join(cmd), file=sys.stderr)
         with open(os.path.join(dst, "model.log"), "w") as log:
             if subprocess.call(cmd, stderr=log) not in (0, 1):

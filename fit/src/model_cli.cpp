@@ -397,7 +397,8 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
   write_table_all(t, (out / "summary").string(),
                   std::string("RMS of model - DEM mean over the mean 95 % band half-width per curve (") +
                       (cal.params.extended ? std::string("extended family, ") + surface_name(cal.params.surface) + " surface, fabric limit " +
-                                                  fabric_lode_name(cal.params.fabric)
+                                                  fabric_lode_name(cal.params.fabric) +
+                                                  (cal.params.state_limit ? ", state-dependent limit (pressure)" : "")
                                            : "group model") +
                       ", calibrated on " + fit_label + "); p_star on constant-volume rows, eps_v where p is held");
 }
@@ -543,6 +544,11 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
                         "(principal, and the fabric gated by the minor principal stress), overlap (the default: principal, "
                         "and the fabric gated by the fraction of contacts opened by the extension strain) or extension "
                         "(overlap, and the fabric's rate per unit extension strain)");
+  if (o.state_limit == "pressure") co.state_limit = true;
+  else if (o.state_limit != "none")
+    throw InputError("--state-limit " + o.state_limit + ": give none (the default: the stress-ratio limit s_max(nu) on the "
+                     "Lode surface) or pressure (that limit times (p_ref/p)^n_psi, the state parameter in pressure form, "
+                     "n_psi(nu) fitted; docs/model.md)");
   return co;
 }
 
@@ -757,6 +763,9 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "(principal, and the fabric gated by the minor principal stress), overlap (the default: principal, and "
                  "the fabric gated by the fraction of contacts opened by the extension strain), extension (overlap, and "
                  "the fabric's rate per unit extension strain; docs/model.md)");
+  app.add_option("--state-limit", o.state_limit, "extended family's stress-ratio limit: none (the default) or pressure "
+                 "(s_lim (p_ref/p)^n_psi, a state parameter in pressure form, n_psi(nu) fitted: a peak that falls as p "
+                 "rises at constant volume or nu falls under constant p; docs/model.md)");
   app.add_option("--max-iterations", o.max_iterations, "Ceres iterations of each fit (default 300)");
   app.add_option("--start", o.start, "parameters.csv of another `dem model` run: the start values (re-centred on "
                  "this data's nu_ref); with it the path ensembles alone may be calibrated (--calibrate-on PATHS)");

@@ -53,9 +53,10 @@ struct CurveResidual {
   double b = kLodeBD2;
   Surface surface = Surface::None;
   FabricLode fabric = FabricLode::Norm;
+  bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric};
+    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit};
     const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -88,9 +89,10 @@ struct PathResidual {
   double b = kLodeBD2;
   Surface surface = Surface::None;
   FabricLode fabric = FabricLode::Norm;
+  bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric};
+    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit};
     const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step, ext);
     const std::size_t n = acc.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -351,8 +353,9 @@ Parameters read_parameters(const std::string& path) {
   for (int i = 0; i < kNumShear; ++i) P.shear[i] = get(shear_name(i));
   P.nu_ref = get("nu_ref");
   P.extended = v.count(ext_name(0)) > 0;
+  P.state_limit = P.extended && v.count(ext_name(kNPsiA)) > 0;
   if (P.extended)
-    for (int i = 0; i < kNumExt; ++i) P.ext[i] = get(ext_name(i));
+    for (int i = 0; i < ext_size(P.state_limit); ++i) P.ext[i] = get(ext_name(i));
   return P;
 }
 
@@ -360,7 +363,7 @@ Parameters recentred(const Parameters& P, double nu_ref) {
   Parameters Q = P;
   const double d = nu_ref - P.nu_ref;
   for (int i = 0; i + 1 < kNumShear; i += 2) Q.shear[i] = P.shear[i] + P.shear[i + 1] * d;
-  for (int i : {kNFA, kKappaA, kDilA}) Q.ext[i] = P.ext[i] + P.ext[i + 1] * d;
+  for (int i : {kNFA, kKappaA, kDilA, kNPsiA}) Q.ext[i] = P.ext[i] + P.ext[i + 1] * d;
   Q.nu_ref = nu_ref;
   return Q;
 }
@@ -482,11 +485,11 @@ void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& 
     auto* f = new CurveResidual{c.eps, c.p, c.s, c.F, weights(c.se_p, o.se_floor, c.source + " p_star"),
                                 weights(c.se_s, o.se_floor, c.source + " s_dev"), weights(c.se_F, o.se_floor, c.source + " F_dev"),
                                 c.nu, c.p.front(), c.s.front(), c.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(c.mode); f->surface = o.surface; f->fabric = o.fabric;
+    f->extended = X; f->b = lode_b_of(c.mode); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
-    if (X) cost->AddParameterBlock(kNumExt);
+    if (X) cost->AddParameterBlock(ext_size(o.state_limit));
     cost->SetNumResiduals(3 * static_cast<int>(c.eps.size()));
     problem.AddResidualBlock(cost, nullptr, blocks_all);
     n_res += 3 * static_cast<int>(c.eps.size());
@@ -520,11 +523,11 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     for (std::size_t i = 1; i <= prefix; ++i) w1[i] = ws[i] = wF[i] = 0.0;
     auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, ws, wF, d.direction, d.isobaric,
                                d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(d.name); f->surface = o.surface; f->fabric = o.fabric;
+    f->extended = X; f->b = lode_b_of(d.name); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
-    if (X) cost->AddParameterBlock(kNumExt);
+    if (X) cost->AddParameterBlock(ext_size(o.state_limit));
     cost->SetNumResiduals(3 * static_cast<int>(n));
     problem.AddResidualBlock(cost, nullptr, blocks_all);
     n_res += 3 * static_cast<int>(n - 1 - prefix);   // weighted rows only
@@ -579,7 +582,7 @@ void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const 
 // The parameters' bounds: jamming fractions below every start state, positive alpha and p0, the
 // rates' ranges (tighter for the frictional family, whose rate laws have stiff corners).
 void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
-                std::vector<double>& ext, double numin, bool X) {
+                std::vector<double>& ext, double numin, bool X, bool state_limit) {
   problem.SetParameterUpperBound(isob.data(), kNuC, numin * (1 - 1e-6));
   problem.SetParameterUpperBound(isob.data(), kNuCC, numin * (1 - 1e-6));
   problem.SetParameterLowerBound(isob.data(), kAlpha, 0.05);
@@ -603,6 +606,10 @@ void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<
     problem.SetParameterUpperBound(ext.data(), kKappaA, 30.0);
     problem.SetParameterLowerBound(ext.data(), kChiD, -1.0);
     problem.SetParameterUpperBound(ext.data(), kChiD, 3.0);
+    if (state_limit) {   // |n_psi| <= 10 at nu_ref: (p_ref/p)^10 moves the limit by 2.7 at a 10 % pressure excess
+      problem.SetParameterLowerBound(ext.data(), kNPsiA, -10.0);
+      problem.SetParameterUpperBound(ext.data(), kNPsiA, 10.0);
+    }
   }
 
 }
@@ -610,7 +617,7 @@ void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<
 // Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof).
 void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
                        std::vector<double>& ext, const CalibrationOptions& o, bool X, Calibration& cal) {
-  const int np = kNumIso + kNumShear + (X ? kNumExt : 0);
+  const int np = kNumIso + kNumShear + (X ? ext_size(o.state_limit) : 0);
   cal.se_cov.assign(np, kNaN);
   cal.corr.assign(np, std::vector<double>(np, kNaN));
   ceres::Covariance::Options co;
@@ -656,6 +663,7 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
     for (int i = 1; i < kNumShear; i += 2) cal.se_cov[kNumIso + i] = kNaN;
     if (X)
       for (int i : {kNFB, kKappaB, kDilB}) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
+    if (X && o.state_limit) cal.se_cov[kNumIso + kNumShear + kNPsiB] = kNaN;
     cal.warnings.push_back("one start volume fraction (nu = " + std::to_string(curves.empty() ? paths.front().nu : curves.front().nu) +
                            "): the nu-slopes (*_b) are not determined by the data; held at 0 without standard errors, "
                            "so the laws hold at this nu only. Calibrate on ensembles from several checkpoints "
@@ -710,6 +718,17 @@ void clamp_extended_start(std::vector<double>& shear, std::vector<double>& ext) 
   ext[kChiD] = std::min(std::max(ext[kChiD], -1.0), 3.0);
 }
 
+/// One start volume fraction: every nu-slope (*_b) held at 0 (not determined by the data).
+void hold_nu_slopes(ceres::Problem& problem, std::vector<double>& shear, std::vector<double>& ext, bool X, bool state_limit) {
+  for (int i = 1; i < kNumShear; i += 2) shear[i] = 0.0;
+  problem.SetManifold(shear.data(), new ceres::SubsetManifold(kNumShear, {1, 3, 5, 7, 9, 11}));
+  if (!X) return;
+  std::vector<int> slopes = {kNFB, kKappaB, kDilB};
+  if (state_limit) slopes.push_back(kNPsiB);
+  for (int i : slopes) ext[i] = 0.0;
+  problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit), slopes));
+}
+
 }  // namespace
 
 Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
@@ -757,7 +776,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (int i : {kNuC, kNuCC})
     if (isob[i] > numin * (1 - 1e-6)) isob[i] = numin - 0.005;
   add_isotropic_residuals(problem, iso, o, isob, numin, n_res);
-  set_bounds(problem, isob, shear, ext, numin, X);
+  set_bounds(problem, isob, shear, ext, numin, X, o.state_limit);
   if (o.fit_isotropic && !held.empty())
     problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 
@@ -767,14 +786,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (const auto& c : curves) nus_seen.insert(std::llround(c.nu * 1e6));
   for (const auto& d : paths) nus_seen.insert(std::llround(d.nu * 1e6));
   const bool one_nu = nus_seen.size() < 2;
-  if (one_nu) {
-    for (int i = 1; i < kNumShear; i += 2) shear[i] = 0.0;
-    problem.SetManifold(shear.data(), new ceres::SubsetManifold(kNumShear, {1, 3, 5, 7, 9, 11}));
-    if (X) {
-      for (int i : {kNFB, kKappaB, kDilB}) ext[i] = 0.0;
-      problem.SetManifold(ext.data(), new ceres::SubsetManifold(kNumExt, {kNFB, kKappaB, kDilB}));
-    }
-  }
+  if (one_nu) hold_nu_slopes(problem, shear, ext, X, o.state_limit);
 
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
@@ -796,13 +808,15 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   cal.params.extended = X;
   cal.params.surface = X ? o.surface : Surface::None;
   cal.params.fabric = X ? o.fabric : FabricLode::Norm;
+  cal.params.state_limit = X && o.state_limit;
+  const int n_ext = ext_size(cal.params.state_limit);
   cal.chi2 = 2 * sum.final_cost;
   cal.n_residuals = n_res;
-  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear + (X ? kNumExt - (one_nu ? 3 : 0) : 0);
+  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear + (X ? n_ext - (one_nu ? (cal.params.state_limit ? 4 : 3) : 0) : 0);
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(isob[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(shear[i]); }
   if (X)
-    for (int i = 0; i < kNumExt; ++i) { cal.names.push_back(ext_name(i)); cal.value.push_back(ext[i]); }
+    for (int i = 0; i < n_ext; ++i) { cal.names.push_back(ext_name(i)); cal.value.push_back(ext[i]); }
 
   covariance_errors(problem, isob, shear, ext, o, X, cal);
   for (int i : held) cal.se_cov[i] = kNaN;   // held at the start value: no error of its own
@@ -815,7 +829,8 @@ ModelCurve predict_curve(const Parameters& params, const CurveData& c, double ep
   if (t.eps.empty() || std::fabs(t.eps.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + c.source + " does not start at eps_d = 0");
   const std::vector<double> iso = params.iso();
-  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface, params.fabric};
+  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface, params.fabric,
+                        params.extended && params.state_limit};
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
                                          t.F.front(), t.eps, max_step, ext);
   ModelCurve m;
@@ -873,7 +888,8 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
     throw std::invalid_argument("model prediction: " + d.source + " does not start at eps_d_accumulated = 0");
   const std::vector<double> iso = params.iso();
   check_start_scale(iso, d.nu, d.source);
-  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric};
+  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric,
+                        params.extended && params.state_limit};
   const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
                                          d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
   PathPrediction m;

@@ -173,7 +173,7 @@ Synthetic synthetic(const Parameters& P, const std::vector<double>& nus, int K, 
   for (int i = 0; i <= 100; ++i) eps.push_back(0.004 * i);
   for (double nu : nus) {
     const double p0 = isotropic_pressure(iso.data(), nu);
-    const Ext<double> ext{P.extended ? P.ext : nullptr, lode_b_of(mode), P.surface, P.fabric};
+    const Ext<double> ext{P.extended ? P.ext : nullptr, lode_b_of(mode), P.surface, P.fabric, P.extended && P.state_limit};
     const auto st = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.01, 0.01, eps, 1e-3, ext);
     std::vector<CurveData> mem;
     for (int k = 0; k < K; ++k) {
@@ -822,9 +822,14 @@ TEST(ModelFriction, OverlapRuleGatesTheFabricByTheOpenedFraction) {
 // coefficients within 3 jackknife standard errors, and the active terms (n_F, kappa_s) are
 // resolved from zero. One seed, so that it runs in seconds; the coverage study of the group
 // model (above) is the calibration of the jackknife itself.
-static void recover_extension(FabricLode rule) {
+static void recover_extension(FabricLode rule, bool state_limit = false) {
   Parameters P = frictional_truth();
   P.fabric = rule;
+  if (state_limit) {   // a peak in the loose packings (n_psi 2.9 at 0.69), none at 0.80 (0.5)
+    P.state_limit = true;
+    P.ext[kNPsiA] = 1.8;
+    P.ext[kNPsiB] = -20.0;
+  }
   const int K = 8;
   const Synthetic S = synthetic(P, {0.69, 0.74, 0.80}, K, 0.9, 11);
   CalibrationOptions o;
@@ -834,13 +839,14 @@ static void recover_extension(FabricLode rule) {
   o.extended = true;
   o.surface = Surface::LadeDuncan;
   o.fabric = rule;
+  o.state_limit = state_limit;
   Parameters start = P;
   for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.9 : 1.05);
   for (int i = 0; i < kNumExt; ++i) start.ext[i] *= (i % 2 ? 0.8 : 1.2);
   o.start = &start;
   const Calibration cal = calibrate(S.mean, {}, o);
   ASSERT_TRUE(cal.ok) << cal.message;
-  ASSERT_EQ(cal.value.size(), static_cast<std::size_t>(kNumIso + kNumShear + kNumExt));
+  ASSERT_EQ(cal.value.size(), static_cast<std::size_t>(kNumIso + kNumShear + ext_size(state_limit)));
   CalibrationOptions oj = o;
   oj.start = &cal.params;
   std::vector<std::vector<double>> est;
@@ -858,15 +864,19 @@ static void recover_extension(FabricLode rule) {
     }
     est.push_back(calibrate(loo, {}, oj).value);
   }
-  for (int i = 0; i < kNumExt; ++i) {
+  // 3 SE; with the state limit t_{K-1,0.995} = 3.50: over seeds 11-21 its n_psi_a z-scores have an RMS
+  // of 1.5 (the K = 8 jackknife SE is t-distributed and under-covers), and seed 11 puts n_psi_b at 3.15 SE
+  // (docs/model.md, "The state-dependent limit").
+  const double within = state_limit ? demfit::t_quantile(0.995, K - 1) : 3.0;
+  for (int i = 0; i < ext_size(state_limit); ++i) {
     const int a = kNumIso + kNumShear + i;
     double mean = 0, ss = 0;
     for (const auto& e : est) mean += e[a] / K;
     for (const auto& e : est) ss += (e[a] - mean) * (e[a] - mean);
     const double se = std::sqrt((K - 1.0) / K * ss);
-    EXPECT_LT(std::fabs(cal.value[a] - P.ext[i]), 3 * se + 1e-9)
+    EXPECT_LT(std::fabs(cal.value[a] - P.ext[i]), within * se + 1e-9)
         << ext_name(i) << ": estimate " << cal.value[a] << " truth " << P.ext[i] << " jackknife se " << se;
-    if (i == kNFA || i == kKappaA) {
+    if (i == kNFA || i == kKappaA || i == kNPsiA) {
       EXPECT_GT(std::fabs(cal.value[a]) / se, 3.0) << ext_name(i) << " not resolved from 0";
     }
   }
@@ -945,6 +955,79 @@ TEST(ModelFriction, ExtensionRuleRatesTheFabricPerUnitExtensionStrain) {
 // Synthetic D2 under the extension rule: D2 is the overlap rule's, so the same recovery; D3 from the
 // same truth (rate per unit extension strain) predicted within a band.
 TEST(ModelFriction, RecoversExtensionUnderTheExtensionRule) { recover_extension(FabricLode::Extension); }
+
+// The state-dependent stress-ratio limit (issue 31, fifth round). (i) The factor is (p_ref/p)^n_psi
+// with n_psi = a + b (nu - nu_ref), built by hand, and exactly 1 at p = p_ref. (ii) It moves the
+// stress ratio's target only: at a state off the reference pressure the right-hand side differs from
+// the plain limit's by beta_s (s_max/s_lim) s_lim (factor - 1)(1 + kappa_s r) in ds, and not at all in
+// dp and dF (constant volume), in D2 and D3. (iii) Off, the n_psi entries are never read: a block with
+// n_psi != 0 integrates, bit for bit, as one with n_psi = 0 switched on (exp(0 ln x) = 1, s_lim x 1),
+// on constant-volume, reversed, isobaric and triaxial segments. (iv) Long constant-volume shear ends
+// where the stress ratio equals the state-dependent limit at the end pressure, not s_lim: a
+// critical state whose ratio is set by the state parameter (to 1e-3 of s).
+TEST(ModelFriction, StateLimitIsAPressureFormStateParameter) {
+  Parameters P = frictional_truth();
+  P.fabric = FabricLode::Overlap;
+  P.ext[kNPsiA] = 1.5;
+  P.ext[kNPsiB] = -10.0;
+  const auto iso = P.iso();
+  const double nu = 0.71, p_ref = isotropic_pressure(iso.data(), nu);
+  const double n = 1.5 - 10.0 * (nu - P.nu_ref);
+  for (double p : {0.5 * p_ref, 1.2 * p_ref})
+    EXPECT_NEAR(state_limit_factor(P.ext, nu, P.nu_ref, p, p_ref), std::pow(p_ref / p, n), 1e-14);
+  EXPECT_EQ(state_limit_factor(P.ext, nu, P.nu_ref, p_ref, p_ref), 1.0);
+
+  for (double b : {0.5, 0.0}) {
+    const Material<double> on{iso.data(), P.shear, P.nu_ref, 1.0, Ext<double>{P.ext, b, Surface::LadeDuncan, P.fabric, true}};
+    Material<double> off = on;
+    off.ext.state_limit = false;
+    State<double> y{std::log(nu), 1.2 * p_ref, 0.3, 0.05};
+    y.l = 0.05;
+    const State<double> d_on = rhs(on, y, 1.0, Segment{}), d_off = rhs(off, y, 1.0, Segment{});
+    const Local<double> L = local(P.shear, nu, P.nu_ref);
+    const double s_lim = lode_limit(L.s_max, b, Surface::LadeDuncan);
+    const double kappa = P.ext[kKappaA] + P.ext[kKappaB] * (nu - P.nu_ref);
+    const double want = L.beta_s * (L.s_max / s_lim) * s_lim * (std::pow(1.0 / 1.2, n) - 1.0) * (1 + kappa * 0.3 / s_lim);
+    EXPECT_NEAR(d_on.s - d_off.s, want, 1e-12 * std::fabs(want)) << b;
+    EXPECT_LT(d_on.s, d_off.s) << "above the reference pressure the limit is lower";
+    EXPECT_EQ(d_on.p, d_off.p) << b;
+    EXPECT_EQ(d_on.F, d_off.F) << b;
+  }
+
+  const double p0 = isotropic_pressure(iso.data(), nu);
+  double zero_psi[kNumExt];
+  std::copy(P.ext, P.ext + kNumExt, zero_psi);
+  zero_psi[kNPsiA] = zero_psi[kNPsiB] = 0.0;
+  const auto off = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, mixed_path(),
+                                     Ext<double>{P.ext, kLodeBD2, Surface::LadeDuncan, P.fabric, false});
+  const auto on0 = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, mixed_path(),
+                                     Ext<double>{zero_psi, kLodeBD2, Surface::LadeDuncan, P.fabric, true});
+  const auto on = integrate<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, mixed_path(),
+                                    Ext<double>{P.ext, kLodeBD2, Surface::LadeDuncan, P.fabric, true});
+  ASSERT_EQ(off.size(), on0.size());
+  for (std::size_t i = 0; i < off.size(); ++i) {
+    EXPECT_EQ(off[i].state.p, on0[i].state.p) << i;
+    EXPECT_EQ(off[i].state.s, on0[i].state.s) << i;
+    EXPECT_EQ(off[i].state.F, on0[i].state.F) << i;
+    EXPECT_EQ(off[i].eps_vol, on0[i].eps_vol) << i;
+  }
+  EXPECT_GT(std::fabs(on[20].state.s - off[20].state.s), 1e-4);   // and switched on it does act
+
+  std::vector<double> eps;
+  for (int i = 0; i <= 300; ++i) eps.push_back(0.01 * i);
+  const auto st = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, eps, 2e-3,
+                                         Ext<double>{P.ext, kLodeBD2, Surface::LadeDuncan, P.fabric, true});
+  const double s_max = local(P.shear, nu, P.nu_ref).s_max;
+  const double p_end = st.back().p;
+  ASSERT_GT(std::fabs(p_end / p0 - 1.0), 0.02) << "the test needs a pressure that moves";
+  EXPECT_NEAR(st.back().s, s_max * std::pow(p0 / p_end, n), 1e-3);
+  EXPECT_GT(std::fabs(st.back().s - s_max), 0.01);
+}
+
+// Synthetic D2 made with the state-dependent limit (overlap rule, K = 8, AR(1) rho = 0.9): the nine
+// extension coefficients, n_psi's two among them, are recovered within t_{7,0.995} = 3.5 jackknife SE, n_psi at nu_ref
+// resolved from 0, and D3 from the same truth predicted within a band.
+TEST(ModelFriction, RecoversTheStateLimit) { recover_extension(FabricLode::Overlap, true); }
 
 // The Lode surface moves the limit, not the initial stiffness: from s = 0 the stress ratio rises
 // at G/p = beta_s s_max in D2 (b = 1/2) and in D3 (b = 0) alike, and tends to s_max and to the

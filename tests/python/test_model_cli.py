@@ -184,6 +184,9 @@ def test_bad_family_and_surface_are_refused(tmp_path):
     assert r.returncode == 2 and "--fabric-lode max" in r.stderr and "principal" in r.stderr and "opening" in r.stderr, r.stderr
     assert "overlap" in r.stderr, r.stderr
     assert not os.path.exists(tmp_path / "l")
+    r = run(ENSEMBLE, "--out", str(tmp_path / "p"), "--family", "extended", "--state-limit", "volume", "--no-plots")
+    assert r.returncode == 2 and "--state-limit volume" in r.stderr and "pressure" in r.stderr, r.stderr
+    assert not os.path.exists(tmp_path / "p")
 
 
 def test_group_model_at_mu_0_ignores_the_fabric_rule(tmp_path):
@@ -327,3 +330,65 @@ def test_fabric_rate_and_stress_peak_of_curves_built_by_hand(tmp_path):
     for _, _, curve, pm, _ in peak:
         assert abs(pm[0] - 0.09) < 0.005 and abs(pm[1] - 0.15) < 0.01, (curve, pm)
         assert abs(pm[4] - (1 + 0.285)) < 0.002, (curve, pm)
+
+
+def test_state_limit_fits_the_peak_at_mu_0_5_and_is_off_by_default(tmp_path):
+    """The state-dependent stress-ratio limit (docs/model.md, "The state-dependent limit"): off by
+    default (`--state-limit none` gives the default run's summary, the same bytes, and its parameters
+    table has no n_psi); switched on, the table lists n_psi_a and n_psi_b, every fitted D2 curve is
+    within a band, and the D2 stress ratio at nu = 0.69, which peaks and softens in the DEM, is fitted
+    within half a band (0.27 when stored; 0.68 without the state limit)."""
+    from demkit import model_friction
+    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
+    work = str(tmp_path / "mu_0.5")
+    model_friction.copy_tree(src, work)
+    outs = {k: str(tmp_path / k) for k in ("default", "none", "pressure")}
+    for k, extra in (("default", []), ("none", ["--state-limit", "none"]), ("pressure", ["--state-limit", "pressure"])):
+        r = run(work, "--out", outs[k], "--family", "extended", "--no-jackknife", "--no-plots", *extra)
+        assert r.returncode == 0, r.stderr
+    for name in ("summary.md", "parameters.md"):
+        with open(os.path.join(outs["default"], name)) as a, open(os.path.join(outs["none"], name)) as b:
+            assert a.read() == b.read(), name
+    off = {p["parameter"]: p for p in rows(os.path.join(outs["none"], "parameters.csv"))}
+    on = {p["parameter"]: p for p in rows(os.path.join(outs["pressure"], "parameters.csv"))}
+    assert "n_psi_a" not in off and len(on) == len(off) + 2 and "n_psi_b" in on
+    with open(os.path.join(outs["pressure"], "summary.md")) as fh:
+        assert "state-dependent limit (pressure)" in fh.read()
+    summary = {(s["mode"], float(s["nu [-]"])): s for s in rows(os.path.join(outs["pressure"], "summary.csv"))
+               if s["mode"] != "calibration"}
+    plain = {(s["mode"], float(s["nu [-]"])): s for s in rows(os.path.join(outs["none"], "summary.csv"))
+             if s["mode"] != "calibration"}
+    for (mode, nu), s in summary.items():
+        if mode == "D2":
+            assert float(s["worst [band]"]) < 1, s
+    assert float(summary[("D2", 0.69)]["s_dev [band]"]) < 0.5 < float(plain[("D2", 0.69)]["s_dev [band]"])
+
+
+def test_state_limit_choice_pairs_the_held_out_scores(tmp_path):
+    """demkit.model_state_limit on hand-built selection files: the scores pair by left-out packing; a
+    state-limit run better on every packing by 0.3 (spread 0.05) is chosen, one better by 0.01 with a
+    spread of 0.2 is not (t_{7,0.975} = 2.365)."""
+    from demkit import model_state_limit
+
+    def write(folder, scores):
+        os.makedirs(folder, exist_ok=True)
+        with open(os.path.join(folder, "selection.csv"), "w") as fh:
+            fh.write("# held-out\npacking_left_out,heldout_group [-],heldout_extended [-],difference [-]\n")
+            for k, v in enumerate(scores):
+                fh.write(f"{k},50,{v},{50 - v}\n")
+            fh.write("mean,nan,nan,1\nchosen,extended,chi2/dof 1 / 1,nan\n")
+
+    plain = [1.0 + 0.05 * ((-1) ** k) for k in range(8)]
+    write(str(tmp_path / "plain" / "mu_1"), plain)
+    write(str(tmp_path / "good" / "mu_1" / "model"), [v - 0.3 + 0.01 * k for k, v in enumerate(plain)])
+    write(str(tmp_path / "noisy" / "mu_1" / "model"), [v - 0.01 + 0.2 * ((-1) ** (k // 2)) for k, v in enumerate(plain)])
+    mean, se, t, K, chosen = model_state_limit.paired_choice(
+        model_state_limit.extended_scores(str(tmp_path / "plain" / "mu_1")),
+        model_state_limit.extended_scores(str(tmp_path / "good" / "mu_1" / "model")))
+    assert K == 8 and chosen and abs(mean - (0.3 - 0.035)) < 1e-12 and abs(t - 2.3646) < 1e-3
+    out = str(tmp_path / "choice.md")
+    model_state_limit.main(["--plain", str(tmp_path / "plain"), "--state", str(tmp_path / "noisy"), "--mu", "1",
+                            "--out", out])
+    with open(out) as fh:
+        text = fh.read()
+    assert "| 1 | 8 |" in text and text.rstrip().endswith("plain limit |"), text

@@ -48,8 +48,17 @@ enum ExtIndex {
   kKappaA, kKappaB,        ///< kappa_s(nu) [-]: shape of the stress-ratio law, rate x (1 + kappa_s r)
   kDilA, kDilB,            ///< d_D(nu) [-]: plastic dilatancy per unit eps_d, d_D (r - chi_D)(1 - F/F_max)
   kChiD,                   ///< chi_D [-]: mobilisation at which the dilatancy changes sign (phase transformation)
+  /// n_psi(nu) [-] (issue 31, fifth round; only with Ext::state_limit, else never read): the stress-ratio
+  /// limit's state dependence, s_lim (p_ref/p)^n_psi = s_lim exp(-n_psi psi_p), psi_p = ln(p/p_ref) the
+  /// state parameter in pressure form (docs/model.md, "The state-dependent limit").
+  kNPsiA, kNPsiB,
   kNumExt
 };
+
+/// Number of extension coefficients without the state-dependent limit (the block Ceres sees when it is off).
+constexpr int kNumExtBase = kNPsiA;
+/// Size of the extension block: kNumExtBase, or kNumExt with the state-dependent limit.
+inline int ext_size(bool state_limit) { return state_limit ? kNumExt : kNumExtBase; }
 
 /// Lode-angle dependence of the stress-ratio limit: s_max is the limit at the calibration
 /// test's intermediate-stress ratio b_ref; at another b the limit lies on the same
@@ -98,8 +107,9 @@ struct Parameters {
   double alpha = 0.5;      ///< [-] coordination power-law exponent
   double shear[kNumShear] = {0.16, -0.5, std::log(50.0), -5.0, 0.11, -0.8, std::log(40.0), -8.0,
                              0.3, -5.0, std::log(20.0), 0.0};
-  double ext[kNumExt] = {0, 0, 0, 0, 0, 0, 0};   ///< frictional extension (all 0: the group model)
+  double ext[kNumExt] = {0, 0, 0, 0, 0, 0, 0, 0, 0};   ///< frictional extension (all 0: the group model)
   bool extended = false;   ///< the frictional family (ext fitted, Lode surface `surface`)
+  bool state_limit = false;   ///< the frictional family's state-dependent stress-ratio limit (n_psi fitted)
   Surface surface = Surface::None;   ///< Lode-angle surface of the extended family
   FabricLode fabric = FabricLode::Norm;   ///< Lode rule of the extended family's fabric limit
   double nu_ref = 0.74;    ///< [-] volume fraction the nu-laws are centred on
@@ -114,7 +124,8 @@ inline const char* shear_name(int i) {
   return n[i];
 }
 inline const char* ext_name(int i) {
-  static const char* n[kNumExt] = {"n_F_a", "n_F_b", "kappa_s_a", "kappa_s_b", "d_D_a", "d_D_b", "chi_D"};
+  static const char* n[kNumExt] = {"n_F_a", "n_F_b", "kappa_s_a", "kappa_s_b", "d_D_a", "d_D_b", "chi_D",
+                                   "n_psi_a", "n_psi_b"};
   return n[i];
 }
 inline const char* iso_name(int i) {
@@ -271,15 +282,36 @@ T opened_fraction(const T* iso, const T& nu, const T& p, const T& l, double b) {
 }
 
 /// What the frictional family adds to a run: its parameter block (null: the group model), the
-/// test's intermediate-stress ratio b, the Lode surface of the stress ratio and the Lode rule of
-/// the fabric limit.
+/// test's intermediate-stress ratio b, the Lode surface of the stress ratio, the Lode rule of
+/// the fabric limit, and whether the block carries the state-dependent limit's n_psi (kNPsiA,
+/// kNPsiB; off: the block has kNumExtBase entries and they are never read).
 template <class T>
 struct Ext {
   const T* p = nullptr;
   double b = kLodeBD2;
   Surface surface = Surface::None;
   FabricLode fabric = FabricLode::Norm;
+  bool state_limit = false;
 };
+
+/// The state-dependent stress-ratio limit (issue 31, fifth round): the limit the stress ratio is
+/// driven to, s_lim exp(-n_psi psi_p) = s_lim (p_ref/p)^n_psi, with psi_p = ln(p/p_ref) the state
+/// parameter in pressure form: the pressure against the isotropic reference p_ref = k p_iso(nu) at the
+/// current volume fraction (the reference of the pressure relaxation). A packing below its
+/// reference pressure (psi_p < 0, "denser than the reference at this pressure") has a limit above
+/// s_lim, one above it a lower one; psi_p = 0 gives s_lim. As Manzari & Dafalias (1997)'s peak
+/// ratio M exp(-n_b psi), with the volume-form psi = e - e_cs(p) of Been & Jefferies (1985) replaced
+/// by the pressure form (the state pressure index of Wang et al. 2002). p_ref/p floored at 1e-6
+/// (p_ref <= 0 below the isotropic law's jamming fraction). n_psi(nu) = a + b (nu - nu_ref).
+template <class T>
+T state_limit_factor(const T* ext, const T& nu, double nu_ref, const T& p, const T& p_ref) {
+  using std::exp;
+  using std::log;
+  const T n_psi = ext[kNPsiA] + ext[kNPsiB] * (nu - T(nu_ref));
+  T ratio = p_ref / p;
+  if (!(ratio > T(1e-6))) ratio = T(1e-6);
+  return exp(n_psi * log(ratio));
+}
 
 /// State of the material point.
 template <class T>
@@ -384,7 +416,10 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   // stiffness G/p = beta_s s_max does not depend on the Lode angle (only the limit does): the
   // DEM's D2 and D3 stress ratios rise together at first. 1 without a surface or at b_ref.
   const bool lode = m.ext.surface != Surface::None && m.ext.b != kLodeBD2;
-  const T shear = L.beta_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_lim - y.s) * shape_s;
+  // The state-dependent limit (fifth round; off: s_lim itself, untouched): the target of the stress
+  // ratio only; the mobilisation r, the rate scaling and the dilatancy keep s_lim (psi_p = 0).
+  const T s_target = (m.ext.p && m.ext.state_limit) ? s_lim * state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref) : s_lim;
+  const T shear = L.beta_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_target - y.s) * shape_s;
   if (seg.control == Control::Isobaric) {
     dvol = (A * T(sigma) - relax + B * dil) / B;
   } else if (seg.control == Control::Triaxial) {

@@ -24,6 +24,7 @@ struct ModelCommandOptions {
   int max_iterations = 300;               ///< Ceres iterations of each fit
   std::string start;                      ///< parameters.csv of another `dem model` run: start values (paths-only calibration)
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs start)
+  std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default) or pressure (n_psi fitted)
   std::string fabric_lode = "overlap";  ///< Lode rule of the extended family's fabric: overlap (default), principal, norm, opening, extension
 };
 

@@ -51,6 +51,10 @@ struct CalibrationOptions {
   /// The fabric limit's Lode rule of the frictional family (FabricLode; `Norm` before issue 31's
   /// second round, `Principal` since: the largest principal deviatoric fabric saturates).
   FabricLode fabric = FabricLode::Principal;
+  /// The frictional family's state-dependent stress-ratio limit (issue 31, fifth round): n_psi(nu)
+  /// fitted too (the extension block then has kNumExt entries, else kNumExtBase; off: the fourth
+  /// round's fit exactly).
+  bool state_limit = false;
   /// Isotropic parameters (IsoIndex) held at their start values while the rest of the block is
   /// fitted: a laboratory's isotropic branch of a few pressure levels cannot fix all seven (issue 31,
   /// "Calibrated on drained triaxial tests"). Needs `start`.
