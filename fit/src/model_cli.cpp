@@ -152,6 +152,9 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   t.add_row({"nu_ref", "centre of the nu-laws (fixed)", num(cal.params.nu_ref), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
   t.add_row({"chi2_per_dof", "weighted residuals of the joint fit", num(cal.chi2_dof()), "nan",
              std::to_string(cal.n_residuals) + " residuals", "nan", "nan", "nan", "nan", "-"});
+  // A fit that stopped short says so in its table (the values are where it stopped; --start goes on)
+  if (!cal.ok)
+    t.add_row({"converged", "no: " + cal.message, "nan", "nan", "not converged", "nan", "nan", "nan", "nan", "-"});
   write_table_all(t, (out / "parameters").string(),
                   "Incremental anisotropic model: joint fit of the isotropic branch and the ensemble curves of " + fit_label +
                   " (docs/model.md); 95 % intervals: estimate -/+ t se");
@@ -736,6 +739,10 @@ int run(const ModelCommandOptions& o) {
     write_results(in, fits[f], dest, o);
     if (f == chosen && !fits[f].cal.ok) rc = 1;
   }
+  if (rc)
+    std::cerr << "dem model: the " << fams[chosen] << " family's calibration did not converge (parameters.md says "
+              << "why: row `converged`); its tables are written, and the exit status is 1. To go on from where it "
+              << "stopped: --start " << (out / "parameters.csv").string() << " [--max-iterations N]\n";
   return rc;
 }
 

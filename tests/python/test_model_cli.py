@@ -392,3 +392,22 @@ def test_state_limit_choice_pairs_the_held_out_scores(tmp_path):
     with open(out) as fh:
         text = fh.read()
     assert "| 1 | 8 |" in text and text.rstrip().endswith("plain limit |"), text
+
+
+def test_a_fit_stopped_short_says_so_and_can_go_on(tmp_path):
+    """Two iterations cannot converge: the tables are written with a `converged = no` row, the exit
+    status is 1 with the way on, and --start from that table continues (no input error)."""
+    from demkit import model_friction
+    work = str(tmp_path / "mu_0.5")
+    model_friction.copy_tree(os.path.join(ROOT, "data", "friction_n1000", "mu_0.5"), work)
+    out = str(tmp_path / "short")
+    r = run(work, "--out", out, "--family", "extended", "--no-jackknife", "--no-plots", "--max-iterations", "2")
+    assert r.returncode == 1, r.stderr
+    assert "did not converge" in r.stderr and "--start " + os.path.join(out, "parameters.csv") in r.stderr
+    params = {p["parameter"]: p for p in rows(os.path.join(out, "parameters.csv"))}
+    assert params["converged"]["law"].startswith("no: ") and "NO_CONVERGENCE" in params["converged"]["law"]
+    on = run(work, "--out", str(tmp_path / "on"), "--family", "extended", "--no-jackknife", "--no-plots",
+             "--start", os.path.join(out, "parameters.csv"), "--max-iterations", "2")
+    assert on.returncode in (0, 1), on.stderr
+    assert "converged" not in {p["parameter"] for p in rows(os.path.join(str(tmp_path / "on"), "parameters.csv"))} \
+        or on.returncode == 1
