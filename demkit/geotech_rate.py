@@ -9,8 +9,8 @@ another rate (the half-rate check of TC_s3).
 Two commands:
 
     /usr/bin/python3 -m demkit.geotech_rate run --out runs/geotech --mu 0.5 --prep loose --level iso_hi \\
-        --test SS_cns --rates 1e-5,3e-5,1e-4 [--packings 4] [--jobs 2]
-        `dem mode --rate-tc R` from the checkpoints of demkit.geotech's preparations (made if absent,
+        --test SS_cns --rates 1e-5,3e-5,1e-4 [--eps-d 0.6] [--packings 4] [--jobs 2]
+        `dem mode --rate-tc R` (--eps-d: ending at that eps_d, not at the scene path's `until`) from the checkpoints of demkit.geotech's preparations (made if absent,
         the same folders: runs/geotech/prep/...), the servo's rate limit 4x the test rate as in the
         scene; curves in OUT/rate/mu_MU/PREP/LEVEL/TEST/rR/mS.csv (skips what exists);
     /usr/bin/python3 -m demkit.geotech_rate analyse runs/geotech/rate --out data/geotech/rate [--store]
@@ -371,7 +371,26 @@ def analyse(root, out, plots=True):
 # Running
 
 
-def run_one(dem, scene, root, prep, mu, seed, level, test, rate):
+def toml_inline(v):
+    """A value of a parsed TOML file (str, number, list, table) written back as inline TOML."""
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {toml_inline(x)}" for k, x in v.items()) + " }"
+    if isinstance(v, list):
+        return "[" + ", ".join(toml_inline(x) for x in v) + "]"
+    return f'"{v}"' if isinstance(v, str) else repr(v)
+
+
+def stop_override(scene, test, eps_d):
+    """`--set paths.TEST=...`: the scene's path with its last stage ending at eps_d instead of its own
+    `until` (the mu(I) series keeps the length it was made with when the scene's test grows)."""
+    import tomllib
+    with open(scene, "rb") as fh:
+        stages = tomllib.load(fh)["paths"][test]
+    stages[-1] = {**stages[-1], "until": {"eps_d": float(eps_d)}}
+    return ["--set", f"paths.{test}={toml_inline(stages)}"]
+
+
+def run_one(dem, scene, root, prep, mu, seed, level, test, rate, eps_d=None):
     out = os.path.join(root, "rate", f"mu_{mu}", prep, level, test, f"r{rate}", f"m{seed}.csv")
     if os.path.exists(out):
         return 0
@@ -380,8 +399,9 @@ def run_one(dem, scene, root, prep, mu, seed, level, test, rate):
         return -1
     os.makedirs(os.path.dirname(out), exist_ok=True)
     servo = SERVO_FACTOR * float(rate)
+    stop = stop_override(scene, test, eps_d) if eps_d is not None else []
     return geotech.run_cmd([dem, "mode", "--scene", scene, "--packing", ckpt[0], "--mode", test, "--out", out,
-                            "--rate-tc", rate, "--set", f"servo.rate_max_tc={servo:.6g}",
+                            "--rate-tc", rate, "--set", f"servo.rate_max_tc={servo:.6g}", *stop,
                             "--set", f"contact.friction={mu}", "--threads", "1", "--quiet"], out[:-4] + ".log")
 
 
@@ -398,7 +418,7 @@ def run(args):
                 print(f"preparation {p} mu={mu} m{s} failed ({rc})", file=sys.stderr)
         # slowest first: the longest runs start while the pool is full
         jobs = [(args.prep, args.mu, s, args.level, args.test, r) for r in sorted(rates, key=float) for s in seeds]
-        for job, rc in zip(jobs, pool.map(lambda a: run_one(args.dem, args.scene, args.out, *a), jobs)):
+        for job, rc in zip(jobs, pool.map(lambda a: run_one(args.dem, args.scene, args.out, *a, eps_d=args.eps_d), jobs)):
             print(f"{' '.join(map(str, job))}: {'ok' if rc == 0 else f'failed ({rc})'}", flush=True)
 
 
@@ -412,6 +432,8 @@ def main(argv=None):
     r.add_argument("--level", default="iso_hi", choices=geotech.LEVELS)
     r.add_argument("--test", default="SS_cns")
     r.add_argument("--rates", required=True, help="comma-separated rates times t_c, e.g. 1e-5,3e-5,1e-4")
+    r.add_argument("--eps-d", type=float, default=None,
+                   help="end the test at this eps_d instead of its scene path's `until` (the stored mu(I) series: 0.6)")
     geotech.dispatch(ap.parse_args(argv), run, analyse, lambda root, out: store(collect(root), out))
 
 

@@ -1,11 +1,16 @@
 """demkit.geotech (issue 31, docs/geotech.md) on synthetic data with known answers: friction and
 dilatancy angles of Mohr-Coulomb stress states under the Mohr-Coulomb flow rule, the closed-form
 properties of the Matsuoka-Nakai and Lade-Duncan surfaces, and intervals over packings."""
+import csv
+import glob
 import math
+import os
+import tomllib
 
 import numpy as np
 import pytest
 
+from conftest import ROOT
 from demkit import geotech
 
 # ------------------------------------------------------------------------------------------
@@ -107,3 +112,64 @@ def test_the_critical_state_flag_says_yes_no_or_not_determined():
     assert geotech.critical_state_reached({"volume_stationary": "yes", "stress_stationary": "no"}) == "no"
     assert geotech.critical_state_reached({"volume_stationary": "yes", "stress_stationary": "not determined"}) == \
         "not determined"
+
+
+# ------------------------------------------------------------------------------------------
+# The stored runs (data/geotech) against the scene that made them and against each other
+
+DATA = os.path.join(ROOT, "data", "geotech")
+
+
+def data_rows(path):
+    """(header, rows) of a curve, comment lines skipped."""
+    with open(path) as fh:
+        rows = list(csv.reader(ln for ln in fh if not ln.startswith("#")))
+    return rows[0], rows[1:]
+
+
+def test_every_stored_curve_runs_to_the_end_its_scene_path_sets():
+    """Each curve in data/geotech/curves ends where data/scenes/geotech.toml's `until` stops its test
+    (a curve left from a shorter version of the scene fails here)."""
+    with open(os.path.join(ROOT, "data", "scenes", "geotech.toml"), "rb") as fh:
+        paths = tomllib.load(fh)["paths"]
+    curves = glob.glob(os.path.join(DATA, "curves", "mu_*", "*", "*", "*", "m*.csv"))
+    assert len(curves) >= 8 * 4 * 4
+    for path in curves:
+        (key, target), = paths[path.split(os.sep)[-2]][-1]["until"].items()
+        header, rows = data_rows(path)
+        end = float(rows[-1][header.index(key)])
+        assert abs(end) >= abs(target) and abs(end) - abs(target) < 0.01, (path, key, end, target)
+
+
+def test_the_failure_surface_has_five_b_values_at_every_mu_and_preparation():
+    """Every (mu, prep, level) with curves has the whole constant-p family, b = 0 ... 1, over 4 packings."""
+    with open(os.path.join(DATA, "failure_surface_cs.csv")) as fh:
+        rows = list(csv.DictReader(fh))
+    cells = {(r["mu"], r["prep"], r["level"]) for r in rows}
+    on_disk = {tuple(p.split(os.sep)[-3:]) for p in glob.glob(os.path.join(DATA, "curves", "mu_*", "*", "*"))}
+    assert {(m[3:], p, lv) for m, p, lv in on_disk} == cells
+    assert {c[0] for c in cells} == {"0", "0.3", "0.5"}
+    for cell in cells:
+        rs = [r for r in rows if (r["mu"], r["prep"], r["level"]) == cell]
+        assert sorted(float(r["b_target"]) for r in rs) == [0, 0.25, 0.5, 0.75, 1], cell
+        assert all(r["K"] == "4" for r in rs), cell
+
+
+def test_the_rate_series_at_the_scene_rate_is_a_prefix_of_the_stored_curves():
+    """data/geotech/rate's curves at the scene's rate (3e-5/t_c) and their twins in curves/ are one
+    deterministic run: equal in every column both keep, row for row, over the rate curve's length but
+    its last row (the row written where the rate series stops, which a longer test passes without a
+    row)."""
+    twins = glob.glob(os.path.join(DATA, "rate", "curves", "mu_*", "*", "*", "*", "r3e-5", "m*.csv"))
+    assert len(twins) == 16
+    for path in twins:
+        parts = path.split(os.sep)
+        h1, a = data_rows(path)
+        h2, b = data_rows(os.path.join(DATA, "curves", *parts[-6:-2], parts[-1]))
+        common = [c for c in h1 if c in h2 and c != "stage"]
+        assert len(common) >= 8
+        pick = lambda h, rows: [[r[h.index(c)] for c in common] for r in rows]
+        assert len(b) >= len(a) - 1
+        assert pick(h1, a[:-1]) == pick(h2, b[:len(a) - 1]), path
+        if len(b) == len(a):                       # same length: the same test, the stop row too
+            assert pick(h1, a[-1:]) == pick(h2, b[-1:]), path

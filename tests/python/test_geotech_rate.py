@@ -112,3 +112,19 @@ def test_unsteady_rates_are_left_out_of_the_fits():
     assert (fit["nu_max"], fit["a"]) == pytest.approx((0.62, 0.3))
     (with_it,) = gr.law_fits(members)
     assert with_it["rates"] == 9 and with_it["mu_s"] != pytest.approx(TRUE[0], rel=1e-3)
+
+
+def test_the_stop_override_is_the_scene_path_with_only_its_end_changed(tmp_path):
+    """--eps-d's `--set paths.TEST=...` parses (as TOML, the way `dem` reads a --set) to the scene's own
+    stages with the last one's `until` replaced, every other key and value kept."""
+    import tomllib
+    scene = tmp_path / "s.toml"
+    scene.write_text('[paths]\nT = [ { rate = "SS_xz", sigma_p0 = { z = 1.0 }, until = { eps_d = 1.2 } },\n'
+                     '      { rate = [0, 0, -1], pressure_p0 = 0.5, lode_b = 0.25, until = { eps_zz = -0.4 } } ]\n')
+    flag, value = gr.stop_override(str(scene), "T", 0.6)
+    key, text = value.split("=", 1)
+    assert flag == "--set" and key == "paths.T"
+    got = tomllib.loads("T = " + text)["T"]
+    want = tomllib.loads(scene.read_text())["paths"]["T"]
+    want[-1]["until"] = {"eps_d": 0.6}
+    assert got == want
