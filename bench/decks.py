@@ -53,6 +53,18 @@ DEM = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 
 SCENE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data", "scenes", "quickstart.toml")
 
 
+def dem_info(dem, scene, flag, sets):
+    """`dem info SCENE FLAG --set ...` (FLAG --lammps, --liggghts): its output; RuntimeError with
+    dem's message when it refuses (a sub-model without a counterpart)."""
+    cmd = [dem, "info", scene, flag]
+    for kv in sets:
+        cmd += ["--set", kv]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode:
+        raise RuntimeError(f"{' '.join(cmd)}: {r.stderr.strip()}")
+    return r.stdout.strip()
+
+
 @functools.lru_cache(maxsize=None)
 def pair_coeff(sets=(), dem=DEM, scene=SCENE):
     """The LAMMPS `pair_coeff * * ...` line of our contact law for the scene with `sets` (a tuple of
@@ -62,13 +74,7 @@ def pair_coeff(sets=(), dem=DEM, scene=SCENE):
     ours' no-tension clamp, contact.allow_attractive = false; Hertz's e' is the value whose LAMMPS
     polynomial alpha(e') equals ours' alpha, docs/contact_models.md). Raises RuntimeError with
     dem's message when a chosen sub-model has no LAMMPS counterpart (Luding's law)."""
-    cmd = [dem, "info", scene, "--lammps"]
-    for kv in sets:
-        cmd += ["--set", kv]
-    r = subprocess.run(cmd, capture_output=True, text=True)
-    if r.returncode:
-        raise RuntimeError(f"{' '.join(cmd)}: {r.stderr.strip()}")
-    return r.stdout.strip()
+    return dem_info(dem, scene, "--lammps", sets)
 
 
 def lammps_deck(data, steps, rate, dt, sets=(), k=None, gamma=None, gamma_b=0.1, skin=2e-4, warmup=0, thermo=False):
@@ -118,13 +124,7 @@ def liggghts_lines(sets=(), dem=DEM, scene=SCENE):
     on` (absolute_damping: gamma is the dashpot itself, not times the effective mass; limitForce:
     ours' no-tension clamp) and `pair_coeff * *`. Raises RuntimeError with dem's message when a
     chosen sub-model has no LIGGGHTS counterpart declared (Hertz, Mindlin, rolling, Luding)."""
-    cmd = [dem, "info", scene, "--liggghts"]
-    for kv in sets:
-        cmd += ["--set", kv]
-    r = subprocess.run(cmd, capture_output=True, text=True)
-    if r.returncode:
-        raise RuntimeError(f"{' '.join(cmd)}: {r.stderr.strip()}")
-    return r.stdout.strip()
+    return dem_info(dem, scene, "--liggghts", sets)
 
 
 def liggghts_deck(data, steps, rate, dt, sets=(), k=None, gamma=None, gamma_b=0.1, skin=2e-4):
