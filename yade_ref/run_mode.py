@@ -3,6 +3,10 @@
 #
 #   yade -n -x -j1 yade_ref/run_mode.py --packing P.txt --mode D2 --rate-tc 4e-5 --eps-max 0.3 --out yade.csv
 #
+# With --scene SCENE.toml [--set KEY=VALUE ...] the YADE law, density, t_c radius, dt, rate, sampling and
+# background damping come from ours' scene (`build/dem info SCENE --yade`: each contact sub-model's
+# YADE counterpart in the registry; a law without one is refused by name); options given here win.
+#
 # Constant side stress (triaxial, docs/control.md): --mode uniaxial_z --side-stress-p0 1 holds
 # sigma_xx = sigma_yy = 1 x p0 (the pressure of the packing as loaded) with YADE's own
 # PeriTriaxController (quasi-static branch, dynCell=False, stressMask x|y) while z is compressed at
