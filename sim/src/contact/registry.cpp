@@ -390,21 +390,36 @@ std::vector<std::string> describe_contact(const ContactLaw& law, const PairScale
   return out;
 }
 
-std::string lammps_pair_coeff(const ContactLaw& law) {
-  const std::vector<const SubModelInfo*> chosen = chosen_submodels(law);
-  std::string line = "pair_coeff * *";
+namespace {
+
+using WordsOf = std::function<std::string(const ContactLaw&)> SubModelInfo::*;
+
+// Each chosen sub-model's words in another code's input (the member `words`), each after a space;
+// SceneError naming the sub-model that has none ("has no " + what + ": " + its member `why`) or
+// whose values that code cannot take (the std::invalid_argument its words throw).
+std::string chosen_words(const std::vector<const SubModelInfo*>& chosen, const ContactLaw& law, WordsOf words,
+                         std::string SubModelInfo::*why, const std::string& what) {
+  std::string line;
   for (const SubModelInfo* m : chosen) {
-    if (!m->lammps_words)
-      throw SceneError("contact." + slot_name(m->slot) + " = \"" + m->name + "\" has no LAMMPS pair granular counterpart: " +
-                       m->lammps);
-    std::string words;
+    if (!(m->*words))
+      throw SceneError("contact." + slot_name(m->slot) + " = \"" + m->name + "\" has no " + what + ": " + m->*why);
+    std::string w;
     try {
-      words = m->lammps_words(law);
+      w = (m->*words)(law);
     } catch (const std::invalid_argument& e) {
       throw SceneError(e.what());
     }
-    if (!words.empty()) line += " " + words;
+    if (!w.empty()) line += " " + w;
   }
+  return line;
+}
+
+}  // namespace
+
+std::string lammps_pair_coeff(const ContactLaw& law) {
+  const std::vector<const SubModelInfo*> chosen = chosen_submodels(law);
+  std::string line = "pair_coeff * *" + chosen_words(chosen, law, &SubModelInfo::lammps_words, &SubModelInfo::lammps,
+                                                     "LAMMPS pair granular counterpart");
   if (chosen.front()->lammps_tail) line += " " + chosen.front()->lammps_tail(law);
   return line;
 }
@@ -441,32 +456,18 @@ std::string common_yade_law(const std::vector<const SubModelInfo*>& chosen, cons
 
 std::string yade_run_mode_options(const ContactLaw& law) {
   const std::vector<const SubModelInfo*> chosen = chosen_submodels(law);
-  for (const SubModelInfo* m : chosen)
-    if (!m->yade_words)
-      throw SceneError("contact." + slot_name(m->slot) + " = \"" + m->name +
-                       "\" has no counterpart in yade_ref/run_mode.py: " + m->yade);
-  std::string line = "--law " + common_yade_law(chosen, law);
-  for (const SubModelInfo* m : chosen) {
-    std::string words;
-    try {
-      words = m->yade_words(law);
-    } catch (const std::invalid_argument& e) {
-      throw SceneError(e.what());
-    }
-    if (!words.empty()) line += " " + words;
-  }
-  return line;
+  const std::string words = chosen_words(chosen, law, &SubModelInfo::yade_words, &SubModelInfo::yade,
+                                         "counterpart in yade_ref/run_mode.py");
+  return "--law " + common_yade_law(chosen, law) + words;
 }
 
 std::string liggghts_pair_style(const ContactLaw& law) {
   const std::vector<const SubModelInfo*> chosen = chosen_submodels(law);
   std::string fixes, style = "pair_style gran";
   int n = 0;
+  style += chosen_words(chosen, law, &SubModelInfo::liggghts_words, &SubModelInfo::liggghts,
+                        "LIGGGHTS pair gran counterpart here");
   for (const SubModelInfo* m : chosen) {
-    if (!m->liggghts_words)
-      throw SceneError("contact." + slot_name(m->slot) + " = \"" + m->name + "\" has no LIGGGHTS pair gran counterpart here: " +
-                       m->liggghts);
-    if (const std::string words = m->liggghts_words(law); !words.empty()) style += " " + words;
     if (m->liggghts_properties)
       for (const std::string& p : m->liggghts_properties(law)) {
         const std::size_t sp = p.find(' ');
