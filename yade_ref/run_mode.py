@@ -101,7 +101,6 @@ def _column_table():
     """The curve columns as ours defines them, once (sim/src/measure/measure.cpp, column_table):
     `dem info --columns --json` of the build beside this script (or $DEM_BIN)."""
     import json
-    import os
     import subprocess
     dem = _dem_binary()
     try:
