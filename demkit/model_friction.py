@@ -170,11 +170,12 @@ def table(work, mus, norm_work=None, middle="norm"):
     md += ["", "| μ | χ²/dof group | χ²/dof extended | held-out test chooses |", "|---|---|---|---|"]
     md += [f"| {mu} | {gc:.3g} | {xc:.3g} | {ch} |" for mu, gc, xc, ch, _ in chis]
     # Compact: per mu the worst curve of each kind, before -> (norm rule ->) after.
+    d3_role = next((r[3] for r in out_rows if r[1] == "D3"), "predicted")   # fitted with --calibrate-on D2,D3
     if d2_moves:
-        md += ["", f"| μ | χ²/dof ({arrow}) | worst fitted D2 | worst predicted D3 | worst predicted isobaric "
+        md += ["", f"| μ | χ²/dof ({arrow}) | worst fitted D2 | worst {d3_role} D3 | worst predicted isobaric "
                "| chosen |", "|---|---|---|---|---|---|"]
     else:
-        md += ["", f"| μ | χ²/dof before → after | worst fitted D2 | worst predicted D3 ({arrow}) | worst predicted "
+        md += ["", f"| μ | χ²/dof before → after | worst fitted D2 | worst {d3_role} D3 ({arrow}) | worst predicted "
                "isobaric | chosen |", "|---|---|---|---|---|---|"]
     for mu, gc, xc, ch, nc in chis:
         cells = []
@@ -225,11 +226,14 @@ def main(argv=None):
     ap.add_argument("--mu", nargs="+", default=list(MUS))
     ap.add_argument("--no-jackknife", action="store_true")
     ap.add_argument("--surface", default="ld")
-    ap.add_argument("--fabric-lode", default="overlap", choices=("principal", "norm", "opening", "overlap", "extension"),
+    ap.add_argument("--fabric-lode", default="overlap", choices=("principal", "norm", "opening", "overlap", "extension", "weighted"),
                     help="the extended family's fabric-limit rule (norm: the first round's numbers)")
     ap.add_argument("--state-limit", default="none", choices=("none", "pressure"),
                     help="the extended family's stress-ratio limit (pressure: the state-dependent limit of issue 31's "
                          "fifth round, n_psi fitted)")
+    ap.add_argument("--calibrate-on", default="D2",
+                    help="the modes fitted, passed to `dem model --calibrate-on` (D2,D3 for the weighted rule, which needs "
+                         "a second Lode angle; the others are predicted)")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
     ap.add_argument("--middle-rule", default="norm", help="the --fabric-lode of --norm-work's run (its column name)")
     ap.add_argument("--norm-work", default=None,
@@ -251,6 +255,8 @@ def main(argv=None):
             cmd.append("--no-jackknife")
         if a.state_limit != "none":
             cmd += ["--state-limit", a.state_limit]
+        if a.calibrate_on != "D2":
+            cmd += ["--calibrate-on", a.calibrate_on]
         print("model_friction:", " ".join(cmd), file=sys.stderr)
         with open(os.path.join(dst, "model.log"), "w") as log:
             if subprocess.call(cmd, stderr=log) not in (0, 1):

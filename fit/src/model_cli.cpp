@@ -128,6 +128,7 @@ CurveData leave_one_out(const CurveData& c, const fs::path& member_csv) {
 std::string law_of(const std::string& n) {
   if (n == "p0" || n == "nu_c" || n == "gamma_p") return "p*(nu) = p0 (nu C(nu)/nu_c) x (1 + gamma_p x), x = ln(nu/nu_c)";
   if (n == "C0" || n == "C1" || n == "nu_cC" || n == "alpha") return "C(nu) = C0 + C1 (nu/nu_cC - 1)^alpha";
+  if (n == "ln_delta_w" || n == "n_w") return "Lode weight w = 1/(1 + exp(n_w (ln_delta_w - ln(delta/d)))), delta/d = pi p*/(C nu)";
   const std::string q = n.substr(0, n.size() - 2);
   return q + "(nu) = " + q + "_a + " + q + "_b (nu - nu_ref)";
 }
@@ -136,6 +137,7 @@ std::string unit_of(const std::string& n) {
   if (n == "p0") return "p* (p = p* k/(2<r>))";
   if (n.size() > 2 && n.compare(n.size() - 2, 2, "_b") == 0) return "[coefficient_a] per unit nu";
   if (n.rfind("ln_beta", 0) == 0) return "ln(1/unit eps_d)";
+  if (n == "ln_delta_w") return "ln(overlap/diameter)";
   return "-";
 }
 
@@ -542,11 +544,13 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   else if (o.fabric_lode == "opening") co.fabric = FabricLode::Opening;
   else if (o.fabric_lode == "overlap") co.fabric = FabricLode::Overlap;
   else if (o.fabric_lode == "extension") co.fabric = FabricLode::Extension;
+  else if (o.fabric_lode == "weighted") co.fabric = FabricLode::Weighted;
   else throw InputError("--fabric-lode " + o.fabric_lode + ": give principal (the largest principal deviatoric fabric "
                         "saturates at every Lode angle), norm (F_dev saturates at F_max at every Lode angle), opening "
                         "(principal, and the fabric gated by the minor principal stress), overlap (the default: principal, "
                         "and the fabric gated by the fraction of contacts opened by the extension strain) or extension "
-                        "(overlap, and the fabric's rate per unit extension strain)");
+                        "(overlap, and the fabric's rate per unit extension strain) or weighted (the Lode dependence of "
+                        "the onset and the rate weighted by the contact overlap; needs a second Lode angle in --calibrate-on)");
   if (o.state_limit == "pressure") co.state_limit = true;
   else if (o.state_limit != "none")
     throw InputError("--state-limit " + o.state_limit + ": give none (the default: the stress-ratio limit s_max(nu) on the "
@@ -769,7 +773,9 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "largest principal deviatoric fabric saturates at every Lode angle), norm (F_dev saturates at F_max), opening "
                  "(principal, and the fabric gated by the minor principal stress), overlap (the default: principal, and "
                  "the fabric gated by the fraction of contacts opened by the extension strain), extension (overlap, and "
-                 "the fabric's rate per unit extension strain; docs/model.md)");
+                 "the fabric's rate per unit extension strain), weighted (the onset's and the rate's Lode dependence "
+                 "raised to a weight that rises with the contact overlap, two coefficients; needs a second Lode angle "
+                 "in --calibrate-on, e.g. D2,D3; docs/model.md)");
   app.add_option("--state-limit", o.state_limit, "extended family's stress-ratio limit: none (the default) or pressure "
                  "(s_lim (p_ref/p)^n_psi, a state parameter in pressure form, n_psi(nu) fitted: a peak that falls as p "
                  "rises at constant volume or nu falls under constant p; docs/model.md)");

@@ -355,7 +355,8 @@ Parameters read_parameters(const std::string& path) {
   P.extended = v.count(ext_name(0)) > 0;
   P.state_limit = P.extended && v.count(ext_name(kNPsiA)) > 0;
   if (P.extended)
-    for (int i = 0; i < ext_size(P.state_limit); ++i) P.ext[i] = get(ext_name(i));
+    for (int i = 0; i < kNumExt; ++i)
+      if (i < kNumExtBase || v.count(ext_name(i))) P.ext[i] = get(ext_name(i));
   return P;
 }
 
@@ -387,7 +388,7 @@ const char* surface_name(Surface s) {
 const char* fabric_lode_name(FabricLode f) {
   return f == FabricLode::Principal ? "principal" : f == FabricLode::Opening ? "opening"
          : f == FabricLode::Overlap ? "overlap"
-         : f == FabricLode::Extension ? "extension" : "norm";
+         : f == FabricLode::Extension ? "extension" : f == FabricLode::Weighted ? "weighted" : "norm";
 }
 
 CurveData read_curve(const std::string& path, const std::string& mode, double nu) {
@@ -489,7 +490,7 @@ void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& 
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
-    if (X) cost->AddParameterBlock(ext_size(o.state_limit));
+    if (X) cost->AddParameterBlock(ext_size(o.state_limit, o.fabric == FabricLode::Weighted));
     cost->SetNumResiduals(3 * static_cast<int>(c.eps.size()));
     problem.AddResidualBlock(cost, nullptr, blocks_all);
     n_res += 3 * static_cast<int>(c.eps.size());
@@ -527,7 +528,7 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
-    if (X) cost->AddParameterBlock(ext_size(o.state_limit));
+    if (X) cost->AddParameterBlock(ext_size(o.state_limit, o.fabric == FabricLode::Weighted));
     cost->SetNumResiduals(3 * static_cast<int>(n));
     problem.AddResidualBlock(cost, nullptr, blocks_all);
     n_res += 3 * static_cast<int>(n - 1 - prefix);   // weighted rows only
@@ -582,7 +583,7 @@ void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const 
 // The parameters' bounds: jamming fractions below every start state, positive alpha and p0, the
 // rates' ranges (tighter for the frictional family, whose rate laws have stiff corners).
 void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
-                std::vector<double>& ext, double numin, bool X, bool state_limit) {
+                std::vector<double>& ext, double numin, bool X, bool state_limit, bool weighted) {
   problem.SetParameterUpperBound(isob.data(), kNuC, numin * (1 - 1e-6));
   problem.SetParameterUpperBound(isob.data(), kNuCC, numin * (1 - 1e-6));
   problem.SetParameterLowerBound(isob.data(), kAlpha, 0.05);
@@ -610,6 +611,12 @@ void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<
       problem.SetParameterLowerBound(ext.data(), kNPsiA, -10.0);
       problem.SetParameterUpperBound(ext.data(), kNPsiA, 10.0);
     }
+    if (weighted) {   // the switch between overlaps of 1e-4 and 0.5 d, no steeper than (delta/delta_w)^30
+      problem.SetParameterLowerBound(ext.data(), kLnDeltaW, std::log(1e-4));
+      problem.SetParameterUpperBound(ext.data(), kLnDeltaW, std::log(0.5));
+      problem.SetParameterLowerBound(ext.data(), kNW, 0.0);
+      problem.SetParameterUpperBound(ext.data(), kNW, 30.0);
+    }
   }
 
 }
@@ -617,7 +624,7 @@ void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<
 // Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof).
 void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
                        std::vector<double>& ext, const CalibrationOptions& o, bool X, Calibration& cal) {
-  const int np = kNumIso + kNumShear + (X ? ext_size(o.state_limit) : 0);
+  const int np = kNumIso + kNumShear + (X ? ext_size(o.state_limit, o.fabric == FabricLode::Weighted) : 0);
   cal.se_cov.assign(np, kNaN);
   cal.corr.assign(np, std::vector<double>(np, kNaN));
   ceres::Covariance::Options co;
@@ -716,17 +723,54 @@ void clamp_extended_start(std::vector<double>& shear, std::vector<double>& ext) 
   ext[kNFA] = std::min(std::max(ext[kNFA], -1.0), 30.0);
   ext[kKappaA] = std::min(std::max(ext[kKappaA], -0.9), 30.0);
   ext[kChiD] = std::min(std::max(ext[kChiD], -1.0), 3.0);
+  if (ext[kLnDeltaW] == 0.0 && ext[kNW] == 0.0) {   // the `Weighted` rule's start (unread by the others): w = 1/2 at
+    ext[kLnDeltaW] = std::log(kDeltaWStart);        // delta/d = 0.03, the middle of the friction study's overlaps
+    ext[kNW] = 4.0;
+  }
 }
 
-/// One start volume fraction: every nu-slope (*_b) held at 0 (not determined by the data).
-void hold_nu_slopes(ceres::Problem& problem, std::vector<double>& shear, std::vector<double>& ext, bool X, bool state_limit) {
-  for (int i = 1; i < kNumShear; i += 2) shear[i] = 0.0;
-  problem.SetManifold(shear.data(), new ceres::SubsetManifold(kNumShear, {1, 3, 5, 7, 9, 11}));
-  if (!X) return;
-  std::vector<int> slopes = {kNFB, kKappaB, kDilB};
-  if (state_limit) slopes.push_back(kNPsiB);
-  for (int i : slopes) ext[i] = 0.0;
-  problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit), slopes));
+/// The extension coefficients held at 0: the nu-slopes (*_b) from one start volume fraction (not
+/// determined by the data), and n_psi when the `Weighted` rule's block carries it with the limit off.
+std::vector<int> held_ext(bool one_nu, bool state_limit, bool weighted) {
+  std::vector<int> held;
+  if (one_nu) held = {kNFB, kKappaB, kDilB};
+  if (one_nu && state_limit) held.push_back(kNPsiB);
+  if (weighted && !state_limit) held.insert(held.end(), {kNPsiA, kNPsiB});
+  return held;
+}
+
+/// One start volume fraction: every nu-slope (*_b) held at 0; with the extension block, held_ext.
+void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<double>& ext, bool X, bool one_nu,
+              bool state_limit, bool weighted) {
+  if (one_nu) {
+    for (int i = 1; i < kNumShear; i += 2) shear[i] = 0.0;
+    problem.SetManifold(shear.data(), new ceres::SubsetManifold(kNumShear, {1, 3, 5, 7, 9, 11}));
+  }
+  const std::vector<int> held = held_ext(one_nu, state_limit, weighted);
+  if (!X || held.empty()) return;
+  for (int i : held) ext[i] = 0.0;
+  problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit, weighted), held));
+}
+
+/// Entries [pos, pos + n) of the reported parameters removed (names, values, errors, correlations):
+/// coefficients the block carries but the law does not have.
+void drop_entries(Calibration& cal, int pos, int n) {
+  cal.names.erase(cal.names.begin() + pos, cal.names.begin() + pos + n);
+  cal.value.erase(cal.value.begin() + pos, cal.value.begin() + pos + n);
+  cal.se_cov.erase(cal.se_cov.begin() + pos, cal.se_cov.begin() + pos + n);
+  cal.corr.erase(cal.corr.begin() + pos, cal.corr.begin() + pos + n);
+  for (auto& row : cal.corr) row.erase(row.begin() + pos, row.begin() + pos + n);
+}
+
+/// The `Weighted` rule's coefficients are identified by a second Lode angle only: refused without one.
+void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector<PathData>& paths) {
+  for (const auto& c : curves)
+    if (lode_b_of(c.mode) != kLodeBD2) return;
+  for (const auto& d : paths)
+    if (lode_b_of(d.name) != kLodeBD2) return;
+  throw std::invalid_argument("model calibration: the weighted fabric rule's Lode weight (ln_delta_w, n_w) acts only away "
+                              "from D2's Lode angle, and every calibrated curve is at b = 1/2: add a second Lode angle "
+                              "(--calibrate-on D2,D3, or a triaxial path) or choose another --fabric-lode");
 }
 
 }  // namespace
@@ -744,6 +788,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   const double nu_ref = o.nu_ref > 0 ? o.nu_ref : nu_mean;
   Parameters start = o.start ? recentred(*o.start, nu_ref) : start_values(curves, iso, nu_ref);
   const bool X = o.extended;
+  if (X && o.fabric == FabricLode::Weighted) check_weighted_lode(curves, paths);
   if (X && !o.start) {
     // The frictional family starts from the group model's calibration (its nested case) with a
     // moderate extension: a fabric gated by the mobilisation, a stress ratio linear for longer.
@@ -776,7 +821,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (int i : {kNuC, kNuCC})
     if (isob[i] > numin * (1 - 1e-6)) isob[i] = numin - 0.005;
   add_isotropic_residuals(problem, iso, o, isob, numin, n_res);
-  set_bounds(problem, isob, shear, ext, numin, X, o.state_limit);
+  const bool weighted = X && o.fabric == FabricLode::Weighted;
+  set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted);
   if (o.fit_isotropic && !held.empty())
     problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 
@@ -786,7 +832,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (const auto& c : curves) nus_seen.insert(std::llround(c.nu * 1e6));
   for (const auto& d : paths) nus_seen.insert(std::llround(d.nu * 1e6));
   const bool one_nu = nus_seen.size() < 2;
-  if (one_nu) hold_nu_slopes(problem, shear, ext, X, o.state_limit);
+  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted);
 
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
@@ -809,10 +855,12 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   cal.params.surface = X ? o.surface : Surface::None;
   cal.params.fabric = X ? o.fabric : FabricLode::Norm;
   cal.params.state_limit = X && o.state_limit;
-  const int n_ext = ext_size(cal.params.state_limit);
+  const int n_ext = ext_size(cal.params.state_limit, weighted);
+  const std::vector<int> held_x = X ? held_ext(one_nu, cal.params.state_limit, weighted) : std::vector<int>();
   cal.chi2 = 2 * sum.final_cost;
   cal.n_residuals = n_res;
-  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear + (X ? n_ext - (one_nu ? (cal.params.state_limit ? 4 : 3) : 0) : 0);
+  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear +
+               (X ? n_ext - static_cast<int>(held_x.size()) : 0);
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(isob[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(shear[i]); }
   if (X)
@@ -820,7 +868,9 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
 
   covariance_errors(problem, isob, shear, ext, o, X, cal);
   for (int i : held) cal.se_cov[i] = kNaN;   // held at the start value: no error of its own
+  for (int i : held_x) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
   calibration_warnings(curves, paths, iso, o, isob, numin, one_nu, X, cal);
+  if (weighted && !cal.params.state_limit) drop_entries(cal, kNumIso + kNumShear + kNPsiA, 2);   // n_psi: not in this law
   return cal;
 }
 

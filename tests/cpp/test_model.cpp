@@ -1029,6 +1029,148 @@ TEST(ModelFriction, StateLimitIsAPressureFormStateParameter) {
 // resolved from 0, and D3 from the same truth predicted within a band.
 TEST(ModelFriction, RecoversTheStateLimit) { recover_extension(FabricLode::Overlap, true); }
 
+// The weighted rule (issue 31, sixth round): the Lode dependence of the fabric's onset and rate,
+// (c3(b)/c3(1/2))^w, weighted by w = 1/(1 + exp(n_w (ln delta_w - ln delta))). (i) w against the
+// formula by hand, 1/2 at delta_w, 0 where the overlap is not positive. (ii) D2 is the overlap rule's,
+// bit for bit, whatever w's coefficients. (iii) With n_F = 0 (no gate) and n_w = 0 (w = 1/2 exactly)
+// the D3 fabric at constant volume is the relaxation in closed form at the rate beta_F 3^(-1/4);
+// with w -> 1 the extension rule's closed form (rate / sqrt(3)), with w -> 0 the rate beta_F itself.
+// (iv) With the gate on and w -> 1 the D3 right-hand side is the extension rule's. (v) A calibration
+// on D2 alone cannot see w and is refused by name.
+TEST(ModelFriction, WeightedRuleSpansTheLodeBlindAndTheExtensionRules) {
+  const double ex0[kNumExt] = {0, 0, 0, 0, 0, 0, 0, 0, 0, std::log(0.02), 6.0};
+  EXPECT_DOUBLE_EQ(lode_weight(ex0, 0.02), 0.5);
+  EXPECT_NEAR(lode_weight(ex0, 0.04), 1.0 / (1.0 + std::pow(0.02 / 0.04, 6.0)), 1e-15);
+  EXPECT_EQ(lode_weight(ex0, 0.0), 0.0);
+  const Parameters P = frictional_truth();
+  const auto iso = P.iso();
+  const double nu = 0.78, p0 = isotropic_pressure(iso.data(), nu);
+  std::vector<double> eps;
+  for (int i = 0; i <= 60; ++i) eps.push_back(0.005 * i);
+  auto run = [&](const double* ext, const char* mode, FabricLode f) {
+    return monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, eps, 2e-3,
+                                  Ext<double>{ext, lode_b_of(mode), P.surface, f});
+  };
+  double ext[kNumExt];
+  std::copy(P.ext, P.ext + kNumExt, ext);
+  ext[kLnDeltaW] = std::log(0.03);
+  ext[kNW] = 5.0;
+  const auto w2 = run(ext, "D2", FabricLode::Weighted), o2 = run(ext, "D2", FabricLode::Overlap);
+  for (std::size_t i = 0; i < eps.size(); ++i) {
+    EXPECT_EQ(w2[i].F, o2[i].F) << i;
+    EXPECT_EQ(w2[i].p, o2[i].p) << i;
+    EXPECT_EQ(w2[i].s, o2[i].s) << i;
+  }
+  const Local<double> L = local(P.shear, nu, P.nu_ref);
+  const double F_lim = std::sqrt(3.0) / 2 * L.F_max;
+  const std::pair<double, double> cases[] = {{0.0, std::pow(3.0, -0.25)}, {30.0, 1.0 / std::sqrt(3.0)}, {-30.0, 1.0}};
+  for (const auto& [n_w, rate] : cases) {   // n_w = +-30 about ln delta_w = -3.5 +- 6.5: w = 1 or 0 to 1e-80
+    double flat[kNumExt];
+    std::copy(ext, ext + kNumExt, flat);
+    flat[kNFA] = flat[kNFB] = 0.0;
+    flat[kNW] = n_w == 0.0 ? 0.0 : 30.0;
+    flat[kLnDeltaW] = n_w > 0 ? -10.0 : n_w < 0 ? std::log(0.5) + 2.0 : -3.5;
+    const auto w3 = run(flat, "D3", FabricLode::Weighted);
+    for (std::size_t i = 0; i < eps.size(); ++i)
+      EXPECT_NEAR(w3[i].F, F_lim + (0.01 - F_lim) * std::exp(-L.beta_F * rate * eps[i]), 1e-9) << n_w << " " << i;
+  }
+  double one[kNumExt];
+  std::copy(ext, ext + kNumExt, one);
+  one[kLnDeltaW] = -10.0;
+  one[kNW] = 30.0;
+  State<double> y{std::log(nu), 0.1, 0.3, 0.05};
+  y.l = 0.05;
+  auto rhs_at = [&](const double* e, FabricLode f) {
+    const Material<double> m{iso.data(), P.shear, P.nu_ref, 1.0, Ext<double>{e, 0.0, Surface::LadeDuncan, f}};
+    return rhs(m, y, 1.0, Segment{});
+  };
+  const State<double> dw = rhs_at(one, FabricLode::Weighted), de = rhs_at(one, FabricLode::Extension);
+  EXPECT_NEAR(dw.F, de.F, 1e-13 * std::fabs(de.F));
+  EXPECT_EQ(dw.s, de.s);
+  EXPECT_EQ(dw.p, de.p);
+
+  Parameters Pw = P;
+  Pw.fabric = FabricLode::Weighted;
+  std::copy(ext, ext + kNumExt, Pw.ext);
+  const Synthetic S = synthetic(Pw, {0.74, 0.80}, 4, 0.9, 5);
+  CalibrationOptions o;
+  o.fit_isotropic = false;
+  o.extended = true;
+  o.fabric = FabricLode::Weighted;
+  o.start = &Pw;
+  try {
+    calibrate(S.mean, {}, o);
+    ADD_FAILURE() << "a weighted calibration on D2 alone was not refused";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("second Lode angle"), std::string::npos) << e.what();
+  }
+}
+
+// Synthetic D2 and D3 ensembles under the weighted rule, w switching from 0.1 at nu = 0.69 to 0.9 at
+// 0.80 (the isotropic states' overlaps): the calibration on both Lode angles recovers every extension
+// coefficient, ln delta_w and n_w among them, within 3 jackknife SE (K = 8, AR(1) noise), resolves n_w
+// from 0, and reports no n_psi (the state limit is off).
+TEST(ModelFriction, RecoversTheLodeWeightFromTwoLodeAngles) {
+  Parameters P = frictional_truth();
+  P.fabric = FabricLode::Weighted;
+  const auto iso = P.iso();
+  const double lo = std::log(mean_overlap(iso.data(), 0.69, isotropic_pressure(iso.data(), 0.69)));
+  const double hi = std::log(mean_overlap(iso.data(), 0.80, isotropic_pressure(iso.data(), 0.80)));
+  P.ext[kLnDeltaW] = 0.5 * (lo + hi);
+  P.ext[kNW] = 2.0 * std::log(9.0) / (hi - lo);
+  const int K = 8;
+  const std::vector<double> nus = {0.69, 0.74, 0.80};
+  const Synthetic S2 = synthetic(P, nus, K, 0.9, 21), S3 = synthetic(P, nus, K, 0.9, 22, "D3");
+  std::vector<CurveData> all = S2.mean;
+  all.insert(all.end(), S3.mean.begin(), S3.mean.end());
+  std::vector<std::vector<CurveData>> members = S2.members;
+  members.insert(members.end(), S3.members.begin(), S3.members.end());
+  CalibrationOptions o;
+  o.fit_isotropic = false;
+  o.nu_ref = P.nu_ref;
+  o.max_step = 2e-3;
+  o.extended = true;
+  o.surface = Surface::LadeDuncan;
+  o.fabric = FabricLode::Weighted;
+  Parameters start = P;
+  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.9 : 1.05);
+  for (int i = 0; i < kNumExt; ++i) start.ext[i] *= (i % 2 ? 0.8 : 1.2);
+  o.start = &start;
+  const Calibration cal = calibrate(all, {}, o);
+  ASSERT_TRUE(cal.ok) << cal.message;
+  ASSERT_EQ(cal.value.size(), static_cast<std::size_t>(kNumIso + kNumShear + kNumExtBase + 2));
+  EXPECT_EQ(cal.names.back(), "n_w");
+  CalibrationOptions oj = o;
+  oj.start = &cal.params;
+  std::vector<std::vector<double>> est;
+  for (int k = 0; k < K; ++k) {
+    std::vector<CurveData> loo;
+    for (std::size_t j = 0; j < all.size(); ++j) {
+      CurveData c = all[j];
+      const CurveData& x = members[j][k];
+      for (std::size_t i = 0; i < c.eps.size(); ++i) {
+        c.p[i] = (K * c.p[i] - x.p[i]) / (K - 1);
+        c.s[i] = (K * c.s[i] - x.s[i]) / (K - 1);
+        c.F[i] = (K * c.F[i] - x.F[i]) / (K - 1);
+      }
+      loo.push_back(c);
+    }
+    est.push_back(calibrate(loo, {}, oj).value);
+  }
+  for (std::size_t a = kNumIso + kNumShear; a < cal.value.size(); ++a) {
+    const int i = static_cast<int>(a) - kNumIso - kNumShear;
+    const int idx = i < kNumExtBase ? i : i + 2;   // past the n_psi entries the report leaves out
+    double mean = 0, ss = 0;
+    for (const auto& e : est) mean += e[a] / K;
+    for (const auto& e : est) ss += (e[a] - mean) * (e[a] - mean);
+    const double se = std::sqrt((K - 1.0) / K * ss);
+    EXPECT_EQ(cal.names[a], ext_name(idx));
+    EXPECT_LT(std::fabs(cal.value[a] - P.ext[idx]), 3.0 * se + 1e-9)
+        << ext_name(idx) << ": estimate " << cal.value[a] << " truth " << P.ext[idx] << " jackknife se " << se;
+    if (idx == kNW) EXPECT_GT(cal.value[a] / se, 3.0) << "n_w not resolved from 0";
+  }
+}
+
 // The Lode surface moves the limit, not the initial stiffness: from s = 0 the stress ratio rises
 // at G/p = beta_s s_max in D2 (b = 1/2) and in D3 (b = 0) alike, and tends to s_max and to the
 // surface's s_lim(b = 0) respectively (kappa_s = 0 here: the plain relaxation law, solved).

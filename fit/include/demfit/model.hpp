@@ -52,13 +52,20 @@ enum ExtIndex {
   /// limit's state dependence, s_lim (p_ref/p)^n_psi = s_lim exp(-n_psi psi_p), psi_p = ln(p/p_ref) the
   /// state parameter in pressure form (docs/model.md, "The state-dependent limit").
   kNPsiA, kNPsiB,
+  /// The `Weighted` fabric rule's Lode weight (issue 31, sixth round; only with FabricLode::Weighted, else never
+  /// read): w = 1/(1 + (delta_w/delta)^n_w) in [0, 1], delta = delta/d the mean contact overlap; ln delta_w [-]
+  /// the overlap at which w = 1/2, n_w [-] the switch's steepness (docs/model.md, "The Lode weight").
+  kLnDeltaW, kNW,
   kNumExt
 };
 
 /// Number of extension coefficients without the state-dependent limit (the block Ceres sees when it is off).
 constexpr int kNumExtBase = kNPsiA;
-/// Size of the extension block: kNumExtBase, or kNumExt with the state-dependent limit.
-inline int ext_size(bool state_limit) { return state_limit ? kNumExt : kNumExtBase; }
+/// Size of the extension block: kNumExtBase, kNumExtBase + 2 with the state-dependent limit (n_psi), kNumExt
+/// with the `Weighted` rule's two coefficients (its n_psi entries then held at 0 when the limit is off).
+inline int ext_size(bool state_limit, bool weighted = false) {
+  return weighted ? kNumExt : state_limit ? kNumExtBase + 2 : kNumExtBase;
+}
 
 /// Lode-angle dependence of the stress-ratio limit: s_max is the limit at the calibration
 /// test's intermediate-stress ratio b_ref; at another b the limit lies on the same
@@ -94,7 +101,14 @@ constexpr double kLodeBD2 = 0.5;
 /// unit extension (minor principal) strain instead of per unit |eps_d|: beta_F c_3(b)/c_3(b_ref), so
 /// 1/sqrt(3) of D2's in axisymmetric compression. Identity at b_ref (D2 is `Overlap`'s, bit for bit).
 /// No parameter. docs/model.md, "The fabric's rate".
-enum class FabricLode { Norm = 0, Principal, Opening, Overlap, Extension };
+///
+/// `Weighted` (issue 31, sixth round): the limit and the opened-fraction gate as `Overlap`, with the Lode
+/// dependence of the onset and of the rate both raised to a weight w in [0, 1]: the gate's extension strain
+/// c_3(b_ref) (c_3(b)/c_3(b_ref))^w l and the rate beta_F (c_3(b)/c_3(b_ref))^w. w = 1 is `Extension`; w = 0
+/// a fabric blind to the Lode angle but for its limit. w rises with the mean contact overlap (lode_weight):
+/// two coefficients that only a second Lode angle in the calibration identifies (identity at b_ref).
+/// docs/model.md, "The Lode weight".
+enum class FabricLode { Norm = 0, Principal, Opening, Overlap, Extension, Weighted };
 
 /// Named view of all parameters (double), with units; `iso()`/`shear()` give the Ceres blocks.
 struct Parameters {
@@ -107,7 +121,7 @@ struct Parameters {
   double alpha = 0.5;      ///< [-] coordination power-law exponent
   double shear[kNumShear] = {0.16, -0.5, std::log(50.0), -5.0, 0.11, -0.8, std::log(40.0), -8.0,
                              0.3, -5.0, std::log(20.0), 0.0};
-  double ext[kNumExt] = {0, 0, 0, 0, 0, 0, 0, 0, 0};   ///< frictional extension (all 0: the group model)
+  double ext[kNumExt] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};   ///< frictional extension (all 0: the group model)
   bool extended = false;   ///< the frictional family (ext fitted, Lode surface `surface`)
   bool state_limit = false;   ///< the frictional family's state-dependent stress-ratio limit (n_psi fitted)
   Surface surface = Surface::None;   ///< Lode-angle surface of the extended family
@@ -117,6 +131,10 @@ struct Parameters {
   void set_iso(const double* v) { p0 = v[0]; nu_c = v[1]; gamma_p = v[2]; C0 = v[3]; C1 = v[4]; nu_cC = v[5]; alpha = v[6]; }
 };
 
+/// The `Weighted` rule's start: w = 1/2 at a mean overlap delta/d of 0.03 (the friction study's packings
+/// span about 0.01-0.06), n_w = 4.
+constexpr double kDeltaWStart = 0.03;
+
 /// Names of the shear coefficients as written in tables.
 inline const char* shear_name(int i) {
   static const char* n[kNumShear] = {"s_max_a", "s_max_b", "ln_beta_s_a", "ln_beta_s_b", "F_max_a", "F_max_b",
@@ -125,7 +143,7 @@ inline const char* shear_name(int i) {
 }
 inline const char* ext_name(int i) {
   static const char* n[kNumExt] = {"n_F_a", "n_F_b", "kappa_s_a", "kappa_s_b", "d_D_a", "d_D_b", "chi_D",
-                                   "n_psi_a", "n_psi_b"};
+                                   "n_psi_a", "n_psi_b", "ln_delta_w", "n_w"};
   return n[i];
 }
 inline const char* iso_name(int i) {
@@ -266,19 +284,37 @@ T mean_overlap(const T* iso, const T& nu, const T& p) {
   return T(3.14159265358979323846) * p / (coordination(iso, nu) * nu);
 }
 
-/// The `Overlap` rule's gate variable: the fraction of contacts opened along the extension
-/// directions, 1 - exp(-e_3/delta), e_3 = minor_fraction(b) l the extension principal strain
-/// after |eps_d| = l since the loading start (D2: l/sqrt(3); axisymmetric compression: l/3) and
-/// delta = mean_overlap (exponential force distribution, Radjai et al. 1996). Floored at 1e-6 like
-/// the mobilisation; 1 where the overlap is not positive.
+/// The gate variable with the extension strain's share c3 of l given: 1 - exp(-c3 l/delta),
+/// floored at 1e-6 like the mobilisation; 1 where the overlap is not positive.
 template <class T>
-T opened_fraction(const T* iso, const T& nu, const T& p, const T& l, double b) {
+T opened_fraction_c3(const T* iso, const T& nu, const T& p, const T& l, const T& c3) {
   using std::exp;
   const T delta = mean_overlap(iso, nu, p);
   if (!(delta > T(0.0))) return T(1.0);
-  T f = T(1.0) - exp(-T(minor_fraction(b)) * l / delta);
+  T f = T(1.0) - exp(-c3 * l / delta);
   if (!(f > T(1e-6))) f = T(1e-6);
   return f;
+}
+
+/// The `Overlap` rule's gate variable: the fraction of contacts opened along the extension
+/// directions, 1 - exp(-e_3/delta), e_3 = minor_fraction(b) l the extension principal strain
+/// after |eps_d| = l since the loading start (D2: l/sqrt(3); axisymmetric compression: l/3) and
+/// delta = mean_overlap (exponential force distribution, Radjai et al. 1996).
+template <class T>
+T opened_fraction(const T* iso, const T& nu, const T& p, const T& l, double b) {
+  return opened_fraction_c3(iso, nu, p, l, T(minor_fraction(b)));
+}
+
+/// The `Weighted` rule's Lode weight w = 1/(1 + (delta_w/delta)^n_w) = 1/(1 + exp(n_w (ln delta_w -
+/// ln delta))), delta = mean_overlap: 0 for loosely held contacts (the fabric ignores the Lode angle but
+/// for its limit), 1 for deeply overlapped ones (it follows the extension strain), 1/2 at delta_w. 0
+/// where the overlap is not positive.
+template <class T>
+T lode_weight(const T* ext, const T& delta) {
+  using std::exp;
+  using std::log;
+  if (!(delta > T(0.0))) return T(0.0);
+  return T(1.0) / (T(1.0) + exp(ext[kNW] * (ext[kLnDeltaW] - log(delta))));
 }
 
 /// What the frictional family adds to a run: its parameter block (null: the group model), the
@@ -403,8 +439,16 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   T r_F = r;
   if (m.ext.fabric == FabricLode::Opening && m.ext.b != kLodeBD2)
     r_F = r * s_lim * T(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2)) / L.s_max;
-  const bool opened = m.ext.fabric == FabricLode::Overlap || m.ext.fabric == FabricLode::Extension;
-  if (opened) r_F = opened_fraction(m.iso, nu, y.p, y.l, m.ext.b);
+  const bool weighted = m.ext.p && m.ext.fabric == FabricLode::Weighted && m.ext.b != kLodeBD2;
+  const bool opened = m.ext.fabric == FabricLode::Overlap || m.ext.fabric == FabricLode::Extension ||
+                      m.ext.fabric == FabricLode::Weighted;
+  // The `Weighted` rule: the Lode factor c_3(b)/c_3(b_ref) of the onset and the rate raised to w.
+  T lode_w = T(1.0);
+  if (weighted)
+    lode_w = exp(lode_weight(m.ext.p, mean_overlap(m.iso, nu, y.p)) *
+                 T(std::log(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2))));
+  if (opened && !weighted) r_F = opened_fraction(m.iso, nu, y.p, y.l, m.ext.b);
+  if (weighted) r_F = opened_fraction_c3(m.iso, nu, y.p, y.l, T(minor_fraction(kLodeBD2)) * lode_w);
   const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
   const T shape_s = T(1.0) + X.kappa_s * r;                               // stress ratio: linear for longer
   // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
@@ -431,7 +475,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   }
   d.ln_nu = -dvol;
   d.p = -B * dvol + A * T(sigma) - relax + B * dil;
-  const T rate_F = m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
+  const T rate_F = weighted ? lode_w : m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
   d.F = L.beta_F * rate_F * (T(sigma) * F_lim - y.F) * gate_F;
   d.l = T(1.0);
   d.s = shear - (A - y.s * B) / y.p * dvol;
