@@ -234,6 +234,8 @@ def main(argv=None):
     ap.add_argument("--calibrate-on", default="D2",
                     help="the modes fitted, passed to `dem model --calibrate-on` (D2,D3 for the weighted rule, which needs "
                          "a second Lode angle; the others are predicted)")
+    ap.add_argument("--max-iterations", type=int, default=None,
+                    help="`dem model --max-iterations` (its default, 300, when not given)")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
     ap.add_argument("--middle-rule", default="norm", help="the --fabric-lode of --norm-work's run (its column name)")
     ap.add_argument("--norm-work", default=None,
@@ -257,6 +259,8 @@ def main(argv=None):
             cmd += ["--state-limit", a.state_limit]
         if a.calibrate_on != "D2":
             cmd += ["--calibrate-on", a.calibrate_on]
+        if a.max_iterations:
+            cmd += ["--max-iterations", str(a.max_iterations)]
         print("model_friction:", " ".join(cmd), file=sys.stderr)
         with open(os.path.join(dst, "model.log"), "w") as log:
             if subprocess.call(cmd, stderr=log) not in (0, 1):

@@ -20,8 +20,10 @@ from scipy import stats
 
 
 def extended_scores(model_dir):
-    """Per left-out packing, the extended family's held-out score from MODEL_DIR/selection.csv."""
-    with open(os.path.join(model_dir, "selection.csv"), newline="") as fh:
+    """Per left-out packing, the extended family's held-out score from MODEL_DIR/selection.csv (a `--family
+    auto` run), or from MODEL_DIR/heldout.csv (a `--family extended` run with the jackknife)."""
+    name = "selection.csv" if os.path.exists(os.path.join(model_dir, "selection.csv")) else "heldout.csv"
+    with open(os.path.join(model_dir, name), newline="") as fh:
         lines = [l for l in fh if not l.startswith("#")]
     rows = list(csv.reader(lines))
     head = rows[0]

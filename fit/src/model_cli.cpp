@@ -637,6 +637,19 @@ FamilyFit fit_family(const ModelInputs& in, const CalibrationOptions& co, const 
   return ff;
 }
 
+// One family's held-out scores (`--family group|extended` with the jackknife; `auto` writes them in
+// selection.csv): per left-out packing, the score the paired test between two runs' rules reads
+// (demkit/model_state_limit.py).
+void write_heldout(const FamilyFit& ff, const fs::path& out) {
+  if (ff.heldout.empty()) return;
+  Table t({"packing_left_out", "heldout_extended [-]"});
+  for (std::size_t k = 0; k < ff.heldout.size(); ++k) t.add_row({std::to_string(k), num(ff.heldout[k], 4)});
+  write_table_all(t, (out / "heldout").string(),
+                  "Held-out score per left-out packing: its own fitted curves predicted by the fit without it, mean "
+                  "squared error in units of the between-packing SD (docs/model.md, the held-out test); the column name "
+                  "is selection.csv's, whatever the family");
+}
+
 // One family's tables, curves and figures in `out`.
 void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& out, const ModelCommandOptions& o) {
   const auto& fit_curves = in.fit_curves; const auto& fit_files = in.fit_files;
@@ -737,6 +750,7 @@ int run(const ModelCommandOptions& o) {
     chosen = write_selection(fits[0], fits[1], K, out) ? 1 : 0;
     std::cerr << "dem model: held-out test chooses the " << fams[chosen] << " family (selection.md)\n";
   }
+  if (fits.size() == 1) write_heldout(fits[0], out);
   int rc = 0;
   for (std::size_t f = 0; f < fits.size(); ++f) {
     const fs::path dest = fits.size() == 2 && f != chosen ? out / fams[f] : out;

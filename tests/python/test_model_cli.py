@@ -411,3 +411,49 @@ def test_a_fit_stopped_short_says_so_and_can_go_on(tmp_path):
     assert on.returncode in (0, 1), on.stderr
     assert "converged" not in {p["parameter"] for p in rows(os.path.join(str(tmp_path / "on"), "parameters.csv"))} \
         or on.returncode == 1
+
+
+def test_weighted_rule_needs_a_second_lode_angle_and_fits_both_at_mu_0_5(tmp_path):
+    """The weighted fabric rule (docs/model.md, "The Lode weight"): on D2 alone it is refused (exit 2,
+    naming the second Lode angle, nothing written); calibrated on D2 + D3 its table lists ln_delta_w and
+    n_w and no n_psi (the state limit off), every D3 fabric curve is fitted within 0.9 band half-widths
+    (0.76 when stored; the overlap rule's reaches 1.02) and its chi2/dof is below the overlap rule's on
+    the same curves (1.42 against 1.75 when stored)."""
+    from demkit import model_friction
+    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
+    work = str(tmp_path / "mu_0.5")
+    model_friction.copy_tree(src, work)
+    r = run(work, "--out", str(tmp_path / "d2"), "--family", "extended", "--fabric-lode", "weighted", "--no-plots")
+    assert r.returncode == 2 and "second Lode angle" in r.stderr and "--calibrate-on" in r.stderr, r.stderr
+    assert not os.path.exists(os.path.join(str(tmp_path / "d2"), "parameters.csv"))
+    chi = {}
+    for rule in ("weighted", "overlap"):
+        r = run(work, "--out", str(tmp_path / rule), "--family", "extended", "--fabric-lode", rule, "--calibrate-on",
+                "D2,D3", "--no-jackknife", "--no-plots")
+        assert r.returncode == 0, r.stderr
+        summary = rows(os.path.join(str(tmp_path / rule), "summary.csv"))
+        chi[rule] = next(float(s["role"].split()[-1]) for s in summary if s["mode"] == "calibration")
+    names = [p["parameter"] for p in rows(os.path.join(str(tmp_path / "weighted"), "parameters.csv"))]
+    assert "ln_delta_w" in names and "n_w" in names and not any(n.startswith("n_psi") for n in names), names
+    for s in rows(os.path.join(str(tmp_path / "weighted"), "summary.csv")):
+        if s["mode"] == "D3":
+            assert s["role"] == "fitted" and float(s["F_dev [band]"]) < 0.9, s
+    assert chi["weighted"] < chi["overlap"], chi
+
+
+def test_held_out_scores_of_a_single_family_run_pair_like_the_selection(tmp_path):
+    """A `--family extended` run with the jackknife writes heldout.csv (the per-packing scores that a
+    `--family auto` run writes in selection.csv); demkit.model_state_limit reads either, and pairs them."""
+    from demkit import model_state_limit
+    a, b = tmp_path / "a", tmp_path / "b"
+    os.makedirs(a)
+    os.makedirs(b)
+    with open(a / "selection.csv", "w") as fh:
+        fh.write("packing_left_out,heldout_group [-],heldout_extended [-],difference [-]\n0,5,1.0,4\n1,5,1.2,3.8\n"
+                 "2,5,0.9,4.1\nmean,nan,nan,1\n")
+    with open(b / "heldout.csv", "w") as fh:
+        fh.write("# held-out\npacking_left_out,heldout_extended [-]\n0,0.5\n1,0.8\n2,0.6\n")
+    sb = model_state_limit.extended_scores(str(b))
+    assert sb == {0: 0.5, 1: 0.8, 2: 0.6}
+    mean, se, t, K, chosen = model_state_limit.paired_choice(model_state_limit.extended_scores(str(a)), sb)
+    assert K == 3 and abs(mean - 0.4) < 1e-12 and chosen
