@@ -457,3 +457,30 @@ def test_held_out_scores_of_a_single_family_run_pair_like_the_selection(tmp_path
     assert sb == {0: 0.5, 1: 0.8, 2: 0.6}
     mean, se, t, K, chosen = model_state_limit.paired_choice(model_state_limit.extended_scores(str(a)), sb)
     assert K == 3 and abs(mean - 0.4) < 1e-12 and chosen
+
+
+def test_lode_weight_table_of_hand_built_runs(tmp_path):
+    """demkit.model_lode_weight --table-only on two hand-built runs (summary, held-out scores, parameters):
+    the worst curve of each kind with its quantity and nu, chi2/dof from the calibration row, and the rule
+    the paired held-out test chooses (weighted better on every packing by 0.2: chosen); a coefficient's
+    jackknife SE, or the covariance SE marked c where the jackknife gave none."""
+    from demkit import model_lode_weight
+    out = tmp_path / "out"
+    head = "mode,nu [-],role,p_star [band],eps_v [band],s_dev [band],F_dev [band],worst [band]\n"
+    for rule, f3, chi, shift in (("overlap", 1.4, 1.7, 0.0), ("weighted", 0.6, 1.3, 0.2)):
+        d = out / rule / "mu_1"
+        os.makedirs(d)
+        (d / "summary.csv").write_text(head + f"D2,0.69,fitted,0.2,nan,0.8,0.5,0.8\nD3,0.74,fitted,0.3,nan,0.5,{f3},{f3}\n"
+                                       "isobaric,0.8,predicted,nan,1.2,0.4,0.3,1.2\n"
+                                       f"calibration,nan,chi2/dof {chi},nan,nan,nan,nan,{f3}\n")
+        (d / "heldout.csv").write_text("packing_left_out,heldout_extended [-]\n" +
+                                       "".join(f"{k},{1.0 + 0.01 * k - shift}\n" for k in range(8)))
+        (d / "parameters.csv").write_text("parameter,law,value,se,se_method,lo95,hi95,se_covariance,se_jackknife,units\n"
+                                          "n_w,w,5.0,0.5,jk,4,6,0.3,0.5,-\nchi_D,c,3.0,nan,cov,nan,nan,0.1,nan,-\n")
+    model_lode_weight.main(["--work", str(tmp_path / "w"), "--out", str(out), "--mu", "1", "--table-only"])
+    text = (out / "lode_weight.md").read_text()
+    row = next(l for l in text.splitlines() if l.startswith("| 1 |"))
+    assert "1.7 → 1.3" in row and "0.80 (s 0.69)" in row and "1.40 (F 0.74) → 0.60 (F 0.74)" in row, row
+    assert "1.20 (ε_v 0.80)" in row and row.rstrip().endswith("| weighted |"), row
+    params = (out / "parameters_weighted.md").read_text()
+    assert "| n_w | 5 ± 0.5 |" in params and "| chi_D | 3 ± 0.1 c |" in params, params
