@@ -69,6 +69,10 @@ def table(out, mus):
           "held-out difference ± SE | chosen |", "|---|---|---|---|---|---|---|"]
     lines = [",".join(head) + "\n"]
     for mu in mus:
+        for rule in RULES:
+            if not os.path.exists(os.path.join(out, rule, f"mu_{mu}", "summary.csv")):
+                raise SystemExit(f"model_lode_weight: {out}/{rule}/mu_{mu}/summary.csv does not exist: run without "
+                                 "--table-only first (or give --mu the values that were run)")
         res = {rule: worst(os.path.join(out, rule, f"mu_{mu}", "summary.csv")) for rule in RULES}
         scores = {rule: model_state_limit.extended_scores(os.path.join(out, rule, f"mu_{mu}")) for rule in RULES}
         mean, se, t, K, chosen = model_state_limit.paired_choice(scores["overlap"], scores["weighted"])
@@ -96,11 +100,10 @@ def parameter_tables(out, mus):
                 rows = list(csv.DictReader(l for l in fh if not l.startswith("#")))
             vals = {}
             for r in rows:
-                try:
-                    v, jk, cov = (float(r[k]) for k in ("value", "se_jackknife", "se_covariance"))
-                except ValueError:   # the `converged` row
-                    vals[r["parameter"]] = r["value"].split(":")[0]
+                if r["parameter"] == "converged":   # "no: <Ceres' summary>" in its law column
+                    vals["converged"] = r["law"].split(":")[0]
                     continue
+                v, jk, cov = (float(r[k]) for k in ("value", "se_jackknife", "se_covariance"))
                 se, mark = (jk, "") if jk == jk else (cov, " c")
                 vals[r["parameter"]] = f"{v:.4g} ± {se:.2g}{mark}" if se == se else f"{v:.4g}"
             names += [n for n in vals if n not in names]

@@ -484,3 +484,21 @@ def test_lode_weight_table_of_hand_built_runs(tmp_path):
     assert "1.20 (ε_v 0.80)" in row and row.rstrip().endswith("| weighted |"), row
     params = (out / "parameters_weighted.md").read_text()
     assert "| n_w | 5 ± 0.5 |" in params and "| chi_D | 3 ± 0.1 c |" in params, params
+
+
+def test_stored_lode_weight_tables_are_rebuilt_from_the_stored_runs(tmp_path):
+    """data/friction_n1000/model_friction/lode_weight: its tables are what `--table-only` makes of its runs
+    (byte for byte), every run carries its 8 held-out scores, and a missing run is named, not a traceback."""
+    from demkit import model_lode_weight
+    src = os.path.join(ROOT, "data", "friction_n1000", "model_friction", "lode_weight")
+    work = tmp_path / "lw"
+    shutil.copytree(src, work)
+    model_lode_weight.main(["--work", str(tmp_path / "w"), "--out", str(work), "--table-only"])
+    for name in ("lode_weight.md", "lode_weight.csv", "parameters_overlap.md", "parameters_weighted.md"):
+        with open(os.path.join(src, name)) as a, open(work / name) as b:
+            assert a.read() == b.read(), name
+    for rule in model_lode_weight.RULES:
+        for mu in model_lode_weight.MUS:
+            assert len(model_lode_weight.model_state_limit.extended_scores(str(work / rule / f"mu_{mu}"))) == 8
+    with pytest.raises(SystemExit, match="does not exist"):
+        model_lode_weight.main(["--work", str(tmp_path / "w"), "--out", str(tmp_path / "none"), "--table-only"])
