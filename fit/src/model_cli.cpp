@@ -548,7 +548,7 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   else throw InputError("--fabric-lode " + o.fabric_lode + ": give principal (the largest principal deviatoric fabric "
                         "saturates at every Lode angle), norm (F_dev saturates at F_max at every Lode angle), opening "
                         "(principal, and the fabric gated by the minor principal stress), overlap (the default: principal, "
-                        "and the fabric gated by the fraction of contacts opened by the extension strain) or extension "
+                        "and the fabric gated by the fraction of contacts opened by the extension strain), extension "
                         "(overlap, and the fabric's rate per unit extension strain) or weighted (the Lode dependence of "
                         "the onset and the rate weighted by the contact overlap; needs a second Lode angle in --calibrate-on)");
   if (o.state_limit == "pressure") co.state_limit = true;
@@ -736,8 +736,15 @@ int run(const ModelCommandOptions& o) {
   if (fs::exists(out / "parameters.csv") && !o.force)
     throw InputError(out.string() + " already holds model results: pass --force to overwrite, or --out another folder");
   const CalibrationOptions co = calibration_options(o);   // bad options refused before anything is written
-  check_output_folder(out);
   const ModelInputs in = read_model_inputs(o, dir);
+  if (o.family != "group" && co.fabric == FabricLode::Weighted) {   // refused before anything is written
+    try {
+      check_weighted_lode(in.fit_curves, in.fit_paths);
+    } catch (const std::invalid_argument& e) {
+      throw InputError(e.what());
+    }
+  }
+  check_output_folder(out);
   std::cerr << "dem model: fitting " << in.fit_curves.size() << " mode curves, " << in.fit_paths.size() << " path curves ("
             << in.fit_label << ") and " << in.iso.nu.size() << " isotropic points\n";
   const int K = in.K;

@@ -762,7 +762,8 @@ void drop_entries(Calibration& cal, int pos, int n) {
   for (auto& row : cal.corr) row.erase(row.begin() + pos, row.begin() + pos + n);
 }
 
-/// The `Weighted` rule's coefficients are identified by a second Lode angle only: refused without one.
+}  // namespace
+
 void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector<PathData>& paths) {
   for (const auto& c : curves)
     if (lode_b_of(c.mode) != kLodeBD2) return;
@@ -772,8 +773,6 @@ void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector
                               "from D2's Lode angle, and every calibrated curve is at b = 1/2: add a second Lode angle "
                               "(--calibrate-on D2,D3, or a triaxial path) or choose another --fabric-lode");
 }
-
-}  // namespace
 
 Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
                       const std::vector<PathData>& paths) {

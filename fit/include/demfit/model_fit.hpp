@@ -118,6 +118,10 @@ struct PathData {
   bool has_volume() const;                    ///< any row (after the first) at prescribed volume
 };
 
+/// The `Weighted` fabric rule's coefficients are identified by a second Lode angle only: throws
+/// std::invalid_argument (naming `--calibrate-on D2,D3`) when every curve and path is at b = 1/2.
+void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector<PathData>& paths);
+
 /// Reads a path ensemble CSV; throws std::runtime_error naming the file and a missing column.
 PathData read_path(const std::string& path, const std::string& name, double nu);
 
