@@ -858,7 +858,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   const std::vector<int> held_x = X ? held_ext(one_nu, cal.params.state_limit, weighted) : std::vector<int>();
   cal.chi2 = 2 * sum.final_cost;
   cal.n_residuals = n_res;
-  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear +
+  // Free parameters: the held ones (isotropic, the nu-slopes of one start volume fraction, held_ext) left out.
+  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear - (one_nu ? kNumShear / 2 : 0) +
                (X ? n_ext - static_cast<int>(held_x.size()) : 0);
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(isob[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(shear[i]); }

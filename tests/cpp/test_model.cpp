@@ -305,6 +305,11 @@ TEST(ModelFit, RecoversExactParametersFromNoiseFreeCurves) {
     EXPECT_NEAR(cal.value[kNumIso + i], P.shear[i], 1e-5 * std::max(1.0, std::fabs(P.shear[i]))) << shear_name(i);
   EXPECT_NEAR(cal.params.p0, P.p0, 1e-6);
   EXPECT_NEAR(cal.params.alpha, P.alpha, 1e-4);
+  EXPECT_EQ(cal.n_free, kNumIso + kNumShear);
+  // One start volume fraction: the six nu-slopes are held at 0, so they are not free parameters of chi2/dof.
+  const Calibration one = calibrate({S.mean[1]}, iso, o);
+  EXPECT_EQ(one.n_free, kNumIso + kNumShear / 2);
+  for (int i = 1; i < kNumShear; i += 2) EXPECT_EQ(one.value[kNumIso + i], 0.0) << shear_name(i);
 }
 
 TEST(ModelFit, BadInputIsRefusedWithTheFix) {
