@@ -736,15 +736,18 @@ int run(const ModelCommandOptions& o) {
   if (fs::exists(out / "parameters.csv") && !o.force)
     throw InputError(out.string() + " already holds model results: pass --force to overwrite, or --out another folder");
   const CalibrationOptions co = calibration_options(o);   // bad options refused before anything is written
+  const bool out_existed = fs::exists(out);
+  check_output_folder(out);
   const ModelInputs in = read_model_inputs(o, dir);
   if (o.family != "group" && co.fabric == FabricLode::Weighted) {   // refused before anything is written
     try {
       check_weighted_lode(in.fit_curves, in.fit_paths);
     } catch (const std::invalid_argument& e) {
+      std::error_code ec;
+      if (!out_existed && fs::is_empty(out, ec)) fs::remove(out, ec);   // the folder the check made, empty
       throw InputError(e.what());
     }
   }
-  check_output_folder(out);
   std::cerr << "dem model: fitting " << in.fit_curves.size() << " mode curves, " << in.fit_paths.size() << " path curves ("
             << in.fit_label << ") and " << in.iso.nu.size() << " isotropic points\n";
   const int K = in.K;
