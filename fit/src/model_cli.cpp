@@ -729,6 +729,27 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
   }
 }
 
+// The inputs read and checked against the options (the weighted fabric rule needs a second Lode angle);
+// on a refusal the output folder that check_output_folder made, still empty, is removed again.
+ModelInputs checked_inputs(const ModelCommandOptions& o, const CalibrationOptions& co, const fs::path& dir,
+                           const fs::path& out, bool out_existed) {
+  try {
+    ModelInputs in = read_model_inputs(o, dir);
+    if (o.family != "group" && co.fabric == FabricLode::Weighted) {
+      try {
+        check_weighted_lode(in.fit_curves, in.fit_paths);
+      } catch (const std::invalid_argument& e) {
+        throw InputError(e.what());
+      }
+    }
+    return in;
+  } catch (...) {
+    std::error_code ec;
+    if (!out_existed && fs::is_empty(out, ec)) fs::remove(out, ec);
+    throw;
+  }
+}
+
 int run(const ModelCommandOptions& o) {
   const fs::path dir(o.dir);
   if (!fs::is_directory(dir)) throw InputError(o.dir + " is not a folder: give an ensemble folder reduced by `dem fit`");
@@ -738,16 +759,7 @@ int run(const ModelCommandOptions& o) {
   const CalibrationOptions co = calibration_options(o);   // bad options refused before anything is written
   const bool out_existed = fs::exists(out);
   check_output_folder(out);
-  const ModelInputs in = read_model_inputs(o, dir);
-  if (o.family != "group" && co.fabric == FabricLode::Weighted) {   // refused before anything is written
-    try {
-      check_weighted_lode(in.fit_curves, in.fit_paths);
-    } catch (const std::invalid_argument& e) {
-      std::error_code ec;
-      if (!out_existed && fs::is_empty(out, ec)) fs::remove(out, ec);   // the folder the check made, empty
-      throw InputError(e.what());
-    }
-  }
+  const ModelInputs in = checked_inputs(o, co, dir, out, out_existed);
   std::cerr << "dem model: fitting " << in.fit_curves.size() << " mode curves, " << in.fit_paths.size() << " path curves ("
             << in.fit_label << ") and " << in.iso.nu.size() << " isotropic points\n";
   const int K = in.K;

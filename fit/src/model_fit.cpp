@@ -479,6 +479,9 @@ PathData read_path(const std::string& path, const std::string& name, double nu) 
 
 namespace {
 
+// Size of the extension block Ceres sees for these options (ext_size).
+int ext_block(const CalibrationOptions& o) { return ext_size(o.state_limit, o.fabric == FabricLode::Weighted); }
+
 // The residuals of the D2 ensemble curves: p*, s and F along each, weighted by their standard errors.
 void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& curves, const CalibrationOptions& o,
                          double nu_ref, bool X, std::vector<double*>& blocks_all, int& n_res) {
@@ -490,7 +493,7 @@ void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& 
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
-    if (X) cost->AddParameterBlock(ext_size(o.state_limit, o.fabric == FabricLode::Weighted));
+    if (X) cost->AddParameterBlock(ext_block(o));
     cost->SetNumResiduals(3 * static_cast<int>(c.eps.size()));
     problem.AddResidualBlock(cost, nullptr, blocks_all);
     n_res += 3 * static_cast<int>(c.eps.size());
@@ -528,7 +531,7 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
-    if (X) cost->AddParameterBlock(ext_size(o.state_limit, o.fabric == FabricLode::Weighted));
+    if (X) cost->AddParameterBlock(ext_block(o));
     cost->SetNumResiduals(3 * static_cast<int>(n));
     problem.AddResidualBlock(cost, nullptr, blocks_all);
     n_res += 3 * static_cast<int>(n - 1 - prefix);   // weighted rows only
@@ -624,7 +627,7 @@ void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<
 // Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof).
 void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
                        std::vector<double>& ext, const CalibrationOptions& o, bool X, Calibration& cal) {
-  const int np = kNumIso + kNumShear + (X ? ext_size(o.state_limit, o.fabric == FabricLode::Weighted) : 0);
+  const int np = kNumIso + kNumShear + (X ? ext_block(o) : 0);
   cal.se_cov.assign(np, kNaN);
   cal.corr.assign(np, std::vector<double>(np, kNaN));
   ceres::Covariance::Options co;

@@ -215,6 +215,29 @@ Synthetic synthetic(const Parameters& P, const std::vector<double>& nus, int K, 
   return S;
 }
 
+// The jackknife's leave-one-out calibrations: member k left out of every mean curve ((K mean - x_k)/(K - 1)),
+// each fit from the options `o` (their start the full fit's); one estimate vector per left-out member.
+std::vector<std::vector<double>> leave_one_out_estimates(const std::vector<CurveData>& mean,
+                                                         const std::vector<std::vector<CurveData>>& members, int K,
+                                                         const CalibrationOptions& o) {
+  std::vector<std::vector<double>> est;
+  for (int k = 0; k < K; ++k) {
+    std::vector<CurveData> loo;
+    for (std::size_t j = 0; j < mean.size(); ++j) {
+      CurveData c = mean[j];
+      const CurveData& x = members[j][k];
+      for (std::size_t i = 0; i < c.eps.size(); ++i) {
+        c.p[i] = (K * c.p[i] - x.p[i]) / (K - 1);
+        c.s[i] = (K * c.s[i] - x.s[i]) / (K - 1);
+        c.F[i] = (K * c.F[i] - x.F[i]) / (K - 1);
+      }
+      loo.push_back(c);
+    }
+    est.push_back(calibrate(loo, {}, o).value);
+  }
+  return est;
+}
+
 }  // namespace
 
 // Calibration recovers the known shear laws from synthetic ensembles with strongly correlated
@@ -240,23 +263,9 @@ TEST(ModelFit, RecoversKnownParametersWithinJackknifeErrors) {
     o.start = &start;
     const Calibration cal = calibrate(S.mean, {}, o);
     ASSERT_TRUE(cal.ok) << cal.message;
-    std::vector<std::vector<double>> est;
     CalibrationOptions oj = o;
     oj.start = &cal.params;
-    for (int k = 0; k < K; ++k) {
-      std::vector<CurveData> loo;
-      for (std::size_t j = 0; j < S.mean.size(); ++j) {
-        CurveData c = S.mean[j];
-        const CurveData& x = S.members[j][k];
-        for (std::size_t i = 0; i < c.eps.size(); ++i) {
-          c.p[i] = (K * c.p[i] - x.p[i]) / (K - 1);
-          c.s[i] = (K * c.s[i] - x.s[i]) / (K - 1);
-          c.F[i] = (K * c.F[i] - x.F[i]) / (K - 1);
-        }
-        loo.push_back(c);
-      }
-      est.push_back(calibrate(loo, {}, oj).value);
-    }
+    const auto est = leave_one_out_estimates(S.mean, S.members, K, oj);
     for (int i = 0; i < kNumShear; ++i) {
       const int a = kNumIso + i;
       double mean = 0, ss = 0;
@@ -617,6 +626,22 @@ Parameters frictional_truth() {
   return P;
 }
 
+// The strain grid of the rule tests: eps_d = 0 to 0.3 in 60 steps.
+std::vector<double> shear_grid() {
+  std::vector<double> eps;
+  for (int i = 0; i <= 60; ++i) eps.push_back(0.005 * i);
+  return eps;
+}
+
+// Constant-volume shear of P's material from nu = 0.78 at its isotropic pressure (s0 0.02, F0 0.01) along
+// shear_grid(), under the extension block `ext` (null: the group model), the mode's Lode angle and `rule`.
+std::vector<State<double>> frictional_shear(const Parameters& P, const double* ext, const char* mode, FabricLode rule) {
+  const auto iso = P.iso();
+  const double nu = 0.78;
+  return monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, isotropic_pressure(iso.data(), nu), 0.02, 0.01,
+                                shear_grid(), 2e-3, Ext<double>{ext, lode_b_of(mode), P.surface, rule});
+}
+
 std::vector<Segment> mixed_path() {
   return {shear_seg(0.1, 20), shear_seg(-0.15, 30), shear_seg(0.1, 20, Control::Isobaric),
           shear_seg(0.1, 20, Control::Triaxial)};
@@ -796,12 +821,8 @@ TEST(ModelFriction, OverlapRuleGatesTheFabricByTheOpenedFraction) {
   }
 
   const double p0 = isotropic_pressure(iso.data(), nu);
-  std::vector<double> eps;
-  for (int i = 0; i <= 60; ++i) eps.push_back(0.005 * i);
-  auto run = [&](const double* ext, const char* mode, FabricLode f) {
-    return monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, eps, 2e-3,
-                                  Ext<double>{ext, lode_b_of(mode), P.surface, f});
-  };
+  const std::vector<double> eps = shear_grid();
+  auto run = [&](const double* ext, const char* mode, FabricLode f) { return frictional_shear(P, ext, mode, f); };
   double flat[kNumExt];
   std::copy(P.ext, P.ext + kNumExt, flat);
   flat[kNFA] = flat[kNFB] = 0.0;
@@ -854,21 +875,7 @@ static void recover_extension(FabricLode rule, bool state_limit = false) {
   ASSERT_EQ(cal.value.size(), static_cast<std::size_t>(kNumIso + kNumShear + ext_size(state_limit)));
   CalibrationOptions oj = o;
   oj.start = &cal.params;
-  std::vector<std::vector<double>> est;
-  for (int k = 0; k < K; ++k) {
-    std::vector<CurveData> loo;
-    for (std::size_t j = 0; j < S.mean.size(); ++j) {
-      CurveData c = S.mean[j];
-      const CurveData& x = S.members[j][k];
-      for (std::size_t i = 0; i < c.eps.size(); ++i) {
-        c.p[i] = (K * c.p[i] - x.p[i]) / (K - 1);
-        c.s[i] = (K * c.s[i] - x.s[i]) / (K - 1);
-        c.F[i] = (K * c.F[i] - x.F[i]) / (K - 1);
-      }
-      loo.push_back(c);
-    }
-    est.push_back(calibrate(loo, {}, oj).value);
-  }
+  const auto est = leave_one_out_estimates(S.mean, S.members, K, oj);
   // 3 SE; with the state limit t_{K-1,0.995} = 3.50: over seeds 11-21 its n_psi_a z-scores have an RMS
   // of 1.5 (the K = 8 jackknife SE is t-distributed and under-covers), and seed 11 puts n_psi_b at 3.15 SE
   // (docs/model.md, "The state-dependent limit").
@@ -918,13 +925,9 @@ TEST(ModelFriction, ExtensionRuleRatesTheFabricPerUnitExtensionStrain) {
     EXPECT_EQ(fabric_rate_factor(f, 0.0), 1.0);
   const Parameters P = frictional_truth();
   const auto iso = P.iso();
-  const double nu = 0.78, p0 = isotropic_pressure(iso.data(), nu);
-  std::vector<double> eps;
-  for (int i = 0; i <= 60; ++i) eps.push_back(0.005 * i);
-  auto run = [&](const double* ext, const char* mode, FabricLode f) {
-    return monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, eps, 2e-3,
-                                  Ext<double>{ext, lode_b_of(mode), P.surface, f});
-  };
+  const double nu = 0.78;
+  const std::vector<double> eps = shear_grid();
+  auto run = [&](const double* ext, const char* mode, FabricLode f) { return frictional_shear(P, ext, mode, f); };
   const auto e2 = run(P.ext, "D2", FabricLode::Extension), o2 = run(P.ext, "D2", FabricLode::Overlap);
   for (std::size_t i = 0; i < eps.size(); ++i) {
     EXPECT_EQ(e2[i].F, o2[i].F) << i;
@@ -1049,13 +1052,9 @@ TEST(ModelFriction, WeightedRuleSpansTheLodeBlindAndTheExtensionRules) {
   EXPECT_EQ(lode_weight(ex0, 0.0), 0.0);
   const Parameters P = frictional_truth();
   const auto iso = P.iso();
-  const double nu = 0.78, p0 = isotropic_pressure(iso.data(), nu);
-  std::vector<double> eps;
-  for (int i = 0; i <= 60; ++i) eps.push_back(0.005 * i);
-  auto run = [&](const double* ext, const char* mode, FabricLode f) {
-    return monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.01, eps, 2e-3,
-                                  Ext<double>{ext, lode_b_of(mode), P.surface, f});
-  };
+  const double nu = 0.78;
+  const std::vector<double> eps = shear_grid();
+  auto run = [&](const double* ext, const char* mode, FabricLode f) { return frictional_shear(P, ext, mode, f); };
   double ext[kNumExt];
   std::copy(P.ext, P.ext + kNumExt, ext);
   ext[kLnDeltaW] = std::log(0.03);
@@ -1147,21 +1146,7 @@ TEST(ModelFriction, RecoversTheLodeWeightFromTwoLodeAngles) {
   EXPECT_EQ(cal.names.back(), "n_w");
   CalibrationOptions oj = o;
   oj.start = &cal.params;
-  std::vector<std::vector<double>> est;
-  for (int k = 0; k < K; ++k) {
-    std::vector<CurveData> loo;
-    for (std::size_t j = 0; j < all.size(); ++j) {
-      CurveData c = all[j];
-      const CurveData& x = members[j][k];
-      for (std::size_t i = 0; i < c.eps.size(); ++i) {
-        c.p[i] = (K * c.p[i] - x.p[i]) / (K - 1);
-        c.s[i] = (K * c.s[i] - x.s[i]) / (K - 1);
-        c.F[i] = (K * c.F[i] - x.F[i]) / (K - 1);
-      }
-      loo.push_back(c);
-    }
-    est.push_back(calibrate(loo, {}, oj).value);
-  }
+  const auto est = leave_one_out_estimates(all, members, K, oj);
   for (std::size_t a = kNumIso + kNumShear; a < cal.value.size(); ++a) {
     const int i = static_cast<int>(a) - kNumIso - kNumShear;
     const int idx = i < kNumExtBase ? i : i + 2;   // past the n_psi entries the report leaves out

@@ -426,6 +426,9 @@ def test_weighted_rule_needs_a_second_lode_angle_and_fits_both_at_mu_0_5(tmp_pat
     r = run(work, "--out", str(tmp_path / "d2"), "--family", "extended", "--fabric-lode", "weighted", "--no-plots")
     assert r.returncode == 2 and "second Lode angle" in r.stderr and "--calibrate-on" in r.stderr, r.stderr
     assert not os.path.exists(str(tmp_path / "d2")), "the refused run left its output folder"
+    os.makedirs(tmp_path / "empty")
+    r = run(str(tmp_path / "empty"), "--out", str(tmp_path / "e"), "--no-plots")   # any refusal after the folder check
+    assert r.returncode == 2 and "does not exist" in r.stderr and not os.path.exists(str(tmp_path / "e")), r.stderr
     chi = {}
     for rule in ("weighted", "overlap"):
         r = run(work, "--out", str(tmp_path / rule), "--family", "extended", "--fabric-lode", rule, "--calibrate-on",

@@ -284,14 +284,13 @@ T mean_overlap(const T* iso, const T& nu, const T& p) {
   return T(3.14159265358979323846) * p / (coordination(iso, nu) * nu);
 }
 
-/// The gate variable with the extension strain's share c3 of l given: 1 - exp(-c3 l/delta),
+/// The gate variable at mean overlap delta after the extension strain e3: 1 - exp(-e3/delta),
 /// floored at 1e-6 like the mobilisation; 1 where the overlap is not positive.
 template <class T>
-T opened_fraction_c3(const T* iso, const T& nu, const T& p, const T& l, const T& c3) {
+T opened_fraction_at(const T& delta, const T& e3) {
   using std::exp;
-  const T delta = mean_overlap(iso, nu, p);
   if (!(delta > T(0.0))) return T(1.0);
-  T f = T(1.0) - exp(-c3 * l / delta);
+  T f = T(1.0) - exp(-e3 / delta);
   if (!(f > T(1e-6))) f = T(1e-6);
   return f;
 }
@@ -302,7 +301,7 @@ T opened_fraction_c3(const T* iso, const T& nu, const T& p, const T& l, const T&
 /// delta = mean_overlap (exponential force distribution, Radjai et al. 1996).
 template <class T>
 T opened_fraction(const T* iso, const T& nu, const T& p, const T& l, double b) {
-  return opened_fraction_c3(iso, nu, p, l, T(minor_fraction(b)));
+  return opened_fraction_at(mean_overlap(iso, nu, p), T(minor_fraction(b)) * l);
 }
 
 /// The `Weighted` rule's Lode weight w = 1/(1 + (delta_w/delta)^n_w) = 1/(1 + exp(n_w (ln delta_w -
@@ -444,11 +443,13 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
                       m.ext.fabric == FabricLode::Weighted;
   // The `Weighted` rule: the Lode factor c_3(b)/c_3(b_ref) of the onset and the rate raised to w.
   T lode_w = T(1.0);
-  if (weighted)
-    lode_w = exp(lode_weight(m.ext.p, mean_overlap(m.iso, nu, y.p)) *
-                 T(std::log(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2))));
-  if (opened && !weighted) r_F = opened_fraction(m.iso, nu, y.p, y.l, m.ext.b);
-  if (weighted) r_F = opened_fraction_c3(m.iso, nu, y.p, y.l, T(minor_fraction(kLodeBD2)) * lode_w);
+  if (weighted) {
+    const T delta = mean_overlap(m.iso, nu, y.p);
+    lode_w = exp(lode_weight(m.ext.p, delta) * T(std::log(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2))));
+    r_F = opened_fraction_at(delta, T(minor_fraction(kLodeBD2)) * lode_w * y.l);
+  } else if (opened) {
+    r_F = opened_fraction(m.iso, nu, y.p, y.l, m.ext.b);
+  }
   const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
   const T shape_s = T(1.0) + X.kappa_s * r;                               // stress ratio: linear for longer
   // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
