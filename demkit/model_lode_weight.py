@@ -27,10 +27,11 @@ RULES = ("overlap", "weighted")
 QUANTITIES = (("p_star [band]", "p*"), ("eps_v [band]", "ε_v"), ("s_dev [band]", "s"), ("F_dev [band]", "F"))
 
 
-def run_rule(dem, work, out, rule, jackknife=True):
-    """`dem model` on WORK (a working copy) into OUT, the extended family under RULE on D2 + D3."""
+def run_rule(dem, work, out, rule, jackknife=True, state_limit=True):
+    """`dem model` on WORK (a working copy) into OUT, the extended family under RULE on D2 + D3 (with the
+    state-dependent limit unless told)."""
     cmd = [dem, "model", work, "--out", out, "--family", "extended", "--fabric-lode", rule, "--state-limit",
-           "pressure", "--calibrate-on", "D2,D3", "--no-plots", "--force"]
+           "pressure" if state_limit else "none", "--calibrate-on", "D2,D3", "--no-plots", "--force"]
     if not jackknife:
         cmd.append("--no-jackknife")
     print("model_lode_weight:", " ".join(cmd), file=sys.stderr)
@@ -63,7 +64,7 @@ def table(out, mus):
     head = ["mu", "rule", "chi2_per_dof [-]", "worst_fitted_D2 [band]", "worst_fitted_D3 [band]",
             "worst_predicted_isobaric [band]", "heldout_mean [-]", "chosen"]
     md = ["<!-- demkit/model_lode_weight.py: the extended family on D2 + D3 (state limit on), RMS over the mean 95 % "
-          "band half-width; held-out: mean score over the 8 left-out packings, the difference overlap - weighted "
+          "band half-width; held-out: mean score over the {K} left-out packings, the difference overlap - weighted "
           "paired (t_{K-1,0.975}) -->",
           "| μ | χ²/dof overlap → weighted | worst fitted D2 | worst fitted D3 | worst predicted isobaric | "
           "held-out difference ± SE | chosen |", "|---|---|---|---|---|---|---|"]
@@ -86,6 +87,7 @@ def table(out, mus):
             m = sum(scores[rule].values()) / len(scores[rule])
             w = [f"{res[rule][1][k][0]:.4g}" for k in (("D2", "fitted"), ("D3", "fitted"), ("isobaric", "predicted"))]
             lines.append(",".join([mu, rule, f"{res[rule][0]:.4g}", *w, f"{m:.4g}", "yes" if rule == pick else "no"]) + "\n")
+    md[0] = md[0].replace("{K}", str(K))
     write_atomic(os.path.join(out, "lode_weight.md"), "\n".join(md) + "\n")
     write_atomic(os.path.join(out, "lode_weight.csv"), "".join(lines))
     print("\n".join(md))
@@ -108,8 +110,9 @@ def parameter_tables(out, mus):
                 vals[r["parameter"]] = f"{v:.4g} ± {se:.2g}{mark}" if se == se else f"{v:.4g}"
             names += [n for n in vals if n not in names]
             cols.append(vals)
+        K = len(model_state_limit.extended_scores(os.path.join(out, rule, f"mu_{mus[0]}")))
         md = [f"<!-- demkit/model_lode_weight.py: the {rule} rule on D2 + D3 (state limit on), value ± jackknife SE "
-              "over the 8 packings (c: covariance SE) -->",
+              f"over the {K} packings (c: covariance SE) -->",
               "| parameter | " + " | ".join(f"μ = {mu}" for mu in mus) + " |", "|---|" + "---|" * len(mus)]
         md += [f"| {n} | " + " | ".join(c.get(n, "") for c in cols) + " |" for n in names]
         write_atomic(os.path.join(out, f"parameters_{rule}.md"), "\n".join(md) + "\n")

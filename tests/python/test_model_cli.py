@@ -505,3 +505,53 @@ def test_stored_lode_weight_tables_are_rebuilt_from_the_stored_runs(tmp_path):
             assert len(model_lode_weight.model_state_limit.extended_scores(str(work / rule / f"mu_{mu}"))) == 8
     with pytest.raises(SystemExit, match="does not exist"):
         model_lode_weight.main(["--work", str(tmp_path / "w"), "--out", str(tmp_path / "none"), "--table-only"])
+
+
+def test_variant_choice_is_the_simplest_that_no_other_beats():
+    """demkit.model_variants.choose: b beats a when a's held-out scores exceed b's by more than t_{K-1,0.975}
+    paired SE; the chosen variant is the one with the fewest coefficients that nothing beats (a tie: the lower
+    mean), so a richer variant is taken only when it beats every simpler one."""
+    from demkit import model_variants
+    noise = [0.01, -0.02, 0.015, -0.005, 0.02, -0.01, 0.0, 0.005]
+    base = {k: 1.0 + 0.1 * k for k in range(8)}
+
+    def shifted(d, flip=1):
+        return {k: v - d + flip * noise[k] for k, v in base.items()}
+
+    sizes = {"A": 7, "B": 9, "C": 9, "D": 11}
+    # B and D below A on every packing, D below B: only D is not beaten.
+    chosen, beaten, means = model_variants.choose(
+        {"A": dict(base), "B": shifted(0.3), "C": shifted(0.0, -1), "D": shifted(0.6)}, sizes)
+    assert chosen == "D" and beaten["D"] == [] and set(beaten["A"]) == {"B", "D"}, (chosen, beaten)
+    # D only noise below B: B (fewer coefficients) is chosen, and D, not beaten either, is not.
+    chosen, beaten, _ = model_variants.choose(
+        {"A": dict(base), "B": shifted(0.3), "C": shifted(0.0, -1), "D": shifted(0.3, -1)}, sizes)
+    assert chosen == "B" and beaten["B"] == [] and beaten["D"] == [], (chosen, beaten)
+    # Nothing separates the four: the simplest.
+    same = {n: shifted(0.0, s) for n, s in (("A", 1), ("B", -1), ("C", 1), ("D", -1))}
+    assert model_variants.choose(same, sizes)[0] == "A"
+    # B and C tie on size and are both unbeaten: the lower mean.
+    chosen, _, means = model_variants.choose({"A": dict(base), "B": shifted(0.3), "C": shifted(0.31, -1),
+                                              "D": shifted(0.3)}, sizes)
+    assert chosen == "C" and means["C"] < means["B"], (chosen, means)
+
+
+def test_stored_variant_table_is_rebuilt_from_the_stored_runs(tmp_path):
+    """data/friction_n1000/model_friction/lode_weight/variants.{md,csv}: what `demkit.model_variants --table-only`
+    makes of the four variants' stored runs (byte for byte); every run carries its 8 held-out scores, and the
+    choice is a variant that no other beats."""
+    from demkit import model_variants
+    src = os.path.join(ROOT, "data", "friction_n1000", "model_friction", "lode_weight")
+    work = tmp_path / "lw"
+    shutil.copytree(src, work)
+    model_variants.main(["--work", str(tmp_path / "w"), "--out", str(work), "--table-only"])
+    for name in ("variants.md", "variants.csv"):
+        with open(os.path.join(src, name)) as a, open(work / name) as b:
+            assert a.read() == b.read(), name
+    rows = list(csv.DictReader(open(work / "variants.csv")))
+    assert len(rows) == 4 * len(model_variants.MUS)
+    for r in rows:
+        assert (r["chosen"] == "yes") <= (r["beaten_by"] == "none"), r
+    for _, folder, _, _, _ in model_variants.VARIANTS:
+        for mu in model_variants.MUS:
+            assert len(model_variants.model_state_limit.extended_scores(str(work / folder / f"mu_{mu}"))) == 8

@@ -1,0 +1,116 @@
+"""Four variants of the frictional family on D2 + D3, chosen by the held-out test (issue 31, seventh round):
+the overlap or the weighted fabric rule (`--fabric-lode`), each with or without the state-dependent stress-ratio
+limit (`--state-limit pressure`). Calibrated on D2 + D3 + the isotropic branch of the friction study's K = 8
+ensembles, the isobaric D2 path predicted, jackknife over the packings.
+
+    /usr/bin/python3 -m demkit.model_variants --work WORK --out OUT             # the two runs without the limit
+    /usr/bin/python3 -m demkit.model_variants --work WORK --out OUT --table-only
+
+OUT is the sixth round's folder (data/friction_n1000/model_friction/lode_weight): OUT/RULE/mu_MU holds the runs
+with the limit (`demkit.model_lode_weight`), OUT/RULE_no_limit/mu_MU those without (made here). The choice: a
+variant is beaten when another's held-out scores are lower on average by more than t_{K-1,0.975} times the SE
+of the paired difference; the variant with the fewest coefficients that no other beats is chosen (a tie: the
+lower mean score). OUT/variants.{md,csv}: per mu and variant chi2/dof, the worst fitted and predicted curve,
+the mean held-out score, what beats it, and the choice; the target (every curve within one band half-width,
+chi2/dof <= 3) with the chosen variant. docs/model.md, "Which variant: the held-out test over four".
+"""
+import argparse
+import os
+import sys
+
+from demkit import model_friction, model_lode_weight, model_state_limit
+from demkit.atomic import write_atomic
+
+MUS = model_lode_weight.MUS
+# (name, folder under OUT, fabric rule, state limit, extension coefficients beyond the overlap rule's 7)
+VARIANTS = (("overlap", "overlap_no_limit", "overlap", False, 7),
+            ("overlap + limit", "overlap", "overlap", True, 9),
+            ("weighted", "weighted_no_limit", "weighted", False, 9),
+            ("weighted + limit", "weighted", "weighted", True, 11))
+KINDS = (("D2", "fitted"), ("D3", "fitted"), ("isobaric", "predicted"))
+
+
+def choose(scores, sizes):
+    """The held-out choice among variants. scores: {name: {packing: score}}, sizes: {name: coefficients}.
+    Returns (chosen, {name: [names that beat it]}, {name: mean score}): b beats a when the paired mean of
+    a - b exceeds t_{K-1,0.975} SE (model_state_limit.paired_choice); the chosen variant is the one with the
+    fewest coefficients that nothing beats, ties broken by the lower mean score."""
+    beaten = {a: [b for b in scores if b != a and model_state_limit.paired_choice(scores[a], scores[b])[4]]
+              for a in scores}
+    means = {a: sum(s.values()) / len(s) for a, s in scores.items()}
+    free = [a for a in scores if not beaten[a]]
+    return min(free, key=lambda a: (sizes[a], means[a])), beaten, means
+
+
+def run_missing(dem, work, out, mus, store):
+    """The runs without the limit (OUT/RULE_no_limit/mu_MU), on working copies made when missing."""
+    for mu in mus:
+        src, w = os.path.join(store, f"mu_{mu}"), os.path.join(work, f"mu_{mu}")
+        if not os.path.isdir(src):
+            raise SystemExit(f"model_variants: {src} does not exist (--store: the friction study's folder)")
+        if not os.path.isdir(os.path.join(w, "paths")):
+            model_friction.copy_tree(src, w)
+            model_friction.isobaric_paths(src, w)
+        for _, folder, rule, limit, _ in VARIANTS:
+            if not limit:
+                model_lode_weight.run_rule(dem, w, os.path.join(out, folder, f"mu_{mu}"), rule, state_limit=False)
+
+
+def table(out, mus):
+    """OUT/variants.{md,csv} from the four variants' runs."""
+    md = ["<!-- demkit/model_variants.py: the extended family on D2 + D3 under four variants, RMS over the mean 95 % "
+          "band half-width; held-out: mean score over the {K} left-out packings; beaten by: variants whose paired "
+          "held-out scores are lower by more than t_{K-1,0.975} SE -->",
+          "| μ | variant | extension coefficients | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | "
+          "mean held-out score | beaten by | chosen |", "|---|---|---|---|---|---|---|---|---|---|"]
+    head = ["mu", "variant", "extension_coefficients", "chi2_per_dof [-]", "worst_fitted_D2 [band]",
+            "worst_fitted_D3 [band]", "worst_predicted_isobaric [band]", "heldout_mean [-]", "beaten_by", "chosen"]
+    lines = [",".join(head) + "\n"]
+    target = ["", "| μ | chosen | χ²/dof | worst curve | target met |", "|---|---|---|---|---|"]
+    for mu in mus:
+        res, scores = {}, {}
+        for name, folder, _, _, _ in VARIANTS:
+            d = os.path.join(out, folder, f"mu_{mu}")
+            if not os.path.exists(os.path.join(d, "summary.csv")):
+                raise SystemExit(f"model_variants: {d}/summary.csv does not exist: run without --table-only first "
+                                 "(the runs with the limit: demkit.model_lode_weight), or give --mu the values run")
+            res[name] = model_lode_weight.worst(os.path.join(d, "summary.csv"))
+            scores[name] = model_state_limit.extended_scores(d)
+        sizes = {v[0]: v[4] for v in VARIANTS}
+        chosen, beaten, means = choose(scores, sizes)
+        for name, _, _, _, k in VARIANTS:
+            chi, w = res[name]
+            cells = [f"{w[key][0]:.2f} ({w[key][1]})" for key in KINDS]
+            by = "; ".join(beaten[name]) or "none"
+            mark = "**yes**" if name == chosen else "no"
+            md.append(f"| {mu} | {name} | {k} | {chi:.3g} | " + " | ".join(cells) + f" | {means[name]:.4g} | {by} | {mark} |")
+            lines.append(",".join([mu, name, str(k), f"{chi:.4g}", *(f"{w[key][0]:.4g}" for key in KINDS),
+                                   f"{means[name]:.4g}", by, "yes" if name == chosen else "no"]) + "\n")
+        chi, w = res[chosen]
+        top = max(w.items(), key=lambda kv: kv[1][0])
+        met = chi <= 3 and top[1][0] <= 1
+        target.append(f"| {mu} | {chosen} | {chi:.3g} | {top[1][0]:.2f} ({top[0][0]} {top[1][1]}) | "
+                      f"{'yes' if met else 'no'} |")
+    md[0] = md[0].replace("{K}", str(len(scores[chosen])))
+    write_atomic(os.path.join(out, "variants.md"), "\n".join(md + target) + "\n")
+    write_atomic(os.path.join(out, "variants.csv"), "".join(lines))
+    print("\n".join(md + target))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--work", required=True, help="working copies of the stored ensembles (made when missing)")
+    ap.add_argument("--out", required=True, help="the sixth round's folder: RULE/mu_MU (with the limit) read, "
+                                                 "RULE_no_limit/mu_MU made")
+    ap.add_argument("--store", default="data/friction_n1000", help="the friction study's stored ensembles")
+    ap.add_argument("--dem", default="build/dem")
+    ap.add_argument("--mu", nargs="+", default=list(MUS))
+    ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
+    a = ap.parse_args(argv)
+    if not a.table_only:
+        run_missing(a.dem, a.work, a.out, a.mu, a.store)
+    table(a.out, a.mu)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
