@@ -3,6 +3,7 @@ through `dem ensemble` (prep, D2 and isobaric D2 per packing, the reduce), then
 demkit.friction_study's per-packing quantities against what friction must do: jam lower, raise
 the stress ratio, slide some contacts, and leave mu = 0 on the frictionless code path."""
 import csv
+import math
 import os
 import subprocess
 import sys
@@ -144,3 +145,26 @@ def test_folders_are_checked(tmp_path):
     p = subprocess.run(["/usr/bin/python3", "-m", "demkit.friction_study", "--out", str(tmp_path / "o"),
                         str(tmp_path)], capture_output=True, text=True, cwd=ROOT)
     assert p.returncode != 0 and "not an ensemble folder" in p.stderr
+
+
+def test_two_summaries_compared_cell_by_cell(tmp_path):
+    """demkit.summary_compare: z = (b - a)/sqrt(se_a^2 + se_b^2) per shared cell, by hand; a cell without an SE is
+    'not determined' and not counted; the count beyond |z| = 2 against 5 % of the cells; --mu filters; no shared
+    cell is refused by name."""
+    from demkit import summary_compare
+    head = "# summary\nmu,mode,nu,quantity,packings,mean,se,lo95,hi95\n"
+    (tmp_path / "a.csv").write_text(head + "0.5,D2,0.690,s_cs,8,0.80,0.03,0,0\n0.5,D2,0.690,F_cs,8,0.30,0.01,0,0\n"
+                                    "0.5,D2,0.800,s_peak,1,0.79,nan,0,0\n1,D2,0.690,s_cs,8,1.0,0.01,0,0\n")
+    (tmp_path / "b.csv").write_text(head + "0.5,D2,0.690,s_cs,12,0.84,0.04,0,0\n0.5,D2,0.690,F_cs,12,0.35,0.01,0,0\n"
+                                    "0.5,D2,0.800,s_peak,4,0.80,0.01,0,0\n1,D2,0.690,s_cs,12,0.0,0.01,0,0\n")
+    out = str(tmp_path / "cmp")
+    summary_compare.main([str(tmp_path / "a.csv"), str(tmp_path / "b.csv"), "--out", out, "--mu", "0.5"])
+    rows = {r["quantity"]: r for r in csv.DictReader(open(out + ".csv"))}
+    assert set(rows) == {"s_cs", "F_cs", "s_peak"}
+    assert abs(float(rows["s_cs"]["z"]) - 0.04 / 0.05) < 1e-9
+    assert abs(float(rows["F_cs"]["z"]) - 0.05 / math.sqrt(2e-4)) < 1e-3   # 4 digits in the csv
+    assert rows["s_peak"]["z"] == "nan"
+    text = open(out + ".md").read()
+    assert "1 of 2 cells beyond |z| = 2 (expected 0.1" in text and "not determined" in text, text
+    with pytest.raises(SystemExit, match="share no cell"):
+        summary_compare.main([str(tmp_path / "a.csv"), str(tmp_path / "b.csv"), "--out", out, "--mu", "0.3"])
