@@ -27,13 +27,15 @@ RULES = ("overlap", "weighted")
 QUANTITIES = (("p_star [band]", "p*"), ("eps_v [band]", "ε_v"), ("s_dev [band]", "s"), ("F_dev [band]", "F"))
 
 
-def run_rule(dem, work, out, rule, jackknife=True, state_limit=True):
+def run_rule(dem, work, out, rule, jackknife=True, state_limit=True, start=None):
     """`dem model` on WORK (a working copy) into OUT, the extended family under RULE on D2 + D3 (with the
-    state-dependent limit unless told)."""
+    state-dependent limit unless told; from START, a parameters.csv, when given)."""
     cmd = [dem, "model", work, "--out", out, "--family", "extended", "--fabric-lode", rule, "--state-limit",
            "pressure" if state_limit else "none", "--calibrate-on", "D2,D3", "--no-plots", "--force"]
     if not jackknife:
         cmd.append("--no-jackknife")
+    if start:
+        cmd += ["--start", start]
     print("model_lode_weight:", " ".join(cmd), file=sys.stderr)
     os.makedirs(out, exist_ok=True)
     with open(os.path.join(out, "model.log"), "w") as log:

@@ -16,6 +16,7 @@ chi2/dof <= 3) with the chosen variant. docs/model.md, "Which variant: the held-
 """
 import argparse
 import os
+import shutil
 import sys
 
 from demkit import model_friction, model_lode_weight, model_state_limit
@@ -43,7 +44,8 @@ def choose(scores, sizes):
 
 
 def run_missing(dem, work, out, mus, store):
-    """The runs without the limit (OUT/RULE_no_limit/mu_MU), on working copies made when missing."""
+    """The runs without the limit (OUT/RULE_no_limit/mu_MU) that do not exist yet, on working copies made when
+    missing."""
     for mu in mus:
         src, w = os.path.join(store, f"mu_{mu}"), os.path.join(work, f"mu_{mu}")
         if not os.path.isdir(src):
@@ -52,8 +54,47 @@ def run_missing(dem, work, out, mus, store):
             model_friction.copy_tree(src, w)
             model_friction.isobaric_paths(src, w)
         for _, folder, rule, limit, _ in VARIANTS:
-            if not limit:
-                model_lode_weight.run_rule(dem, w, os.path.join(out, folder, f"mu_{mu}"), rule, state_limit=False)
+            run = os.path.join(out, folder, f"mu_{mu}")
+            if not limit and not os.path.exists(os.path.join(run, "summary.csv")):   # a run that exists is kept
+                model_lode_weight.run_rule(dem, w, run, rule, state_limit=False)
+
+
+def cross_start(dem, work, out, mu, scratch):
+    """Each variant calibrated again (without the jackknife) from every other variant's calibrated parameters
+    (`dem model --start`); where one of those starts ends at a lower chi2/dof than the default start (by more
+    than 0.1 %), the variant is run again from it with the jackknife, in place, and OUT/FOLDER/mu_MU/start.txt
+    names the start. The fits are multi-modal: the default start can stop in a worse minimum."""
+    runs = {v[0]: os.path.join(out, v[1], f"mu_{mu}") for v in VARIANTS}
+    starts = {}
+    for name, folder, rule, limit, _ in VARIANTS:   # the default runs' parameters, copied before any is replaced
+        starts[name] = os.path.join(scratch, f"mu_{mu}", f"start_{folder}.csv")
+        os.makedirs(os.path.dirname(starts[name]), exist_ok=True)
+        shutil.copy(os.path.join(runs[name], "parameters.csv"), starts[name])
+    for name, folder, rule, limit, _ in VARIANTS:
+        best = (model_lode_weight.worst(os.path.join(runs[name], "summary.csv"))[0], None)
+        base = best[0]
+        for other in starts:
+            if other == name:
+                continue
+            trial = os.path.join(scratch, f"mu_{mu}", f"{folder}_from_{other.replace(' + ', '_')}")
+            model_lode_weight.run_rule(dem, work, trial, rule, jackknife=False, state_limit=limit, start=starts[other])
+            chi = model_lode_weight.worst(os.path.join(trial, "summary.csv"))[0]
+            if chi < best[0]:
+                best = (chi, other)
+        if best[1] is not None and best[0] < base * (1 - 1e-3):
+            model_lode_weight.run_rule(dem, work, runs[name], rule, state_limit=limit, start=starts[best[1]])
+            write_atomic(os.path.join(runs[name], "start.txt"),
+                         f"started from the calibrated parameters of the variant '{best[1]}' (chi2/dof {base:.4g} from "
+                         f"the default start, {best[0]:.4g} from this one; demkit.model_variants --cross-start)\n")
+
+
+def start_of(run):
+    """'default', or the variant whose calibrated parameters the run started from (start.txt)."""
+    path = os.path.join(run, "start.txt")
+    if not os.path.exists(path):
+        return "default"
+    text = open(path).read()
+    return text.split("'")[1] if "'" in text else "default"
 
 
 def table(out, mus):
@@ -61,9 +102,9 @@ def table(out, mus):
     md = ["<!-- demkit/model_variants.py: the extended family on D2 + D3 under four variants, RMS over the mean 95 % "
           "band half-width; held-out: mean score over the {K} left-out packings; beaten by: variants whose paired "
           "held-out scores are lower by more than t_{K-1,0.975} SE -->",
-          "| μ | variant | extension coefficients | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | "
-          "mean held-out score | beaten by | chosen |", "|---|---|---|---|---|---|---|---|---|---|"]
-    head = ["mu", "variant", "extension_coefficients", "chi2_per_dof [-]", "worst_fitted_D2 [band]",
+          "| μ | variant | extension coefficients | start | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | "
+          "mean held-out score | beaten by | chosen |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    head = ["mu", "variant", "extension_coefficients", "start", "chi2_per_dof [-]", "worst_fitted_D2 [band]",
             "worst_fitted_D3 [band]", "worst_predicted_isobaric [band]", "heldout_mean [-]", "beaten_by", "chosen"]
     lines = [",".join(head) + "\n"]
     target = ["", "| μ | chosen | χ²/dof | worst curve | target met |", "|---|---|---|---|---|"]
@@ -78,13 +119,14 @@ def table(out, mus):
             scores[name] = model_state_limit.extended_scores(d)
         sizes = {v[0]: v[4] for v in VARIANTS}
         chosen, beaten, means = choose(scores, sizes)
-        for name, _, _, _, k in VARIANTS:
+        for name, folder, _, _, k in VARIANTS:
             chi, w = res[name]
+            st = start_of(os.path.join(out, folder, f"mu_{mu}"))
             cells = [f"{w[key][0]:.2f} ({w[key][1]})" for key in KINDS]
             by = "; ".join(beaten[name]) or "none"
             mark = "**yes**" if name == chosen else "no"
-            md.append(f"| {mu} | {name} | {k} | {chi:.3g} | " + " | ".join(cells) + f" | {means[name]:.4g} | {by} | {mark} |")
-            lines.append(",".join([mu, name, str(k), f"{chi:.4g}", *(f"{w[key][0]:.4g}" for key in KINDS),
+            md.append(f"| {mu} | {name} | {k} | {st} | {chi:.3g} | " + " | ".join(cells) + f" | {means[name]:.4g} | {by} | {mark} |")
+            lines.append(",".join([mu, name, str(k), st, f"{chi:.4g}", *(f"{w[key][0]:.4g}" for key in KINDS),
                                    f"{means[name]:.4g}", by, "yes" if name == chosen else "no"]) + "\n")
         chi, w = res[chosen]
         top = max(w.items(), key=lambda kv: kv[1][0])
@@ -106,9 +148,13 @@ def main(argv=None):
     ap.add_argument("--dem", default="build/dem")
     ap.add_argument("--mu", nargs="+", default=list(MUS))
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
+    ap.add_argument("--cross-start", action="store_true",
+                    help="then calibrate each variant from the others' parameters too, and keep the lowest chi2/dof")
     a = ap.parse_args(argv)
     if not a.table_only:
         run_missing(a.dem, a.work, a.out, a.mu, a.store)
+        for mu in a.mu if a.cross_start else []:
+            cross_start(a.dem, os.path.join(a.work, f"mu_{mu}"), a.out, mu, os.path.join(a.work, "cross_start"))
     table(a.out, a.mu)
 
 

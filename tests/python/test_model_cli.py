@@ -555,3 +555,40 @@ def test_stored_variant_table_is_rebuilt_from_the_stored_runs(tmp_path):
     for _, folder, _, _, _ in model_variants.VARIANTS:
         for mu in model_variants.MUS:
             assert len(model_variants.model_state_limit.extended_scores(str(work / folder / f"mu_{mu}"))) == 8
+
+
+def test_cross_start_keeps_the_lowest_minimum(tmp_path):
+    """demkit.model_variants.cross_start with a stand-in `dem` (its chi2/dof set by the start's parameters.csv):
+    each variant tried from the other three's parameters; the one whose default start ended higher is run again
+    from the best start, with the jackknife, and says so in start.txt (the table's start column); one already at
+    its lowest is left as it was."""
+    from demkit import model_variants
+    fake = tmp_path / "dem"
+    fake.write_text("#!/usr/bin/env python3\n"
+                    "import sys, os\n"
+                    "a = sys.argv\n"
+                    "out = a[a.index('--out') + 1]\n"
+                    "chi = 2.0\n"
+                    "if '--start' in a:\n"
+                    "    chi = float(open(a[a.index('--start') + 1]).read().split(',')[-1])\n"
+                    "os.makedirs(out, exist_ok=True)\n"
+                    "open(os.path.join(out, 'summary.csv'), 'w').write('mode,nu [-],role,p_star [band],eps_v [band],"
+                    "s_dev [band],F_dev [band],worst [band]\\ncalibration,nan,chi2/dof %g,nan,nan,nan,nan,1\\n' % chi)\n"
+                    "open(os.path.join(out, 'parameters.csv'), 'w').write('parameter,value\\nchi,%g' % chi)\n"
+                    "open(os.path.join(out, 'jack.txt'), 'w').write(str('--no-jackknife' not in a))\n")
+    fake.chmod(0o755)
+    out = tmp_path / "out"
+    chis = {"overlap_no_limit": 1.5, "overlap": 1.2, "weighted_no_limit": 3.0, "weighted": 1.0}
+    for folder, chi in chis.items():
+        d = out / folder / "mu_1"
+        os.makedirs(d)
+        (d / "summary.csv").write_text("mode,nu [-],role,p_star [band],eps_v [band],s_dev [band],F_dev [band],"
+                                       f"worst [band]\ncalibration,nan,chi2/dof {chi},nan,nan,nan,nan,1\n")
+        (d / "parameters.csv").write_text(f"parameter,value\nchi,{chi}")
+    model_variants.cross_start(str(fake), str(tmp_path / "work"), str(out), "1", str(tmp_path / "scratch"))
+    for folder in ("overlap_no_limit", "overlap", "weighted_no_limit"):   # each reaches 1.0 from weighted's start
+        assert model_variants.start_of(str(out / folder / "mu_1")) == "weighted + limit", folder
+        assert (out / folder / "mu_1" / "jack.txt").read_text() == "True"
+        assert "chi2/dof 1," in (out / folder / "mu_1" / "summary.csv").read_text()
+    assert model_variants.start_of(str(out / "weighted" / "mu_1")) == "default"
+    assert "chi2/dof 1.0" in (out / "weighted" / "mu_1" / "summary.csv").read_text()
