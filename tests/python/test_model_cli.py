@@ -536,25 +536,34 @@ def test_variant_choice_is_the_simplest_that_no_other_beats():
     assert chosen == "C" and means["C"] < means["B"], (chosen, means)
 
 
-def test_stored_variant_table_is_rebuilt_from_the_stored_runs(tmp_path):
-    """data/friction_n1000/model_friction/lode_weight/variants.{md,csv}: what `demkit.model_variants --table-only`
-    makes of the four variants' stored runs (byte for byte); every run carries its 8 held-out scores, and the
-    choice is a variant that no other beats."""
-    from demkit import model_variants
-    src = os.path.join(ROOT, "data", "friction_n1000", "model_friction", "lode_weight")
+@pytest.mark.parametrize("where, K, mus", [
+    (("friction_n1000", "model_friction", "lode_weight"), 8, ("0", "0.01", "0.1", "0.3", "0.5", "1")),
+    (("friction_n1000_k12", "model"), 12, ("0", "0.1", "0.3", "0.5", "1"))])
+def test_stored_variant_table_is_rebuilt_from_the_stored_runs(tmp_path, where, K, mus):
+    """The stored variants.{md,csv} (the K = 8 study; the K = 12 ensembles, cross-started): what `demkit.model_variants
+    --table-only` makes of the four variants' stored runs (byte for byte), and at K = 12 the two rules' tables
+    (demkit.model_lode_weight) too; every run carries its K held-out scores, the choice is a variant that no
+    other beats, and a start other than the default is named."""
+    from demkit import model_lode_weight, model_variants
+    src = os.path.join(ROOT, "data", *where)
     work = tmp_path / "lw"
     shutil.copytree(src, work)
-    model_variants.main(["--work", str(tmp_path / "w"), "--out", str(work), "--table-only"])
-    for name in ("variants.md", "variants.csv"):
+    model_variants.main(["--work", str(tmp_path / "w"), "--out", str(work), "--mu", *mus, "--table-only"])
+    names = ["variants.md", "variants.csv"]
+    if K == 12:
+        model_lode_weight.main(["--work", str(tmp_path / "w"), "--out", str(work), "--mu", *mus, "--table-only"])
+        names += ["lode_weight.md", "lode_weight.csv", "parameters_overlap.md", "parameters_weighted.md"]
+    for name in names:
         with open(os.path.join(src, name)) as a, open(work / name) as b:
             assert a.read() == b.read(), name
     rows = list(csv.DictReader(open(work / "variants.csv")))
-    assert len(rows) == 4 * len(model_variants.MUS)
+    assert len(rows) == 4 * len(mus)
     for r in rows:
         assert (r["chosen"] == "yes") <= (r["beaten_by"] == "none"), r
+        assert r["start"] == "default" or r["start"] in [v[0] for v in model_variants.VARIANTS], r
     for _, folder, _, _, _ in model_variants.VARIANTS:
-        for mu in model_variants.MUS:
-            assert len(model_variants.model_state_limit.extended_scores(str(work / folder / f"mu_{mu}"))) == 8
+        for mu in mus:
+            assert len(model_variants.model_state_limit.extended_scores(str(work / folder / f"mu_{mu}"))) == K
 
 
 def test_cross_start_keeps_the_lowest_minimum(tmp_path):
