@@ -64,6 +64,18 @@ def copy_tree(src, dst):
                 shutil.copy(f, os.path.join(dst, "members", name, sub))
 
 
+def working_copy(store, work, mu, who):
+    """WORK/mu_MU, a working copy of STORE/mu_MU (copy_tree and isobaric_paths) made when it has no paths/ yet;
+    a missing STORE/mu_MU is refused, naming WHO's --store."""
+    src, dst = os.path.join(store, f"mu_{mu}"), os.path.join(work, f"mu_{mu}")
+    if not os.path.isdir(src):
+        raise SystemExit(f"{who}: {src} does not exist (--store: the friction study's folder)")
+    if not os.path.isdir(os.path.join(dst, "paths")):
+        copy_tree(src, dst)
+        isobaric_paths(src, dst)
+    return dst
+
+
 def isobaric_paths(src, dst):
     """paths/isobaric_phiX.csv and members/mNNN/paths/isobaric_phiX.csv from the members' isobaric D2 curves."""
     members = sorted(glob.glob(os.path.join(src, "members", "m*")))

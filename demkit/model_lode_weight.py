@@ -130,12 +130,7 @@ def main(argv=None):
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
     a = ap.parse_args(argv)
     for mu in ([] if a.table_only else a.mu):
-        src, work = os.path.join(a.store, f"mu_{mu}"), os.path.join(a.work, f"mu_{mu}")
-        if not os.path.isdir(src):
-            raise SystemExit(f"model_lode_weight: {src} does not exist (--store: the friction study's folder)")
-        if not os.path.isdir(os.path.join(work, "paths")):
-            model_friction.copy_tree(src, work)
-            model_friction.isobaric_paths(src, work)
+        work = model_friction.working_copy(a.store, a.work, mu, "model_lode_weight")
         for rule in RULES:
             run_rule(a.dem, work, os.path.join(a.out, rule, f"mu_{mu}"), rule)
     table(a.out, a.mu)

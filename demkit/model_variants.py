@@ -47,12 +47,7 @@ def run_missing(dem, work, out, mus, store):
     """The runs without the limit (OUT/RULE_no_limit/mu_MU) that do not exist yet, on working copies made when
     missing."""
     for mu in mus:
-        src, w = os.path.join(store, f"mu_{mu}"), os.path.join(work, f"mu_{mu}")
-        if not os.path.isdir(src):
-            raise SystemExit(f"model_variants: {src} does not exist (--store: the friction study's folder)")
-        if not os.path.isdir(os.path.join(w, "paths")):
-            model_friction.copy_tree(src, w)
-            model_friction.isobaric_paths(src, w)
+        w = model_friction.working_copy(store, work, mu, "model_variants")
         for _, folder, rule, limit, _ in VARIANTS:
             run = os.path.join(out, folder, f"mu_{mu}")
             if not limit and not os.path.exists(os.path.join(run, "summary.csv")):   # a run that exists is kept
