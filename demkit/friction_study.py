@@ -157,8 +157,9 @@ def summarise(folder):
 
 
 def round_to_error(v, e):
-    """'0.197 ± 0.002': the value rounded to its error, the rule of every table (demkit.rounding)."""
-    return pm(v, e)
+    """'0.197 ± 0.002': the value rounded to its error, the rule of every table (demkit.rounding); "not
+    determined" where there is no value (a peak no packing has: every curve still rising at its end)."""
+    return pm(v, e) if math.isfinite(v) else "not determined"
 
 
 UNITS = {"nu_J": "", "C_star_nr": "", "nu_bracket": "", "s_peak": "", "eps_peak": "", "s_cs": "", "F_cs": "",
@@ -200,7 +201,8 @@ def write_headline(rows, out):
     find = {(r["mu"], r["mode"], r["nu"], r["quantity"]): r for r in rows}
     lines = []
     for nu in nus:
-        lines += [f"**ν = {nu}** (K = packings per cell)", "",
+        lines += [f"**ν = {nu}** (K = packings per cell; a peak is averaged over the packings whose curve has "
+                  "one, none on a curve still rising at its end, so K can differ between columns)", "",
                   "| μ | K | " + " | ".join(h[2] for h in HEADLINE) + " |", "|---" * (len(HEADLINE) + 2) + "|"]
         for mu in mus:
             cells, ks = [], set()
@@ -371,6 +373,14 @@ def store(folder, dst):
             trim_csv(f, os.path.join(dst, "members", b, os.path.basename(os.path.dirname(f)), os.path.basename(f)))
 
 
+def source_path(folder, a):
+    """Where the summary's data lie, relative to the summary's folder (a stored copy if --store made one), so
+    that a stored study names its own folders wherever it is cloned."""
+    if a.store:
+        folder = os.path.join(a.store, f"mu_{friction_of(folder):g}")
+    return os.path.relpath(folder, a.out)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -393,7 +403,7 @@ def main(argv=None):
             store(f, os.path.join(a.store, f"mu_{friction_of(f):g}"))
     tmp = os.path.join(a.out, "summary.json.part")
     with open(tmp, "w") as fh:
-        json.dump({"folders": {f"{friction_of(f):g}": os.path.abspath(f) for f in a.folders},
+        json.dump({"folders": {f"{friction_of(f):g}": source_path(f, a) for f in a.folders},
                    "rows": [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in r.items()}
                             for r in rows]}, fh, indent=1)
     os.replace(tmp, os.path.join(a.out, "summary.json"))

@@ -168,3 +168,27 @@ def test_two_summaries_compared_cell_by_cell(tmp_path):
     assert "1 of 2 cells beyond |z| = 2 (expected 0.1" in text and "not determined" in text, text
     with pytest.raises(SystemExit, match="share no cell"):
         summary_compare.main([str(tmp_path / "a.csv"), str(tmp_path / "b.csv"), "--out", out, "--mu", "0.3"])
+
+
+@pytest.mark.parametrize("study,mus", [("friction_n1000", ["0", "0.01", "0.1", "0.3", "0.5", "1"]),
+                                       ("friction_n1000_k12", ["0", "0.1", "0.3", "0.5", "1"])])
+def test_stored_summary_is_rebuilt_from_the_stored_folders(tmp_path, study, mus):
+    """The stored summary and headline are what today's friction_study makes of the stored curves (the
+    K = 8 study's first tables predated the still-rising-curve rule), and summary.json names its data by
+    paths that resolve beside it wherever the repository is cloned."""
+    import json
+    src = os.path.join(ROOT, "data", study)
+    folders = [os.path.join(src, f"mu_{m}") for m in mus]
+    friction_study.main([*folders, "--out", str(tmp_path), "--no-plots"])
+    for name in ("summary.csv", "summary.md", "headline.md"):
+        with open(os.path.join(src, name)) as a, open(tmp_path / name) as b:
+            assert a.read() == b.read(), f"data/{study}/{name} is not rebuilt by today's friction_study"
+    with open(os.path.join(src, "summary.json")) as fh:
+        named = json.load(fh)["folders"]
+    assert sorted(named, key=float) == mus
+    for m, rel in named.items():
+        assert not os.path.isabs(rel) and os.path.isfile(os.path.join(src, rel, "scene.toml")), rel
+    # a peak no packing has is "not determined", never a number or a bare n/a
+    with open(tmp_path / "summary.md") as fh:
+        rows = [l for l in fh if "| 0 | not determined |" in l]
+    assert all("peak" in l or "softening" in l or "C_star_nr" in l for l in rows)
