@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
+#include <memory>
 #include <regex>
 #include <sstream>
 #include <stdexcept>
@@ -48,6 +49,12 @@ std::vector<CurveFile> curves_in(const fs::path& dir) {
     return a.mode != b.mode ? a.mode < b.mode : a.nu < b.nu;
   });
   return out;
+}
+
+// Every --start is a parameters.csv (none is `default`): only then may path ensembles alone be the
+// calibration, since the default start comes from a monotone mode's saturating fits.
+bool starts_from_files(const ModelCommandOptions& o) {
+  return !o.start.empty() && std::find(o.start.begin(), o.start.end(), "default") == o.start.end();
 }
 
 std::vector<CurveFile> find_curves(const fs::path& dir, bool optional = false) {
@@ -128,6 +135,7 @@ CurveData leave_one_out(const CurveData& c, const fs::path& member_csv) {
 std::string law_of(const std::string& n) {
   if (n == "p0" || n == "nu_c" || n == "gamma_p") return "p*(nu) = p0 (nu C(nu)/nu_c) x (1 + gamma_p x), x = ln(nu/nu_c)";
   if (n == "C0" || n == "C1" || n == "nu_cC" || n == "alpha") return "C(nu) = C0 + C1 (nu/nu_cC - 1)^alpha";
+  if (n == "chi_D") return "mobilisation r at which the plastic dilatancy changes sign (one value at every nu)";
   if (n == "ln_delta_w" || n == "n_w") return "Lode weight w = 1/(1 + exp(n_w (ln_delta_w - ln(delta/d)))), delta/d = pi p*/(C nu)";
   const std::string q = n.substr(0, n.size() - 2);
   return q + "(nu) = " + q + "_a + " + q + "_b (nu - nu_ref)";
@@ -293,8 +301,17 @@ void write_model_paths(const Parameters& P, const CurveData& c, const std::strin
 
 // ---- Families, the held-out test, the summary table (docs/model.md, "The frictional extension") ----
 
+struct StartOutcome {   // one start of a multi-start calibration (starts.csv)
+  std::string start;      ///< the --start entry: a parameters.csv or `default`
+  double chi2_dof = 0;
+  bool converged = false;
+  std::string message;
+};
+
 struct FamilyFit {
   Calibration cal;
+  std::vector<StartOutcome> starts;        ///< every start tried (more than one: --start A,B,...)
+  std::size_t chosen_start = 0;
   std::vector<std::vector<double>> jack;   ///< leave-one-out estimates
   std::vector<double> heldout;             ///< per left-out packing: its own fitted curves' mean squared
                                            ///< standardised error under the fit without it
@@ -448,7 +465,7 @@ ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir)
          fit_label, members_out, iso_files_out, iso_out, K_out] = in;
   // With --start the path ensembles alone may be the calibration (the laboratory set of issue 31):
   // DIR need not hold ensemble curves then.
-  const auto files = find_curves(dir, !o.start.empty());
+  const auto files = find_curves(dir, starts_from_files(o));
   std::vector<std::string> fit_names = o.calibrate_on.empty() ? std::vector<std::string>{o.calibrate_mode} : o.calibrate_on;
   auto fitted = [&](const std::string& n) { return std::find(fit_names.begin(), fit_names.end(), n) != fit_names.end(); };
   std::vector<std::string> known;
@@ -458,7 +475,7 @@ ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir)
     if (fitted(f.mode)) { fit_curves.push_back(c); fit_files.push_back(f); }
     else { other.push_back(c); other_files.push_back(f); }
   }
-  if (fit_curves.empty() && o.start.empty())
+  if (fit_curves.empty() && !starts_from_files(o))
     throw InputError("no ensemble curve of the fitted modes (" + o.calibrate_mode + ", --calibrate-on) under " +
                      (dir / "ensemble").string() + ": run the ensemble with mode D2 (or pick another with --calibrate-mode); "
                      "paths alone cannot be the calibration (a monotone mode gives the start values) unless --start "
@@ -505,7 +522,28 @@ ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir)
   return in;
 }
 
-Parameters start_params;   // --start, read once (CalibrationOptions::start points at it)
+// --start, read once: one entry per start, nullptr for `default` (CalibrationOptions::start points at one of them).
+std::vector<std::unique_ptr<Parameters>> start_params;
+
+// The starts of the calibration from --start, checked and read (none given: the default start alone).
+void read_starts(const ModelCommandOptions& o, CalibrationOptions& co) {
+  start_params.clear();
+  for (const auto& f : o.start) {
+    if (f == "default") {
+      start_params.push_back(nullptr);
+      continue;
+    }
+    if (!fs::is_regular_file(f))
+      throw InputError("--start " + f + " is not a file: give the parameters.csv of a `dem model` run, or `default` "
+                       "(the start from the data's own saturating fits)");
+    try {
+      start_params.push_back(std::make_unique<Parameters>(read_parameters(f)));
+    } catch (const std::runtime_error& e) {
+      throw InputError("--start " + f + ": " + e.what());
+    }
+  }
+  co.start = start_params.empty() ? nullptr : start_params.front().get();
+}
 
 // The calibration's options from the command's (--eps-max, --family, --surface, --fabric-lode checked).
 CalibrationOptions calibration_options(const ModelCommandOptions& o) {
@@ -513,22 +551,16 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   co.eps_max = o.eps_max;
   if (o.max_iterations < 1) throw InputError("--max-iterations " + std::to_string(o.max_iterations) + ": give a positive number");
   co.max_iterations = o.max_iterations;
-  if (!o.start.empty()) {
-    if (!fs::is_regular_file(o.start))
-      throw InputError("--start " + o.start + " is not a file: give the parameters.csv of a `dem model` run");
-    try {
-      start_params = read_parameters(o.start);
-    } catch (const std::runtime_error& e) {
-      throw InputError(std::string("--start: ") + e.what());
-    }
-    co.start = &start_params;
-  }
+  read_starts(o, co);
+  if (!o.hold_isotropic.empty() && o.start.size() != 1)
+    throw InputError("--hold-isotropic holds parameters at the values of one --start file: give exactly one (got " +
+                     std::to_string(o.start.size()) + ")");
   for (const auto& n : o.hold_isotropic) {
     const int i = iso_index(n);
     if (i < 0)
       throw InputError("--hold-isotropic " + n + ": not an isotropic parameter; give some of p0, nu_c, gamma_p, C0, C1, "
                        "nu_cC, alpha");
-    if (o.start.empty())
+    if (!co.start)
       throw InputError("--hold-isotropic needs --start PARAMETERS.csv (the values they are held at)");
     co.hold_iso.push_back(i);
   }
@@ -625,12 +657,30 @@ FamilyFit fit_family(const ModelInputs& in, const CalibrationOptions& co, const 
   CalibrationOptions co_f = co;
   co_f.extended = extended;
   std::cerr << "dem model: family " << (extended ? "extended" : "group") << "\n";
-  try {
-    cal = calibrate(fit_curves, iso, co_f, fit_paths);
-  } catch (const std::invalid_argument& e) {
-    throw InputError(e.what());
+  const std::size_t n_starts = std::max<std::size_t>(1, start_params.size());
+  for (std::size_t i = 0; i < n_starts; ++i) {
+    if (!start_params.empty()) co_f.start = start_params[i].get();
+    Calibration ci;
+    try {
+      ci = calibrate(fit_curves, iso, co_f, fit_paths);
+    } catch (const std::invalid_argument& e) {
+      throw InputError((n_starts > 1 ? "--start " + o.start[i] + ": " : std::string()) + e.what());
+    }
+    std::cerr << "dem model: " << (n_starts > 1 ? "start " + o.start[i] + ": " : std::string()) << ci.message
+              << "  chi2/dof = " << num(ci.chi2_dof(), 4) << "\n";
+    if (n_starts > 1) ff.starts.push_back({o.start[i], ci.chi2_dof(), ci.ok, ci.message});
+    // the lowest chi2/dof of the converged fits (of all, if none converged)
+    const bool better = i == 0 || (ci.ok && !cal.ok) ||
+                        (ci.ok == cal.ok && ci.chi2_dof() < cal.chi2_dof());
+    if (better) {
+      cal = std::move(ci);
+      ff.chosen_start = i;
+    }
   }
-  std::cerr << "dem model: " << cal.message << "  chi2/dof = " << num(cal.chi2_dof(), 4) << "\n";
+  co_f.start = start_params.empty() ? nullptr : start_params[ff.chosen_start].get();
+  if (n_starts > 1)
+    std::cerr << "dem model: the fit from start " << o.start[ff.chosen_start] << " has the lowest chi2/dof ("
+              << num(cal.chi2_dof(), 4) << "; starts.md)\n";
 
   jackknife(in, co_f, o, ff);
 
@@ -648,6 +698,20 @@ void write_heldout(const FamilyFit& ff, const fs::path& out) {
                   "Held-out score per left-out packing: its own fitted curves predicted by the fit without it, mean "
                   "squared error in units of the between-packing SD (docs/model.md, the held-out test); the column name "
                   "is selection.csv's, whatever the family");
+}
+
+// A multi-start calibration's starts (--start A,B,...): each one's chi2/dof and whether it converged, and which
+// was kept (the jackknife refits start from the kept optimum).
+void write_starts(const FamilyFit& ff, const fs::path& out) {
+  if (ff.starts.empty()) return;
+  Table t({"start", "chi2_per_dof [-]", "converged", "kept", "message"});
+  for (std::size_t i = 0; i < ff.starts.size(); ++i) {
+    const auto& s = ff.starts[i];
+    t.add_row({s.start, num(s.chi2_dof, 6), s.converged ? "yes" : "no", i == ff.chosen_start ? "yes" : "no", s.message});
+  }
+  write_table_all(t, (out / "starts").string(),
+                  "The calibration from each --start (`default`: the start from the data's own saturating fits); the "
+                  "lowest chi2/dof of the converged fits is kept (of all, if none converged), and the jackknife refits start from it");
 }
 
 // One family's tables, curves and figures in `out`.
@@ -777,6 +841,7 @@ int run(const ModelCommandOptions& o) {
   for (std::size_t f = 0; f < fits.size(); ++f) {
     const fs::path dest = fits.size() == 2 && f != chosen ? out / fams[f] : out;
     write_results(in, fits[f], dest, o);
+    write_starts(fits[f], dest);
     if (f == chosen && !fits[f].cal.ok) rc = 1;
   }
   if (rc)
@@ -817,7 +882,10 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "rises at constant volume or nu falls under constant p; docs/model.md)");
   app.add_option("--max-iterations", o.max_iterations, "Ceres iterations of each fit (default 300)");
   app.add_option("--start", o.start, "parameters.csv of another `dem model` run: the start values (re-centred on "
-                 "this data's nu_ref); with it the path ensembles alone may be calibrated (--calibrate-on PATHS)");
+                 "this data's nu_ref); with it the path ensembles alone may be calibrated (--calibrate-on PATHS). "
+                 "Several, comma-separated, `default` for the start from the data's own fits: the fit is made from "
+                 "each and the lowest chi2/dof kept (OUT/starts.md); the fits of the extended family are multi-modal")
+      ->delimiter(',')->default_str("");
   app.add_option("--hold-isotropic", o.hold_isotropic, "isotropic parameters held at their --start values, "
                  "comma-separated (e.g. gamma_p,nu_cC,alpha: a branch of two pressure levels fixes two of the pressure "
                  "law's three)")->delimiter(',')->default_str("");

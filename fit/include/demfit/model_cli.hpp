@@ -22,8 +22,10 @@ struct ModelCommandOptions {
   std::string family = "group";           ///< group, extended or auto (docs/model.md, "The frictional extension")
   std::string surface = "ld";             ///< Lode surface of the extended family: ld, mn, none
   int max_iterations = 300;               ///< Ceres iterations of each fit
-  std::string start;                      ///< parameters.csv of another `dem model` run: start values (paths-only calibration)
-  std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs start)
+  /// Start values: parameters.csv files of other `dem model` runs, or `default` (the start from the data's own
+  /// saturating fits). More than one: the fit is made from each, the lowest chi2/dof is kept (starts.{csv,md}).
+  std::vector<std::string> start;
+  std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
   std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default) or pressure (n_psi fitted)
   std::string fabric_lode = "overlap";  ///< Lode rule of the extended family's fabric: overlap (default), principal, norm, opening, extension
 };
