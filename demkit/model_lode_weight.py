@@ -29,9 +29,11 @@ QUANTITIES = (("p_star [band]", "p*"), ("eps_v [band]", "ε_v"), ("s_dev [band]"
 
 def run_rule(dem, work, out, rule, jackknife=True, state_limit=True, start=None):
     """`dem model` on WORK (a working copy) into OUT, the extended family under RULE on D2 + D3 (with the
-    state-dependent limit unless told; from START, a parameters.csv, when given)."""
+    state-dependent limit unless told: True or False, or a `--state-limit` value such as "pressure-lode"; from
+    START, a parameters.csv or a comma-separated multi-start list, when given)."""
+    limit = state_limit if isinstance(state_limit, str) else "pressure" if state_limit else "none"
     cmd = [dem, "model", work, "--out", out, "--family", "extended", "--fabric-lode", rule, "--state-limit",
-           "pressure" if state_limit else "none", "--calibrate-on", "D2,D3", "--no-plots", "--force"]
+           limit, "--calibrate-on", "D2,D3", "--no-plots", "--force"]
     if not jackknife:
         cmd.append("--no-jackknife")
     if start:

@@ -15,6 +15,7 @@ the mean held-out score, what beats it, and the choice; the target (every curve 
 chi2/dof <= 3) with the chosen variant. docs/model.md, "Which variant: the held-out test over four".
 """
 import argparse
+import csv
 import os
 import shutil
 import sys
@@ -23,11 +24,16 @@ from demkit import model_friction, model_lode_weight, model_state_limit
 from demkit.atomic import write_atomic
 
 MUS = model_lode_weight.MUS
-# (name, folder under OUT, fabric rule, state limit, extension coefficients beyond the overlap rule's 7)
-VARIANTS = (("overlap", "overlap_no_limit", "overlap", False, 7),
-            ("overlap + limit", "overlap", "overlap", True, 9),
-            ("weighted", "weighted_no_limit", "weighted", False, 9),
-            ("weighted + limit", "weighted", "weighted", True, 11))
+# (name, folder under OUT, fabric rule, state limit, extension coefficients in all)
+BASE = (("overlap", "overlap_no_limit", "overlap", False, 7),
+        ("overlap + limit", "overlap", "overlap", True, 9),
+        ("weighted", "weighted_no_limit", "weighted", False, 9),
+        ("weighted + limit", "weighted", "weighted", True, 11))
+# The eighth round's two (--lode-limit): the limit's state exponent scaled by (c_3(1/2)/c_3(b))^lambda_psi, one
+# coefficient more. Optional: a table lists them as "not run" where their runs do not exist.
+LODE = (("overlap + Lode limit", "overlap_lode_limit", "overlap", "pressure-lode", 10),
+        ("weighted + Lode limit", "weighted_lode_limit", "weighted", "pressure-lode", 12))
+VARIANTS = BASE + LODE
 KINDS = (("D2", "fitted"), ("D3", "fitted"), ("isobaric", "predicted"))
 
 
@@ -43,15 +49,23 @@ def choose(scores, sizes):
     return min(free, key=lambda a: (sizes[a], means[a])), beaten, means
 
 
-def run_missing(dem, work, out, mus, store):
+def run_missing(dem, work, out, mus, store, lode=False):
     """The runs without the limit (OUT/RULE_no_limit/mu_MU) that do not exist yet, on working copies made when
-    missing."""
+    missing; with `lode`, the two Lode-limit variants too (OUT/RULE_lode_limit/mu_MU), each a multi-start
+    calibration (`dem model --start default,A,B`) from its default start and from both rules' fits with the
+    limit (lambda_psi = 0 there: the same exponent at every Lode angle), the lowest chi2/dof kept."""
     for mu in mus:
         w = model_friction.working_copy(store, work, mu, "model_variants")
         for _, folder, rule, limit, _ in VARIANTS:
             run = os.path.join(out, folder, f"mu_{mu}")
-            if not limit and not os.path.exists(os.path.join(run, "summary.csv")):   # a run that exists is kept
+            if os.path.exists(os.path.join(run, "summary.csv")):   # a run that exists is kept
+                continue
+            if not limit:
                 model_lode_weight.run_rule(dem, w, run, rule, state_limit=False)
+            elif limit == "pressure-lode" and lode:
+                own, other = (("weighted", "overlap") if rule == "weighted" else ("overlap", "weighted"))
+                starts = ["default"] + [os.path.join(out, f, f"mu_{mu}", "parameters.csv") for f in (own, other)]
+                model_lode_weight.run_rule(dem, w, run, rule, state_limit=limit, start=",".join(starts))
 
 
 def cross_start(dem, work, out, mu, scratch):
@@ -59,13 +73,13 @@ def cross_start(dem, work, out, mu, scratch):
     (`dem model --start`); where one of those starts ends at a lower chi2/dof than the default start (by more
     than 0.1 %), the variant is run again from it with the jackknife, in place, and OUT/FOLDER/mu_MU/start.txt
     names the start. The fits are multi-modal: the default start can stop in a worse minimum."""
-    runs = {v[0]: os.path.join(out, v[1], f"mu_{mu}") for v in VARIANTS}
+    runs = {v[0]: os.path.join(out, v[1], f"mu_{mu}") for v in BASE}
     starts = {}
-    for name, folder, rule, limit, _ in VARIANTS:   # the default runs' parameters, copied before any is replaced
+    for name, folder, rule, limit, _ in BASE:   # the default runs' parameters, copied before any is replaced
         starts[name] = os.path.join(scratch, f"mu_{mu}", f"start_{folder}.csv")
         os.makedirs(os.path.dirname(starts[name]), exist_ok=True)
         shutil.copy(os.path.join(runs[name], "parameters.csv"), starts[name])
-    for name, folder, rule, limit, _ in VARIANTS:
+    for name, folder, rule, limit, _ in BASE:
         best = (model_lode_weight.worst(os.path.join(runs[name], "summary.csv"))[0], None)
         base = best[0]
         for other in starts:
@@ -84,17 +98,25 @@ def cross_start(dem, work, out, mu, scratch):
 
 
 def start_of(run):
-    """'default', or the variant whose calibrated parameters the run started from (start.txt)."""
+    """'default', or the variant whose calibrated parameters the run started from: start.txt (--cross-start), or
+    the kept row of a multi-start run's starts.csv (a path OUT/FOLDER/mu_MU/parameters.csv names the variant)."""
     path = os.path.join(run, "start.txt")
+    if os.path.exists(path):
+        text = open(path).read()
+        return text.split("'")[1] if "'" in text else "default"
+    path = os.path.join(run, "starts.csv")
     if not os.path.exists(path):
         return "default"
-    text = open(path).read()
-    return text.split("'")[1] if "'" in text else "default"
+    with open(path, newline="") as fh:
+        kept = [r["start"] for r in csv.DictReader(l for l in fh if not l.startswith("#")) if r["kept"] == "yes"]
+    folder = os.path.basename(os.path.dirname(os.path.dirname(kept[0]))) if kept and kept[0] != "default" else ""
+    return next((v[0] for v in VARIANTS if v[1] == folder), "default")
 
 
 def table(out, mus):
-    """OUT/variants.{md,csv} from the four variants' runs."""
-    md = ["<!-- demkit/model_variants.py: the extended family on D2 + D3 under four variants, RMS over the mean 95 % "
+    """OUT/variants.{md,csv} from the variants' runs (the two Lode-limit variants "not run" where absent: the
+    choice is then among the others)."""
+    md = ["<!-- demkit/model_variants.py: the extended family on D2 + D3 under its variants, RMS over the mean 95 % "
           "band half-width; held-out: mean score over the {K} left-out packings; beaten by: variants whose paired "
           "held-out scores are lower by more than t_{K-1,0.975} SE -->",
           "| μ | variant | extension coefficients | start | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | "
@@ -105,16 +127,22 @@ def table(out, mus):
     target = ["", "| μ | chosen | χ²/dof | worst curve | target met |", "|---|---|---|---|---|"]
     for mu in mus:
         res, scores = {}, {}
-        for name, folder, _, _, _ in VARIANTS:
+        for name, folder, _, limit, _ in VARIANTS:
             d = os.path.join(out, folder, f"mu_{mu}")
+            if limit == "pressure-lode" and not os.path.exists(os.path.join(d, "summary.csv")):
+                continue
             if not os.path.exists(os.path.join(d, "summary.csv")):
                 raise SystemExit(f"model_variants: {d}/summary.csv does not exist: run without --table-only first "
                                  "(the runs with the limit: demkit.model_lode_weight), or give --mu the values run")
             res[name] = model_lode_weight.worst(os.path.join(d, "summary.csv"))
             scores[name] = model_state_limit.extended_scores(d)
-        sizes = {v[0]: v[4] for v in VARIANTS}
+        sizes = {v[0]: v[4] for v in VARIANTS if v[0] in scores}
         chosen, beaten, means = choose(scores, sizes)
         for name, folder, _, _, k in VARIANTS:
+            if name not in res:
+                md.append(f"| {mu} | {name} | {k} | not run | | | | | | | no |")
+                lines.append(",".join([mu, name, str(k), "not run", *[""] * 6, "no"]) + "\n")
+                continue
             chi, w = res[name]
             st = start_of(os.path.join(out, folder, f"mu_{mu}"))
             cells = [f"{w[key][0]:.2f} ({w[key][1]})" for key in KINDS]
@@ -144,12 +172,18 @@ def main(argv=None):
     ap.add_argument("--mu", nargs="+", default=list(MUS))
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
     ap.add_argument("--cross-start", action="store_true",
-                    help="then calibrate each variant from the others' parameters too, and keep the lowest chi2/dof")
+                    help="then calibrate each of the four base variants from the others' parameters too, and keep the "
+                         "lowest chi2/dof")
+    ap.add_argument("--lode-limit", action="store_true",
+                    help="also the two variants whose state exponent depends on the Lode angle (eighth round; each "
+                         "started from its default and from both rules' fits with the limit, after --cross-start)")
     a = ap.parse_args(argv)
     if not a.table_only:
         run_missing(a.dem, a.work, a.out, a.mu, a.store)
         for mu in a.mu if a.cross_start else []:
             cross_start(a.dem, os.path.join(a.work, f"mu_{mu}"), a.out, mu, os.path.join(a.work, "cross_start"))
+        if a.lode_limit:
+            run_missing(a.dem, a.work, a.out, a.mu, a.store, lode=True)
     table(a.out, a.mu)
 
 

@@ -135,6 +135,7 @@ CurveData leave_one_out(const CurveData& c, const fs::path& member_csv) {
 std::string law_of(const std::string& n) {
   if (n == "p0" || n == "nu_c" || n == "gamma_p") return "p*(nu) = p0 (nu C(nu)/nu_c) x (1 + gamma_p x), x = ln(nu/nu_c)";
   if (n == "C0" || n == "C1" || n == "nu_cC" || n == "alpha") return "C(nu) = C0 + C1 (nu/nu_cC - 1)^alpha";
+  if (n == "lambda_psi") return "state exponent at Lode parameter b: n_psi (c_3(1/2)/c_3(b))^lambda_psi";
   if (n == "chi_D") return "mobilisation r at which the plastic dilatancy changes sign (one value at every nu)";
   if (n == "ln_delta_w" || n == "n_w") return "Lode weight w = 1/(1 + exp(n_w (ln_delta_w - ln(delta/d)))), delta/d = pi p*/(C nu)";
   const std::string q = n.substr(0, n.size() - 2);
@@ -420,7 +421,8 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
                   std::string("RMS of model - DEM mean over the mean 95 % band half-width per curve (") +
                       (cal.params.extended ? std::string("extended family, ") + surface_name(cal.params.surface) + " surface, fabric limit " +
                                                   fabric_lode_name(cal.params.fabric) +
-                                                  (cal.params.state_limit ? ", state-dependent limit (pressure)" : "")
+                                                  (cal.params.state_lode ? ", state-dependent limit (pressure, Lode-dependent exponent)"
+                                                   : cal.params.state_limit ? ", state-dependent limit (pressure)" : "")
                                            : "group model") +
                       ", calibrated on " + fit_label + "); p_star on constant-volume rows, eps_v where p is held");
 }
@@ -583,11 +585,13 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
                         "and the fabric gated by the fraction of contacts opened by the extension strain), extension "
                         "(overlap, and the fabric's rate per unit extension strain) or weighted (the Lode dependence of "
                         "the onset and the rate weighted by the contact overlap; needs a second Lode angle in --calibrate-on)");
-  if (o.state_limit == "pressure") co.state_limit = true;
+  if (o.state_limit == "pressure" || o.state_limit == "pressure-lode") co.state_limit = true;
   else if (o.state_limit != "none")
     throw InputError("--state-limit " + o.state_limit + ": give none (the default: the stress-ratio limit s_max(nu) on the "
-                     "Lode surface) or pressure (that limit times (p_ref/p)^n_psi, the state parameter in pressure form, "
-                     "n_psi(nu) fitted; docs/model.md)");
+                     "Lode surface), pressure (that limit times (p_ref/p)^n_psi, the state parameter in pressure form, "
+                     "n_psi(nu) fitted) or pressure-lode (pressure, with n_psi scaled by (c_3(b_ref)/c_3(b))^lambda_psi, "
+                     "lambda_psi fitted; needs a second Lode angle in --calibrate-on); docs/model.md");
+  co.state_lode = o.state_limit == "pressure-lode";
   return co;
 }
 
@@ -879,7 +883,9 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "in --calibrate-on, e.g. D2,D3; docs/model.md)");
   app.add_option("--state-limit", o.state_limit, "extended family's stress-ratio limit: none (the default) or pressure "
                  "(s_lim (p_ref/p)^n_psi, a state parameter in pressure form, n_psi(nu) fitted: a peak that falls as p "
-                 "rises at constant volume or nu falls under constant p; docs/model.md)");
+                 "rises at constant volume or nu falls under constant p) or pressure-lode (n_psi scaled by "
+                 "(c_3(1/2)/c_3(b))^lambda_psi at the test's Lode parameter b, lambda_psi fitted; needs a second Lode "
+                 "angle in --calibrate-on; docs/model.md)");
   app.add_option("--max-iterations", o.max_iterations, "Ceres iterations of each fit (default 300)");
   app.add_option("--start", o.start, "parameters.csv of another `dem model` run: the start values (re-centred on "
                  "this data's nu_ref); with it the path ensembles alone may be calibrated (--calibrate-on PATHS). "

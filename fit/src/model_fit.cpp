@@ -54,9 +54,11 @@ struct CurveResidual {
   Surface surface = Surface::None;
   FabricLode fabric = FabricLode::Norm;
   bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
+  bool state_lode = false;    ///< par[2] carries lambda_psi (the state exponent's Lode dependence)
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit};
+    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
+                     extended && state_lode};
     const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -90,9 +92,11 @@ struct PathResidual {
   Surface surface = Surface::None;
   FabricLode fabric = FabricLode::Norm;
   bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
+  bool state_lode = false;    ///< par[2] carries lambda_psi (the state exponent's Lode dependence)
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit};
+    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
+                     extended && state_lode};
     const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step, ext);
     const std::size_t n = acc.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -354,6 +358,7 @@ Parameters read_parameters(const std::string& path) {
   P.nu_ref = get("nu_ref");
   P.extended = v.count(ext_name(0)) > 0;
   P.state_limit = P.extended && v.count(ext_name(kNPsiA)) > 0;
+  P.state_lode = P.state_limit && v.count(ext_name(kLambdaPsi)) > 0;
   if (P.extended)
     for (int i = 0; i < kNumExt; ++i)
       if (i < kNumExtBase || v.count(ext_name(i))) P.ext[i] = get(ext_name(i));
@@ -480,7 +485,9 @@ PathData read_path(const std::string& path, const std::string& name, double nu) 
 namespace {
 
 // Size of the extension block Ceres sees for these options (ext_size).
-int ext_block(const CalibrationOptions& o) { return ext_size(o.state_limit, o.fabric == FabricLode::Weighted); }
+int ext_block(const CalibrationOptions& o) {
+  return ext_size(o.state_limit, o.fabric == FabricLode::Weighted, o.state_limit && o.state_lode);
+}
 
 // The residuals of the D2 ensemble curves: p*, s and F along each, weighted by their standard errors.
 void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& curves, const CalibrationOptions& o,
@@ -489,7 +496,7 @@ void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& 
     auto* f = new CurveResidual{c.eps, c.p, c.s, c.F, weights(c.se_p, o.se_floor, c.source + " p_star"),
                                 weights(c.se_s, o.se_floor, c.source + " s_dev"), weights(c.se_F, o.se_floor, c.source + " F_dev"),
                                 c.nu, c.p.front(), c.s.front(), c.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(c.mode); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit;
+    f->extended = X; f->b = lode_b_of(c.mode); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -527,7 +534,7 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     for (std::size_t i = 1; i <= prefix; ++i) w1[i] = ws[i] = wF[i] = 0.0;
     auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, ws, wF, d.direction, d.isobaric,
                                d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(d.name); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit;
+    f->extended = X; f->b = lode_b_of(d.name); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -586,7 +593,7 @@ void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const 
 // The parameters' bounds: jamming fractions below every start state, positive alpha and p0, the
 // rates' ranges (tighter for the frictional family, whose rate laws have stiff corners).
 void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
-                std::vector<double>& ext, double numin, bool X, bool state_limit, bool weighted) {
+                std::vector<double>& ext, double numin, bool X, bool state_limit, bool weighted, bool state_lode) {
   problem.SetParameterUpperBound(isob.data(), kNuC, numin * (1 - 1e-6));
   problem.SetParameterUpperBound(isob.data(), kNuCC, numin * (1 - 1e-6));
   problem.SetParameterLowerBound(isob.data(), kAlpha, 0.05);
@@ -613,6 +620,10 @@ void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<
     if (state_limit) {   // |n_psi| <= 10 at nu_ref: (p_ref/p)^10 moves the limit by 2.7 at a 10 % pressure excess
       problem.SetParameterLowerBound(ext.data(), kNPsiA, -10.0);
       problem.SetParameterUpperBound(ext.data(), kNPsiA, 10.0);
+    }
+    if (state_lode) {   // the exponent at most e^{+-5 ln 1.73} = 15 (1/15) times D2's in axisymmetric compression
+      problem.SetParameterLowerBound(ext.data(), kLambdaPsi, -5.0);
+      problem.SetParameterUpperBound(ext.data(), kLambdaPsi, 5.0);
     }
     if (weighted) {   // the switch between overlaps of 1e-4 and 0.5 d, no steeper than (delta/delta_w)^30
       problem.SetParameterLowerBound(ext.data(), kLnDeltaW, std::log(1e-4));
@@ -732,27 +743,31 @@ void clamp_extended_start(std::vector<double>& shear, std::vector<double>& ext) 
   }
 }
 
-/// The extension coefficients held at 0: the nu-slopes (*_b) from one start volume fraction (not
-/// determined by the data), and n_psi when the `Weighted` rule's block carries it with the limit off.
-std::vector<int> held_ext(bool one_nu, bool state_limit, bool weighted) {
+/// The extension coefficients held: the nu-slopes (*_b) from one start volume fraction (not determined by the
+/// data), n_psi when the `Weighted` rule's block carries it with the limit off (at 0), and the `Weighted` rule's
+/// two coefficients when the Lode-dependent state exponent's block carries them for another rule (at their start,
+/// unread).
+std::vector<int> held_ext(bool one_nu, bool state_limit, bool weighted, bool state_lode = false) {
   std::vector<int> held;
   if (one_nu) held = {kNFB, kKappaB, kDilB};
   if (one_nu && state_limit) held.push_back(kNPsiB);
   if (weighted && !state_limit) held.insert(held.end(), {kNPsiA, kNPsiB});
+  if (state_lode && !weighted) held.insert(held.end(), {kLnDeltaW, kNW});
   return held;
 }
 
 /// One start volume fraction: every nu-slope (*_b) held at 0; with the extension block, held_ext.
 void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<double>& ext, bool X, bool one_nu,
-              bool state_limit, bool weighted) {
+              bool state_limit, bool weighted, bool state_lode) {
   if (one_nu) {
     for (int i = 1; i < kNumShear; i += 2) shear[i] = 0.0;
     problem.SetManifold(shear.data(), new ceres::SubsetManifold(kNumShear, {1, 3, 5, 7, 9, 11}));
   }
-  const std::vector<int> held = held_ext(one_nu, state_limit, weighted);
+  const std::vector<int> held = held_ext(one_nu, state_limit, weighted, state_lode);
   if (!X || held.empty()) return;
-  for (int i : held) ext[i] = 0.0;
-  problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit, weighted), held));
+  for (int i : held)
+    if (i != kLnDeltaW && i != kNW) ext[i] = 0.0;   // the unread `Weighted` pair keeps its start (inside its bounds)
+  problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit, weighted, state_lode), held));
 }
 
 /// Entries [pos, pos + n) of the reported parameters removed (names, values, errors, correlations):
@@ -767,14 +782,20 @@ void drop_entries(Calibration& cal, int pos, int n) {
 
 }  // namespace
 
-void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector<PathData>& paths) {
+void check_second_lode_angle(const std::vector<CurveData>& curves, const std::vector<PathData>& paths,
+                             const std::string& what, const std::string& or_else) {
   for (const auto& c : curves)
     if (lode_b_of(c.mode) != kLodeBD2) return;
   for (const auto& d : paths)
     if (lode_b_of(d.name) != kLodeBD2) return;
-  throw std::invalid_argument("model calibration: the weighted fabric rule's Lode weight (ln_delta_w, n_w) acts only away "
-                              "from D2's Lode angle, and every calibrated curve is at b = 1/2: add a second Lode angle "
-                              "(--calibrate-on D2,D3, or a triaxial path) or choose another --fabric-lode");
+  throw std::invalid_argument("model calibration: " + what + " acts only away from D2's Lode angle, and every calibrated "
+                              "curve is at b = 1/2: add a second Lode angle (--calibrate-on D2,D3, or a triaxial path) " +
+                              or_else);
+}
+
+void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector<PathData>& paths) {
+  check_second_lode_angle(curves, paths, "the weighted fabric rule's Lode weight (ln_delta_w, n_w)",
+                          "or choose another --fabric-lode");
 }
 
 Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
@@ -824,7 +845,10 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     if (isob[i] > numin * (1 - 1e-6)) isob[i] = numin - 0.005;
   add_isotropic_residuals(problem, iso, o, isob, numin, n_res);
   const bool weighted = X && o.fabric == FabricLode::Weighted;
-  set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted);
+  const bool state_lode = X && o.state_limit && o.state_lode;
+  if (state_lode) check_second_lode_angle(curves, paths, "the state exponent's Lode dependence (lambda_psi)",
+                                          "or choose --state-limit pressure");
+  set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted, state_lode);
   if (o.fit_isotropic && !held.empty())
     problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 
@@ -834,7 +858,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (const auto& c : curves) nus_seen.insert(std::llround(c.nu * 1e6));
   for (const auto& d : paths) nus_seen.insert(std::llround(d.nu * 1e6));
   const bool one_nu = nus_seen.size() < 2;
-  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted);
+  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode);
 
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
@@ -857,8 +881,9 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   cal.params.surface = X ? o.surface : Surface::None;
   cal.params.fabric = X ? o.fabric : FabricLode::Norm;
   cal.params.state_limit = X && o.state_limit;
-  const int n_ext = ext_size(cal.params.state_limit, weighted);
-  const std::vector<int> held_x = X ? held_ext(one_nu, cal.params.state_limit, weighted) : std::vector<int>();
+  cal.params.state_lode = state_lode;
+  const int n_ext = ext_size(cal.params.state_limit, weighted, state_lode);
+  const std::vector<int> held_x = X ? held_ext(one_nu, cal.params.state_limit, weighted, state_lode) : std::vector<int>();
   cal.chi2 = 2 * sum.final_cost;
   cal.n_residuals = n_res;
   // Free parameters: the held ones (isotropic, the nu-slopes of one start volume fraction, held_ext) left out.
@@ -874,6 +899,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (int i : held_x) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
   calibration_warnings(curves, paths, iso, o, isob, numin, one_nu, X, cal);
   if (weighted && !cal.params.state_limit) drop_entries(cal, kNumIso + kNumShear + kNPsiA, 2);   // n_psi: not in this law
+  if (state_lode && !weighted) drop_entries(cal, kNumIso + kNumShear + kLnDeltaW, 2);   // the `Weighted` pair: unread
   return cal;
 }
 
@@ -883,7 +909,7 @@ ModelCurve predict_curve(const Parameters& params, const CurveData& c, double ep
     throw std::invalid_argument("model prediction: " + c.source + " does not start at eps_d = 0");
   const std::vector<double> iso = params.iso();
   const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface, params.fabric,
-                        params.extended && params.state_limit};
+                        params.extended && params.state_limit, params.extended && params.state_lode};
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
                                          t.F.front(), t.eps, max_step, ext);
   ModelCurve m;
@@ -942,7 +968,7 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
   const std::vector<double> iso = params.iso();
   check_start_scale(iso, d.nu, d.source);
   const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric,
-                        params.extended && params.state_limit};
+                        params.extended && params.state_limit, params.extended && params.state_lode};
   const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
                                          d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
   PathPrediction m;

@@ -173,7 +173,8 @@ Synthetic synthetic(const Parameters& P, const std::vector<double>& nus, int K, 
   for (int i = 0; i <= 100; ++i) eps.push_back(0.004 * i);
   for (double nu : nus) {
     const double p0 = isotropic_pressure(iso.data(), nu);
-    const Ext<double> ext{P.extended ? P.ext : nullptr, lode_b_of(mode), P.surface, P.fabric, P.extended && P.state_limit};
+    const Ext<double> ext{P.extended ? P.ext : nullptr, lode_b_of(mode), P.surface, P.fabric, P.extended && P.state_limit,
+                          P.extended && P.state_lode};
     const auto st = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.01, 0.01, eps, 1e-3, ext);
     std::vector<CurveData> mem;
     for (int k = 0; k < K; ++k) {
@@ -906,6 +907,111 @@ static void recover_extension(FabricLode rule, bool state_limit = false) {
 }
 
 TEST(ModelFriction, RecoversExtensionWithinJackknifeErrors) { recover_extension(FabricLode::Principal); }
+
+// The state exponent's Lode dependence (issue 31, eighth round; `--state-limit pressure-lode`): (i) the factor
+// by hand, (p_ref/p)^(n_psi 3^(lambda/2)) in axisymmetric compression (c_3(1/2)/c_3(0) = (1/sqrt 3)/(1/3) = sqrt 3),
+// n_psi itself at b = 1/2; (ii) D2 is the pressure limit's bit for bit whatever lambda_psi; (iii) lambda_psi = 0
+// gives D3 the pressure limit's bit for bit; (iv) lambda_psi > 0 lowers D3's late stress ratio where the
+// pressure has risen above its reference (a stronger softening), and leaves the start alone.
+TEST(ModelFriction, LodeStateExponentScalesTheLimitAwayFromD2) {
+  double ext[kNumExt] = {0};
+  ext[kNPsiA] = 0.6;
+  ext[kLambdaPsi] = 1.5;
+  const double p = 0.05, p_ref = 0.04, nu = 0.74;
+  const double want = std::pow(p_ref / p, 0.6 * std::pow(3.0, 0.75));
+  EXPECT_NEAR(state_limit_factor<double>(ext, nu, nu, p, p_ref, 0.0, true), want, 1e-14);
+  EXPECT_EQ(state_limit_factor<double>(ext, nu, nu, p, p_ref, 0.5, true), std::pow(p_ref / p, 0.6));
+  EXPECT_EQ(state_limit_factor<double>(ext, nu, nu, p, p_ref, 0.0, false), std::pow(p_ref / p, 0.6));
+
+  Parameters P = frictional_truth();
+  P.ext[kNPsiA] = 1.8;
+  const auto iso = P.iso();
+  const double nu0 = 0.78, p0 = isotropic_pressure(iso.data(), nu0);
+  auto run = [&](const char* mode, double lambda, bool lode) {
+    double e[kNumExt];
+    std::copy(P.ext, P.ext + kNumExt, e);
+    e[kLambdaPsi] = lambda;
+    return monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.02, 0.01, shear_grid(), 2e-3,
+                                  Ext<double>{e, lode_b_of(mode), P.surface, P.fabric, true, lode});
+  };
+  const auto d2 = run("D2", 0.0, false), d2l = run("D2", 2.0, true);
+  const auto d3 = run("D3", 0.0, false), d30 = run("D3", 0.0, true), d3l = run("D3", 2.0, true);
+  for (std::size_t i = 0; i < d2.size(); ++i) {
+    EXPECT_EQ(d2[i].s, d2l[i].s) << i;
+    EXPECT_EQ(d2[i].p, d2l[i].p) << i;
+    EXPECT_EQ(d3[i].s, d30[i].s) << i;
+    EXPECT_EQ(d3[i].F, d30[i].F) << i;
+  }
+  // (iv) at one state: above the reference pressure the D3 stress ratio is driven lower with lambda_psi > 0,
+  // below it higher; D2's rate is the same
+  for (double over : {1.2, 0.8}) {
+    State<double> y{std::log(nu0), over * p0, 0.4, 0.05};
+    auto ds = [&](double b, double lambda) {
+      double e[kNumExt];
+      std::copy(P.ext, P.ext + kNumExt, e);
+      e[kLambdaPsi] = lambda;
+      const Material<double> m{iso.data(), P.shear, P.nu_ref, 1.0, Ext<double>{e, b, P.surface, P.fabric, true, true}};
+      return rhs(m, y, 1.0, Segment{}).s;
+    };
+    EXPECT_EQ(ds(0.5, 2.0), ds(0.5, 0.0));
+    if (over > 1) EXPECT_LT(ds(0.0, 2.0), ds(0.0, 0.0));
+    else EXPECT_GT(ds(0.0, 2.0), ds(0.0, 0.0));
+  }
+}
+
+// Synthetic D2 and D3 ensembles (K = 8, three volume fractions each, AR(1) noise) from the weighted rule with the
+// Lode-dependent state exponent (lambda_psi = 1.5): every extension coefficient, lambda_psi among them, is
+// recovered within t_{K-1,0.995} jackknife SE and lambda_psi is resolved from 0; without a second Lode angle the
+// option is refused.
+TEST(ModelFriction, RecoversTheLodeStateExponentFromD2AndD3) {
+  Parameters P = frictional_truth();
+  P.fabric = FabricLode::Overlap;
+  P.state_limit = P.state_lode = true;
+  P.ext[kNPsiA] = 1.8;
+  P.ext[kNPsiB] = -20.0;
+  P.ext[kLambdaPsi] = 1.5;
+  const int K = 8;
+  Synthetic S = synthetic(P, {0.69, 0.74, 0.80}, K, 0.9, 31);
+  const Synthetic S3 = synthetic(P, {0.69, 0.74, 0.80}, K, 0.9, 32, "D3");
+  CalibrationOptions o;
+  o.fit_isotropic = false;
+  o.nu_ref = P.nu_ref;
+  o.max_step = 2e-3;
+  o.extended = true;
+  o.surface = Surface::LadeDuncan;
+  o.fabric = FabricLode::Overlap;
+  o.state_limit = o.state_lode = true;
+  Parameters start = P;
+  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.9 : 1.05);
+  for (int i = 0; i < kNumExt; ++i) start.ext[i] *= (i % 2 ? 0.8 : 1.2);
+  o.start = &start;
+  EXPECT_THROW(calibrate(S.mean, {}, o), std::invalid_argument);   // D2 alone: lambda_psi cannot act
+  S.mean.insert(S.mean.end(), S3.mean.begin(), S3.mean.end());
+  S.members.insert(S.members.end(), S3.members.begin(), S3.members.end());
+  const Calibration cal = calibrate(S.mean, {}, o);
+  ASSERT_TRUE(cal.ok) << cal.message;
+  // the block without the `Weighted` pair (unread under the overlap rule): n_F .. n_psi_b, lambda_psi
+  ASSERT_EQ(cal.value.size(), static_cast<std::size_t>(kNumIso + kNumShear + kNumExtBase + 3));
+  EXPECT_EQ(cal.names.back(), "lambda_psi");
+  CalibrationOptions oj = o;
+  oj.start = &cal.params;
+  const auto est = leave_one_out_estimates(S.mean, S.members, K, oj);
+  const double within = demfit::t_quantile(0.995, K - 1);
+  std::vector<int> idx;
+  for (int i = 0; i < kNumExtBase + 2; ++i) idx.push_back(i);
+  idx.push_back(kLambdaPsi);
+  for (std::size_t j = 0; j < idx.size(); ++j) {
+    const int a = kNumIso + kNumShear + static_cast<int>(j);
+    double mean = 0, ss = 0;
+    for (const auto& e : est) mean += e[a] / K;
+    for (const auto& e : est) ss += (e[a] - mean) * (e[a] - mean);
+    const double se = std::sqrt((K - 1.0) / K * ss);
+    EXPECT_LT(std::fabs(cal.value[a] - P.ext[idx[j]]), within * se + 1e-9)
+        << ext_name(idx[j]) << ": estimate " << cal.value[a] << " truth " << P.ext[idx[j]] << " jackknife se " << se;
+    if (idx[j] == kLambdaPsi) EXPECT_GT(cal.value[a] / se, 3.0) << "lambda_psi not resolved from 0";
+  }
+}
+
 
 // The same under the overlap rule, which changes D2 (its gate is the opened fraction, not the
 // mobilisation): the coefficients, n_F among them, are recovered within 3 jackknife SE from D2 alone.

@@ -56,15 +56,21 @@ enum ExtIndex {
   /// read): w = 1/(1 + (delta_w/delta)^n_w) in [0, 1], delta = delta/d the mean contact overlap; ln delta_w [-]
   /// the overlap at which w = 1/2, n_w [-] the switch's steepness (docs/model.md, "The Lode weight").
   kLnDeltaW, kNW,
+  /// lambda_psi [-] (issue 31, eighth round; only with Ext::state_lode, else never read): the state exponent's
+  /// Lode dependence, n_psi (c_3(b_ref)/c_3(b))^lambda_psi, c_3 the minor principal fraction of a unit strain
+  /// deviator (1.73^lambda_psi in axisymmetric compression against D2; docs/model.md, "The state exponent at
+  /// another Lode angle").
+  kLambdaPsi,
   kNumExt
 };
 
 /// Number of extension coefficients without the state-dependent limit (the block Ceres sees when it is off).
 constexpr int kNumExtBase = kNPsiA;
-/// Size of the extension block: kNumExtBase, kNumExtBase + 2 with the state-dependent limit (n_psi), kNumExt
-/// with the `Weighted` rule's two coefficients (its n_psi entries then held at 0 when the limit is off).
-inline int ext_size(bool state_limit, bool weighted = false) {
-  return weighted ? kNumExt : state_limit ? kNumExtBase + 2 : kNumExtBase;
+/// Size of the extension block: kNumExtBase, kNumExtBase + 2 with the state-dependent limit (n_psi), kLambdaPsi
+/// with the `Weighted` rule's two coefficients (its n_psi entries then held at 0 when the limit is off), kNumExt
+/// with the Lode-dependent state exponent (the `Weighted` entries then held when the rule is another).
+inline int ext_size(bool state_limit, bool weighted = false, bool state_lode = false) {
+  return state_lode ? kNumExt : weighted ? kLambdaPsi : state_limit ? kNumExtBase + 2 : kNumExtBase;
 }
 
 /// Lode-angle dependence of the stress-ratio limit: s_max is the limit at the calibration
@@ -121,9 +127,10 @@ struct Parameters {
   double alpha = 0.5;      ///< [-] coordination power-law exponent
   double shear[kNumShear] = {0.16, -0.5, std::log(50.0), -5.0, 0.11, -0.8, std::log(40.0), -8.0,
                              0.3, -5.0, std::log(20.0), 0.0};
-  double ext[kNumExt] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};   ///< frictional extension (all 0: the group model)
+  double ext[kNumExt] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};   ///< frictional extension (all 0: the group model)
   bool extended = false;   ///< the frictional family (ext fitted, Lode surface `surface`)
   bool state_limit = false;   ///< the frictional family's state-dependent stress-ratio limit (n_psi fitted)
+  bool state_lode = false;    ///< ... with the exponent's Lode dependence (lambda_psi fitted; needs state_limit)
   Surface surface = Surface::None;   ///< Lode-angle surface of the extended family
   FabricLode fabric = FabricLode::Norm;   ///< Lode rule of the extended family's fabric limit
   double nu_ref = 0.74;    ///< [-] volume fraction the nu-laws are centred on
@@ -143,7 +150,7 @@ inline const char* shear_name(int i) {
 }
 inline const char* ext_name(int i) {
   static const char* n[kNumExt] = {"n_F_a", "n_F_b", "kappa_s_a", "kappa_s_b", "d_D_a", "d_D_b", "chi_D",
-                                   "n_psi_a", "n_psi_b", "ln_delta_w", "n_w"};
+                                   "n_psi_a", "n_psi_b", "ln_delta_w", "n_w", "lambda_psi"};
   return n[i];
 }
 inline const char* iso_name(int i) {
@@ -327,6 +334,7 @@ struct Ext {
   Surface surface = Surface::None;
   FabricLode fabric = FabricLode::Norm;
   bool state_limit = false;
+  bool state_lode = false;   ///< n_psi scaled by (c_3(b_ref)/c_3(b))^lambda_psi (the block carries kLambdaPsi)
 };
 
 /// The state-dependent stress-ratio limit (issue 31, fifth round): the limit the stress ratio is
@@ -338,11 +346,16 @@ struct Ext {
 /// ratio M exp(-n_b psi), with the volume-form psi = e - e_cs(p) of Been & Jefferies (1985) replaced
 /// by the pressure form (the state pressure index of Wang et al. 2002). p_ref/p floored at 1e-6
 /// (p_ref <= 0 below the isotropic law's jamming fraction). n_psi(nu) = a + b (nu - nu_ref).
+/// With `lode` (eighth round) the exponent is n_psi (c_3(b_ref)/c_3(b))^lambda_psi at the test's b: at b_ref
+/// (D2) n_psi itself; lambda_psi = 0 the exponent of every Lode angle alike.
 template <class T>
-T state_limit_factor(const T* ext, const T& nu, double nu_ref, const T& p, const T& p_ref) {
+T state_limit_factor(const T* ext, const T& nu, double nu_ref, const T& p, const T& p_ref, double b = kLodeBD2,
+                     bool lode = false) {
   using std::exp;
   using std::log;
-  const T n_psi = ext[kNPsiA] + ext[kNPsiB] * (nu - T(nu_ref));
+  T n_psi = ext[kNPsiA] + ext[kNPsiB] * (nu - T(nu_ref));
+  if (lode && b != kLodeBD2)
+    n_psi = n_psi * exp(ext[kLambdaPsi] * T(std::log(minor_fraction(kLodeBD2) / minor_fraction(b))));
   T ratio = p_ref / p;
   if (!(ratio > T(1e-6))) ratio = T(1e-6);
   return exp(n_psi * log(ratio));
@@ -463,7 +476,9 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const bool lode = m.ext.surface != Surface::None && m.ext.b != kLodeBD2;
   // The state-dependent limit (fifth round; off: s_lim itself, untouched): the target of the stress
   // ratio only; the mobilisation r, the rate scaling and the dilatancy keep s_lim (psi_p = 0).
-  const T s_target = (m.ext.p && m.ext.state_limit) ? s_lim * state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref) : s_lim;
+  const T s_target = (m.ext.p && m.ext.state_limit)
+                         ? s_lim * state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref, m.ext.b, m.ext.state_lode)
+                         : s_lim;
   const T shear = L.beta_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_target - y.s) * shape_s;
   if (seg.control == Control::Isobaric) {
     dvol = (A * T(sigma) - relax + B * dil) / B;

@@ -26,7 +26,7 @@ struct ModelCommandOptions {
   /// saturating fits). More than one: the fit is made from each, the lowest chi2/dof is kept (starts.{csv,md}).
   std::vector<std::string> start;
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
-  std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default) or pressure (n_psi fitted)
+  std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default), pressure (n_psi fitted), pressure-lode (+ lambda_psi)
   std::string fabric_lode = "overlap";  ///< Lode rule of the extended family's fabric: overlap (default), principal, norm, opening, extension
 };
 

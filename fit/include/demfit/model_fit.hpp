@@ -55,6 +55,9 @@ struct CalibrationOptions {
   /// fitted too (the extension block then has kNumExt entries, else kNumExtBase; off: the fourth
   /// round's fit exactly).
   bool state_limit = false;
+  /// With state_limit: the exponent n_psi scaled by (c_3(b_ref)/c_3(b))^lambda_psi, lambda_psi fitted (needs a
+  /// second Lode angle in the calibration; `--state-limit pressure-lode`, docs/model.md).
+  bool state_lode = false;
   /// Isotropic parameters (IsoIndex) held at their start values while the rest of the block is
   /// fitted: a laboratory's isotropic branch of a few pressure levels cannot fix all seven (issue 31,
   /// "Calibrated on drained triaxial tests"). Needs `start`.
@@ -121,6 +124,10 @@ struct PathData {
 /// The `Weighted` fabric rule's coefficients are identified by a second Lode angle only: throws
 /// std::invalid_argument (naming `--calibrate-on D2,D3`) when every curve and path is at b = 1/2.
 void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector<PathData>& paths);
+/// Throws std::invalid_argument naming `what` (a coefficient that acts only away from D2's Lode angle) when every
+/// calibrated curve and path is at b = 1/2; `or_else` ends the message with the other way out.
+void check_second_lode_angle(const std::vector<CurveData>& curves, const std::vector<PathData>& paths,
+                             const std::string& what, const std::string& or_else);
 
 /// Reads a path ensemble CSV; throws std::runtime_error naming the file and a missing column.
 PathData read_path(const std::string& path, const std::string& name, double nu);
