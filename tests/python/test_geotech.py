@@ -148,7 +148,7 @@ def test_the_failure_surface_has_five_b_values_at_every_mu_and_preparation():
     cells = {(r["mu"], r["prep"], r["level"]) for r in rows}
     on_disk = {tuple(p.split(os.sep)[-3:]) for p in glob.glob(os.path.join(DATA, "curves", "mu_*", "*", "*"))}
     assert {(m[3:], p, lv) for m, p, lv in on_disk} == cells
-    assert {c[0] for c in cells} == {"0", "0.3", "0.5"}
+    assert {c[0] for c in cells} == {"0", "0.1", "0.3", "0.5", "1"}   # the friction study's mu but 0.01
     for cell in cells:
         rs = [r for r in rows if (r["mu"], r["prep"], r["level"]) == cell]
         assert sorted(float(r["b_target"]) for r in rs) == [0, 0.25, 0.5, 0.75, 1], cell
