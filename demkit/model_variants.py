@@ -1,9 +1,11 @@
-"""Four variants of the frictional family on D2 + D3, chosen by the held-out test (issue 31, seventh round):
-the overlap or the weighted fabric rule (`--fabric-lode`), each with or without the state-dependent stress-ratio
-limit (`--state-limit pressure`). Calibrated on D2 + D3 + the isotropic branch of the friction study's K = 8
-ensembles, the isobaric D2 path predicted, jackknife over the packings.
+"""Variants of the frictional family on D2 + D3, chosen by the held-out test (issue 31, seventh and eighth
+rounds): the overlap or the weighted fabric rule (`--fabric-lode`), each with or without the state-dependent
+stress-ratio limit (`--state-limit pressure`), and with `--lode-limit` each with that limit's exponent scaled by
+the Lode angle (`--state-limit pressure-lode`). Calibrated on D2 + D3 + the isotropic branch of the friction
+study's ensembles, the isobaric D2 path predicted, jackknife over the packings.
 
     /usr/bin/python3 -m demkit.model_variants --work WORK --out OUT             # the two runs without the limit
+    /usr/bin/python3 -m demkit.model_variants --work WORK --out OUT --lode-limit   # + the two Lode-limit runs
     /usr/bin/python3 -m demkit.model_variants --work WORK --out OUT --table-only
 
 OUT is the sixth round's folder (data/friction_n1000/model_friction/lode_weight): OUT/RULE/mu_MU holds the runs
@@ -12,7 +14,8 @@ variant is beaten when another's held-out scores are lower on average by more th
 of the paired difference; the variant with the fewest coefficients that no other beats is chosen (a tie: the
 lower mean score). OUT/variants.{md,csv}: per mu and variant chi2/dof, the worst fitted and predicted curve,
 the mean held-out score, what beats it, and the choice; the target (every curve within one band half-width,
-chi2/dof <= 3) with the chosen variant. docs/model.md, "Which variant: the held-out test over four".
+chi2/dof <= 3) with the chosen variant. docs/model.md, "Which variant: the held-out test over four" and "The
+state exponent at another Lode angle".
 """
 import argparse
 import csv
