@@ -770,6 +770,34 @@ void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<d
   problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit, weighted, state_lode), held));
 }
 
+/// One Ceres solve of the calibration (dense QR, tight tolerances, one thread: the same bits on every run).
+ceres::Solver::Summary solve(ceres::Problem& problem, int max_iterations) {
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = max_iterations;
+  so.function_tolerance = 1e-12;
+  so.parameter_tolerance = 1e-12;
+  so.num_threads = 1;
+  ceres::Solver::Summary sum;
+  ceres::Solve(so, &problem, &sum);
+  return sum;
+}
+
+/// The start's parameters with the fitted blocks and the options' family, surface, rules and limit.
+Parameters fitted_params(const Parameters& start, const std::vector<double>& isob, const std::vector<double>& shear,
+                         const std::vector<double>& ext, const CalibrationOptions& o, bool X) {
+  Parameters P = start;
+  P.set_iso(isob.data());
+  std::copy(shear.begin(), shear.end(), P.shear);
+  std::copy(ext.begin(), ext.end(), P.ext);
+  P.extended = X;
+  P.surface = X ? o.surface : Surface::None;
+  P.fabric = X ? o.fabric : FabricLode::Norm;
+  P.state_limit = X && o.state_limit;
+  P.state_lode = X && o.state_limit && o.state_lode;
+  return P;
+}
+
 /// Entries [pos, pos + n) of the reported parameters removed (names, values, errors, correlations):
 /// coefficients the block carries but the law does not have.
 void drop_entries(Calibration& cal, int pos, int n) {
@@ -860,28 +888,13 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   const bool one_nu = nus_seen.size() < 2;
   hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode);
 
-  ceres::Solver::Options so;
-  so.linear_solver_type = ceres::DENSE_QR;
-  so.max_num_iterations = o.max_iterations;
-  so.function_tolerance = 1e-12;
-  so.parameter_tolerance = 1e-12;
-  so.num_threads = 1;
-  ceres::Solver::Summary sum;
-  ceres::Solve(so, &problem, &sum);
+  const ceres::Solver::Summary sum = solve(problem, o.max_iterations);
 
   Calibration cal;
   cal.ok = sum.IsSolutionUsable() && sum.termination_type == ceres::CONVERGENCE;
   cal.message = sum.BriefReport();
   if (!cal.ok) cal.warnings.push_back("optimiser did not converge: " + sum.message);
-  cal.params = start;
-  cal.params.set_iso(isob.data());
-  std::copy(shear.begin(), shear.end(), cal.params.shear);
-  std::copy(ext.begin(), ext.end(), cal.params.ext);
-  cal.params.extended = X;
-  cal.params.surface = X ? o.surface : Surface::None;
-  cal.params.fabric = X ? o.fabric : FabricLode::Norm;
-  cal.params.state_limit = X && o.state_limit;
-  cal.params.state_lode = state_lode;
+  cal.params = fitted_params(start, isob, shear, ext, o, X);
   const int n_ext = ext_size(cal.params.state_limit, weighted, state_lode);
   const std::vector<int> held_x = X ? held_ext(one_nu, cal.params.state_limit, weighted, state_lode) : std::vector<int>();
   cal.chi2 = 2 * sum.final_cost;
