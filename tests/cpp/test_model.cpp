@@ -844,6 +844,27 @@ TEST(ModelFriction, OverlapRuleGatesTheFabricByTheOpenedFraction) {
   EXPECT_NEAR(path.back().state.l, 0.07, 1e-12);   // reset at the reversal, not at the next segment
 }
 
+// The extended family's calibration options of the synthetic recovery tests: the isotropic block held, P's nu_ref,
+// Lade-Duncan, the fabric rule given.
+static CalibrationOptions extended_options(const Parameters& P, FabricLode rule) {
+  CalibrationOptions o;
+  o.fit_isotropic = false;
+  o.nu_ref = P.nu_ref;
+  o.max_step = 2e-3;
+  o.extended = true;
+  o.surface = Surface::LadeDuncan;
+  o.fabric = rule;
+  return o;
+}
+
+// A start 5-20 % off the truth: rates and limits up or down by turns, the extension block likewise.
+static Parameters perturbed_start(const Parameters& P) {
+  Parameters start = P;
+  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.9 : 1.05);
+  for (int i = 0; i < kNumExt; ++i) start.ext[i] *= (i % 2 ? 0.8 : 1.2);
+  return start;
+}
+
 // Synthetic D2 ensembles made by the frictional family with known parameters (K = 8, three
 // volume fractions, AR(1) noise rho = 0.9): the calibration recovers the extension's
 // coefficients within 3 jackknife standard errors, and the active terms (n_F, kappa_s) are
@@ -859,17 +880,9 @@ static void recover_extension(FabricLode rule, bool state_limit = false) {
   }
   const int K = 8;
   const Synthetic S = synthetic(P, {0.69, 0.74, 0.80}, K, 0.9, 11);
-  CalibrationOptions o;
-  o.fit_isotropic = false;
-  o.nu_ref = P.nu_ref;
-  o.max_step = 2e-3;
-  o.extended = true;
-  o.surface = Surface::LadeDuncan;
-  o.fabric = rule;
+  CalibrationOptions o = extended_options(P, rule);
   o.state_limit = state_limit;
-  Parameters start = P;
-  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.9 : 1.05);
-  for (int i = 0; i < kNumExt; ++i) start.ext[i] *= (i % 2 ? 0.8 : 1.2);
+  const Parameters start = perturbed_start(P);
   o.start = &start;
   const Calibration cal = calibrate(S.mean, {}, o);
   ASSERT_TRUE(cal.ok) << cal.message;
@@ -973,17 +986,9 @@ TEST(ModelFriction, RecoversTheLodeStateExponentFromD2AndD3) {
   const int K = 8;
   Synthetic S = synthetic(P, {0.69, 0.74, 0.80}, K, 0.9, 31);
   const Synthetic S3 = synthetic(P, {0.69, 0.74, 0.80}, K, 0.9, 32, "D3");
-  CalibrationOptions o;
-  o.fit_isotropic = false;
-  o.nu_ref = P.nu_ref;
-  o.max_step = 2e-3;
-  o.extended = true;
-  o.surface = Surface::LadeDuncan;
-  o.fabric = FabricLode::Overlap;
+  CalibrationOptions o = extended_options(P, FabricLode::Overlap);
   o.state_limit = o.state_lode = true;
-  Parameters start = P;
-  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.9 : 1.05);
-  for (int i = 0; i < kNumExt; ++i) start.ext[i] *= (i % 2 ? 0.8 : 1.2);
+  const Parameters start = perturbed_start(P);
   o.start = &start;
   EXPECT_THROW(calibrate(S.mean, {}, o), std::invalid_argument);   // D2 alone: lambda_psi cannot act
   S.mean.insert(S.mean.end(), S3.mean.begin(), S3.mean.end());
@@ -1235,16 +1240,8 @@ TEST(ModelFriction, RecoversTheLodeWeightFromTwoLodeAngles) {
   all.insert(all.end(), S3.mean.begin(), S3.mean.end());
   std::vector<std::vector<CurveData>> members = S2.members;
   members.insert(members.end(), S3.members.begin(), S3.members.end());
-  CalibrationOptions o;
-  o.fit_isotropic = false;
-  o.nu_ref = P.nu_ref;
-  o.max_step = 2e-3;
-  o.extended = true;
-  o.surface = Surface::LadeDuncan;
-  o.fabric = FabricLode::Weighted;
-  Parameters start = P;
-  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.9 : 1.05);
-  for (int i = 0; i < kNumExt; ++i) start.ext[i] *= (i % 2 ? 0.8 : 1.2);
+  CalibrationOptions o = extended_options(P, FabricLode::Weighted);
+  const Parameters start = perturbed_start(P);
   o.start = &start;
   const Calibration cal = calibrate(all, {}, o);
   ASSERT_TRUE(cal.ok) << cal.message;
