@@ -554,9 +554,9 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   if (o.max_iterations < 1) throw InputError("--max-iterations " + std::to_string(o.max_iterations) + ": give a positive number");
   co.max_iterations = o.max_iterations;
   read_starts(o, co);
-  if (!o.hold_isotropic.empty() && o.start.size() != 1)
-    throw InputError("--hold-isotropic holds parameters at the values of one --start file: give exactly one (got " +
-                     std::to_string(o.start.size()) + ")");
+  if (!o.hold_isotropic.empty() && !start_params.empty() && !start_params.front())
+    throw InputError("--hold-isotropic holds parameters at the values of the first --start file, and the first is "
+                     "`default`: put a parameters.csv first");
   for (const auto& n : o.hold_isotropic) {
     const int i = iso_index(n);
     if (i < 0)
@@ -566,6 +566,7 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
       throw InputError("--hold-isotropic needs --start PARAMETERS.csv (the values they are held at)");
     co.hold_iso.push_back(i);
   }
+  co.hold_from = co.hold_iso.empty() ? nullptr : co.start;
   if (o.family != "group" && o.family != "extended" && o.family != "auto")
     throw InputError("--family " + o.family + ": give group (the incremental anisotropic model), extended (with the "
                      "frictional extension) or auto (both, chosen by the held-out test)");
@@ -892,7 +893,7 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "Several, comma-separated, `default` for the start from the data's own fits: the fit is made from "
                  "each and the lowest chi2/dof kept (OUT/starts.md); the fits of the extended family are multi-modal")
       ->delimiter(',')->default_str("");
-  app.add_option("--hold-isotropic", o.hold_isotropic, "isotropic parameters held at their --start values, "
+  app.add_option("--hold-isotropic", o.hold_isotropic, "isotropic parameters held at their values in the (first) --start file, "
                  "comma-separated (e.g. gamma_p,nu_cC,alpha: a branch of two pressure levels fixes two of the pressure "
                  "law's three)")->delimiter(',')->default_str("");
   app.add_flag("--force", o.force, "overwrite an existing output folder");

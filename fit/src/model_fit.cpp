@@ -851,6 +851,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   }
   start.nu_ref = nu_ref;
   std::vector<double> isob = start.iso();
+  if (o.hold_from)
+    for (int i : o.hold_iso) isob[i] = o.hold_from->iso()[i];
   std::vector<double> shear(start.shear, start.shear + kNumShear);
   std::vector<double> ext(start.ext, start.ext + kNumExt);
   if (X) clamp_extended_start(shear, ext);

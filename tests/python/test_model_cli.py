@@ -654,10 +654,39 @@ def test_multi_start_keeps_the_best_of_the_single_starts(tmp_path, result):
     assert not os.path.exists(os.path.join(single["default"][2], "starts.csv"))
 
 
+def edited_parameters(src, dst, factors):
+    """A copy of a parameters.csv with some values multiplied (a start elsewhere)."""
+    table = rows(src)
+    for t in table:
+        if t["parameter"] in factors:
+            t["value"] = repr(float(t["value"]) * factors[t["parameter"]])
+    with open(dst, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(table[0]))
+        w.writeheader()
+        w.writerows(table)
+    return dst
+
+
+def test_multi_start_holds_the_first_starts_isotropic_values(tmp_path, result):
+    """--hold-isotropic with several starts: every start's fit holds the named parameters at the
+    first start's values, including a kept start that carries other values of them."""
+    good = os.path.join(result[0], "parameters.csv")
+    first = edited_parameters(good, str(tmp_path / "first.csv"), {"p0": 1.1, "s_max_a": 1.6, "ln_beta_s_a": 0.5})
+    second = edited_parameters(good, str(tmp_path / "second.csv"), {"p0": 0.8})
+    out = str(tmp_path / "multi")
+    r = run(ENSEMBLE, "--out", out, "--no-jackknife", "--no-plots", "--start", f"{first},{second}",
+            "--hold-isotropic", "p0", "--max-iterations", "5")
+    assert r.returncode in (0, 1), r.stderr
+    assert [t["kept"] for t in rows(os.path.join(out, "starts.csv"))] == ["no", "yes"]   # the second start kept
+    p = {q["parameter"]: float(q["value"]) for q in rows(os.path.join(out, "parameters.csv")) if q["parameter"] == "p0"}
+    p_first = float(next(q["value"] for q in rows(first) if q["parameter"] == "p0"))
+    assert p["p0"] == pytest.approx(p_first, rel=1e-5)   # held at the first start's 1.1 x, not the kept one's 0.8 x
+
+
 def test_bad_starts_are_refused(tmp_path, result):
     good = os.path.join(result[0], "parameters.csv")
     r = run(ENSEMBLE, "--out", str(tmp_path / "a"), "--no-plots", "--start", f"default,{tmp_path}/none.csv")
     assert r.returncode == 2 and "none.csv is not a file" in r.stderr and "`default`" in r.stderr
-    r = run(ENSEMBLE, "--out", str(tmp_path / "b"), "--no-plots", "--start", f"{good},default", "--hold-isotropic", "p0")
-    assert r.returncode == 2 and "exactly one" in r.stderr
+    r = run(ENSEMBLE, "--out", str(tmp_path / "b"), "--no-plots", "--start", f"default,{good}", "--hold-isotropic", "p0")
+    assert r.returncode == 2 and "the first is `default`" in r.stderr and "parameters.csv first" in r.stderr
     assert not os.path.exists(tmp_path / "a" / "parameters.csv") and not os.path.exists(tmp_path / "b" / "parameters.csv")
