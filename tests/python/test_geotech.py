@@ -114,6 +114,66 @@ def test_the_critical_state_flag_says_yes_no_or_not_determined():
         "not determined"
 
 
+def synthetic_csl_results(nu_of_p, levels=(5e6, 5e7, 5e8), tests=("TC_s3", "TC_p"), packings=4, noise=2e-4, seed=3):
+    """results[(mu, prep, level, test)] of analyse_groups' shape: end states on nu_of_p(p) with
+    Gaussian noise, each curve at p scattered by a few per cent about its level."""
+    rng = np.random.default_rng(seed)
+    results = {}
+    for i, p0 in enumerate(levels):
+        for test in tests:
+            ps = p0 * (1 + 0.05 * rng.standard_normal(packings))
+            members = [{"nu_cs": nu_of_p(p) + noise * rng.standard_normal(), "p_cs_Pa": p} for p in ps]
+            results[("0.5", "dense", f"L{i}", test)] = {"members": members, "summary": {"volume_stationary": "yes"}}
+    return results
+
+
+def test_the_critical_state_line_shape_recovers_a_soft_sphere_line_and_its_curvature():
+    """Three pressure decades: nu = nu_0 + c p gives back nu_0 and c within 3 SE; a straight line
+    e(ln p) gives kappa = 0 within 3 SE, a curved one its kappa; a test missing at one level is left
+    out of the shape fits; two levels give no shape rows."""
+    nu0, c = 0.585, 0.04 / 500                      # nu rises by 0.04 at 500 MPa
+    rows = geotech.critical_state_line(synthetic_csl_results(lambda p: nu0 + c * p / 1e6))
+    rigid, = [r for r in rows if r["level"] == "rigid"]
+    assert abs(rigid["nu_cs"] - nu0) < 3 * rigid["nu_0_se"] and rigid["nu_0_se"] < 2e-4
+    assert abs(rigid["c_per_MPa"] - c) < 3 * rigid["c_per_MPa_se"]
+    assert rigid["tests"] == "TC_p+TC_s3" and rigid["n_curves"] == 24
+    for kappa in (0.0, 0.002):
+        e = lambda p: 0.7 - 0.02 * math.log(p / 1e6) + kappa * math.log(p / 1e6) ** 2
+        res = synthetic_csl_results(lambda p: 1 / (1 + e(p)))
+        res[("0.5", "loose", "L0", "TE_s3")] = {"members": [{"nu_cs": 0.5, "p_cs_Pa": 5e6}] * 4,
+                                                "summary": {"volume_stationary": "yes"}}   # at one level only
+        curv, = [r for r in geotech.critical_state_line(res) if r["level"] == "curvature"]
+        assert abs(curv["kappa"] - kappa) < 3 * curv["kappa_se"] and curv["kappa_se"] < 5e-4
+        assert abs(curv["lambda"] - 0.02) < 3 * curv["lambda_se"] and curv["tests"] == "TC_p+TC_s3"
+    two = geotech.critical_state_line(synthetic_csl_results(lambda p: nu0 + c * p / 1e6, levels=(5e7, 5e8)))
+    assert not [r for r in two if r["level"] in ("curvature", "rigid")] and [r for r in two if r["level"] == "line"]
+
+
+def test_the_low_pressure_level_has_its_own_preparation_and_rate():
+    """iso_vlo (p* = 1e-4): the scene's gas stage, then its iso_lo stage at a tenth of the target, as
+    `--set` values that TOML reads back; the test rate sqrt(10) below the scene's, the servo's limit
+    in the scene's ratio to it; the scene's levels keep the scene's rate."""
+    scene = os.path.join(ROOT, "data", "scenes", "geotech.toml")
+    with open(scene, "rb") as fh:
+        sc = tomllib.load(fh)
+    args = geotech.low_level_overrides(scene)
+    assert args[0] == "--set" and args[2:] == ["--set", "protocol.modes_from=iso_vlo"]
+    key, value = args[1].split("=", 1)
+    stages = tomllib.loads(f"v = {value}")["v"]
+    lo = next(st for st in sc["protocol"]["preparation"] if st.get("checkpoint_name") == "iso_lo")
+    assert key == "protocol.preparation" and stages[0] == sc["protocol"]["preparation"][0]
+    assert stages[1] == dict(lo, name="iso_vlo", checkpoint_name="iso_vlo", target_Pa=lo["target_Pa"] / 10)
+    rate = geotech.level_rate_args(scene, "iso_vlo")
+    assert float(rate[1]) == pytest.approx(sc["protocol"]["deviatoric_rate_tc"] / math.sqrt(10), rel=1e-5)
+    ratio = sc["servo"]["rate_max_tc"] / sc["protocol"]["deviatoric_rate_tc"]
+    assert rate[2:] == ["--set", f"servo.rate_max_tc={float(rate[1]) * ratio:.6g}"]
+    assert geotech.level_rate_args(scene, "iso_lo") == [] == geotech.level_rate_args(scene, "iso_hi")
+    for v in ({"a": [1, 2.5e-7, "x\"y"], "b": {"c": True}}, ["q"]):
+        assert tomllib.loads(f"v = {geotech.toml_inline(v)}")["v"] == v
+    with pytest.raises(SystemExit):
+        geotech.main(["run", "--out", "/nonexistent", "--levels", "iso_low"])
+
+
 # ------------------------------------------------------------------------------------------
 # The stored runs (data/geotech) against the scene that made them and against each other
 
@@ -142,7 +202,8 @@ def test_every_stored_curve_runs_to_the_end_its_scene_path_sets():
 
 
 def test_the_failure_surface_has_five_b_values_at_every_mu_and_preparation():
-    """Every (mu, prep, level) with curves has the whole constant-p family, b = 0 ... 1, over 4 packings."""
+    """Every (mu, prep, level) of the scene's two levels with curves has the whole constant-p family,
+    b = 0 ... 1, over 4 packings (the p* = 1e-4 level, iso_vlo, runs TC_p of it only: b = 0)."""
     with open(os.path.join(DATA, "failure_surface_cs.csv")) as fh:
         rows = list(csv.DictReader(fh))
     cells = {(r["mu"], r["prep"], r["level"]) for r in rows}
@@ -151,7 +212,8 @@ def test_the_failure_surface_has_five_b_values_at_every_mu_and_preparation():
     assert {c[0] for c in cells} == {"0", "0.1", "0.3", "0.5", "1"}   # the friction study's mu but 0.01
     for cell in cells:
         rs = [r for r in rows if (r["mu"], r["prep"], r["level"]) == cell]
-        assert sorted(float(r["b_target"]) for r in rs) == [0, 0.25, 0.5, 0.75, 1], cell
+        b = [0] if cell[2] == geotech.LOW_LEVEL else [0, 0.25, 0.5, 0.75, 1]
+        assert sorted(float(r["b_target"]) for r in rs) == b, cell
         assert all(r["K"] == "4" for r in rs), cell
 
 
