@@ -23,6 +23,8 @@ import os
 import shutil
 import sys
 
+from scipy import stats
+
 from demkit import model_friction, model_lode_weight, model_state_limit
 from demkit.atomic import write_atomic
 
@@ -40,13 +42,38 @@ VARIANTS = BASE + LODE
 KINDS = (("D2", "fitted"), ("D3", "fitted"), ("isobaric", "predicted"))
 
 
-def choose(scores, sizes):
+def holm_beats(scores, alpha=0.05):
+    """{(a, b): True where b beats a} under Holm's step-down correction over the n(n-1)/2 pairs of variants:
+    each pair's two-sided paired t-test (K-1 degrees of freedom; the uncorrected rule is the same test at
+    alpha, one side), the p-values sorted, the i-th smallest rejected while p_(i) <= alpha/(m - i + 1); a
+    rejected pair is a beat of the lower-scoring variant over the other."""
+    names = list(scores)
+    pairs = []
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            mean, se, _, K, _ = model_state_limit.paired_choice(scores[a], scores[b])
+            p = (0.0 if mean else 1.0) if se == 0 else 2 * float(stats.t.sf(abs(mean) / se, K - 1))
+            pairs.append((p, (a, b) if mean > 0 else (b, a)))
+    beats, m = {}, len(pairs)
+    for i, (p, (loser, winner)) in enumerate(sorted(pairs, key=lambda x: x[0])):
+        if p > alpha / (m - i):
+            break
+        beats[(loser, winner)] = True
+    return beats
+
+
+def choose(scores, sizes, holm=False):
     """The held-out choice among variants. scores: {name: {packing: score}}, sizes: {name: coefficients}.
     Returns (chosen, {name: [names that beat it]}, {name: mean score}): b beats a when the paired mean of
-    a - b exceeds t_{K-1,0.975} SE (model_state_limit.paired_choice); the chosen variant is the one with the
-    fewest coefficients that nothing beats, ties broken by the lower mean score."""
-    beaten = {a: [b for b in scores if b != a and model_state_limit.paired_choice(scores[a], scores[b])[4]]
-              for a in scores}
+    a - b exceeds t_{K-1,0.975} SE (model_state_limit.paired_choice), or with holm=True when Holm's correction
+    over all pairs still rejects (holm_beats); the chosen variant is the one with the fewest coefficients that
+    nothing beats, ties broken by the lower mean score."""
+    if holm:
+        hb = holm_beats(scores)
+        beaten = {a: [b for b in scores if (a, b) in hb] for a in scores}
+    else:
+        beaten = {a: [b for b in scores if b != a and model_state_limit.paired_choice(scores[a], scores[b])[4]]
+                  for a in scores}
     means = {a: sum(s.values()) / len(s) for a, s in scores.items()}
     free = [a for a in scores if not beaten[a]]
     return min(free, key=lambda a: (sizes[a], means[a])), beaten, means
@@ -116,18 +143,29 @@ def start_of(run):
     return next((v[0] for v in VARIANTS if v[1] == folder), "default")
 
 
+def target_cells(name, chi, w):
+    """'name | chi2/dof | worst curve | met' of the target table for one chosen variant."""
+    top = max(w.items(), key=lambda kv: kv[1][0])
+    met = chi <= 3 and top[1][0] <= 1
+    return f"{name} | {chi:.3g} | {top[1][0]:.2f} ({top[0][0]} {top[1][1]}) | {'yes' if met else 'no'}"
+
+
 def table(out, mus):
     """OUT/variants.{md,csv} from the variants' runs (the two Lode-limit variants "not run" where absent: the
     choice is then among the others)."""
     md = ["<!-- demkit/model_variants.py: the extended family on D2 + D3 under its variants, RMS over the mean 95 % "
           "band half-width; held-out: mean score over the {K} left-out packings; beaten by: variants whose paired "
-          "held-out scores are lower by more than t_{K-1,0.975} SE -->",
+          "held-out scores are lower by more than t_{K-1,0.975} SE; Holm: the same two-sided paired tests with Holm's "
+          "step-down correction over all pairs of the variants run (family-wise 5 %) -->",
           "| μ | variant | extension coefficients | start | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | "
-          "mean held-out score | beaten by | chosen |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+          "mean held-out score | beaten by | chosen | beaten by (Holm) | chosen (Holm) |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     head = ["mu", "variant", "extension_coefficients", "start", "chi2_per_dof [-]", "worst_fitted_D2 [band]",
-            "worst_fitted_D3 [band]", "worst_predicted_isobaric [band]", "heldout_mean [-]", "beaten_by", "chosen"]
+            "worst_fitted_D3 [band]", "worst_predicted_isobaric [band]", "heldout_mean [-]", "beaten_by", "chosen",
+            "beaten_by_holm", "chosen_holm"]
     lines = [",".join(head) + "\n"]
-    target = ["", "| μ | chosen | χ²/dof | worst curve | target met |", "|---|---|---|---|---|"]
+    target = ["", "| μ | chosen | χ²/dof | worst curve | target met | chosen (Holm) | χ²/dof | worst curve | target met |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for mu in mus:
         res, scores = {}, {}
         for name, folder, _, limit, _ in VARIANTS:
@@ -141,24 +179,24 @@ def table(out, mus):
             scores[name] = model_state_limit.extended_scores(d)
         sizes = {v[0]: v[4] for v in VARIANTS if v[0] in scores}
         chosen, beaten, means = choose(scores, sizes)
+        chosen_h, beaten_h, _ = choose(scores, sizes, holm=True)
         for name, folder, _, _, k in VARIANTS:
             if name not in res:
-                md.append(f"| {mu} | {name} | {k} | not run | | | | | | | no |")
-                lines.append(",".join([mu, name, str(k), "not run", *[""] * 6, "no"]) + "\n")
+                md.append(f"| {mu} | {name} | {k} | not run | | | | | | | no | | no |")
+                lines.append(",".join([mu, name, str(k), "not run", *[""] * 6, "no", "", "no"]) + "\n")
                 continue
             chi, w = res[name]
             st = start_of(os.path.join(out, folder, f"mu_{mu}"))
             cells = [f"{w[key][0]:.2f} ({w[key][1]})" for key in KINDS]
             by = "; ".join(beaten[name]) or "none"
-            mark = "**yes**" if name == chosen else "no"
-            md.append(f"| {mu} | {name} | {k} | {st} | {chi:.3g} | " + " | ".join(cells) + f" | {means[name]:.4g} | {by} | {mark} |")
+            by_h = "; ".join(beaten_h[name]) or "none"
+            mark, mark_h = ("**yes**" if name == c else "no" for c in (chosen, chosen_h))
+            md.append(f"| {mu} | {name} | {k} | {st} | {chi:.3g} | " + " | ".join(cells) +
+                      f" | {means[name]:.4g} | {by} | {mark} | {by_h} | {mark_h} |")
             lines.append(",".join([mu, name, str(k), st, f"{chi:.4g}", *(f"{w[key][0]:.4g}" for key in KINDS),
-                                   f"{means[name]:.4g}", by, "yes" if name == chosen else "no"]) + "\n")
-        chi, w = res[chosen]
-        top = max(w.items(), key=lambda kv: kv[1][0])
-        met = chi <= 3 and top[1][0] <= 1
-        target.append(f"| {mu} | {chosen} | {chi:.3g} | {top[1][0]:.2f} ({top[0][0]} {top[1][1]}) | "
-                      f"{'yes' if met else 'no'} |")
+                                   f"{means[name]:.4g}", by, "yes" if name == chosen else "no", by_h,
+                                   "yes" if name == chosen_h else "no"]) + "\n")
+        target.append(f"| {mu} | " + " | ".join(target_cells(c, *res[c]) for c in (chosen, chosen_h)) + " |")
     md[0] = md[0].replace("{K}", str(len(scores[chosen])))
     write_atomic(os.path.join(out, "variants.md"), "\n".join(md + target) + "\n")
     write_atomic(os.path.join(out, "variants.csv"), "".join(lines))

@@ -536,6 +536,31 @@ def test_variant_choice_is_the_simplest_that_no_other_beats():
     assert chosen == "C" and means["C"] < means["B"], (chosen, means)
 
 
+def test_holms_correction_keeps_strong_beats_and_drops_marginal_ones():
+    """demkit.model_variants.holm_beats: with two variants Holm's correction is the uncorrected test; among six,
+    a beat at p ~ 0.02 (t ~ 2.9, K = 8) is dropped (the smallest p must be below 0.05/15) while one at t ~ 15 is
+    kept, and choose(holm=True) then takes the simpler variant."""
+    from demkit import model_variants
+    noise = [0.01, -0.02, 0.015, -0.005, 0.02, -0.01, 0.0, 0.005]
+    base = {k: 1.0 + 0.1 * k for k in range(8)}
+    marginal = {k: v - 0.016 + noise[k] for k, v in base.items()}
+    strong = {k: v - 0.1 + 0.3 * noise[k] for k, v in base.items()}
+    two = {"A": base, "B": marginal}
+    assert model_variants.holm_beats(two) == {("A", "B"): True}
+    assert model_variants.choose(two, {"A": 7, "B": 9}, holm=True)[0] == "B" == model_variants.choose(two, {"A": 7, "B": 9})[0]
+    six = {"A": base, "B": marginal, "S": strong}
+    for j, sign in enumerate((1, -1, 1)):   # three more, noise about A
+        six[f"N{j}"] = {k: v + sign * noise[(k + j + 1) % 8] for k, v in base.items()}
+    sizes = {"A": 7, "B": 9, "S": 11, "N0": 9, "N1": 9, "N2": 9}
+    hb = model_variants.holm_beats(six)
+    assert ("A", "S") in hb and ("A", "B") not in hb and ("B", "A") not in hb
+    assert model_variants.choose(six, sizes)[1]["A"] == ["B", "S"]       # uncorrected: B beats A too
+    chosen, beaten, _ = model_variants.choose(six, sizes, holm=True)
+    assert chosen == "S" and "B" not in beaten["A"] and "S" in beaten["A"], (chosen, beaten)
+    six.pop("S"), sizes.pop("S")
+    assert model_variants.choose(six, sizes, holm=True)[0] == "A" and model_variants.choose(six, sizes)[0] == "B"
+
+
 @pytest.mark.parametrize("where, K, mus", [
     (("friction_n1000", "model_friction", "lode_weight"), 8, ("0", "0.01", "0.1", "0.3", "0.5", "1")),
     (("friction_n1000_k12", "model"), 12, ("0", "0.1", "0.3", "0.5", "1"))])
@@ -560,6 +585,9 @@ def test_stored_variant_table_is_rebuilt_from_the_stored_runs(tmp_path, where, K
     assert len(rows) == len(model_variants.VARIANTS) * len(mus)
     for r in rows:
         assert (r["chosen"] == "yes") <= (r["beaten_by"] == "none"), r
+        assert (r["chosen_holm"] == "yes") <= (r["beaten_by_holm"] in ("none", "")), r
+        # Holm's correction only removes beats
+        assert set(r["beaten_by_holm"].split("; ")) - {"none", ""} <= set(r["beaten_by"].split("; ")), r
         assert r["start"] in ["default", "not run"] + [v[0] for v in model_variants.VARIANTS], r
         # only the eighth round's optional Lode-limit variants may be missing
         assert r["start"] != "not run" or r["variant"] in [v[0] for v in model_variants.LODE], r
