@@ -371,15 +371,6 @@ def analyse(root, out, plots=True):
 # Running
 
 
-def toml_inline(v):
-    """A value of a parsed TOML file (str, number, list, table) written back as inline TOML."""
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{k} = {toml_inline(x)}" for k, x in v.items()) + " }"
-    if isinstance(v, list):
-        return "[" + ", ".join(toml_inline(x) for x in v) + "]"
-    return f'"{v}"' if isinstance(v, str) else repr(v)
-
-
 def stop_override(scene, test, eps_d):
     """`--set paths.TEST=...`: the scene's path with its last stage ending at eps_d instead of its own
     `until` (the mu(I) series keeps the length it was made with when the scene's test grows)."""
@@ -387,14 +378,14 @@ def stop_override(scene, test, eps_d):
     with open(scene, "rb") as fh:
         stages = tomllib.load(fh)["paths"][test]
     stages[-1] = {**stages[-1], "until": {"eps_d": float(eps_d)}}
-    return ["--set", f"paths.{test}={toml_inline(stages)}"]
+    return ["--set", f"paths.{test}={geotech.toml_inline(stages)}"]
 
 
 def run_one(dem, scene, root, prep, mu, seed, level, test, rate, eps_d=None):
     out = os.path.join(root, "rate", f"mu_{mu}", prep, level, test, f"r{rate}", f"m{seed}.csv")
     if os.path.exists(out):
         return 0
-    ckpt = glob.glob(os.path.join(geotech.prep_dir(root, prep, mu, seed), "checkpoints", f"{level}_phi*.ckpt"))
+    ckpt = glob.glob(os.path.join(geotech.prep_dir(root, prep, mu, seed, level), "checkpoints", f"{level}_phi*.ckpt"))
     if len(ckpt) != 1:
         return -1
     os.makedirs(os.path.dirname(out), exist_ok=True)
@@ -412,8 +403,8 @@ def run(args):
         if not (float(r) > 0):
             raise SystemExit(f"--rates: {r} is not a positive number (rates times t_c, e.g. 1e-5,3e-5)")
     with ThreadPoolExecutor(args.jobs) as pool:
-        preps = [(args.prep, args.mu, s) for s in seeds]
-        for (p, mu, s), rc in zip(preps, pool.map(lambda a: geotech.prepare(args.dem, args.scene, args.out, *a), preps)):
+        preps = [(args.prep, args.mu, s, args.level == geotech.LOW_LEVEL) for s in seeds]
+        for (p, mu, s, _), rc in zip(preps, pool.map(lambda a: geotech.prepare(args.dem, args.scene, args.out, *a), preps)):
             if rc:
                 print(f"preparation {p} mu={mu} m{s} failed ({rc})", file=sys.stderr)
         # slowest first: the longest runs start while the pool is full
@@ -429,7 +420,7 @@ def main(argv=None):
                         root_help="OUT/rate of `run`, or a stored copy's curves/ folder")
     r.add_argument("--mu", default="0.5")
     r.add_argument("--prep", default="loose", choices=sorted(geotech.PREPS))
-    r.add_argument("--level", default="iso_hi", choices=geotech.LEVELS)
+    r.add_argument("--level", default="iso_hi", choices=(*geotech.LEVELS, geotech.LOW_LEVEL))
     r.add_argument("--test", default="SS_cns")
     r.add_argument("--rates", required=True, help="comma-separated rates times t_c, e.g. 1e-5,3e-5,1e-4")
     r.add_argument("--eps-d", type=float, default=None,
