@@ -218,12 +218,16 @@ def test_the_failure_surface_has_five_b_values_at_every_mu_and_preparation():
 
 
 def test_the_rate_series_at_the_scene_rate_is_a_prefix_of_the_stored_curves():
-    """data/geotech/rate's curves at the scene's rate (3e-5/t_c) and their twins in curves/ are one
-    deterministic run: equal in every column both keep, row for row, over the rate curve's length but
-    its last row (the row written where the rate series stops, which a longer test passes without a
-    row)."""
-    twins = glob.glob(os.path.join(DATA, "rate", "curves", "mu_*", "*", "*", "*", "r3e-5", "m*.csv"))
-    assert len(twins) == 16
+    """data/geotech/rate's curves at the scene's rate (3e-5/t_c; at p* = 1e-4 the level's own,
+    geotech.level_rate_args) and their twins in curves/ are one deterministic run: equal in every column
+    both keep, row for row, over the rate curve's length but its last row (the row written where the rate
+    series stops, which a longer test passes without a row)."""
+    scene = os.path.join(ROOT, "data", "scenes", "geotech.toml")
+    low = float(geotech.level_rate_args(scene, geotech.LOW_LEVEL)[1])
+    twins = glob.glob(os.path.join(DATA, "rate", "curves", "mu_*", "*", "iso_[lh]*", "*", "r3e-5", "m*.csv"))
+    twins += [p for p in glob.glob(os.path.join(DATA, "rate", "curves", "mu_*", "*", geotech.LOW_LEVEL, "*", "r*", "m*.csv"))
+              if float(p.split(os.sep)[-2][1:]) == pytest.approx(low, rel=1e-5)]
+    assert len(twins) == 24
     for path in twins:
         parts = path.split(os.sep)
         h1, a = data_rows(path)
