@@ -374,9 +374,7 @@ def analyse(root, out, plots=True):
 def stop_override(scene, test, eps_d):
     """`--set paths.TEST=...`: the scene's path with its last stage ending at eps_d instead of its own
     `until` (the mu(I) series keeps the length it was made with when the scene's test grows)."""
-    import tomllib
-    with open(scene, "rb") as fh:
-        stages = tomllib.load(fh)["paths"][test]
+    stages = geotech.load_scene(scene)["paths"][test]
     stages[-1] = {**stages[-1], "until": {"eps_d": float(eps_d)}}
     return ["--set", f"paths.{test}={geotech.toml_inline(stages)}"]
 
