@@ -54,6 +54,7 @@ std::vector<CurveFile> curves_in(const fs::path& dir) {
 // Every --start is a parameters.csv (none is `default`): only then may path ensembles alone be the
 // calibration, since the default start comes from a monotone mode's saturating fits.
 bool starts_from_files(const ModelCommandOptions& o) {
+  if (!o.predict_with.empty()) return true;   // nothing fitted: the file's parameters
   return !o.start.empty() && std::find(o.start.begin(), o.start.end(), "default") == o.start.end();
 }
 
@@ -137,6 +138,9 @@ std::string law_of(const std::string& n) {
   if (n == "C0" || n == "C1" || n == "nu_cC" || n == "alpha") return "C(nu) = C0 + C1 (nu/nu_cC - 1)^alpha";
   if (n == "lambda_psi") return "state exponent at Lode parameter b: n_psi (c_3(1/2)/c_3(b))^lambda_psi";
   if (n == "chi_D") return "mobilisation r at which the plastic dilatancy changes sign (one value at every nu)";
+  if (n == "nu_cs" || n == "lambda_cs") return "critical-state line nu_cs(p) = nu_cs + lambda_cs ln(p*/1e-3) (psi = nu - nu_cs(p))";
+  if (n == "n_peak") return "stress-ratio target s_lim exp(n_peak psi), psi = nu - nu_cs(p)";
+  if (n == "n_dil") return "plastic dilatancy d_D (r - chi_D exp(-n_dil psi)), psi = nu - nu_cs(p)";
   if (n == "ln_delta_w" || n == "n_w") return "Lode weight w = 1/(1 + exp(n_w (ln_delta_w - ln(delta/d)))), delta/d = pi p*/(C nu)";
   const std::string q = n.substr(0, n.size() - 2);
   return q + "(nu) = " + q + "_a + " + q + "_b (nu - nu_ref)";
@@ -422,7 +426,8 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
                       (cal.params.extended ? std::string("extended family, ") + surface_name(cal.params.surface) + " surface, fabric limit " +
                                                   fabric_lode_name(cal.params.fabric) +
                                                   (cal.params.state_lode ? ", state-dependent limit (pressure, Lode-dependent exponent)"
-                                                   : cal.params.state_limit ? ", state-dependent limit (pressure)" : "")
+                                                   : cal.params.state_limit ? ", state-dependent limit (pressure)"
+                                                   : cal.params.state_volume ? ", state parameter nu - nu_cs(p)" : "")
                                            : "group model") +
                       ", calibrated on " + fit_label + "); p_star on constant-volume rows, eps_v where p is held");
 }
@@ -469,6 +474,7 @@ ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir)
   // DIR need not hold ensemble curves then.
   const auto files = find_curves(dir, starts_from_files(o));
   std::vector<std::string> fit_names = o.calibrate_on.empty() ? std::vector<std::string>{o.calibrate_mode} : o.calibrate_on;
+  if (!o.predict_with.empty()) fit_names.clear();   // --predict-with: nothing fitted, everything predicted
   auto fitted = [&](const std::string& n) { return std::find(fit_names.begin(), fit_names.end(), n) != fit_names.end(); };
   std::vector<std::string> known;
   for (const auto& f : files) {
@@ -502,7 +508,7 @@ ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir)
     if (std::find(known.begin(), known.end(), n) == known.end())
       throw InputError("--calibrate-on " + n + ": no ensemble curve " + n + "_phiX.csv under " + (dir / "ensemble").string() +
                        " nor path ensemble under " + paths_dir.string());
-  if (fit_curves.empty() && fit_paths.empty())
+  if (fit_curves.empty() && fit_paths.empty() && o.predict_with.empty())
     throw InputError("--calibrate-on names no curve or path ensemble under " + dir.string() + ": give the paths to fit "
                      "(e.g. --calibrate-on TC_s3_dense)");
   for (const auto& n : fit_names) fit_label += (fit_label.empty() ? "" : "+") + n;
@@ -520,7 +526,8 @@ ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir)
     if (!fs::exists(f)) throw InputError("--isotropic " + f + " does not exist");
   iso_out = read_isotropic(iso_files);
 
-  K_out = fit_curves.empty() ? fit_paths.front().packings : fit_curves.front().packings;
+  K_out = !fit_curves.empty() ? fit_curves.front().packings : !fit_paths.empty() ? fit_paths.front().packings
+          : !other.empty() ? other.front().packings : other_paths.empty() ? 0 : other_paths.front().packings;
   return in;
 }
 
@@ -587,12 +594,19 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
                         "(overlap, and the fabric's rate per unit extension strain) or weighted (the Lode dependence of "
                         "the onset and the rate weighted by the contact overlap; needs a second Lode angle in --calibrate-on)");
   if (o.state_limit == "pressure" || o.state_limit == "pressure-lode") co.state_limit = true;
+  else if (o.state_limit == "volume") co.state_volume = true;
   else if (o.state_limit != "none")
     throw InputError("--state-limit " + o.state_limit + ": give none (the default: the stress-ratio limit s_max(nu) on the "
                      "Lode surface), pressure (that limit times (p_ref/p)^n_psi, the state parameter in pressure form, "
                      "n_psi(nu) fitted) or pressure-lode (pressure, with n_psi scaled by (c_3(b_ref)/c_3(b))^lambda_psi, "
-                     "lambda_psi fitted; needs a second Lode angle in --calibrate-on); docs/model.md");
+                     "lambda_psi fitted; needs a second Lode angle in --calibrate-on) or volume (the state parameter "
+                     "psi = nu - nu_cs(p): the limit times e^{n_b psi}, the dilatancy d_D (r - e^{-n_d psi}), the "
+                     "critical-state line nu_cs + lambda_cs ln(p*/1e-3) from the calibration paths' end states); "
+                     "docs/model.md");
   co.state_lode = o.state_limit == "pressure-lode";
+  if (co.state_volume && o.family != "extended")
+    throw InputError("--state-limit volume: the volume-form state parameter belongs to the extended family; give "
+                     "--family extended");
   return co;
 }
 
@@ -819,6 +833,43 @@ ModelInputs checked_inputs(const ModelCommandOptions& o, const CalibrationOption
   }
 }
 
+// `--predict-with PARAMETERS.csv`: no calibration; the file's parameters (the family, surface and fabric rule of the
+// options, the state limit as the file has it) predict every curve and path, the --calibrate-on ones included.
+FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions& co, ModelInputs& in) {
+  FamilyFit ff;
+  Calibration& cal = ff.cal;
+  try {
+    cal.params = read_parameters(o.predict_with);
+  } catch (const std::exception& e) {
+    throw InputError("--predict-with: " + std::string(e.what()));
+  }
+  Parameters& P = cal.params;
+  if (P.extended != (o.family == "extended"))
+    throw InputError("--predict-with " + o.predict_with + " holds the " + (P.extended ? "extended" : "group") +
+                     " family's parameters: give --family " + (P.extended ? "extended" : "group"));
+  P.surface = P.extended ? co.surface : Surface::None;
+  P.fabric = P.extended ? co.fabric : FabricLode::Norm;
+  const std::vector<double> iso = P.iso();
+  for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(iso[i]); }
+  for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(P.shear[i]); }
+  if (P.extended)
+    for (int i = 0; i < kNumExt; ++i) { cal.names.push_back(ext_name(i)); cal.value.push_back(P.ext[i]); }
+  cal.se_cov.assign(cal.value.size(), std::nan(""));
+  cal.corr.assign(cal.value.size(), std::vector<double>(cal.value.size(), std::nan("")));
+  cal.ok = true;
+  cal.chi2 = std::nan("");   // nothing fitted: chi2/dof "nan" in the tables
+  cal.n_residuals = 1;
+  cal.message = "no calibration: parameters from " + o.predict_with;
+  for (std::size_t j = 0; j < in.fit_curves.size(); ++j) { in.other.push_back(in.fit_curves[j]); in.other_files.push_back(in.fit_files[j]); }
+  for (std::size_t j = 0; j < in.fit_paths.size(); ++j) {
+    in.other_paths.push_back(in.fit_paths[j]);
+    in.other_path_files.push_back(in.fit_path_files[j]);
+  }
+  in.fit_curves.clear(); in.fit_files.clear(); in.fit_paths.clear(); in.fit_path_files.clear();
+  in.fit_label = "nothing (predicted with " + o.predict_with + ")";
+  return ff;
+}
+
 int run(const ModelCommandOptions& o) {
   const fs::path dir(o.dir);
   if (!fs::is_directory(dir)) throw InputError(o.dir + " is not a folder: give an ensemble folder reduced by `dem fit`");
@@ -828,7 +879,12 @@ int run(const ModelCommandOptions& o) {
   const CalibrationOptions co = calibration_options(o);   // bad options refused before anything is written
   const bool out_existed = fs::exists(out);
   check_output_folder(out);
-  const ModelInputs in = checked_inputs(o, co, dir, out, out_existed);
+  ModelInputs in = checked_inputs(o, co, dir, out, out_existed);
+  if (!o.predict_with.empty()) {
+    const FamilyFit ff = prediction_only(o, co, in);
+    write_results(in, ff, out, o);
+    return 0;
+  }
   std::cerr << "dem model: fitting " << in.fit_curves.size() << " mode curves, " << in.fit_paths.size() << " path curves ("
             << in.fit_label << ") and " << in.iso.nu.size() << " isotropic points\n";
   const int K = in.K;
@@ -886,7 +942,14 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "(s_lim (p_ref/p)^n_psi, a state parameter in pressure form, n_psi(nu) fitted: a peak that falls as p "
                  "rises at constant volume or nu falls under constant p) or pressure-lode (n_psi scaled by "
                  "(c_3(1/2)/c_3(b))^lambda_psi at the test's Lode parameter b, lambda_psi fitted; needs a second Lode "
-                 "angle in --calibrate-on; docs/model.md)");
+                 "angle in --calibrate-on) or volume (psi = nu - nu_cs(p), the volume-form state parameter: the limit "
+                 "times e^{n_b psi} and the dilatancy d_D (r - e^{-n_d psi}), so that drained tests end on the "
+                 "critical-state line nu_cs + lambda_cs ln(p*/1e-3) of the calibration paths' end states from dense and "
+                 "loose starts alike; needs drained --calibrate-on paths; docs/model.md)");
+  app.add_option("--predict-with", o.predict_with, "parameters.csv of another `dem model` run: no calibration, every "
+                 "curve and path predicted with those parameters (give the --family, --surface and --fabric-lode that "
+                 "run was given; e.g. a dense preparation's calibration predicting the loose one)")
+      ->check(CLI::ExistingFile);
   app.add_option("--max-iterations", o.max_iterations, "Ceres iterations of each fit (default 300)");
   app.add_option("--start", o.start, "parameters.csv of another `dem model` run: the start values (re-centred on "
                  "this data's nu_ref); with it the path ensembles alone may be calibrated (--calibrate-on PATHS). "

@@ -55,10 +55,11 @@ struct CurveResidual {
   FabricLode fabric = FabricLode::Norm;
   bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
   bool state_lode = false;    ///< par[2] carries lambda_psi (the state exponent's Lode dependence)
+  bool state_volume = false;  ///< par[2] carries nu_cs, lambda_cs, n_b, n_d (the volume-form state parameter)
   template <class T>
   bool operator()(T const* const* par, T* r) const {
     const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
-                     extended && state_lode};
+                     extended && state_lode, extended && state_volume};
     const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -93,10 +94,11 @@ struct PathResidual {
   FabricLode fabric = FabricLode::Norm;
   bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
   bool state_lode = false;    ///< par[2] carries lambda_psi (the state exponent's Lode dependence)
+  bool state_volume = false;  ///< par[2] carries nu_cs, lambda_cs, n_b, n_d (the volume-form state parameter)
   template <class T>
   bool operator()(T const* const* par, T* r) const {
     const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
-                     extended && state_lode};
+                     extended && state_lode, extended && state_volume};
     const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step, ext);
     const std::size_t n = acc.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -359,6 +361,7 @@ Parameters read_parameters(const std::string& path) {
   P.extended = v.count(ext_name(0)) > 0;
   P.state_limit = P.extended && v.count(ext_name(kNPsiA)) > 0;
   P.state_lode = P.state_limit && v.count(ext_name(kLambdaPsi)) > 0;
+  P.state_volume = P.extended && v.count(ext_name(kNuCs)) > 0;
   if (P.extended)
     for (int i = 0; i < kNumExt; ++i)
       if (i < kNumExtBase || v.count(ext_name(i))) P.ext[i] = get(ext_name(i));
@@ -486,7 +489,7 @@ namespace {
 
 // Size of the extension block Ceres sees for these options (ext_size).
 int ext_block(const CalibrationOptions& o) {
-  return ext_size(o.state_limit, o.fabric == FabricLode::Weighted, o.state_limit && o.state_lode);
+  return ext_size(o.state_limit, o.fabric == FabricLode::Weighted, o.state_limit && o.state_lode, o.state_volume);
 }
 
 // The residuals of the D2 ensemble curves: p*, s and F along each, weighted by their standard errors.
@@ -497,6 +500,7 @@ void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& 
                                 weights(c.se_s, o.se_floor, c.source + " s_dev"), weights(c.se_F, o.se_floor, c.source + " F_dev"),
                                 c.nu, c.p.front(), c.s.front(), c.F.front(), nu_ref, o.max_step};
     f->extended = X; f->b = lode_b_of(c.mode); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
+    f->state_volume = o.state_volume;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -535,6 +539,7 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, ws, wF, d.direction, d.isobaric,
                                d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
     f->extended = X; f->b = lode_b_of(d.name); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
+    f->state_volume = o.state_volume;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -542,7 +547,10 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     cost->SetNumResiduals(3 * static_cast<int>(n));
     problem.AddResidualBlock(cost, nullptr, blocks_all);
     n_res += 3 * static_cast<int>(n - 1 - prefix);   // weighted rows only
-    for (double v : d.nu_m) numin = std::min(numin, v);
+    // The jamming fractions' bound: below every state the isotropic law is evaluated at (none with the volume-form
+    // state parameter: its elastic volume fraction starts on the law at the start pressure, start_state).
+    if (!o.state_volume)
+      for (double v : d.nu_m) numin = std::min(numin, v);
   }
 }
 
@@ -593,7 +601,8 @@ void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const 
 // The parameters' bounds: jamming fractions below every start state, positive alpha and p0, the
 // rates' ranges (tighter for the frictional family, whose rate laws have stiff corners).
 void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
-                std::vector<double>& ext, double numin, bool X, bool state_limit, bool weighted, bool state_lode) {
+                std::vector<double>& ext, double numin, bool X, bool state_limit, bool weighted, bool state_lode,
+                bool state_volume) {
   problem.SetParameterUpperBound(isob.data(), kNuC, numin * (1 - 1e-6));
   problem.SetParameterUpperBound(isob.data(), kNuCC, numin * (1 - 1e-6));
   problem.SetParameterLowerBound(isob.data(), kAlpha, 0.05);
@@ -624,6 +633,21 @@ void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<
     if (state_lode) {   // the exponent at most e^{+-5 ln 1.73} = 15 (1/15) times D2's in axisymmetric compression
       problem.SetParameterLowerBound(ext.data(), kLambdaPsi, -5.0);
       problem.SetParameterUpperBound(ext.data(), kLambdaPsi, 5.0);
+    }
+    if (state_volume) {   // the critical-state line within the packings' range; the state exponents >= 0 (a peak
+                          // and a dilatancy onset that rise with the density), n_b at most e^{60 x 0.05} = 20 at psi = 0.05
+      problem.SetParameterLowerBound(ext.data(), kNuCs, 0.40);
+      problem.SetParameterUpperBound(ext.data(), kNuCs, 0.80);
+      problem.SetParameterLowerBound(ext.data(), kLambdaCs, -0.1);
+      problem.SetParameterUpperBound(ext.data(), kLambdaCs, 0.1);
+      problem.SetParameterLowerBound(ext.data(), kDilA, 0.0);   // d_D >= 0: the dilatancy drives psi to 0, not away
+      problem.SetParameterLowerBound(ext.data(), kNFA, 0.0);    // n_F >= 0 at the critical state, which loose and
+                                                                 // dense packings both reach (r^n_F <= 1: a gate)
+      problem.SetParameterLowerBound(ext.data(), kNB, 0.0);
+      problem.SetParameterUpperBound(ext.data(), kNB, 60.0);
+      problem.SetParameterLowerBound(ext.data(), kND, 0.0);
+      problem.SetParameterUpperBound(ext.data(), kND, 150.0);   // e^{150 x 0.03} = 90 at a loose psi = -0.03
+      problem.SetParameterLowerBound(isob.data(), kC0, 0.0);   // the coordination law, read at nu_el, >= 0
     }
     if (weighted) {   // the switch between overlaps of 1e-4 and 0.5 d, no steeper than (delta/delta_w)^30
       problem.SetParameterLowerBound(ext.data(), kLnDeltaW, std::log(1e-4));
@@ -693,7 +717,8 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
   for (int i : {kNuC, kNuCC})
     if (o.fit_isotropic && isob[i] >= numin * (1 - 2e-6)) {
       cal.se_cov[i] = kNaN;
-      cal.warnings.push_back(std::string(iso_name(i)) + " sits on its bound (the lowest start volume fraction " +
+      cal.warnings.push_back(std::string(iso_name(i)) + " sits on its bound (the lowest " +
+                             (X && o.state_volume ? "isotropic-branch" : "start") + " volume fraction " +
                              std::to_string(numin) + "): no standard error quoted");
     }
   if (o.fit_isotropic && !iso.nu.empty()) {
@@ -718,6 +743,10 @@ std::set<int> checked_inputs(const std::vector<CurveData>& curves_in, const IsoD
   if (!o.hold_iso.empty() && !o.start)
     throw std::invalid_argument("model calibration: isotropic parameters can only be held at given start values "
                                 "(--hold-isotropic needs --start PARAMETERS.csv)");
+  if (o.state_volume && (!o.extended || o.state_limit))
+    throw std::invalid_argument("model calibration: the volume-form state parameter (--state-limit volume) belongs to the "
+                                "extended family and replaces the pressure form: give --family extended and one "
+                                "--state-limit");
   std::set<int> held(o.hold_iso.begin(), o.hold_iso.end());
   const std::size_t need_iso = held.empty() ? 8 : kNumIso - held.size() + 2;
   if (o.fit_isotropic && iso.nu.size() < need_iso)
@@ -747,8 +776,16 @@ void clamp_extended_start(std::vector<double>& shear, std::vector<double>& ext) 
 /// data), n_psi when the `Weighted` rule's block carries it with the limit off (at 0), and the `Weighted` rule's
 /// two coefficients when the Lode-dependent state exponent's block carries them for another rule (at their start,
 /// unread).
-std::vector<int> held_ext(bool one_nu, bool state_limit, bool weighted, bool state_lode = false) {
+std::vector<int> held_ext(bool one_nu, bool state_limit, bool weighted, bool state_lode = false, bool state_volume = false) {
   std::vector<int> held;
+  if (state_volume) {   // chi_D at 1 (the phase transformation at r = 1 on the critical-state line), the other laws' entries
+    held = {kDilB, kChiD, kNPsiA, kNPsiB, kLambdaPsi, kNuCs, kLambdaCs};   // d_D's state dependence is psi's; the
+                                                                       // critical-state line the end states'
+    if (!weighted) held.insert(held.end(), {kLnDeltaW, kNW});
+    if (one_nu) held.insert(held.end(), {kNFB, kKappaB});
+    std::sort(held.begin(), held.end());
+    return held;
+  }
   if (one_nu) held = {kNFB, kKappaB, kDilB};
   if (one_nu && state_limit) held.push_back(kNPsiB);
   if (weighted && !state_limit) held.insert(held.end(), {kNPsiA, kNPsiB});
@@ -758,16 +795,24 @@ std::vector<int> held_ext(bool one_nu, bool state_limit, bool weighted, bool sta
 
 /// One start volume fraction: every nu-slope (*_b) held at 0; with the extension block, held_ext.
 void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<double>& ext, bool X, bool one_nu,
-              bool state_limit, bool weighted, bool state_lode) {
-  if (one_nu) {
-    for (int i = 1; i < kNumShear; i += 2) shear[i] = 0.0;
-    problem.SetManifold(shear.data(), new ceres::SubsetManifold(kNumShear, {1, 3, 5, 7, 9, 11}));
-  }
-  const std::vector<int> held = held_ext(one_nu, state_limit, weighted, state_lode);
+              bool state_limit, bool weighted, bool state_lode, bool state_volume) {
+  // Held shear coefficients: the nu-slopes from one start volume fraction; with the volume-form state parameter s_max_b
+  // at 0 (the limit's state dependence is psi's, s_lim e^{n_b psi}) and beta_p at its start (it does not act: the
+  // pressure stays on the isotropic law at nu_el).
+  std::set<int> held_s;
+  if (one_nu) held_s = {kSmaxB, kLnBetaSB, kFmaxB, kLnBetaFB, kAnisoB, kLnBetaPB};
+  if (X && state_volume) held_s.insert({kSmaxB, kLnBetaPA, kLnBetaPB});
+  for (int i : held_s)
+    if (i % 2 == 1) shear[i] = 0.0;
+  if (!held_s.empty())
+    problem.SetManifold(shear.data(), new ceres::SubsetManifold(kNumShear, std::vector<int>(held_s.begin(), held_s.end())));
+  const std::vector<int> held = held_ext(one_nu, state_limit, weighted, state_lode, state_volume);
   if (!X || held.empty()) return;
   for (int i : held)
-    if (i != kLnDeltaW && i != kNW) ext[i] = 0.0;   // the unread `Weighted` pair keeps its start (inside its bounds)
-  problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit, weighted, state_lode), held));
+    if (i != kLnDeltaW && i != kNW && i != kNuCs && i != kLambdaCs) ext[i] = 0.0;   // the unread `Weighted` pair
+                                                            // keeps its start (inside its bounds), the line its own
+  if (state_volume) ext[kChiD] = 1.0;
+  problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit, weighted, state_lode, state_volume), held));
 }
 
 /// One Ceres solve of the calibration (dense QR, tight tolerances, one thread: the same bits on every run).
@@ -795,6 +840,7 @@ Parameters fitted_params(const Parameters& start, const std::vector<double>& iso
   P.fabric = X ? o.fabric : FabricLode::Norm;
   P.state_limit = X && o.state_limit;
   P.state_lode = X && o.state_limit && o.state_lode;
+  P.state_volume = X && o.state_volume;
   return P;
 }
 
@@ -806,6 +852,56 @@ void drop_entries(Calibration& cal, int pos, int n) {
   cal.se_cov.erase(cal.se_cov.begin() + pos, cal.se_cov.begin() + pos + n);
   cal.corr.erase(cal.corr.begin() + pos, cal.corr.begin() + pos + n);
   for (auto& row : cal.corr) row.erase(row.begin() + pos, row.begin() + pos + n);
+}
+
+/// The volume-form state parameter's table: the entries its block carries for the other laws (n_psi, lambda_psi, and
+/// the `Weighted` pair under another rule) removed, the last first.
+void drop_unread_for_volume_state(Calibration& cal, bool weighted) {
+  const int x = kNumIso + kNumShear;
+  drop_entries(cal, x + kLambdaPsi, 1);
+  drop_entries(cal, x + kNPsiA, weighted ? 2 : 4);
+}
+
+std::pair<double, double> end_state_line(const std::vector<PathData>& paths);
+
+/// A start file re-centred on this data's nu_ref; with the volume-form state parameter the laws are laws of psi: a
+/// volume-form start as it is, another re-centred on the end states' critical volume fraction (its laws there taken
+/// as the critical state's, psi = 0).
+Parameters start_of(const Parameters& s, const CalibrationOptions& o, const std::vector<PathData>& paths, double nu_ref) {
+  if (!(o.extended && o.state_volume)) return recentred(s, nu_ref);
+  if (s.state_volume) return s;
+  const auto line = end_state_line(paths);
+  double p_end = 0;
+  for (const auto& d : paths) p_end += std::log(std::max(d.p.back(), 1e-12) / kPCsRef) / paths.size();
+  return recentred(s, line.first + line.second * p_end);
+}
+
+/// The critical-state line of the calibration paths' end states: least squares of their end volume fractions on
+/// ln(p*/kPCsRef) of their end pressures, {nu_cs, lambda_cs} (lambda_cs = 0 from one pressure).
+std::pair<double, double> end_state_line(const std::vector<PathData>& paths) {
+  if (paths.empty())
+    throw std::invalid_argument("model calibration: --state-limit volume needs paths that reach the critical state "
+                                "(--calibrate-on a drained test, e.g. TC_s3_dense): their end states give the line");
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  const double n = static_cast<double>(paths.size());
+  for (const auto& d : paths) {
+    const double x = std::log(std::max(d.p.back(), 1e-12) / kPCsRef), y = d.nu_m.back();
+    sx += x; sy += y; sxx += x * x; sxy += x * y;
+  }
+  const double var = sxx - sx * sx / n;
+  const double lambda = var > 1e-9 ? (sxy - sx * sy / n) / var : 0.0;
+  return {sy / n - lambda * sx / n, lambda};
+}
+
+/// The volume-form state parameter's start: the critical-state line of the end states (held in the fit), d_D >= 0,
+/// the state exponents at 2 where zero (a peak 1.1 times the limit at psi = 0.05; from 5 the dense start of
+/// data/geotech's mu = 0.5 runs away: a contraction that raises psi and the peak until the side stress vanishes).
+void volume_state_start(const std::vector<PathData>& paths, std::vector<double>& ext) {
+  ext[kDilA] = std::fabs(ext[kDilA]);
+  ext[kNFA] = std::max(ext[kNFA], 0.0);
+  if (ext[kNB] == 0.0) ext[kNB] = 2.0;
+  if (ext[kND] == 0.0) ext[kND] = 2.0;
+  std::tie(ext[kNuCs], ext[kLambdaCs]) = end_state_line(paths);
 }
 
 }  // namespace
@@ -837,7 +933,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     for (const auto& d : paths) nu_mean += d.nu;
   nu_mean /= curves.empty() ? paths.size() : curves.size();
   const double nu_ref = o.nu_ref > 0 ? o.nu_ref : nu_mean;
-  Parameters start = o.start ? recentred(*o.start, nu_ref) : start_values(curves, iso, nu_ref);
+  Parameters start = o.start ? start_of(*o.start, o, paths, nu_ref) : start_values(curves, iso, nu_ref);
   const bool X = o.extended;
   if (X && o.fabric == FabricLode::Weighted) check_weighted_lode(curves, paths);
   if (X && !o.start) {
@@ -861,12 +957,15 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   double numin = 1e9;
   // Both jamming fractions must lie below every start state (the curves' nu); branch points
   // below them are allowed (C = C0 there; p* < 0 is simply a large residual).
-  for (const auto& c : curves) numin = std::min(numin, c.nu);
+  if (!(X && o.state_volume))
+    for (const auto& c : curves) numin = std::min(numin, c.nu);
 
   ceres::Problem problem;
   int n_res = 0;
   add_curve_residuals(problem, curves, o, nu_ref, X, blocks_all, n_res);
   add_path_residuals(problem, paths, o, nu_ref, X, blocks_all, n_res, numin);
+  if (X && o.state_volume)   // the isotropic law's jamming fraction below its own branch only (start_state)
+    numin = iso.nu.empty() ? 1.0 : *std::min_element(iso.nu.begin(), iso.nu.end());
   // Start values inside the jamming fractions' bounds (a start from another calibration may lie
   // above this data's lowest volume fraction; Ceres refuses an infeasible start): moved to 0.005
   // below it, not onto it, where the coordination law's cusp (nu/nu_cC - 1)^alpha would sit on the
@@ -878,7 +977,12 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   const bool state_lode = X && o.state_limit && o.state_lode;
   if (state_lode) check_second_lode_angle(curves, paths, "the state exponent's Lode dependence (lambda_psi)",
                                           "or choose --state-limit pressure");
-  set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted, state_lode);
+  const bool state_volume = X && o.state_volume;
+  if (state_volume) {
+    volume_state_start(paths, ext);
+    isob[kC0] = std::max(isob[kC0], 0.0);
+  }
+  set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted, state_lode, state_volume);
   if (o.fit_isotropic && !held.empty())
     problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 
@@ -888,7 +992,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (const auto& c : curves) nus_seen.insert(std::llround(c.nu * 1e6));
   for (const auto& d : paths) nus_seen.insert(std::llround(d.nu * 1e6));
   const bool one_nu = nus_seen.size() < 2;
-  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode);
+  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume);
 
   const ceres::Solver::Summary sum = solve(problem, o.max_iterations);
 
@@ -897,12 +1001,12 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   cal.message = sum.BriefReport();
   if (!cal.ok) cal.warnings.push_back("optimiser did not converge: " + sum.message);
   cal.params = fitted_params(start, isob, shear, ext, o, X);
-  const int n_ext = ext_size(cal.params.state_limit, weighted, state_lode);
-  const std::vector<int> held_x = X ? held_ext(one_nu, cal.params.state_limit, weighted, state_lode) : std::vector<int>();
+  const int n_ext = ext_size(cal.params.state_limit, weighted, state_lode, state_volume);
+  const std::vector<int> held_x = X ? held_ext(one_nu, cal.params.state_limit, weighted, state_lode, state_volume) : std::vector<int>();
   cal.chi2 = 2 * sum.final_cost;
   cal.n_residuals = n_res;
   // Free parameters: the held ones (isotropic, the nu-slopes of one start volume fraction, held_ext) left out.
-  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear - (one_nu ? kNumShear / 2 : 0) +
+  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear - (one_nu ? kNumShear / 2 : 0) - (state_volume ? (one_nu ? 1 : 3) : 0) +
                (X ? n_ext - static_cast<int>(held_x.size()) : 0);
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(isob[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(shear[i]); }
@@ -913,7 +1017,10 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (int i : held) cal.se_cov[i] = kNaN;   // held at the start value: no error of its own
   for (int i : held_x) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
   calibration_warnings(curves, paths, iso, o, isob, numin, one_nu, X, cal);
-  if (weighted && !cal.params.state_limit) drop_entries(cal, kNumIso + kNumShear + kNPsiA, 2);   // n_psi: not in this law
+  if (state_volume)   // held: s_max_b at 0 (the peak's state is psi's), beta_p at its start (it does not act)
+    for (int i : {kSmaxB, kLnBetaPA, kLnBetaPB}) cal.se_cov[kNumIso + i] = kNaN;
+  if (state_volume) drop_unread_for_volume_state(cal, weighted);
+  else if (weighted && !cal.params.state_limit) drop_entries(cal, kNumIso + kNumShear + kNPsiA, 2);   // n_psi: not in this law
   if (state_lode && !weighted) drop_entries(cal, kNumIso + kNumShear + kLnDeltaW, 2);   // the `Weighted` pair: unread
   return cal;
 }
@@ -924,7 +1031,8 @@ ModelCurve predict_curve(const Parameters& params, const CurveData& c, double ep
     throw std::invalid_argument("model prediction: " + c.source + " does not start at eps_d = 0");
   const std::vector<double> iso = params.iso();
   const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface, params.fabric,
-                        params.extended && params.state_limit, params.extended && params.state_lode};
+                        params.extended && params.state_limit, params.extended && params.state_lode,
+                        params.extended && params.state_volume};
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
                                          t.F.front(), t.eps, max_step, ext);
   ModelCurve m;
@@ -981,9 +1089,10 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
   if (d.acc.empty() || std::fabs(d.acc.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + d.source + " does not start at eps_d_accumulated = 0");
   const std::vector<double> iso = params.iso();
-  check_start_scale(iso, d.nu, d.source);
+  if (!(params.extended && params.state_volume)) check_start_scale(iso, d.nu, d.source);
   const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric,
-                        params.extended && params.state_limit, params.extended && params.state_lode};
+                        params.extended && params.state_limit, params.extended && params.state_lode,
+                        params.extended && params.state_volume};
   const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
                                          d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
   PathPrediction m;

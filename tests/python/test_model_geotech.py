@@ -142,3 +142,48 @@ def test_collect_puts_blind_and_lab_side_by_side(tmp_path):
     r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--collect", str(tmp_path)], capture_output=True,
                        text=True, cwd=ROOT)
     assert r.returncode != 0 and "lab_loose" in r.stderr, r.stderr
+
+
+def summary_rows(path):
+    return {(r["mode"], r["nu [-]"]): r for r in read(path) if r["mode"] != "calibration"}
+
+
+def test_volume_state_parameters_round_trip_through_predict_with(tmp_path):
+    """On the stored mu = 0.5 loose TC_s3/TE_s3 curves: `--state-limit volume` writes nu_cs, lambda_cs, n_peak, n_dil;
+    `--predict-with` its parameters.csv gives every curve the numbers the calibration's own evaluation gave (the
+    fitted TC_s3 now 'predicted'); the option refused with the group family, and --predict-with refused with the
+    family its file does not hold."""
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech", "curves"),
+                        "--mu", "0.5", "--out", str(tmp_path / "m"), "--tests", "TC_s3,TE_s3"], capture_output=True,
+                       text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    ens = tmp_path / "m" / "ensemble_loose"
+    start = os.path.join(ROOT, "data", "friction_n1000", "model_friction", "mu_0.5", "parameters.csv")
+    cal = tmp_path / "cal"
+    r = subprocess.run([DEM, "model", str(ens), "--no-plots", "--no-jackknife", "--family", "extended", "--calibrate-on",
+                        "TC_s3_loose", "--start", start, "--state-limit", "volume", "--max-iterations", "5",
+                        "--hold-isotropic", "gamma_p,nu_cC,alpha", "--out",
+                        str(cal)], capture_output=True, text=True, timeout=300)
+    assert r.returncode in (0, 1), r.stderr   # 5 iterations: converged or not, the tables are written
+    names = [x["parameter"] for x in read(cal / "parameters.csv")]
+    for n in ("nu_cs", "lambda_cs", "n_peak", "n_dil", "chi_D"):
+        assert n in names, names
+    assert "n_psi_a" not in names and "lambda_psi" not in names
+    pred = tmp_path / "pred"
+    r = subprocess.run([DEM, "model", str(ens), "--no-plots", "--family", "extended", "--predict-with",
+                        str(cal / "parameters.csv"), "--out", str(pred)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    a, b = summary_rows(cal / "summary.csv"), summary_rows(pred / "summary.csv")
+    assert set(a) == set(b) and len(a) == 4, (a.keys(), b.keys())   # TC_s3, TE_s3 at two pressures
+    for key in a:
+        assert b[key]["role"] == "predicted"
+        for q in ("p_star [band]", "eps_v [band]", "s_dev [band]", "F_dev [band]"):
+            assert a[key][q] == b[key][q], (key, q, a[key][q], b[key][q])
+    assert "chi2/dof nan" in (pred / "summary.md").read_text()
+    r = subprocess.run([DEM, "model", str(ens), "--no-plots", "--family", "group", "--predict-with",
+                        str(cal / "parameters.csv"), "--out", str(tmp_path / "g")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "--family extended" in r.stderr, r.stderr
+    r = subprocess.run([DEM, "model", str(ens), "--no-plots", "--no-jackknife", "--family", "group", "--calibrate-on",
+                        "TC_s3_loose", "--start", start, "--state-limit", "volume", "--out", str(tmp_path / "h")],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "--family extended" in r.stderr, r.stderr

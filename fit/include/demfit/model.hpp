@@ -61,16 +61,31 @@ enum ExtIndex {
   /// deviator (1.73^lambda_psi in axisymmetric compression against D2; docs/model.md, "The state exponent at
   /// another Lode angle").
   kLambdaPsi,
+  /// The volume-form state parameter (issue 31, tenth round; only with Ext::state_volume, else never read):
+  /// psi = nu - nu_cs(p), nu_cs(p) = nu_cs + lambda_cs ln(p/kPCsRef) the critical-state line in the volume fraction
+  /// (positive psi: denser than critical). The stress-ratio target s_lim exp(n_b psi) (a peak when dense, Manzari &
+  /// Dafalias 1997's M exp(-n_b psi_e)), and the dilatancy d_D (r - chi_D exp(-n_d psi)) (Li & Dafalias 2000's
+  /// phase transformation M exp(m psi_e)): the volume is driven to nu_cs(p) whatever the preparation
+  /// (docs/model.md, "The volume-form state parameter").
+  kNuCs,       ///< nu_cs [-]: the critical-state volume fraction at p* = kPCsRef
+  kLambdaCs,   ///< lambda_cs [-]: d nu_cs / d ln p* (positive: soft spheres pack denser at higher pressure)
+  kNB,         ///< n_b [-] (written n_peak): the peak's state exponent
+  kND,         ///< n_d [-] (written n_dil): the phase transformation's state exponent
   kNumExt
 };
+
+/// Reference pressure of the critical-state line nu_cs(p) of the volume-form state parameter [p* units].
+constexpr double kPCsRef = 1e-3;
 
 /// Number of extension coefficients without the state-dependent limit (the block Ceres sees when it is off).
 constexpr int kNumExtBase = kNPsiA;
 /// Size of the extension block: kNumExtBase, kNumExtBase + 2 with the state-dependent limit (n_psi), kLambdaPsi
 /// with the `Weighted` rule's two coefficients (its n_psi entries then held at 0 when the limit is off), kNumExt
 /// with the Lode-dependent state exponent (the `Weighted` entries then held when the rule is another).
-inline int ext_size(bool state_limit, bool weighted = false, bool state_lode = false) {
-  return state_lode ? kNumExt : weighted ? kLambdaPsi : state_limit ? kNumExtBase + 2 : kNumExtBase;
+/// The volume-form state parameter's block is the whole layout (kNumExt; the entries it does not read held).
+inline int ext_size(bool state_limit, bool weighted = false, bool state_lode = false, bool state_volume = false) {
+  if (state_volume) return kNumExt;
+  return state_lode ? kNuCs : weighted ? kLambdaPsi : state_limit ? kNumExtBase + 2 : kNumExtBase;
 }
 
 /// Lode-angle dependence of the stress-ratio limit: s_max is the limit at the calibration
@@ -127,10 +142,11 @@ struct Parameters {
   double alpha = 0.5;      ///< [-] coordination power-law exponent
   double shear[kNumShear] = {0.16, -0.5, std::log(50.0), -5.0, 0.11, -0.8, std::log(40.0), -8.0,
                              0.3, -5.0, std::log(20.0), 0.0};
-  double ext[kNumExt] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};   ///< frictional extension (all 0: the group model)
+  double ext[kNumExt] = {};   ///< frictional extension (all 0: the group model)
   bool extended = false;   ///< the frictional family (ext fitted, Lode surface `surface`)
   bool state_limit = false;   ///< the frictional family's state-dependent stress-ratio limit (n_psi fitted)
   bool state_lode = false;    ///< ... with the exponent's Lode dependence (lambda_psi fitted; needs state_limit)
+  bool state_volume = false;  ///< the volume-form state parameter psi = nu - nu_cs(p) (nu_cs, lambda_cs, n_b, n_d fitted)
   Surface surface = Surface::None;   ///< Lode-angle surface of the extended family
   FabricLode fabric = FabricLode::Norm;   ///< Lode rule of the extended family's fabric limit
   double nu_ref = 0.74;    ///< [-] volume fraction the nu-laws are centred on
@@ -150,7 +166,8 @@ inline const char* shear_name(int i) {
 }
 inline const char* ext_name(int i) {
   static const char* n[kNumExt] = {"n_F_a", "n_F_b", "kappa_s_a", "kappa_s_b", "d_D_a", "d_D_b", "chi_D",
-                                   "n_psi_a", "n_psi_b", "ln_delta_w", "n_w", "lambda_psi"};
+                                   "n_psi_a", "n_psi_b", "ln_delta_w", "n_w", "lambda_psi", "nu_cs", "lambda_cs",
+                                   "n_peak", "n_dil"};
   return n[i];
 }
 inline const char* iso_name(int i) {
@@ -335,7 +352,18 @@ struct Ext {
   FabricLode fabric = FabricLode::Norm;
   bool state_limit = false;
   bool state_lode = false;   ///< n_psi scaled by (c_3(b_ref)/c_3(b))^lambda_psi (the block carries kLambdaPsi)
+  bool state_volume = false;   ///< the volume-form state parameter (the block carries kNuCs..kND)
 };
+
+/// The volume-form state parameter psi = nu - nu_cs(p), nu_cs(p) = nu_cs + lambda_cs ln(p/kPCsRef) (tenth round):
+/// positive denser than the critical-state line. p floored at 1e-12 (a path that unloads to zero pressure).
+template <class T>
+T state_psi(const T* ext, const T& nu, const T& p) {
+  using std::log;
+  T pp = p;
+  if (!(pp > T(1e-12))) pp = T(1e-12);
+  return nu - (ext[kNuCs] + ext[kLambdaCs] * log(pp / T(kPCsRef)));
+}
 
 /// The state-dependent stress-ratio limit (issue 31, fifth round): the limit the stress ratio is
 /// driven to, s_lim exp(-n_psi psi_p) = s_lim (p_ref/p)^n_psi, with psi_p = ln(p/p_ref) the state
@@ -369,6 +397,12 @@ struct State {
   T s;       ///< stress ratio sigma_dev/p [-], signed along the first loading direction
   T F;       ///< deviatoric fabric [-], signed likewise
   T l = T(0.0);   ///< |eps_d| accumulated since the loading start or the last reversal [-] (FabricLode::Overlap)
+  /// Plastic volumetric strain [-] (extension positive; integrated, read with the volume-form state parameter only):
+  /// every volume change but the elastic -dp/B, so that ln nu + e_pl = ln nu_el, the elastic volume fraction, follows
+  /// the pressure along the isotropic law (d ln nu_el = dp/B). The law's B and p_ref are evaluated at nu_el: a dense
+  /// packing dilating to its critical state below the isotropic law's jamming fraction keeps its stiffness, and the
+  /// relaxation towards k p_iso(nu_el) = p vanishes (docs/model.md, "The volume-form state parameter").
+  T e_pl = T(0.0);
 };
 
 /// How the volume is controlled during a segment.
@@ -425,9 +459,15 @@ template <class T>
 State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg) {
   using std::exp;
   const T nu = exp(y.ln_nu);
-  const T B = m.k * bulk_modulus(m.iso, nu);
-  const T p_ref = m.k * isotropic_pressure(m.iso, nu);
-  const Local<T> L = local(m.shear, nu, m.nu_ref);
+  const bool vol_state = m.ext.p && m.ext.state_volume;
+  const T nu_el = vol_state ? exp(y.ln_nu + y.e_pl) : nu;   // the elastic volume fraction (nu itself otherwise)
+  const T B = m.k * bulk_modulus(m.iso, nu_el);
+  const T p_ref = m.k * isotropic_pressure(m.iso, nu_el);
+  // With the volume-form state parameter every law is a law of psi (q = a + b psi: the critical state's a at psi = 0,
+  // whatever the preparation), not of nu - nu_ref.
+  const T psi = vol_state ? state_psi(m.ext.p, nu, y.p) : T(0.0);
+  const T nu_law = vol_state ? T(m.nu_ref) + psi : nu;
+  const Local<T> L = local(m.shear, nu_law, m.nu_ref);
   const T A = L.a_A * B * y.F;                       // anisotropy modulus [K]
   State<T> d;
   if (sigma == 0.0) {   // pure volumetric: d eps_vol = +1 per unit l (sign carried by seg.eps_vol)
@@ -437,11 +477,12 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
     d.s = -(A - y.s * B) / y.p * dev;
     d.F = T(0.0);
     d.l = T(0.0);
+    d.e_pl = T(0.0);
     return d;
   }
   // The frictional extension (docs/model.md): r the mobilised stress ratio on the test's Lode
   // surface; neutral (the group model's numbers exactly) when m.ext.p is null or all zero.
-  const LocalExt<T> X = local_ext(m.ext.p, nu, m.nu_ref);
+  const LocalExt<T> X = local_ext(m.ext.p, nu_law, m.nu_ref);
   const T s_lim = lode_limit(L.s_max, m.ext.b, m.ext.surface);
   T r = T(sigma) * y.s / s_lim;
   if (!(r > T(1e-6))) r = T(1e-6);
@@ -457,17 +498,20 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   // The `Weighted` rule: the Lode factor c_3(b)/c_3(b_ref) of the onset and the rate raised to w.
   T lode_w = T(1.0);
   if (weighted) {
-    const T delta = mean_overlap(m.iso, nu, y.p);
+    const T delta = mean_overlap(m.iso, nu_el, y.p);
     lode_w = exp(lode_weight(m.ext.p, delta) * T(std::log(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2))));
     r_F = opened_fraction_at(delta, T(minor_fraction(kLodeBD2)) * lode_w * y.l);
   } else if (opened) {
-    r_F = opened_fraction(m.iso, nu, y.p, y.l, m.ext.b);
+    r_F = opened_fraction(m.iso, nu_el, y.p, y.l, m.ext.b);
   }
   const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
   const T shape_s = T(1.0) + X.kappa_s * r;                               // stress ratio: linear for longer
   // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
   const T F_lim = m.ext.p ? L.F_max * T(fabric_lode_factor(m.ext.fabric, m.ext.b)) : L.F_max;
-  const T dil = m.ext.p ? X.d_D * (r - X.chi_D) * (T(1.0) - T(sigma) * y.F / F_lim) : T(0.0);   // plastic dilatancy
+  // Plastic dilatancy: gated by the fabric (1 - F/F_lim), or with the volume-form state parameter driven by psi
+  // (tenth round): d_D (r - chi_D e^{-n_d psi}), no fabric gate, so the volume moves until psi = 0.
+  const T dil = vol_state ? X.d_D * (r - X.chi_D * exp(-m.ext.p[kND] * psi))
+                : m.ext.p ? X.d_D * (r - X.chi_D) * (T(1.0) - T(sigma) * y.F / F_lim) : T(0.0);
   const T relax = L.beta_p * (y.p - p_ref);          // excess pressure relaxing with |d eps_d|
   T dvol;                                            // d eps_vol per |d eps_d|
   // The deviatoric source of ds. The rate is scaled by s_max/s_lim so that the initial shear
@@ -476,7 +520,9 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const bool lode = m.ext.surface != Surface::None && m.ext.b != kLodeBD2;
   // The state-dependent limit (fifth round; off: s_lim itself, untouched): the target of the stress
   // ratio only; the mobilisation r, the rate scaling and the dilatancy keep s_lim (psi_p = 0).
-  const T s_target = (m.ext.p && m.ext.state_limit)
+  // The volume-form state parameter (tenth round) likewise: s_lim e^{n_b psi}.
+  const T s_target = vol_state ? s_lim * exp(m.ext.p[kNB] * psi)
+                     : (m.ext.p && m.ext.state_limit)
                          ? s_lim * state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref, m.ext.b, m.ext.state_lode)
                          : s_lim;
   const T shear = L.beta_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_target - y.s) * shape_s;
@@ -494,13 +540,15 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const T rate_F = weighted ? lode_w : m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
   d.F = L.beta_F * rate_F * (T(sigma) * F_lim - y.F) * gate_F;
   d.l = T(1.0);
+  d.e_pl = vol_state ? d.p / B + dvol : T(0.0);
   d.s = shear - (A - y.s * B) / y.p * dvol;
   return d;
 }
 
 template <class T>
 State<T> axpy(const State<T>& y, const State<T>& d, double h) {
-  return {y.ln_nu + T(h) * d.ln_nu, y.p + T(h) * d.p, y.s + T(h) * d.s, y.F + T(h) * d.F, y.l + T(h) * d.l};
+  return {y.ln_nu + T(h) * d.ln_nu, y.p + T(h) * d.p, y.s + T(h) * d.s, y.F + T(h) * d.F, y.l + T(h) * d.l,
+          y.e_pl + T(h) * d.e_pl};
 }
 
 /// One classical RK4 step of length h (in |eps_d|, or |eps_vol| for a volumetric segment).
@@ -516,7 +564,52 @@ State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const S
   out.s += T(h / 6) * (k1.s + T(2) * k2.s + T(2) * k3.s + k4.s);
   out.F += T(h / 6) * (k1.F + T(2) * k2.F + T(2) * k3.F + k4.F);
   out.l += T(h / 6) * (k1.l + T(2) * k2.l + T(2) * k3.l + k4.l);
+  out.e_pl += T(h / 6) * (k1.e_pl + T(2) * k2.e_pl + T(2) * k3.e_pl + k4.e_pl);
   return out;
+}
+
+/// The value of a scalar: itself, or a Ceres Jet's value part (its member a), recursively.
+inline double scalar_value(double x) { return x; }
+template <class J>
+double scalar_value(const J& j) { return scalar_value(j.a); }
+
+/// The isotropic law's volume fraction at pressure p* [-]: p_iso(nu) = p, bracketed between nu_c and 1 by bisection
+/// in double, then two Newton steps in T (d p_iso / d nu = B/nu), so that Ceres differentiates it through the law's
+/// parameters. nu_c itself where p <= 0.
+template <class T>
+T isotropic_volume(const T* iso, double p) {
+  auto val = [](const T& x) { return model::scalar_value(x); };
+  const double nu_c = val(iso[kNuC]);
+  double lo = nu_c, hi = 1.0;
+  std::vector<double> isod(kNumIso);
+  for (int i = 0; i < kNumIso; ++i) isod[i] = val(iso[i]);
+  if (!(p > 0) || isotropic_pressure(isod.data(), hi) < p) return !(p > 0) ? iso[kNuC] : T(hi);
+  for (int it = 0; it < 60; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (isotropic_pressure(isod.data(), mid) < p ? lo : hi) = mid;
+  }
+  T nu = T(0.5 * (lo + hi));
+  for (int it = 0; it < 2; ++it) nu = nu - (isotropic_pressure(iso, nu) - T(p)) * nu / bulk_modulus(iso, nu);
+  return nu;
+}
+
+/// The material of a path from (nu0, p0): the scale k = p0/p_iso(nu0), the state's own offset from the isotropic law;
+/// with the volume-form state parameter k = 1 (the elastic state is the law's at p0, start_state).
+template <class T>
+Material<T> start_material(const T* iso, const T* shear, double nu_ref, double nu0, double p0, const Ext<T>& ext) {
+  if (ext.p && ext.state_volume) return Material<T>{iso, shear, nu_ref, T(1.0), ext};
+  return Material<T>{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0)), ext};
+}
+
+/// The start state; with the volume-form state parameter the plastic strain e_pl = ln(nu_iso(p0)/nu0), so that the
+/// elastic volume fraction starts on the isotropic law at p0 whatever the preparation (a loose packing below the law's
+/// jamming fraction included): the elastic stiffness a function of the pressure alone, as SANISAND's K(p).
+template <class T>
+State<T> start_state(const Material<T>& m, double nu0, double p0, double s0, double F0) {
+  State<T> y{T(std::log(nu0)), T(p0), T(s0), T(F0)};
+  using std::log;
+  if (m.ext.p && m.ext.state_volume) y.e_pl = log(isotropic_volume(m.iso, p0)) - T(std::log(nu0));
+  return y;
 }
 
 /// Integrates the model along `path` from the state (nu0, p0, s0, F0) (p0 in p* units).
@@ -528,8 +621,8 @@ std::vector<Point<T>> integrate(const T* iso, const T* shear, double nu_ref, dou
   using std::log;
   if (path.empty()) throw std::invalid_argument("model path: no segments");
   if (!(nu0 > 0 && p0 > 0)) throw std::invalid_argument("model path: initial nu and p must be positive");
-  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0)), ext};
-  State<T> y{T(log(nu0)), T(p0), T(s0), T(F0)};
+  Material<T> m = start_material(iso, shear, nu_ref, nu0, p0, ext);
+  State<T> y = start_state(m, nu0, p0, s0, F0);
   T eps_vol = T(0.0);
   double acc = 0, eps_d = 0, last_sigma = 1.0;
   std::vector<Point<T>> out{{0.0, 0.0, eps_vol, y}};
@@ -579,8 +672,8 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
   if (acc.empty() || direction.size() != acc.size() || isobaric.size() != acc.size())
     throw std::invalid_argument("model path rows: acc, direction and isobaric must have the same, non-zero length");
   if (!(nu0 > 0 && p0 > 0)) throw std::invalid_argument("model path rows: initial nu and p must be positive");
-  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0)), ext};
-  State<T> y{T(std::log(nu0)), T(p0), T(s0), T(F0)};
+  Material<T> m = start_material(iso, shear, nu_ref, nu0, p0, ext);
+  State<T> y = start_state(m, nu0, p0, s0, F0);
   T eps_vol = T(0.0);
   double last_sigma = 1.0;
   std::vector<RowState<T>> out;
@@ -619,8 +712,8 @@ std::vector<State<T>> monotone_shear(const T* iso, const T* shear, double nu_ref
                                      double F0, const std::vector<double>& eps, double max_step = 5e-4,
                                      const Ext<T>& ext = {}) {
   using std::exp;
-  Material<T> m{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0)), ext};
-  State<T> y{T(std::log(nu0)), T(p0), T(s0), T(F0)};
+  Material<T> m = start_material(iso, shear, nu_ref, nu0, p0, ext);
+  State<T> y = start_state(m, nu0, p0, s0, F0);
   Segment seg;   // constant volume, forward
   std::vector<State<T>> out;
   out.reserve(eps.size());

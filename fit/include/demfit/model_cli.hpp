@@ -28,6 +28,9 @@ struct ModelCommandOptions {
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
   std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default), pressure (n_psi fitted), pressure-lode (+ lambda_psi)
   std::string fabric_lode = "overlap";  ///< Lode rule of the extended family's fabric: overlap (default), principal, norm, opening, extension
+  /// parameters.csv of another `dem model` run: no calibration, every curve and path predicted with it (the family,
+  /// surface and fabric rule from --family/--surface/--fabric-lode as that run was given them; the state limit from the file)
+  std::string predict_with;
 };
 
 void add_model_options(CLI::App& app, ModelCommandOptions& o);
