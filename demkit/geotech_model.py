@@ -186,12 +186,53 @@ def collect(root):
     return rows
 
 
+STATE_RUNS = (("dense", "dense", "loose_predicts_dense"), ("loose", "dense_predicts_loose", "loose"))   # prep, its dense-state and loose-state runs
+
+
+def collect_state(root):
+    """ROOT/state_volume/{dense,loose,dense_predicts_loose,loose_predicts_dense}/summary.csv and ROOT/lab_PREP/summary.csv
+    -> ROOT/state_volume/comparison.{md,csv}: per laboratory curve the worst RMS error over the band half-width of the
+    stored laboratory calibration of its own preparation (no state parameter), of the dense calibration with the
+    volume-form state parameter and of the loose one (fitted where the curve is its calibration, else predicted)."""
+    sv = os.path.join(root, "state_volume")
+    need = [os.path.join(root, f"lab_{p}", "summary.csv") for p in ("dense", "loose")]
+    need += [os.path.join(sv, d, "summary.csv") for d in ("dense", "loose", "dense_predicts_loose", "loose_predicts_dense")]
+    missing = [n for n in need if not os.path.exists(n)]
+    if missing:
+        raise SystemExit(f"geotech_model: --collect-state needs {', '.join(missing)} (the README's `dem model` runs, step 7)")
+    head = ["prep", "mode", "nu [-]", "lab role", "lab worst [band]", "dense-state role", "dense-state worst [band]",
+            "loose-state role", "loose-state worst [band]"]
+    rows, chi = [], {}
+    for prep, dense_dir, loose_dir in STATE_RUNS:
+        lab = read_summary(os.path.join(root, f"lab_{prep}", "summary.csv"))
+        ds = read_summary(os.path.join(sv, dense_dir, "summary.csv"))
+        ls = read_summary(os.path.join(sv, loose_dir, "summary.csv"))
+        chi[prep] = chi2_of(os.path.join(sv, prep, "summary.csv"))
+        for key in [k for k in ds if k[0].endswith("_" + prep)]:
+            rows.append([prep, key[0], key[1], lab.get(key, {}).get("role", ""), lab.get(key, {}).get("worst [band]", ""),
+                         ds[key]["role"], ds[key]["worst [band]"], ls.get(key, {}).get("role", ""),
+                         ls.get(key, {}).get("worst [band]", "")])
+    csv_text = ",".join(head) + "\n" + "".join(",".join(r) + "\n" for r in rows)
+    write_atomic(os.path.join(sv, "comparison.csv"), csv_text)
+    md = ["<!-- worst RMS of model - DEM mean over the mean 95 % band half-width per laboratory curve (mu = 0.5): lab = the "
+          "stored calibration of the curve's own preparation (lab_PREP, no state parameter); dense-state / loose-state = "
+          "calibrated on TC_s3 of that preparation with --state-limit volume, the other preparation predicted with "
+          "--predict-with; nan: not integrated (diverged) or not a quantity; chi2/dof dense-state "
+          f"{chi['dense']}, loose-state {chi['loose']} -->\n",
+          "| " + " | ".join(head) + " |\n", "|" + "---|" * len(head) + "\n"]
+    md += ["| " + " | ".join(r) + " |\n" for r in rows]
+    write_atomic(os.path.join(sv, "comparison.md"), "".join(md))
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--curves", default="data/geotech/curves", help="folder of the stored geotech curves")
     ap.add_argument("--mu", default="0.5", help="friction coefficient as in the folder name mu_MU")
     ap.add_argument("--out", help="output folder (ensemble_PREP/ written in it)")
     ap.add_argument("--collect", help="instead: write ROOT/comparison.{md,csv} from ROOT/{blind,lab}_{dense,loose}/summary.csv")
+    ap.add_argument("--collect-state", help="instead: write ROOT/state_volume/comparison.{md,csv} from the volume-form "
+                    "state parameter's runs and ROOT/lab_{dense,loose}")
     ap.add_argument("--tests", default=",".join(TESTS), help="comma-separated tests (default: every monotone test)")
     ap.add_argument("--force", action="store_true", help="replace existing ensemble_PREP folders")
     ap.add_argument("--friction", help="also copy this friction-study folder's D2/D3 ensemble means into "
@@ -200,8 +241,11 @@ def main(argv=None):
     if a.collect:
         collect(a.collect)
         return 0
+    if a.collect_state:
+        collect_state(a.collect_state)
+        return 0
     if not a.out:
-        print("geotech_model: give --out DIR (or --collect ROOT)", file=sys.stderr)
+        print("geotech_model: give --out DIR (or --collect ROOT, --collect-state ROOT)", file=sys.stderr)
         return 2
     tests = [t for t in a.tests.split(",") if t]
     bad = [t for t in tests if t not in TESTS]

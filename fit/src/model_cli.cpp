@@ -655,7 +655,10 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
       double mean = 0, ss = 0;
       for (const auto& e : est) mean += e[i] / K;
       for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
-      cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
+      // held parameters have no error of their own, but the critical-state line of --state-limit volume is held at
+      // the end states of the data, which the jackknife moves: its spread is its error
+      const bool from_data = cal.names[i] == "nu_cs" || cal.names[i] == "lambda_cs";
+      cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) || from_data ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
     }
     if (K < 4) {   // as `dem fit` says for its fits
       double worst = 1;

@@ -187,3 +187,32 @@ def test_volume_state_parameters_round_trip_through_predict_with(tmp_path):
                         "TC_s3_loose", "--start", start, "--state-limit", "volume", "--out", str(tmp_path / "h")],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "--family extended" in r.stderr, r.stderr
+
+
+def test_collect_state_puts_the_state_parameters_runs_beside_the_lab_calibrations(tmp_path):
+    head = "mode,nu [-],role,p_star [band],eps_v [band],s_dev [band],F_dev [band],worst [band]\n"
+    def summary(d, rows, chi):
+        d.mkdir(parents=True)
+        (d / "summary.csv").write_text(head + "".join(f"{m},{nu},{role},1,1,1,1,{w}\n" for m, nu, role, w in rows)
+                                       + f"calibration,nan,chi2/dof {chi},nan,nan,nan,nan,9\n")
+    summary(tmp_path / "lab_dense", [("TC_s3_dense", "0.66", "fitted", "2.1"), ("TC_p_dense", "0.66", "predicted", "nan")], 24)
+    summary(tmp_path / "lab_loose", [("TC_s3_loose", "0.59", "fitted", "0.5")], 0.7)
+    sv = tmp_path / "state_volume"
+    summary(sv / "dense", [("TC_s3_dense", "0.66", "fitted", "1.2"), ("TC_p_dense", "0.66", "predicted", "2.0"),
+                           ("D2", "0.74", "predicted", "30")], 16.3)
+    summary(sv / "dense_predicts_loose", [("TC_s3_loose", "0.59", "predicted", "1.1")], "nan")
+    summary(sv / "loose", [("TC_s3_loose", "0.59", "fitted", "0.35")], 1.15)
+    summary(sv / "loose_predicts_dense", [("TC_s3_dense", "0.66", "predicted", "nan")], "nan")
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--collect-state", str(tmp_path)],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    rows = [(x["prep"], x["mode"], x["lab worst [band]"], x["dense-state role"], x["dense-state worst [band]"],
+             x["loose-state role"], x["loose-state worst [band]"]) for x in read(sv / "comparison.csv")]
+    assert rows == [("dense", "TC_s3_dense", "2.1", "fitted", "1.2", "predicted", "nan"),
+                    ("dense", "TC_p_dense", "nan", "predicted", "2.0", "", ""),
+                    ("loose", "TC_s3_loose", "0.5", "predicted", "1.1", "fitted", "0.35")], rows
+    assert "chi2/dof dense-state 16.3, loose-state 1.15" in (sv / "comparison.md").read_text()
+    (sv / "loose" / "summary.csv").unlink()
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--collect-state", str(tmp_path)],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode != 0 and "state_volume/loose/summary.csv" in r.stderr, r.stderr
