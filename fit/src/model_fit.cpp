@@ -922,6 +922,26 @@ void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector
                           "or choose another --fabric-lode");
 }
 
+namespace {
+// The start values: the given start (start_of), or the data's own fits; the frictional family without a start from the
+// group model's calibration (its nested case) with a moderate extension (a fabric gated by the mobilisation, a stress
+// ratio linear for longer).
+Parameters calibration_start(const std::vector<CurveData>& curves_in, const std::vector<CurveData>& curves,
+                             const IsoData& iso, const CalibrationOptions& o, const std::vector<PathData>& paths,
+                             double nu_ref) {
+  Parameters start = o.start ? start_of(*o.start, o, paths, nu_ref) : start_values(curves, iso, nu_ref);
+  if (o.extended && !o.start) {
+    CalibrationOptions g = o;
+    g.extended = false;
+    Parameters base = calibrate(curves_in, iso, g, paths).params;
+    base.nu_ref = nu_ref;
+    start = extended_start(curves, base, o);
+  }
+  start.nu_ref = nu_ref;
+  return start;
+}
+}  // namespace
+
 Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
                       const std::vector<PathData>& paths) {
   init_glog();
@@ -933,19 +953,9 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     for (const auto& d : paths) nu_mean += d.nu;
   nu_mean /= curves.empty() ? paths.size() : curves.size();
   const double nu_ref = o.nu_ref > 0 ? o.nu_ref : nu_mean;
-  Parameters start = o.start ? start_of(*o.start, o, paths, nu_ref) : start_values(curves, iso, nu_ref);
   const bool X = o.extended;
   if (X && o.fabric == FabricLode::Weighted) check_weighted_lode(curves, paths);
-  if (X && !o.start) {
-    // The frictional family starts from the group model's calibration (its nested case) with a
-    // moderate extension: a fabric gated by the mobilisation, a stress ratio linear for longer.
-    CalibrationOptions g = o;
-    g.extended = false;
-    Parameters base = calibrate(curves_in, iso, g, paths).params;
-    base.nu_ref = nu_ref;
-    start = extended_start(curves, base, o);
-  }
-  start.nu_ref = nu_ref;
+  const Parameters start = calibration_start(curves_in, curves, iso, o, paths, nu_ref);
   std::vector<double> isob = start.iso();
   if (o.hold_from)
     for (int i : o.hold_iso) isob[i] = o.hold_from->iso()[i];
