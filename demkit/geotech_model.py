@@ -174,16 +174,20 @@ def collect(root):
             rb, rl = b.get(key, {}), lab.get(key, {})
             rows.append([prep, key[0], key[1]] + [rb.get(c, "") or "" for c in q] + [rl.get("role", "")]
                         + [rl.get(c, "") for c in q])
-    csv_text = ",".join(head) + "\n" + "".join(",".join(r) + "\n" for r in rows)
-    write_atomic(os.path.join(root, "comparison.csv"), csv_text)
-    md = ["<!-- RMS of model - DEM mean over the mean 95 % band half-width per curve: blind = the friction study's "
-          "mu = 0.5 calibration (constant-volume D2, nu = 0.69-0.80), lab = calibrated on TC_s3 at both pressures + "
-          "the isotropic states of the same preparation; nan: not a quantity of that curve; empty: not in that run; "
-          f"chi2/dof blind / lab: dense {chi['dense'][0]} / {chi['dense'][1]}, loose {chi['loose'][0]} / {chi['loose'][1]} -->\n",
-          "| " + " | ".join(head) + " |\n", "|" + "---|" * len(head) + "\n"]
-    md += ["| " + " | ".join(r) + " |\n" for r in rows]
-    write_atomic(os.path.join(root, "comparison.md"), "".join(md))
+    write_comparison(root, head, rows,
+                     "RMS of model - DEM mean over the mean 95 % band half-width per curve: blind = the friction study's "
+                     "mu = 0.5 calibration (constant-volume D2, nu = 0.69-0.80), lab = calibrated on TC_s3 at both pressures + "
+                     "the isotropic states of the same preparation; nan: not a quantity of that curve; empty: not in that run; "
+                     f"chi2/dof blind / lab: dense {chi['dense'][0]} / {chi['dense'][1]}, loose {chi['loose'][0]} / {chi['loose'][1]}")
     return rows
+
+
+def write_comparison(folder, head, rows, comment):
+    """FOLDER/comparison.csv and .md (the comment in an HTML comment above the table), each written atomically."""
+    write_atomic(os.path.join(folder, "comparison.csv"), ",".join(head) + "\n" + "".join(",".join(r) + "\n" for r in rows))
+    md = [f"<!-- {comment} -->\n", "| " + " | ".join(head) + " |\n", "|" + "---|" * len(head) + "\n"]
+    md += ["| " + " | ".join(r) + " |\n" for r in rows]
+    write_atomic(os.path.join(folder, "comparison.md"), "".join(md))
 
 
 STATE_RUNS = (("dense", "dense", "loose_predicts_dense"), ("loose", "dense_predicts_loose", "loose"))   # prep, its dense-state and loose-state runs
@@ -212,16 +216,12 @@ def collect_state(root):
             rows.append([prep, key[0], key[1], lab.get(key, {}).get("role", ""), lab.get(key, {}).get("worst [band]", ""),
                          ds[key]["role"], ds[key]["worst [band]"], ls.get(key, {}).get("role", ""),
                          ls.get(key, {}).get("worst [band]", "")])
-    csv_text = ",".join(head) + "\n" + "".join(",".join(r) + "\n" for r in rows)
-    write_atomic(os.path.join(sv, "comparison.csv"), csv_text)
-    md = ["<!-- worst RMS of model - DEM mean over the mean 95 % band half-width per laboratory curve (mu = 0.5): lab = the "
-          "stored calibration of the curve's own preparation (lab_PREP, no state parameter); dense-state / loose-state = "
-          "calibrated on TC_s3 of that preparation with --state-limit volume, the other preparation predicted with "
-          "--predict-with; nan: not integrated (diverged) or not a quantity; chi2/dof dense-state "
-          f"{chi['dense']}, loose-state {chi['loose']} -->\n",
-          "| " + " | ".join(head) + " |\n", "|" + "---|" * len(head) + "\n"]
-    md += ["| " + " | ".join(r) + " |\n" for r in rows]
-    write_atomic(os.path.join(sv, "comparison.md"), "".join(md))
+    write_comparison(sv, head, rows,
+                     "worst RMS of model - DEM mean over the mean 95 % band half-width per laboratory curve (mu = 0.5): lab = "
+                     "the stored calibration of the curve's own preparation (lab_PREP, no state parameter); dense-state / "
+                     "loose-state = calibrated on TC_s3 of that preparation with --state-limit volume, the other preparation "
+                     "predicted with --predict-with; nan: not integrated (diverged) or not a quantity; chi2/dof dense-state "
+                     f"{chi['dense']}, loose-state {chi['loose']}")
     return rows
 
 
