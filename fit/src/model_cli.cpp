@@ -821,6 +821,10 @@ ModelInputs checked_inputs(const ModelCommandOptions& o, const CalibrationOption
                            const fs::path& out, bool out_existed) {
   try {
     ModelInputs in = read_model_inputs(o, dir);
+    if (co.state_volume && o.predict_with.empty() && in.fit_paths.empty())
+      throw InputError("--state-limit volume takes its critical-state line from the end states of drained paths, and "
+                       "--calibrate-on names none: calibrate on a drained triaxial test (e.g. --calibrate-on TC_s3_dense "
+                       "with --start PARAMETERS.csv), or choose --state-limit none or pressure");
     if (o.family != "group" && co.fabric == FabricLode::Weighted) {
       try {
         check_weighted_lode(in.fit_curves, in.fit_paths);

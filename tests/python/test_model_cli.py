@@ -184,9 +184,13 @@ def test_bad_family_and_surface_are_refused(tmp_path):
     assert r.returncode == 2 and "--fabric-lode max" in r.stderr and "principal" in r.stderr and "opening" in r.stderr, r.stderr
     assert "overlap" in r.stderr, r.stderr
     assert not os.path.exists(tmp_path / "l")
-    r = run(ENSEMBLE, "--out", str(tmp_path / "p"), "--family", "extended", "--state-limit", "volume", "--no-plots")
-    assert r.returncode == 2 and "--state-limit volume" in r.stderr and "pressure" in r.stderr, r.stderr
+    r = run(ENSEMBLE, "--out", str(tmp_path / "p"), "--family", "extended", "--state-limit", "volumetric", "--no-plots")
+    assert r.returncode == 2 and "--state-limit volumetric" in r.stderr and "pressure" in r.stderr, r.stderr
     assert not os.path.exists(tmp_path / "p")
+    # the volume-form state parameter needs drained paths (its critical-state line is their end states)
+    r = run(ENSEMBLE, "--out", str(tmp_path / "v"), "--family", "extended", "--state-limit", "volume", "--no-plots")
+    assert r.returncode == 2 and "--state-limit volume" in r.stderr and "drained" in r.stderr, r.stderr
+    assert not os.path.exists(tmp_path / "v")
 
 
 def test_group_model_at_mu_0_ignores_the_fabric_rule(tmp_path):
