@@ -198,6 +198,26 @@ void write_laws_table(const Parameters& P, const std::vector<double>& nus, const
                                               "(G/p at s = 0: beta_s s_max)");
 }
 
+// With the volume-form state parameter the laws are laws of psi: evaluated at the critical state (psi = 0) and at each
+// calibration path's start state psi0 = nu0 - nu_cs(p0), with the peak target's factor e^{n_b psi} and the dilatancy's
+// phase transformation e^{-n_d psi}.
+void write_state_laws_table(const Parameters& P, const std::vector<PathData>& paths, const fs::path& out) {
+  Table t({"state", "psi [-]", "s_max [-]", "peak_factor [-]", "phase_transformation [-]", "beta_s [1/eps_d]", "F_max [-]",
+           "beta_F [1/eps_d]", "a_A [-]", "d_D [-]", "n_F [-]", "kappa_s [-]"});
+  std::vector<std::pair<std::string, double>> rows = {{"critical state", 0.0}};
+  for (const auto& d : paths)
+    rows.push_back({d.name + " start (nu " + num(d.nu, 4) + ", p* " + num(d.p.front(), 4) + ")",
+                    state_psi(P.ext, d.nu, d.p.front())});
+  for (const auto& [label, psi] : rows) {
+    const Local<double> L = local(P.shear, P.nu_ref + psi, P.nu_ref);
+    const LocalExt<double> X = local_ext(P.ext, P.nu_ref + psi, P.nu_ref);
+    t.add_row({label, num(psi, 4), num(L.s_max), num(std::exp(P.ext[kNB] * psi)), num(std::exp(-P.ext[kND] * psi)),
+               num(L.beta_s), num(L.F_max), num(L.beta_F), num(L.a_A), num(X.d_D), num(X.n_F), num(X.kappa_s)});
+  }
+  write_table_all(t, (out / "laws").string(), "The calibrated laws of the state psi = nu - nu_cs(p) (--state-limit volume), "
+                                              "at the critical state and at the calibration paths' start states");
+}
+
 void write_model_curve(const ModelCurve& m, const CurveData& c, const std::string& role, const fs::path& path) {
   std::ostringstream o;
   o << "# dem model: model curve and DEM ensemble (" << c.packings << " packings) for " << c.mode << " from nu = "
@@ -752,7 +772,8 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
   for (const auto& c : fit_curves) nus.push_back(c.nu);
   if (fit_curves.empty())
     for (const auto& d : fit_paths) nus.push_back(d.nu);
-  write_laws_table(cal.params, nus, out);
+  if (cal.params.extended && cal.params.state_volume) write_state_laws_table(cal.params, fit_paths, out);
+  else write_laws_table(cal.params, nus, out);
 
   Table pred({"mode", "nu", "role", "quantity", "n", "rms [quantity]", "max_abs [quantity]", "bias [quantity]",
               "band_halfwidth [quantity]", "rms_over_band [-]", "max_over_band [-]", "frac_in_band [-]"});

@@ -169,6 +169,9 @@ def test_volume_state_parameters_round_trip_through_predict_with(tmp_path):
     for n in ("nu_cs", "lambda_cs", "n_peak", "n_dil", "chi_D"):
         assert n in names, names
     assert "n_psi_a" not in names and "lambda_psi" not in names
+    laws = read(cal / "laws.csv")   # laws of psi: at the critical state and at each calibration path's start
+    assert laws[0]["state"] == "critical state" and float(laws[0]["psi [-]"]) == 0.0, laws[0]
+    assert len(laws) == 3 and all(r["state"].startswith("TC_s3_loose start") for r in laws[1:]), laws
     pred = tmp_path / "pred"
     r = subprocess.run([DEM, "model", str(ens), "--no-plots", "--family", "extended", "--predict-with",
                         str(cal / "parameters.csv"), "--out", str(pred)], capture_output=True, text=True, timeout=300)
