@@ -793,15 +793,21 @@ std::vector<int> held_ext(bool one_nu, bool state_limit, bool weighted, bool sta
   return held;
 }
 
+/// The shear coefficients held (hold_ext says why).
+std::set<int> held_shear(bool X, bool one_nu, bool state_volume) {
+  std::set<int> held;
+  if (one_nu) held = {kSmaxB, kLnBetaSB, kFmaxB, kLnBetaFB, kAnisoB, kLnBetaPB};
+  if (X && state_volume) held.insert({kSmaxB, kLnBetaPA, kLnBetaPB});
+  return held;
+}
+
 /// One start volume fraction: every nu-slope (*_b) held at 0; with the extension block, held_ext.
 void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<double>& ext, bool X, bool one_nu,
               bool state_limit, bool weighted, bool state_lode, bool state_volume) {
   // Held shear coefficients: the nu-slopes from one start volume fraction; with the volume-form state parameter s_max_b
   // at 0 (the limit's state dependence is psi's, s_lim e^{n_b psi}) and beta_p at its start (it does not act: the
   // pressure stays on the isotropic law at nu_el).
-  std::set<int> held_s;
-  if (one_nu) held_s = {kSmaxB, kLnBetaSB, kFmaxB, kLnBetaFB, kAnisoB, kLnBetaPB};
-  if (X && state_volume) held_s.insert({kSmaxB, kLnBetaPA, kLnBetaPB});
+  const std::set<int> held_s = held_shear(X, one_nu, state_volume);
   for (int i : held_s)
     if (i % 2 == 1) shear[i] = 0.0;
   if (!held_s.empty())
@@ -1016,7 +1022,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   cal.chi2 = 2 * sum.final_cost;
   cal.n_residuals = n_res;
   // Free parameters: the held ones (isotropic, the nu-slopes of one start volume fraction, held_ext) left out.
-  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear - (one_nu ? kNumShear / 2 : 0) - (state_volume ? (one_nu ? 1 : 3) : 0) +
+  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear - static_cast<int>(held_shear(X, one_nu, state_volume).size()) +
                (X ? n_ext - static_cast<int>(held_x.size()) : 0);
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(isob[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(shear[i]); }

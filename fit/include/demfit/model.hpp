@@ -146,7 +146,7 @@ struct Parameters {
   bool extended = false;   ///< the frictional family (ext fitted, Lode surface `surface`)
   bool state_limit = false;   ///< the frictional family's state-dependent stress-ratio limit (n_psi fitted)
   bool state_lode = false;    ///< ... with the exponent's Lode dependence (lambda_psi fitted; needs state_limit)
-  bool state_volume = false;  ///< the volume-form state parameter psi = nu - nu_cs(p) (nu_cs, lambda_cs, n_b, n_d fitted)
+  bool state_volume = false;  ///< the volume-form state parameter psi = nu - nu_cs(p) (n_b, n_d fitted; the line held)
   Surface surface = Surface::None;   ///< Lode-angle surface of the extended family
   FabricLode fabric = FabricLode::Norm;   ///< Lode rule of the extended family's fabric limit
   double nu_ref = 0.74;    ///< [-] volume fraction the nu-laws are centred on

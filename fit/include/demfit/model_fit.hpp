@@ -60,8 +60,8 @@ struct CalibrationOptions {
   bool state_lode = false;
   /// The volume-form state parameter psi = nu - nu_cs(p) (issue 31, tenth round; `--state-limit volume`, excludes
   /// state_limit): the peak s_lim e^{n_b psi}, the dilatancy d_D (r - e^{-n_d psi}) with chi_D held at 1, and the
-  /// critical-state line nu_cs + lambda_cs ln(p*/1e-3) fitted (started from the calibration paths' end states when
-  /// the start has none). docs/model.md, "The volume-form state parameter".
+  /// critical-state line nu_cs + lambda_cs ln(p*/1e-3) held at the calibration paths' end states (which it needs).
+  /// docs/model.md, "The volume-form state parameter".
   bool state_volume = false;
   /// Isotropic parameters (IsoIndex) held at their start values while the rest of the block is
   /// fitted: a laboratory's isotropic branch of a few pressure levels cannot fix all seven (issue 31,
