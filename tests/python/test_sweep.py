@@ -169,6 +169,14 @@ def test_killed_sweep_resumes_without_redoing_finished_tasks(swept, tmp_path):
     time.sleep(0.5)   # let Snakemake register the finished task
     os.killpg(p.pid, signal.SIGKILL)
     p.wait()
+    # every process of the group gone (a worker that inherited the ensemble's lock can outlive the leader by a moment)
+    gone = time.time() + 30
+    while time.time() < gone:
+        try:
+            os.killpg(p.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.1)
     inc = out / ".snakemake" / "incomplete"   # tasks Snakemake had not registered as finished: rerun, rightly
     marked = {os.path.join(str(out), base64.urlsafe_b64decode(m.name).decode())
               for m in inc.glob("*")} if inc.is_dir() else set()
