@@ -138,7 +138,8 @@ std::string law_of(const std::string& n) {
   if (n == "C0" || n == "C1" || n == "nu_cC" || n == "alpha") return "C(nu) = C0 + C1 (nu/nu_cC - 1)^alpha";
   if (n == "lambda_psi") return "state exponent at Lode parameter b: n_psi (c_3(1/2)/c_3(b))^lambda_psi";
   if (n == "chi_D") return "mobilisation r at which the plastic dilatancy changes sign (one value at every nu)";
-  if (n == "nu_cs" || n == "lambda_cs") return "critical-state line nu_cs(p) = nu_cs + lambda_cs ln(p*/1e-3) (psi = nu - nu_cs(p))";
+  if (n == "nu_cs" || n == "lambda_cs" || n == "c_cs")
+    return "critical-state line nu_cs(p) = nu_cs + lambda_cs ln(p*/1e-3) + c_cs (p* - 1e-3) (psi = nu - nu_cs(p))";
   if (n == "n_peak") return "stress-ratio target s_lim exp(n_peak psi), psi = nu - nu_cs(p)";
   if (n == "n_dil") return "plastic dilatancy d_D (r - chi_D exp(-n_dil psi)), psi = nu - nu_cs(p)";
   if (n == "ln_delta_w" || n == "n_w") return "Lode weight w = 1/(1 + exp(n_w (ln_delta_w - ln(delta/d)))), delta/d = pi p*/(C nu)";
@@ -621,9 +622,14 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
                      "n_psi(nu) fitted) or pressure-lode (pressure, with n_psi scaled by (c_3(b_ref)/c_3(b))^lambda_psi, "
                      "lambda_psi fitted; needs a second Lode angle in --calibrate-on) or volume (the state parameter "
                      "psi = nu - nu_cs(p): the limit times e^{n_b psi}, the dilatancy d_D (r - e^{-n_d psi}), the "
-                     "critical-state line nu_cs + lambda_cs ln(p*/1e-3) from the calibration paths' end states); "
+                     "critical-state line from the calibration paths' end states, --csl); "
                      "docs/model.md");
   co.state_lode = o.state_limit == "pressure-lode";
+  if (o.csl != "linear" && o.csl != "log")
+    throw InputError("--csl " + o.csl + ": give linear (the default: the critical-state line nu_cs + c_cs (p* - 1e-3), "
+                     "a rigid-grain critical state compressed by the contacts) or log (nu_cs + lambda_cs ln(p*/1e-3)); "
+                     "docs/model.md, \"The critical-state line of soft spheres\"");
+  co.csl_linear = o.csl == "linear";
   if (co.state_volume && o.family != "extended")
     throw InputError("--state-limit volume: the volume-form state parameter belongs to the extended family; give "
                      "--family extended");
@@ -677,7 +683,7 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
       for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
       // held parameters have no error of their own, but the critical-state line of --state-limit volume is held at
       // the end states of the data, which the jackknife moves: its spread is its error
-      const bool from_data = cal.names[i] == "nu_cs" || cal.names[i] == "lambda_cs";
+      const bool from_data = cal.names[i] == "nu_cs" || cal.names[i] == "lambda_cs" || cal.names[i] == "c_cs";
       cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) || from_data ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
     }
     if (K < 4) {   // as `dem fit` says for its fits
@@ -972,8 +978,11 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "(c_3(1/2)/c_3(b))^lambda_psi at the test's Lode parameter b, lambda_psi fitted; needs a second Lode "
                  "angle in --calibrate-on) or volume (psi = nu - nu_cs(p), the volume-form state parameter: the limit "
                  "times e^{n_b psi} and the dilatancy d_D (r - e^{-n_d psi}), so that drained tests end on the "
-                 "critical-state line nu_cs + lambda_cs ln(p*/1e-3) of the calibration paths' end states from dense and "
-                 "loose starts alike; needs drained --calibrate-on paths; docs/model.md)");
+                 "critical-state line of the calibration paths' end states (--csl) from dense and loose starts alike; "
+                 "needs drained --calibrate-on paths; docs/model.md)");
+  app.add_option("--csl", o.csl, "with --state-limit volume, the critical-state line's form: linear (the default, "
+                 "nu_cs + c_cs (p* - 1e-3): a rigid-grain critical state compressed by the contacts, which reaches the "
+                 "steady states of dense constant-volume shear) or log (nu_cs + lambda_cs ln(p*/1e-3))");
   app.add_option("--predict-with", o.predict_with, "parameters.csv of another `dem model` run: no calibration, every "
                  "curve and path predicted with those parameters (give the --family, --surface and --fabric-lode that "
                  "run was given; e.g. a dense preparation's calibration predicting the loose one)")

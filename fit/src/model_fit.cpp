@@ -699,6 +699,24 @@ void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::
   }
 }
 
+// Shear and extension coefficients that end on a bound of set_bounds: no standard error (the covariance describes the
+// problem without the active bound, and the jackknife's refits, which start there, stay on it: a spread of 0), and said.
+void bound_warnings(const ceres::Problem& problem, const std::vector<double>& shear, const std::vector<double>& ext,
+                    bool X, int n_ext, Calibration& cal) {
+  auto check = [&](const double* block, int i, int at, const char* name) {
+    if (!std::isfinite(cal.se_cov[at])) return;   // held, or quoted without an error already
+    const double v = block[i], tol = 1e-9 * std::max(1.0, std::fabs(v));
+    const double lo = problem.GetParameterLowerBound(block, i), hi = problem.GetParameterUpperBound(block, i);
+    if (std::fabs(v - lo) > tol && std::fabs(v - hi) > tol) return;
+    cal.se_cov[at] = kNaN;
+    cal.warnings.push_back(std::string(name) + " sits on its bound " + fmt(v, 6) + ": no standard error quoted (the "
+                           "data would take it beyond; docs/model.md)");
+  };
+  for (int i = 0; i < kNumShear; ++i) check(shear.data(), i, kNumIso + i, shear_name(i));
+  if (X)
+    for (int i = 0; i < n_ext; ++i) check(ext.data(), i, kNumIso + kNumShear + i, ext_name(i));
+}
+
 // What the data leave undetermined: the nu-slopes from one start volume fraction, jamming
 // fractions on their bounds (no standard errors quoted for them).
 void calibration_warnings(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, const IsoData& iso,
@@ -779,7 +797,7 @@ void clamp_extended_start(std::vector<double>& shear, std::vector<double>& ext) 
 std::vector<int> held_ext(bool one_nu, bool state_limit, bool weighted, bool state_lode = false, bool state_volume = false) {
   std::vector<int> held;
   if (state_volume) {   // chi_D at 1 (the phase transformation at r = 1 on the critical-state line), the other laws' entries
-    held = {kDilB, kChiD, kNPsiA, kNPsiB, kLambdaPsi, kNuCs, kLambdaCs};   // d_D's state dependence is psi's; the
+    held = {kDilB, kChiD, kNPsiA, kNPsiB, kLambdaPsi, kNuCs, kLambdaCs, kCCs};   // d_D's state dependence is psi's; the
                                                                        // critical-state line the end states'
     if (!weighted) held.insert(held.end(), {kLnDeltaW, kNW});
     if (one_nu) held.insert(held.end(), {kNFB, kKappaB});
@@ -815,7 +833,7 @@ void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<d
   const std::vector<int> held = held_ext(one_nu, state_limit, weighted, state_lode, state_volume);
   if (!X || held.empty()) return;
   for (int i : held)
-    if (i != kLnDeltaW && i != kNW && i != kNuCs && i != kLambdaCs) ext[i] = 0.0;   // the unread `Weighted` pair
+    if (i != kLnDeltaW && i != kNW && i != kNuCs && i != kLambdaCs && i != kCCs) ext[i] = 0.0;   // the unread `Weighted` pair
                                                             // keeps its start (inside its bounds), the line its own
   if (state_volume) ext[kChiD] = 1.0;
   problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit, weighted, state_lode, state_volume), held));
@@ -868,7 +886,7 @@ void drop_unread_for_volume_state(Calibration& cal, bool weighted) {
   drop_entries(cal, x + kNPsiA, weighted ? 2 : 4);
 }
 
-std::pair<double, double> end_state_line(const std::vector<PathData>& paths);
+std::pair<double, double> end_state_line(const std::vector<PathData>& paths, bool linear);
 
 /// A start file re-centred on this data's nu_ref; with the volume-form state parameter the laws are laws of psi: a
 /// volume-form start as it is, another re-centred on the end states' critical volume fraction (its laws there taken
@@ -876,22 +894,23 @@ std::pair<double, double> end_state_line(const std::vector<PathData>& paths);
 Parameters start_of(const Parameters& s, const CalibrationOptions& o, const std::vector<PathData>& paths, double nu_ref) {
   if (!(o.extended && o.state_volume)) return recentred(s, nu_ref);
   if (s.state_volume) return s;
-  const auto line = end_state_line(paths);
-  double p_end = 0;
-  for (const auto& d : paths) p_end += std::log(std::max(d.p.back(), 1e-12) / kPCsRef) / paths.size();
-  return recentred(s, line.first + line.second * p_end);
+  end_state_line(paths, o.csl_linear);   // its refusal without paths
+  double nu_end = 0;   // the least-squares line's mean value over the end states: their mean volume fraction
+  for (const auto& d : paths) nu_end += d.nu_m.back() / paths.size();
+  return recentred(s, nu_end);
 }
 
 /// The critical-state line of the calibration paths' end states: least squares of their end volume fractions on
-/// ln(p*/kPCsRef) of their end pressures, {nu_cs, lambda_cs} (lambda_cs = 0 from one pressure).
-std::pair<double, double> end_state_line(const std::vector<PathData>& paths) {
+/// ln(p*/kPCsRef) of their end pressures (`linear`: on p* - kPCsRef), {nu_cs, slope} (slope 0 from one pressure).
+std::pair<double, double> end_state_line(const std::vector<PathData>& paths, bool linear) {
   if (paths.empty())
     throw std::invalid_argument("model calibration: --state-limit volume needs paths that reach the critical state "
                                 "(--calibrate-on a drained test, e.g. TC_s3_dense): their end states give the line");
   double sx = 0, sy = 0, sxx = 0, sxy = 0;
   const double n = static_cast<double>(paths.size());
   for (const auto& d : paths) {
-    const double x = std::log(std::max(d.p.back(), 1e-12) / kPCsRef), y = d.nu_m.back();
+    const double x = linear ? d.p.back() - kPCsRef : std::log(std::max(d.p.back(), 1e-12) / kPCsRef);
+    const double y = d.nu_m.back();
     sx += x; sy += y; sxx += x * x; sxy += x * y;
   }
   const double var = sxx - sx * sx / n;
@@ -902,12 +921,15 @@ std::pair<double, double> end_state_line(const std::vector<PathData>& paths) {
 /// The volume-form state parameter's start: the critical-state line of the end states (held in the fit), d_D >= 0,
 /// the state exponents at 2 where zero (a peak 1.1 times the limit at psi = 0.05; from 5 the dense start of
 /// data/geotech's mu = 0.5 runs away: a contraction that raises psi and the peak until the side stress vanishes).
-void volume_state_start(const std::vector<PathData>& paths, std::vector<double>& ext) {
+void volume_state_start(const std::vector<PathData>& paths, std::vector<double>& ext, bool csl_linear) {
   ext[kDilA] = std::fabs(ext[kDilA]);
   ext[kNFA] = std::max(ext[kNFA], 0.0);
   if (ext[kNB] == 0.0) ext[kNB] = 2.0;
   if (ext[kND] == 0.0) ext[kND] = 2.0;
-  std::tie(ext[kNuCs], ext[kLambdaCs]) = end_state_line(paths);
+  const auto line = end_state_line(paths, csl_linear);
+  ext[kNuCs] = line.first;
+  ext[kLambdaCs] = csl_linear ? 0.0 : line.second;
+  ext[kCCs] = csl_linear ? line.second : 0.0;
 }
 
 }  // namespace
@@ -995,7 +1017,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
                                           "or choose --state-limit pressure");
   const bool state_volume = X && o.state_volume;
   if (state_volume) {
-    volume_state_start(paths, ext);
+    volume_state_start(paths, ext, o.csl_linear);
     isob[kC0] = std::max(isob[kC0], 0.0);
   }
   set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted, state_lode, state_volume);
@@ -1015,6 +1037,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   Calibration cal;
   cal.ok = sum.IsSolutionUsable() && sum.termination_type == ceres::CONVERGENCE;
   cal.message = sum.BriefReport();
+  if (sum.termination_type == ceres::FAILURE) cal.message += " (" + sum.message + ")";   // why, in starts.md
   if (!cal.ok) cal.warnings.push_back("optimiser did not converge: " + sum.message);
   cal.params = fitted_params(start, isob, shear, ext, o, X);
   const int n_ext = ext_size(cal.params.state_limit, weighted, state_lode, state_volume);
@@ -1033,6 +1056,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (int i : held) cal.se_cov[i] = kNaN;   // held at the start value: no error of its own
   for (int i : held_x) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
   calibration_warnings(curves, paths, iso, o, isob, numin, one_nu, X, cal);
+  bound_warnings(problem, shear, ext, X, n_ext, cal);
   if (state_volume)   // held: s_max_b at 0 (the peak's state is psi's), beta_p at its start (it does not act)
     for (int i : {kSmaxB, kLnBetaPA, kLnBetaPB}) cal.se_cov[kNumIso + i] = kNaN;
   if (state_volume) drop_unread_for_volume_state(cal, weighted);

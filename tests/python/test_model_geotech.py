@@ -166,8 +166,10 @@ def test_volume_state_parameters_round_trip_through_predict_with(tmp_path):
                         str(cal)], capture_output=True, text=True, timeout=300)
     assert r.returncode in (0, 1), r.stderr   # 5 iterations: converged or not, the tables are written
     names = [x["parameter"] for x in read(cal / "parameters.csv")]
-    for n in ("nu_cs", "lambda_cs", "n_peak", "n_dil", "chi_D"):
+    for n in ("nu_cs", "lambda_cs", "c_cs", "n_peak", "n_dil", "chi_D"):
         assert n in names, names
+    values = {x["parameter"]: float(x["value"]) for x in read(cal / "parameters.csv")}
+    assert values["lambda_cs"] == 0.0 and values["c_cs"] > 0, values   # --csl linear, the default
     assert "n_psi_a" not in names and "lambda_psi" not in names
     laws = read(cal / "laws.csv")   # laws of psi: at the critical state and at each calibration path's start
     assert laws[0]["state"] == "critical state" and float(laws[0]["psi [-]"]) == 0.0, laws[0]
@@ -190,6 +192,11 @@ def test_volume_state_parameters_round_trip_through_predict_with(tmp_path):
                         "TC_s3_loose", "--start", start, "--state-limit", "volume", "--out", str(tmp_path / "h")],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "--family extended" in r.stderr, r.stderr
+    r = subprocess.run([DEM, "model", str(ens), "--no-plots", "--no-jackknife", "--family", "extended", "--calibrate-on",
+                        "TC_s3_loose", "--start", start, "--state-limit", "volume", "--csl", "cubic", "--out",
+                        str(tmp_path / "c")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "--csl cubic" in r.stderr and "linear" in r.stderr, r.stderr
+    assert not (tmp_path / "c").exists()
 
 
 def test_collect_state_puts_the_state_parameters_runs_beside_the_lab_calibrations(tmp_path):

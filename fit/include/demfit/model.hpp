@@ -62,7 +62,8 @@ enum ExtIndex {
   /// another Lode angle").
   kLambdaPsi,
   /// The volume-form state parameter (issue 31, tenth round; only with Ext::state_volume, else never read):
-  /// psi = nu - nu_cs(p), nu_cs(p) = nu_cs + lambda_cs ln(p/kPCsRef) the critical-state line in the volume fraction
+  /// psi = nu - nu_cs(p), nu_cs(p) = nu_cs + lambda_cs ln(p/kPCsRef) + c_cs (p - kPCsRef) the critical-state line
+/// in the volume fraction, one of the two terms held at 0 (`--csl log|linear`)
   /// (positive psi: denser than critical). The stress-ratio target s_lim exp(n_b psi) (a peak when dense, Manzari &
   /// Dafalias 1997's M exp(-n_b psi_e)), and the dilatancy d_D (r - chi_D exp(-n_d psi)) (Li & Dafalias 2000's
   /// phase transformation M exp(m psi_e)): the volume is driven to nu_cs(p) whatever the preparation
@@ -71,6 +72,10 @@ enum ExtIndex {
   kLambdaCs,   ///< lambda_cs [-]: d nu_cs / d ln p* (positive: soft spheres pack denser at higher pressure)
   kNB,         ///< n_b [-] (written n_peak): the peak's state exponent
   kND,         ///< n_d [-] (written n_dil): the phase transformation's state exponent
+  /// c_cs [-]: d nu_cs / d p*, the line's linear term (eleventh round, `--csl linear`: nu_cs(p) = nu_cs + c_cs (p* -
+  /// kPCsRef), the rigid-grain critical state nu_cs - c_cs kPCsRef compressed by the contacts' compliance; 0 in the
+  /// logarithmic form and in files written before it)
+  kCCs,
   kNumExt
 };
 
@@ -167,7 +172,7 @@ inline const char* shear_name(int i) {
 inline const char* ext_name(int i) {
   static const char* n[kNumExt] = {"n_F_a", "n_F_b", "kappa_s_a", "kappa_s_b", "d_D_a", "d_D_b", "chi_D",
                                    "n_psi_a", "n_psi_b", "ln_delta_w", "n_w", "lambda_psi", "nu_cs", "lambda_cs",
-                                   "n_peak", "n_dil"};
+                                   "n_peak", "n_dil", "c_cs"};
   return n[i];
 }
 inline const char* iso_name(int i) {
@@ -352,17 +357,18 @@ struct Ext {
   FabricLode fabric = FabricLode::Norm;
   bool state_limit = false;
   bool state_lode = false;   ///< n_psi scaled by (c_3(b_ref)/c_3(b))^lambda_psi (the block carries kLambdaPsi)
-  bool state_volume = false;   ///< the volume-form state parameter (the block carries kNuCs..kND)
+  bool state_volume = false;   ///< the volume-form state parameter (the block carries kNuCs..kCCs)
 };
 
-/// The volume-form state parameter psi = nu - nu_cs(p), nu_cs(p) = nu_cs + lambda_cs ln(p/kPCsRef) (tenth round):
+/// The volume-form state parameter psi = nu - nu_cs(p), nu_cs(p) = nu_cs + lambda_cs ln(p/kPCsRef) (tenth round)
+/// + c_cs (p - kPCsRef) (eleventh round; one of the two held at 0):
 /// positive denser than the critical-state line. p floored at 1e-12 (a path that unloads to zero pressure).
 template <class T>
 T state_psi(const T* ext, const T& nu, const T& p) {
   using std::log;
   T pp = p;
   if (!(pp > T(1e-12))) pp = T(1e-12);
-  return nu - (ext[kNuCs] + ext[kLambdaCs] * log(pp / T(kPCsRef)));
+  return nu - (ext[kNuCs] + ext[kLambdaCs] * log(pp / T(kPCsRef)) + ext[kCCs] * (pp - T(kPCsRef)));
 }
 
 /// The state-dependent stress-ratio limit (issue 31, fifth round): the limit the stress ratio is
@@ -451,7 +457,20 @@ struct Material {
   double nu_ref;
   T k;
   Ext<T> ext = {};
+  /// With the volume-form state parameter: B/p on the isotropic law at p* = kPCsRef, so that the rates scaled by the
+  /// elastic stiffness B/p (rate_scale) keep their values at that pressure (1: unscaled)
+  T bp_ref = T(1.0);
 };
+
+/// The rates' elastic scaling with the volume-form state parameter: (B/p)/(B/p)_ref, the shear modulus a fixed
+/// fraction of the bulk modulus (a constant Poisson ratio, as SANISAND's G and K): 1 otherwise.
+template <class T>
+T rate_scale(const Material<T>& m, const T& B, const T& p) {
+  if (!(m.ext.p && m.ext.state_volume)) return T(1.0);
+  T pp = p;
+  if (!(pp > T(1e-12))) pp = T(1e-12);
+  return B / pp / m.bp_ref;
+}
 
 /// Derivatives per unit |d eps_d| along a segment with direction sigma (+1/-1), or per unit
 /// eps_vol for a pure volumetric segment (sigma = 0). Returns d/dl of (ln nu, p, s, F).
@@ -525,9 +544,13 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
                      : (m.ext.p && m.ext.state_limit)
                          ? s_lim * state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref, m.ext.b, m.ext.state_lode)
                          : s_lim;
-  const T shear = L.beta_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_target - y.s) * shape_s;
+  const T g_s = rate_scale(m, B, y.p);
+  const T shear = L.beta_s * g_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_target - y.s) * shape_s;
   if (seg.control == Control::Isobaric) {
     dvol = (A * T(sigma) - relax + B * dil) / B;
+  } else if (seg.control == Control::Triaxial && vol_state) {
+    // The same with the elastic split: ds = shear - (A - s B)/p (dvol - dil), so (B - A/3)(dvol - dil) remains.
+    dvol = dil + ((T(1.0) - y.s / T(3.0)) * (A * T(sigma) - relax) - y.p / T(3.0) * shear) / (B - A / T(3.0));
   } else if (seg.control == Control::Triaxial) {
     // (1 - s/3) dp - (p/3) ds = 0 with dp = -B dvol + A sigma - relax + B dil and
     // ds = shear - (A - s B)/p dvol: the B s/3 terms cancel, leaving (B - A/3) dvol.
@@ -538,10 +561,14 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   d.ln_nu = -dvol;
   d.p = -B * dvol + A * T(sigma) - relax + B * dil;
   const T rate_F = weighted ? lode_w : m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
-  d.F = L.beta_F * rate_F * (T(sigma) * F_lim - y.F) * gate_F;
+  d.F = L.beta_F * g_s * rate_F * (T(sigma) * F_lim - y.F) * gate_F;
   d.l = T(1.0);
   d.e_pl = vol_state ? d.p / B + dvol : T(0.0);
-  d.s = shear - (A - y.s * B) / y.p * dvol;
+  // The volumetric term of the stress ratio: the elastic stress response to the volume change. With the volume-form
+  // state parameter only the elastic part dvol - dil acts (the plastic dilatancy moves the volume, not the stress);
+  // otherwise the whole dvol (the constant-volume law `shear` carries the plastic part; docs/model.md).
+  const T dvol_stress = vol_state ? dvol - dil : dvol;
+  d.s = shear - (A - y.s * B) / y.p * dvol_stress;
   return d;
 }
 
@@ -594,10 +621,16 @@ T isotropic_volume(const T* iso, double p) {
 }
 
 /// The material of a path from (nu0, p0): the scale k = p0/p_iso(nu0), the state's own offset from the isotropic law;
-/// with the volume-form state parameter k = 1 (the elastic state is the law's at p0, start_state).
+/// with the volume-form state parameter k = 1 (the elastic state is the law's at p0, start_state) and the rates'
+/// reference stiffness B/p at p* = kPCsRef on the law (rate_scale).
 template <class T>
 Material<T> start_material(const T* iso, const T* shear, double nu_ref, double nu0, double p0, const Ext<T>& ext) {
-  if (ext.p && ext.state_volume) return Material<T>{iso, shear, nu_ref, T(1.0), ext};
+  if (ext.p && ext.state_volume) {
+    const T nu_ref_cs = isotropic_volume(iso, kPCsRef);
+    Material<T> m{iso, shear, nu_ref, T(1.0), ext};
+    m.bp_ref = bulk_modulus(iso, nu_ref_cs) / T(kPCsRef);
+    return m;
+  }
   return Material<T>{iso, shear, nu_ref, T(p0) / isotropic_pressure(iso, T(nu0)), ext};
 }
 

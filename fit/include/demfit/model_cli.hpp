@@ -27,6 +27,9 @@ struct ModelCommandOptions {
   std::vector<std::string> start;
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
   std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default), pressure (n_psi fitted), pressure-lode (+ lambda_psi)
+  /// The critical-state line's form with --state-limit volume: linear (the default: nu_cs + c_cs (p* - 1e-3)) or
+  /// log (nu_cs + lambda_cs ln(p*/1e-3))
+  std::string csl = "linear";
   std::string fabric_lode = "overlap";  ///< Lode rule of the extended family's fabric: overlap (default), principal, norm, opening, extension
   /// parameters.csv of another `dem model` run: no calibration, every curve and path predicted with it (the family,
   /// surface and fabric rule from --family/--surface/--fabric-lode as that run was given them; the state limit from the file)

@@ -63,6 +63,9 @@ struct CalibrationOptions {
   /// critical-state line nu_cs + lambda_cs ln(p*/1e-3) held at the calibration paths' end states (which it needs).
   /// docs/model.md, "The volume-form state parameter".
   bool state_volume = false;
+  /// The critical-state line's form with state_volume (`--csl`): false, nu_cs + lambda_cs ln(p*/1e-3); true,
+  /// nu_cs + c_cs (p* - 1e-3), linear in the pressure (docs/model.md, "The critical-state line of soft spheres").
+  bool csl_linear = false;
   /// Isotropic parameters (IsoIndex) held at their start values while the rest of the block is
   /// fitted: a laboratory's isotropic branch of a few pressure levels cannot fix all seven (issue 31,
   /// "Calibrated on drained triaxial tests"). Needs `start`.
