@@ -1627,3 +1627,27 @@ TEST(ModelVolumeState, RatesScaleWithTheElasticStiffness) {
   }
   EXPECT_LT(stiffness(5e-2), 0.5 * stiffness(kPCsRef)) << "a test that could fail: the stiffness ratio moves";
 }
+
+// The stress ratio's shape 1 + kappa_s r is floored at kShapeFloor with the volume-form state parameter: a kappa_s
+// below -1/r (a psi-law extrapolated) gives the rates of the shape at the floor, not a negative shape that drives s
+// away from its target (the loose calibration's constant-p runaway of the eleventh round, docs/model.md).
+TEST(ModelVolumeState, TheStressRatioShapeStaysPositive) {
+  Parameters P = volume_truth();
+  P.ext[kKappaB] = 0.0;   // kappa_s = kappa_s_a at every state
+  const auto iso = P.iso();
+  const double s = 0.6, r = s / lode_limit(P.shear[kSmaxA], 0.0, Surface::LadeDuncan);
+  auto rates = [&](double kappa, Control c) {
+    Parameters Q = P;
+    Q.ext[kKappaA] = kappa;
+    const Material<double> m = start_material<double>(iso.data(), Q.shear, Q.nu_ref, 0.64, 2e-3, volume_ext(Q, 0.0));
+    return rhs(m, volume_state(Q, 2e-3, -0.002, s, 0.1), 1.0, shear_seg(0.1, 1, c));
+  };
+  const double at_floor = (kShapeFloor - 1.0) / r, below = -3.0;
+  ASSERT_LT(1.0 + below * r, 0.0) << "a shape that would be negative";
+  for (Control c : {Control::Isobaric, Control::Triaxial}) {
+    const State<double> d = rates(below, c), f = rates(at_floor, c), up = rates(0.5 * at_floor, c);
+    EXPECT_NEAR(d.s, f.s, 1e-12 * std::fabs(f.s)) << "the shape at its floor";
+    EXPECT_NEAR(d.ln_nu, f.ln_nu, 1e-12 * std::fabs(f.ln_nu) + 1e-15);
+    EXPECT_GT(std::fabs(up.s - f.s), 1e-6 * std::fabs(f.s)) << "a test that could fail: kappa_s acts above the floor";
+  }
+}

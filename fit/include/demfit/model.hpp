@@ -81,6 +81,10 @@ enum ExtIndex {
 
 /// Reference pressure of the critical-state line nu_cs(p) of the volume-form state parameter [p* units].
 constexpr double kPCsRef = 1e-3;
+/// With the volume-form state parameter the stress ratio's shape 1 + kappa_s r is floored here (eleventh round): a
+/// psi-law of kappa_s extrapolated past -1/r would turn it negative and drive the stress ratio away from its target
+/// (the loose calibration's constant-p runaway, docs/model.md). Without the flag the shape is not floored.
+constexpr double kShapeFloor = 0.05;
 
 /// Number of extension coefficients without the state-dependent limit (the block Ceres sees when it is off).
 constexpr int kNumExtBase = kNPsiA;
@@ -524,7 +528,8 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
     r_F = opened_fraction(m.iso, nu_el, y.p, y.l, m.ext.b);
   }
   const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
-  const T shape_s = T(1.0) + X.kappa_s * r;                               // stress ratio: linear for longer
+  T shape_s = T(1.0) + X.kappa_s * r;                                     // stress ratio: linear for longer
+  if (vol_state && shape_s < T(kShapeFloor)) shape_s = T(kShapeFloor);   // never away from the target (kShapeFloor)
   // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
   const T F_lim = m.ext.p ? L.F_max * T(fabric_lode_factor(m.ext.fabric, m.ext.b)) : L.F_max;
   // Plastic dilatancy: gated by the fabric (1 - F/F_lim), or with the volume-form state parameter driven by psi
