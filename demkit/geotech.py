@@ -641,6 +641,14 @@ LEVELS = ("iso_lo", "iso_hi")
 # and iso_hi preparations stay bit for bit as they are; its tests run sqrt(10) times slower than the
 # scene's rate, at the inertial number of iso_lo's (I ~ rate sqrt(m / (p d))).
 LOW_LEVEL, LOW_FACTOR = "iso_vlo", 0.1
+# The highest, p* = 5e-2 (twelfth round of issue 31): the pressures of the friction study's
+# constant-volume D2/D3 (p* = 0.04-0.11), where a laboratory calibrating for them would test. Its own
+# preparation too (the gas stage, then iso_hi's stage at 5x its target); tests at the scene's rate
+# (inertial number about 1.3e-4, below iso_hi's).
+HIGH_LEVEL, HIGH_FACTOR = "iso_vhi", 5.0
+# level -> (its preparation's folder, the scene's stage it scales, the factor on that stage's target)
+OWN_PREP = {LOW_LEVEL: ("prep_vlo", LEVELS[0], LOW_FACTOR), HIGH_LEVEL: ("prep_vhi", LEVELS[1], HIGH_FACTOR)}
+ALL_LEVELS = (LOW_LEVEL, *LEVELS, HIGH_LEVEL)
 
 
 def scene_tests(scene):
@@ -649,7 +657,7 @@ def scene_tests(scene):
 
 
 def prep_dir(root, prep, mu, seed, level=None):
-    top = "prep_vlo" if level == LOW_LEVEL else "prep"
+    top = OWN_PREP[level][0] if level in OWN_PREP else "prep"
     return os.path.join(root, top, "dense" if prep == "dense" else f"loose_mu{mu}", f"m{seed}")
 
 
@@ -672,17 +680,23 @@ def load_scene(scene):
         return tomllib.load(fh)
 
 
-def low_level_overrides(scene):
-    """`--set` arguments of the p* = 1e-4 preparation: the scene's first stage (the gas) and its
-    iso_lo stage renamed iso_vlo, at LOW_FACTOR of the target."""
+def level_overrides(scene, level):
+    """`--set` arguments of a level with its own preparation (OWN_PREP): the scene's first stage (the
+    gas) and the stage it scales, renamed to the level, at the level's factor of that stage's target."""
     stages = load_scene(scene)["protocol"]["preparation"]
-    lo = next(st for st in stages if st.get("checkpoint_name") == LEVELS[0])
-    low = dict(lo, name=LOW_LEVEL, checkpoint_name=LOW_LEVEL, target_Pa=lo["target_Pa"] * LOW_FACTOR)
-    return ["--set", f"protocol.preparation={toml_inline([stages[0], low])}", "--set", f"protocol.modes_from={LOW_LEVEL}"]
+    _, base, factor = OWN_PREP[level]
+    st = next(st for st in stages if st.get("checkpoint_name") == base)
+    own = dict(st, name=level, checkpoint_name=level, target_Pa=st["target_Pa"] * factor)
+    return ["--set", f"protocol.preparation={toml_inline([stages[0], own])}", "--set", f"protocol.modes_from={level}"]
+
+
+def low_level_overrides(scene):
+    """`--set` arguments of the p* = 1e-4 preparation (level_overrides of iso_vlo)."""
+    return level_overrides(scene, LOW_LEVEL)
 
 
 def level_rate_args(scene, level):
-    """`dem mode` arguments of a level's test rate: the scene's at iso_lo and iso_hi; at iso_vlo
+    """`dem mode` arguments of a level's test rate: the scene's at iso_lo, iso_hi and iso_vhi; at iso_vlo
     sqrt(LOW_FACTOR) of it, with the servo's limit 4x that (as the scene's)."""
     if level != LOW_LEVEL:
         return []
@@ -697,12 +711,13 @@ def run_cmd(cmd, log):
         return subprocess.run(["nice", "-n", "10", *cmd], stdout=fh, stderr=subprocess.STDOUT).returncode
 
 
-def prepare(dem, scene, root, prep, mu, seed, low=False):
-    d = prep_dir(root, prep, mu, seed, LOW_LEVEL if low else None)
-    if all(glob.glob(os.path.join(d, "checkpoints", f"{lv}_phi*.ckpt")) for lv in ([LOW_LEVEL] if low else LEVELS)):
+def prepare(dem, scene, root, prep, mu, seed, own=None):
+    """One packing's preparation: the scene's (both LEVELS), or with `own` the level's own (OWN_PREP)."""
+    d = prep_dir(root, prep, mu, seed, own)
+    if all(glob.glob(os.path.join(d, "checkpoints", f"{lv}_phi*.ckpt")) for lv in ([own] if own else LEVELS)):
         return 0
     extra = PREPS[prep] if prep == "dense" else ["--set", f"contact.friction={mu}"]
-    extra = extra + (low_level_overrides(scene) if low else [])
+    extra = extra + (level_overrides(scene, own) if own else [])
     os.makedirs(os.path.dirname(d), exist_ok=True)
     return run_cmd([dem, "run", scene, "--out", d, "--stages", "prep", "--set", f"particles.seed={seed}",
                     *extra, "--threads", "1", "--quiet", "--force"], d + ".log")
@@ -728,11 +743,11 @@ def run(args):
         # mu = 0: one preparation (frictionless): a loose frictionless packing does not exist
         kinds = lambda mu: ["dense"] if float(mu) == 0 else list(PREPS)
         levels = args.levels.split(",")
-        lows = [lv == LOW_LEVEL for lv in levels]
-        preps = [(p, mu, s, low) for mu in args.mu for p in kinds(mu) for s in seeds for low in sorted(set(lows))]
-        for (p, mu, s, low), rc in zip(preps, pool.map(lambda a: prepare(args.dem, args.scene, args.out, *a), preps)):
+        owns = sorted({lv if lv in OWN_PREP else "" for lv in levels})   # "": the scene's preparation
+        preps = [(p, mu, s, own or None) for mu in args.mu for p in kinds(mu) for s in seeds for own in owns]
+        for (p, mu, s, own), rc in zip(preps, pool.map(lambda a: prepare(args.dem, args.scene, args.out, *a), preps)):
             if rc:
-                print(f"preparation {p} mu={mu} m{s}{' iso_vlo' if low else ''} failed ({rc})", file=sys.stderr)
+                print(f"preparation {p} mu={mu} m{s}{' ' + own if own else ''} failed ({rc})", file=sys.stderr)
         jobs = [(p, mu, s, lv, t) for s in seeds for mu in args.mu for lv in levels for p in kinds(mu) for t in tests]
         for job, rc in zip(jobs, pool.map(lambda a: run_test(args.dem, args.scene, args.out, *a), jobs)):
             print(f"{' '.join(map(str, job))}: {'ok' if rc == 0 else f'failed ({rc})'}", flush=True)
@@ -769,10 +784,10 @@ def dispatch(args, run_fn, analyse_fn, store_fn):
 
 
 def checked_levels(text):
-    bad = [lv for lv in text.split(",") if lv not in (*LEVELS, LOW_LEVEL)]
+    bad = [lv for lv in text.split(",") if lv not in ALL_LEVELS]
     if bad or not text:
         raise argparse.ArgumentTypeError(f"unknown level(s) {', '.join(bad) or '(none)'}: give some of "
-                                         f"{', '.join((*LEVELS, LOW_LEVEL))}, comma-separated")
+                                         f"{', '.join(ALL_LEVELS)}, comma-separated")
     return text
 
 
@@ -783,8 +798,8 @@ def main(argv=None):
     r.add_argument("--tests", default="", help="comma-separated [paths] names (default: all of the scene's)")
     r.add_argument("--levels", default=",".join(LEVELS), type=checked_levels,
                    help=f"comma-separated pressure levels: {', '.join(LEVELS)} (the scene's preparation, p* = 1e-3 "
-                   f"and 1e-2; the default both) and {LOW_LEVEL} (p* = 1e-4: its own preparation, tests sqrt(10) "
-                   "times slower than the scene's; docs/geotech.md)")
+                   f"and 1e-2; the default both), {LOW_LEVEL} (p* = 1e-4: its own preparation, tests sqrt(10) "
+                   f"times slower than the scene's) and {HIGH_LEVEL} (p* = 5e-2: its own preparation; docs/geotech.md)")
     dispatch(ap.parse_args(argv), run, analyse, store_curves)
 
 

@@ -9,6 +9,8 @@ DIR/ensemble_PREP/paths/TEST_PREP_phiX.csv          ensemble of the K packings, 
                                                     demkit.path_ensemble (X: the mean start nu, 3 decimals)
 DIR/ensemble_PREP/members/mS/paths/TEST_PREP_phiX.csv   each packing on the ensemble's grid (jackknife)
 DIR/ensemble_PREP/ensemble/D[23]_phiX.csv          with --friction FDIR: FDIR's D2/D3 ensemble means (trimmed)
+DIR/ensemble_joint/                                 with --joint: the dense and loose paths and members in one
+                                                    folder (the dense isotropic states and D2/D3 means)
 DIR/ensemble_PREP/members/mS/prep/cycle_unloading.csv   the packing's isotropic states: the start row
                                                     of its TC_s3 curve at each pressure level (nu, p_star,
                                                     C_nonrattler = the curve's C), what a laboratory's
@@ -39,7 +41,8 @@ from demkit.curves import CurveError, read_text
 from demkit.path_ensemble import reduce_path, trim
 
 TESTS = ("TC_s3", "TE_s3", "TC_p", "TT_b025", "TT_b050", "TT_b075", "TE_p")
-LEVELS = ("iso_lo", "iso_hi")
+LEVELS = ("iso_lo", "iso_hi")   # the default; --levels adds iso_vhi (p* = 5e-2) or iso_vlo (1e-4)
+ALL_LEVELS = ("iso_vlo", "iso_lo", "iso_hi", "iso_vhi")
 NEED = ("eps_xx", "eps_zz", "eps_d", "eps_v", "nu", "p_star", "s_dev", "F_dev", "C", "sigma_xx_Pa", "sigma_yy_Pa",
         "sigma_zz_Pa", "p_Pa", "target_xx_Pa", "target_yy_Pa", "target_zz_Pa", "target_p_Pa")
 
@@ -80,16 +83,16 @@ def member(path):
     }
 
 
-def write_isotropic(root, prep, out, seeds):
-    """Per packing: its start states at both pressure levels (the TC_s3 curves' first rows)."""
+def write_isotropic(root, prep, out, seeds, levels=LEVELS):
+    """Per packing: its start states at every pressure level (the TC_s3 curves' first rows)."""
     for s in seeds:
         lines = ["# dem geotech isotropic states: the first row of TC_s3 at each pressure level (relaxed "
                  "isotropic checkpoints of the preparation, docs/geotech.md); C_nonrattler is the curve's C\n",
                  "nu,p_star,C_nonrattler\n"]
-        for level in LEVELS:
+        for level in levels:
             f = os.path.join(root, prep, level, "TC_s3", f"{s}.csv")
             if not os.path.exists(f):
-                raise SystemExit(f"geotech_model: {f} is missing: the isotropic states come from TC_s3 at both levels")
+                raise SystemExit(f"geotech_model: {f} is missing: the isotropic states come from TC_s3 at every level")
             c = read_columns(f)
             lines.append(f"{c['nu'][0]:.10g},{c['p_star'][0]:.10g},{c['C'][0]:.10g}\n")
         write_atomic(os.path.join(out, "members", s, "prep", "cycle_unloading.csv"), "".join(lines))
@@ -107,7 +110,7 @@ def copy_friction(friction, dest):
         trim(f, os.path.join(dest, "ensemble", os.path.basename(f)), lambda h: bool(keep.match(h)))
 
 
-def convert(curves, mu, out, tests, force=False, friction=None):
+def convert(curves, mu, out, tests, force=False, friction=None, levels=LEVELS):
     root = os.path.join(curves, f"mu_{mu}")
     if not os.path.isdir(root):
         raise SystemExit(f"geotech_model: {root} is not a folder: give --curves data/geotech/curves and a --mu it holds")
@@ -119,13 +122,13 @@ def convert(curves, mu, out, tests, force=False, friction=None):
         if os.path.exists(dest):
             shutil.rmtree(dest)
         seeds = sorted(os.path.splitext(os.path.basename(f))[0]
-                       for f in glob.glob(os.path.join(root, prep, LEVELS[0], "TC_s3", "m*.csv")))
+                       for f in glob.glob(os.path.join(root, prep, levels[0], "TC_s3", "m*.csv")))
         if len(seeds) < 2:
-            raise SystemExit(f"geotech_model: {root}/{prep}/{LEVELS[0]}/TC_s3 holds {len(seeds)} curves; need >= 2")
-        write_isotropic(root, prep, dest, seeds)
+            raise SystemExit(f"geotech_model: {root}/{prep}/{levels[0]}/TC_s3 holds {len(seeds)} curves; need >= 2")
+        write_isotropic(root, prep, dest, seeds, levels)
         if friction:
             copy_friction(friction, dest)
-        for level in LEVELS:
+        for level in levels:
             for test in tests:
                 files = sorted(glob.glob(os.path.join(root, prep, level, test, "m*.csv")))
                 if len(files) < 2:
@@ -139,6 +142,28 @@ def convert(curves, mu, out, tests, force=False, friction=None):
                 print(f"geotech_model: {prep}/{level}/{test} -> {name}_phi{nu_tag}.csv ({K} packings, {n} rows)",
                       file=sys.stderr)
     return made
+
+
+def write_joint(out, made):
+    """ensemble_joint: the dense and the loose ensembles' paths side by side (their names differ by the preparation),
+    each packing's members of both, the dense preparation's isotropic states and D2/D3 means: a laboratory's
+    calibration on dense and loose samples at once (`--calibrate-on TC_s3_dense,TC_s3_loose`)."""
+    preps = sorted({m[0] for m in made})
+    if preps != ["dense", "loose"]:
+        raise SystemExit(f"geotech_model: --joint needs a dense and a loose preparation; this mu has {', '.join(preps)}")
+    dense, loose, joint = (os.path.join(out, f"ensemble_{p}") for p in ("dense", "loose", "joint"))
+    seeds_d = sorted(os.listdir(os.path.join(dense, "members")))
+    seeds_l = sorted(os.listdir(os.path.join(loose, "members")))
+    if seeds_d != seeds_l:
+        raise SystemExit(f"geotech_model: --joint: the dense packings {seeds_d} are not the loose ones {seeds_l}")
+    if os.path.exists(joint):
+        shutil.rmtree(joint)
+    shutil.copytree(dense, joint)
+    for src, dst in [(os.path.join(loose, "paths"), os.path.join(joint, "paths"))] + [
+            (os.path.join(loose, "members", m, "paths"), os.path.join(joint, "members", m, "paths")) for m in seeds_l]:
+        for f in sorted(glob.glob(os.path.join(src, "*.csv"))):
+            shutil.copy2(f, os.path.join(dst, os.path.basename(f)))
+    print(f"geotech_model: {joint}: dense and loose paths, the dense isotropic states", file=sys.stderr)
 
 
 def read_summary(path):
@@ -235,6 +260,10 @@ def main(argv=None):
                     "state parameter's runs and ROOT/lab_{dense,loose}")
     ap.add_argument("--tests", default=",".join(TESTS), help="comma-separated tests (default: every monotone test)")
     ap.add_argument("--force", action="store_true", help="replace existing ensemble_PREP folders")
+    ap.add_argument("--joint", action="store_true", help="also write ensemble_joint/: the dense and loose paths in one "
+                    "ensemble (with the dense isotropic states), to calibrate on both preparations at once")
+    ap.add_argument("--levels", default=",".join(LEVELS), help="comma-separated pressure levels to convert (default "
+                    "iso_lo,iso_hi: p* = 1e-3, 1e-2; also iso_vhi, 5e-2, and iso_vlo, 1e-4, where the curves have them)")
     ap.add_argument("--friction", help="also copy this friction-study folder's D2/D3 ensemble means into "
                     "ensemble_PREP/ensemble/ (predicted by `dem model`), e.g. data/friction_n1000/mu_0.5")
     a = ap.parse_args(argv)
@@ -253,7 +282,14 @@ def main(argv=None):
         print(f"geotech_model: --tests {','.join(bad)}: not a monotone test the model can integrate; give some of "
               f"{','.join(TESTS)} (SS_cns rotates the principal axes, which the model does not have)", file=sys.stderr)
         return 2
-    convert(a.curves, a.mu, a.out, tests, a.force, a.friction)
+    levels = [lv for lv in a.levels.split(",") if lv]
+    bad = [lv for lv in levels if lv not in ALL_LEVELS]
+    if bad or not levels:
+        print(f"geotech_model: --levels {','.join(bad) or '(none)'}: give some of {','.join(ALL_LEVELS)}", file=sys.stderr)
+        return 2
+    made = convert(a.curves, a.mu, a.out, tests, a.force, a.friction, tuple(levels))
+    if a.joint:
+        write_joint(a.out, made)
     return 0
 
 

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -140,8 +141,10 @@ std::string law_of(const std::string& n) {
   if (n == "chi_D") return "mobilisation r at which the plastic dilatancy changes sign (one value at every nu)";
   if (n == "nu_cs" || n == "lambda_cs" || n == "c_cs")
     return "critical-state line nu_cs(p) = nu_cs + lambda_cs ln(p*/1e-3) + c_cs (p* - 1e-3) (psi = nu - nu_cs(p))";
-  if (n == "n_peak") return "stress-ratio target s_lim exp(n_peak psi), psi = nu - nu_cs(p)";
+  if (n == "n_peak" || n == "m_peak")
+    return "stress-ratio target s_lim exp(n_peak (p*/1e-3)^m_peak psi), psi = nu - nu_cs(p)";
   if (n == "n_dil") return "plastic dilatancy d_D (r - chi_D exp(-n_dil psi)), psi = nu - nu_cs(p)";
+  if (n == "n_rate") return "rates beta_s, beta_F scaled by ((B/p)/(B/p at p* = 1e-3))^n_rate, B the isotropic law's stiffness";
   if (n == "ln_delta_w" || n == "n_w") return "Lode weight w = 1/(1 + exp(n_w (ln_delta_w - ln(delta/d)))), delta/d = pi p*/(C nu)";
   const std::string q = n.substr(0, n.size() - 2);
   return q + "(nu) = " + q + "_a + " + q + "_b (nu - nu_ref)";
@@ -205,14 +208,14 @@ void write_laws_table(const Parameters& P, const std::vector<double>& nus, const
 void write_state_laws_table(const Parameters& P, const std::vector<PathData>& paths, const fs::path& out) {
   Table t({"state", "psi [-]", "s_max [-]", "peak_factor [-]", "phase_transformation [-]", "beta_s [1/eps_d]", "F_max [-]",
            "beta_F [1/eps_d]", "a_A [-]", "d_D [-]", "n_F [-]", "kappa_s [-]"});
-  std::vector<std::pair<std::string, double>> rows = {{"critical state", 0.0}};
+  std::vector<std::tuple<std::string, double, double>> rows = {{"critical state", 0.0, kPCsRef}};
   for (const auto& d : paths)
     rows.push_back({d.name + " start (nu " + num(d.nu, 4) + ", p* " + num(d.p.front(), 4) + ")",
-                    state_psi(P.ext, d.nu, d.p.front())});
-  for (const auto& [label, psi] : rows) {
+                    state_psi(P.ext, d.nu, d.p.front()), d.p.front()});
+  for (const auto& [label, psi, p] : rows) {
     const Local<double> L = local(P.shear, P.nu_ref + psi, P.nu_ref);
     const LocalExt<double> X = local_ext(P.ext, P.nu_ref + psi, P.nu_ref);
-    t.add_row({label, num(psi, 4), num(L.s_max), num(std::exp(P.ext[kNB] * psi)), num(std::exp(-P.ext[kND] * psi)),
+    t.add_row({label, num(psi, 4), num(L.s_max), num(std::exp(peak_exponent(P.ext, p) * psi)), num(std::exp(-P.ext[kND] * psi)),
                num(L.beta_s), num(L.F_max), num(L.beta_F), num(L.a_A), num(X.d_D), num(X.n_F), num(X.kappa_s)});
   }
   write_table_all(t, (out / "laws").string(), "The calibrated laws of the state psi = nu - nu_cs(p) (--state-limit volume), "
@@ -682,8 +685,10 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
       for (const auto& e : est) mean += e[i] / K;
       for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
       // held parameters have no error of their own, but the critical-state line of --state-limit volume is held at
-      // the end states of the data, which the jackknife moves: its spread is its error
-      const bool from_data = cal.names[i] == "nu_cs" || cal.names[i] == "lambda_cs" || cal.names[i] == "c_cs";
+      // the end states of the data, which the jackknife moves: its spread is its error (the term --csl does not use
+      // is held at 0 and has none: nan)
+      const bool from_data = cal.names[i] == "nu_cs" || (cal.names[i] == "lambda_cs" && !co_f.csl_linear) ||
+                             (cal.names[i] == "c_cs" && co_f.csl_linear);
       cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) || from_data ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
     }
     if (K < 4) {   // as `dem fit` says for its fits
@@ -715,10 +720,11 @@ FamilyFit fit_family(const ModelInputs& in, const CalibrationOptions& co, const 
       throw InputError((n_starts > 1 ? "--start " + o.start[i] + ": " : std::string()) + e.what());
     }
     std::cerr << "dem model: " << (n_starts > 1 ? "start " + o.start[i] + ": " : std::string()) << ci.message
-              << "  chi2/dof = " << num(ci.chi2_dof(), 4) << "\n";
+              << (std::isnan(ci.chi2) ? "  failed (not evaluated at its start)" : "  chi2/dof = " + num(ci.chi2_dof(), 4))
+              << "\n";
     if (n_starts > 1) ff.starts.push_back({o.start[i], ci.chi2_dof(), ci.ok, ci.message});
     // the lowest chi2/dof of the converged fits (of all, if none converged)
-    const bool better = i == 0 || (ci.ok && !cal.ok) ||
+    const bool better = i == 0 || (ci.ok && !cal.ok) || (std::isnan(cal.chi2) && !std::isnan(ci.chi2)) ||
                         (ci.ok == cal.ok && ci.chi2_dof() < cal.chi2_dof());
     if (better) {
       cal = std::move(ci);

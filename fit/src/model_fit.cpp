@@ -364,7 +364,7 @@ Parameters read_parameters(const std::string& path) {
   P.state_volume = P.extended && v.count(ext_name(kNuCs)) > 0;
   if (P.extended)
     for (int i = 0; i < kNumExt; ++i)
-      if (i < kNumExtBase || v.count(ext_name(i))) P.ext[i] = get(ext_name(i));
+      if (i < kNumExtBase || v.count(ext_name(i))) P.ext[i] = get(ext_name(i));   // else the default (n_rate 1)
   return P;
 }
 
@@ -647,6 +647,10 @@ void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<
       problem.SetParameterUpperBound(ext.data(), kNB, 60.0);
       problem.SetParameterLowerBound(ext.data(), kND, 0.0);
       problem.SetParameterUpperBound(ext.data(), kND, 150.0);   // e^{150 x 0.03} = 90 at a loose psi = -0.03
+      problem.SetParameterLowerBound(ext.data(), kNRate, 0.0);  // the rates never rise with the pressure faster than
+      problem.SetParameterUpperBound(ext.data(), kNRate, 3.0);  // the stiffness falls, nor fall as its cube
+      problem.SetParameterLowerBound(ext.data(), kMPeak, -1.0);  // the peak exponent at most 50-fold over p* = 1e-4..5e-2
+      problem.SetParameterUpperBound(ext.data(), kMPeak, 1.0);
       problem.SetParameterLowerBound(isob.data(), kC0, 0.0);   // the coordination law, read at nu_el, >= 0
     }
     if (weighted) {   // the switch between overlaps of 1e-4 and 0.5 d, no steeper than (delta/delta_w)^30
@@ -790,15 +794,31 @@ void clamp_extended_start(std::vector<double>& shear, std::vector<double>& ext) 
   }
 }
 
+/// The number of distinct start pressures of the calibrated curves and paths: start p* sorted, a new one where it is
+/// more than 1.5 times the last (a dense and a loose sample under the same confining pressure count once).
+int start_pressures(const std::vector<CurveData>& curves, const std::vector<PathData>& paths) {
+  std::vector<double> lp;
+  for (const auto& c : curves) lp.push_back(std::log(std::max(c.p.front(), 1e-300)));
+  for (const auto& d : paths) lp.push_back(std::log(std::max(d.p.front(), 1e-300)));
+  std::sort(lp.begin(), lp.end());
+  int n = lp.empty() ? 0 : 1;
+  for (std::size_t i = 1; i < lp.size(); ++i)
+    if (lp[i] - lp[i - 1] > std::log(1.5)) ++n;
+  return n;
+}
+
 /// The extension coefficients held: the nu-slopes (*_b) from one start volume fraction (not determined by the
 /// data), n_psi when the `Weighted` rule's block carries it with the limit off (at 0), and the `Weighted` rule's
 /// two coefficients when the Lode-dependent state exponent's block carries them for another rule (at their start,
 /// unread).
-std::vector<int> held_ext(bool one_nu, bool state_limit, bool weighted, bool state_lode = false, bool state_volume = false) {
+std::vector<int> held_ext(bool one_nu, bool state_limit, bool weighted, bool state_lode = false, bool state_volume = false,
+                          int n_p = 1) {
   std::vector<int> held;
   if (state_volume) {   // chi_D at 1 (the phase transformation at r = 1 on the critical-state line), the other laws' entries
     held = {kDilB, kChiD, kNPsiA, kNPsiB, kLambdaPsi, kNuCs, kLambdaCs, kCCs};   // d_D's state dependence is psi's; the
                                                                        // critical-state line the end states'
+    if (n_p < 2) held.push_back(kNRate);   // the rates' pressure exponent needs two start pressures (else held at its
+    if (n_p < 3) held.push_back(kMPeak);   // start); the peak's, three (from two it trades with n_peak and the psi-laws)
     if (!weighted) held.insert(held.end(), {kLnDeltaW, kNW});
     if (one_nu) held.insert(held.end(), {kNFB, kKappaB});
     std::sort(held.begin(), held.end());
@@ -821,7 +841,7 @@ std::set<int> held_shear(bool X, bool one_nu, bool state_volume) {
 
 /// One start volume fraction: every nu-slope (*_b) held at 0; with the extension block, held_ext.
 void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<double>& ext, bool X, bool one_nu,
-              bool state_limit, bool weighted, bool state_lode, bool state_volume) {
+              bool state_limit, bool weighted, bool state_lode, bool state_volume, int n_p) {
   // Held shear coefficients: the nu-slopes from one start volume fraction; with the volume-form state parameter s_max_b
   // at 0 (the limit's state dependence is psi's, s_lim e^{n_b psi}) and beta_p at its start (it does not act: the
   // pressure stays on the isotropic law at nu_el).
@@ -830,10 +850,10 @@ void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<d
     if (i % 2 == 1) shear[i] = 0.0;
   if (!held_s.empty())
     problem.SetManifold(shear.data(), new ceres::SubsetManifold(kNumShear, std::vector<int>(held_s.begin(), held_s.end())));
-  const std::vector<int> held = held_ext(one_nu, state_limit, weighted, state_lode, state_volume);
+  const std::vector<int> held = held_ext(one_nu, state_limit, weighted, state_lode, state_volume, n_p);
   if (!X || held.empty()) return;
   for (int i : held)
-    if (i != kLnDeltaW && i != kNW && i != kNuCs && i != kLambdaCs && i != kCCs) ext[i] = 0.0;   // the unread `Weighted` pair
+    if (i != kLnDeltaW && i != kNW && i != kNuCs && i != kLambdaCs && i != kCCs && i != kNRate && i != kMPeak) ext[i] = 0.0;   // the unread `Weighted` pair
                                                             // keeps its start (inside its bounds), the line its own
   if (state_volume) ext[kChiD] = 1.0;
   problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit, weighted, state_lode, state_volume), held));
@@ -930,6 +950,8 @@ void volume_state_start(const std::vector<PathData>& paths, std::vector<double>&
   ext[kNuCs] = line.first;
   ext[kLambdaCs] = csl_linear ? 0.0 : line.second;
   ext[kCCs] = csl_linear ? line.second : 0.0;
+  ext[kNRate] = std::min(std::max(ext[kNRate], 0.0), 3.0);
+  ext[kMPeak] = std::min(std::max(ext[kMPeak], -1.0), 1.0);
 }
 
 }  // namespace
@@ -1030,7 +1052,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (const auto& c : curves) nus_seen.insert(std::llround(c.nu * 1e6));
   for (const auto& d : paths) nus_seen.insert(std::llround(d.nu * 1e6));
   const bool one_nu = nus_seen.size() < 2;
-  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume);
+  const int n_p = start_pressures(curves, paths);
+  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, n_p);
 
   const ceres::Solver::Summary sum = solve(problem, o.max_iterations);
 
@@ -1041,8 +1064,10 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   if (!cal.ok) cal.warnings.push_back("optimiser did not converge: " + sum.message);
   cal.params = fitted_params(start, isob, shear, ext, o, X);
   const int n_ext = ext_size(cal.params.state_limit, weighted, state_lode, state_volume);
-  const std::vector<int> held_x = X ? held_ext(one_nu, cal.params.state_limit, weighted, state_lode, state_volume) : std::vector<int>();
-  cal.chi2 = 2 * sum.final_cost;
+  const std::vector<int> held_x =
+      X ? held_ext(one_nu, cal.params.state_limit, weighted, state_lode, state_volume, n_p) : std::vector<int>();
+  // a start Ceres could not evaluate reports a negative cost: no chi2 ("nan", the start "failed")
+  cal.chi2 = sum.final_cost >= 0 ? 2 * sum.final_cost : std::nan("");
   cal.n_residuals = n_res;
   // Free parameters: the held ones (isotropic, the nu-slopes of one start volume fraction, held_ext) left out.
   cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear - static_cast<int>(held_shear(X, one_nu, state_volume).size()) +

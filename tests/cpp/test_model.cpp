@@ -1421,6 +1421,7 @@ Parameters volume_truth() {
   std::fill(P.ext, P.ext + kNumExt, 0.0);
   P.ext[kNFA] = 1.0; P.ext[kKappaA] = 0.5; P.ext[kDilA] = 0.3; P.ext[kChiD] = 1.0;
   P.ext[kNuCs] = 0.60; P.ext[kLambdaCs] = 0.008; P.ext[kNB] = 8.0; P.ext[kND] = 40.0;
+  P.ext[kNRate] = 0.7;   // the rates slow with the pressure, less than the stiffness falls (twelfth round)
   P.extended = true;
   P.state_volume = true;
   P.surface = Surface::LadeDuncan;
@@ -1503,11 +1504,11 @@ TEST(ModelVolumeState, EntriesAreUnreadWithoutTheFlag) {
 namespace {
 // Synthetic drained triaxial ensembles of the material P (its line logarithmic or linear in p*), calibrated with the
 // same form of the line; the checks of RecoversTheStateParametersFromDrainedTriaxialTests.
-void recover_volume_state(const Parameters& P, bool linear) {
+void recover_volume_state(const Parameters& P, bool linear, const std::vector<double>& pressures = {1e-3, 1e-2}) {
   const Rows r = triaxial_rows(2.4);
   std::mt19937_64 rng(41);
   std::vector<PathData> paths;
-  for (double p0 : {1e-3, 1e-2})
+  for (double p0 : pressures)
     for (double psi0 : {0.06, -0.01}) {
       const double nu0 = P.ext[kNuCs] + P.ext[kLambdaCs] * std::log(p0 / kPCsRef) + P.ext[kCCs] * (p0 - kPCsRef) + psi0;
       paths.push_back(synthetic_path(P, "TC_s3_synthetic", nu0, r, 8, 0.0, rng, p0, volume_ext(P, 0.0)));
@@ -1535,11 +1536,23 @@ void recover_volume_state(const Parameters& P, bool linear) {
   const std::vector<std::pair<std::string, double>> want = {
       {"s_max_a", P.shear[kSmaxA]}, {"F_max_a", P.shear[kFmaxA]}, {"F_max_b", P.shear[kFmaxB]},
       {"ln_beta_s_a", P.shear[kLnBetaSA]}, {"ln_beta_F_a", P.shear[kLnBetaFA]}, {"d_D_a", P.ext[kDilA]},
-      {"n_peak", P.ext[kNB]}, {"n_dil", P.ext[kND]}, {"kappa_s_a", P.ext[kKappaA]}};
+      {"n_peak", P.ext[kNB]}, {"n_dil", P.ext[kND]}, {"kappa_s_a", P.ext[kKappaA]}, {"n_rate", P.ext[kNRate]}};
+  if (pressures.size() >= 3) {
+    const int i = at("m_peak");
+    EXPECT_LT(std::fabs(cal.value[i] - P.ext[kMPeak]), 4 * cal.se_cov[i]) << "m_peak = " << cal.value[i] << " +- " << cal.se_cov[i];
+    EXPECT_GT(std::fabs(cal.value[i]), 4 * cal.se_cov[i]) << "m_peak resolved";
+  } else {
+    EXPECT_EQ(cal.value[at("m_peak")], 0.0) << "held at its start from two pressures";
+    EXPECT_TRUE(std::isnan(cal.se_cov[at("m_peak")]));
+  }
+  // From three pressures s_max_a's covariance error falls to 1e-4 of the value, and the recovered value sits 1e-3 off
+  // (10 such errors; chi2/dof below 3): the errors of the three-pressure fit are quoted with a floor of 0.2 % of the truth
+  const double floor_rel = pressures.size() >= 3 ? 2e-3 : 0.0;
   for (const auto& [n, v] : want) {
     const int i = at(n);
     ASSERT_TRUE(std::isfinite(cal.se_cov[i])) << n;
-    EXPECT_LT(std::fabs(cal.value[i] - v), 4 * cal.se_cov[i]) << n << " = " << cal.value[i] << " +- " << cal.se_cov[i];
+    EXPECT_LT(std::fabs(cal.value[i] - v), std::max(4 * cal.se_cov[i], floor_rel * std::fabs(v)))
+        << n << " = " << cal.value[i] << " +- " << cal.se_cov[i];
   }
   for (const char* n : {"n_peak", "n_dil"}) EXPECT_GT(cal.value[at(n)], 4 * cal.se_cov[at(n)]) << n << " resolved";
   EXPECT_LT(cal.chi2_dof(), 3.0);
@@ -1558,6 +1571,17 @@ TEST(ModelVolumeState, RecoversTheStateParametersFromDrainedTriaxialTests) {
     if (linear) { P.ext[kLambdaCs] = 0.0; P.ext[kCCs] = 1.6; }   // 0.60 + 1.6 (p* - 1e-3): 0.6144 at 1e-2
     recover_volume_state(P, linear);
   }
+}
+
+// The twelfth round's peak exponent at pressure, n_peak (p*/1e-3)^m_peak: from three start pressures (1e-3, 1e-2,
+// 5e-2, as data/geotech's) it is resolved and recovered with the rest; from two it is held at its start (above).
+TEST(ModelVolumeState, RecoversThePeakExponentsPressureDependenceFromThreePressures) {
+  Parameters P = volume_truth();
+  P.ext[kLambdaCs] = 0.0; P.ext[kCCs] = 1.6;
+  P.ext[kMPeak] = 0.2;   // the peak's exponent 2.2 times larger at 5e-2 than at 1e-3
+  EXPECT_NEAR(peak_exponent(P.ext, 5e-2), P.ext[kNB] * std::pow(50.0, 0.2), 1e-12);
+  EXPECT_EQ(peak_exponent(P.ext, kPCsRef), P.ext[kNB]);
+  recover_volume_state(P, true, {1e-3, 1e-2, 5e-2});
 }
 
 namespace {
@@ -1605,27 +1629,34 @@ TEST(ModelVolumeState, PlasticDilatancyMovesTheVolumeNotTheStress) {
 }
 
 // The rates of the stress ratio and the fabric scale with the elastic stiffness B/p of the isotropic law at the
-// pressure (a shear modulus in a fixed ratio to the bulk modulus), 1 at p* = kPCsRef: on the critical-state line (the
-// psi-laws the same) from s = F = 0 at constant volume, ds and dF at p and at kPCsRef stand in the ratio of B/p there.
+// pressure to the power n_rate (1: a shear modulus in a fixed ratio to the bulk modulus; 0: unscaled), 1 at p* =
+// kPCsRef: on the critical-state line (the psi-laws the same) from s = F = 0 at constant volume, ds and dF at p and at
+// kPCsRef stand in the ratio ((B/p)/(B/p)_ref)^n_rate.
 TEST(ModelVolumeState, RatesScaleWithTheElasticStiffness) {
   Parameters P = volume_truth();
   P.ext[kNFA] = 0.0;   // the fabric's gate r_F^0 = 1 at every overlap
   const auto iso = P.iso();
-  auto rates = [&](double p) {
-    const Material<double> m = start_material<double>(iso.data(), P.shear, P.nu_ref, 0.64, p, volume_ext(P, kLodeBD2));
-    return rhs(m, volume_state(P, p, 0.0, 0.0, 0.0), 1.0, Segment{});
+  auto rates = [&](double p, double n_rate) {
+    Parameters Q = P;
+    Q.ext[kNRate] = n_rate;
+    const Material<double> m = start_material<double>(iso.data(), Q.shear, Q.nu_ref, 0.64, p, volume_ext(Q, kLodeBD2));
+    return rhs(m, volume_state(Q, p, 0.0, 0.0, 0.0), 1.0, Segment{});
   };
   auto stiffness = [&](double p) { return bulk_modulus(iso.data(), isotropic_volume<double>(iso.data(), p)) / p; };
-  const State<double> ref = rates(kPCsRef);
   const double shape = 1 + P.ext[kKappaA] * 1e-6;   // r at its floor
-  EXPECT_NEAR(ref.s, std::exp(P.shear[kLnBetaSA]) * P.shear[kSmaxA] * shape, 1e-9) << "unscaled at kPCsRef";
-  for (double p : {1e-4, 1e-2, 5e-2}) {
-    const State<double> d = rates(p);
-    const double want = stiffness(p) / stiffness(kPCsRef);
-    EXPECT_NEAR(d.s / ref.s, want, 1e-9 * want) << "p " << p;
-    EXPECT_NEAR(d.F / ref.F, want, 1e-9 * want) << "p " << p;
+  for (double n_rate : {1.0, 0.7, 0.0}) {
+    SCOPED_TRACE(n_rate);
+    const State<double> ref = rates(kPCsRef, n_rate);
+    EXPECT_NEAR(ref.s, std::exp(P.shear[kLnBetaSA]) * P.shear[kSmaxA] * shape, 1e-9) << "unscaled at kPCsRef";
+    for (double p : {1e-4, 1e-2, 5e-2}) {
+      const State<double> d = rates(p, n_rate);
+      const double want = std::pow(stiffness(p) / stiffness(kPCsRef), n_rate);
+      EXPECT_NEAR(d.s / ref.s, want, 1e-9 * want) << "p " << p;
+      EXPECT_NEAR(d.F / ref.F, want, 1e-9 * want) << "p " << p;
+    }
   }
   EXPECT_LT(stiffness(5e-2), 0.5 * stiffness(kPCsRef)) << "a test that could fail: the stiffness ratio moves";
+  EXPECT_EQ(Parameters{}.ext[kNRate], 1.0) << "files and starts without n_rate: the eleventh round's scaling";
 }
 
 // The stress ratio's shape 1 + kappa_s r is floored at kShapeFloor with the volume-form state parameter: a kappa_s

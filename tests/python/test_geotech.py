@@ -174,6 +174,27 @@ def test_the_low_pressure_level_has_its_own_preparation_and_rate():
         geotech.main(["run", "--out", "/nonexistent", "--levels", "iso_low"])
 
 
+def test_the_high_pressure_level_has_its_own_preparation_at_the_scene_rate():
+    """iso_vhi (p* = 5e-2): the scene's gas stage, then its iso_hi stage at 5x the target, in a folder
+    of its own (the stored iso_lo/iso_hi preparations untouched); its tests at the scene's rate; a run
+    and the model's converter both accept it, an unknown level is refused."""
+    scene = os.path.join(ROOT, "data", "scenes", "geotech.toml")
+    with open(scene, "rb") as fh:
+        sc = tomllib.load(fh)
+    args = geotech.level_overrides(scene, "iso_vhi")
+    assert args[2:] == ["--set", "protocol.modes_from=iso_vhi"]
+    stages = tomllib.loads(f"v = {args[1].split('=', 1)[1]}")["v"]
+    hi = next(st for st in sc["protocol"]["preparation"] if st.get("checkpoint_name") == "iso_hi")
+    assert stages == [sc["protocol"]["preparation"][0],
+                      dict(hi, name="iso_vhi", checkpoint_name="iso_vhi", target_Pa=hi["target_Pa"] * 5)]
+    assert geotech.level_rate_args(scene, "iso_vhi") == []
+    assert geotech.prep_dir("R", "dense", "0.5", 1, "iso_vhi") == os.path.join("R", "prep_vhi", "dense", "m1")
+    assert geotech.prep_dir("R", "loose", "0.5", 1, "iso_hi") == os.path.join("R", "prep", "loose_mu0.5", "m1")
+    assert geotech.checked_levels("iso_lo,iso_vhi") == "iso_lo,iso_vhi"
+    from demkit import geotech_model
+    assert geotech_model.main(["--out", "/nonexistent", "--levels", "iso_xhi"]) == 2
+
+
 # ------------------------------------------------------------------------------------------
 # The stored runs (data/geotech) against the scene that made them and against each other
 

@@ -99,6 +99,37 @@ def test_converter_refuses_what_the_model_cannot_integrate(tree, tmp_path):
     assert r.returncode != 0 and "--force" in r.stderr, r.stderr
 
 
+def test_joint_ensemble_holds_both_preparations_at_every_level_asked(tmp_path):
+    """--joint: ensemble_joint has the dense and the loose paths (at the levels --levels names, iso_vhi included)
+    and each packing's members of both, with the dense isotropic states; a mu without a dense preparation, or an
+    unknown level, is refused."""
+    curves = tmp_path / "curves"
+    for prep, dnu in (("dense", 0.05), ("loose", 0.0)):
+        for level, nu0, p0 in (("iso_lo", 0.60, 5e7), ("iso_hi", 0.62, 5e8), ("iso_vhi", 0.70, 2.5e9)):
+            for k in ("m1", "m2"):
+                write_curve(str(curves / "mu_0.5" / prep / level / "TC_s3" / f"{k}.csv"), "TC_s3",
+                            nu0 + dnu + (0.001 if k == "m2" else 0), p0, 1.0 if k == "m1" else 1.1)
+    out = tmp_path / "model"
+    cmd = [sys.executable, "-m", "demkit.geotech_model", "--curves", str(curves), "--mu", "0.5", "--out", str(out),
+           "--tests", "TC_s3", "--levels", "iso_lo,iso_hi,iso_vhi", "--joint"]
+    r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    joint = out / "ensemble_joint"
+    names = sorted(os.listdir(joint / "paths"))
+    assert names == sorted(f"TC_s3_{p}_phi{np.mean([nu + d, nu + d + 0.001]):.3f}.csv"
+                           for p, d in (("dense", 0.05), ("loose", 0.0)) for nu in (0.60, 0.62, 0.70)), names
+    for m in ("m1", "m2"):
+        assert sorted(os.listdir(joint / "members" / m / "paths")) == names
+        iso = read(joint / "members" / m / "prep" / "cycle_unloading.csv")
+        assert len(iso) == 3 and float(iso[0]["nu"]) > 0.64, "the dense preparation's three isotropic states"
+    r = subprocess.run(cmd[:-3] + ["iso_lo,iso_xhi", "--joint", "--force"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 2 and "iso_xhi" in r.stderr, r.stderr
+    import shutil
+    shutil.rmtree(curves / "mu_0.5" / "dense")
+    r = subprocess.run(cmd + ["--force"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode != 0 and "--joint needs a dense and a loose" in r.stderr, r.stderr
+
+
 def test_paths_only_calibration_options_are_refused_with_the_fix(tree, tmp_path):
     _, ens = tree
     start = os.path.join(ROOT, "data", "friction_n1000", "model_friction", "mu_0.5", "parameters.csv")

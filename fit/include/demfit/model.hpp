@@ -76,6 +76,13 @@ enum ExtIndex {
   /// kPCsRef), the rigid-grain critical state nu_cs - c_cs kPCsRef compressed by the contacts' compliance; 0 in the
   /// logarithmic form and in files written before it)
   kCCs,
+  /// n_rate [-]: the exponent of the rates' elastic scaling ((B/p)/(B/p)_ref)^n_rate (twelfth round, rate_scale):
+  /// 1 in files written before it (the eleventh round's scaling), 0 unscaled; fitted with --state-limit volume
+  kNRate,
+  /// m_peak [-]: the peak's state exponent at pressure p, n_peak (p*/kPCsRef)^m_peak (twelfth round: at the same psi
+  /// the dense peak rises with the pressure from p* = 1e-3 to 5e-2; 0 in files written before it; fitted with
+  /// --state-limit volume from two start pressures on)
+  kMPeak,
   kNumExt
 };
 
@@ -151,7 +158,9 @@ struct Parameters {
   double alpha = 0.5;      ///< [-] coordination power-law exponent
   double shear[kNumShear] = {0.16, -0.5, std::log(50.0), -5.0, 0.11, -0.8, std::log(40.0), -8.0,
                              0.3, -5.0, std::log(20.0), 0.0};
-  double ext[kNumExt] = {};   ///< frictional extension (all 0: the group model)
+  /// frictional extension (all 0, the group model, but n_rate 1: the eleventh round's rate scaling)
+  double ext[kNumExt] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0};
+  static_assert(kNumExt == 19 && kNRate == 17, "the default of ext: n_rate 1, every other entry 0");
   bool extended = false;   ///< the frictional family (ext fitted, Lode surface `surface`)
   bool state_limit = false;   ///< the frictional family's state-dependent stress-ratio limit (n_psi fitted)
   bool state_lode = false;    ///< ... with the exponent's Lode dependence (lambda_psi fitted; needs state_limit)
@@ -176,7 +185,7 @@ inline const char* shear_name(int i) {
 inline const char* ext_name(int i) {
   static const char* n[kNumExt] = {"n_F_a", "n_F_b", "kappa_s_a", "kappa_s_b", "d_D_a", "d_D_b", "chi_D",
                                    "n_psi_a", "n_psi_b", "ln_delta_w", "n_w", "lambda_psi", "nu_cs", "lambda_cs",
-                                   "n_peak", "n_dil", "c_cs"};
+                                   "n_peak", "n_dil", "c_cs", "n_rate", "m_peak"};
   return n[i];
 }
 inline const char* iso_name(int i) {
@@ -466,14 +475,26 @@ struct Material {
   T bp_ref = T(1.0);
 };
 
-/// The rates' elastic scaling with the volume-form state parameter: (B/p)/(B/p)_ref, the shear modulus a fixed
-/// fraction of the bulk modulus (a constant Poisson ratio, as SANISAND's G and K): 1 otherwise.
+/// The peak's state exponent at pressure p* (volume-form state parameter): n_peak (p*/kPCsRef)^m_peak.
+template <class T>
+T peak_exponent(const T* ext, const T& p) {
+  T pp = p;
+  if (!(pp > T(1e-12))) pp = T(1e-12);
+  return ext[kNB] * exp(ext[kMPeak] * log(pp / T(kPCsRef)));
+}
+
+/// The rates' elastic scaling with the volume-form state parameter: ((B/p)/(B/p)_ref)^n_rate; at n_rate = 1 the shear
+/// modulus is a fixed fraction of the bulk modulus (a constant Poisson ratio, as SANISAND's G and K; the eleventh
+/// round), n_rate < 1 a rise to the peak that slows less with the pressure than the stiffness falls (the twelfth
+/// round's p* = 5e-2 tests; docs/model.md): 1 otherwise.
 template <class T>
 T rate_scale(const Material<T>& m, const T& B, const T& p) {
   if (!(m.ext.p && m.ext.state_volume)) return T(1.0);
   T pp = p;
   if (!(pp > T(1e-12))) pp = T(1e-12);
-  return B / pp / m.bp_ref;
+  const T ratio = B / pp / m.bp_ref;
+  if (!(ratio > T(1e-12))) return T(0.0);
+  return exp(m.ext.p[kNRate] * log(ratio));
 }
 
 /// Derivatives per unit |d eps_d| along a segment with direction sigma (+1/-1), or per unit
@@ -545,7 +566,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   // The state-dependent limit (fifth round; off: s_lim itself, untouched): the target of the stress
   // ratio only; the mobilisation r, the rate scaling and the dilatancy keep s_lim (psi_p = 0).
   // The volume-form state parameter (tenth round) likewise: s_lim e^{n_b psi}.
-  const T s_target = vol_state ? s_lim * exp(m.ext.p[kNB] * psi)
+  const T s_target = vol_state ? s_lim * exp(peak_exponent(m.ext.p, y.p) * psi)
                      : (m.ext.p && m.ext.state_limit)
                          ? s_lim * state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref, m.ext.b, m.ext.state_lode)
                          : s_lim;
