@@ -690,6 +690,11 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
       const bool from_data = cal.names[i] == "nu_cs" || (cal.names[i] == "lambda_cs" && !co_f.csl_linear) ||
                              (cal.names[i] == "c_cs" && co_f.csl_linear);
       cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) || from_data ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
+      if (std::isfinite(cal.se_cov[i]) && ss == 0.0) {   // every refit on the same value: a bound held it, no spread
+        cal.se_jackknife[i] = std::nan("");
+        cal.warnings.push_back(cal.names[i] + ": every jackknife refit ends on the same value " + num(est[0][i], 6) +
+                               " (a bound): no jackknife error quoted");
+      }
     }
     if (K < 4) {   // as `dem fit` says for its fits
       double worst = 1;
