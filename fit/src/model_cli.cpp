@@ -598,6 +598,19 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
     co.hold_iso.push_back(i);
   }
   co.hold_from = co.hold_iso.empty() ? nullptr : co.start;
+  for (const auto& n : o.hold) {
+    int i = 0;
+    while (i < kNumExt && n != ext_name(i)) ++i;
+    if (i == kNumExt) {
+      std::string all;
+      for (int j = 0; j < kNumExt; ++j) all += std::string(j ? ", " : "") + ext_name(j);
+      throw InputError("--hold " + n + ": not a coefficient of the frictional extension; give some of " + all +
+                       " (isotropic ones: --hold-isotropic)");
+    }
+    if (o.family != "extended")
+      throw InputError("--hold " + n + " holds a coefficient of the frictional extension: give --family extended");
+    co.hold_ext.push_back(i);
+  }
   if (o.family != "group" && o.family != "extended" && o.family != "auto")
     throw InputError("--family " + o.family + ": give group (the incremental anisotropic model), extended (with the "
                      "frictional extension) or auto (both, chosen by the held-out test)");
@@ -1004,6 +1017,9 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "Several, comma-separated, `default` for the start from the data's own fits: the fit is made from "
                  "each and the lowest chi2/dof kept (OUT/starts.md); the fits of the extended family are multi-modal")
       ->delimiter(',')->default_str("");
+  app.add_option("--hold", o.hold, "frictional-extension coefficients held at their start values (the --start file's, "
+                 "or the default of a file without them: n_rate 1), e.g. n_rate; comma-separated")
+      ->delimiter(',');
   app.add_option("--hold-isotropic", o.hold_isotropic, "isotropic parameters held at their values in the (first) --start file, "
                  "comma-separated (e.g. gamma_p,nu_cC,alpha: a branch of two pressure levels fixes two of the pressure "
                  "law's three)")->delimiter(',')->default_str("");

@@ -840,8 +840,17 @@ std::set<int> held_shear(bool X, bool one_nu, bool state_volume) {
 }
 
 /// One start volume fraction: every nu-slope (*_b) held at 0; with the extension block, held_ext.
+/// held_ext and the coefficients --hold names that the block of n_block entries carries, sorted, each once.
+std::vector<int> with_user_held(std::vector<int> held, const std::vector<int>& user, int n_block) {
+  for (int i : user)
+    if (i < n_block) held.push_back(i);
+  std::sort(held.begin(), held.end());
+  held.erase(std::unique(held.begin(), held.end()), held.end());
+  return held;
+}
+
 void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<double>& ext, bool X, bool one_nu,
-              bool state_limit, bool weighted, bool state_lode, bool state_volume, int n_p) {
+              bool state_limit, bool weighted, bool state_lode, bool state_volume, int n_p, const std::vector<int>& user) {
   // Held shear coefficients: the nu-slopes from one start volume fraction; with the volume-form state parameter s_max_b
   // at 0 (the limit's state dependence is psi's, s_lim e^{n_b psi}) and beta_p at its start (it does not act: the
   // pressure stays on the isotropic law at nu_el).
@@ -850,10 +859,11 @@ void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<d
     if (i % 2 == 1) shear[i] = 0.0;
   if (!held_s.empty())
     problem.SetManifold(shear.data(), new ceres::SubsetManifold(kNumShear, std::vector<int>(held_s.begin(), held_s.end())));
-  const std::vector<int> held = held_ext(one_nu, state_limit, weighted, state_lode, state_volume, n_p);
+  const std::vector<int> held = with_user_held(held_ext(one_nu, state_limit, weighted, state_lode, state_volume, n_p), user,
+                                               ext_size(state_limit, weighted, state_lode, state_volume));
   if (!X || held.empty()) return;
   for (int i : held)
-    if (i != kLnDeltaW && i != kNW && i != kNuCs && i != kLambdaCs && i != kCCs && i != kNRate && i != kMPeak) ext[i] = 0.0;   // the unread `Weighted` pair
+    if (std::find(user.begin(), user.end(), i) == user.end() && i != kLnDeltaW && i != kNW && i != kNuCs && i != kLambdaCs && i != kCCs && i != kNRate && i != kMPeak) ext[i] = 0.0;   // the unread `Weighted` pair
                                                             // keeps its start (inside its bounds), the line its own
   if (state_volume) ext[kChiD] = 1.0;
   problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit, weighted, state_lode, state_volume), held));
@@ -1053,7 +1063,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (const auto& d : paths) nus_seen.insert(std::llround(d.nu * 1e6));
   const bool one_nu = nus_seen.size() < 2;
   const int n_p = start_pressures(curves, paths);
-  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, n_p);
+  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, n_p, o.hold_ext);
 
   const ceres::Solver::Summary sum = solve(problem, o.max_iterations);
 
@@ -1065,7 +1075,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   cal.params = fitted_params(start, isob, shear, ext, o, X);
   const int n_ext = ext_size(cal.params.state_limit, weighted, state_lode, state_volume);
   const std::vector<int> held_x =
-      X ? held_ext(one_nu, cal.params.state_limit, weighted, state_lode, state_volume, n_p) : std::vector<int>();
+      X ? with_user_held(held_ext(one_nu, cal.params.state_limit, weighted, state_lode, state_volume, n_p), o.hold_ext, n_ext)
+        : std::vector<int>();
   // a start Ceres could not evaluate reports a negative cost: no chi2 ("nan", the start "failed")
   cal.chi2 = sum.final_cost >= 0 ? 2 * sum.final_cost : std::nan("");
   cal.n_residuals = n_res;

@@ -228,6 +228,23 @@ def test_volume_state_parameters_round_trip_through_predict_with(tmp_path):
                         str(tmp_path / "c")], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "--csl cubic" in r.stderr and "linear" in r.stderr, r.stderr
     assert not (tmp_path / "c").exists()
+    # --hold: an extension coefficient held at its start (the start file has no n_rate: the default 1), no error
+    # quoted; the free fit above moved it; an unknown name, or the group family, refused before anything is written
+    free = {x["parameter"]: x for x in read(cal / "parameters.csv")}
+    assert float(free["n_rate"]["value"]) != 1.0 and free["lambda_cs"]["se"] == "nan", free["n_rate"]
+    held = tmp_path / "held"
+    base = [DEM, "model", str(ens), "--no-plots", "--no-jackknife", "--calibrate-on", "TC_s3_loose", "--start", start,
+            "--state-limit", "volume", "--max-iterations", "5", "--hold-isotropic", "gamma_p,nu_cC,alpha"]
+    r = subprocess.run(base + ["--family", "extended", "--hold", "n_rate", "--out", str(held)], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode in (0, 1), r.stderr
+    got = {x["parameter"]: x for x in read(held / "parameters.csv")}
+    assert float(got["n_rate"]["value"]) == 1.0 and got["n_rate"]["se"] == "nan", got["n_rate"]
+    for extra, want in ((["--family", "extended", "--hold", "n_ratee"], "n_rate"), (["--family", "group", "--hold", "n_rate"],
+                                                                                  "--family extended")):
+        r = subprocess.run(base + extra + ["--out", str(tmp_path / "x")], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and want in r.stderr, r.stderr
+        assert not (tmp_path / "x").exists()
 
 
 def test_collect_state_puts_the_state_parameters_runs_beside_the_lab_calibrations(tmp_path):

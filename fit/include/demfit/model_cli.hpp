@@ -26,6 +26,7 @@ struct ModelCommandOptions {
   /// saturating fits). More than one: the fit is made from each, the lowest chi2/dof is kept (starts.{csv,md}).
   std::vector<std::string> start;
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
+  std::vector<std::string> hold;             ///< extension coefficients held at their start values (--hold)
   std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default), pressure (n_psi fitted), pressure-lode (+ lambda_psi)
   /// The critical-state line's form with --state-limit volume: linear (the default: nu_cs + c_cs (p* - 1e-3)) or
   /// log (nu_cs + lambda_cs ln(p*/1e-3))

@@ -70,6 +70,8 @@ struct CalibrationOptions {
   /// fitted: a laboratory's isotropic branch of a few pressure levels cannot fix all seven (issue 31,
   /// "Calibrated on drained triaxial tests"). Needs `start`.
   std::vector<int> hold_iso;
+  /// Extension coefficients (ExtIndex) held at their start value (`--hold`, extended family only).
+  std::vector<int> hold_ext;
   /// Where the held isotropic parameters take their values (nullptr: from `start`). A multi-start
   /// fit (`--start A,B,...` with `--hold-isotropic`) holds them at the first start's values in every
   /// start, so that the starts differ in the fitted parameters only.
