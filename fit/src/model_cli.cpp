@@ -649,6 +649,12 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   if (co.state_volume && o.family != "extended")
     throw InputError("--state-limit volume: the volume-form state parameter belongs to the extended family; give "
                      "--family extended");
+  const int n_block = ext_size(co.state_limit, co.fabric == FabricLode::Weighted, co.state_lode, co.state_volume);
+  for (int i : co.hold_ext)
+    if (i >= n_block)
+      throw InputError(std::string("--hold ") + ext_name(i) + ": this law does not have it (--state-limit " +
+                       o.state_limit + ", --fabric-lode " + o.fabric_lode + "); n_rate, m_peak, nu_cs, lambda_cs, "
+                       "n_peak, n_dil and c_cs belong to --state-limit volume");
   return co;
 }
 

@@ -245,6 +245,12 @@ def test_volume_state_parameters_round_trip_through_predict_with(tmp_path):
         r = subprocess.run(base + extra + ["--out", str(tmp_path / "x")], capture_output=True, text=True, timeout=120)
         assert r.returncode == 2 and want in r.stderr, r.stderr
         assert not (tmp_path / "x").exists()
+    # a coefficient the chosen law does not carry (n_rate without the volume-form state parameter) is refused too
+    no_volume = [a for a in base if a not in ("--state-limit", "volume")]
+    r = subprocess.run(no_volume + ["--family", "extended", "--hold", "n_rate", "--out", str(tmp_path / "x")],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "--hold n_rate" in r.stderr and "--state-limit volume" in r.stderr, r.stderr
+    assert not (tmp_path / "x").exists()
 
 
 def test_collect_state_puts_the_state_parameters_runs_beside_the_lab_calibrations(tmp_path):
