@@ -599,9 +599,8 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   }
   co.hold_from = co.hold_iso.empty() ? nullptr : co.start;
   for (const auto& n : o.hold) {
-    int i = 0;
-    while (i < kNumExt && n != ext_name(i)) ++i;
-    if (i == kNumExt) {
+    const int i = ext_index(n);
+    if (i < 0) {
       std::string all;
       for (int j = 0; j < kNumExt; ++j) all += std::string(j ? ", " : "") + ext_name(j);
       throw InputError("--hold " + n + ": not a coefficient of the frictional extension; give some of " + all +

@@ -309,6 +309,12 @@ int iso_index(const std::string& name) {
   return -1;
 }
 
+int ext_index(const std::string& name) {
+  for (int i = 0; i < kNumExt; ++i)
+    if (name == ext_name(i)) return i;
+  return -1;
+}
+
 namespace {
 // One CSV line split into fields, "..." quoting with commas inside (as write_table_all writes).
 std::vector<std::string> csv_fields(const std::string& line) {
@@ -839,7 +845,6 @@ std::set<int> held_shear(bool X, bool one_nu, bool state_volume) {
   return held;
 }
 
-/// One start volume fraction: every nu-slope (*_b) held at 0; with the extension block, held_ext.
 /// held_ext and the coefficients --hold names that the block of n_block entries carries, sorted, each once.
 std::vector<int> with_user_held(std::vector<int> held, const std::vector<int>& user, int n_block) {
   for (int i : user)
@@ -849,6 +854,14 @@ std::vector<int> with_user_held(std::vector<int> held, const std::vector<int>& u
   return held;
 }
 
+/// A held extension coefficient that keeps its start value (the others held are set to 0): one --hold names, the
+/// unread `Weighted` pair (inside its bounds), the critical-state line (the end states') and the pressure exponents.
+bool keeps_start(int i, const std::vector<int>& user) {
+  static const std::set<int> own = {kLnDeltaW, kNW, kNuCs, kLambdaCs, kCCs, kNRate, kMPeak};
+  return own.count(i) > 0 || std::find(user.begin(), user.end(), i) != user.end();
+}
+
+/// One start volume fraction: every nu-slope (*_b) held at 0; with the extension block, held_ext and --hold.
 void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<double>& ext, bool X, bool one_nu,
               bool state_limit, bool weighted, bool state_lode, bool state_volume, int n_p, const std::vector<int>& user) {
   // Held shear coefficients: the nu-slopes from one start volume fraction; with the volume-form state parameter s_max_b
@@ -863,8 +876,7 @@ void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<d
                                                ext_size(state_limit, weighted, state_lode, state_volume));
   if (!X || held.empty()) return;
   for (int i : held)
-    if (std::find(user.begin(), user.end(), i) == user.end() && i != kLnDeltaW && i != kNW && i != kNuCs && i != kLambdaCs && i != kCCs && i != kNRate && i != kMPeak) ext[i] = 0.0;   // the unread `Weighted` pair
-                                                            // keeps its start (inside its bounds), the line its own
+    if (!keeps_start(i, user)) ext[i] = 0.0;
   if (state_volume) ext[kChiD] = 1.0;
   problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit, weighted, state_lode, state_volume), held));
 }

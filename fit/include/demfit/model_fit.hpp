@@ -88,6 +88,8 @@ Parameters recentred(const Parameters& P, double nu_ref);
 
 /// Index of an isotropic parameter name (p0, nu_c, gamma_p, C0, C1, nu_cC, alpha), -1 if none.
 int iso_index(const std::string& name);
+/// The index of a frictional-extension coefficient by its table name (ext_name), -1 if none.
+int ext_index(const std::string& name);
 
 /// Intermediate-stress ratio b the model assumes for a mode or path name: 0 for D3 and
 /// triaxial paths (axisymmetric compression), and for the laboratory tests of data/geotech
