@@ -4,12 +4,12 @@ thirteenth round; docs/geotech.md, "The constant-volume tests' Lode parameter an
 The friction study's constant-volume D2/D3 (data/friction_n1000) end at eps_d = 0.3 on the laboratory
 critical-state line in volume and pressure, but their stress ratios are not the drained tests'; their
 curves carry no intermediate stress. These runs settle why: D2 and D3 at constant volume from the loose
-p* = 5e-2 preparations of data/geotech (nu = 0.69, the friction study's densest state), to eps_d = 1.0,
-with the full stress tensor.
+p* = 5e-2 preparations of data/geotech (nu = 0.69, the friction study's densest state; at mu = 0 the
+frictionless one, nu = 0.75), to eps_d = 1.0, with the full stress tensor.
 
     /usr/bin/python3 -m demkit.geotech_cv run --out runs/cv --preps runs/geotech_vhi [--mu 0.1 0.3 0.5 1]
-        one `dem mode` per (mu, packing, mode) from the loose iso_vhi checkpoints (`demkit.geotech run
-        --levels iso_vhi` made them), in demkit.geotech's layout ROOT/mu_MU/loose/iso_vhi/CV_D2/mSEED.csv;
+        one `dem mode` per (mu, packing, mode) from the iso_vhi checkpoints (`demkit.geotech run
+        --levels iso_vhi` made them), in demkit.geotech's layout ROOT/mu_MU/PREP/iso_vhi/CV_D2/mSEED.csv;
     /usr/bin/python3 -m demkit.geotech_cv analyse runs/cv --out data/geotech/constant_volume [--store]
         the stress ratio q/p, the Lode parameter b and p* over three strain windows (the friction study's
         0.25-0.30, 0.55-0.60, 0.90-1.00) with 95 % intervals over packings, demkit.geotech's critical-state
@@ -37,13 +37,19 @@ LEVEL = gt.HIGH_LEVEL
 DRAINED = ("TC_p", "TT_b025", "TT_b050", "TT_b075", "TE_p")   # the constant-p family, b = 0 ... 1
 
 
+def prep_of(mu):
+    """The preparation the runs start from: the loose one (own mu), at mu = 0 the only one (demkit.geotech)."""
+    return "dense" if float(mu) == 0 else "loose"
+
+
 def run_one(args, mu, seed, mode):
-    ckpt = sorted(gt.glob.glob(os.path.join(gt.prep_dir(args.preps, "loose", mu, seed, LEVEL), "checkpoints",
+    prep = prep_of(mu)
+    ckpt = sorted(gt.glob.glob(os.path.join(gt.prep_dir(args.preps, prep, mu, seed, LEVEL), "checkpoints",
                                             f"{LEVEL}_phi*.ckpt")))
     if len(ckpt) != 1:
-        return f"no single {LEVEL} checkpoint for loose mu={mu} m{seed} under {args.preps} (run demkit.geotech " \
+        return f"no single {LEVEL} checkpoint for {prep} mu={mu} m{seed} under {args.preps} (run demkit.geotech " \
                f"run --levels {LEVEL} first)"
-    out = os.path.join(args.out, f"mu_{mu}", "loose", LEVEL, f"CV_{mode}", f"m{seed}.csv")
+    out = os.path.join(args.out, f"mu_{mu}", prep, LEVEL, f"CV_{mode}", f"m{seed}.csv")
     if os.path.exists(out):
         return "ok (kept)"
     os.makedirs(os.path.dirname(out), exist_ok=True)
@@ -100,10 +106,11 @@ def q_over_p(sin_phi, b):
 
 
 def drained_family(summary_csv, mu):
-    """The loose iso_vhi constant-p tests of data/geotech's summary.csv at mu: (b_cs, q/p_cs, its interval)
-    sorted by b."""
+    """The iso_vhi constant-p tests (prep_of(mu)) of data/geotech's summary.csv at mu: (target b, q/p_cs, its
+    interval) sorted by b. The target, not the measured b_cs: the servo holds b within 0.01-0.04 of it (TC_p's
+    0.02-0.04 is the noise of a ratio of small stress differences), and a CV D3 at b = 0.03 is then still read."""
     rows = [r for r in _summary_rows(summary_csv, mu) if r["test"] in DRAINED]
-    return sorted((float(r["b_cs"]), float(r["q_over_p_cs"]), float(r["q_over_p_cs_ci95"])) for r in rows)
+    return sorted((gt.test_b(r["test"]), float(r["q_over_p_cs"]), float(r["q_over_p_cs_ci95"])) for r in rows)
 
 
 def drained_at(family, b):
@@ -138,13 +145,13 @@ def table_rows(results, summary_csv):
 def _summary_rows(summary_csv, mu):
     import csv
     with open(summary_csv) as fh:
-        return [r for r in csv.DictReader(fh) if r["mu"] == mu and r["prep"] == "loose" and r["level"] == LEVEL]
+        return [r for r in csv.DictReader(fh) if r["mu"] == mu and r["prep"] == prep_of(mu) and r["level"] == LEVEL]
 
 
 def analyse(root, out, summary_csv, plots=True):
     groups = gt.collect(root)
     if not groups:
-        raise SystemExit(f"demkit.geotech_cv: no curves under {root}/mu_*/loose/{LEVEL}/CV_*/m*.csv (run first)")
+        raise SystemExit(f"demkit.geotech_cv: no curves under {root}/mu_*/PREP/{LEVEL}/CV_*/m*.csv (run first)")
     results = gt.analyse_groups(groups)
     for res in results.values():
         for v in res["members"]:
@@ -161,7 +168,7 @@ def analyse(root, out, summary_csv, plots=True):
 def report(rows):
     w0, w1 = WINDOWS[0], WINDOWS[-1]
     k0, k1 = f"{w0[0]:.2f}_{w0[1]:.2f}", f"{w1[0]:.2f}_{w1[1]:.2f}"
-    lines = ["<!-- demkit.geotech_cv analyse: constant-volume D2/D3 from the loose p* = 5e-2 preparations; means over "
+    lines = ["<!-- demkit.geotech_cv analyse: constant-volume D2/D3 from the p* = 5e-2 preparations (loose; mu = 0 the frictionless one); means over "
              "packings with 95 % Student-t intervals; drained: data/geotech's constant-p tests at the same level read "
              "at the measured b (linear in b between neighbours); b_ps: the plane-strain b of a surface through TC_p's "
              "phi_cs with the flow normal to it in the deviatoric plane -->",
@@ -219,12 +226,12 @@ def store(root, out):
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="demkit.geotech_cv", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("run", help="constant-volume D2/D3 from the loose iso_vhi preparations")
+    r = sub.add_parser("run", help="constant-volume D2/D3 from the iso_vhi preparations")
     r.add_argument("--out", required=True)
     r.add_argument("--preps", required=True, help="a demkit.geotech run folder with the iso_vhi preparations")
     r.add_argument("--scene", default="data/scenes/geotech.toml")
     r.add_argument("--dem", default="build/dem")
-    r.add_argument("--mu", nargs="+", default=["0.1", "0.3", "0.5", "1"])
+    r.add_argument("--mu", nargs="+", default=["0", "0.1", "0.3", "0.5", "1"])
     r.add_argument("--packings", type=int, default=4)
     r.add_argument("--first-seed", type=int, default=1)
     r.add_argument("--jobs", type=int, default=2)

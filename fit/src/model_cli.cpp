@@ -169,6 +169,9 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
                num(cal.value[i] + tq * se), num(cal.se_cov[i]), jk ? num(cal.se_jackknife[i]) : "nan", unit_of(cal.names[i])});
   }
   t.add_row({"nu_ref", "centre of the nu-laws (fixed)", num(cal.params.nu_ref), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+  if (cal.params.b_d2 != kLodeBD2)   // files without the row: 1/2 (read_parameters)
+    t.add_row({"b_D2", "stress Lode parameter b of D2 curves and paths (fixed; --d2-lode)", num(cal.params.b_d2), "nan",
+               "fixed", "nan", "nan", "nan", "nan", "-"});
   t.add_row({"chi2_per_dof", "weighted residuals of the joint fit", num(cal.chi2_dof()), "nan",
              std::to_string(cal.n_residuals) + " residuals", "nan", "nan", "nan", "nan", "-"});
   // A fit that stopped short says so in its table (the values are where it stopped; --start goes on)
@@ -578,6 +581,18 @@ void read_starts(const ModelCommandOptions& o, CalibrationOptions& co) {
   co.start = start_params.empty() ? nullptr : start_params.front().get();
 }
 
+// --d2-lode as a number: 1/2 when not given or "normal" (set after the fit, or from the --predict-with file).
+double d2_lode_number(const ModelCommandOptions& o) {
+  if (o.d2_lode.empty() || o.d2_lode == "normal") return kLodeBD2;
+  char* end = nullptr;
+  const double b = std::strtod(o.d2_lode.c_str(), &end);
+  if (end == o.d2_lode.c_str() || *end != '\0' || !(b > 0.0 && b < 1.0))
+    throw InputError("--d2-lode " + o.d2_lode + ": give the stress Lode parameter b of D2 as a number between 0 and 1 "
+                     "(0.5 the strain's; the constant-volume D2 of data/geotech/constant_volume ends at 0.32-0.39), or "
+                     "normal (the plane-strain b of the Lode surface through the calibrated limit)");
+  return b;
+}
+
 // The calibration's options from the command's (--eps-max, --family, --surface, --fabric-lode checked).
 CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   CalibrationOptions co;
@@ -640,6 +655,7 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
                      "critical-state line from the calibration paths' end states, --csl); "
                      "docs/model.md");
   co.state_lode = o.state_limit == "pressure-lode";
+  co.b_d2 = d2_lode_number(o);
   if (o.csl != "linear" && o.csl != "log")
     throw InputError("--csl " + o.csl + ": give linear (the default: the critical-state line nu_cs + c_cs (p* - 1e-3), "
                      "a rigid-grain critical state compressed by the contacts) or log (nu_cs + lambda_cs ln(p*/1e-3)); "
@@ -881,6 +897,17 @@ ModelInputs checked_inputs(const ModelCommandOptions& o, const CalibrationOption
       throw InputError("--state-limit volume takes its critical-state line from the end states of drained paths, and "
                        "--calibrate-on names none: calibrate on a drained triaxial test (e.g. --calibrate-on TC_s3_dense "
                        "with --start PARAMETERS.csv), or choose --state-limit none or pressure");
+    if (o.d2_lode == "normal" && o.predict_with.empty()) {
+      // lode_b_of(name, -1) is -1 only for D2 and paths made of D2: the names whose b --d2-lode sets
+      for (const auto& c : in.fit_curves)
+        if (lode_b_of(c.mode, -1.0) < 0)
+          throw InputError("--d2-lode normal reads D2's b from the calibrated limit, and --calibrate-on fits " + c.mode +
+                           " (a D2 curve), which needs it during the fit: give --d2-lode a number (e.g. 0.35)");
+      for (const auto& d : in.fit_paths)
+        if (lode_b_of(d.name, -1.0) < 0)
+          throw InputError("--d2-lode normal reads D2's b from the calibrated limit, and --calibrate-on fits the path " +
+                           d.name + " (made of D2), which needs it during the fit: give --d2-lode a number (e.g. 0.35)");
+    }
     if (o.family != "group" && co.fabric == FabricLode::Weighted) {
       try {
         check_weighted_lode(in.fit_curves, in.fit_paths);
@@ -912,6 +939,7 @@ FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions
                      " family's parameters: give --family " + (P.extended ? "extended" : "group"));
   P.surface = P.extended ? co.surface : Surface::None;
   P.fabric = P.extended ? co.fabric : FabricLode::Norm;
+  if (!o.d2_lode.empty()) P.b_d2 = o.d2_lode == "normal" ? plane_strain_lode_b(P.surface, P.shear[kSmaxA]) : co.b_d2;
   const std::vector<double> iso = P.iso();
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(iso[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(P.shear[i]); }
@@ -955,6 +983,8 @@ int run(const ModelCommandOptions& o) {
                                                      : std::vector<std::string>{o.family};
   std::vector<FamilyFit> fits;
   for (const auto& fam : fams) fits.push_back(fit_family(in, co, o, fam == "extended"));
+  if (o.d2_lode == "normal")   // the plane-strain b of the calibrated limit (no D2 curve was fitted: checked_inputs)
+    for (auto& ff : fits) ff.cal.params.b_d2 = plane_strain_lode_b(ff.cal.params.surface, ff.cal.params.shear[kSmaxA]);
   std::size_t chosen = 0;
   if (fits.size() == 2) {
     chosen = write_selection(fits[0], fits[1], K, out) ? 1 : 0;
@@ -1016,6 +1046,10 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "curve and path predicted with those parameters (give the --family, --surface and --fabric-lode that "
                  "run was given; e.g. a dense preparation's calibration predicting the loose one)")
       ->check(CLI::ExistingFile);
+  app.add_option("--d2-lode", o.d2_lode, "stress Lode parameter b of D2 curves and paths: a number in (0, 1) or "
+                 "normal (the plane-strain b of the Lode surface through the calibrated limit s_max_a: its deviatoric "
+                 "normal has no intermediate component); default 0.5, with --predict-with the file's (docs/model.md)")
+      ->default_str("");
   app.add_option("--max-iterations", o.max_iterations, "Ceres iterations of each fit (default 300)");
   app.add_option("--start", o.start, "parameters.csv of another `dem model` run: the start values (re-centred on "
                  "this data's nu_ref); with it the path ensembles alone may be calibrated (--calibrate-on PATHS). "

@@ -51,6 +51,7 @@ struct CurveResidual {
   double nu0, p0, s0, F0, nu_ref, max_step;
   bool extended = false;
   double b = kLodeBD2;
+  double b_stress = -1.0;   ///< Ext::b_stress (D2: the parameters' b_d2)
   Surface surface = Surface::None;
   FabricLode fabric = FabricLode::Norm;
   bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
@@ -59,7 +60,7 @@ struct CurveResidual {
   template <class T>
   bool operator()(T const* const* par, T* r) const {
     const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
-                     extended && state_lode, extended && state_volume};
+                     extended && state_lode, extended && state_volume, b_stress};
     const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -90,6 +91,7 @@ struct PathResidual {
   double nu0, p0, s0, F0, nu_ref, max_step;
   bool extended = false;
   double b = kLodeBD2;
+  double b_stress = -1.0;   ///< Ext::b_stress (D2: the parameters' b_d2)
   Surface surface = Surface::None;
   FabricLode fabric = FabricLode::Norm;
   bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
@@ -98,7 +100,7 @@ struct PathResidual {
   template <class T>
   bool operator()(T const* const* par, T* r) const {
     const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
-                     extended && state_lode, extended && state_volume};
+                     extended && state_lode, extended && state_volume, b_stress};
     const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step, ext);
     const std::size_t n = acc.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -364,6 +366,7 @@ Parameters read_parameters(const std::string& path) {
   P.set_iso(isov);
   for (int i = 0; i < kNumShear; ++i) P.shear[i] = get(shear_name(i));
   P.nu_ref = get("nu_ref");
+  if (v.count("b_D2")) P.b_d2 = get("b_D2");   // files before the thirteenth round: kLodeBD2
   P.extended = v.count(ext_name(0)) > 0;
   P.state_limit = P.extended && v.count(ext_name(kNPsiA)) > 0;
   P.state_lode = P.state_limit && v.count(ext_name(kLambdaPsi)) > 0;
@@ -383,7 +386,7 @@ Parameters recentred(const Parameters& P, double nu_ref) {
   return Q;
 }
 
-double lode_b_of(const std::string& mode) {
+double lode_b_of(const std::string& mode, double b_d2) {
   if (mode == "D3" || mode.find("triaxial") != std::string::npos) return 0.0;
   // The laboratory tests of data/geotech (demkit/geotech_model.py names them TEST_PREP): triaxial
   // compression (constant sigma_3 or p) b = 0, extension b = 1, true triaxial TT_bNNN b = NNN/100.
@@ -392,7 +395,7 @@ double lode_b_of(const std::string& mode) {
   if (mode.rfind("TT_b", 0) == 0 && mode.size() >= 7 && std::isdigit(static_cast<unsigned char>(mode[4])) &&
       std::isdigit(static_cast<unsigned char>(mode[5])) && std::isdigit(static_cast<unsigned char>(mode[6])))
     return std::stoi(mode.substr(4, 3)) / 100.0;
-  return kLodeBD2;
+  return b_d2;
 }
 
 const char* surface_name(Surface s) {
@@ -505,7 +508,7 @@ void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& 
     auto* f = new CurveResidual{c.eps, c.p, c.s, c.F, weights(c.se_p, o.se_floor, c.source + " p_star"),
                                 weights(c.se_s, o.se_floor, c.source + " s_dev"), weights(c.se_F, o.se_floor, c.source + " F_dev"),
                                 c.nu, c.p.front(), c.s.front(), c.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(c.mode); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
+    f->extended = X; f->b = lode_b_of(c.mode); f->b_stress = lode_b_of(c.mode, o.b_d2); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
     f->state_volume = o.state_volume;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
@@ -544,7 +547,7 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     for (std::size_t i = 1; i <= prefix; ++i) w1[i] = ws[i] = wF[i] = 0.0;
     auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, ws, wF, d.direction, d.isobaric,
                                d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(d.name); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
+    f->extended = X; f->b = lode_b_of(d.name); f->b_stress = lode_b_of(d.name, o.b_d2); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
     f->state_volume = o.state_volume;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
@@ -904,6 +907,7 @@ Parameters fitted_params(const Parameters& start, const std::vector<double>& iso
   P.extended = X;
   P.surface = X ? o.surface : Surface::None;
   P.fabric = X ? o.fabric : FabricLode::Norm;
+  P.b_d2 = o.b_d2;
   P.state_limit = X && o.state_limit;
   P.state_lode = X && o.state_limit && o.state_lode;
   P.state_volume = X && o.state_volume;
@@ -979,11 +983,11 @@ void volume_state_start(const std::vector<PathData>& paths, std::vector<double>&
 }  // namespace
 
 void check_second_lode_angle(const std::vector<CurveData>& curves, const std::vector<PathData>& paths,
-                             const std::string& what, const std::string& or_else) {
+                             const std::string& what, const std::string& or_else, double b_d2) {
   for (const auto& c : curves)
-    if (lode_b_of(c.mode) != kLodeBD2) return;
+    if (lode_b_of(c.mode, b_d2) != kLodeBD2) return;
   for (const auto& d : paths)
-    if (lode_b_of(d.name) != kLodeBD2) return;
+    if (lode_b_of(d.name, b_d2) != kLodeBD2) return;
   throw std::invalid_argument("model calibration: " + what + " acts only away from D2's Lode angle, and every calibrated "
                               "curve is at b = 1/2: add a second Lode angle (--calibrate-on D2,D3, or a triaxial path) " +
                               or_else);
@@ -991,7 +995,7 @@ void check_second_lode_angle(const std::vector<CurveData>& curves, const std::ve
 
 void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector<PathData>& paths) {
   check_second_lode_angle(curves, paths, "the weighted fabric rule's Lode weight (ln_delta_w, n_w)",
-                          "or choose another --fabric-lode");
+                          "or choose another --fabric-lode");   // a fabric rule: the strain's b
 }
 
 namespace {
@@ -1058,7 +1062,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   const bool weighted = X && o.fabric == FabricLode::Weighted;
   const bool state_lode = X && o.state_limit && o.state_lode;
   if (state_lode) check_second_lode_angle(curves, paths, "the state exponent's Lode dependence (lambda_psi)",
-                                          "or choose --state-limit pressure");
+                                          "or choose --state-limit pressure", o.b_d2);
   const bool state_volume = X && o.state_volume;
   if (state_volume) {
     volume_state_start(paths, ext, o.csl_linear);
@@ -1120,7 +1124,7 @@ ModelCurve predict_curve(const Parameters& params, const CurveData& c, double ep
   const std::vector<double> iso = params.iso();
   const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface, params.fabric,
                         params.extended && params.state_limit, params.extended && params.state_lode,
-                        params.extended && params.state_volume};
+                        params.extended && params.state_volume, lode_b_of(c.mode, params.b_d2)};
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
                                          t.F.front(), t.eps, max_step, ext);
   ModelCurve m;
@@ -1180,7 +1184,7 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
   if (!(params.extended && params.state_volume)) check_start_scale(iso, d.nu, d.source);
   const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric,
                         params.extended && params.state_limit, params.extended && params.state_lode,
-                        params.extended && params.state_volume};
+                        params.extended && params.state_volume, lode_b_of(d.name, params.b_d2)};
   const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
                                          d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
   PathPrediction m;

@@ -1287,6 +1287,75 @@ TEST(ModelFriction, LodeSurfaceMovesTheLimitNotTheInitialSlope) {
   EXPECT_GT(d3.back().s, d2.back().s + 0.02);
 }
 
+// The plane-strain Lode parameter (thirteenth round): at the b it returns, the surface's gradient in principal
+// stress, by central differences of I1 I2 / I3 (Matsuoka-Nakai) or I1^3 / I3 (Lade-Duncan) written out here, has no
+// intermediate component in the deviatoric plane; 1/2 without a surface and as the surface shrinks to a circle;
+// falling with the stress ratio, Lade-Duncan's nearer 1/2 than Matsuoka-Nakai's.
+TEST(ModelFriction, PlaneStrainLodeParameterHasADeviatoricNormalWithoutIntermediateComponent) {
+  const auto invariant = [](Surface f, const double* x) {
+    const double i1 = x[0] + x[1] + x[2], i2 = x[0] * x[1] + x[1] * x[2] + x[2] * x[0], i3 = x[0] * x[1] * x[2];
+    return f == Surface::LadeDuncan ? i1 * i1 * i1 / i3 : i1 * i2 / i3;
+  };
+  EXPECT_EQ(plane_strain_lode_b(Surface::None, 0.7), kLodeBD2);
+  for (Surface f : {Surface::MatsuokaNakai, Surface::LadeDuncan}) {
+    double last = 0.5;
+    for (double s_ref : {0.01, 0.3, 0.6, 0.9}) {
+      const double b = plane_strain_lode_b(f, s_ref);
+      const double k = 1.0 / std::sqrt(1.0 - b + b * b), s = lode_limit(s_ref, b, f);
+      const double sig[3] = {1 + s * (2 - b) / 3 * k, 1 + s * (2 * b - 1) / 3 * k, 1 - s * (1 + b) / 3 * k};
+      double g[3];
+      for (int i = 0; i < 3; ++i) {
+        double up[3] = {sig[0], sig[1], sig[2]}, dn[3] = {sig[0], sig[1], sig[2]};
+        up[i] += 1e-6; dn[i] -= 1e-6;
+        g[i] = (invariant(f, up) - invariant(f, dn)) / 2e-6;
+      }
+      const double mean = (g[0] + g[1] + g[2]) / 3, dev1 = g[0] - mean;
+      EXPECT_LT(std::fabs(g[1] - mean), 1e-5 * std::fabs(dev1)) << surface_name(f) << " " << s_ref << " b " << b;
+      EXPECT_LT(b, last + 1e-12) << s_ref;
+      last = b;
+      if (s_ref == 0.01) EXPECT_NEAR(b, 0.5, 0.01);
+    }
+    EXPECT_LT(last, 0.4);
+  }
+  EXPECT_LT(plane_strain_lode_b(Surface::MatsuokaNakai, 0.7), plane_strain_lode_b(Surface::LadeDuncan, 0.7));
+}
+
+// Parameters::b_d2 is the stress's Lode parameter of D2 only: under the `Norm` fabric rule (the fabric blind to b)
+// a D2 curve predicted with b_d2 = 0.25 is the same curve named TT_b025 with b_d2 = 1/2, to the last bit; D3's is
+// untouched by b_d2; and b_d2 = 1/2 is the model of every earlier round.
+TEST(ModelFriction, D2StressLodeParameterActsOnD2Only) {
+  Parameters P = frictional_truth();
+  P.extended = true;
+  P.surface = Surface::LadeDuncan;
+  P.fabric = FabricLode::Norm;
+  const auto iso = P.iso();
+  CurveData c;
+  c.nu = 0.74;
+  for (int i = 0; i <= 100; ++i) c.eps.push_back(0.003 * i);
+  c.p.assign(c.eps.size(), isotropic_pressure(iso.data(), c.nu));
+  c.s.assign(c.eps.size(), 0.0);
+  c.F.assign(c.eps.size(), 0.01);
+  Parameters Q = P;
+  Q.b_d2 = 0.25;
+  c.mode = "TT_b025";
+  const ModelCurve tt = predict_curve(P, c, 1e9, 2e-3);
+  c.mode = "D2";
+  const ModelCurve d2q = predict_curve(Q, c, 1e9, 2e-3), d2p = predict_curve(P, c, 1e9, 2e-3);
+  for (std::size_t i = 0; i < c.eps.size(); ++i) {
+    EXPECT_EQ(d2q.s[i], tt.s[i]) << i;
+    EXPECT_EQ(d2q.p[i], tt.p[i]) << i;
+    EXPECT_EQ(d2q.F[i], tt.F[i]) << i;
+  }
+  EXPECT_GT(d2q.s.back(), d2p.s.back() + 0.01);   // b = 1/4 holds a larger stress ratio on Lade-Duncan than 1/2
+  c.mode = "D3";
+  const ModelCurve d3q = predict_curve(Q, c, 1e9, 2e-3), d3p = predict_curve(P, c, 1e9, 2e-3);
+  for (std::size_t i = 0; i < c.eps.size(); ++i) EXPECT_EQ(d3q.s[i], d3p.s[i]) << i;
+  EXPECT_EQ(lode_b_of("D2", 0.3), 0.3);
+  EXPECT_EQ(lode_b_of("isobaric_D2", 0.3), 0.3);
+  EXPECT_EQ(lode_b_of("TT_b050_dense", 0.3), 0.5);
+  EXPECT_EQ(lode_b_of("TC_s3_loose", 0.3), 0.0);
+}
+
 // ---- Calibrated on the laboratory set (issue 31; docs/model.md, "Calibrated on drained triaxial tests") ----
 
 // The path ensembles alone (constant side stress at two volume fractions) and an isotropic branch

@@ -78,8 +78,8 @@ def rows(path):
 
 
 def test_the_stored_curves_hold_their_volume_and_run_to_eps_d_one():
-    curves = glob.glob(os.path.join(DATA, "curves", "mu_*", "loose", "iso_vhi", "CV_*", "m*.csv"))
-    assert len(curves) == 4 * 2 * 4
+    curves = glob.glob(os.path.join(DATA, "curves", "mu_*", "*", "iso_vhi", "CV_*", "m*.csv"))
+    assert len(curves) == 5 * 2 * 8   # mu 0, 0.1, 0.3, 0.5, 1; D2, D3; K = 8
     for path in curves:
         header, rs = rows(path)
         col = lambda name: np.array([float(r[header.index(name)]) for r in rs])

@@ -2,6 +2,7 @@
 on hand-built curves; and the refusals of the paths-only calibration options (--start,
 --hold-isotropic, --max-iterations). docs/model.md, "Calibrated on drained triaxial tests"."""
 import csv
+import math
 import os
 import subprocess
 import sys
@@ -280,3 +281,52 @@ def test_collect_state_puts_the_state_parameters_runs_beside_the_lab_calibration
     r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--collect-state", str(tmp_path)],
                        capture_output=True, text=True, cwd=ROOT)
     assert r.returncode != 0 and "state_volume/loose/summary.csv" in r.stderr, r.stderr
+
+
+def test_d2_lode_sets_the_stress_lode_parameter_of_d2_curves_and_round_trips(tmp_path):
+    """`--d2-lode` (thirteenth round) on the stored mu = 0.5 dense calibration predicting the friction study's D2/D3:
+    a number moves the D2 and isobaric D2 predictions only (D3 and the laboratory tests keep their numbers), is written
+    as b_D2 and read back by --predict-with; `normal` gives the plane-strain b of the Lade-Duncan surface through the
+    file's s_max_a, which demkit.geotech_cv's independent root agrees with; bad values, and `normal` with D2 curves
+    in the calibration, are refused before anything is written."""
+    from demkit import geotech, geotech_cv
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech", "curves"),
+                        "--mu", "0.5", "--out", str(tmp_path / "m"), "--tests", "TC_s3", "--friction",
+                        os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    ens = tmp_path / "m" / "ensemble_dense"
+    params = os.path.join(ROOT, "data", "geotech", "model", "state_volume", "dense", "parameters.csv")
+    base = [DEM, "model", str(ens), "--no-plots", "--family", "extended", "--predict-with"]
+
+    def predict(name, *extra, p=params):
+        r = subprocess.run(base + [str(p), "--out", str(tmp_path / name), *extra], capture_output=True, text=True,
+                           timeout=300)
+        assert r.returncode == 0, r.stderr
+        with open(tmp_path / name / "prediction.csv") as fh:
+            return {(x["mode"], x["nu"], x["quantity"]): float(x["rms_over_band [-]"]) for x in csv.DictReader(fh)}
+
+    half, num, normal = predict("half"), predict("num", "--d2-lode", "0.33"), predict("normal", "--d2-lode", "normal")
+    assert set(half) == set(num) and any(k[0] == "D2" for k in half) and any(k[0] == "D3" for k in half)
+    for k in half:
+        if k[0] in ("D2", "isobaric_D2") and k[2] == "s_dev":
+            assert num[k] != half[k], k
+        elif k[0] not in ("D2", "isobaric_D2"):
+            assert num[k] == half[k], k
+    got = {x["parameter"]: x["value"] for x in read(tmp_path / "num" / "parameters.csv")}
+    assert float(got["b_D2"]) == 0.33 and "b_D2" not in {x["parameter"] for x in read(tmp_path / "half" / "parameters.csv")}
+    assert predict("again", p=tmp_path / "num" / "parameters.csv") == num   # the file's b_D2 read back
+    values = {x["parameter"]: float(x["value"]) for x in read(tmp_path / "normal" / "parameters.csv")}
+    s = values["s_max_a"]   # the surface through q/p = s at b = 1/2, as its triaxial-compression friction
+    k = 1 / math.sqrt(0.75)
+    const = geotech.criterion("LD", 1 + s * 0.5 * k, 1.0, 1 - s * 0.5 * k)
+    b = geotech_cv.plane_strain_b("LD", geotech.predicted_sin_phi("LD", const, 0.0))
+    assert values["b_D2"] == pytest.approx(b, abs=1e-5)
+    assert 0.25 < values["b_D2"] < 0.45
+    for bad, want in ((["--d2-lode", "1.5"], "--d2-lode 1.5"), (["--d2-lode", "half"], "--d2-lode half")):
+        r = subprocess.run(base + [params, "--out", str(tmp_path / "x")] + bad, capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and want in r.stderr, r.stderr
+        assert not (tmp_path / "x").exists()
+    r = subprocess.run([DEM, "model", str(ens), "--no-plots", "--no-jackknife", "--family", "extended", "--calibrate-on",
+                        "D2", "--d2-lode", "normal", "--out", str(tmp_path / "y")], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "--d2-lode normal" in r.stderr and "give --d2-lode a number" in r.stderr, r.stderr
+    assert not (tmp_path / "y").exists()

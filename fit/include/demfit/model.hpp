@@ -168,6 +168,10 @@ struct Parameters {
   Surface surface = Surface::None;   ///< Lode-angle surface of the extended family
   FabricLode fabric = FabricLode::Norm;   ///< Lode rule of the extended family's fabric limit
   double nu_ref = 0.74;    ///< [-] volume fraction the nu-laws are centred on
+  /// [-] the stress Lode parameter b of D2 and of paths made of D2 (lode_b_of): kLodeBD2, the strain's, until issue
+  /// 31's thirteenth round; the constant-volume D2 of data/geotech/constant_volume carries b = 0.32-0.39 at its
+  /// critical state (`dem model --d2-lode`). s_max stays the limit at kLodeBD2.
+  double b_d2 = kLodeBD2;
   std::vector<double> iso() const { return {p0, nu_c, gamma_p, C0, C1, nu_cC, alpha}; }
   void set_iso(const double* v) { p0 = v[0]; nu_c = v[1]; gamma_p = v[2]; C0 = v[3]; C1 = v[4]; nu_cC = v[5]; alpha = v[6]; }
 };
@@ -292,6 +296,25 @@ T lode_limit(const T& s_ref, double b, Surface f, double b_ref = kLodeBD2) {
 }
 
 
+/// The plane-strain Lode parameter of a surface (issue 31, thirteenth round): the b at which the surface through
+/// (s_ref, kLodeBD2) has a deviatoric normal with no intermediate component, so that a plastic flow normal to it in the
+/// deviatoric plane (SANISAND's direction n) keeps the intermediate strain at zero, as D2 does. There the trace's
+/// (sigma_1 - sigma_3)/p = s(b)/sqrt(1 - b + b^2) is largest (the tangent is normal to pure shear); golden-section
+/// search over b in [0, 1], to 1e-9. 1/2 without a surface (a circle); below it for Lade-Duncan and Matsuoka-Nakai,
+/// falling as s_ref grows.
+inline double plane_strain_lode_b(Surface f, double s_ref) {
+  if (f == Surface::None) return kLodeBD2;
+  const auto width = [&](double b) { return lode_limit(s_ref, b, f) / std::sqrt(1.0 - b + b * b); };
+  const double g = (std::sqrt(5.0) - 1.0) / 2.0;
+  double a = 0.0, c = 1.0;
+  double x1 = c - g * (c - a), x2 = a + g * (c - a), f1 = width(x1), f2 = width(x2);
+  while (c - a > 1e-9) {
+    if (f1 < f2) { a = x1; x1 = x2; f1 = f2; x2 = a + g * (c - a); f2 = width(x2); }
+    else { c = x2; x2 = x1; f2 = f1; x1 = c - g * (c - a); f1 = width(x1); }
+  }
+  return 0.5 * (a + c);
+}
+
 /// Largest |principal component| of a deviator of unit magnitude (sigma_dev convention of
 /// docs/definitions.md) with intermediate ratio b: max(2 - b, 1 + b) / (3 sqrt(1 - b + b^2));
 /// 2/3 at b = 0 and 1, 1/sqrt(3) at b = 1/2.
@@ -371,6 +394,10 @@ struct Ext {
   bool state_limit = false;
   bool state_lode = false;   ///< n_psi scaled by (c_3(b_ref)/c_3(b))^lambda_psi (the block carries kLambdaPsi)
   bool state_volume = false;   ///< the volume-form state parameter (the block carries kNuCs..kCCs)
+  /// The stress's Lode parameter where it is not the strain's b (D2: Parameters::b_d2, thirteenth round): the
+  /// stress-ratio limit on the surface, the rate's s_max/s_lim and the Opening gate read it; the fabric rules keep b
+  /// (the DEM's D2 fabric is not at the stress's b; docs/model.md). Negative: b.
+  double b_stress = -1.0;
 };
 
 /// The volume-form state parameter psi = nu - nu_cs(p), nu_cs(p) = nu_cs + lambda_cs ln(p/kPCsRef) (tenth round)
@@ -527,15 +554,16 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   // The frictional extension (docs/model.md): r the mobilised stress ratio on the test's Lode
   // surface; neutral (the group model's numbers exactly) when m.ext.p is null or all zero.
   const LocalExt<T> X = local_ext(m.ext.p, nu_law, m.nu_ref);
-  const T s_lim = lode_limit(L.s_max, m.ext.b, m.ext.surface);
+  const double b_s = m.ext.b_stress >= 0.0 ? m.ext.b_stress : m.ext.b;   // the stress's Lode parameter
+  const T s_lim = lode_limit(L.s_max, b_s, m.ext.surface);
   T r = T(sigma) * y.s / s_lim;
   if (!(r > T(1e-6))) r = T(1e-6);
   using std::pow;
   // The fabric's gate: the mobilisation r, or under the `Opening` rule the minor principal
   // deviatoric stress ratio over its value at the D2 limit (r itself at b_ref).
   T r_F = r;
-  if (m.ext.fabric == FabricLode::Opening && m.ext.b != kLodeBD2)
-    r_F = r * s_lim * T(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2)) / L.s_max;
+  if (m.ext.fabric == FabricLode::Opening && b_s != kLodeBD2)
+    r_F = r * s_lim * T(minor_fraction(b_s) / minor_fraction(kLodeBD2)) / L.s_max;
   const bool weighted = m.ext.p && m.ext.fabric == FabricLode::Weighted && m.ext.b != kLodeBD2;
   const bool opened = m.ext.fabric == FabricLode::Overlap || m.ext.fabric == FabricLode::Extension ||
                       m.ext.fabric == FabricLode::Weighted;
@@ -562,13 +590,13 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   // The deviatoric source of ds. The rate is scaled by s_max/s_lim so that the initial shear
   // stiffness G/p = beta_s s_max does not depend on the Lode angle (only the limit does): the
   // DEM's D2 and D3 stress ratios rise together at first. 1 without a surface or at b_ref.
-  const bool lode = m.ext.surface != Surface::None && m.ext.b != kLodeBD2;
+  const bool lode = m.ext.surface != Surface::None && b_s != kLodeBD2;
   // The state-dependent limit (fifth round; off: s_lim itself, untouched): the target of the stress
   // ratio only; the mobilisation r, the rate scaling and the dilatancy keep s_lim (psi_p = 0).
   // The volume-form state parameter (tenth round) likewise: s_lim e^{n_b psi}.
   const T s_target = vol_state ? s_lim * exp(peak_exponent(m.ext.p, y.p) * psi)
                      : (m.ext.p && m.ext.state_limit)
-                         ? s_lim * state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref, m.ext.b, m.ext.state_lode)
+                         ? s_lim * state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref, b_s, m.ext.state_lode)
                          : s_lim;
   const T g_s = rate_scale(m, B, y.p);
   const T shear = L.beta_s * g_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_target - y.s) * shape_s;

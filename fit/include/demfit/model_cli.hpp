@@ -35,6 +35,10 @@ struct ModelCommandOptions {
   /// parameters.csv of another `dem model` run: no calibration, every curve and path predicted with it (the family,
   /// surface and fabric rule from --family/--surface/--fabric-lode as that run was given them; the state limit from the file)
   std::string predict_with;
+  /// --d2-lode: the stress Lode parameter b of D2 curves and paths: "" (a calibration 1/2, --predict-with the file's
+  /// b_D2), a number in (0, 1), or "normal" (the plane-strain b of the surface through the calibrated limit s_max_a,
+  /// plane_strain_lode_b; docs/model.md, thirteenth round)
+  std::string d2_lode;
 };
 
 void add_model_options(CLI::App& app, ModelCommandOptions& o);

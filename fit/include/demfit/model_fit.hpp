@@ -76,6 +76,8 @@ struct CalibrationOptions {
   /// fit (`--start A,B,...` with `--hold-isotropic`) holds them at the first start's values in every
   /// start, so that the starts differ in the fitted parameters only.
   const Parameters* hold_from = nullptr;
+  /// The stress Lode parameter of D2 curves and paths (Parameters::b_d2; `--d2-lode`), kLodeBD2 by default.
+  double b_d2 = kLodeBD2;
 };
 
 /// Parameters from a `parameters.csv` of `dem model` (the names of its first column, the value
@@ -93,8 +95,9 @@ int ext_index(const std::string& name);
 
 /// Intermediate-stress ratio b the model assumes for a mode or path name: 0 for D3 and
 /// triaxial paths (axisymmetric compression), and for the laboratory tests of data/geotech
-/// (demkit/geotech_model.py: TC_* 0, TE_* 1, TT_bNNN NNN/100), kLodeBD2 otherwise (D2 and paths made of D2).
-double lode_b_of(const std::string& mode);
+/// (demkit/geotech_model.py: TC_* 0, TE_* 1, TT_bNNN NNN/100), b_d2 otherwise (D2 and paths made of D2: the
+/// parameters' b_d2, kLodeBD2 unless `--d2-lode` says otherwise).
+double lode_b_of(const std::string& mode, double b_d2 = kLodeBD2);
 const char* surface_name(Surface s);
 const char* fabric_lode_name(FabricLode f);   ///< "norm", "principal", "opening", "overlap" (the --fabric-lode words)
 
@@ -143,7 +146,7 @@ void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector
 /// Throws std::invalid_argument naming `what` (a coefficient that acts only away from D2's Lode angle) when every
 /// calibrated curve and path is at b = 1/2; `or_else` ends the message with the other way out.
 void check_second_lode_angle(const std::vector<CurveData>& curves, const std::vector<PathData>& paths,
-                             const std::string& what, const std::string& or_else);
+                             const std::string& what, const std::string& or_else, double b_d2 = kLodeBD2);
 
 /// Reads a path ensemble CSV; throws std::runtime_error naming the file and a missing column.
 PathData read_path(const std::string& path, const std::string& name, double nu);
