@@ -522,12 +522,12 @@ TRIM = ("step", "time_s", "eps_xx", "eps_yy", "eps_zz", "eps_v", "eps_d", "nu", 
         "rate_xy_1_s", "rate_xz_1_s", "rate_yz_1_s", "stage")
 
 
-def trim_curve(src, dst):
-    """A copy of a curve with its comment lines and the TRIM columns only (for data/)."""
+def trim_curve(src, dst, columns=TRIM):
+    """A copy of a curve with its comment lines and the `columns` (TRIM) only (for data/)."""
     with open(src) as fh:
         lines = fh.read().splitlines()
     rows = list(csv.reader(ln for ln in lines if ln and not ln.startswith("#")))
-    keep = [rows[0].index(c) for c in TRIM if c in rows[0]]
+    keep = [rows[0].index(c) for c in columns if c in rows[0]]
     buf = io.StringIO()
     buf.write("\n".join(ln for ln in lines if ln.startswith("#")) + "\n")
     w = csv.writer(buf, lineterminator="\n")

@@ -8,8 +8,9 @@ p* = 5e-2 preparations of data/geotech (nu = 0.69, the friction study's densest 
 frictionless one, nu = 0.75), to eps_d = 1.0, with the full stress tensor.
 
     /usr/bin/python3 -m demkit.geotech_cv run --out runs/cv --preps runs/geotech_vhi [--mu 0.1 0.3 0.5 1]
-        one `dem mode` per (mu, packing, mode) from the iso_vhi checkpoints (`demkit.geotech run
-        --levels iso_vhi` made them), in demkit.geotech's layout ROOT/mu_MU/PREP/iso_vhi/CV_D2/mSEED.csv;
+        one `dem mode` per (mu, packing, mode) from the iso_vhi checkpoints under PREPS (`demkit.geotech run
+        --levels iso_vhi` makes them; those missing are prepared the same way first), in demkit.geotech's layout
+        ROOT/mu_MU/PREP/iso_vhi/CV_D2/mSEED.csv;
     /usr/bin/python3 -m demkit.geotech_cv analyse runs/cv --out data/geotech/constant_volume [--store]
         the stress ratio q/p, the Lode parameter b and p* over three strain windows (the friction study's
         0.25-0.30, 0.55-0.60, 0.90-1.00) with 95 % intervals over packings, demkit.geotech's critical-state
@@ -21,6 +22,7 @@ frictionless one, nu = 0.75), to eps_d = 1.0, with the full stress tensor.
 import argparse
 import math
 import os
+import sys
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -47,8 +49,8 @@ def run_one(args, mu, seed, mode):
     ckpt = sorted(gt.glob.glob(os.path.join(gt.prep_dir(args.preps, prep, mu, seed, LEVEL), "checkpoints",
                                             f"{LEVEL}_phi*.ckpt")))
     if len(ckpt) != 1:
-        return f"no single {LEVEL} checkpoint for {prep} mu={mu} m{seed} under {args.preps} (run demkit.geotech " \
-               f"run --levels {LEVEL} first)"
+        return f"no single {LEVEL} checkpoint for {prep} mu={mu} m{seed} under {args.preps} (its preparation " \
+               f"failed: {gt.prep_dir(args.preps, prep, mu, seed, LEVEL)}.log)"
     out = os.path.join(args.out, f"mu_{mu}", prep, LEVEL, f"CV_{mode}", f"m{seed}.csv")
     if os.path.exists(out):
         return "ok (kept)"
@@ -61,15 +63,43 @@ def run_one(args, mu, seed, mode):
 
 
 def run(args):
-    jobs = [(mu, s, m) for mu in args.mu for s in range(args.first_seed, args.first_seed + args.packings)
-            for m in MODES]
+    seeds = range(args.first_seed, args.first_seed + args.packings)
+    preps = [(prep_of(mu), mu, s) for mu in args.mu for s in seeds]
+    jobs = [(mu, s, m) for mu in args.mu for s in seeds for m in MODES]
     with ThreadPoolExecutor(args.jobs) as pool:
+        # the iso_vhi preparations first, where missing (demkit.geotech's, so that `demkit.geotech run --levels
+        # iso_vhi` and these runs share them)
+        for (p, mu, s), rc in zip(preps, pool.map(lambda a: gt.prepare(args.dem, args.scene, args.preps, *a, own=LEVEL),
+                                                  preps)):
+            if rc:
+                print(f"preparation {p} mu={mu} m{s} {LEVEL} failed ({rc})", file=sys.stderr)
+        failed = 0
         for job, msg in zip(jobs, pool.map(lambda a: run_one(args, *a), jobs)):
             print(f"mu={job[0]} m{job[1]} CV_{job[2]}: {msg}", flush=True)
+            failed += not msg.startswith("ok")
+    if failed:
+        print(f"demkit.geotech_cv: {failed} of {len(jobs)} runs failed (their .log beside the curve, or the "
+              f"preparation's under {args.preps})", file=sys.stderr)
+    return 1 if failed else 0
+
+
+FABRIC = ("F_xx", "F_yy", "F_zz", "F_xy", "F_xz", "F_yz")
+
+
+def fabric_b(c, k):
+    """The Lode parameter (F_2 - F_3)/(F_1 - F_3) of the fabric tensor averaged over rows k (NaN without it)."""
+    if not all(n in c for n in FABRIC):
+        return math.nan
+    t = np.zeros((3, 3))
+    for (i, j), n in zip(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)), FABRIC):
+        t[i, j] = t[j, i] = np.mean(c[n][k])
+    f = np.sort(np.linalg.eigvalsh(t))[::-1]
+    return float((f[1] - f[2]) / (f[0] - f[2]))
 
 
 def window_values(c):
-    """q/p, b and p* of one curve, each averaged over every WINDOWS row range (NaN where it is not reached)."""
+    """q/p, b, p* and the fabric's b of one curve, each averaged over every WINDOWS row range (NaN where it is not
+    reached)."""
     x = c["eps_d"]
     s = gt.principal_stresses(c)
     series = {"q_over_p": c["sigma_dev_Pa"] / c["p_Pa"], "b": gt.b_value(s[:, 0], s[:, 1], s[:, 2]),
@@ -79,6 +109,7 @@ def window_values(c):
         k = (x >= lo - 1e-9) & (x <= hi + 1e-9)
         for name, y in series.items():
             out[(name, lo)] = float(np.mean(y[k])) if k.any() else math.nan
+        out[("b_F", lo)] = fabric_b(c, k) if k.any() else math.nan
     return out
 
 
@@ -130,9 +161,13 @@ def table_rows(results, summary_csv):
         row = {"mu": mu, "test": test, "K": summ["K"], "critical_state": summ["critical_state"],
                "volume_stationary": summ["volume_stationary"], "stress_stationary": summ["stress_stationary"]}
         for lo, hi in WINDOWS:
-            for name in ("q_over_p", "b", "p_star"):
+            for name in ("q_over_p", "b", "p_star", "b_F"):
                 m, h, _ = gt.mean_ci([v["windows"][(name, lo)] for v in members])
                 row[f"{name}_{lo:.2f}_{hi:.2f}"], row[f"{name}_{lo:.2f}_{hi:.2f}_ci95"] = m, h
+        # the fall from the friction study's window to the end, packing by packing (paired)
+        m, h, _ = gt.mean_ci([v["windows"][("q_over_p", WINDOWS[0][0])] - v["windows"][("q_over_p", WINDOWS[-1][0])]
+                              for v in members])
+        row["q_over_p_fall"], row["q_over_p_fall_ci95"] = m, h
         b_end = row[f"b_{WINDOWS[-1][0]:.2f}_{WINDOWS[-1][1]:.2f}"]
         row["drained_q_over_p_at_b"], row["drained_q_over_p_at_b_ci95"] = drained_at(fam, b_end)
         for name in ("MN", "LD"):
@@ -169,18 +204,22 @@ def report(rows):
     w0, w1 = WINDOWS[0], WINDOWS[-1]
     k0, k1 = f"{w0[0]:.2f}_{w0[1]:.2f}", f"{w1[0]:.2f}_{w1[1]:.2f}"
     lines = ["<!-- demkit.geotech_cv analyse: constant-volume D2/D3 from the p* = 5e-2 preparations (loose; mu = 0 the frictionless one); means over "
-             "packings with 95 % Student-t intervals; drained: data/geotech's constant-p tests at the same level read "
-             "at the measured b (linear in b between neighbours); b_ps: the plane-strain b of a surface through TC_p's "
-             "phi_cs with the flow normal to it in the deviatoric plane -->",
-             f"| mu | test | K | q/p at eps_d {w0[0]}-{w0[1]} | q/p at {w1[0]}-{w1[1]} | drained q/p_cs at that b | "
-             f"b at {w0[0]}-{w0[1]} | b at {w1[0]}-{w1[1]} | b_ps MN | b_ps LD | p* at {w1[0]}-{w1[1]} | critical state |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "packings with 95 % Student-t intervals; fall: q/p at the first window minus the last, per packing; drained: "
+             "data/geotech's constant-p tests at the same level and preparation, linear in their target b, read at the "
+             "measured b; b_ps: the plane-strain b of a surface through TC_p's phi_cs with the flow normal to it in the "
+             "deviatoric plane; b_F: the fabric tensor's Lode parameter -->",
+             f"| mu | test | K | q/p at eps_d {w0[0]}-{w0[1]} | q/p at {w1[0]}-{w1[1]} | fall | drained q/p_cs at that b | "
+             f"b at {w0[0]}-{w0[1]} | b at {w1[0]}-{w1[1]} | b_ps MN | b_ps LD | b_F at {w1[0]}-{w1[1]} | "
+             f"p* at {w1[0]}-{w1[1]} | critical state |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['mu']} | {r['test']} | {r['K']} | {gt.pm(r['q_over_p_' + k0], r['q_over_p_' + k0 + '_ci95'], 3)} | "
                      f"{gt.pm(r['q_over_p_' + k1], r['q_over_p_' + k1 + '_ci95'], 3)} | "
+                     f"{gt.pm(r['q_over_p_fall'], r['q_over_p_fall_ci95'], 3)} | "
                      f"{gt.pm(r['drained_q_over_p_at_b'], r['drained_q_over_p_at_b_ci95'], 3)} | "
                      f"{gt.pm(r['b_' + k0], r['b_' + k0 + '_ci95'], 3)} | {gt.pm(r['b_' + k1], r['b_' + k1 + '_ci95'], 3)} | "
                      f"{_num(r['b_plane_strain_MN'])} | {_num(r['b_plane_strain_LD'])} | "
+                     f"{gt.pm(r['b_F_' + k1], r['b_F_' + k1 + '_ci95'], 3)} | "
                      f"{gt.pm(r['p_star_' + k1], r['p_star_' + k1 + '_ci95'], 4)} | {r['critical_state']} |")
     return "\n".join(lines) + "\n"
 
@@ -220,7 +259,8 @@ def plot(results, out):
 def store(root, out):
     for key, paths in gt.collect(root).items():
         for p in paths:
-            gt.trim_curve(p, os.path.join(out, "curves", f"mu_{key[0]}", *key[1:], os.path.basename(p)))
+            gt.trim_curve(p, os.path.join(out, "curves", f"mu_{key[0]}", *key[1:], os.path.basename(p)),
+                          gt.TRIM + FABRIC)
 
 
 def main(argv=None):
@@ -228,11 +268,11 @@ def main(argv=None):
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="constant-volume D2/D3 from the iso_vhi preparations")
     r.add_argument("--out", required=True)
-    r.add_argument("--preps", required=True, help="a demkit.geotech run folder with the iso_vhi preparations")
+    r.add_argument("--preps", required=True, help="a demkit.geotech run folder with (or for) the iso_vhi preparations")
     r.add_argument("--scene", default="data/scenes/geotech.toml")
     r.add_argument("--dem", default="build/dem")
     r.add_argument("--mu", nargs="+", default=["0", "0.1", "0.3", "0.5", "1"])
-    r.add_argument("--packings", type=int, default=4)
+    r.add_argument("--packings", type=int, default=8)
     r.add_argument("--first-seed", type=int, default=1)
     r.add_argument("--jobs", type=int, default=2)
     a = sub.add_parser("analyse", help="the tables and the figure")
@@ -243,7 +283,7 @@ def main(argv=None):
     a.add_argument("--no-plots", action="store_true")
     args = ap.parse_args(argv)
     if args.cmd == "run":
-        return run(args)
+        sys.exit(run(args))
     analyse(args.root, args.out, args.summary, plots=not args.no_plots)
     if args.store:
         store(args.root, args.out)
