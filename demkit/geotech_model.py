@@ -245,7 +245,7 @@ def collect_state(root):
                      "worst RMS of model - DEM mean over the mean 95 % band half-width per laboratory curve (mu = 0.5): lab = "
                      "the stored calibration of the curve's own preparation (lab_PREP, no state parameter); dense-state / "
                      "loose-state = calibrated on TC_s3 of that preparation with --state-limit volume, the other preparation "
-                     "predicted with --predict-with; nan: not integrated (diverged) or not a quantity; chi2/dof dense-state "
+                     "predicted with --predict-with; inf: the model diverged along it; nan: not a quantity; chi2/dof dense-state "
                      f"{chi['dense']}, loose-state {chi['loose']}")
     return rows
 

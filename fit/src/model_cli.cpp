@@ -169,6 +169,12 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
                num(cal.value[i] + tq * se), num(cal.se_cov[i]), jk ? num(cal.se_jackknife[i]) : "nan", unit_of(cal.names[i])});
   }
   t.add_row({"nu_ref", "centre of the nu-laws (fixed)", num(cal.params.nu_ref), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+  if (std::isfinite(cal.params.psi_lo) && std::isfinite(cal.params.psi_hi)) {   // files without the rows: no clamp
+    t.add_row({"psi_min", "laws of psi held at their value here below it (the calibration's states; --no-psi-range)",
+               num(cal.params.psi_lo), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+    t.add_row({"psi_max", "laws of psi held at their value here above it (the calibration's states; --no-psi-range)",
+               num(cal.params.psi_hi), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+  }
   if (cal.params.b_d2 != kLodeBD2)   // files without the row: 1/2 (read_parameters)
     t.add_row({"b_D2", "stress Lode parameter b of D2 curves and paths (fixed; --d2-lode)", num(cal.params.b_d2), "nan",
                "fixed", "nan", "nan", "nan", "nan", "-"});
@@ -432,22 +438,30 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
   std::vector<std::pair<std::string, double>> keys;
   for (const auto& r : rows)
     if (std::find(keys.begin(), keys.end(), std::make_pair(r.mode, r.nu)) == keys.end()) keys.push_back({r.mode, r.nu});
+  // A quantity the curve has but whose error is not finite (the model's curve went to inf or nan: it diverged) is
+  // "inf", and so is the curve's worst and the calibration's: never left out of the maximum.
+  const auto cell = [](double x) { return std::isinf(x) ? std::string("inf") : num(x, 3); };
   double worst_all = 0;
+  int diverged = 0;
   for (const auto& [mode, nu] : keys) {
-    double v[4] = {std::nan(""), std::nan(""), std::nan(""), std::nan("")};
+    double v[4] = {std::nan(""), std::nan(""), std::nan(""), std::nan("")};   // nan: the curve has no such quantity
     std::string role;
     for (const auto& r : rows) {
       if (r.mode != mode || r.nu != nu || r.quantity.find("after turn") != std::string::npos) continue;
       role = r.role;
       const int q = r.quantity == "p_star" ? 0 : r.quantity == "eps_v" ? 1 : r.quantity.rfind("s_dev", 0) == 0 ? 2 : 3;
-      v[q] = r.rms_over_band;
+      v[q] = std::isfinite(r.rms_over_band) ? r.rms_over_band : std::numeric_limits<double>::infinity();
     }
-    double worst = std::nan("");   // nan: no quantity judged (a path the model could not integrate)
-    for (double x : v) if (std::isfinite(x)) worst = std::isfinite(worst) ? std::max(worst, x) : x;
-    if (std::isfinite(worst)) worst_all = std::max(worst_all, worst);
-    t.add_row({mode, num(nu, 4), role, num(v[0], 3), num(v[1], 3), num(v[2], 3), num(v[3], 3), num(worst, 3)});
+    double worst = std::nan("");   // nan: no quantity judged
+    for (double x : v) if (!std::isnan(x)) worst = std::isnan(worst) ? x : std::max(worst, x);
+    if (!std::isnan(worst)) worst_all = std::max(worst_all, worst);
+    if (std::isinf(worst)) ++diverged;
+    t.add_row({mode, num(nu, 4), role, cell(v[0]), cell(v[1]), cell(v[2]), cell(v[3]), cell(worst)});
   }
-  t.add_row({"calibration", "nan", "chi2/dof " + num(cal.chi2_dof(), 4), "nan", "nan", "nan", "nan", num(worst_all, 3)});
+  t.add_row({"calibration", "nan", "chi2/dof " + num(cal.chi2_dof(), 4), "nan", "nan", "nan", "nan", cell(worst_all)});
+  if (diverged)
+    std::cerr << "dem model: " << diverged << " curves not finite (the model diverged along them): \"inf\" in "
+              << (out / "summary.md").string() << "\n";
   write_table_all(t, (out / "summary").string(),
                   std::string("RMS of model - DEM mean over the mean 95 % band half-width per curve (") +
                       (cal.params.extended ? std::string("extended family, ") + surface_name(cal.params.surface) + " surface, fabric limit " +
@@ -940,6 +954,21 @@ FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions
   P.surface = P.extended ? co.surface : Surface::None;
   P.fabric = P.extended ? co.fabric : FabricLode::Norm;
   if (!o.d2_lode.empty()) P.b_d2 = o.d2_lode == "normal" ? plane_strain_lode_b(P.surface, P.shear[kSmaxA]) : co.b_d2;
+  // The laws of psi: the file's range; without one, that of the curves --calibrate-on names (the states that
+  // calibration held; here they are predicted with the rest); --no-psi-range: unbounded
+  if (!o.psi_range) {
+    P.psi_lo = -std::numeric_limits<double>::infinity();
+    P.psi_hi = std::numeric_limits<double>::infinity();
+  } else if (!std::isfinite(P.psi_lo) && !o.calibrate_on.empty()) {
+    const auto named = [&](const std::string& n) {
+      return std::find(o.calibrate_on.begin(), o.calibrate_on.end(), n) != o.calibrate_on.end();
+    };
+    std::vector<CurveData> cs;
+    std::vector<PathData> ps;
+    for (const auto& c : in.other) if (named(c.mode)) cs.push_back(c);
+    for (const auto& d : in.other_paths) if (named(d.name)) ps.push_back(d);
+    std::tie(P.psi_lo, P.psi_hi) = psi_range(P, cs, ps, o.eps_max);
+  }
   const std::vector<double> iso = P.iso();
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(iso[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(P.shear[i]); }
@@ -985,6 +1014,9 @@ int run(const ModelCommandOptions& o) {
   for (const auto& fam : fams) fits.push_back(fit_family(in, co, o, fam == "extended"));
   if (o.d2_lode == "normal")   // the plane-strain b of the calibrated limit (no D2 curve was fitted: checked_inputs)
     for (auto& ff : fits) ff.cal.params.b_d2 = plane_strain_lode_b(ff.cal.params.surface, ff.cal.params.shear[kSmaxA]);
+  if (o.psi_range)   // the laws of psi kept within the calibration's own states: its fitted curves do not move
+    for (auto& ff : fits)
+      std::tie(ff.cal.params.psi_lo, ff.cal.params.psi_hi) = psi_range(ff.cal.params, in.fit_curves, in.fit_paths, o.eps_max);
   std::size_t chosen = 0;
   if (fits.size() == 2) {
     chosen = write_selection(fits[0], fits[1], K, out) ? 1 : 0;
@@ -1050,6 +1082,10 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "normal (the plane-strain b of the Lode surface through the calibrated limit s_max_a: its deviatoric "
                  "normal has no intermediate component); default 0.5, with --predict-with the file's (docs/model.md)")
       ->default_str("");
+  app.add_flag_callback("--no-psi-range", [&o] { o.psi_range = false; },
+                        "with --state-limit volume: read the laws of psi unbounded (default: held at their values at the "
+                        "edges of the calibration's own states, rows psi_min and psi_max; with --predict-with the file's "
+                        "range, or without one the --calibrate-on curves')");
   app.add_option("--max-iterations", o.max_iterations, "Ceres iterations of each fit (default 300)");
   app.add_option("--start", o.start, "parameters.csv of another `dem model` run: the start values (re-centred on "
                  "this data's nu_ref); with it the path ensembles alone may be calibrated (--calibrate-on PATHS). "

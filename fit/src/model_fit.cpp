@@ -367,6 +367,8 @@ Parameters read_parameters(const std::string& path) {
   for (int i = 0; i < kNumShear; ++i) P.shear[i] = get(shear_name(i));
   P.nu_ref = get("nu_ref");
   if (v.count("b_D2")) P.b_d2 = get("b_D2");   // files before the thirteenth round: kLodeBD2
+  if (v.count("psi_min")) P.psi_lo = get("psi_min");   // ... and without a range (infinite: no clamp)
+  if (v.count("psi_max")) P.psi_hi = get("psi_max");
   P.extended = v.count(ext_name(0)) > 0;
   P.state_limit = P.extended && v.count(ext_name(kNPsiA)) > 0;
   P.state_lode = P.state_limit && v.count(ext_name(kLambdaPsi)) > 0;
@@ -1117,20 +1119,79 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   return cal;
 }
 
+namespace {
+ModelCurve predict_curve_seen(const Parameters& params, const CurveData& c, double eps_max, double max_step,
+                              double* psi_seen);
+PathPrediction predict_path_seen(const Parameters& params, const PathData& d, double max_step, double* psi_seen);
+}  // namespace
+
 ModelCurve predict_curve(const Parameters& params, const CurveData& c, double eps_max, double max_step) {
+  return predict_curve_seen(params, c, eps_max, max_step, nullptr);
+}
+
+PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step) {
+  return predict_path_seen(params, d, max_step, nullptr);
+}
+
+namespace {
+ModelCurve predict_curve_seen(const Parameters& params, const CurveData& c, double eps_max, double max_step,
+                              double* psi_seen) {
   const CurveData t = truncated(c, eps_max);
   if (t.eps.empty() || std::fabs(t.eps.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + c.source + " does not start at eps_d = 0");
   const std::vector<double> iso = params.iso();
   const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface, params.fabric,
                         params.extended && params.state_limit, params.extended && params.state_lode,
-                        params.extended && params.state_volume, lode_b_of(c.mode, params.b_d2)};
+                        params.extended && params.state_volume, lode_b_of(c.mode, params.b_d2), params.psi_lo,
+                        params.psi_hi, psi_seen};
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
                                          t.F.front(), t.eps, max_step, ext);
   ModelCurve m;
   m.eps = t.eps;
   for (const auto& y : st) { m.p.push_back(y.p); m.s.push_back(y.s); m.F.push_back(y.F); m.nu.push_back(std::exp(y.ln_nu)); }
   return m;
+}
+
+PathPrediction predict_path_seen(const Parameters& params, const PathData& d, double max_step, double* psi_seen) {
+  if (d.acc.empty() || std::fabs(d.acc.front()) > 1e-12)
+    throw std::invalid_argument("model prediction: " + d.source + " does not start at eps_d_accumulated = 0");
+  const std::vector<double> iso = params.iso();
+  if (!(params.extended && params.state_volume)) check_start_scale(iso, d.nu, d.source);
+  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric,
+                        params.extended && params.state_limit, params.extended && params.state_lode,
+                        params.extended && params.state_volume, lode_b_of(d.name, params.b_d2), params.psi_lo,
+                        params.psi_hi, psi_seen};
+  const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
+                                         d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
+  PathPrediction m;
+  m.acc = d.acc;
+  for (const auto& r : st) {
+    m.p.push_back(r.state.p); m.s.push_back(r.state.s); m.F.push_back(r.state.F);
+    m.nu.push_back(std::exp(r.state.ln_nu)); m.ev.push_back(r.eps_vol / 3.0);
+  }
+  return m;
+}
+}  // namespace
+
+std::pair<double, double> psi_range(const Parameters& params, const std::vector<CurveData>& curves,
+                                    const std::vector<PathData>& paths, double eps_max, double max_step) {
+  // The largest |psi| of the model's own states along the calibration curves, on both sides of the critical state:
+  // a dense-only calibration (psi >= 0) still predicts loose states as far from the line as its dense ones were
+  // (those predictions stay as they were); only states farther than any it held read the laws at that distance.
+  const double inf = std::numeric_limits<double>::infinity();
+  if (!(params.extended && params.state_volume)) return {-inf, inf};
+  Parameters P = params;
+  P.psi_lo = -inf;
+  P.psi_hi = inf;
+  double lo = inf, hi = -inf;
+  double seen[2] = {inf, -inf};   // every evaluation of the right-hand side, RK4's stages included
+  for (const auto& c : curves) predict_curve_seen(P, c, eps_max, max_step, seen);
+  for (const auto& d : paths) predict_path_seen(P, d, max_step, seen);
+  lo = seen[0];
+  hi = seen[1];
+  if (!(lo <= hi)) return {-inf, inf};
+  const double reach = std::max(std::fabs(lo), std::fabs(hi));   // the same distance on the other side of psi = 0
+  return {-reach, reach};
 }
 
 std::vector<PredictionError> prediction_errors(const ModelCurve& m, const CurveData& c) {
@@ -1175,25 +1236,6 @@ void check_start_scale(const std::vector<double>& iso, double nu0, const std::st
                                 ": p_iso(nu0) <= 0, so the start scale k = p0/p_iso(nu0) and the bulk modulus are not "
                                 "positive and the path cannot be integrated; calibrate on an isotropic branch that "
                                 "reaches below this nu (docs/model.md)");
-}
-
-PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step) {
-  if (d.acc.empty() || std::fabs(d.acc.front()) > 1e-12)
-    throw std::invalid_argument("model prediction: " + d.source + " does not start at eps_d_accumulated = 0");
-  const std::vector<double> iso = params.iso();
-  if (!(params.extended && params.state_volume)) check_start_scale(iso, d.nu, d.source);
-  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric,
-                        params.extended && params.state_limit, params.extended && params.state_lode,
-                        params.extended && params.state_volume, lode_b_of(d.name, params.b_d2)};
-  const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
-                                         d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
-  PathPrediction m;
-  m.acc = d.acc;
-  for (const auto& r : st) {
-    m.p.push_back(r.state.p); m.s.push_back(r.state.s); m.F.push_back(r.state.F);
-    m.nu.push_back(std::exp(r.state.ln_nu)); m.ev.push_back(r.eps_vol / 3.0);
-  }
-  return m;
 }
 
 namespace {

@@ -1751,3 +1751,62 @@ TEST(ModelVolumeState, TheStressRatioShapeStaysPositive) {
     EXPECT_GT(std::fabs(up.s - f.s), 1e-6 * std::fabs(f.s)) << "a test that could fail: kappa_s acts above the floor";
   }
 }
+
+// The range of psi the laws are read in (thirteenth round): psi_range is [-R, R], R the largest |psi| of the model's
+// own states along the calibration paths (at least that of the rows, computed here from predict_path and state_psi;
+// RK4's stages between them reach 1e-4 further at most); those paths predicted with the range are the unclamped ones
+// to the last bit; and a state beyond R reads every law of psi at R: a dense path
+// (psi >= R throughout) predicted with the range equals, to rounding, the unclamped prediction of a model whose laws
+// are constants equal to their values at psi = R (the peak's exponent off in both; the dilatancy reads psi itself).
+TEST(ModelVolumeState, PsiRangeHoldsTheLawsAtTheCalibrationsReach) {
+  Parameters P = volume_truth();
+  P.shear[kSmaxB] = 2.0;
+  P.ext[kNFB] = -30.0; P.ext[kKappaB] = 5.0; P.ext[kDilB] = -2.0;
+  P.ext[kNB] = 0.0;
+  const auto iso = P.iso();
+  const Rows r = triaxial_rows(0.6);
+  std::mt19937_64 rng(7);
+  std::vector<PathData> cal;
+  for (double p0 : {1e-3, 1e-2}) {
+    const double nu = P.ext[kNuCs] + P.ext[kLambdaCs] * std::log(p0 / kPCsRef) + 0.03;
+    cal.push_back(synthetic_path(P, "TC_s3_dense", nu, r, 4, 0.5, rng, p0, volume_ext(P, 0.0)));
+  }
+  double R = 0;
+  for (const auto& d : cal) {
+    const PathPrediction m = predict_path(P, d);
+    for (std::size_t i = 0; i < m.nu.size(); ++i) R = std::max(R, std::fabs(state_psi(P.ext, m.nu[i], m.p[i])));
+  }
+  const auto range = psi_range(P, {}, cal);
+  EXPECT_EQ(range.first, -range.second);
+  EXPECT_GE(range.second, R);
+  EXPECT_LT(range.second, R + 1e-4);
+  EXPECT_GT(R, 0.02);
+  R = range.second;
+  Parameters C = P;
+  C.psi_lo = range.first;
+  C.psi_hi = range.second;
+  for (const auto& d : cal) {
+    const PathPrediction a = predict_path(P, d), b = predict_path(C, d);
+    for (std::size_t i = 0; i < a.s.size(); ++i) {
+      EXPECT_EQ(a.s[i], b.s[i]) << i;
+      EXPECT_EQ(a.p[i], b.p[i]) << i;
+      EXPECT_EQ(a.F[i], b.F[i]) << i;
+      EXPECT_EQ(a.ev[i], b.ev[i]) << i;
+    }
+  }
+  // beyond the reach: a start 0.12 denser than the line, 0.02 of strain
+  const Rows shortr = triaxial_rows(0.02);
+  PathData dense = synthetic_path(P, "TC_s3_dense", P.ext[kNuCs] + 0.12, shortr, 4, 0.5, rng, 1e-3, volume_ext(P, 0.0));
+  Parameters Q = P;   // every law of psi a constant at psi = R
+  for (int i = 0; i + 1 < kNumShear; i += 2) { Q.shear[i] = P.shear[i] + P.shear[i + 1] * R; Q.shear[i + 1] = 0.0; }
+  for (int i : {kNFA, kKappaA, kDilA}) { Q.ext[i] = P.ext[i] + P.ext[i + 1] * R; Q.ext[i + 1] = 0.0; }
+  const PathPrediction clamped = predict_path(C, dense), constant = predict_path(Q, dense), free = predict_path(P, dense);
+  for (std::size_t i = 0; i < clamped.nu.size(); ++i)
+    ASSERT_GT(state_psi(P.ext, clamped.nu[i], clamped.p[i]), R) << "the path stays beyond the reach, row " << i;
+  for (std::size_t i = 1; i < clamped.s.size(); ++i) {
+    EXPECT_NEAR(clamped.s[i], constant.s[i], 1e-9 * std::fabs(constant.s[i]) + 1e-12) << i;
+    EXPECT_NEAR(clamped.p[i], constant.p[i], 1e-9 * constant.p[i]) << i;
+    EXPECT_NEAR(clamped.F[i], constant.F[i], 1e-9 * std::fabs(constant.F[i]) + 1e-12) << i;
+  }
+  EXPECT_GT(std::fabs(free.s.back() - clamped.s.back()), 1e-3) << "unclamped, the laws at psi = 0.1 differ";
+}

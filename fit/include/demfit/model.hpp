@@ -10,8 +10,10 @@
 #pragma once
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace demfit::model {
@@ -172,6 +174,11 @@ struct Parameters {
   /// 31's thirteenth round; the constant-volume D2 of data/geotech/constant_volume carries b = 0.32-0.39 at its
   /// critical state (`dem model --d2-lode`). s_max stays the limit at kLodeBD2.
   double b_d2 = kLodeBD2;
+  /// [-] with the volume-form state parameter, the range of psi its laws are read in (Ext::psi_lo, psi_hi): the
+  /// calibration's own states (psi_range); rows psi_min, psi_max of parameters.csv. Infinite: no clamp (files before
+  /// the thirteenth round).
+  double psi_lo = -std::numeric_limits<double>::infinity();
+  double psi_hi = std::numeric_limits<double>::infinity();
   std::vector<double> iso() const { return {p0, nu_c, gamma_p, C0, C1, nu_cC, alpha}; }
   void set_iso(const double* v) { p0 = v[0]; nu_c = v[1]; gamma_p = v[2]; C0 = v[3]; C1 = v[4]; nu_cC = v[5]; alpha = v[6]; }
 };
@@ -398,6 +405,15 @@ struct Ext {
   /// stress-ratio limit on the surface, the rate's s_max/s_lim and the Opening gate read it; the fabric rules keep b
   /// (the DEM's D2 fabric is not at the stress's b; docs/model.md). Negative: b.
   double b_stress = -1.0;
+  /// With the volume-form state parameter (thirteenth round): the range of psi the laws are read in. The laws of psi
+  /// (the nu-laws at nu_ref + psi, the peak's e^{n_peak psi}) hold their edge values outside it, so that a
+  /// prediction that leaves the calibration's states does not extrapolate linear laws without bound; the dilatancy's
+  /// e^{-n_dil psi} keeps the state itself (it drives psi back to 0). Infinite (the default): no clamp.
+  double psi_lo = -std::numeric_limits<double>::infinity();
+  double psi_hi = std::numeric_limits<double>::infinity();
+  /// If set (plain double runs only): [min, max] of psi over every evaluation of the right-hand side, RK4's
+  /// intermediate stages included (psi_range), so that the range covers every state a calibration's fit evaluated.
+  double* psi_seen = nullptr;
 };
 
 /// The volume-form state parameter psi = nu - nu_cs(p), nu_cs(p) = nu_cs + lambda_cs ln(p/kPCsRef) (tenth round)
@@ -537,7 +553,16 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   // With the volume-form state parameter every law is a law of psi (q = a + b psi: the critical state's a at psi = 0,
   // whatever the preparation), not of nu - nu_ref.
   const T psi = vol_state ? state_psi(m.ext.p, nu, y.p) : T(0.0);
-  const T nu_law = vol_state ? T(m.nu_ref) + psi : nu;
+  if constexpr (std::is_same<T, double>::value) {
+    if (vol_state && m.ext.psi_seen) {
+      m.ext.psi_seen[0] = std::min(m.ext.psi_seen[0], psi);
+      m.ext.psi_seen[1] = std::max(m.ext.psi_seen[1], psi);
+    }
+  }
+  T psi_law = psi;   // the laws' psi: within [psi_lo, psi_hi] (Ext)
+  if (psi_law < T(m.ext.psi_lo)) psi_law = T(m.ext.psi_lo);
+  if (psi_law > T(m.ext.psi_hi)) psi_law = T(m.ext.psi_hi);
+  const T nu_law = vol_state ? T(m.nu_ref) + psi_law : nu;
   const Local<T> L = local(m.shear, nu_law, m.nu_ref);
   const T A = L.a_A * B * y.F;                       // anisotropy modulus [K]
   State<T> d;
@@ -594,7 +619,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   // The state-dependent limit (fifth round; off: s_lim itself, untouched): the target of the stress
   // ratio only; the mobilisation r, the rate scaling and the dilatancy keep s_lim (psi_p = 0).
   // The volume-form state parameter (tenth round) likewise: s_lim e^{n_b psi}.
-  const T s_target = vol_state ? s_lim * exp(peak_exponent(m.ext.p, y.p) * psi)
+  const T s_target = vol_state ? s_lim * exp(peak_exponent(m.ext.p, y.p) * psi_law)
                      : (m.ext.p && m.ext.state_limit)
                          ? s_lim * state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref, b_s, m.ext.state_lode)
                          : s_lim;

@@ -39,6 +39,9 @@ struct ModelCommandOptions {
   /// b_D2), a number in (0, 1), or "normal" (the plane-strain b of the surface through the calibrated limit s_max_a,
   /// plane_strain_lode_b; docs/model.md, thirteenth round)
   std::string d2_lode;
+  /// With --state-limit volume: keep the laws of psi within the calibration's own states (psi_range; rows psi_min,
+  /// psi_max); false (--no-psi-range): unbounded, as before the thirteenth round
+  bool psi_range = true;
 };
 
 void add_model_options(CLI::App& app, ModelCommandOptions& o);

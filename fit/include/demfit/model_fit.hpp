@@ -184,6 +184,13 @@ struct PathPrediction {
 };
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4);
 
+/// The range of psi = nu - nu_cs(p) the laws are read in: [-R, R], R the largest |psi| of the model's own states
+/// along `curves` and `paths`, predicted unclamped with `params` (volume-form state parameter only; else both
+/// infinite): the calibration's distance from the critical state, on either side (thirteenth round). Along those
+/// curves the clamp changes nothing.
+std::pair<double, double> psi_range(const Parameters& params, const std::vector<CurveData>& curves,
+                                    const std::vector<PathData>& paths, double eps_max = 1e9, double max_step = 5e-4);
+
 /// Throws std::invalid_argument (naming `source`) when nu0 lies at or below the isotropic law's
 /// jamming fraction, where p_iso(nu0) <= 0 makes the start scale k = p0/p_iso(nu0) non-positive.
 void check_start_scale(const std::vector<double>& iso, double nu0, const std::string& source);
