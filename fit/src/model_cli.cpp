@@ -171,9 +171,9 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   t.add_row({"nu_ref", "centre of the nu-laws (fixed)", num(cal.params.nu_ref), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
   if (std::isfinite(cal.params.psi_lo) && std::isfinite(cal.params.psi_hi)) {   // files without the rows: no clamp
     t.add_row({"psi_min", "laws of psi held at their value here below it (the calibration's states; --no-psi-range)",
-               num(cal.params.psi_lo), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+               num(cal.params.psi_lo, 17), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});   // exact: --predict-with
     t.add_row({"psi_max", "laws of psi held at their value here above it (the calibration's states; --no-psi-range)",
-               num(cal.params.psi_hi), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+               num(cal.params.psi_hi, 17), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
   }
   if (cal.params.b_d2 != kLodeBD2)   // files without the row: 1/2 (read_parameters)
     t.add_row({"b_D2", "stress Lode parameter b of D2 curves and paths (fixed; --d2-lode)", num(cal.params.b_d2), "nan",

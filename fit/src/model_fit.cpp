@@ -674,6 +674,21 @@ void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<
 
 }
 
+// A covariance error at most this times max(1, |value|): a null direction of the Jacobian (null_directions).
+constexpr double kNullSe = 1e-9;
+
+// DENSE_SVD's pseudo-inverse gives a direction the curves do not see (a fitted coefficient that does not act on them)
+// a variance of 0 to rounding: that is "not determined", not "exact" (no DEM curve fixes a coefficient to 1e-9). Such
+// errors become nan, and said; the held coefficients (nan already) are not looked at.
+void null_directions(Calibration& cal) {
+  for (std::size_t a = 0; a < cal.se_cov.size() && a < cal.value.size(); ++a) {
+    if (!std::isfinite(cal.se_cov[a]) || cal.se_cov[a] > kNullSe * std::max(1.0, std::fabs(cal.value[a]))) continue;
+    cal.se_cov[a] = kNaN;
+    cal.warnings.push_back(cal.names[a] + " is not determined by these curves (its covariance error is 0 to rounding: it "
+                           "does not act on them); no standard error quoted");
+  }
+}
+
 // Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof).
 void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
                        std::vector<double>& ext, const CalibrationOptions& o, bool X, Calibration& cal) {
@@ -1113,6 +1128,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   bound_warnings(problem, shear, ext, X, n_ext, cal);
   if (state_volume)   // held: s_max_b at 0 (the peak's state is psi's), beta_p at its start (it does not act)
     for (int i : {kSmaxB, kLnBetaPA, kLnBetaPB}) cal.se_cov[kNumIso + i] = kNaN;
+  null_directions(cal);
   if (state_volume) drop_unread_for_volume_state(cal, weighted);
   else if (weighted && !cal.params.state_limit) drop_entries(cal, kNumIso + kNumShear + kNPsiA, 2);   // n_psi: not in this law
   if (state_lode && !weighted) drop_entries(cal, kNumIso + kNumShear + kLnDeltaW, 2);   // the `Weighted` pair: unread
