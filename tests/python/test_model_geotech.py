@@ -330,3 +330,46 @@ def test_d2_lode_sets_the_stress_lode_parameter_of_d2_curves_and_round_trips(tmp
                         "D2", "--d2-lode", "normal", "--out", str(tmp_path / "y")], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "--d2-lode normal" in r.stderr and "give --d2-lode a number" in r.stderr, r.stderr
     assert not (tmp_path / "y").exists()
+
+
+def test_a_curve_the_model_diverges_along_is_inf_and_counts_in_the_worst(tmp_path):
+    """Thirteenth round: the stored three-pressure mu = 0.1 calibration, read with unbounded laws of psi
+    (--no-psi-range, the twelfth round's model), diverges along the loose 1e-2 constant-p tests: their cells and the
+    calibration row's worst are "inf" (they were nan and left out of the worst, which read 10.7); with the file's psi
+    range every curve is finite or inf, and none is silently nan."""
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech", "curves"),
+                        "--mu", "0.1", "--out", str(tmp_path / "m"), "--levels", "iso_lo,iso_hi,iso_vhi", "--joint",
+                        "--tests", "TC_s3,TC_p"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    params = os.path.join(ROOT, "data", "geotech", "model", "state_volume", "three_pressures", "mu_0.1", "joint",
+                          "parameters.csv")
+    base = [DEM, "model", str(tmp_path / "m" / "ensemble_joint"), "--no-plots", "--family", "extended", "--predict-with",
+            params]
+    r = subprocess.run(base + ["--no-psi-range", "--out", str(tmp_path / "free")], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    rows = {(x["mode"], x["nu [-]"]): x for x in read(tmp_path / "free" / "summary.csv")}
+    bad = [k for k, x in rows.items() if x["worst [band]"] == "inf"]
+    assert ("TC_p_loose", "0.6262") in bad, rows
+    assert rows[("calibration", "nan")]["worst [band]"] == "inf"
+    assert "not finite" in r.stderr
+    r = subprocess.run(base + ["--out", str(tmp_path / "range")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    for x in read(tmp_path / "range" / "summary.csv"):
+        assert x["worst [band]"] != "nan", x   # every curve judged: a number, or inf
+
+
+def test_no_stored_state_calibration_quotes_a_coefficient_as_exact():
+    """A covariance error of 0 to rounding is a direction the curves do not see (thirteenth round): every stored
+    volume-state parameters.csv of README step 8 on (the starts of earlier rounds kept as they were) quotes such a
+    coefficient as nan, never as an error below 1e-9 of its value."""
+    import glob
+    files = [f for f in glob.glob(os.path.join(ROOT, "data", "geotech", "model", "state_volume", "**", "parameters.csv"),
+                                  recursive=True)
+             if not any(old in f for old in ("tenth_round", "eleventh_round"))]   # earlier rounds' starts, as they were
+    assert len(files) >= 10
+    for f in files:
+        for x in read(f):
+            se = float(x["se_covariance"]) if x.get("se_covariance") not in (None, "", "nan") else math.nan
+            if math.isfinite(se):
+                assert se > 1e-9 * max(1.0, abs(float(x["value"]))), (f, x["parameter"], se)
