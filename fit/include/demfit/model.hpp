@@ -526,6 +526,21 @@ T peak_exponent(const T* ext, const T& p) {
   return ext[kNB] * exp(ext[kMPeak] * log(pp / T(kPCsRef)));
 }
 
+/// The psi the laws of psi read (thirteenth round): psi within [ext.psi_lo, ext.psi_hi]; a double run also records
+/// psi itself in ext.psi_seen when set (psi_range).
+template <class T>
+T law_psi(const Ext<T>& ext, const T& psi) {
+  if constexpr (std::is_same<T, double>::value) {
+    if (ext.psi_seen) {
+      ext.psi_seen[0] = std::min(ext.psi_seen[0], psi);
+      ext.psi_seen[1] = std::max(ext.psi_seen[1], psi);
+    }
+  }
+  if (psi < T(ext.psi_lo)) return T(ext.psi_lo);
+  if (psi > T(ext.psi_hi)) return T(ext.psi_hi);
+  return psi;
+}
+
 /// The rates' elastic scaling with the volume-form state parameter: ((B/p)/(B/p)_ref)^n_rate; at n_rate = 1 the shear
 /// modulus is a fixed fraction of the bulk modulus (a constant Poisson ratio, as SANISAND's G and K; the eleventh
 /// round), n_rate < 1 a rise to the peak that slows less with the pressure than the stiffness falls (the twelfth
@@ -553,15 +568,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   // With the volume-form state parameter every law is a law of psi (q = a + b psi: the critical state's a at psi = 0,
   // whatever the preparation), not of nu - nu_ref.
   const T psi = vol_state ? state_psi(m.ext.p, nu, y.p) : T(0.0);
-  if constexpr (std::is_same<T, double>::value) {
-    if (vol_state && m.ext.psi_seen) {
-      m.ext.psi_seen[0] = std::min(m.ext.psi_seen[0], psi);
-      m.ext.psi_seen[1] = std::max(m.ext.psi_seen[1], psi);
-    }
-  }
-  T psi_law = psi;   // the laws' psi: within [psi_lo, psi_hi] (Ext)
-  if (psi_law < T(m.ext.psi_lo)) psi_law = T(m.ext.psi_lo);
-  if (psi_law > T(m.ext.psi_hi)) psi_law = T(m.ext.psi_hi);
+  const T psi_law = vol_state ? law_psi(m.ext, psi) : T(0.0);   // within [psi_lo, psi_hi]
   const T nu_law = vol_state ? T(m.nu_ref) + psi_law : nu;
   const Local<T> L = local(m.shear, nu_law, m.nu_ref);
   const T A = L.a_A * B * y.F;                       // anisotropy modulus [K]
