@@ -20,6 +20,7 @@ frictionless one, nu = 0.75), to eps_d = 1.0, with the full stress tensor.
 """
 
 import argparse
+import glob
 import math
 import os
 import sys
@@ -46,11 +47,11 @@ def prep_of(mu):
 
 def run_one(args, mu, seed, mode):
     prep = prep_of(mu)
-    ckpt = sorted(gt.glob.glob(os.path.join(gt.prep_dir(args.preps, prep, mu, seed, LEVEL), "checkpoints",
-                                            f"{LEVEL}_phi*.ckpt")))
+    d = gt.prep_dir(args.preps, prep, mu, seed, LEVEL)
+    ckpt = sorted(glob.glob(os.path.join(d, "checkpoints", f"{LEVEL}_phi*.ckpt")))
     if len(ckpt) != 1:
         return f"no single {LEVEL} checkpoint for {prep} mu={mu} m{seed} under {args.preps} (its preparation " \
-               f"failed: {gt.prep_dir(args.preps, prep, mu, seed, LEVEL)}.log)"
+               f"failed: {d}.log)"
     out = os.path.join(args.out, f"mu_{mu}", prep, LEVEL, f"CV_{mode}", f"m{seed}.csv")
     if os.path.exists(out):
         return "ok (kept)"

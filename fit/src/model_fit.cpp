@@ -1135,23 +1135,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   return cal;
 }
 
-namespace {
-ModelCurve predict_curve_seen(const Parameters& params, const CurveData& c, double eps_max, double max_step,
-                              double* psi_seen);
-PathPrediction predict_path_seen(const Parameters& params, const PathData& d, double max_step, double* psi_seen);
-}  // namespace
-
-ModelCurve predict_curve(const Parameters& params, const CurveData& c, double eps_max, double max_step) {
-  return predict_curve_seen(params, c, eps_max, max_step, nullptr);
-}
-
-PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step) {
-  return predict_path_seen(params, d, max_step, nullptr);
-}
-
-namespace {
-ModelCurve predict_curve_seen(const Parameters& params, const CurveData& c, double eps_max, double max_step,
-                              double* psi_seen) {
+ModelCurve predict_curve(const Parameters& params, const CurveData& c, double eps_max, double max_step,
+                         double* psi_seen) {
   const CurveData t = truncated(c, eps_max);
   if (t.eps.empty() || std::fabs(t.eps.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + c.source + " does not start at eps_d = 0");
@@ -1168,7 +1153,7 @@ ModelCurve predict_curve_seen(const Parameters& params, const CurveData& c, doub
   return m;
 }
 
-PathPrediction predict_path_seen(const Parameters& params, const PathData& d, double max_step, double* psi_seen) {
+PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step, double* psi_seen) {
   if (d.acc.empty() || std::fabs(d.acc.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + d.source + " does not start at eps_d_accumulated = 0");
   const std::vector<double> iso = params.iso();
@@ -1187,7 +1172,6 @@ PathPrediction predict_path_seen(const Parameters& params, const PathData& d, do
   }
   return m;
 }
-}  // namespace
 
 std::pair<double, double> psi_range(const Parameters& params, const std::vector<CurveData>& curves,
                                     const std::vector<PathData>& paths, double eps_max, double max_step) {
@@ -1199,14 +1183,11 @@ std::pair<double, double> psi_range(const Parameters& params, const std::vector<
   Parameters P = params;
   P.psi_lo = -inf;
   P.psi_hi = inf;
-  double lo = inf, hi = -inf;
   double seen[2] = {inf, -inf};   // every evaluation of the right-hand side, RK4's stages included
-  for (const auto& c : curves) predict_curve_seen(P, c, eps_max, max_step, seen);
-  for (const auto& d : paths) predict_path_seen(P, d, max_step, seen);
-  lo = seen[0];
-  hi = seen[1];
-  if (!(lo <= hi)) return {-inf, inf};
-  const double reach = std::max(std::fabs(lo), std::fabs(hi));   // the same distance on the other side of psi = 0
+  for (const auto& c : curves) predict_curve(P, c, eps_max, max_step, seen);
+  for (const auto& d : paths) predict_path(P, d, max_step, seen);
+  if (!(seen[0] <= seen[1])) return {-inf, inf};
+  const double reach = std::max(std::fabs(seen[0]), std::fabs(seen[1]));   // the same distance on the other side of 0
   return {-reach, reach};
 }
 

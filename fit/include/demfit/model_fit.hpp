@@ -164,7 +164,9 @@ Calibration calibrate(const std::vector<CurveData>& curves, const IsoData& iso, 
 struct ModelCurve {
   std::vector<double> eps, p, s, F, nu;
 };
-ModelCurve predict_curve(const Parameters& params, const CurveData& c, double eps_max = 1e9, double max_step = 5e-4);
+/// psi_seen (optional): [min, max] of psi over every right-hand-side evaluation (Ext::psi_seen; psi_range).
+ModelCurve predict_curve(const Parameters& params, const CurveData& c, double eps_max = 1e9, double max_step = 5e-4,
+                         double* psi_seen = nullptr);
 
 /// Prediction error of one quantity of one curve against the DEM ensemble.
 struct PredictionError {
@@ -182,7 +184,8 @@ std::vector<PredictionError> prediction_errors(const ModelCurve& m, const CurveD
 struct PathPrediction {
   std::vector<double> acc, p, s, F, nu, ev;   ///< as PathData; ev = eps_vol/3 (the curves' eps_v) [-]
 };
-PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4);
+PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
+                            double* psi_seen = nullptr);
 
 /// The range of psi = nu - nu_cs(p) the laws are read in: [-R, R], R the largest |psi| of the model's own states
 /// along `curves` and `paths`, predicted unclamped with `params` (volume-form state parameter only; else both
