@@ -1752,6 +1752,40 @@ TEST(ModelVolumeState, TheStressRatioShapeStaysPositive) {
   }
 }
 
+// Above its target a stress ratio relaxes at least as fast as at the target (fourteenth round): with the volume-form
+// state parameter the shape 1 + kappa_s r is read at most at the target's mobilisation r_t when kappa_s < 0, then
+// floored. On the critical-state line at kPCsRef (the laws at their a values, the rate scale 1, b = b_ref so s_lim =
+// s_max) with the peak's exponent off (r_t = 1), ds(kappa) - ds(0) = beta_s (s_max - s) (shape - 1) exactly at
+// constant volume (the volumetric term does not read kappa_s): written out here for r = 1.3 and r = 0.6.
+TEST(ModelVolumeState, AStressRatioAboveItsTargetRelaxesAtLeastAsFastAsAtIt) {
+  Parameters P = volume_truth();
+  P.ext[kNB] = 0.0;   // s_target = s_lim: r_t = 1
+  const auto iso = P.iso();
+  const double s_max = P.shear[kSmaxA], beta = std::exp(P.shear[kLnBetaSA]);
+  auto ds = [&](double kappa, double r) {
+    Parameters Q = P;
+    Q.ext[kKappaA] = kappa;
+    const Material<double> m =
+        start_material<double>(iso.data(), Q.shear, Q.nu_ref, 0.64, kPCsRef, volume_ext(Q, kLodeBD2));
+    return rhs(m, volume_state(Q, kPCsRef, 0.0, r * s_max, 0.05), 1.0, Segment{}).s;
+  };
+  struct Case { double kappa, r, shape; const char* what; };
+  const Case cases[] = {
+      {-0.5, 1.3, 0.5, "above the target: the shape at r_t (unbounded 0.35)"},
+      {-0.9, 1.3, 1.0 - 0.9, "above: at r_t (unbounded -0.17, the floor's 0.05 before this round)"},
+      {-1.2, 1.3, kShapeFloor, "above: the shape at r_t negative, floored"},
+      {0.5, 1.3, 1.0 + 0.5 * 1.3, "kappa_s > 0: faster above the target already, unchanged"},
+      {-0.5, 0.6, 1.0 - 0.5 * 0.6, "below the target: 1 + kappa_s r"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    const double want = beta * (s_max - c.r * s_max) * (c.shape - 1.0);
+    EXPECT_NEAR(ds(c.kappa, c.r) - ds(0.0, c.r), want, 1e-9 * std::fabs(want));
+  }
+  EXPECT_LT(ds(-0.9, 1.3), 0.0) << "above the target s falls";
+  EXPECT_EQ(stress_shape(-0.9, 1.3, 1.0, false), 1.0 - 0.9 * 1.3) << "without the volume form: unbounded";
+}
+
 // The range of psi the laws are read in (thirteenth round): psi_range is [-R, R], R the largest |psi| of the model's
 // own states along the calibration paths (at least that of the rows, computed here from predict_path and state_psi;
 // RK4's stages between them reach 1e-4 further at most); those paths predicted with the range are the unclamped ones

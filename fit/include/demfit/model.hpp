@@ -557,6 +557,19 @@ T rate_scale(const Material<T>& m, const T& B, const T& p) {
 
 /// Derivatives per unit |d eps_d| along a segment with direction sigma (+1/-1), or per unit
 /// eps_vol for a pure volumetric segment (sigma = 0). Returns d/dl of (ln nu, p, s, F).
+/// The stress ratio's shape 1 + kappa_s r at the mobilisation r (stress ratio: linear for longer). With the
+/// volume-form state parameter (`capped`) a stress ratio above its target's mobilisation r_t relaxes at least as fast
+/// as at the target: the shape is max(1 + kappa_s r, 1 + kappa_s r_t) there (fourteenth round: a psi-law kappa_s < 0
+/// otherwise slows the return of an overshoot to the floor's 5 %, and the volumetric term keeps carrying s away;
+/// docs/model.md); then floored at kShapeFloor. Without the flag: 1 + kappa_s r, unbounded.
+template <class T>
+T stress_shape(const T& kappa_s, const T& r, const T& r_t, bool capped) {
+  T shape = T(1.0) + kappa_s * r;
+  if (!capped) return shape;
+  if (r > r_t && T(1.0) + kappa_s * r_t > shape) shape = T(1.0) + kappa_s * r_t;
+  return shape < T(kShapeFloor) ? T(kShapeFloor) : shape;
+}
+
 template <class T>
 State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg) {
   using std::exp;
@@ -609,8 +622,6 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
     r_F = opened_fraction(m.iso, nu_el, y.p, y.l, m.ext.b);
   }
   const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
-  T shape_s = T(1.0) + X.kappa_s * r;                                     // stress ratio: linear for longer
-  if (vol_state && shape_s < T(kShapeFloor)) shape_s = T(kShapeFloor);   // never away from the target (kShapeFloor)
   // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
   const T F_lim = m.ext.p ? L.F_max * T(fabric_lode_factor(m.ext.fabric, m.ext.b)) : L.F_max;
   // Plastic dilatancy: gated by the fabric (1 - F/F_lim), or with the volume-form state parameter driven by psi
@@ -630,6 +641,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
                      : (m.ext.p && m.ext.state_limit)
                          ? s_lim * state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref, b_s, m.ext.state_lode)
                          : s_lim;
+  const T shape_s = stress_shape(X.kappa_s, r, s_target / s_lim, vol_state);
   const T g_s = rate_scale(m, B, y.p);
   const T shear = L.beta_s * g_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_target - y.s) * shape_s;
   if (seg.control == Control::Isobaric) {
