@@ -727,23 +727,7 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
       std::cerr << "dem model: jackknife " << k + 1 << "/" << K << " (" << members[k].filename().string()
                 << " left out): chi2/dof = " << num(ck.chi2_dof(), 4) << "\n";
     }
-    cal.se_jackknife.assign(cal.value.size(), 0.0);
-    for (std::size_t i = 0; i < cal.value.size(); ++i) {
-      double mean = 0, ss = 0;
-      for (const auto& e : est) mean += e[i] / K;
-      for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
-      // held parameters have no error of their own, but the critical-state line of --state-limit volume is held at
-      // the end states of the data, which the jackknife moves: its spread is its error (the term --csl does not use
-      // is held at 0 and has none: nan)
-      const bool from_data = cal.names[i] == "nu_cs" || (cal.names[i] == "lambda_cs" && !co_f.csl_linear) ||
-                             (cal.names[i] == "c_cs" && co_f.csl_linear);
-      cal.se_jackknife[i] = std::isfinite(cal.se_cov[i]) || from_data ? std::sqrt((K - 1.0) / K * ss) : std::nan("");
-      if (std::isfinite(cal.se_cov[i]) && ss == 0.0) {   // every refit on the same value: a bound held it, no spread
-        cal.se_jackknife[i] = std::nan("");
-        cal.warnings.push_back(cal.names[i] + ": every jackknife refit ends on the same value " + num(est[0][i], 6) +
-                               " (a bound): no jackknife error quoted");
-      }
-    }
+    cal.se_jackknife = jackknife_errors(est, cal, co_f.csl_linear, &cal.warnings);
     if (K < 4) {   // as `dem fit` says for its fits
       double worst = 1;
       for (std::size_t i = 0; i < cal.value.size(); ++i)

@@ -1291,4 +1291,29 @@ std::vector<PredictionError> path_errors(const PathPrediction& m, const PathData
   return out;
 }
 
+std::vector<double> jackknife_errors(const std::vector<std::vector<double>>& est, const Calibration& cal,
+                                     bool csl_linear, std::vector<std::string>* warnings) {
+  const double K = static_cast<double>(est.size());
+  std::vector<double> se(cal.value.size(), std::nan(""));
+  if (est.empty()) return se;
+  for (std::size_t i = 0; i < cal.value.size(); ++i) {
+    double mean = 0, ss = 0;
+    for (const auto& e : est) mean += e[i] / K;
+    for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
+    // held parameters have no error of their own, but the critical-state line of --state-limit volume is held at the
+    // end states of the data, which the jackknife moves: its spread is its error (the term --csl does not use is held
+    // at 0 and has none: nan)
+    const bool from_data = cal.names[i] == "nu_cs" || (cal.names[i] == "lambda_cs" && !csl_linear) ||
+                           (cal.names[i] == "c_cs" && csl_linear);
+    if (std::isfinite(cal.se_cov[i]) || from_data) se[i] = std::sqrt((K - 1.0) / K * ss);
+    if (std::isfinite(cal.se_cov[i]) && ss == 0.0) {   // every refit on the same value: a bound held it, no spread
+      se[i] = std::nan("");
+      if (warnings)
+        warnings->push_back(cal.names[i] + ": every jackknife refit ends on the same value " +
+                            table_number(est[0][i], 6) + " (a bound): no jackknife error quoted");
+    }
+  }
+  return se;
+}
+
 }  // namespace demfit::model

@@ -553,6 +553,50 @@ PathData synthetic_path(const Parameters& P, const std::string& name, double nu,
 
 }  // namespace
 
+// The jackknife's errors from hand-made leave-one-out estimates (K = 4): sqrt((K-1)/K sum (e - mean)^2) for a free
+// coefficient; a free one whose every refit ends on the same value (a bound) gets nan and a warning naming it; a held
+// one nan; the critical-state line's terms held at the data's end states keep their spread (nu_cs always, lambda_cs
+// with the logarithmic line, c_cs with the linear one).
+TEST(ModelFit, JackknifeErrorsQuoteTheSpreadAndNotABound) {
+  Calibration cal;
+  const double nan = std::nan("");
+  cal.names = {"s_max_a", "n_dil", "held", "nu_cs", "lambda_cs", "c_cs"};
+  cal.value = {0.7, 150.0, 1.0, 0.6, 0.01, 1.8};
+  cal.se_cov = {0.01, 3.0, nan, nan, nan, nan};
+  const std::vector<std::vector<double>> est = {{0.69, 150.0, 1.0, 0.601, 0.011, 1.7},
+                                                {0.71, 150.0, 2.0, 0.603, 0.012, 1.9},
+                                                {0.70, 150.0, 3.0, 0.600, 0.010, 1.8},
+                                                {0.72, 150.0, 4.0, 0.604, 0.013, 2.0}};
+  auto spread = [&](std::size_t i) {   // written out: mean, then sqrt(3/4 sum of squares)
+    const double mean = (est[0][i] + est[1][i] + est[2][i] + est[3][i]) / 4.0;
+    double ss = 0;
+    for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
+    return std::sqrt(0.75 * ss);
+  };
+  for (bool linear : {true, false}) {
+    SCOPED_TRACE(linear ? "--csl linear" : "--csl log");
+    std::vector<std::string> warnings;
+    const std::vector<double> se = jackknife_errors(est, cal, linear, &warnings);
+    ASSERT_EQ(se.size(), cal.value.size());
+    EXPECT_NEAR(se[0], spread(0), 1e-15);
+    EXPECT_NEAR(se[0], std::sqrt(0.75 * 0.0005), 1e-12) << "0.69, 0.71, 0.70, 0.72 about 0.705";
+    EXPECT_TRUE(std::isnan(se[1])) << "every refit on 150: no spread to quote";
+    ASSERT_EQ(warnings.size(), 1u);
+    EXPECT_NE(warnings[0].find("n_dil: every jackknife refit ends on the same value 150"), std::string::npos) << warnings[0];
+    EXPECT_TRUE(std::isnan(se[2])) << "held: no error, though its refits differ";
+    EXPECT_NEAR(se[3], spread(3), 1e-15);
+    EXPECT_GT(se[3], 0.0);
+    if (linear) {
+      EXPECT_TRUE(std::isnan(se[4]));
+      EXPECT_NEAR(se[5], spread(5), 1e-15);
+    } else {
+      EXPECT_NEAR(se[4], spread(4), 1e-15);
+      EXPECT_TRUE(std::isnan(se[5]));
+    }
+  }
+  EXPECT_TRUE(std::isnan(jackknife_errors({}, cal, true)[0])) << "no refits: nothing quoted";
+}
+
 // Identifiability: from D2 alone, a_A and beta_p are pinned only through the pressure excess
 // a_A B F_max / beta_p and its onset, so their estimates are strongly correlated. Does a strain
 // reversal (A = a_A B F acting against the strain while F turns) or an isobaric test (the volume

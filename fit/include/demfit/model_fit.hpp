@@ -119,6 +119,13 @@ struct Calibration {
   const std::vector<double>& se() const { return se_jackknife.empty() ? se_cov : se_jackknife; }
 };
 
+/// The jackknife's standard errors from the K leave-one-out estimates est[k][i] of cal.value: sqrt((K-1)/K sum (e -
+/// mean)^2) for every coefficient with a covariance error, and for the critical-state line's terms held at the data's
+/// end states (nu_cs, and lambda_cs or c_cs, whichever --csl uses); nan for the other held ones, and nan with a
+/// warning for a free coefficient whose every refit ends on the same value (a bound: no spread to quote).
+std::vector<double> jackknife_errors(const std::vector<std::vector<double>>& est, const Calibration& cal,
+                                     bool csl_linear, std::vector<std::string>* warnings = nullptr);
+
 /// An ensemble mean of a loading path (reversal, cyclic, isobaric; written by
 /// demkit/path_ensemble.py): rows on the accumulated deviatoric strain, deviators signed along
 /// the first loading direction (docs/model.md, "Paths").
