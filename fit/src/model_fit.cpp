@@ -684,6 +684,8 @@ void null_directions(Calibration& cal) {
   for (std::size_t a = 0; a < cal.se_cov.size() && a < cal.value.size(); ++a) {
     if (!std::isfinite(cal.se_cov[a]) || cal.se_cov[a] > kNullSe * std::max(1.0, std::fabs(cal.value[a]))) continue;
     cal.se_cov[a] = kNaN;
+    cal.undetermined.resize(cal.value.size(), false);
+    cal.undetermined[a] = true;
     cal.warnings.push_back(cal.names[a] + " is not determined by these curves (its covariance error is 0 to rounding: it "
                            "does not act on them); no standard error quoted");
   }
@@ -1305,7 +1307,9 @@ std::vector<double> jackknife_errors(const std::vector<std::vector<double>>& est
     // at 0 and has none: nan)
     const bool from_data = cal.names[i] == "nu_cs" || (cal.names[i] == "lambda_cs" && !csl_linear) ||
                            (cal.names[i] == "c_cs" && csl_linear);
-    if (std::isfinite(cal.se_cov[i]) || from_data) se[i] = std::sqrt((K - 1.0) / K * ss);
+    const bool undetermined = i < cal.undetermined.size() && cal.undetermined[i];   // its refits still spread
+    if (std::isfinite(cal.se_cov[i]) || from_data || (undetermined && ss > 0.0))
+      se[i] = std::sqrt((K - 1.0) / K * ss);
     if (std::isfinite(cal.se_cov[i]) && ss == 0.0) {   // every refit on the same value: a bound held it, no spread
       se[i] = std::nan("");
       if (warnings)

@@ -556,17 +556,19 @@ PathData synthetic_path(const Parameters& P, const std::string& name, double nu,
 // The jackknife's errors from hand-made leave-one-out estimates (K = 4): sqrt((K-1)/K sum (e - mean)^2) for a free
 // coefficient; a free one whose every refit ends on the same value (a bound) gets nan and a warning naming it; a held
 // one nan; the critical-state line's terms held at the data's end states keep their spread (nu_cs always, lambda_cs
-// with the logarithmic line, c_cs with the linear one).
+// with the logarithmic line, c_cs with the linear one); one the covariance left undetermined (fourteenth round: the
+// mu = 1 joint optimum's pseudo-inverse is 0 in every direction) keeps the refits' spread where there is one.
 TEST(ModelFit, JackknifeErrorsQuoteTheSpreadAndNotABound) {
   Calibration cal;
   const double nan = std::nan("");
-  cal.names = {"s_max_a", "n_dil", "held", "nu_cs", "lambda_cs", "c_cs"};
-  cal.value = {0.7, 150.0, 1.0, 0.6, 0.01, 1.8};
-  cal.se_cov = {0.01, 3.0, nan, nan, nan, nan};
-  const std::vector<std::vector<double>> est = {{0.69, 150.0, 1.0, 0.601, 0.011, 1.7},
-                                                {0.71, 150.0, 2.0, 0.603, 0.012, 1.9},
-                                                {0.70, 150.0, 3.0, 0.600, 0.010, 1.8},
-                                                {0.72, 150.0, 4.0, 0.604, 0.013, 2.0}};
+  cal.names = {"s_max_a", "n_dil", "held", "nu_cs", "lambda_cs", "c_cs", "n_rate", "m_peak"};
+  cal.value = {0.7, 150.0, 1.0, 0.6, 0.01, 1.8, 1.1, 0.2};
+  cal.se_cov = {0.01, 3.0, nan, nan, nan, nan, nan, nan};
+  cal.undetermined = {false, false, false, false, false, false, true, true};   // a degenerate pseudo-inverse
+  const std::vector<std::vector<double>> est = {{0.69, 150.0, 1.0, 0.601, 0.011, 1.7, 1.0, 0.2},
+                                                {0.71, 150.0, 2.0, 0.603, 0.012, 1.9, 1.2, 0.2},
+                                                {0.70, 150.0, 3.0, 0.600, 0.010, 1.8, 1.1, 0.2},
+                                                {0.72, 150.0, 4.0, 0.604, 0.013, 2.0, 1.3, 0.2}};
   auto spread = [&](std::size_t i) {   // written out: mean, then sqrt(3/4 sum of squares)
     const double mean = (est[0][i] + est[1][i] + est[2][i] + est[3][i]) / 4.0;
     double ss = 0;
@@ -593,6 +595,8 @@ TEST(ModelFit, JackknifeErrorsQuoteTheSpreadAndNotABound) {
       EXPECT_NEAR(se[4], spread(4), 1e-15);
       EXPECT_TRUE(std::isnan(se[5]));
     }
+    EXPECT_NEAR(se[6], spread(6), 1e-15) << "undetermined by the covariance, its refits spread: the jackknife's error";
+    EXPECT_TRUE(std::isnan(se[7])) << "undetermined and every refit on one value: nothing to quote (warned already)";
   }
   EXPECT_TRUE(std::isnan(jackknife_errors({}, cal, true)[0])) << "no refits: nothing quoted";
 }

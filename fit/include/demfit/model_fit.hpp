@@ -115,14 +115,18 @@ struct Calibration {
   bool ok = false;
   std::string message;                  ///< Ceres' summary line
   std::vector<std::string> warnings;
+  /// Coefficients the covariance leaves undetermined (an error of 0 to rounding from the pseudo-inverse: se_cov nan);
+  /// the jackknife still quotes their spread over packings.
+  std::vector<bool> undetermined;
   /// The errors to quote: jackknife where it ran, else the covariance.
   const std::vector<double>& se() const { return se_jackknife.empty() ? se_cov : se_jackknife; }
 };
 
 /// The jackknife's standard errors from the K leave-one-out estimates est[k][i] of cal.value: sqrt((K-1)/K sum (e -
-/// mean)^2) for every coefficient with a covariance error, and for the critical-state line's terms held at the data's
-/// end states (nu_cs, and lambda_cs or c_cs, whichever --csl uses); nan for the other held ones, and nan with a
-/// warning for a free coefficient whose every refit ends on the same value (a bound: no spread to quote).
+/// mean)^2) for every coefficient with a covariance error or one the covariance left undetermined (cal.undetermined),
+/// and for the critical-state line's terms held at the data's end states (nu_cs, and lambda_cs or c_cs, whichever
+/// --csl uses); nan for the held ones and those on a bound, and nan with a warning for a coefficient with a covariance
+/// error whose every refit ends on the same value (a bound: no spread to quote).
 std::vector<double> jackknife_errors(const std::vector<std::vector<double>>& est, const Calibration& cal,
                                      bool csl_linear, std::vector<std::string>* warnings = nullptr);
 
