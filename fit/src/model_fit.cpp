@@ -681,14 +681,26 @@ constexpr double kNullSe = 1e-9;
 // a variance of 0 to rounding: that is "not determined", not "exact" (no DEM curve fixes a coefficient to 1e-9). Such
 // errors become nan, and said; the held coefficients (nan already) are not looked at.
 void null_directions(Calibration& cal) {
+  std::vector<std::size_t> null;
+  std::size_t quoted = 0;
   for (std::size_t a = 0; a < cal.se_cov.size() && a < cal.value.size(); ++a) {
-    if (!std::isfinite(cal.se_cov[a]) || cal.se_cov[a] > kNullSe * std::max(1.0, std::fabs(cal.value[a]))) continue;
+    if (!std::isfinite(cal.se_cov[a])) continue;
+    ++quoted;
+    if (cal.se_cov[a] <= kNullSe * std::max(1.0, std::fabs(cal.value[a]))) null.push_back(a);
+  }
+  cal.undetermined.assign(cal.value.size(), false);
+  for (std::size_t a : null) {
     cal.se_cov[a] = kNaN;
-    cal.undetermined.resize(cal.value.size(), false);
     cal.undetermined[a] = true;
+  }
+  if (null.size() > 1 && null.size() == quoted) {   // every direction: the optimum's Jacobian, not one coefficient
+    cal.warnings.push_back("the covariance is 0 to rounding in every direction (a degenerate Jacobian at this optimum): "
+                           "no covariance errors quoted; the jackknife's where its refits spread");
+    return;
+  }
+  for (std::size_t a : null)
     cal.warnings.push_back(cal.names[a] + " is not determined by these curves (its covariance error is 0 to rounding: it "
                            "does not act on them); no standard error quoted");
-  }
 }
 
 // Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof).
@@ -939,6 +951,8 @@ void drop_entries(Calibration& cal, int pos, int n) {
   cal.names.erase(cal.names.begin() + pos, cal.names.begin() + pos + n);
   cal.value.erase(cal.value.begin() + pos, cal.value.begin() + pos + n);
   cal.se_cov.erase(cal.se_cov.begin() + pos, cal.se_cov.begin() + pos + n);
+  if (cal.undetermined.size() >= static_cast<std::size_t>(pos + n))
+    cal.undetermined.erase(cal.undetermined.begin() + pos, cal.undetermined.begin() + pos + n);
   cal.corr.erase(cal.corr.begin() + pos, cal.corr.begin() + pos + n);
   for (auto& row : cal.corr) row.erase(row.begin() + pos, row.begin() + pos + n);
 }
