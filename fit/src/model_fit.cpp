@@ -677,6 +677,8 @@ void set_bounds(ceres::Problem& problem, std::vector<double>& isob, std::vector<
 // A covariance error at most this times max(1, |value|): a null direction of the Jacobian (null_directions).
 constexpr double kNullSe = 1e-9;
 
+}  // namespace
+
 // DENSE_SVD's pseudo-inverse gives a direction the curves do not see (a fitted coefficient that does not act on them)
 // a variance of 0 to rounding: that is "not determined", not "exact" (no DEM curve fixes a coefficient to 1e-9). Such
 // errors become nan, and said; the held coefficients (nan already) are not looked at.
@@ -702,6 +704,8 @@ void null_directions(Calibration& cal) {
     cal.warnings.push_back(cal.names[a] + " is not determined by these curves (its covariance error is 0 to rounding: it "
                            "does not act on them); no standard error quoted");
 }
+
+namespace {
 
 // Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof).
 void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
@@ -945,6 +949,8 @@ Parameters fitted_params(const Parameters& start, const std::vector<double>& iso
   return P;
 }
 
+}  // namespace
+
 /// Entries [pos, pos + n) of the reported parameters removed (names, values, errors, correlations):
 /// coefficients the block carries but the law does not have.
 void drop_entries(Calibration& cal, int pos, int n) {
@@ -956,6 +962,8 @@ void drop_entries(Calibration& cal, int pos, int n) {
   cal.corr.erase(cal.corr.begin() + pos, cal.corr.begin() + pos + n);
   for (auto& row : cal.corr) row.erase(row.begin() + pos, row.begin() + pos + n);
 }
+
+namespace {
 
 /// The volume-form state parameter's table: the entries its block carries for the other laws (n_psi, lambda_psi, and
 /// the `Weighted` pair under another rule) removed, the last first.

@@ -601,6 +601,40 @@ TEST(ModelFit, JackknifeErrorsQuoteTheSpreadAndNotABound) {
   EXPECT_TRUE(std::isnan(jackknife_errors({}, cal, true)[0])) << "no refits: nothing quoted";
 }
 
+// A covariance error of 0 to rounding is "not determined" (nan, flagged, said), and the flag stays on its coefficient
+// when the table drops entries before it (the volume form drops its unread ones: a first pass of the fourteenth
+// round put the flags on the wrong rows); a covariance 0 in every direction is one warning, not one per coefficient.
+TEST(ModelFit, UndeterminedCoefficientsKeepTheirFlagWhenEntriesAreDropped) {
+  const double nan = std::nan("");
+  Calibration cal;
+  cal.names = {"a", "unread1", "unread2", "b", "c"};
+  cal.value = {1.0, 0.0, 0.0, 2.0, 3.0};
+  cal.se_cov = {0.1, nan, nan, 1e-12, 0.2};
+  cal.corr.assign(5, std::vector<double>(5, 0.0));
+  null_directions(cal);
+  EXPECT_TRUE(std::isnan(cal.se_cov[3]));
+  ASSERT_EQ(cal.warnings.size(), 1u);
+  EXPECT_NE(cal.warnings[0].find("b is not determined"), std::string::npos) << cal.warnings[0];
+  drop_entries(cal, 1, 2);
+  ASSERT_EQ(cal.names.size(), 3u);
+  ASSERT_EQ(cal.undetermined.size(), 3u);
+  EXPECT_EQ(cal.names[1], "b");
+  EXPECT_TRUE(cal.undetermined[1]) << "the flag on b's row";
+  EXPECT_FALSE(cal.undetermined[0]);
+  EXPECT_FALSE(cal.undetermined[2]);
+  const std::vector<std::vector<double>> est = {{1.0, 2.1, 3.0}, {1.1, 1.9, 3.2}, {0.9, 2.0, 3.1}, {1.0, 2.0, 2.9}};
+  const std::vector<double> se = jackknife_errors(est, cal, true);
+  EXPECT_GT(se[1], 0.0) << "b's refits spread: the jackknife's error";
+  Calibration all;
+  all.names = {"x", "y", "z"};
+  all.value = {1.0, 2.0, 3.0};
+  all.se_cov = {1e-12, 0.0, nan};
+  null_directions(all);
+  ASSERT_EQ(all.warnings.size(), 1u) << "one warning for a covariance 0 in every quoted direction";
+  EXPECT_NE(all.warnings[0].find("every direction"), std::string::npos) << all.warnings[0];
+  EXPECT_TRUE(all.undetermined[0] && all.undetermined[1] && !all.undetermined[2]);
+}
+
 // Identifiability: from D2 alone, a_A and beta_p are pinned only through the pressure excess
 // a_A B F_max / beta_p and its onset, so their estimates are strongly correlated. Does a strain
 // reversal (A = a_A B F acting against the strain while F turns) or an isobaric test (the volume

@@ -122,6 +122,13 @@ struct Calibration {
   const std::vector<double>& se() const { return se_jackknife.empty() ? se_cov : se_jackknife; }
 };
 
+/// A covariance error at most 1e-9 max(1, |value|) (DENSE_SVD's pseudo-inverse on a direction the curves do not see)
+/// becomes nan, flagged in cal.undetermined, with a warning per coefficient, or one when every quoted error is so
+/// (a degenerate Jacobian at the optimum).
+void null_directions(Calibration& cal);
+/// Entries [pos, pos + n) of the reported parameters removed (names, values, errors, flags, correlations).
+void drop_entries(Calibration& cal, int pos, int n);
+
 /// The jackknife's standard errors from the K leave-one-out estimates est[k][i] of cal.value: sqrt((K-1)/K sum (e -
 /// mean)^2) for every coefficient with a covariance error or one the covariance left undetermined (cal.undetermined),
 /// and for the critical-state line's terms held at the data's end states (nu_cs, and lambda_cs or c_cs, whichever
