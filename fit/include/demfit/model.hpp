@@ -555,8 +555,6 @@ T rate_scale(const Material<T>& m, const T& B, const T& p) {
   return exp(m.ext.p[kNRate] * log(ratio));
 }
 
-/// Derivatives per unit |d eps_d| along a segment with direction sigma (+1/-1), or per unit
-/// eps_vol for a pure volumetric segment (sigma = 0). Returns d/dl of (ln nu, p, s, F).
 /// The stress ratio's shape 1 + kappa_s r at the mobilisation r (stress ratio: linear for longer). With the
 /// volume-form state parameter (`capped`) a stress ratio above its target's mobilisation r_t relaxes at least as fast
 /// as at the target: the shape is max(1 + kappa_s r, 1 + kappa_s r_t) there (fourteenth round: a psi-law kappa_s < 0
@@ -570,6 +568,8 @@ T stress_shape(const T& kappa_s, const T& r, const T& r_t, bool capped) {
   return shape < T(kShapeFloor) ? T(kShapeFloor) : shape;
 }
 
+/// Derivatives per unit |d eps_d| along a segment with direction sigma (+1/-1), or per unit
+/// eps_vol for a pure volumetric segment (sigma = 0). Returns d/dl of (ln nu, p, s, F).
 template <class T>
 State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg) {
   using std::exp;
