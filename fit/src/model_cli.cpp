@@ -1016,8 +1016,9 @@ int run(const ModelCommandOptions& o) {
   }
   if (rc)
     std::cerr << "dem model: the " << fams[chosen] << " family's calibration did not converge (parameters.md says "
-              << "why: row `converged`); its tables are written, and the exit status is 1. To go on from where it "
-              << "stopped: --start " << (out / "parameters.csv").string() << " [--max-iterations N]\n";
+              << "why: row `converged`); its tables are written, and the exit status is 1. To go on from its values: "
+              << "--start " << (out / "parameters.csv").string() << " [--max-iterations N] (the isotropic block "
+              << "restarts from the isotropic branch's own fit; docs/model.md, \"What the model does not capture\")\n";
   return rc;
 }
 
