@@ -566,9 +566,10 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
 }
 
 // The isotropic branch's residuals (p*(nu), C(nu)), weighted by the branch's scatter about the
-// isotropic laws fitted alone; held constant when the branch is not fitted.
+// isotropic laws fitted alone (`own`: that fit); held constant when the branch is not fitted. Without a
+// start the block starts from its own fit; with one, choose_isotropic_start decides.
 void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const CalibrationOptions& o,
-                             std::vector<double>& isob, double numin, int& n_res) {
+                             std::vector<double>& isob, double numin, int& n_res, std::vector<double>& own) {
   if (o.fit_isotropic) {
     // Weights: the scatter of the branch about the isotropic laws fitted alone (reduced chi2 = 1
     // for this block), so that neither block dominates by its number of points.
@@ -598,7 +599,8 @@ void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const 
     const double free_iso = kNumIso - static_cast<double>(std::set<int>(o.hold_iso.begin(), o.hold_iso.end()).size());
     const double dof = std::max<double>(1.0, iso.nu.size() - free_iso / 2.0);
     const double sp = std::max(std::sqrt(rp / dof), 1e-12), sc = std::max(std::sqrt(rc / dof), 1e-12);
-    isob = isopre;
+    own = isopre;
+    if (!o.start) isob = isopre;
     for (std::size_t i = 0; i < iso.nu.size(); ++i)
       problem.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
                                    new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0 / sp, 1.0 / sc}),
@@ -607,6 +609,24 @@ void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const 
   } else {
     problem.SetParameterBlockConstant(isob.data());
   }
+}
+
+// With a start file the isotropic block starts from the file's values (a restart from a stored optimum starts
+// there), or from the branch's own fit `own` where that gives the lower total cost (a start from another material,
+// whose laws miss this branch). `own` is moved inside the block's bounds first; a non-finite cost loses.
+void choose_isotropic_start(ceres::Problem& problem, std::vector<double>& isob, std::vector<double> own) {
+  for (int i = 0; i < kNumIso; ++i)
+    own[i] = std::min(std::max(own[i], problem.GetParameterLowerBound(isob.data(), i)),
+                      problem.GetParameterUpperBound(isob.data(), i));
+  const auto cost = [&problem] {
+    double c = 0;
+    problem.Evaluate(ceres::Problem::EvaluateOptions(), &c, nullptr, nullptr, nullptr);
+    return std::isfinite(c) ? c : std::numeric_limits<double>::infinity();
+  };
+  const double c_start = cost();
+  const std::vector<double> from_start = isob;
+  isob = own;
+  if (cost() >= c_start) isob = from_start;
 }
 
 // The parameters' bounds: jamming fractions below every start state, positive alpha and p0, the
@@ -1099,7 +1119,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   // start state itself (an unbounded B there; a held nu_cC would stay on it).
   for (int i : {kNuC, kNuCC})
     if (isob[i] > numin * (1 - 1e-6)) isob[i] = numin - 0.005;
-  add_isotropic_residuals(problem, iso, o, isob, numin, n_res);
+  std::vector<double> iso_own;
+  add_isotropic_residuals(problem, iso, o, isob, numin, n_res, iso_own);
   const bool weighted = X && o.fabric == FabricLode::Weighted;
   const bool state_lode = X && o.state_limit && o.state_lode;
   if (state_lode) check_second_lode_angle(curves, paths, "the state exponent's Lode dependence (lambda_psi)",
@@ -1121,6 +1142,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   const bool one_nu = nus_seen.size() < 2;
   const int n_p = start_pressures(curves, paths);
   hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, n_p, o.hold_ext);
+  if (o.start && o.fit_isotropic) choose_isotropic_start(problem, isob, iso_own);
 
   const ceres::Solver::Summary sum = solve(problem, o.max_iterations);
 
