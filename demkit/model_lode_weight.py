@@ -36,8 +36,9 @@ def run_rule(dem, work, out, rule, jackknife=True, state_limit=True, start=None)
            limit, "--calibrate-on", "D2,D3", "--no-plots", "--force"]
     if not jackknife:
         cmd.append("--no-jackknife")
-    if start:
-        cmd += ["--start", start]
+    if start:   # the isotropic block from the branch's own fit, as every stored variant run started (issue 31,
+                # fifteenth round: `--start-isotropic file`, the default, would restart them from the files' values)
+        cmd += ["--start", start, "--start-isotropic", "branch"]
     print("model_lode_weight:", " ".join(cmd), file=sys.stderr)
     os.makedirs(out, exist_ok=True)
     with open(os.path.join(out, "model.log"), "w") as log:

@@ -593,6 +593,7 @@ void read_starts(const ModelCommandOptions& o, CalibrationOptions& co) {
     }
   }
   co.start = start_params.empty() ? nullptr : start_params.front().get();
+  co.start_iso_from_file = o.start_isotropic != "branch";
 }
 
 // --d2-lode as a number: 1/2 when not given or "normal" (set after the fit, or from the --predict-with file).
@@ -614,6 +615,10 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   if (o.max_iterations < 1) throw InputError("--max-iterations " + std::to_string(o.max_iterations) + ": give a positive number");
   co.max_iterations = o.max_iterations;
   read_starts(o, co);
+  if (o.start_isotropic == "branch" && o.start.empty())
+    throw InputError("--start-isotropic branch says where a --start fit's isotropic block starts, and no --start was "
+                     "given: add --start PARAMETERS.csv, or leave it out (without a start the block starts from the "
+                     "branch's own fit)");
   if (!o.hold_isotropic.empty() && !start_params.empty() && !start_params.front())
     throw InputError("--hold-isotropic holds parameters at the values of the first --start file, and the first is "
                      "`default`: put a parameters.csv first");
@@ -1017,8 +1022,7 @@ int run(const ModelCommandOptions& o) {
   if (rc)
     std::cerr << "dem model: the " << fams[chosen] << " family's calibration did not converge (parameters.md says "
               << "why: row `converged`); its tables are written, and the exit status is 1. To go on from its values: "
-              << "--start " << (out / "parameters.csv").string() << " [--max-iterations N] (the isotropic block "
-              << "restarts from the isotropic branch's own fit; docs/model.md, \"What the model does not capture\")\n";
+              << "--start " << (out / "parameters.csv").string() << " [--max-iterations N]\n";
   return rc;
 }
 
@@ -1073,13 +1077,18 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                         "range, or without one the --calibrate-on curves')");
   app.add_option("--max-iterations", o.max_iterations, "Ceres iterations of each fit (default 300)");
   app.add_option("--start", o.start, "parameters.csv of another `dem model` run: the start values (re-centred on "
-                 "this data's nu_ref); with it the path ensembles alone may be calibrated (--calibrate-on PATHS). "
+                 "this data's nu_ref; the isotropic block from the file, or from the branch's own fit where that gives "
+                 "the lower cost); with it the path ensembles alone may be calibrated (--calibrate-on PATHS). "
                  "Several, comma-separated, `default` for the start from the data's own fits: the fit is made from "
                  "each and the lowest chi2/dof kept (OUT/starts.md); the fits of the extended family are multi-modal")
       ->delimiter(',')->default_str("");
   app.add_option("--hold", o.hold, "frictional-extension coefficients held at their start values (the --start file's, "
                  "or the default of a file without them: n_rate 1), e.g. n_rate; comma-separated")
       ->delimiter(',');
+  app.add_option("--start-isotropic", o.start_isotropic, "where the isotropic block of a --start fit starts: file (the "
+                 "file's values, default: a restart from a stored optimum starts there) or branch (the isotropic "
+                 "branch's own fit: for a start from another material's laws, which miss this branch)")
+      ->check(CLI::IsMember({"file", "branch"}))->default_str("file");
   app.add_option("--hold-isotropic", o.hold_isotropic, "isotropic parameters held at their values in the (first) --start file, "
                  "comma-separated (e.g. gamma_p,nu_cC,alpha: a branch of two pressure levels fixes two of the pressure "
                  "law's three)")->delimiter(',')->default_str("");

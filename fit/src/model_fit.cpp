@@ -566,10 +566,10 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
 }
 
 // The isotropic branch's residuals (p*(nu), C(nu)), weighted by the branch's scatter about the
-// isotropic laws fitted alone (`own`: that fit); held constant when the branch is not fitted. Without a
-// start the block starts from its own fit; with one, choose_isotropic_start decides.
+// isotropic laws fitted alone; held constant when the branch is not fitted. The block starts from
+// that fit, or from the start file's values (o.start_iso_from_file).
 void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const CalibrationOptions& o,
-                             std::vector<double>& isob, double numin, int& n_res, std::vector<double>& own) {
+                             std::vector<double>& isob, double numin, int& n_res) {
   if (o.fit_isotropic) {
     // Weights: the scatter of the branch about the isotropic laws fitted alone (reduced chi2 = 1
     // for this block), so that neither block dominates by its number of points.
@@ -599,8 +599,7 @@ void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const 
     const double free_iso = kNumIso - static_cast<double>(std::set<int>(o.hold_iso.begin(), o.hold_iso.end()).size());
     const double dof = std::max<double>(1.0, iso.nu.size() - free_iso / 2.0);
     const double sp = std::max(std::sqrt(rp / dof), 1e-12), sc = std::max(std::sqrt(rc / dof), 1e-12);
-    own = isopre;
-    if (!o.start) isob = isopre;
+    if (!o.start || !o.start_iso_from_file) isob = isopre;
     for (std::size_t i = 0; i < iso.nu.size(); ++i)
       problem.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
                                    new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0 / sp, 1.0 / sc}),
@@ -609,24 +608,6 @@ void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const 
   } else {
     problem.SetParameterBlockConstant(isob.data());
   }
-}
-
-// With a start file the isotropic block starts from the file's values (a restart from a stored optimum starts
-// there), or from the branch's own fit `own` where that gives the lower total cost (a start from another material,
-// whose laws miss this branch). `own` is moved inside the block's bounds first; a non-finite cost loses.
-void choose_isotropic_start(ceres::Problem& problem, std::vector<double>& isob, std::vector<double> own) {
-  for (int i = 0; i < kNumIso; ++i)
-    own[i] = std::min(std::max(own[i], problem.GetParameterLowerBound(isob.data(), i)),
-                      problem.GetParameterUpperBound(isob.data(), i));
-  const auto cost = [&problem] {
-    double c = 0;
-    problem.Evaluate(ceres::Problem::EvaluateOptions(), &c, nullptr, nullptr, nullptr);
-    return std::isfinite(c) ? c : std::numeric_limits<double>::infinity();
-  };
-  const double c_start = cost();
-  const std::vector<double> from_start = isob;
-  isob = own;
-  if (cost() >= c_start) isob = from_start;
 }
 
 // The parameters' bounds: jamming fractions below every start state, positive alpha and p0, the
@@ -717,7 +698,8 @@ void null_directions(Calibration& cal) {
   }
   if (null.size() > 1 && null.size() == quoted) {   // every direction: the optimum's Jacobian, not one coefficient
     cal.warnings.push_back("the covariance is 0 to rounding in every direction (a degenerate Jacobian at this optimum): "
-                           "no covariance errors quoted; the jackknife's where its refits spread");
+                           "no covariance errors quoted; the jackknife's where its refits spread, which may understate them (the "
+                           "refits start at this optimum, where the steps are as ill-conditioned)");
     return;
   }
   for (std::size_t a : null)
@@ -1119,8 +1101,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   // start state itself (an unbounded B there; a held nu_cC would stay on it).
   for (int i : {kNuC, kNuCC})
     if (isob[i] > numin * (1 - 1e-6)) isob[i] = numin - 0.005;
-  std::vector<double> iso_own;
-  add_isotropic_residuals(problem, iso, o, isob, numin, n_res, iso_own);
+  add_isotropic_residuals(problem, iso, o, isob, numin, n_res);
   const bool weighted = X && o.fabric == FabricLode::Weighted;
   const bool state_lode = X && o.state_limit && o.state_lode;
   if (state_lode) check_second_lode_angle(curves, paths, "the state exponent's Lode dependence (lambda_psi)",
@@ -1142,7 +1123,6 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   const bool one_nu = nus_seen.size() < 2;
   const int n_p = start_pressures(curves, paths);
   hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, n_p, o.hold_ext);
-  if (o.start && o.fit_isotropic) choose_isotropic_start(problem, isob, iso_own);
 
   const ceres::Solver::Summary sum = solve(problem, o.max_iterations);
 

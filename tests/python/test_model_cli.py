@@ -721,4 +721,9 @@ def test_bad_starts_are_refused(tmp_path, result):
     assert r.returncode == 2 and "none.csv is not a file" in r.stderr and "`default`" in r.stderr
     r = run(ENSEMBLE, "--out", str(tmp_path / "b"), "--no-plots", "--start", f"default,{good}", "--hold-isotropic", "p0")
     assert r.returncode == 2 and "the first is `default`" in r.stderr and "parameters.csv first" in r.stderr
-    assert not os.path.exists(tmp_path / "a" / "parameters.csv") and not os.path.exists(tmp_path / "b" / "parameters.csv")
+    r = run(ENSEMBLE, "--out", str(tmp_path / "c"), "--no-plots", "--start-isotropic", "branch")
+    assert r.returncode == 2 and "no --start was given" in r.stderr and "--start PARAMETERS.csv" in r.stderr, r.stderr
+    r = run(ENSEMBLE, "--out", str(tmp_path / "d"), "--no-plots", "--start", good, "--start-isotropic", "both")
+    assert r.returncode == 2 and "--start-isotropic" in r.stderr, r.stderr
+    for d in "abcd":
+        assert not os.path.exists(tmp_path / d / "parameters.csv")

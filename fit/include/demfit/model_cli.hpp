@@ -25,6 +25,9 @@ struct ModelCommandOptions {
   /// Start values: parameters.csv files of other `dem model` runs, or `default` (the start from the data's own
   /// saturating fits). More than one: the fit is made from each, the lowest chi2/dof is kept (starts.{csv,md}).
   std::vector<std::string> start;
+  /// Where the isotropic block of a --start fit starts: `file` (the file's values) or `branch` (the isotropic branch's
+  /// own fit: for a start from another material's laws; every fit before the fifteenth round of issue 31 started so).
+  std::string start_isotropic = "file";
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
   std::vector<std::string> hold;             ///< extension coefficients held at their start values (--hold)
   std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default), pressure (n_psi fitted), pressure-lode (+ lambda_psi)

@@ -40,6 +40,10 @@ struct CalibrationOptions {
   double max_step = 5e-4;        ///< RK4 step in eps_d [-]
   bool fit_isotropic = true;     ///< false: isotropic block held at `start` (e.g. synthetic tests)
   const Parameters* start = nullptr;   ///< start values (nullptr: from per-curve saturating fits)
+  /// With `start`: the isotropic block starts from its values (true: a restart from a stored optimum starts there) or
+  /// from the isotropic branch's own fit (false, `--start-isotropic branch`: a start from another material's laws,
+  /// which miss this branch; every fit before the fifteenth round of issue 31 started so).
+  bool start_iso_from_file = true;
   /// Paths: leave out (weight 0) the leading rows that are forward constant-volume shear from the
   /// start, up to the first turn: a D2 run from the same packings, which the D2 curves carry.
   bool skip_d2_prefix = true;
