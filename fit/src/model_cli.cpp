@@ -1077,8 +1077,7 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                         "range, or without one the --calibrate-on curves')");
   app.add_option("--max-iterations", o.max_iterations, "Ceres iterations of each fit (default 300)");
   app.add_option("--start", o.start, "parameters.csv of another `dem model` run: the start values (re-centred on "
-                 "this data's nu_ref; the isotropic block from the file, or from the branch's own fit where that gives "
-                 "the lower cost); with it the path ensembles alone may be calibrated (--calibrate-on PATHS). "
+                 "this data's nu_ref; the isotropic block too unless --start-isotropic branch); with it the path ensembles alone may be calibrated (--calibrate-on PATHS). "
                  "Several, comma-separated, `default` for the start from the data's own fits: the fit is made from "
                  "each and the lowest chi2/dof kept (OUT/starts.md); the fits of the extended family are multi-modal")
       ->delimiter(',')->default_str("");

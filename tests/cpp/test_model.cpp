@@ -1440,11 +1440,6 @@ TEST(ModelFriction, D2StressLodeParameterActsOnD2Only) {
 
 // ---- Calibrated on the laboratory set (issue 31; docs/model.md, "Calibrated on drained triaxial tests") ----
 
-// The path ensembles alone (constant side stress at two volume fractions) and an isotropic branch
-// of a few states are the calibration when start values are given: synthetic triaxial ensembles
-// made by the model with known parameters (K = 8, AR(1) noise rho = 0.5), a start 10-20 % off, the
-// pressure law's curvature and the coordination law's onset and exponent held at their (true)
-// start values. The held parameters stay exactly there; the others come back within their errors.
 namespace {
 // The laboratory set of the tests below: synthetic triaxial ensembles at constant side stress from two volume
 // fractions (K = 8, AR(1) noise rho = 0.5) and an isotropic branch of 8 states with 0.3 % scatter.
@@ -1469,6 +1464,11 @@ LabSet lab_set(const Parameters& P) {
 }
 }  // namespace
 
+// The path ensembles alone (constant side stress at two volume fractions) and an isotropic branch
+// of a few states are the calibration when start values are given: synthetic triaxial ensembles
+// made by the model with known parameters (K = 8, AR(1) noise rho = 0.5), a start 10-20 % off, the
+// pressure law's curvature and the coordination law's onset and exponent held at their (true)
+// start values. The held parameters stay exactly there; the others come back within their errors.
 TEST(ModelFit, CalibratesOnTriaxialPathsAloneFromAStart) {
   const Parameters P = truth();
   const auto iso = P.iso();
