@@ -162,11 +162,13 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   Table t({"parameter", "law", "value", "se", "se_method", "lo95", "hi95", "se_covariance", "se_jackknife", "units"});
   const bool jk = !cal.se_jackknife.empty();
   const double tq = jk ? t_quantile(0.975, packings - 1) : 1.959964;
+  std::vector<std::string> exact;   // the values to the last bit (parameters.csv/json: a --start reads them back)
   for (std::size_t i = 0; i < cal.value.size(); ++i) {
     const double se = cal.se()[i];
     t.add_row({cal.names[i], law_of(cal.names[i]), num(cal.value[i]), num(se),
                jk ? "jackknife over packings" : "covariance x max(1, chi2/dof)", num(cal.value[i] - tq * se),
                num(cal.value[i] + tq * se), num(cal.se_cov[i]), jk ? num(cal.se_jackknife[i]) : "nan", unit_of(cal.names[i])});
+    exact.push_back(table_number_exact(cal.value[i]));
   }
   t.add_row({"nu_ref", "centre of the nu-laws (fixed)", num(cal.params.nu_ref), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
   if (std::isfinite(cal.params.psi_lo) && std::isfinite(cal.params.psi_hi)) {   // files without the rows: no clamp
@@ -183,9 +185,11 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   // A fit that stopped short says so in its table (the values are where it stopped; --start goes on)
   if (!cal.ok)
     t.add_row({"converged", "no: " + cal.message, "nan", "nan", "not converged", "nan", "nan", "nan", "nan", "-"});
-  write_table_all(t, (out / "parameters").string(),
+  Table machine = t;
+  for (std::size_t i = 0; i < exact.size(); ++i) machine.rows[i][2] = exact[i];
+  write_table_all(machine, t, (out / "parameters").string(),
                   "Incremental anisotropic model: joint fit of the isotropic branch and the ensemble curves of " + fit_label +
-                  " (docs/model.md); 95 % intervals: estimate -/+ t se");
+                  " (docs/model.md); 95 % intervals: estimate -/+ t se; value: every digit in .csv/.json, six in .md/.tex");
   std::vector<std::string> h = {"parameter"};
   for (const auto& n : cal.names) h.push_back(n);
   Table c(h);

@@ -767,6 +767,16 @@ void bound_warnings(const ceres::Problem& problem, const std::vector<double>& sh
     for (int i = 0; i < n_ext; ++i) check(ext.data(), i, kNumIso + kNumShear + i, ext_name(i));
 }
 
+/// The pressure p* at the coordination law's jamming fraction nu_cC on the isotropic law, where nu_cC lies above the
+/// pressure's jamming fraction nu_c (NaN otherwise). There the law's stiffness B = dp*/d ln nu is unbounded (the
+/// coordination's slope (nu/nu_cC - 1)^(alpha - 1), alpha < 1, times a pressure factor that is not zero), and with
+/// the volume-form state parameter the elastic state follows p*: a path through that pressure pins its stress ratio
+/// to a_A F, and where it leaves depends on the steps (sixteenth round; docs/model.md, "The isotropic law's cusp").
+double cusp_pressure(const double* iso) {
+  if (!(iso[kNuCC] > iso[kNuC])) return kNaN;
+  return isotropic_pressure(iso, iso[kNuCC]);
+}
+
 // What the data leave undetermined: the nu-slopes from one start volume fraction, jamming
 // fractions on their bounds (no standard errors quoted for them).
 void calibration_warnings(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, const IsoData& iso,
@@ -789,6 +799,21 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
                              (X && o.state_volume ? "isotropic-branch" : "start") + " volume fraction " +
                              std::to_string(numin) + "): no standard error quoted");
     }
+  const bool nu_c_floor = X && o.state_volume && o.fit_isotropic &&
+                          std::count(o.hold_iso.begin(), o.hold_iso.end(), kNuCC) &&
+                          !std::count(o.hold_iso.begin(), o.hold_iso.end(), kNuC);
+  if (nu_c_floor && isob[kNuC] <= isob[kNuCC] * (1 + 1e-9)) {
+    cal.se_cov[kNuC] = kNaN;
+    cal.warnings.push_back("nu_c sits on its bound, the held nu_cC (" + std::to_string(isob[kNuCC]) +
+                           "; below it the isotropic law's stiffness would be unbounded on the paths): no standard "
+                           "error quoted");
+  }
+  if (X && o.state_volume && std::isfinite(cusp_pressure(isob.data())))
+    cal.warnings.push_back("nu_cC (" + std::to_string(isob[kNuCC]) + ") lies above nu_c (" + std::to_string(isob[kNuC]) +
+                           "): the isotropic law's stiffness is unbounded at p* = " +
+                           std::to_string(cusp_pressure(isob.data())) +
+                           ", and a path through it is integrated with an error that jumps with the coefficients. "
+                           "Hold nu_cC (--hold-isotropic nu_cC): nu_c is then kept at or above it");
   if (o.fit_isotropic && !iso.nu.empty()) {
     const double lowest = *std::min_element(iso.nu.begin(), iso.nu.end());
     if (std::fabs(isob[kNuCC] - lowest) < 1e-9) {
@@ -1111,7 +1136,11 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     volume_state_start(paths, ext, o.csl_linear);
     isob[kC0] = std::max(isob[kC0], 0.0);
   }
+  // With the volume-form state parameter and nu_cC held, nu_c is kept at or above it (cusp_pressure)
+  const bool nu_c_floor = state_volume && o.fit_isotropic && held.count(kNuCC) && !held.count(kNuC);
+  if (nu_c_floor) isob[kNuC] = std::max(isob[kNuC], isob[kNuCC]);
   set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted, state_lode, state_volume);
+  if (nu_c_floor) problem.SetParameterLowerBound(isob.data(), kNuC, isob[kNuCC]);
   if (o.fit_isotropic && !held.empty())
     problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 

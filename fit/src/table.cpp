@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <cctype>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -159,8 +160,9 @@ void write_table_all(const Table& t, const std::string& stem, const std::string&
   write_table_all(t, stem, caption, "");
 }
 
-void write_table_all(const Table& t, const std::string& stem, const std::string& caption, const std::string& latex) {
-  std::ostringstream md, tex;
+namespace {
+std::string markdown_text(const Table& t, const std::string& caption) {
+  std::ostringstream md;
   md << "<!-- " << caption << " -->\n|";
   for (auto& h : t.header) md << " " << h << " |";
   md << "\n|";
@@ -171,6 +173,11 @@ void write_table_all(const Table& t, const std::string& stem, const std::string&
     for (auto& c : r) md << " " << c << " |";
     md << "\n";
   }
+  return md.str();
+}
+
+std::string tex_text(const Table& t, const std::string& caption) {
+  std::ostringstream tex;
   tex << "% " << caption << " (needs \\usepackage{booktabs})\n\\begin{tabular}{" << std::string(t.header.size(), 'l')
       << "}\n\\toprule\n";
   for (std::size_t k = 0; k < t.header.size(); ++k) tex << (k ? " & " : "") << tex_escape(t.header[k]);
@@ -180,9 +187,20 @@ void write_table_all(const Table& t, const std::string& stem, const std::string&
     tex << " \\\\\n";
   }
   tex << "\\bottomrule\n\\end{tabular}\n";
+  return tex.str();
+}
+}  // namespace
+
+void write_table_all(const Table& t, const std::string& stem, const std::string& caption, const std::string& latex) {
   // All four or none: renamed into place only once every one is written.
-  dem::write_files_atomic({{stem + ".csv", csv_text(t)}, {stem + ".json", json_text(t, caption)}, {stem + ".md", md.str()},
-                     {stem + ".tex", latex.empty() ? tex.str() : latex}});
+  dem::write_files_atomic({{stem + ".csv", csv_text(t)}, {stem + ".json", json_text(t, caption)},
+                           {stem + ".md", markdown_text(t, caption)},
+                           {stem + ".tex", latex.empty() ? tex_text(t, caption) : latex}});
+}
+
+void write_table_all(const Table& machine, const Table& people, const std::string& stem, const std::string& caption) {
+  dem::write_files_atomic({{stem + ".csv", csv_text(machine)}, {stem + ".json", json_text(machine, caption)},
+                           {stem + ".md", markdown_text(people, caption)}, {stem + ".tex", tex_text(people, caption)}});
 }
 
 // ---- Tables for people -------------------------------------------------------------------
@@ -602,6 +620,13 @@ std::string table_number(double v, int prec) {
   char b[64];
   std::snprintf(b, sizeof b, "%.*g", prec, v);
   return b;
+}
+
+std::string table_number_exact(double v) {
+  if (!std::isfinite(v)) return "nan";
+  char b[64];
+  const auto r = std::to_chars(b, b + sizeof b, v);
+  return std::string(b, r.ptr);
 }
 
 std::string correlation_number(double rho) {

@@ -1976,3 +1976,79 @@ TEST(ModelVolumeState, PsiRangeHoldsTheLawsAtTheCalibrationsReach) {
   }
   EXPECT_GT(std::fabs(free.s.back() - clamped.s.back()), 1e-3) << "unclamped, the laws at psi = 0.1 differ";
 }
+
+// The isotropic law's cusp (sixteenth round; docs/model.md, "The isotropic law's cusp"): where the coordination law's
+// jamming fraction nu_cC lies above the pressure's nu_c, the stiffness B = dp*/d ln nu is unbounded at p*(nu_cC) (the
+// coordination's slope (nu/nu_cC - 1)^(alpha - 1) times a pressure factor that is not zero there), and the volume-form
+// state parameter takes the elastic state along the law with p*. A dense drained path that falls back through that
+// pressure after its peak (an anisotropy modulus a_A = 0.3 couples the stress ratio to B) then ends where the steps
+// put it: the same path with rows every 1e-3 and every 1e-5 ends 0.01 or more apart in s. With nu_c moved up to nu_cC
+// (no cusp) the two agree to 1e-7.
+TEST(ModelVolumeState, APathThroughTheIsotropicCuspEndsWhereItsStepsPutIt) {
+  Parameters P = volume_truth();
+  P.shear[kAnisoA] = 0.3;
+  ASSERT_GT(P.nu_cC, P.nu_c);
+  const double p0 = 6e-4, nu0 = P.ext[kNuCs] + P.ext[kLambdaCs] * std::log(p0 / kPCsRef) + 0.06;
+  auto end_s = [&](const Parameters& Q, double h) {
+    const auto iso = Q.iso();
+    const Rows r = rows_of(0.3, 0.3, h, false);
+    std::vector<int> isob(r.acc.size(), 2);
+    const auto st = integrate_rows<double>(iso.data(), Q.shear, Q.nu_ref, nu0, p0, 0.0, 0.0, r.acc, r.dir, isob, 5e-4,
+                                           volume_ext(Q, 0.0));
+    double p_max = 0;
+    for (const auto& x : st) p_max = std::max(p_max, x.state.p);
+    EXPECT_GT(p_max, isotropic_pressure(Q.iso().data(), P.nu_cC)) << "the path rises through the cusp's pressure";
+    return st.back().state.s;
+  };
+  EXPECT_GT(std::fabs(end_s(P, 1e-3) - end_s(P, 1e-5)), 0.01) << "with the cusp";
+  Parameters Q = P;
+  Q.nu_c = P.nu_cC;
+  EXPECT_NEAR(end_s(Q, 1e-3), end_s(Q, 1e-5), 1e-7) << "without it";
+}
+
+// The calibration keeps the paths off the cusp: with the volume-form state parameter and nu_cC held, nu_c is bounded
+// below by it (a start below it is moved onto it, and the truth here, 0.6642 < 0.667, would take it below), and the
+// table says that it sits on that bound; with the whole isotropic block held at a law with the cusp, the calibration
+// warns, naming the pressure and the fix.
+TEST(ModelVolumeState, TheCalibrationKeepsNuCAtOrAboveAHeldNuCC) {
+  const Parameters P = volume_truth();
+  const auto iso = P.iso();
+  const Rows r = triaxial_rows(0.6);
+  std::mt19937_64 rng(5);
+  std::vector<PathData> paths;
+  for (double p0 : {1e-3, 1e-2})
+    paths.push_back(synthetic_path(P, "TC_s3_synthetic", P.ext[kNuCs] + P.ext[kLambdaCs] * std::log(p0 / kPCsRef) + 0.04,
+                                   r, 8, 0.0, rng, p0, volume_ext(P, 0.0)));
+  IsoData branch;
+  for (int i = 0; i < 8; ++i) {
+    const double nu = 0.68 + 0.018 * i, f = 1.0 + (i % 2 ? 0.003 : -0.003);
+    branch.nu.push_back(nu);
+    branch.p.push_back(f * isotropic_pressure(iso.data(), nu));
+    branch.C.push_back(f * coordination(iso.data(), nu));
+  }
+  CalibrationOptions o = extended_options(P, FabricLode::Overlap);
+  o.state_volume = true;
+  o.max_iterations = 20;
+  Parameters start = P;
+  start.nu_c = 0.660;
+  o.start = &start;
+  o.fit_isotropic = true;
+  o.hold_iso = {kGammaP, kNuCC, kAlpha};
+  const Calibration cal = calibrate({}, branch, o, paths);
+  EXPECT_EQ(cal.value[kNuCC], P.nu_cC) << "held";
+  EXPECT_EQ(cal.value[kNuC], P.nu_cC) << "on it: the data would take it below";
+  auto said = [](const Calibration& c, const std::string& what) {
+    for (const auto& w : c.warnings) if (w.find(what) != std::string::npos) return true;
+    return false;
+  };
+  EXPECT_TRUE(said(cal, "nu_c sits on its bound, the held nu_cC")) << "said";
+  EXPECT_TRUE(std::isnan(cal.se_cov[kNuC])) << "no error on a bound";
+  EXPECT_FALSE(said(cal, "is unbounded at p*"));
+  o.fit_isotropic = false;
+  o.hold_iso.clear();
+  o.max_iterations = 2;
+  const Calibration held = calibrate({}, {}, o, paths);
+  EXPECT_EQ(held.value[kNuC], start.nu_c);
+  EXPECT_TRUE(said(held, "is unbounded at p* = 0.002473")) << "the cusp of the start's law named (p*(0.667) at nu_c 0.660)";
+  EXPECT_TRUE(said(held, "--hold-isotropic nu_cC")) << "and the fix";
+}
