@@ -850,6 +850,14 @@ std::set<int> checked_inputs(const std::vector<CurveData>& curves_in, const IsoD
   return held;
 }
 
+/// With the volume-form state parameter and nu_cC held (nu_c free), nu_c is kept at or above it, a start below moved
+/// onto it: the isotropic law's stiffness is then bounded on every path (cusp_pressure).
+void floor_nu_c(ceres::Problem& problem, std::vector<double>& isob, const CalibrationOptions& o, const std::set<int>& held) {
+  if (!o.fit_isotropic || !held.count(kNuCC) || held.count(kNuC)) return;
+  isob[kNuC] = std::max(isob[kNuC], isob[kNuCC]);
+  problem.SetParameterLowerBound(isob.data(), kNuC, isob[kNuCC]);
+}
+
 /// The extended family's start inside the bounds set_bounds sets (Ceres refuses an infeasible start).
 void clamp_extended_start(std::vector<double>& shear, std::vector<double>& ext) {
   for (int i : {kLnBetaSA, kLnBetaFA, kLnBetaPA}) {
@@ -1136,11 +1144,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     volume_state_start(paths, ext, o.csl_linear);
     isob[kC0] = std::max(isob[kC0], 0.0);
   }
-  // With the volume-form state parameter and nu_cC held, nu_c is kept at or above it (cusp_pressure)
-  const bool nu_c_floor = state_volume && o.fit_isotropic && held.count(kNuCC) && !held.count(kNuC);
-  if (nu_c_floor) isob[kNuC] = std::max(isob[kNuC], isob[kNuCC]);
   set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted, state_lode, state_volume);
-  if (nu_c_floor) problem.SetParameterLowerBound(isob.data(), kNuC, isob[kNuCC]);
+  if (state_volume) floor_nu_c(problem, isob, o, held);
   if (o.fit_isotropic && !held.empty())
     problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 
