@@ -770,8 +770,8 @@ void bound_warnings(const ceres::Problem& problem, const std::vector<double>& sh
 /// The pressure p* at the coordination law's jamming fraction nu_cC on the isotropic law, where nu_cC lies above the
 /// pressure's jamming fraction nu_c (NaN otherwise). There the law's stiffness B = dp*/d ln nu is unbounded (the
 /// coordination's slope (nu/nu_cC - 1)^(alpha - 1), alpha < 1, times a pressure factor that is not zero), and with
-/// the volume-form state parameter the elastic state follows p*: a path through that pressure pins its stress ratio
-/// to a_A F, and where it leaves depends on the steps (sixteenth round; docs/model.md, "The isotropic law's cusp").
+/// the volume-form state parameter the elastic state follows p*: a path through that pressure is held there, and
+/// where it leaves depends on the steps (sixteenth round; docs/model.md, "The isotropic law's cusp").
 double cusp_pressure(const double* iso) {
   if (!(iso[kNuCC] > iso[kNuC])) return kNaN;
   return isotropic_pressure(iso, iso[kNuCC]);
@@ -812,7 +812,7 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
     cal.warnings.push_back("nu_cC (" + std::to_string(isob[kNuCC]) + ") lies above nu_c (" + std::to_string(isob[kNuC]) +
                            "): the isotropic law's stiffness is unbounded at p* = " +
                            std::to_string(cusp_pressure(isob.data())) +
-                           ", and a path through it is integrated with an error that jumps with the coefficients. "
+                           ", and a path through that pressure ends where its steps put it. "
                            "Hold nu_cC (--hold-isotropic nu_cC): nu_c is then kept at or above it");
   if (o.fit_isotropic && !iso.nu.empty()) {
     const double lowest = *std::min_element(iso.nu.begin(), iso.nu.end());
