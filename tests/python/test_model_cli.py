@@ -7,6 +7,7 @@ import math
 import os
 import shutil
 import subprocess
+import sys
 
 import pytest
 
@@ -748,3 +749,27 @@ def test_parameter_values_carry_every_digit_in_the_machine_tables(result):
         assert md[name] == "%.6g" % v, (name, md[name], text)   # .md: six significant digits of it
         longer += len(text.lstrip("-").replace(".", "").lstrip("0")) > 6
     assert longer >= 6, table   # fitted values are not six-digit numbers
+
+
+def test_cost_scan_reads_a_smooth_optimum_and_refuses_unknown_names(tmp_path, result):
+    """demkit.model_cost_scan: the group model's optimum on figure3_n9261 is smooth (stepping s_max_a and p0 by
+    relative 1e-7 leaves the initial cost's seven digits, spread below 1e-5), every point in --csv; a name that is not a
+    coefficient is refused with the names it could have been, exit 2, nothing written."""
+    good = os.path.join(result[0], "parameters.csv")
+    out = str(tmp_path / "scan.csv")
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    r = subprocess.run([sys.executable, "-m", "demkit.model_cost_scan", ENSEMBLE, good, "--scan", "s_max_a,p0",
+                        "--steps", "1", "--dem", DEM, "--csv", out], capture_output=True, text=True, cwd=ROOT, env=env,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.count("(smooth)") == 2, r.stdout
+    pts = rows(out)
+    assert [p["name"] for p in pts] == ["s_max_a"] * 3 + ["p0"] * 3
+    assert [int(p["k"]) for p in pts] == [-1, 0, 1, -1, 0, 1]
+    v = [float(p["value"]) for p in pts[:3]]
+    assert v[0] < v[1] < v[2] and v[2] / v[1] - 1 == pytest.approx(1e-7, rel=1e-3)
+    bad = str(tmp_path / "bad.csv")
+    r = subprocess.run([sys.executable, "-m", "demkit.model_cost_scan", ENSEMBLE, good, "--scan", "n_peak",
+                        "--dem", DEM, "--csv", bad], capture_output=True, text=True, cwd=ROOT, env=env, timeout=60)
+    assert r.returncode == 2 and "n_peak not a coefficient" in r.stderr and "s_max_a" in r.stderr, r.stderr
+    assert not os.path.exists(bad)
