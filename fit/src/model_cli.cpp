@@ -963,6 +963,10 @@ FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions
     std::tie(P.psi_lo, P.psi_hi) = psi_range(P, cs, ps, o.eps_max);
   }
   const std::vector<double> iso = P.iso();
+  if (P.extended && P.state_volume && std::isfinite(cusp_pressure(iso.data())))
+    cal.warnings.push_back("the isotropic law of " + o.predict_with + " has nu_cC above nu_c: its stiffness is unbounded "
+                           "at p* = " + num(cusp_pressure(iso.data())) + ", and a path through that pressure ends where "
+                           "its steps put it (docs/model.md, \"The isotropic law's cusp\"; recalibrate with nu_cC held)");
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(iso[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(P.shear[i]); }
   if (P.extended)

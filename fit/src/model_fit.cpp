@@ -379,6 +379,11 @@ Parameters read_parameters(const std::string& path) {
   return P;
 }
 
+double cusp_pressure(const double* iso) {
+  if (!(iso[kNuCC] > iso[kNuC])) return kNaN;
+  return isotropic_pressure(iso, iso[kNuCC]);
+}
+
 Parameters recentred(const Parameters& P, double nu_ref) {
   Parameters Q = P;
   const double d = nu_ref - P.nu_ref;
@@ -765,16 +770,6 @@ void bound_warnings(const ceres::Problem& problem, const std::vector<double>& sh
   for (int i = 0; i < kNumShear; ++i) check(shear.data(), i, kNumIso + i, shear_name(i));
   if (X)
     for (int i = 0; i < n_ext; ++i) check(ext.data(), i, kNumIso + kNumShear + i, ext_name(i));
-}
-
-/// The pressure p* at the coordination law's jamming fraction nu_cC on the isotropic law, where nu_cC lies above the
-/// pressure's jamming fraction nu_c (NaN otherwise). There the law's stiffness B = dp*/d ln nu is unbounded (the
-/// coordination's slope (nu/nu_cC - 1)^(alpha - 1), alpha < 1, times a pressure factor that is not zero), and with
-/// the volume-form state parameter the elastic state follows p*: a path through that pressure is held there, and
-/// where it leaves depends on the steps (sixteenth round; docs/model.md, "The isotropic law's cusp").
-double cusp_pressure(const double* iso) {
-  if (!(iso[kNuCC] > iso[kNuC])) return kNaN;
-  return isotropic_pressure(iso, iso[kNuCC]);
 }
 
 // What the data leave undetermined: the nu-slopes from one start volume fraction, jamming

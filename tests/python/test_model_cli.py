@@ -773,3 +773,23 @@ def test_cost_scan_reads_a_smooth_optimum_and_refuses_unknown_names(tmp_path, re
                         "--dem", DEM, "--csv", bad], capture_output=True, text=True, cwd=ROOT, env=env, timeout=60)
     assert r.returncode == 2 and "n_peak not a coefficient" in r.stderr and "s_max_a" in r.stderr, r.stderr
     assert not os.path.exists(bad)
+
+
+def test_predicting_with_a_law_that_has_the_isotropic_cusp_warns(tmp_path):
+    """--predict-with a stored volume-form calibration whose nu_cC lies above its nu_c (the fourteenth round's mu = 1
+    joint optimum, kept as a start) predicts, and warns with the cusp's pressure p*(nu_cC) = 1.92e-3, computed here from
+    the file's isotropic law; a law without the cusp (the stored mu = 1 joint calibration) does not warn."""
+    sv = os.path.join(ROOT, "data", "geotech", "model", "state_volume")
+    law = os.path.join(sv, "fourteenth_round", "three_pressures", "mu_1", "joint", "parameters.csv")
+    v = {r["parameter"]: float(r["value"]) for r in rows(law) if r["parameter"] in
+         ("p0", "nu_c", "gamma_p", "C0", "nu_cC")}
+    x = math.log(v["nu_cC"] / v["nu_c"])
+    p_cusp = v["p0"] * (v["nu_cC"] * v["C0"] / v["nu_c"]) * x * (1 + v["gamma_p"] * x)   # C = C0 at nu_cC
+    friction = os.path.join(ROOT, "data", "friction_n1000", "mu_1")
+    r = run(friction, "--predict-with", law, "--family", "extended", "--no-plots", "--out", str(tmp_path / "a"), "--force")
+    assert r.returncode == 0, r.stderr
+    line = next(l for l in r.stderr.splitlines() if "nu_cC above nu_c" in l)
+    assert float(line.split("unbounded at p* = ")[1].split(",")[0]) == pytest.approx(p_cusp, rel=1e-5), line
+    ok = os.path.join(sv, "three_pressures", "mu_1", "joint", "parameters.csv")
+    r = run(friction, "--predict-with", ok, "--family", "extended", "--no-plots", "--out", str(tmp_path / "b"), "--force")
+    assert r.returncode == 0 and "nu_cC above nu_c" not in r.stderr, r.stderr

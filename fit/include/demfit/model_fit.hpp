@@ -209,6 +209,14 @@ struct PathPrediction {
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
                             double* psi_seen = nullptr);
 
+/// The pressure p* at the coordination law's jamming fraction nu_cC on the isotropic law `iso` (kNumIso entries),
+/// where nu_cC lies above the pressure's jamming fraction nu_c; NaN otherwise. There the law's stiffness
+/// B = dp*/d ln nu is unbounded (the coordination's slope (nu/nu_cC - 1)^(alpha - 1), alpha < 1, times a pressure
+/// factor that is not zero), and with the volume-form state parameter the elastic state follows p*: a path through
+/// that pressure is held there, and where it leaves depends on the steps (sixteenth round; docs/model.md, "The
+/// isotropic law's cusp").
+double cusp_pressure(const double* iso);
+
 /// The range of psi = nu - nu_cs(p) the laws are read in: [-R, R], R the largest |psi| of the model's own states
 /// along `curves` and `paths`, predicted unclamped with `params` (volume-form state parameter only; else both
 /// infinite): the calibration's distance from the critical state, on either side (thirteenth round). Along those
