@@ -772,6 +772,13 @@ void bound_warnings(const ceres::Problem& problem, const std::vector<double>& sh
     for (int i = 0; i < n_ext; ++i) check(ext.data(), i, kNumIso + kNumShear + i, ext_name(i));
 }
 
+/// Whether nu_c is bounded below by nu_cC (floor_nu_c): the volume-form state parameter, the isotropic block fitted,
+/// nu_cC held and nu_c not.
+bool nu_c_floored(const CalibrationOptions& o) {
+  const auto holds = [&](int i) { return std::find(o.hold_iso.begin(), o.hold_iso.end(), i) != o.hold_iso.end(); };
+  return o.state_volume && o.fit_isotropic && holds(kNuCC) && !holds(kNuC);
+}
+
 // What the data leave undetermined: the nu-slopes from one start volume fraction, jamming
 // fractions on their bounds (no standard errors quoted for them).
 void calibration_warnings(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, const IsoData& iso,
@@ -794,10 +801,7 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
                              (X && o.state_volume ? "isotropic-branch" : "start") + " volume fraction " +
                              std::to_string(numin) + "): no standard error quoted");
     }
-  const bool nu_c_floor = X && o.state_volume && o.fit_isotropic &&
-                          std::count(o.hold_iso.begin(), o.hold_iso.end(), kNuCC) &&
-                          !std::count(o.hold_iso.begin(), o.hold_iso.end(), kNuC);
-  if (nu_c_floor && isob[kNuC] <= isob[kNuCC] * (1 + 1e-9)) {
+  if (X && nu_c_floored(o) && isob[kNuC] <= isob[kNuCC] * (1 + 1e-9)) {
     cal.se_cov[kNuC] = kNaN;
     cal.warnings.push_back("nu_c sits on its bound, the held nu_cC (" + std::to_string(isob[kNuCC]) +
                            "; below it the isotropic law's stiffness would be unbounded on the paths): no standard "
@@ -847,8 +851,8 @@ std::set<int> checked_inputs(const std::vector<CurveData>& curves_in, const IsoD
 
 /// With the volume-form state parameter and nu_cC held (nu_c free), nu_c is kept at or above it, a start below moved
 /// onto it: the isotropic law's stiffness is then bounded on every path (cusp_pressure).
-void floor_nu_c(ceres::Problem& problem, std::vector<double>& isob, const CalibrationOptions& o, const std::set<int>& held) {
-  if (!o.fit_isotropic || !held.count(kNuCC) || held.count(kNuC)) return;
+void floor_nu_c(ceres::Problem& problem, std::vector<double>& isob, const CalibrationOptions& o) {
+  if (!nu_c_floored(o)) return;
   isob[kNuC] = std::max(isob[kNuC], isob[kNuCC]);
   problem.SetParameterLowerBound(isob.data(), kNuC, isob[kNuCC]);
 }
@@ -1140,7 +1144,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     isob[kC0] = std::max(isob[kC0], 0.0);
   }
   set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted, state_lode, state_volume);
-  if (state_volume) floor_nu_c(problem, isob, o, held);
+  if (state_volume) floor_nu_c(problem, isob, o);
   if (o.fit_isotropic && !held.empty())
     problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 
