@@ -248,6 +248,8 @@ def main(argv=None):
                          "a second Lode angle; the others are predicted)")
     ap.add_argument("--max-iterations", type=int, default=None,
                     help="`dem model --max-iterations` (its default, 300, when not given)")
+    ap.add_argument("--jamming", default="separate", choices=("separate", "shared"),
+                    help="the isotropic laws' jamming fractions (dem model --jamming; shared: nu_cC = nu_c)")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
     ap.add_argument("--middle-rule", default="norm", help="the --fabric-lode of --norm-work's run (its column name)")
     ap.add_argument("--norm-work", default=None,
@@ -271,6 +273,8 @@ def main(argv=None):
             cmd += ["--state-limit", a.state_limit]
         if a.calibrate_on != "D2":
             cmd += ["--calibrate-on", a.calibrate_on]
+        if a.jamming != "separate":
+            cmd += ["--jamming", a.jamming]
         if a.max_iterations:
             cmd += ["--max-iterations", str(a.max_iterations)]
         print("model_friction:", " ".join(cmd), file=sys.stderr)

@@ -165,8 +165,10 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   std::vector<std::string> exact;   // the values to the last bit (parameters.csv/json: a --start reads them back)
   for (std::size_t i = 0; i < cal.value.size(); ++i) {
     const double se = cal.se()[i];
-    t.add_row({cal.names[i], law_of(cal.names[i]), num(cal.value[i]), num(se),
-               jk ? "jackknife over packings" : "covariance x max(1, chi2/dof)", num(cal.value[i] - tq * se),
+    const bool tied = cal.shared_jamming && cal.names[i] == "nu_cC";
+    const std::string method = jk ? "jackknife over packings" : "covariance x max(1, chi2/dof)";
+    t.add_row({cal.names[i], tied ? "nu_cC = nu_c (one jamming fraction: --jamming shared)" : law_of(cal.names[i]),
+               num(cal.value[i]), num(se), tied ? "nu_c's (tied): " + method : method, num(cal.value[i] - tq * se),
                num(cal.value[i] + tq * se), num(cal.se_cov[i]), jk ? num(cal.se_jackknife[i]) : "nan", unit_of(cal.names[i])});
     exact.push_back(table_number_exact(cal.value[i]));
   }
@@ -443,7 +445,8 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
   for (const auto& r : rows)
     if (std::find(keys.begin(), keys.end(), std::make_pair(r.mode, r.nu)) == keys.end()) keys.push_back({r.mode, r.nu});
   // A quantity the curve has but whose error is not finite (the model's curve went to inf or nan: it diverged) is
-  // "inf", and so is the curve's worst and the calibration's: never left out of the maximum.
+  // "inf", and so is the curve's worst and the calibration's: never left out of the maximum. A path the laws cannot
+  // start (role "not integrable": no model curve) is "nan" in every cell, not determined, its role saying why.
   const auto cell = [](double x) { return std::isinf(x) ? std::string("inf") : num(x, 3); };
   double worst_all = 0;
   int diverged = 0;
@@ -453,6 +456,7 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
     for (const auto& r : rows) {
       if (r.mode != mode || r.nu != nu || r.quantity.find("after turn") != std::string::npos) continue;
       role = r.role;
+      if (role.find("not integrable") != std::string::npos) continue;   // no model curve: not determined, not diverged
       const int q = r.quantity == "p_star" ? 0 : r.quantity == "eps_v" ? 1 : r.quantity.rfind("s_dev", 0) == 0 ? 2 : 3;
       v[q] = std::isfinite(r.rms_over_band) ? r.rms_over_band : std::numeric_limits<double>::infinity();
     }
@@ -636,6 +640,10 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
     co.hold_iso.push_back(i);
   }
   co.hold_from = co.hold_iso.empty() ? nullptr : co.start;
+  co.shared_jamming = o.jamming == "shared";
+  if (co.shared_jamming && std::find(co.hold_iso.begin(), co.hold_iso.end(), kNuCC) != co.hold_iso.end())
+    throw InputError("--jamming shared ties nu_cC to the fitted nu_c, and --hold-isotropic holds nu_cC: leave nu_cC out "
+                     "of --hold-isotropic (or use --jamming separate)");
   for (const auto& n : o.hold) {
     const int i = ext_index(n);
     if (i < 0) {
@@ -966,7 +974,7 @@ FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions
   if (P.extended && P.state_volume && std::isfinite(cusp_pressure(iso.data())))
     cal.warnings.push_back("the isotropic law of " + o.predict_with + " has nu_cC above nu_c: its stiffness is unbounded "
                            "at p* = " + num(cusp_pressure(iso.data())) + ", and a path through that pressure ends where "
-                           "its steps put it (docs/model.md, \"The isotropic law's cusp\"; recalibrate with nu_cC held)");
+                           "its steps put it (docs/model.md, \"The isotropic law's cusp\"; recalibrate with nu_cC held or --jamming shared)");
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(iso[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(P.shear[i]); }
   if (P.extended)
@@ -1099,6 +1107,10 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
   app.add_option("--hold-isotropic", o.hold_isotropic, "isotropic parameters held at their values in the (first) --start file, "
                  "comma-separated (e.g. gamma_p,nu_cC,alpha: a branch of two pressure levels fixes two of the pressure "
                  "law's three)")->delimiter(',')->default_str("");
+  app.add_option("--jamming", o.jamming, "the isotropic laws' jamming fractions: separate (nu_c for the pressure, "
+                 "nu_cC for the coordination law; default) or shared (nu_cC = nu_c: one jamming fraction, the "
+                 "stiffness bounded at every nu; docs/model.md \"One jamming fraction\")")
+      ->check(CLI::IsMember({"separate", "shared"}))->default_str("separate");
   app.add_flag("--force", o.force, "overwrite an existing output folder");
 }
 

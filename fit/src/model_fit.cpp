@@ -570,49 +570,64 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
   }
 }
 
-// The isotropic branch's residuals (p*(nu), C(nu)), weighted by the branch's scatter about the
-// isotropic laws fitted alone; held constant when the branch is not fitted. The block starts from
-// that fit, or from the start file's values (o.start_iso_from_file).
-void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const CalibrationOptions& o,
-                             std::vector<double>& isob, double numin, int& n_res) {
-  if (o.fit_isotropic) {
-    // Weights: the scatter of the branch about the isotropic laws fitted alone (reduced chi2 = 1
-    // for this block), so that neither block dominates by its number of points.
-    ceres::Problem pre;
-    std::vector<double> isopre = isob;
-    for (std::size_t i = 0; i < iso.nu.size(); ++i)
-      pre.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
-                               new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0, 1.0}), nullptr, isopre.data());
-    pre.SetParameterUpperBound(isopre.data(), kNuC, numin * (1 - 1e-6));
-    pre.SetParameterUpperBound(isopre.data(), kNuCC, numin * (1 - 1e-6));
-    pre.SetParameterLowerBound(isopre.data(), kAlpha, 0.05);
-    if (!o.hold_iso.empty()) {
-      const std::set<int> held(o.hold_iso.begin(), o.hold_iso.end());
-      pre.SetManifold(isopre.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
-    }
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_QR;
-    so.max_num_iterations = 500;
-    ceres::Solver::Summary sum;
-    ceres::Solve(so, &pre, &sum);
-    double rp = 0, rc = 0;
-    for (std::size_t i = 0; i < iso.nu.size(); ++i) {
-      const double dp = isotropic_pressure(isopre.data(), iso.nu[i]) - iso.p[i];
-      const double dc = coordination(isopre.data(), iso.nu[i]) - iso.C[i];
-      rp += dp * dp; rc += dc * dc;
-    }
-    const double free_iso = kNumIso - static_cast<double>(std::set<int>(o.hold_iso.begin(), o.hold_iso.end()).size());
-    const double dof = std::max<double>(1.0, iso.nu.size() - free_iso / 2.0);
-    const double sp = std::max(std::sqrt(rp / dof), 1e-12), sc = std::max(std::sqrt(rc / dof), 1e-12);
-    if (!o.start || !o.start_iso_from_file) isob = isopre;
-    for (std::size_t i = 0; i < iso.nu.size(); ++i)
-      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
-                                   new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0 / sp, 1.0 / sc}),
-                               nullptr, isob.data());
-    n_res += 2 * static_cast<int>(iso.nu.size());
-  } else {
-    problem.SetParameterBlockConstant(isob.data());
+// The isotropic laws fitted to the branch alone from `isob` (the `held` ones kept), and the branch's RMS scatter about
+// them in p* and C.
+struct IsoPrefit {
+  std::vector<double> iso;
+  double sp = 1.0, sc = 1.0;
+};
+
+IsoPrefit prefit_isotropic(const IsoData& iso, const std::vector<double>& isob, const std::set<int>& held, double numin) {
+  IsoPrefit f{isob};
+  ceres::Problem pre;
+  for (std::size_t i = 0; i < iso.nu.size(); ++i)
+    pre.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
+                             new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0, 1.0}), nullptr, f.iso.data());
+  pre.SetParameterUpperBound(f.iso.data(), kNuC, numin * (1 - 1e-6));
+  pre.SetParameterUpperBound(f.iso.data(), kNuCC, numin * (1 - 1e-6));
+  pre.SetParameterLowerBound(f.iso.data(), kAlpha, 0.05);
+  if (!held.empty())
+    pre.SetManifold(f.iso.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = 500;
+  ceres::Solver::Summary sum;
+  ceres::Solve(so, &pre, &sum);
+  double rp = 0, rc = 0;
+  for (std::size_t i = 0; i < iso.nu.size(); ++i) {
+    const double dp = isotropic_pressure(f.iso.data(), iso.nu[i]) - iso.p[i];
+    const double dc = coordination(f.iso.data(), iso.nu[i]) - iso.C[i];
+    rp += dp * dp; rc += dc * dc;
   }
+  const double dof = std::max<double>(1.0, iso.nu.size() - (kNumIso - static_cast<double>(held.size())) / 2.0);
+  f.sp = std::max(std::sqrt(rp / dof), 1e-12);
+  f.sc = std::max(std::sqrt(rc / dof), 1e-12);
+  return f;
+}
+
+// The isotropic branch's residuals (p*(nu), C(nu)), weighted by the branch's scatter about the
+// isotropic laws fitted alone (reduced chi2 = 1 for this block, so that neither block dominates by its number of
+// points); held constant when the branch is not fitted. The block starts from that fit, or from the start file's
+// values (o.start_iso_from_file). With one jamming fraction (o.shared_jamming) the weights stay those of the separate
+// laws' fit (the data's scatter about the seven-coefficient laws), so that the tie's cost shows in chi2, and the
+// block starts from the tied laws' own fit (nu_cC <= 0: coordination_jamming).
+void add_isotropic_residuals(ceres::Problem& problem, const IsoData& iso, const CalibrationOptions& o,
+                             const std::set<int>& held, std::vector<double>& isob, double numin, int& n_res) {
+  if (!o.fit_isotropic) {
+    problem.SetParameterBlockConstant(isob.data());
+    return;
+  }
+  std::set<int> untied = held;
+  if (o.shared_jamming) untied.erase(kNuCC);
+  const IsoPrefit w = prefit_isotropic(iso, isob, untied, numin);
+  if (o.shared_jamming) isob[kNuCC] = 0.0;
+  const IsoPrefit f = o.shared_jamming ? prefit_isotropic(iso, isob, held, numin) : w;
+  if (!o.start || !o.start_iso_from_file) isob = f.iso;
+  for (std::size_t i = 0; i < iso.nu.size(); ++i)
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<IsoResidual, 2, kNumIso>(
+                                 new IsoResidual{iso.nu[i], iso.p[i], iso.C[i], 1.0 / w.sp, 1.0 / w.sc}),
+                             nullptr, isob.data());
+  n_res += 2 * static_cast<int>(iso.nu.size());
 }
 
 // The parameters' bounds: jamming fractions below every start state, positive alpha and p0, the
@@ -779,6 +794,14 @@ bool nu_c_floored(const CalibrationOptions& o) {
   return o.state_volume && o.fit_isotropic && holds(kNuCC) && !holds(kNuC);
 }
 
+/// One jamming fraction: the fitted law written with nu_cC = nu_c (the same law as the tie's), with nu_c's error.
+void tie_jamming_fractions(Calibration& cal) {
+  cal.shared_jamming = true;
+  cal.params.nu_cC = cal.params.nu_c;
+  cal.value[kNuCC] = cal.value[kNuC];
+  cal.se_cov[kNuCC] = cal.se_cov[kNuC];
+}
+
 // What the data leave undetermined: the nu-slopes from one start volume fraction, jamming
 // fractions on their bounds (no standard errors quoted for them).
 void calibration_warnings(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, const IsoData& iso,
@@ -812,7 +835,13 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
                            "): the isotropic law's stiffness is unbounded at p* = " +
                            std::to_string(cusp_pressure(isob.data())) +
                            ", and a path through that pressure ends where its steps put it. "
-                           "Hold nu_cC (--hold-isotropic nu_cC): nu_c is then kept at or above it");
+                           "Hold nu_cC (--hold-isotropic nu_cC): nu_c is then kept at or above it; or tie the two "
+                           "(--jamming shared)");
+  else if (o.fit_isotropic && std::isfinite(cusp_pressure(isob.data())))
+    cal.warnings.push_back("nu_cC (" + std::to_string(isob[kNuCC]) + ") lies above nu_c (" + std::to_string(isob[kNuC]) +
+                           "): the isotropic law's stiffness is unbounded at nu = nu_cC, which a path whose volume "
+                           "fraction crosses it meets (a kink in an isobaric or drained path near jamming; constant-"
+                           "volume curves do not). --jamming shared ties the two (docs/model.md, \"One jamming fraction\")");
   if (o.fit_isotropic && !iso.nu.empty()) {
     const double lowest = *std::min_element(iso.nu.begin(), iso.nu.end());
     if (std::fabs(isob[kNuCC] - lowest) < 1e-9) {
@@ -840,6 +869,12 @@ std::set<int> checked_inputs(const std::vector<CurveData>& curves_in, const IsoD
                                 "extended family and replaces the pressure form: give --family extended and one "
                                 "--state-limit");
   std::set<int> held(o.hold_iso.begin(), o.hold_iso.end());
+  if (o.shared_jamming) {
+    if (!o.fit_isotropic || held.count(kNuCC))
+      throw std::invalid_argument("model calibration: one jamming fraction (--jamming shared) ties nu_cC to the fitted "
+                                  "nu_c: fit the isotropic block and leave nu_cC out of --hold-isotropic");
+    held.insert(kNuCC);
+  }
   const std::size_t need_iso = held.empty() ? 8 : kNumIso - held.size() + 2;
   if (o.fit_isotropic && iso.nu.size() < need_iso)
     throw std::invalid_argument("model calibration: only " + std::to_string(iso.nu.size()) +
@@ -1133,7 +1168,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   // start state itself (an unbounded B there; a held nu_cC would stay on it).
   for (int i : {kNuC, kNuCC})
     if (isob[i] > numin * (1 - 1e-6)) isob[i] = numin - 0.005;
-  add_isotropic_residuals(problem, iso, o, isob, numin, n_res);
+  add_isotropic_residuals(problem, iso, o, held, isob, numin, n_res);
   const bool weighted = X && o.fabric == FabricLode::Weighted;
   const bool state_lode = X && o.state_limit && o.state_lode;
   if (state_lode) check_second_lode_angle(curves, paths, "the state exponent's Lode dependence (lambda_psi)",
@@ -1182,6 +1217,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
 
   covariance_errors(problem, isob, shear, ext, o, X, cal);
   for (int i : held) cal.se_cov[i] = kNaN;   // held at the start value: no error of its own
+  if (o.shared_jamming) tie_jamming_fractions(cal);
   for (int i : held_x) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
   calibration_warnings(curves, paths, iso, o, isob, numin, one_nu, X, cal);
   bound_warnings(problem, shear, ext, X, n_ext, cal);

@@ -322,6 +322,77 @@ TEST(ModelFit, RecoversExactParametersFromNoiseFreeCurves) {
   for (int i = 1; i < kNumShear; i += 2) EXPECT_EQ(one.value[kNumIso + i], 0.0) << shear_name(i);
 }
 
+// One jamming fraction (seventeenth round; docs/model.md, "One jamming fraction"): nu_cC <= 0 makes the coordination
+// law read the pressure law's nu_c, the same law as nu_cC = nu_c written out; its stiffness B = dp*/d ln nu is then
+// bounded as nu -> nu_c (x -> 0 cancels the coordination's (nu/nu_c - 1)^(alpha - 1)) and equals a central difference
+// of p*(ln nu), where the separate law's B diverges at nu_cC. A calibration tied so (--jamming shared) recovers a shared
+// truth from noise-free curves and branch points and a start with separate fractions, writes nu_cC = nu_c with nu_c's
+// error and one free parameter fewer; holding nu_cC, or not fitting the isotropic block, is refused with the fix.
+TEST(ModelFit, OneJammingFractionBoundsTheStiffnessAndIsRecovered) {
+  Parameters P = truth();
+  P.nu_cC = P.nu_c;
+  std::vector<double> tied = P.iso(), written = P.iso();
+  tied[kNuCC] = 0.0;
+  for (double nu : {P.nu_c * (1 + 1e-12), 0.6643, 0.67, 0.75, 0.85}) {
+    EXPECT_EQ(coordination(tied.data(), nu), coordination(written.data(), nu)) << nu;
+    EXPECT_EQ(bulk_modulus(tied.data(), nu), bulk_modulus(written.data(), nu)) << nu;
+    const double h = 1e-6, fd = (isotropic_pressure(tied.data(), nu * std::exp(h)) -
+                                 isotropic_pressure(tied.data(), nu * std::exp(-h))) / (2 * h);
+    if (nu > P.nu_c * 1.001) EXPECT_NEAR(bulk_modulus(tied.data(), nu), fd, 1e-6 * fd) << nu;
+  }
+  const double B0 = bulk_modulus(tied.data(), P.nu_c * (1 + 1e-12));
+  EXPECT_NEAR(B0, P.p0 * P.C0, 1e-4 * P.p0 * P.C0) << "the limit at jamming: p0 C0";
+  std::vector<double> sep = written;
+  sep[kNuCC] = P.nu_c + 0.005;
+  EXPECT_GT(bulk_modulus(sep.data(), sep[kNuCC] * (1 + 1e-12)), 1e3 * bulk_modulus(sep.data(), sep[kNuCC] * 1.01))
+      << "separate fractions: the cusp";
+
+  Synthetic S = synthetic(P, {0.69, 0.73, 0.77, 0.81}, 2, 0.0, 3);
+  for (auto& c : S.mean) {   // the members' noise-free model curve
+    const auto st = monotone_shear<double>(written.data(), P.shear, P.nu_ref, c.nu, c.p[0], c.s[0], c.F[0], c.eps, 1e-3);
+    for (std::size_t i = 0; i < c.eps.size(); ++i) { c.p[i] = st[i].p; c.s[i] = st[i].s; c.F[i] = st[i].F; }
+  }
+  IsoData iso;
+  for (int i = 0; i < 40; ++i) {
+    const double nu = 0.666 + 0.004 * i;
+    iso.nu.push_back(nu);
+    iso.p.push_back(isotropic_pressure(written.data(), nu));
+    iso.C.push_back(coordination(written.data(), nu));
+  }
+  Parameters start = P;
+  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.8 : 1.1);
+  start.nu_cC = P.nu_c + 0.002;
+  start.C0 = 5.0; start.alpha = 0.45;
+  CalibrationOptions o;
+  o.start = &start;
+  o.nu_ref = P.nu_ref;
+  o.max_step = 1e-3;
+  o.shared_jamming = true;
+  const Calibration cal = calibrate(S.mean, iso, o);
+  ASSERT_TRUE(cal.ok) << cal.message;
+  EXPECT_TRUE(cal.shared_jamming);
+  EXPECT_NEAR(cal.value[kNuC], P.nu_c, 1e-6);
+  EXPECT_NEAR(cal.params.C0, P.C0, 1e-4);
+  EXPECT_NEAR(cal.params.alpha, P.alpha, 1e-5);
+  EXPECT_EQ(cal.value[kNuCC], cal.value[kNuC]);
+  EXPECT_EQ(cal.params.nu_cC, cal.params.nu_c);
+  EXPECT_EQ(std::isnan(cal.se_cov[kNuCC]), std::isnan(cal.se_cov[kNuC]));   // noise-free: both undetermined (null_directions)
+  if (std::isfinite(cal.se_cov[kNuC])) EXPECT_EQ(cal.se_cov[kNuCC], cal.se_cov[kNuC]);
+  EXPECT_EQ(cal.n_free, kNumIso - 1 + kNumShear);
+  CalibrationOptions held = o;
+  held.hold_iso = {kNuCC};
+  CalibrationOptions fixed = o;
+  fixed.fit_isotropic = false;
+  for (const auto& bad : {held, fixed}) {
+    try {
+      calibrate(S.mean, iso, bad);
+      FAIL() << "a tie that cannot act was accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("leave nu_cC out of --hold-isotropic"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(ModelFit, BadInputIsRefusedWithTheFix) {
   const Parameters P = truth();
   Synthetic S = synthetic(P, {0.72}, 3, 0.5, 1);

@@ -793,3 +793,41 @@ def test_predicting_with_a_law_that_has_the_isotropic_cusp_warns(tmp_path):
     ok = os.path.join(sv, "three_pressures", "mu_1", "joint", "parameters.csv")
     r = run(friction, "--predict-with", ok, "--family", "extended", "--no-plots", "--out", str(tmp_path / "b"), "--force")
     assert r.returncode == 0 and "nu_cC above nu_c" not in r.stderr, r.stderr
+
+
+def _slope_jump_ratio(curve):
+    """The largest jump of d eps_vol / d eps_d between rows of a model path, over the mean of the jumps two rows either
+    side (1 on a smooth curve; large at a kink), away from the first rows."""
+    with open(curve) as fh:
+        r = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+    ev, e = [float(x["eps_vol"]) for x in r], [float(x["eps_d"]) for x in r]
+    d1 = [(ev[i + 1] - ev[i]) / (e[i + 1] - e[i]) for i in range(len(r) - 1)]
+    d2 = [abs(d1[i + 1] - d1[i]) for i in range(len(d1) - 1)]
+    return max(d2[i] / max(1e-15, (d2[i - 2] + d2[i + 2]) / 2) for i in range(5, len(d2) - 2))
+
+
+def test_one_jamming_fraction_removes_the_isobaric_kink(tmp_path, result):
+    """--jamming shared ties the coordination law's jamming fraction to the pressure law's: parameters.csv writes
+    nu_cC = nu_c (every digit) with the tie named; the separate laws of figure3_n9261 (nu_cC 0.6670 above nu_c 0.6663)
+    warn, and their isobaric model path at nu = 0.671 kinks where its nu crosses nu_cC (the slope of eps_vol jumps 24
+    times its neighbours' jumps), the tied law's is smooth; a tie with nu_cC held, or an unknown word, is refused."""
+    out = str(tmp_path / "shared")
+    r = run(ENSEMBLE, "--out", out, "--no-jackknife", "--jamming", "shared", "--force")
+    assert r.returncode == 0, r.stderr
+    table = {x["parameter"]: x for x in rows(os.path.join(out, "parameters.csv"))}
+    assert table["nu_cC"]["value"] == table["nu_c"]["value"]
+    assert "one jamming fraction" in table["nu_cC"]["law"] and "tied" in table["nu_cC"]["se_method"]
+    assert "lies above nu_c" not in r.stderr
+    sep = {x["parameter"]: float(x["value"]) for x in rows(os.path.join(result[0], "parameters.csv"))}
+    assert sep["nu_cC"] > sep["nu_c"]
+    assert "--jamming shared ties the two" in result[1].stderr
+    assert _slope_jump_ratio(os.path.join(result[0], "curves", "isobaric_phi0.671.csv")) > 10
+    assert _slope_jump_ratio(os.path.join(out, "curves", "isobaric_phi0.671.csv")) < 2
+    good = os.path.join(result[0], "parameters.csv")
+    r = run(ENSEMBLE, "--out", str(tmp_path / "a"), "--no-plots", "--jamming", "shared", "--start", good,
+            "--hold-isotropic", "nu_cC")
+    assert r.returncode == 2 and "leave nu_cC out of --hold-isotropic" in r.stderr, r.stderr
+    r = run(ENSEMBLE, "--out", str(tmp_path / "b"), "--no-plots", "--jamming", "one")
+    assert r.returncode == 2 and "--jamming" in r.stderr, r.stderr
+    for d in "ab":
+        assert not os.path.exists(tmp_path / d / "parameters.csv")

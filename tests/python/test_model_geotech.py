@@ -382,3 +382,25 @@ def test_no_stored_state_calibration_quotes_a_coefficient_as_exact():
             se = float(x["se_covariance"]) if x.get("se_covariance") not in (None, "", "nan") else math.nan
             if math.isfinite(se):
                 assert se > 1e-9 * max(1.0, abs(float(x["value"]))), (f, x["parameter"], se)
+
+
+def test_a_path_the_laws_cannot_start_is_not_determined_not_diverged(tmp_path):
+    """Seventeenth round: the friction study's mu = 0.5 laws (nu_c = 0.5990) predicting the loose TC_s3 tests: the one
+    at p* = 1e-3 starts at nu = 0.5928, below nu_c, so the laws cannot start it. Its summary row says so in its role and
+    is "nan" (not determined) in every cell, it does not make the calibration row's worst "inf", and no curve is called
+    diverged; the p* = 1e-2 test (nu = 0.6185) is predicted and judged, and is the worst."""
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech", "curves"),
+                        "--mu", "0.5", "--out", str(tmp_path / "m"), "--tests", "TC_s3"], capture_output=True, text=True,
+                       cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    law = os.path.join(ROOT, "data", "friction_n1000", "model_friction", "mu_0.5", "parameters.csv")
+    r = subprocess.run([DEM, "model", str(tmp_path / "m" / "ensemble_loose"), "--no-plots", "--family", "extended",
+                        "--predict-with", law, "--out", str(tmp_path / "p")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "cannot be integrated" in r.stderr and "not finite" not in r.stderr
+    rows = {(x["mode"], x["nu [-]"]): x for x in read(tmp_path / "p" / "summary.csv")}
+    low, high = rows[("TC_s3_loose", "0.5928")], rows[("TC_s3_loose", "0.6185")]
+    assert "not integrable" in low["role"]
+    assert [low[k] for k in ("p_star [band]", "eps_v [band]", "s_dev [band]", "F_dev [band]", "worst [band]")] == ["nan"] * 5
+    worst = float(high["worst [band]"])
+    assert math.isfinite(worst) and float(rows[("calibration", "nan")]["worst [band]"]) == worst

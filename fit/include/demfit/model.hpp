@@ -204,11 +204,19 @@ inline const char* iso_name(int i) {
   return n[i];
 }
 
+/// The coordination law's jamming fraction: nu_cC, or the pressure law's nu_c where nu_cC <= 0 (one jamming
+/// fraction for both laws, `dem model --jamming shared`: the stiffness B is then bounded at every nu, docs/model.md
+/// "One jamming fraction"). A calibration writes the tied value as nu_c's, the same law.
+template <class T>
+T coordination_jamming(const T* iso) {
+  return iso[kNuCC] > T(0.0) ? iso[kNuCC] : iso[kNuC];
+}
+
 /// C(nu) = C0 + C1 (nu/nu_cC - 1)^alpha [-] (Goncu et al. 2010), C0 below nu_cC.
 template <class T>
 T coordination(const T* iso, const T& nu) {
   using std::pow;
-  const T base = nu / iso[kNuCC] - T(1.0);
+  const T base = nu / coordination_jamming(iso) - T(1.0);
   if (!(base > T(0.0))) return iso[kC0];
   return iso[kC0] + iso[kC1] * pow(base, iso[kAlpha]);
 }
@@ -230,9 +238,10 @@ T bulk_modulus(const T* iso, const T& nu) {
   using std::pow;
   const T x = log(nu / iso[kNuC]);
   const T C = coordination(iso, nu);
-  const T base = nu / iso[kNuCC] - T(1.0);
+  const T nu_j = coordination_jamming(iso);
+  const T base = nu / nu_j - T(1.0);
   T dC = T(0.0);   // nu dC/dnu
-  if (base > T(0.0)) dC = iso[kC1] * iso[kAlpha] * pow(base, iso[kAlpha] - T(1.0)) * nu / iso[kNuCC];
+  if (base > T(0.0)) dC = iso[kC1] * iso[kAlpha] * pow(base, iso[kAlpha] - T(1.0)) * nu / nu_j;
   const T g = x * (T(1.0) + iso[kGammaP] * x);            // x (1 + gamma x)
   const T dg = T(1.0) + T(2.0) * iso[kGammaP] * x;        // d g / d ln nu
   return iso[kP0] / iso[kNuC] * (nu * C * g + nu * dC * g + nu * C * dg);

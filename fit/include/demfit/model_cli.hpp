@@ -28,6 +28,9 @@ struct ModelCommandOptions {
   /// Where the isotropic block of a --start fit starts: `file` (the file's values) or `branch` (the isotropic branch's
   /// own fit: for a start from another material's laws; every fit before the fifteenth round of issue 31 started so).
   std::string start_isotropic = "file";
+  /// The isotropic laws' jamming fractions: `separate` (nu_c and nu_cC, the default) or `shared` (nu_cC = nu_c:
+  /// no cusp in the stiffness; docs/model.md, "One jamming fraction")
+  std::string jamming = "separate";
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
   std::vector<std::string> hold;             ///< extension coefficients held at their start values (--hold)
   std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default), pressure (n_psi fitted), pressure-lode (+ lambda_psi)

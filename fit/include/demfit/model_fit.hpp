@@ -44,6 +44,10 @@ struct CalibrationOptions {
   /// from the isotropic branch's own fit (false, `--start-isotropic branch`: a start from another material's laws,
   /// which miss this branch; every fit before the fifteenth round of issue 31 started so).
   bool start_iso_from_file = true;
+  /// One jamming fraction for both isotropic laws (`--jamming shared`): nu_cC tied to nu_c (coordination_jamming), so
+  /// that the stiffness B is bounded at every nu (no cusp, cusp_pressure). Needs the isotropic block fitted and nu_cC
+  /// not held; the fit writes nu_cC = nu_c (docs/model.md, "One jamming fraction").
+  bool shared_jamming = false;
   /// Paths: leave out (weight 0) the leading rows that are forward constant-volume shear from the
   /// start, up to the first turn: a D2 run from the same packings, which the D2 curves carry.
   bool skip_d2_prefix = true;
@@ -119,6 +123,7 @@ struct Calibration {
   bool ok = false;
   std::string message;                  ///< Ceres' summary line
   std::vector<std::string> warnings;
+  bool shared_jamming = false;          ///< nu_cC tied to nu_c (CalibrationOptions::shared_jamming)
   /// Coefficients the covariance leaves undetermined (an error of 0 to rounding from the pseudo-inverse: se_cov nan);
   /// the jackknife still quotes their spread over packings.
   std::vector<bool> undetermined;
