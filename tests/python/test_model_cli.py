@@ -831,3 +831,31 @@ def test_one_jamming_fraction_removes_the_isobaric_kink(tmp_path, result):
     assert r.returncode == 2 and "--jamming" in r.stderr, r.stderr
     for d in "ab":
         assert not os.path.exists(tmp_path / d / "parameters.csv")
+
+
+def test_jamming_table_reads_the_laws_as_dem_model_writes_them(tmp_path, result):
+    """demkit.model_jamming's isotropic laws are the C++ ones: at each nu of laws.csv its p*(nu) and C(nu) equal the
+    table's p_iso and C_iso (six digits) for the separate and for the tied law; its row for figure3_n9261 quotes each
+    run's chi2/dof as parameters.csv does, the tied nu_c, and the separate laws' cusp p*(nu_cC) (C = C0 there) where
+    nu_cC lies above nu_c; a folder that is not a tied run is refused."""
+    from demkit import model_jamming as mj
+    out = str(tmp_path / "shared")
+    r = run(ENSEMBLE, "--out", out, "--no-jackknife", "--no-plots", "--jamming", "shared", "--force")
+    assert r.returncode == 0, r.stderr
+    dirs = {"separate": result[0], "shared": out}
+    for d in dirs.values():
+        L = mj.read_law(os.path.join(d, "parameters.csv"))
+        for x in rows(os.path.join(d, "laws.csv")):
+            nu = float(x["nu [-]"])
+            assert float("%.6g" % mj.pressure(L, nu)) == pytest.approx(float(x["p_iso [p*]"]), rel=1e-9), (d, nu)
+            assert float("%.6g" % mj.coordination(L, nu)) == pytest.approx(float(x["C_iso [-]"]), rel=1e-9), (d, nu)
+    row = mj.row("figure3", "group", ENSEMBLE, dirs)
+    chi = {w: float(next(x for x in rows(os.path.join(d, "parameters.csv")) if x["parameter"] == "chi2_per_dof")["value"])
+           for w, d in dirs.items()}
+    assert row[2] == pytest.approx(chi["separate"], rel=1e-4) and row[3] == pytest.approx(chi["shared"], rel=1e-4)
+    A, B = (mj.read_law(os.path.join(d, "parameters.csv")) for d in dirs.values())
+    assert row[11] == B["nu_c"] == B["nu_cC"]
+    x = math.log(A["nu_cC"] / A["nu_c"])
+    assert row[21] == pytest.approx(A["p0"] * A["nu_cC"] * A["C0"] / A["nu_c"] * x * (1 + A["gamma_p"] * x), rel=1e-12)
+    with pytest.raises(SystemExit, match="not a --jamming shared run"):
+        mj.row("figure3", "group", ENSEMBLE, {"separate": result[0], "shared": result[0]})
