@@ -98,6 +98,7 @@ def run(cmd, log):
 
 def compute(work, dem, figure3):
     """Both calibrations of every ensemble into WORK/{separate,shared}/ and WORK/figure3_{separate,shared}/."""
+    os.makedirs(work, exist_ok=True)
     for way in WAYS:
         run([sys.executable, "-m", "demkit.model_friction", "--out", os.path.join(work, way), "--no-jackknife",
              "--jamming", way, "--dem", dem], os.path.join(work, f"friction_{way}.log"))
@@ -239,6 +240,11 @@ def main(argv=None):
         compute(a.work, a.dem, a.figure3)
     rows = [row(*c) for c in cases(a.work, a.figure3)]
     write(rows, a.out)
+    for way in WAYS:   # the N = 9261 model paths (the isobaric kink at nu = 0.671 with separate fractions)
+        png = os.path.join(a.work, f"figure3_{way}", "model_paths.png")
+        if os.path.exists(png):
+            with open(png, "rb") as fh:
+                write_atomic(os.path.join(a.out, f"figure3_model_paths_{way}.png"), fh.read())
     print(f"model_jamming: {len(rows)} rows written to {a.out}/jamming.{{md,csv}}", file=sys.stderr)
 
 
