@@ -794,8 +794,11 @@ bool nu_c_floored(const CalibrationOptions& o) {
   return o.state_volume && o.fit_isotropic && holds(kNuCC) && !holds(kNuC);
 }
 
-/// One jamming fraction: the fitted law written with nu_cC = nu_c (the same law as the tie's), with nu_c's error.
-void tie_jamming_fractions(Calibration& cal) {
+/// Held isotropic coefficients have no error of their own. With one jamming fraction (`tied`) the fitted law is
+/// written with nu_cC = nu_c (the same law as the tie's) and nu_c's error.
+void held_isotropic_errors(Calibration& cal, const std::set<int>& held, bool tied) {
+  for (int i : held) cal.se_cov[i] = kNaN;
+  if (!tied) return;
   cal.shared_jamming = true;
   cal.params.nu_cC = cal.params.nu_c;
   cal.value[kNuCC] = cal.value[kNuC];
@@ -1216,8 +1219,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     for (int i = 0; i < n_ext; ++i) { cal.names.push_back(ext_name(i)); cal.value.push_back(ext[i]); }
 
   covariance_errors(problem, isob, shear, ext, o, X, cal);
-  for (int i : held) cal.se_cov[i] = kNaN;   // held at the start value: no error of its own
-  if (o.shared_jamming) tie_jamming_fractions(cal);
+  held_isotropic_errors(cal, held, o.shared_jamming);
   for (int i : held_x) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
   calibration_warnings(curves, paths, iso, o, isob, numin, one_nu, X, cal);
   bound_warnings(problem, shear, ext, X, n_ext, cal);
