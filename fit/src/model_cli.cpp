@@ -438,6 +438,23 @@ struct SummaryRow {
 
 // One line per curve: RMS error over the band half-width of p* (or eps_v where p is held),
 // s_dev and F_dev, fitted and predicted, with the calibration's chi2/dof: the table of issue 31.
+// Where a predicted path meets the isotropic law's cusp (nu_cC above nu_c): "" where it does not. The law is read at
+// the path's own nu, or (the volume-form state parameter) at the pressure's elastic state, so the path meets it where
+// its nu crosses nu_cC, or its p* crosses p*(nu_cC) (cusp_pressure).
+std::string cusp_on_path(const Parameters& P, const PathPrediction& m) {
+  const std::vector<double> iso = P.iso();
+  const double pc = cusp_pressure(iso.data());
+  if (!std::isfinite(pc) || m.nu.empty()) return "";
+  const bool vol = P.extended && P.state_volume;
+  const std::vector<double>& x = vol ? m.p : m.nu;
+  const double at = vol ? pc : P.nu_cC;
+  const auto [lo, hi] = std::minmax_element(x.begin(), x.end());
+  if (!(*lo <= at && at <= *hi)) return "";
+  return std::string("crosses the isotropic law's cusp (") + (vol ? "p* = " + num(pc) : "nu = nu_cC = " + num(P.nu_cC)) +
+         ", nu_cC above nu_c = " + num(P.nu_c) + "): its stiffness is unbounded there and the path bends or ends where "
+         "its steps put it; --jamming shared ties the two fractions (docs/model.md, \"One jamming fraction\")";
+}
+
 void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, const std::string& fit_label,
                    const fs::path& out) {
   Table t({"mode", "nu [-]", "role", "p_star [band]", "eps_v [band]", "s_dev [band]", "F_dev [band]", "worst [band]"});
@@ -870,6 +887,8 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
                     "nan", "nan", "nan"});
       return;
     }
+    const std::string cusp = cusp_on_path(cal.params, m);
+    if (!cusp.empty()) std::cerr << "dem model: warning: " << d.name << " (" << role << ") " << cusp << "\n";
     fs::create_directories(out / "curves" / "paths");
     write_path_curve(m, d, role, out / "curves" / "paths" / (f.mode + "_" + f.tag + ".csv"));
     for (const auto& e : path_errors(m, d)) {

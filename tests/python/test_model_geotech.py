@@ -388,7 +388,8 @@ def test_a_path_the_laws_cannot_start_is_not_determined_not_diverged(tmp_path):
     """Seventeenth round: the friction study's mu = 0.5 laws (nu_c = 0.5990) predicting the loose TC_s3 tests: the one
     at p* = 1e-3 starts at nu = 0.5928, below nu_c, so the laws cannot start it. Its summary row says so in its role and
     is "nan" (not determined) in every cell, it does not make the calibration row's worst "inf", and no curve is called
-    diverged; the p* = 1e-2 test (nu = 0.6185) is predicted and judged, and is the worst."""
+    diverged; the p* = 1e-2 test (nu = 0.6185) is predicted and judged, and is the worst. That one crosses the law's
+    cusp at nu_cC, and is said to; with the fractions tied it is not."""
     r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech", "curves"),
                         "--mu", "0.5", "--out", str(tmp_path / "m"), "--tests", "TC_s3"], capture_output=True, text=True,
                        cwd=ROOT)
@@ -404,3 +405,21 @@ def test_a_path_the_laws_cannot_start_is_not_determined_not_diverged(tmp_path):
     assert [low[k] for k in ("p_star [band]", "eps_v [band]", "s_dev [band]", "F_dev [band]", "worst [band]")] == ["nan"] * 5
     worst = float(high["worst [band]"])
     assert math.isfinite(worst) and float(rows[("calibration", "nan")]["worst [band]"]) == worst
+    # the p* = 1e-2 path dilates through nu_cC = 0.6100 (above nu_c): the law's cusp, named with the fix; a copy of the
+    # law with the two fractions tied (nu_cC = nu_c) predicts it without the warning
+    with open(tmp_path / "p" / "curves" / "paths" / "TC_s3_loose_phi0.618.csv") as fh:
+        nu = [float(x["nu_model"]) for x in csv.DictReader(ln for ln in fh if not ln.startswith("#"))]
+    law_rows = read(law)
+    v = {x["parameter"]: x["value"] for x in law_rows}
+    assert min(nu) < float(v["nu_cC"]) < max(nu) and float(v["nu_c"]) < float(v["nu_cC"])
+    assert "TC_s3_loose (predicted) crosses the isotropic law's cusp (nu = nu_cC = 0.609957" in r.stderr, r.stderr
+    assert "--jamming shared" in r.stderr
+    with open(law, newline="") as fh:
+        table = list(csv.reader(fh))
+    tied = tmp_path / "tied.csv"
+    with open(tied, "w", newline="") as fh:
+        csv.writer(fh).writerows([row[:2] + [v["nu_c"]] + row[3:] if row[0] == "nu_cC" else row for row in table])
+    r = subprocess.run([DEM, "model", str(tmp_path / "m" / "ensemble_loose"), "--no-plots", "--family", "extended",
+                        "--predict-with", str(tied), "--out", str(tmp_path / "t")], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0 and "cusp" not in r.stderr, r.stderr
