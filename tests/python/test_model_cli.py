@@ -778,7 +778,8 @@ def test_cost_scan_reads_a_smooth_optimum_and_refuses_unknown_names(tmp_path, re
 def test_predicting_with_a_law_that_has_the_isotropic_cusp_warns(tmp_path):
     """--predict-with a stored volume-form calibration whose nu_cC lies above its nu_c (the fourteenth round's mu = 1
     joint optimum, kept as a start) predicts, and warns with the cusp's pressure p*(nu_cC) = 1.92e-3, computed here from
-    the file's isotropic law; a law without the cusp (the stored mu = 1 joint calibration) does not warn."""
+    the file's isotropic law; a law without the cusp (the stored mu = 1 joint calibration) does not warn. A path whose
+    pressure crosses p*(nu_cC) (the dense TC_s3 test at p* = 1e-3) is named."""
     sv = os.path.join(ROOT, "data", "geotech", "model", "state_volume")
     law = os.path.join(sv, "fourteenth_round", "three_pressures", "mu_1", "joint", "parameters.csv")
     v = {r["parameter"]: float(r["value"]) for r in rows(law) if r["parameter"] in
@@ -793,6 +794,19 @@ def test_predicting_with_a_law_that_has_the_isotropic_cusp_warns(tmp_path):
     ok = os.path.join(sv, "three_pressures", "mu_1", "joint", "parameters.csv")
     r = run(friction, "--predict-with", ok, "--family", "extended", "--no-plots", "--out", str(tmp_path / "b"), "--force")
     assert r.returncode == 0 and "nu_cC above nu_c" not in r.stderr, r.stderr
+    # seventeenth round: the dense TC_s3 test at p* = 1e-3 rises through that pressure, and is named
+    g = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech",
+                        "curves"), "--mu", "1", "--out", str(tmp_path / "g"), "--levels", "iso_lo", "--joint", "--tests",
+                        "TC_s3"], capture_output=True, text=True, cwd=ROOT)
+    assert g.returncode == 0, g.stderr
+    r = run(str(tmp_path / "g" / "ensemble_joint"), "--predict-with", law, "--family", "extended", "--no-plots", "--out",
+            str(tmp_path / "c"), "--force")
+    assert r.returncode == 0, r.stderr
+    with open(tmp_path / "c" / "curves" / "paths" / "TC_s3_dense_phi0.658.csv") as fh:
+        p = [float(x["p_star_model"]) for x in csv.DictReader(ln for ln in fh if not ln.startswith("#"))]
+    assert min(p) < p_cusp < max(p)
+    line = next(l for l in r.stderr.splitlines() if "TC_s3_dense (predicted) crosses the isotropic law's cusp" in l)
+    assert float(line.split("(p* = ")[1].split(",")[0]) == pytest.approx(p_cusp, rel=1e-5) and "--jamming shared" in line
 
 
 def _slope_jump_ratio(curve):
