@@ -13,6 +13,7 @@ sits.
 import argparse
 import csv
 import glob
+import json
 import math
 import os
 import subprocess
@@ -73,6 +74,25 @@ def branch_misfit(L, points):
     return rp, rc
 
 
+def relaxed_points(path, mu):
+    """(nu, p*) of the relaxed static packings of data/isostatic_n1000 at friction mu (E_kin/E_pot < 1e-9, p* > 1e-6):
+    states the moving unloading branch does not hold, an independent check of the pressure law near jamming."""
+    if not path or not os.path.exists(path):
+        return []
+    with open(path) as fh:
+        runs = json.load(fh)["runs"]
+    return [(q["nu"], q["p_star"]) for r in runs for q in r["points"]
+            if abs(q["mu"] - mu) < 1e-9 and q["E_kin_over_E_pot"] < 1e-9 and q["p_star"] > 1e-6]
+
+
+def relaxed_misfit(L, points):
+    """RMS of p*_law/p* - 1 over the relaxed points above the law's nu_c, and how many those are (nan, 0 without)."""
+    ok = [(nu, p) for nu, p in points if nu > L["nu_c"]]
+    if not ok:
+        return float("nan"), 0
+    return math.sqrt(sum((pressure(L, nu) / p - 1) ** 2 for nu, p in ok) / len(ok)), len(ok)
+
+
 def summary(model_dir):
     """chi2/dof and the worst band error per role ('fitted', 'predicted') of a summary.csv."""
     with open(os.path.join(model_dir, "summary.csv"), newline="") as fh:
@@ -107,14 +127,14 @@ def compute(work, dem, figure3):
 
 
 def cases(work, figure3):
-    """(label, family, ensemble with members, {way: model dir})."""
+    """(label, family, ensemble with members, {way: model dir}, mu)."""
     out = [("figure3_n9261 (N = 9261, μ = 0)", "group", figure3,
-            {w: os.path.join(work, f"figure3_{w}") for w in WAYS})]
+            {w: os.path.join(work, f"figure3_{w}") for w in WAYS}, 0.0)]
     for mu in MUS:
         ens = os.path.join(work, "separate", f"mu_{mu}")
         for fam, sub in (("group", ""), ("extended", "extended")):
             out.append((f"friction_n1000 μ = {mu}", fam, ens,
-                        {w: os.path.join(work, w, f"mu_{mu}", "model", sub) for w in WAYS}))
+                        {w: os.path.join(work, w, f"mu_{mu}", "model", sub) for w in WAYS}, float(mu)))
     return out
 
 
@@ -123,10 +143,12 @@ HEAD = ["ensemble", "family", "chi2_dof_separate [-]", "chi2_dof_shared [-]", "c
         "worst_predicted_shared [band]", "nu_c_separate [-]", "nu_cC_separate [-]", "nu_c_shared [-]",
         "C0_separate [-]", "C0_shared [-]", "alpha_separate [-]", "alpha_shared [-]",
         "branch_rms_p_rel_separate [-]", "branch_rms_p_rel_shared [-]", "branch_rms_C_separate [-]",
-        "branch_rms_C_shared [-]", "branch_lowest_nu [-]", "cusp_p_star_separate [-]"]
+        "branch_rms_C_shared [-]", "branch_lowest_nu [-]", "cusp_p_star_separate [-]",
+        "relaxed_rms_p_rel_separate [-]", "relaxed_rms_p_rel_shared [-]", "relaxed_points_separate",
+        "relaxed_points_shared"]
 
 
-def row(label, fam, ens, dirs):
+def row(label, fam, ens, dirs, mu=None, relaxed=None):
     s, t = (summary(dirs[w]) for w in WAYS)
     A, B = (read_law(os.path.join(dirs[w], "parameters.csv")) for w in WAYS)
     if B["nu_cC"] != B["nu_c"]:
@@ -134,9 +156,11 @@ def row(label, fam, ens, dirs):
     pts = branch(ens)
     (pa, ca), (pb, cb) = branch_misfit(A, pts), branch_misfit(B, pts)
     cusp = pressure(A, A["nu_cC"]) if A["nu_cC"] > A["nu_c"] else float("nan")
+    rel = relaxed_points(relaxed, mu) if mu is not None else []
+    (ra, na), (rb, nb) = relaxed_misfit(A, rel), relaxed_misfit(B, rel)
     return [label, fam, s["chi2"], t["chi2"], 100 * (t["chi2"] / s["chi2"] - 1), s["fitted"], t["fitted"],
             s["predicted"], t["predicted"], A["nu_c"], A["nu_cC"], B["nu_c"], A["C0"], B["C0"], A["alpha"],
-            B["alpha"], pa, pb, ca, cb, min(p[0] for p in pts), cusp]
+            B["alpha"], pa, pb, ca, cb, min(p[0] for p in pts), cusp, ra, rb, na, nb]
 
 
 def cell(v, digits=4):
@@ -153,16 +177,25 @@ def write(rows, out):
           "(--jamming shared), no jackknife; chi2/dof with the isotropic branch weighted alike (its scatter about the "
           "separate laws); worst: largest RMS error over the 95 % band half-width of a fitted / predicted curve; branch: "
           "RMS misfit of the isotropic branch, p* relative, C absolute; cusp: p*(nu_cC) of the separate laws, none where "
-          "nu_cC <= nu_c -->",
+          "nu_cC <= nu_c; relaxed: RMS of p*_law/p* - 1 over the relaxed static packings of data/isostatic_n1000 at "
+          "this mu above the law's nu_c (how many), none where there are none -->",
           "| ensemble | family | χ²/dof separate → shared | change | worst fitted | worst predicted | ν_c, ν_cC separate "
-          "| ν_c shared | C0 | α | branch p* RMS (rel.) | branch C RMS | lowest branch ν | cusp p* (separate) |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "| ν_c shared | C0 | α | branch p* RMS (rel.) | branch C RMS | lowest branch ν | cusp p* (separate) "
+          "| relaxed p* RMS (rel.; points) |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         md.append(f"| {r[0]} | {r[1]} | {cell(r[2])} → {cell(r[3])} | {r[4]:+.1f} % | {cell(r[5], 3)} → {cell(r[6], 3)} "
                   f"| {cell(r[7], 3)} → {cell(r[8], 3)} | {r[9]:.4f}, {r[10]:.4f} | {r[11]:.4f} "
                   f"| {r[12]:.3f} → {r[13]:.3f} | {r[14]:.3f} → {r[15]:.3f} | {r[16]:.4f} → {r[17]:.4f} "
-                  f"| {r[18]:.4f} → {r[19]:.4f} | {r[20]:.4f} | {cell(r[21], 3)} |")
+                  f"| {r[18]:.4f} → {r[19]:.4f} | {r[20]:.4f} | {cell(r[21], 3)} "
+                  f"| {relaxed_cell(r)} |")
     write_atomic(os.path.join(out, "jamming.md"), "\n".join(md) + "\n")
+
+
+def relaxed_cell(r):
+    if not r[24] and not r[25]:
+        return "none"
+    return f"{cell(r[22], 3)} ({r[24]}) → {cell(r[23], 3)} ({r[25]})"
 
 
 LAB = ("loose", "dense", "mu_0/dense", "mu_0.1/dense", "mu_0.3/dense", "mu_1/dense", "three_pressures/joint",
@@ -225,6 +258,8 @@ def main(argv=None):
     ap.add_argument("--out", required=True, help="folder of jamming.{md,csv}")
     ap.add_argument("--dem", default="build/dem")
     ap.add_argument("--figure3", default="data/figure3_n9261", help="the N = 9261 ensemble")
+    ap.add_argument("--relaxed", default="data/isostatic_n1000/isostatic.json",
+                    help="relaxed static packings (demkit.isostatic's json): the pressure law checked on them")
     ap.add_argument("--table-only", action="store_true", help="only collect WORK's existing runs")
     ap.add_argument("--lab", nargs=2, metavar=("STORED", "SHARED"),
                     help="instead: the step-8 calibrations of data/geotech/model (STORED: state_volume) against their "
@@ -238,7 +273,7 @@ def main(argv=None):
         ap.error("--work WORK is needed (or --lab STORED SHARED)")
     if not a.table_only:
         compute(a.work, a.dem, a.figure3)
-    rows = [row(*c) for c in cases(a.work, a.figure3)]
+    rows = [row(*c, relaxed=a.relaxed) for c in cases(a.work, a.figure3)]
     write(rows, a.out)
     for way in WAYS:   # the N = 9261 model paths (the isobaric kink at nu = 0.671 with separate fractions)
         png = os.path.join(a.work, f"figure3_{way}", "model_paths.png")

@@ -871,5 +871,15 @@ def test_jamming_table_reads_the_laws_as_dem_model_writes_them(tmp_path, result)
     assert row[11] == B["nu_c"] == B["nu_cC"]
     x = math.log(A["nu_cC"] / A["nu_c"])
     assert row[21] == pytest.approx(A["p0"] * A["nu_cC"] * A["C0"] / A["nu_c"] * x * (1 + A["gamma_p"] * x), rel=1e-12)
+    # the relaxed static packings of data/isostatic_n1000 at mu = 0: 18 stops, 2 of them unjammed (E_kin/E_pot > 1)
+    relaxed = os.path.join(ROOT, "data", "isostatic_n1000", "isostatic.json")
+    pts = mj.relaxed_points(relaxed, 0.0)
+    assert len(pts) == 16 and min(p for _, p in pts) == pytest.approx(2.61e-4, rel=1e-2)
+    full = mj.row("figure3", "group", ENSEMBLE, dirs, mu=0.0, relaxed=relaxed)
+    assert full[:22] == row[:22] and row[24] == row[25] == 0   # without the relaxed points: none
+    for law, rms, n in ((A, full[22], full[24]), (B, full[23], full[25])):
+        above = [(nu, p) for nu, p in pts if nu > law["nu_c"]]
+        assert n == len(above) > 0
+        assert rms == pytest.approx(math.sqrt(sum((mj.pressure(law, nu) / p - 1) ** 2 for nu, p in above) / n))
     with pytest.raises(SystemExit, match="not a --jamming shared run"):
         mj.row("figure3", "group", ENSEMBLE, {"separate": result[0], "shared": result[0]})
