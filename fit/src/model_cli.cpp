@@ -436,11 +436,9 @@ struct SummaryRow {
   double rms_over_band;
 };
 
-// One line per curve: RMS error over the band half-width of p* (or eps_v where p is held),
-// s_dev and F_dev, fitted and predicted, with the calibration's chi2/dof: the table of issue 31.
-// Where a predicted path meets the isotropic law's cusp (nu_cC above nu_c): "" where it does not. The law is read at
-// the path's own nu, or (the volume-form state parameter) at the pressure's elastic state, so the path meets it where
-// its nu crosses nu_cC, or its p* crosses p*(nu_cC) (cusp_pressure).
+// Where a fitted or predicted path meets the isotropic law's cusp (nu_cC above nu_c): "" where it does not. The law
+// is read at the path's own nu, or (the volume-form state parameter) at the pressure's elastic state, so the path
+// meets it where its nu crosses nu_cC, or its p* crosses p*(nu_cC) (cusp_pressure).
 std::string cusp_on_path(const Parameters& P, const PathPrediction& m) {
   const std::vector<double> iso = P.iso();
   const double pc = cusp_pressure(iso.data());
@@ -455,6 +453,8 @@ std::string cusp_on_path(const Parameters& P, const PathPrediction& m) {
          "its steps put it; --jamming shared ties the two fractions (docs/model.md, \"One jamming fraction\")";
 }
 
+// One line per curve: RMS error over the band half-width of p* (or eps_v where p is held),
+// s_dev and F_dev, fitted and predicted, with the calibration's chi2/dof: the table of issue 31.
 void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, const std::string& fit_label,
                    const fs::path& out) {
   Table t({"mode", "nu [-]", "role", "p_star [band]", "eps_v [band]", "s_dev [band]", "F_dev [band]", "worst [band]"});
