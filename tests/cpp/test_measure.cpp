@@ -119,3 +119,32 @@ TEST(Measure, RemovingContactsMakesRattlersRecursively) {
   EXPECT_DOUBLE_EQ(q.rattler_fraction, 1.0);
   EXPECT_DOUBLE_EQ(q.C_nonrattler, 0.0);
 }
+
+// The frictional rattler rule (seventeenth round of issue 31; docs/friction.md, "Isostaticity"): with friction two
+// contacts can hold a particle, so C_nonrattler_2 removes only particles with fewer than 2 contacts, recursively. By
+// hand: a triangle of three touching spheres with a tail of two attached to one corner. The tail's end has 1 contact,
+// its neighbour then 1: both go; the triangle's corners keep 2 each, so C_nonrattler_2 = 2, while the frictionless
+// rule (fewer than 4) removes every particle. A straight chain goes from its ends inwards, all of it. Without friction
+// the column is not measured.
+TEST(Measure, FrictionalRattlerRuleKeepsParticlesWithTwoContacts) {
+  const std::vector<std::pair<int, int>> pairs = {{0, 1}, {1, 2}, {2, 0}, {0, 3}, {3, 4}};
+  EXPECT_EQ(dem::rattler_flags(5, pairs, 2), (std::vector<char>{0, 0, 0, 1, 1}));
+  EXPECT_EQ(dem::rattler_flags(5, pairs), (std::vector<char>{1, 1, 1, 1, 1}));
+  EXPECT_EQ(dem::rattler_flags(4, {{0, 1}, {1, 2}, {2, 3}}, 2), (std::vector<char>{1, 1, 1, 1}));
+
+  const double r = 1e-3, delta = 1e-5, a = 2 * r - delta, h = a * std::sqrt(3.0) / 2;
+  const Vec3 o(10e-3, 10e-3, 10e-3);
+  std::vector<Vec3> x = {o, o + Vec3(a, 0, 0), o + Vec3(a / 2, h, 0), o - Vec3(a, 0, 0), o - Vec3(2 * a, 0, 0)};
+  std::vector<double> rad(x.size(), r);
+  dem::State s = dem_test::make_state(Vec3(30e-3, 30e-3, 30e-3), x, rad);
+  const auto q = measure_static(dem_test::model_with({"contact.friction=0.5"}), s);
+  EXPECT_EQ(q.contacts, 5);
+  EXPECT_TRUE(q.frictional);
+  EXPECT_DOUBLE_EQ(q.C_nonrattler_2, 2.0);
+  EXPECT_DOUBLE_EQ(q.C_nonrattler, 0.0);
+  EXPECT_DOUBLE_EQ(q.rattler_fraction, 1.0);
+  dem::State s0 = dem_test::make_state(Vec3(30e-3, 30e-3, 30e-3), x, rad);
+  const auto q0 = measure_static(dem_test::model_with(), s0);
+  EXPECT_FALSE(q0.frictional);
+  EXPECT_DOUBLE_EQ(q0.C_nonrattler_2, 0.0);
+}

@@ -68,7 +68,7 @@ double axis_angle_deg(const Vec3& a, const Vec3& b) {
   return std::acos(c) * 180.0 / M_PI;
 }
 
-std::vector<char> rattler_flags(int n, const std::vector<std::pair<int, int>>& pairs) {
+std::vector<char> rattler_flags(int n, const std::vector<std::pair<int, int>>& pairs, int min_contacts) {
   std::vector<int> degree(n, 0);
   for (auto& pr : pairs) { ++degree[pr.first]; ++degree[pr.second]; }
   std::vector<char> rattler(n, 0);
@@ -79,13 +79,13 @@ std::vector<char> rattler_flags(int n, const std::vector<std::pair<int, int>>& p
   for (auto& pr : pairs) { adj[fill[pr.first]++] = pr.second; adj[fill[pr.second]++] = pr.first; }
   std::vector<int> queue;
   for (int i = 0; i < n; ++i)
-    if (degree[i] < 4) { rattler[i] = 1; queue.push_back(i); }
+    if (degree[i] < min_contacts) { rattler[i] = 1; queue.push_back(i); }
   while (!queue.empty()) {
     const int i = queue.back();
     queue.pop_back();
     for (int a = start[i]; a < start[i + 1]; ++a) {
       const int j = adj[a];
-      if (!rattler[j] && --degree[j] < 4) { rattler[j] = 1; queue.push_back(j); }
+      if (!rattler[j] && --degree[j] < min_contacts) { rattler[j] = 1; queue.push_back(j); }
     }
   }
   return rattler;
@@ -93,14 +93,23 @@ std::vector<char> rattler_flags(int n, const std::vector<std::pair<int, int>>& p
 
 namespace {
 
-// The rattlers (rattler_flags) and the coordination of the particles that carry force.
-void set_rattlers(Measurement& m, int n, const std::vector<std::pair<int, int>>& pairs) {
-  const std::vector<char> rattler = rattler_flags(n, pairs);
-  long n_rattlers = 0, contacts_nr = 0;
-  for (int i = 0; i < n; ++i) n_rattlers += rattler[i];
+// The coordination of the non-rattlers of `rattler` (0 when every particle is one), and how many rattlers there are.
+double nonrattler_coordination(int n, const std::vector<std::pair<int, int>>& pairs, const std::vector<char>& rattler,
+                               long* n_rattlers) {
+  long nr = 0, contacts_nr = 0;
+  for (int i = 0; i < n; ++i) nr += rattler[i];
   for (auto& pr : pairs) contacts_nr += (!rattler[pr.first] && !rattler[pr.second]);
+  *n_rattlers = nr;
+  return nr < n ? 2.0 * contacts_nr / (n - nr) : 0.0;
+}
+
+// The rattlers (rattler_flags) and the coordination of the particles that carry force; with friction also under the
+// frictional rule (fewer than 2 contacts).
+void set_rattlers(Measurement& m, int n, const std::vector<std::pair<int, int>>& pairs) {
+  long n_rattlers = 0, unused = 0;
+  m.C_nonrattler = nonrattler_coordination(n, pairs, rattler_flags(n, pairs), &n_rattlers);
   m.rattler_fraction = static_cast<double>(n_rattlers) / n;
-  m.C_nonrattler = n_rattlers < n ? 2.0 * contacts_nr / (n - n_rattlers) : 0.0;
+  if (m.frictional) m.C_nonrattler_2 = nonrattler_coordination(n, pairs, rattler_flags(n, pairs, 2), &unused);
 }
 
 // The objective (eigenvalue) measures and the non-coaxiality of stress, fabric and stretching; in a
@@ -274,6 +283,7 @@ const std::vector<CurveColumn>& column_table() {
     {"angle_sigma_D_deg", "deg", "angle between the major stress direction and the most compressive strain-rate direction", G::Every, [](const Measurement& m) { return m.angle_sigma_D; }},
     {"angle_F_D_deg", "deg", "angle between the major fabric direction and the most compressive strain-rate direction", G::Every, [](const Measurement& m) { return m.angle_F_D; }},
     {"sliding_fraction", "1", "contacts at the Coulomb limit / contacts", G::Rotations, [](const Measurement& m) { return m.sliding_fraction; }},
+    {"C_nonrattler_2", "1", "coordination number of the particles with at least 2 contacts, removed recursively (the rattler rule of frictional packings)", G::Rotations, [](const Measurement& m) { return m.C_nonrattler_2; }},
     {"E_rot_J", "J", "rotational kinetic energy sum I w^2/2", G::Rotations, [](const Measurement& m) { return m.E_rot; }},
     {"omega_mean_rad_s", "rad/s", "mean |w|", G::Rotations, [](const Measurement& m) { return m.omega_mean; }},
     {"E_t_J", "J", "elastic energy of the tangential (and rolling, twisting) springs (part of E_pot_J)", G::Rotations, [](const Measurement& m) { return m.E_t; }},

@@ -39,6 +39,9 @@ struct Measurement {
   // With friction (friction_columns(), after the usual columns):
   bool frictional = false;
   double sliding_fraction = 0;    ///< contacts at the Coulomb limit / contacts
+  /// Coordination of the particles with at least 2 contacts, removed recursively: the rattler rule of frictional
+  /// packings (one contact cannot balance a particle, two can with friction; docs/friction.md, "Isostaticity")
+  double C_nonrattler_2 = 0;
   double E_rot = 0;               ///< rotational kinetic energy sum I w^2/2 [J]
   double omega_mean = 0;          ///< mean |w| [rad/s]
   double E_t = 0;                 ///< elastic energy of the tangential springs [J] (part of E_pot)
@@ -69,9 +72,10 @@ Sym3 log_strain_tensor(const Box& box);
 /// Angle [deg] between the axes of two unit vectors (0..90: directions, not orientations).
 double axis_angle_deg(const Vec3& a, const Vec3& b);
 
-/// The rattler rule of measure(): a particle with fewer than 4 contacts is a rattler, removed
-/// with its contacts, recursively. `pairs` are the contacts (i, j) of n particles; 1 = rattler.
-std::vector<char> rattler_flags(int n, const std::vector<std::pair<int, int>>& pairs);
+/// The rattler rule of measure(): a particle with fewer than `min_contacts` contacts (4, d + 1: frictionless
+/// spheres; 2 for frictional ones, C_nonrattler_2) is a rattler, removed with its contacts, recursively. `pairs` are
+/// the contacts (i, j) of n particles; 1 = rattler.
+std::vector<char> rattler_flags(int n, const std::vector<std::pair<int, int>>& pairs, int min_contacts = 4);
 
 /// Measures a state. `list` must be current for the state (it is after every Engine step).
 /// `rate` [1/s] enters the dashpot forces, the inertial number (max |L_ij|) and the
