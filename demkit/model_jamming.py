@@ -93,20 +93,27 @@ def relaxed_misfit(L, points):
     return math.sqrt(sum((pressure(L, nu) / p - 1) ** 2 for nu, p in ok) / len(ok)), len(ok)
 
 
-def summary(model_dir):
-    """chi2/dof and the worst band error per role ('fitted', 'predicted') of a summary.csv."""
+def summary(model_dir, group=lambda r: "fitted" if r["role"] == "fitted" else "predicted",
+            keys=("fitted", "predicted")):
+    """chi2/dof and the worst band error per group of curves of a summary.csv (`group`: a row -> one of `keys`;
+    default 'fitted' and 'predicted'); a group without a finite row is nan."""
     with open(os.path.join(model_dir, "summary.csv"), newline="") as fh:
         rows = list(csv.DictReader(fh))
-    out = {"fitted": float("nan"), "predicted": float("nan")}
+    out = dict.fromkeys(keys, float("nan"))
     for r in rows:
         if r["mode"] == "calibration":
             out["chi2"] = float(r["role"].split()[-1])
             continue
-        role = "fitted" if r["role"] == "fitted" else "predicted"
-        w = float(r["worst [band]"])
+        key, w = group(r), float(r["worst [band]"])
         if not math.isnan(w):
-            out[role] = w if math.isnan(out[role]) else max(out[role], w)
+            out[key] = w if math.isnan(out[key]) else max(out[key], w)
     return out
+
+
+def write_csv(path, head, rows):
+    """A table as CSV (strings quoted, numbers to the last bit), written atomically."""
+    lines = [",".join(head)] + [",".join(f'"{v}"' if isinstance(v, str) else repr(v) for v in r) for r in rows]
+    write_atomic(path, "\n".join(lines) + "\n")
 
 
 def run(cmd, log):
@@ -170,9 +177,7 @@ def cell(v, digits=4):
 
 
 def write(rows, out):
-    os.makedirs(out, exist_ok=True)
-    lines = [",".join(HEAD)] + [",".join(f'"{v}"' if isinstance(v, str) else repr(v) for v in r) for r in rows]
-    write_atomic(os.path.join(out, "jamming.csv"), "\n".join(lines) + "\n")
+    write_csv(os.path.join(out, "jamming.csv"), HEAD, rows)
     md = ["<!-- demkit/model_jamming.py: dem model with two jamming fractions (nu_c, nu_cC; the default) and with one "
           "(--jamming shared), no jackknife; chi2/dof with the isotropic branch weighted alike (its scatter about the "
           "separate laws); worst: largest RMS error over the 95 % band half-width of a fitted / predicted curve; branch: "
@@ -207,20 +212,9 @@ LAB_HEAD = ["calibration", "chi2_dof_separate [-]", "chi2_dof_shared [-]", "wors
             "nu_c_shared [-]", "C0_separate [-]", "C0_shared [-]", "converged_shared"]
 
 
-def lab_worst(model_dir):
-    """chi2/dof and the worst band error of the fitted, the predicted laboratory and the D2/D3 curves."""
-    with open(os.path.join(model_dir, "summary.csv"), newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    out = {"fitted": float("nan"), "lab": float("nan"), "d2d3": float("nan")}
-    for r in rows:
-        if r["mode"] == "calibration":
-            out["chi2"] = float(r["role"].split()[-1])
-            continue
-        key = "fitted" if r["role"] == "fitted" else "d2d3" if r["mode"] in ("D2", "D3") else "lab"
-        w = float(r["worst [band]"])
-        if not math.isnan(w):
-            out[key] = w if math.isnan(out[key]) else max(out[key], w)
-    return out
+def lab_group(r):
+    """The fitted curves, the predicted D2/D3 of the friction study, the predicted laboratory tests."""
+    return "fitted" if r["role"] == "fitted" else "d2d3" if r["mode"] in ("D2", "D3") else "lab"
 
 
 def lab_table(stored, shared, out):
@@ -228,15 +222,13 @@ def lab_table(stored, shared, out):
     rows = []
     for name in LAB:
         a, b = os.path.join(stored, name), os.path.join(shared, name)
-        s, t = lab_worst(a), lab_worst(b)
+        s, t = (summary(d, lab_group, ("fitted", "lab", "d2d3")) for d in (a, b))
         A, B = read_law(os.path.join(a, "parameters.csv")), read_law(os.path.join(b, "parameters.csv"))
         with open(os.path.join(b, "parameters.csv"), newline="") as fh:
             conv = "no" if any(r["parameter"] == "converged" for r in csv.DictReader(fh)) else "yes"
         rows.append([name, s["chi2"], t["chi2"], s["fitted"], t["fitted"], s["lab"], t["lab"], s["d2d3"], t["d2d3"],
                      A["nu_c"], A["nu_cC"], B["nu_c"], A["C0"], B["C0"], conv])
-    os.makedirs(out, exist_ok=True)
-    lines = [",".join(LAB_HEAD)] + [",".join(f'"{v}"' if isinstance(v, str) else repr(v) for v in r) for r in rows]
-    write_atomic(os.path.join(out, "comparison.csv"), "\n".join(lines) + "\n")
+    write_csv(os.path.join(out, "comparison.csv"), LAB_HEAD, rows)
     md = ["<!-- demkit/model_jamming.py --lab: every README step-8 calibration of data/geotech/model (separate: the "
           "stored one, nu_cC held) against its restart from the stored optimum with one jamming fraction "
           "(--jamming shared, gamma_p and alpha held, no jackknife); worst: largest RMS error over the 95 % band "
