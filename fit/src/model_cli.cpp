@@ -179,6 +179,9 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
     t.add_row({"psi_max", "laws of psi held at their value here above it (the calibration's states; --no-psi-range)",
                num(cal.params.psi_hi, 17), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
   }
+  if (cal.params.excess_relaxes)   // files without the row: the permanent anisotropic pressure (read_parameters)
+    t.add_row({"anisotropy_excess", "1: the anisotropy's pressure relaxes as an excess at beta_p (--anisotropy-pressure "
+               "relaxing)", "1", "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
   if (cal.params.b_d2 != kLodeBD2)   // files without the row: 1/2 (read_parameters)
     t.add_row({"b_D2", "stress Lode parameter b of D2 curves and paths (fixed; --d2-lode)", num(cal.params.b_d2), "nan",
                "fixed", "nan", "nan", "nan", "nan", "-"});
@@ -712,6 +715,10 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   if (co.state_volume && o.family != "extended")
     throw InputError("--state-limit volume: the volume-form state parameter belongs to the extended family; give "
                      "--family extended");
+  co.excess_relaxes = o.anisotropy_pressure == "relaxing";
+  if (co.excess_relaxes && !co.state_volume && o.predict_with.empty())
+    throw InputError("--anisotropy-pressure relaxing: the relaxing excess belongs to the volume-form state parameter "
+                     "(without it the anisotropic pressure always relaxes at beta_p); add --state-limit volume");
   const int n_block = ext_size(co.state_limit, co.fabric == FabricLode::Weighted, co.state_lode, co.state_volume);
   for (int i : co.hold_ext)
     if (i >= n_block)
@@ -974,6 +981,12 @@ FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions
   P.surface = P.extended ? co.surface : Surface::None;
   P.fabric = P.extended ? co.fabric : FabricLode::Norm;
   if (!o.d2_lode.empty()) P.b_d2 = o.d2_lode == "normal" ? plane_strain_lode_b(P.surface, P.shear[kSmaxA]) : co.b_d2;
+  if (!o.anisotropy_pressure.empty()) {   // else the file's (row anisotropy_excess)
+    if (co.excess_relaxes && !P.state_volume)
+      throw InputError("--anisotropy-pressure relaxing: " + o.predict_with + " has no volume-form state parameter (no "
+                       "nu_cs row); the relaxing excess belongs to --state-limit volume calibrations");
+    P.excess_relaxes = co.excess_relaxes;
+  }
   // The laws of psi: the file's range; without one, that of the curves --calibrate-on names (the states that
   // calibration held; here they are predicted with the rest); --no-psi-range: unbounded
   if (!o.psi_range) {
@@ -1130,6 +1143,12 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "nu_cC for the coordination law; default) or shared (nu_cC = nu_c: one jamming fraction, the "
                  "stiffness bounded at every nu; docs/model.md \"One jamming fraction\")")
       ->check(CLI::IsMember({"separate", "shared"}))->default_str("separate");
+  app.add_option("--anisotropy-pressure", o.anisotropy_pressure, "with --state-limit volume, the anisotropy's "
+                 "pressure A d eps_d: permanent (the default: it moves the elastic state and never relaxes, so a "
+                 "constant-p path is steady only where the dilatancy cancels a_A F) or relaxing (an excess over the "
+                 "isotropic law that relaxes at beta_p, fitted: steady at psi = 0); with --predict-with the file's "
+                 "unless given (docs/model.md, \"A relaxing anisotropic pressure\")")
+      ->check(CLI::IsMember({"permanent", "relaxing"}))->default_str("permanent");
   app.add_flag("--force", o.force, "overwrite an existing output folder");
 }
 

@@ -57,10 +57,12 @@ struct CurveResidual {
   bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
   bool state_lode = false;    ///< par[2] carries lambda_psi (the state exponent's Lode dependence)
   bool state_volume = false;  ///< par[2] carries nu_cs, lambda_cs, n_b, n_d (the volume-form state parameter)
+  bool excess_relaxes = false;   ///< Ext::excess_relaxes
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
-                     extended && state_lode, extended && state_volume, b_stress};
+    Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
+               extended && state_lode, extended && state_volume, b_stress};
+    ext.excess_relaxes = excess_relaxes;
     const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -97,10 +99,12 @@ struct PathResidual {
   bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
   bool state_lode = false;    ///< par[2] carries lambda_psi (the state exponent's Lode dependence)
   bool state_volume = false;  ///< par[2] carries nu_cs, lambda_cs, n_b, n_d (the volume-form state parameter)
+  bool excess_relaxes = false;   ///< Ext::excess_relaxes
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    const Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
-                     extended && state_lode, extended && state_volume, b_stress};
+    Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
+               extended && state_lode, extended && state_volume, b_stress};
+    ext.excess_relaxes = excess_relaxes;
     const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step, ext);
     const std::size_t n = acc.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -373,6 +377,7 @@ Parameters read_parameters(const std::string& path) {
   P.state_limit = P.extended && v.count(ext_name(kNPsiA)) > 0;
   P.state_lode = P.state_limit && v.count(ext_name(kLambdaPsi)) > 0;
   P.state_volume = P.extended && v.count(ext_name(kNuCs)) > 0;
+  P.excess_relaxes = P.state_volume && v.count("anisotropy_excess") && get("anisotropy_excess") == 1.0;
   if (P.extended)
     for (int i = 0; i < kNumExt; ++i)
       if (i < kNumExtBase || v.count(ext_name(i))) P.ext[i] = get(ext_name(i));   // else the default (n_rate 1)
@@ -517,6 +522,7 @@ void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& 
                                 c.nu, c.p.front(), c.s.front(), c.F.front(), nu_ref, o.max_step};
     f->extended = X; f->b = lode_b_of(c.mode); f->b_stress = lode_b_of(c.mode, o.b_d2); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
     f->state_volume = o.state_volume;
+    f->excess_relaxes = o.state_volume && o.excess_relaxes;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -556,6 +562,7 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
                                d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
     f->extended = X; f->b = lode_b_of(d.name); f->b_stress = lode_b_of(d.name, o.b_d2); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
     f->state_volume = o.state_volume;
+    f->excess_relaxes = o.state_volume && o.excess_relaxes;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -948,10 +955,14 @@ std::vector<int> held_ext(bool one_nu, bool state_limit, bool weighted, bool sta
 }
 
 /// The shear coefficients held (hold_ext says why).
-std::set<int> held_shear(bool X, bool one_nu, bool state_volume) {
+/// With the volume-form state parameter s_max_b (the peak's state is psi's) and beta_p's slope; beta_p itself too
+/// unless the anisotropic excess relaxes (without it the pressure stays on the isotropic law at nu_el: beta_p does
+/// not act).
+std::set<int> held_shear(bool X, bool one_nu, bool state_volume, bool excess_relaxes) {
   std::set<int> held;
   if (one_nu) held = {kSmaxB, kLnBetaSB, kFmaxB, kLnBetaFB, kAnisoB, kLnBetaPB};
-  if (X && state_volume) held.insert({kSmaxB, kLnBetaPA, kLnBetaPB});
+  if (X && state_volume) held.insert({kSmaxB, kLnBetaPB});
+  if (X && state_volume && !excess_relaxes) held.insert(kLnBetaPA);
   return held;
 }
 
@@ -973,11 +984,12 @@ bool keeps_start(int i, const std::vector<int>& user) {
 
 /// One start volume fraction: every nu-slope (*_b) held at 0; with the extension block, held_ext and --hold.
 void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<double>& ext, bool X, bool one_nu,
-              bool state_limit, bool weighted, bool state_lode, bool state_volume, int n_p, const std::vector<int>& user) {
+              bool state_limit, bool weighted, bool state_lode, bool state_volume, bool excess_relaxes, int n_p,
+              const std::vector<int>& user) {
   // Held shear coefficients: the nu-slopes from one start volume fraction; with the volume-form state parameter s_max_b
-  // at 0 (the limit's state dependence is psi's, s_lim e^{n_b psi}) and beta_p at its start (it does not act: the
-  // pressure stays on the isotropic law at nu_el).
-  const std::set<int> held_s = held_shear(X, one_nu, state_volume);
+  // at 0 (the limit's state dependence is psi's, s_lim e^{n_b psi}) and beta_p at its start unless the anisotropic
+  // excess relaxes (else it does not act: the pressure stays on the isotropic law at nu_el).
+  const std::set<int> held_s = held_shear(X, one_nu, state_volume, excess_relaxes);
   for (int i : held_s)
     if (i % 2 == 1) shear[i] = 0.0;
   if (!held_s.empty())
@@ -1018,6 +1030,7 @@ Parameters fitted_params(const Parameters& start, const std::vector<double>& iso
   P.state_limit = X && o.state_limit;
   P.state_lode = X && o.state_limit && o.state_lode;
   P.state_volume = X && o.state_volume;
+  P.excess_relaxes = P.state_volume && o.excess_relaxes;
   return P;
 }
 
@@ -1177,6 +1190,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   if (state_lode) check_second_lode_angle(curves, paths, "the state exponent's Lode dependence (lambda_psi)",
                                           "or choose --state-limit pressure", o.b_d2);
   const bool state_volume = X && o.state_volume;
+  const bool relaxes = state_volume && o.excess_relaxes;   // beta_p fitted (held_shear)
   if (state_volume) {
     volume_state_start(paths, ext, o.csl_linear);
     isob[kC0] = std::max(isob[kC0], 0.0);
@@ -1193,7 +1207,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (const auto& d : paths) nus_seen.insert(std::llround(d.nu * 1e6));
   const bool one_nu = nus_seen.size() < 2;
   const int n_p = start_pressures(curves, paths);
-  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, n_p, o.hold_ext);
+  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, relaxes, n_p, o.hold_ext);
 
   const ceres::Solver::Summary sum = solve(problem, o.max_iterations);
 
@@ -1211,7 +1225,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   cal.chi2 = sum.final_cost >= 0 ? 2 * sum.final_cost : std::nan("");
   cal.n_residuals = n_res;
   // Free parameters: the held ones (isotropic, the nu-slopes of one start volume fraction, held_ext) left out.
-  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear - static_cast<int>(held_shear(X, one_nu, state_volume).size()) +
+  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear - static_cast<int>(held_shear(X, one_nu, state_volume, relaxes).size()) +
                (X ? n_ext - static_cast<int>(held_x.size()) : 0);
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(isob[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(shear[i]); }
@@ -1223,8 +1237,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (int i : held_x) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
   calibration_warnings(curves, paths, iso, o, isob, numin, one_nu, X, cal);
   bound_warnings(problem, shear, ext, X, n_ext, cal);
-  if (state_volume)   // held: s_max_b at 0 (the peak's state is psi's), beta_p at its start (it does not act)
-    for (int i : {kSmaxB, kLnBetaPA, kLnBetaPB}) cal.se_cov[kNumIso + i] = kNaN;
+  for (int i : held_shear(X, false, state_volume, relaxes))   // s_max_b at 0, beta_p's slope, beta_p unless it acts
+    cal.se_cov[kNumIso + i] = kNaN;
   null_directions(cal);
   if (state_volume) drop_unread_for_volume_state(cal, weighted);
   else if (weighted && !cal.params.state_limit) drop_entries(cal, kNumIso + kNumShear + kNPsiA, 2);   // n_psi: not in this law
@@ -1238,10 +1252,11 @@ ModelCurve predict_curve(const Parameters& params, const CurveData& c, double ep
   if (t.eps.empty() || std::fabs(t.eps.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + c.source + " does not start at eps_d = 0");
   const std::vector<double> iso = params.iso();
-  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface, params.fabric,
+  Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface, params.fabric,
                         params.extended && params.state_limit, params.extended && params.state_lode,
                         params.extended && params.state_volume, lode_b_of(c.mode, params.b_d2), params.psi_lo,
                         params.psi_hi, psi_seen};
+  ext.excess_relaxes = params.extended && params.state_volume && params.excess_relaxes;
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
                                          t.F.front(), t.eps, max_step, ext);
   ModelCurve m;
@@ -1255,10 +1270,11 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
     throw std::invalid_argument("model prediction: " + d.source + " does not start at eps_d_accumulated = 0");
   const std::vector<double> iso = params.iso();
   if (!(params.extended && params.state_volume)) check_start_scale(iso, d.nu, d.source);
-  const Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric,
+  Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric,
                         params.extended && params.state_limit, params.extended && params.state_lode,
                         params.extended && params.state_volume, lode_b_of(d.name, params.b_d2), params.psi_lo,
                         params.psi_hi, psi_seen};
+  ext.excess_relaxes = params.extended && params.state_volume && params.excess_relaxes;
   const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
                                          d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
   PathPrediction m;

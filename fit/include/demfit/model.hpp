@@ -179,6 +179,9 @@ struct Parameters {
   /// the thirteenth round).
   double psi_lo = -std::numeric_limits<double>::infinity();
   double psi_hi = std::numeric_limits<double>::infinity();
+  /// With state_volume: the anisotropy's pressure relaxes as an excess over the isotropic law (Ext::excess_relaxes;
+  /// row anisotropy_excess of parameters.csv, absent: false).
+  bool excess_relaxes = false;
   std::vector<double> iso() const { return {p0, nu_c, gamma_p, C0, C1, nu_cC, alpha}; }
   void set_iso(const double* v) { p0 = v[0]; nu_c = v[1]; gamma_p = v[2]; C0 = v[3]; C1 = v[4]; nu_cC = v[5]; alpha = v[6]; }
 };
@@ -423,6 +426,12 @@ struct Ext {
   /// If set (plain double runs only): [min, max] of psi over every evaluation of the right-hand side, RK4's
   /// intermediate stages included (psi_range), so that the range covers every state a calibration's fit evaluated.
   double* psi_seen = nullptr;
+  /// With the volume-form state parameter (eighteenth round, `--anisotropy-pressure relaxing`): the anisotropy's
+  /// pressure A sigma d eps_d is an excess over the isotropic law at the elastic state, which relaxes at beta_p, not a
+  /// change of the elastic state. The elastic volume fraction then follows p_ref = p - q (q the excess, dq = A sigma -
+  /// beta_p q), so at the critical state the volume is steady where the dilatancy is 0 (psi = 0), whatever a_A F.
+  /// False (the default, the tenth to seventeenth rounds): d ln nu_el = dp/B, q = 0, beta_p never acts.
+  bool excess_relaxes = false;
 };
 
 /// The volume-form state parameter psi = nu - nu_cs(p), nu_cs(p) = nu_cs + lambda_cs ln(p/kPCsRef) (tenth round)
@@ -670,7 +679,11 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const T rate_F = weighted ? lode_w : m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
   d.F = L.beta_F * g_s * rate_F * (T(sigma) * F_lim - y.F) * gate_F;
   d.l = T(1.0);
-  d.e_pl = vol_state ? d.p / B + dvol : T(0.0);
+  // The elastic volume fraction follows the pressure on the isotropic law (d ln nu_el = dp/B), or with a relaxing
+  // excess the pressure less its anisotropic excess: d ln nu_el = (dp - A sigma + relax)/B, so that the excess q = p -
+  // p_ref obeys dq = A sigma - beta_p q.
+  const T dp_el = m.ext.excess_relaxes ? d.p - A * T(sigma) + relax : d.p;
+  d.e_pl = vol_state ? dp_el / B + dvol : T(0.0);
   // The volumetric term of the stress ratio: the elastic stress response to the volume change. With the volume-form
   // state parameter only the elastic part dvol - dil acts (the plastic dilatancy moves the volume, not the stress);
   // otherwise the whole dvol (the constant-volume law `shear` carries the plastic part; docs/model.md).

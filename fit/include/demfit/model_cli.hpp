@@ -31,6 +31,10 @@ struct ModelCommandOptions {
   /// The isotropic laws' jamming fractions: `separate` (nu_c and nu_cC, the default) or `shared` (nu_cC = nu_c:
   /// no cusp in the stiffness; docs/model.md, "One jamming fraction")
   std::string jamming = "separate";
+  /// With --state-limit volume, the anisotropy's pressure (eighteenth round): `permanent` (the elastic state carries it,
+  /// never relaxed: the tenth to seventeenth rounds) or `relaxing` (an excess over the isotropic law that relaxes at
+  /// beta_p, fitted); empty: permanent, or with --predict-with the file's (row anisotropy_excess)
+  std::string anisotropy_pressure;
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
   std::vector<std::string> hold;             ///< extension coefficients held at their start values (--hold)
   std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default), pressure (n_psi fitted), pressure-lode (+ lambda_psi)

@@ -74,6 +74,10 @@ struct CalibrationOptions {
   /// The critical-state line's form with state_volume (`--csl`): false, nu_cs + lambda_cs ln(p*/1e-3); true,
   /// nu_cs + c_cs (p* - 1e-3), linear in the pressure (docs/model.md, "The critical-state line of soft spheres").
   bool csl_linear = false;
+  /// With state_volume (`--anisotropy-pressure relaxing`, eighteenth round): the anisotropy's pressure is an excess
+  /// over the isotropic law at the elastic state that relaxes at beta_p (fitted: ln_beta_p_a; its slope held at 0), so
+  /// that a constant-p path's volume is steady at psi = 0 whatever a_A F (Ext::excess_relaxes; docs/model.md).
+  bool excess_relaxes = false;
   /// Isotropic parameters (IsoIndex) held at their start values while the rest of the block is
   /// fitted: a laboratory's isotropic branch of a few pressure levels cannot fix all seven (issue 31,
   /// "Calibrated on drained triaxial tests"). Needs `start`.
