@@ -1038,7 +1038,14 @@ int run(const ModelCommandOptions& o) {
   check_output_folder(out);
   ModelInputs in = checked_inputs(o, co, dir, out, out_existed);
   if (!o.predict_with.empty()) {
-    const FamilyFit ff = prediction_only(o, co, in);
+    FamilyFit ff;
+    try {
+      ff = prediction_only(o, co, in);
+    } catch (const InputError&) {   // the file refused (its family, its law): the folder made above goes again
+      std::error_code ec;
+      if (!out_existed && fs::is_empty(out, ec)) fs::remove(out, ec);
+      throw;
+    }
     write_results(in, ff, out, o);
     return 0;
   }

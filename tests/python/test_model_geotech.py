@@ -220,6 +220,7 @@ def test_volume_state_parameters_round_trip_through_predict_with(tmp_path):
     r = subprocess.run([DEM, "model", str(ens), "--no-plots", "--family", "group", "--predict-with",
                         str(cal / "parameters.csv"), "--out", str(tmp_path / "g")], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "--family extended" in r.stderr, r.stderr
+    assert not (tmp_path / "g").exists()   # the refused file leaves no empty folder behind (eighteenth round)
     r = subprocess.run([DEM, "model", str(ens), "--no-plots", "--no-jackknife", "--family", "group", "--calibrate-on",
                         "TC_s3_loose", "--start", start, "--state-limit", "volume", "--out", str(tmp_path / "h")],
                        capture_output=True, text=True, timeout=120)
@@ -423,3 +424,67 @@ def test_a_path_the_laws_cannot_start_is_not_determined_not_diverged(tmp_path):
                         "--predict-with", str(tied), "--out", str(tmp_path / "t")], capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0 and "cusp" not in r.stderr, r.stderr
+
+
+def test_a_relaxing_anisotropic_pressure_ends_the_constant_p_runaway(tmp_path):
+    """Eighteenth round: the stored mu = 0.5 loose calibration (README step 8, the anisotropy's pressure permanent)
+    predicting the loose constant-p triaxial compression at p* = 1e-3: the model's nu still moves at the end (over the
+    last 0.1 of strain more than 100 times the DEM's drift) and ends far from its own critical-state line; its restart
+    with `--anisotropy-pressure relaxing` (step 11; parameters.csv carries the row anisotropy_excess) ends on the line
+    and as still as the DEM. demkit.model_excess reads the ends as computed here by hand; the written parameters.csv
+    round-trips through --predict-with; the flag overrides the file's law (permanent brings the drift back); the flag
+    without the volume-form state parameter, or unknown, is refused."""
+    from demkit import model_excess as mx
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech", "curves"),
+                        "--mu", "0.5", "--out", str(tmp_path / "m"), "--tests", "TC_p"], capture_output=True, text=True,
+                       cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    ens = str(tmp_path / "m" / "ensemble_loose")
+    sv = os.path.join(ROOT, "data", "geotech", "model", "state_volume")
+    laws = {"permanent": os.path.join(sv, "loose", "parameters.csv"),
+            "relaxing": os.path.join(sv, "relaxing_excess", "loose", "parameters.csv")}
+    assert "anisotropy_excess" in [x["parameter"] for x in read(laws["relaxing"])]
+    assert "anisotropy_excess" not in [x["parameter"] for x in read(laws["permanent"])]
+
+    def predict(law, out, *extra):
+        r = subprocess.run([DEM, "model", ens, "--no-plots", "--family", "extended", "--predict-with", law, *extra,
+                            "--out", str(tmp_path / out)], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        return str(tmp_path / out)
+
+    ends = {}
+    for way, law in laws.items():
+        out = predict(law, way)
+        P = mx.values(law)
+        with open(os.path.join(out, "curves", "paths", "TC_p_loose_phi0.593.csv")) as fh:
+            c = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+        eps = [float(x["eps_d_accumulated"]) for x in c]
+        nu = [float(x["nu_model"]) for x in c]
+        dem = [nu[0] * math.exp(-3 * float(x["eps_v_mean"])) for x in c]
+        i = max(j for j in range(len(eps)) if eps[j] <= eps[-1] - 0.1)
+        p_end = float(c[-1]["p_star_model"])
+        psi = nu[-1] - (P["nu_cs"] + P["lambda_cs"] * math.log(p_end / 1e-3) + P["c_cs"] * (p_end - 1e-3))
+        drift, drift_dem = (abs(v[-1] - v[i]) / (eps[-1] - eps[i]) for v in (nu, dem))
+        got = {n: (x, m, d) for n, x, m, d in mx.path_ends(out, P)}["TC_p_loose_phi0.593"]
+        assert got == pytest.approx((psi, drift, drift_dem), rel=1e-12)
+        ends[way] = (psi, drift, drift_dem)
+    psi, drift, drift_dem = ends["permanent"]
+    assert drift > 100 * drift_dem and drift > 0.01 and abs(psi) > 0.01, ends
+    psi, drift, drift_dem = ends["relaxing"]
+    assert drift < 10 * drift_dem + 1e-3 and abs(psi) < 1e-3, ends
+    again = predict(os.path.join(str(tmp_path / "relaxing"), "parameters.csv"), "again")
+    assert summary_rows(os.path.join(again, "summary.csv")) == summary_rows(str(tmp_path / "relaxing" / "summary.csv"))
+    back = predict(laws["relaxing"], "back", "--anisotropy-pressure", "permanent")
+    assert "anisotropy_excess" not in [x["parameter"] for x in read(os.path.join(back, "parameters.csv"))]
+    assert mx.path_ends(back, mx.values(laws["relaxing"]))[0][2] > 0.01
+    bad = [([DEM, "model", ens, "--no-plots", "--family", "extended", "--calibrate-on", "TC_p_loose", "--start",
+             laws["permanent"], "--anisotropy-pressure", "relaxing"], "add --state-limit volume"),
+           ([DEM, "model", ens, "--no-plots", "--family", "extended", "--predict-with",
+             os.path.join(ROOT, "data", "friction_n1000", "model_friction", "mu_0.5", "parameters.csv"),
+             "--anisotropy-pressure", "relaxing"], "no volume-form state parameter"),
+           ([DEM, "model", ens, "--no-plots", "--family", "extended", "--predict-with", laws["permanent"],
+             "--anisotropy-pressure", "elastic"], "--anisotropy-pressure")]
+    for k, (cmd, want) in enumerate(bad):
+        r = subprocess.run(cmd + ["--out", str(tmp_path / f"x{k}")], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and want in r.stderr, r.stderr
+        assert not (tmp_path / f"x{k}").exists()

@@ -1,0 +1,197 @@
+"""A relaxing anisotropic pressure against the permanent one (issue 31, eighteenth round).
+
+With the volume-form state parameter the anisotropy's pressure A d eps_d either moves the elastic state and never
+relaxes (`permanent`, the tenth to seventeenth rounds: a constant-p path is steady only where the dilatancy cancels
+a_A F, and can run away) or is an excess over the isotropic law that relaxes at beta_p (`--anisotropy-pressure
+relaxing`: steady at psi = 0). This predicts every laboratory test with each step-8 calibration of data/geotech/model
+and its restart with the relaxing excess (README step 11), and writes per calibration chi2/dof, the worst fitted and
+predicted curve, and where the model's drained paths end: the largest |psi| at the end of a laboratory path and the
+largest volume drift |d nu / d eps_d| over its last 0.1 of strain (a path still moving at the end has not reached a
+steady state).
+
+    /usr/bin/python3 -m demkit.model_excess --stored data/geotech/model/state_volume \\
+        --relaxing data/geotech/model/state_volume/relaxing_excess --work WORK --out OUT
+"""
+import argparse
+import csv
+import glob
+import math
+import os
+import sys
+
+from demkit.atomic import write_atomic
+from demkit.model_jamming import LAB, lab_group, run, summary, write_csv
+
+ENSEMBLE = {"loose": "runs/geotech_model/ensemble_loose", "dense": "runs/geotech_model/ensemble_dense",
+            "three_pressures/joint": "runs/geotech_model3_mu0.5/ensemble_joint",
+            "three_pressures/dense": "runs/geotech_model3_mu0.5/ensemble_dense",
+            "three_pressures/mu_0/dense": "runs/geotech_model3_mu0/ensemble_dense"}
+for _mu in ("0", "0.1", "0.3", "1"):
+    ENSEMBLE[f"mu_{_mu}/dense"] = f"runs/geotech_model_mu{_mu}/ensemble_dense"
+for _mu in ("0.1", "0.3", "1"):
+    ENSEMBLE[f"three_pressures/mu_{_mu}/joint"] = f"runs/geotech_model3_mu{_mu}/ensemble_joint"
+WAYS = ("permanent", "relaxing")
+TAIL = 0.1   # the strain window of the end drift
+HEAD = ["calibration", "chi2_dof_permanent [-]", "chi2_dof_relaxing [-]", "worst_fitted_permanent [band]",
+        "worst_fitted_relaxing [band]", "worst_lab_predicted_permanent [band]", "worst_lab_predicted_relaxing [band]",
+        "worst_D2_D3_permanent [band]", "worst_D2_D3_relaxing [band]", "end_psi_max_permanent [-]",
+        "end_psi_max_relaxing [-]", "end_drift_max_permanent [-]", "end_drift_max_relaxing [-]",
+        "end_drift_path_permanent", "end_drift_dem_permanent_path [-]", "end_drift_path_relaxing",
+        "end_drift_dem_relaxing_path [-]", "beta_p_relaxing [1/eps_d]", "a_A_a_permanent [-]", "a_A_a_relaxing [-]",
+        "converged_relaxing"]
+
+
+def values(path):
+    """name -> value (float; nan where not a number) of a parameters.csv."""
+    with open(path, newline="") as fh:
+        out = {}
+        for r in csv.DictReader(fh):
+            try:
+                out[r["parameter"]] = float(r["value"])
+            except ValueError:
+                out[r["parameter"]] = float("nan")
+        return out
+
+
+def nu_cs(P, p):
+    """The critical-state line nu_cs + lambda_cs ln(p*/1e-3) + c_cs (p* - 1e-3) (demfit/model.hpp, state_psi)."""
+    return P["nu_cs"] + P.get("lambda_cs", 0.0) * math.log(max(p, 1e-12) / 1e-3) + P.get("c_cs", 0.0) * (p - 1e-3)
+
+
+def end_drift(eps, nu):
+    """|d nu/d eps_d| over the last TAIL of strain."""
+    i = max(j for j in range(len(eps)) if eps[j] <= eps[-1] - TAIL)
+    return abs(nu[-1] - nu[i]) / (eps[-1] - eps[i])
+
+
+def path_ends(model_dir, P):
+    """Per laboratory path of MODEL_DIR/curves/paths: (name, the model's psi at the end, the model's end drift, the
+    DEM's end drift), the DEM's nu = nu0 e^{-3 eps_v} (eps_v = tr E/3, as the model's nu)."""
+    out = []
+    for f in sorted(glob.glob(os.path.join(model_dir, "curves", "paths", "*.csv"))):
+        with open(f, newline="") as fh:
+            rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+        eps = [float(r["eps_d_accumulated"]) for r in rows]
+        nu = [float(r["nu_model"]) for r in rows]
+        p = [float(r["p_star_model"]) for r in rows]
+        dem = [nu[0] * math.exp(-3 * float(r["eps_v_mean"])) for r in rows]
+        name = os.path.basename(f)[:-4]
+        if not all(math.isfinite(x) for x in nu + p):
+            out.append((name, float("nan"), float("nan"), end_drift(eps, dem)))
+            continue
+        out.append((name, nu[-1] - nu_cs(P, p[-1]), end_drift(eps, nu), end_drift(eps, dem)))
+    if not out:
+        raise SystemExit(f"model_excess: no model paths under {model_dir}/curves/paths")
+    return out
+
+
+def make_starts(stored, out):
+    """OUT/NAME/beta_p_B.csv: each step-8 parameters.csv with ln_beta_p_a set to ln B (B in BETA_P_STARTS), the extra
+    starts of step 11 (the stored value is the held start of the permanent law, which it never read)."""
+    for name in LAB:
+        with open(os.path.join(stored, name, "parameters.csv"), newline="") as fh:
+            rows = list(csv.reader(fh))
+        col = rows[0].index("value")
+        for b in BETA_P_STARTS:
+            for r in rows[1:]:
+                if r[0] == "ln_beta_p_a":
+                    r[col] = repr(math.log(b))
+            path = os.path.join(out, name, f"beta_p_{b:g}.csv")
+            os.makedirs(os.path.dirname(path), exist_ok=True)
+            lines = [",".join(f'"{v}"' if ("," in v or '"' in v) else v for v in r) for r in rows]
+            write_atomic(path, "\n".join(lines) + "\n")
+
+
+def predict(stored, relaxing, work, dem):
+    """Every laboratory test predicted with each calibration, both ways, into WORK/{permanent,relaxing}/NAME."""
+    for name in LAB:
+        for way, root in zip(WAYS, (stored, relaxing)):
+            out = os.path.join(work, way, name)
+            os.makedirs(os.path.dirname(out), exist_ok=True)
+            run([dem, "model", ENSEMBLE[name], "--predict-with", os.path.join(root, name, "parameters.csv"),
+                 "--family", "extended", "--no-plots", "--out", out, "--force"], out + ".log")
+
+
+def largest(values):
+    """The largest finite entry (by its first element) of a list of tuples; None without one."""
+    ok = [v for v in values if math.isfinite(v[0])]
+    return max(ok) if ok else None
+
+
+def ends_summary(ends):
+    """(largest end |psi|, largest end drift, its path, the DEM's drift on that path); nan where none is finite."""
+    psi = largest([(abs(x),) for _, x, _, _ in ends])
+    d = largest([(m, n, dem) for n, _, m, dem in ends])
+    nan = float("nan")
+    return (psi[0] if psi else nan,) + (d if d else (nan, "", nan))
+
+
+def table(stored, relaxing, work):
+    """Per calibration: chi2/dof and the worst curves (each calibration's own summary.csv), the model paths' ends
+    (WORK's predictions), beta_p, a_A."""
+    rows = []
+    for name in LAB:
+        A, B = (values(os.path.join(r, name, "parameters.csv")) for r in (stored, relaxing))
+        s, t = (summary(os.path.join(r, name), lab_group, ("fitted", "lab", "d2d3")) for r in (stored, relaxing))
+        e = [ends_summary(path_ends(os.path.join(work, w, name), P)) for w, P in zip(WAYS, (A, B))]
+        rows.append([name, A["chi2_per_dof"], B["chi2_per_dof"], s["fitted"], t["fitted"], s["lab"], t["lab"],
+                     s["d2d3"], t["d2d3"], e[0][0], e[1][0], e[0][1], e[1][1], e[0][2], e[0][3], e[1][2], e[1][3],
+                     math.exp(B["ln_beta_p_a"]), A["a_A_a"], B["a_A_a"], "no" if "converged" in B else "yes"])
+    return rows
+
+
+def cell(v, digits=3):
+    return "nan" if not math.isfinite(v) else f"{v:.{digits}g}"
+
+
+def write(rows, out):
+    os.makedirs(out, exist_ok=True)
+    write_csv(os.path.join(out, "comparison.csv"), HEAD, rows)
+    md = ["<!-- demkit/model_excess.py: every README step-8 calibration of data/geotech/model (permanent: the stored "
+          "one) against its restart with --anisotropy-pressure relaxing (step 11: from the stored optimum and two "
+          "more values of beta_p, the lowest chi2/dof kept; gamma_p, nu_cC, alpha held, no jackknife); worst: largest "
+          "RMS error over the 95 % band half-width; end |psi|: the largest over the model's laboratory paths at their "
+          f"ends; end drift: the largest |d nu/d eps_d| of the model over the last {TAIL} of strain of a laboratory "
+          "path, the DEM's on the same path in brackets -->",
+          "| calibration | χ²/dof permanent → relaxing | worst fitted | worst predicted, laboratory | worst predicted, "
+          "D2/D3 | end \\|ψ\\| | end drift \\|dν/dε_d\\|, model (DEM), permanent | relaxing | β_p | a_A at ψ = 0 "
+          "| converged |",
+          "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        md.append(f"| {r[0]} | {cell(r[1], 4)} → {cell(r[2], 4)} | {cell(r[3])} → {cell(r[4])} | {cell(r[5])} → "
+                  f"{cell(r[6])} | {cell(r[7])} → {cell(r[8])} | {cell(r[9], 2)} → {cell(r[10], 2)} | "
+                  f"{cell(r[11], 2)} ({cell(r[14], 2)}, {r[13]}) | {cell(r[12], 2)} ({cell(r[16], 2)}, {r[15]}) "
+                  f"| {cell(r[17])} | {cell(r[18])} → {cell(r[19])} | {r[20]} |")
+    write_atomic(os.path.join(out, "comparison.md"), "\n".join(md) + "\n")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--stored", required=True, help="the step-8 calibrations (data/geotech/model/state_volume)")
+    ap.add_argument("--relaxing", required=True, help="their restarts with --anisotropy-pressure relaxing (step 11)")
+    ap.add_argument("--work", required=True, help="where the predictions go (model curves of every path)")
+    ap.add_argument("--out", required=True, help="where comparison.{md,csv} go")
+    ap.add_argument("--dem", default="build/dem")
+    ap.add_argument("--table-only", action="store_true", help="the table from WORK's predictions")
+    ap.add_argument("--make-starts", metavar="DIR", help="instead: write the extra starts of README step 11 to DIR")
+    a = ap.parse_args(argv)
+    if a.make_starts:
+        make_starts(a.stored, a.make_starts)
+        return
+    for name in LAB:
+        for root in (a.stored, a.relaxing):
+            if not os.path.exists(os.path.join(root, name, "parameters.csv")):
+                raise SystemExit(f"model_excess: {root}/{name}/parameters.csv is missing: run README step 8 and 11 "
+                                 "of data/geotech/model first")
+    if not a.table_only:
+        missing = [e for e in ENSEMBLE.values() if not os.path.isdir(e)]
+        if missing:
+            raise SystemExit(f"model_excess: ensembles missing ({', '.join(sorted(set(missing)))}): make them with "
+                             "README steps 1-8b of data/geotech/model")
+        predict(a.stored, a.relaxing, a.work, a.dem)
+    write(table(a.stored, a.relaxing, a.work), a.out)
+    print(f"model_excess: {a.out}/comparison.md", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
