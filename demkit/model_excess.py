@@ -85,6 +85,9 @@ def path_ends(model_dir, P):
     return out
 
 
+BETA_P_STARTS = (30.0, 200.0)
+
+
 def make_starts(stored, out):
     """OUT/NAME/beta_p_B.csv: each step-8 parameters.csv with ln_beta_p_a set to ln B (B in BETA_P_STARTS), the extra
     starts of step 11 (the stored value is the held start of the permanent law, which it never read)."""

@@ -477,6 +477,15 @@ def test_a_relaxing_anisotropic_pressure_ends_the_constant_p_runaway(tmp_path):
     back = predict(laws["relaxing"], "back", "--anisotropy-pressure", "permanent")
     assert "anisotropy_excess" not in [x["parameter"] for x in read(os.path.join(back, "parameters.csv"))]
     assert mx.path_ends(back, mx.values(laws["relaxing"]))[0][2] > 0.01
+    # step 11's extra starts: each stored file with ln_beta_p_a set to ln 30 and ln 200, every other cell the same
+    mx.make_starts(sv, str(tmp_path / "starts"))
+    for name in mx.LAB:
+        orig = list(csv.reader(open(os.path.join(sv, name, "parameters.csv"))))
+        for b in mx.BETA_P_STARTS:
+            new = list(csv.reader(open(tmp_path / "starts" / name / f"beta_p_{b:g}.csv")))
+            assert len(new) == len(orig)
+            for x, y in zip(orig, new):
+                assert x == y if x[0] != "ln_beta_p_a" else (x[:2] + x[3:] == y[:2] + y[3:] and float(y[2]) == math.log(b))
     bad = [([DEM, "model", ens, "--no-plots", "--family", "extended", "--calibrate-on", "TC_p_loose", "--start",
              laws["permanent"], "--anisotropy-pressure", "relaxing"], "add --state-limit volume"),
            ([DEM, "model", ens, "--no-plots", "--family", "extended", "--predict-with",
