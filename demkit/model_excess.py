@@ -143,6 +143,46 @@ def table(stored, relaxing, work):
     return rows
 
 
+RUNAWAYS = (("loose", "TC_p_loose_phi0.593", "loose μ = 0.5: TC_p at p* = 10⁻³"),
+            ("mu_0.3/dense", "TT_b050_dense_phi0.658", "μ = 0.3 dense: TT b = 0.5 at p* = 10⁻³"))
+
+
+def read_curve(path):
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+    return {k: [float(r[k]) for r in rows] for k in rows[0]}
+
+
+def figure(work, out):
+    """OUT/runaway_paths.{png,svg}: the two paths the permanent law runs away on, eps_v and s_dev against eps_d, the
+    DEM's mean and 95 % band and both laws (from WORK's predictions)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from demkit.atomic import write_figure
+    fig, ax = plt.subplots(2, len(RUNAWAYS), figsize=(4.2 * len(RUNAWAYS), 6.2), sharex="col", squeeze=False)
+    for j, (name, path, title) in enumerate(RUNAWAYS):
+        c = {w: read_curve(os.path.join(work, w, name, "curves", "paths", path + ".csv")) for w in WAYS}
+        d = c["permanent"]
+        for i, (q, label) in enumerate((("eps_v", "ε_v = tr E/3 (extension +)"), ("s_dev", "s_dev = σ_dev/p"))):
+            a = ax[i][j]
+            a.fill_between(d["eps_d_accumulated"], d[q + "_lo95"], d[q + "_hi95"], color="0.8", label="DEM, 95 % band")
+            a.plot(d["eps_d_accumulated"], d[q + "_mean"], color="k", lw=1.2, label="DEM mean (4 packings)")
+            for w, style in zip(WAYS, ("--", "-")):
+                a.plot(c[w]["eps_d_accumulated"], c[w][q + "_model"], style, color="C3" if w == "permanent" else "C0",
+                       label=f"model, {w} anisotropic pressure")
+            a.set_ylabel(label)
+            if i == 0:
+                a.set_title(title, fontsize=10)
+            else:
+                a.set_xlabel("ε_d accumulated")
+    ax[0][0].legend(fontsize=7, loc="best")
+    fig.suptitle("Constant-p runaway of the permanent anisotropic pressure (data/geotech/model README step 11)",
+                 fontsize=10)
+    fig.tight_layout()
+    write_figure(fig, os.path.join(out, "runaway_paths"))
+
+
 def cell(v, digits=3):
     return "nan" if not math.isfinite(v) else f"{v:.{digits}g}"
 
@@ -193,6 +233,7 @@ def main(argv=None):
                              "README steps 1-8b of data/geotech/model")
         predict(a.stored, a.relaxing, a.work, a.dem)
     write(table(a.stored, a.relaxing, a.work), a.out)
+    figure(a.work, a.out)
     print(f"model_excess: {a.out}/comparison.md", file=sys.stderr)
 
 
