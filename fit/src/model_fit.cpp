@@ -1190,7 +1190,6 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   if (state_lode) check_second_lode_angle(curves, paths, "the state exponent's Lode dependence (lambda_psi)",
                                           "or choose --state-limit pressure", o.b_d2);
   const bool state_volume = X && o.state_volume;
-  const bool relaxes = state_volume && o.excess_relaxes;   // beta_p fitted (held_shear)
   if (state_volume) {
     volume_state_start(paths, ext, o.csl_linear);
     isob[kC0] = std::max(isob[kC0], 0.0);
@@ -1207,7 +1206,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (const auto& d : paths) nus_seen.insert(std::llround(d.nu * 1e6));
   const bool one_nu = nus_seen.size() < 2;
   const int n_p = start_pressures(curves, paths);
-  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, relaxes, n_p, o.hold_ext);
+  hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, o.excess_relaxes, n_p, o.hold_ext);
 
   const ceres::Solver::Summary sum = solve(problem, o.max_iterations);
 
@@ -1225,7 +1224,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   cal.chi2 = sum.final_cost >= 0 ? 2 * sum.final_cost : std::nan("");
   cal.n_residuals = n_res;
   // Free parameters: the held ones (isotropic, the nu-slopes of one start volume fraction, held_ext) left out.
-  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear - static_cast<int>(held_shear(X, one_nu, state_volume, relaxes).size()) +
+  cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear - static_cast<int>(held_shear(X, one_nu, state_volume, o.excess_relaxes).size()) +
                (X ? n_ext - static_cast<int>(held_x.size()) : 0);
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(isob[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(shear[i]); }
@@ -1237,7 +1236,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (int i : held_x) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
   calibration_warnings(curves, paths, iso, o, isob, numin, one_nu, X, cal);
   bound_warnings(problem, shear, ext, X, n_ext, cal);
-  for (int i : held_shear(X, false, state_volume, relaxes))   // s_max_b at 0, beta_p's slope, beta_p unless it acts
+  for (int i : held_shear(X, false, state_volume, o.excess_relaxes))   // s_max_b at 0, beta_p's slope, beta_p unless it acts
     cal.se_cov[kNumIso + i] = kNaN;
   null_directions(cal);
   if (state_volume) drop_unread_for_volume_state(cal, weighted);

@@ -586,6 +586,21 @@ T stress_shape(const T& kappa_s, const T& r, const T& r_t, bool capped) {
   return shape < T(kShapeFloor) ? T(kShapeFloor) : shape;
 }
 
+/// The pure volumetric segment: d eps_vol = +1 per unit l (its sign carried by seg.eps_vol); the elastic state moves
+/// with the volume (e_pl unchanged), and an anisotropic excess stays what it was.
+template <class T>
+State<T> volumetric_rhs(const State<T>& y, const T& A, const T& B, const Segment& seg) {
+  const T dev = T(seg.eps_vol > 0 ? 1.0 : -1.0);
+  State<T> d;
+  d.ln_nu = -dev;
+  d.p = -B * dev;
+  d.s = -(A - y.s * B) / y.p * dev;
+  d.F = T(0.0);
+  d.l = T(0.0);
+  d.e_pl = T(0.0);
+  return d;
+}
+
 /// Derivatives per unit |d eps_d| along a segment with direction sigma (+1/-1), or per unit
 /// eps_vol for a pure volumetric segment (sigma = 0). Returns d/dl of (ln nu, p, s, F).
 template <class T>
@@ -604,16 +619,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const Local<T> L = local(m.shear, nu_law, m.nu_ref);
   const T A = L.a_A * B * y.F;                       // anisotropy modulus [K]
   State<T> d;
-  if (sigma == 0.0) {   // pure volumetric: d eps_vol = +1 per unit l (sign carried by seg.eps_vol)
-    const T dev = T(seg.eps_vol > 0 ? 1.0 : -1.0);
-    d.ln_nu = -dev;
-    d.p = -B * dev;
-    d.s = -(A - y.s * B) / y.p * dev;
-    d.F = T(0.0);
-    d.l = T(0.0);
-    d.e_pl = T(0.0);
-    return d;
-  }
+  if (sigma == 0.0) return volumetric_rhs(y, A, B, seg);
   // The frictional extension (docs/model.md): r the mobilised stress ratio on the test's Lode
   // surface; neutral (the group model's numbers exactly) when m.ext.p is null or all zero.
   const LocalExt<T> X = local_ext(m.ext.p, nu_law, m.nu_ref);
