@@ -35,10 +35,10 @@ TAIL = 0.1   # the strain window of the end drift
 HEAD = ["calibration", "chi2_dof_permanent [-]", "chi2_dof_relaxing [-]", "worst_fitted_permanent [band]",
         "worst_fitted_relaxing [band]", "worst_lab_predicted_permanent [band]", "worst_lab_predicted_relaxing [band]",
         "worst_D2_D3_permanent [band]", "worst_D2_D3_relaxing [band]", "end_psi_max_permanent [-]",
-        "end_psi_max_relaxing [-]", "end_drift_max_permanent [-]", "end_drift_max_relaxing [-]",
-        "end_drift_path_permanent", "end_drift_dem_permanent_path [-]", "end_drift_path_relaxing",
-        "end_drift_dem_relaxing_path [-]", "beta_p_relaxing [1/eps_d]", "a_A_a_permanent [-]", "a_A_a_relaxing [-]",
-        "converged_relaxing"]
+        "end_psi_max_relaxing [-]", "paths_moving_permanent", "paths_moving_relaxing", "worst_drift_path_permanent",
+        "worst_drift_model_permanent [-]", "worst_drift_dem_permanent [-]", "worst_drift_path_relaxing",
+        "worst_drift_model_relaxing [-]", "worst_drift_dem_relaxing [-]", "paths", "beta_p_relaxing [1/eps_d]",
+        "a_A_a_permanent [-]", "a_A_a_relaxing [-]", "converged_relaxing"]
 
 
 def values(path):
@@ -121,12 +121,20 @@ def largest(values):
     return max(ok) if ok else None
 
 
+def moving(model, dem):
+    """A path still moving at its end, by dem model's rule (drift_on_path): the model's drift above 0.01 and ten times
+    the DEM's."""
+    return model > 0.01 and model > 10 * dem
+
+
 def ends_summary(ends):
-    """(largest end |psi|, largest end drift, its path, the DEM's drift on that path); nan where none is finite."""
+    """(largest end |psi|, how many paths still move (moving), the path whose drift most exceeds the DEM's, its
+    model drift, the DEM's); nan where none is finite."""
     psi = largest([(abs(x),) for _, x, _, _ in ends])
-    d = largest([(m, n, dem) for n, _, m, dem in ends])
+    n = sum(1 for _, _, m, dem in ends if math.isfinite(m) and moving(m, dem))
+    d = largest([(m - dem, n, m, dem) for n, _, m, dem in ends])
     nan = float("nan")
-    return (psi[0] if psi else nan,) + (d if d else (nan, "", nan))
+    return (psi[0] if psi else nan, n) + (d[1:] if d else ("", nan, nan))
 
 
 def table(stored, relaxing, work):
@@ -136,9 +144,10 @@ def table(stored, relaxing, work):
     for name in LAB:
         A, B = (values(os.path.join(r, name, "parameters.csv")) for r in (stored, relaxing))
         s, t = (summary(os.path.join(r, name), lab_group, ("fitted", "lab", "d2d3")) for r in (stored, relaxing))
-        e = [ends_summary(path_ends(os.path.join(work, w, name), P)) for w, P in zip(WAYS, (A, B))]
+        ends = [path_ends(os.path.join(work, w, name), P) for w, P in zip(WAYS, (A, B))]
+        e = [ends_summary(x) for x in ends]
         rows.append([name, A["chi2_per_dof"], B["chi2_per_dof"], s["fitted"], t["fitted"], s["lab"], t["lab"],
-                     s["d2d3"], t["d2d3"], e[0][0], e[1][0], e[0][1], e[1][1], e[0][2], e[0][3], e[1][2], e[1][3],
+                     s["d2d3"], t["d2d3"], e[0][0], e[1][0], e[0][1], e[1][1], *e[0][2:], *e[1][2:], len(ends[0]),
                      math.exp(B["ln_beta_p_a"]), A["a_A_a"], B["a_A_a"], "no" if "converged" in B else "yes"])
     return rows
 
@@ -194,17 +203,19 @@ def write(rows, out):
           "one) against its restart with --anisotropy-pressure relaxing (step 11: from the stored optimum and two "
           "more values of beta_p, the lowest chi2/dof kept; gamma_p, nu_cC, alpha held, no jackknife); worst: largest "
           "RMS error over the 95 % band half-width; end |psi|: the largest over the model's laboratory paths at their "
-          f"ends; end drift: the largest |d nu/d eps_d| of the model over the last {TAIL} of strain of a laboratory "
-          "path, the DEM's on the same path in brackets -->",
+          f"ends; drift: |d nu/d eps_d| over the last {TAIL} of strain of a laboratory path; still moving: paths whose "
+          "model drift is above 0.01 and ten times the DEM's (dem model warns about them); worst drift: the path whose "
+          "model drift most exceeds the DEM's, model (DEM) -->",
           "| calibration | χ²/dof permanent → relaxing | worst fitted | worst predicted, laboratory | worst predicted, "
-          "D2/D3 | end \\|ψ\\| | end drift \\|dν/dε_d\\|, model (DEM), permanent | relaxing | β_p | a_A at ψ = 0 "
-          "| converged |",
-          "|---|---|---|---|---|---|---|---|---|---|---|"]
+          "D2/D3 | end \\|ψ\\| | paths still moving | worst drift, permanent: model (DEM) | relaxing | β_p "
+          "| a_A at ψ = 0 | converged |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         md.append(f"| {r[0]} | {cell(r[1], 4)} → {cell(r[2], 4)} | {cell(r[3])} → {cell(r[4])} | {cell(r[5])} → "
                   f"{cell(r[6])} | {cell(r[7])} → {cell(r[8])} | {cell(r[9], 2)} → {cell(r[10], 2)} | "
-                  f"{cell(r[11], 2)} ({cell(r[14], 2)}, {r[13]}) | {cell(r[12], 2)} ({cell(r[16], 2)}, {r[15]}) "
-                  f"| {cell(r[17])} | {cell(r[18])} → {cell(r[19])} | {r[20]} |")
+                  f"{r[11]} → {r[12]} of {r[19]} | {r[13]}: {cell(r[14], 2)} ({cell(r[15], 2)}) | "
+                  f"{r[16]}: {cell(r[17], 2)} ({cell(r[18], 2)}) | {cell(r[20])} | {cell(r[21])} → {cell(r[22])} "
+                  f"| {r[23]} |")
     write_atomic(os.path.join(out, "comparison.md"), "\n".join(md) + "\n")
 
 

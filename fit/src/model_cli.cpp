@@ -456,6 +456,26 @@ std::string cusp_on_path(const Parameters& P, const PathPrediction& m) {
          "its steps put it; --jamming shared ties the two fractions (docs/model.md, \"One jamming fraction\")";
 }
 
+/// With the volume-form state parameter, a drained path (its last row at held p or side stress) whose model volume still
+/// moves at its end: |d nu/d eps_d| over the last 0.1 of strain above 0.01 and ten times the DEM's there (nu = nu0
+/// e^{-3 eps_v}). The permanent anisotropic pressure has no steady state where |a_A F| exceeds the dilatancy's reach;
+/// "" otherwise (docs/model.md, "A relaxing anisotropic pressure").
+std::string drift_on_path(const Parameters& P, const PathPrediction& m, const PathData& d) {
+  constexpr double tail = 0.1;
+  if (!(P.extended && P.state_volume) || m.acc.size() < 2 || d.isobaric.back() == 0 || m.acc.back() < 2 * tail) return "";
+  std::size_t i = 0;
+  while (i + 1 < m.acc.size() && m.acc[i + 1] <= m.acc.back() - tail) ++i;
+  const double de = m.acc.back() - m.acc[i];
+  const double model = std::fabs(m.nu.back() - m.nu[i]) / de;
+  const double dem = d.nu * std::fabs(std::exp(-3 * d.ev.back()) - std::exp(-3 * d.ev[i])) / de;
+  if (!(model > 0.01 && model > 10 * dem)) return "";
+  return "still moves at its end: |d nu/d eps_d| = " + num(model, 3) + " over the last " + num(tail) + " of strain, the "
+         "DEM's " + num(dem, 3) + (P.excess_relaxes ? std::string(" (no steady state by the path's end)") :
+         std::string(": with the permanent anisotropic pressure a constant-p path is steady only where the dilatancy "
+                     "cancels a_A F; --anisotropy-pressure relaxing ends it on the critical-state line (docs/model.md, "
+                     "\"A relaxing anisotropic pressure\")"));
+}
+
 // One line per curve: RMS error over the band half-width of p* (or eps_v where p is held),
 // s_dev and F_dev, fitted and predicted, with the calibration's chi2/dof: the table of issue 31.
 void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, const std::string& fit_label,
@@ -896,6 +916,8 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
     }
     const std::string cusp = cusp_on_path(cal.params, m);
     if (!cusp.empty()) std::cerr << "dem model: warning: " << d.name << " (" << role << ") " << cusp << "\n";
+    const std::string drift = drift_on_path(cal.params, m, d);
+    if (!drift.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << drift << "\n";
     fs::create_directories(out / "curves" / "paths");
     write_path_curve(m, d, role, out / "curves" / "paths" / (f.mode + "_" + f.tag + ".csv"));
     for (const auto& e : path_errors(m, d)) {

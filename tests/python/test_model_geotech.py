@@ -450,11 +450,15 @@ def test_a_relaxing_anisotropic_pressure_ends_the_constant_p_runaway(tmp_path):
         r = subprocess.run([DEM, "model", ens, "--no-plots", "--family", "extended", "--predict-with", law, *extra,
                             "--out", str(tmp_path / out)], capture_output=True, text=True, timeout=300)
         assert r.returncode == 0, r.stderr
+        predict.stderr = r.stderr
         return str(tmp_path / out)
 
     ends = {}
     for way, law in laws.items():
         out = predict(law, way)
+        # the permanent law's runaway is named on stderr, with the fix; the relaxing law's paths are not
+        named = "TC_p_loose nu=0.5928 (predicted) still moves at its end" in predict.stderr
+        assert named == (way == "permanent") and ("--anisotropy-pressure relaxing" in predict.stderr) == named, predict.stderr
         P = mx.values(law)
         with open(os.path.join(out, "curves", "paths", "TC_p_loose_phi0.593.csv")) as fh:
             c = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
