@@ -167,6 +167,7 @@ def figure(work, out):
     DEM's mean and 95 % band and both laws (from WORK's predictions)."""
     import matplotlib
     matplotlib.use("Agg")
+    matplotlib.rcParams["svg.hashsalt"] = "model_excess"   # the same SVG from the same data
     import matplotlib.pyplot as plt
     from demkit.atomic import write_figure
     fig, ax = plt.subplots(2, len(RUNAWAYS), figsize=(4.2 * len(RUNAWAYS), 6.2), sharex="col", squeeze=False)
@@ -189,19 +190,21 @@ def figure(work, out):
     fig.suptitle("Constant-p runaway of the permanent anisotropic pressure (data/geotech/model README step 11)",
                  fontsize=10)
     fig.tight_layout()
-    write_figure(fig, os.path.join(out, "runaway_paths"))
+    write_figure(fig, os.path.join(out, "runaway_paths"), metadata={
+        "png": {"Title": "runaway_paths", "Source": "demkit/model_excess.py"},
+        "svg": {"Title": "runaway_paths", "Source": "demkit/model_excess.py", "Date": None}})
 
 
 def cell(v, digits=3):
     return "nan" if not math.isfinite(v) else f"{v:.{digits}g}"
 
 
-def write(rows, out):
+def write(rows, out, stored, relaxing):
     os.makedirs(out, exist_ok=True)
     write_csv(os.path.join(out, "comparison.csv"), HEAD, rows)
-    md = ["<!-- demkit/model_excess.py: every README step-8 calibration of data/geotech/model (permanent: the stored "
-          "one) against its restart with --anisotropy-pressure relaxing (step 11: from the stored optimum and two "
-          "more values of beta_p, the lowest chi2/dof kept; gamma_p, nu_cC, alpha held, no jackknife); worst: largest "
+    md = [f"<!-- demkit/model_excess.py: every calibration of {stored} (permanent) against its restart in {relaxing} "
+          "with --anisotropy-pressure relaxing (data/geotech/model README step 11: from the stored optimum and two "
+          "more values of beta_p, the lowest chi2/dof kept; the stored one's held set, no jackknife); worst: largest "
           "RMS error over the 95 % band half-width; end |psi|: the largest over the model's laboratory paths at their "
           f"ends; drift: |d nu/d eps_d| over the last {TAIL} of strain of a laboratory path; still moving: paths whose "
           "model drift is above 0.01 and ten times the DEM's (dem model warns about them); worst drift: the path whose "
@@ -243,7 +246,7 @@ def main(argv=None):
             raise SystemExit(f"model_excess: ensembles missing ({', '.join(sorted(set(missing)))}): make them with "
                              "README steps 1-8b of data/geotech/model")
         predict(a.stored, a.relaxing, a.work, a.dem)
-    write(table(a.stored, a.relaxing, a.work), a.out)
+    write(table(a.stored, a.relaxing, a.work), a.out, a.stored, a.relaxing)
     figure(a.work, a.out)
     print(f"model_excess: {a.out}/comparison.md", file=sys.stderr)
 
