@@ -122,9 +122,9 @@ def largest(values):
 
 
 def moving(model, dem):
-    """A path still moving at its end, by dem model's rule (drift_on_path): the model's drift above 0.01 and ten times
+    """A path still moving at its end, by dem model's rule (drift_on_path): the model's drift above 0.01 and five times
     the DEM's."""
-    return model > 0.01 and model > 10 * dem
+    return model > 0.01 and model > 5 * dem
 
 
 def ends_summary(ends):
@@ -207,7 +207,7 @@ def write(rows, out, stored, relaxing):
           "more values of beta_p, the lowest chi2/dof kept; the stored one's held set, no jackknife); worst: largest "
           "RMS error over the 95 % band half-width; end |psi|: the largest over the model's laboratory paths at their "
           f"ends; drift: |d nu/d eps_d| over the last {TAIL} of strain of a laboratory path; still moving: paths whose "
-          "model drift is above 0.01 and ten times the DEM's (dem model warns about them); worst drift: the path whose "
+          "model drift is above 0.01 and five times the DEM's (dem model warns about them); worst drift: the path whose "
           "model drift most exceeds the DEM's, model (DEM) -->",
           "| calibration | χ²/dof permanent → relaxing | worst fitted | worst predicted, laboratory | worst predicted, "
           "D2/D3 | end \\|ψ\\| | paths still moving | worst drift, permanent: model (DEM) | relaxing | β_p "

@@ -457,7 +457,7 @@ std::string cusp_on_path(const Parameters& P, const PathPrediction& m) {
 }
 
 /// With the volume-form state parameter, a drained path (its last row at held p or side stress) whose model volume still
-/// moves at its end: |d nu/d eps_d| over the last 0.1 of strain above 0.01 and ten times the DEM's there (nu = nu0
+/// moves at its end: |d nu/d eps_d| over the last 0.1 of strain above 0.01 and five times the DEM's there (nu = nu0
 /// e^{-3 eps_v}). The permanent anisotropic pressure has no steady state where |a_A F| exceeds the dilatancy's reach;
 /// "" otherwise (docs/model.md, "A relaxing anisotropic pressure").
 std::string drift_on_path(const Parameters& P, const PathPrediction& m, const PathData& d) {
@@ -468,7 +468,7 @@ std::string drift_on_path(const Parameters& P, const PathPrediction& m, const Pa
   const double de = m.acc.back() - m.acc[i];
   const double model = std::fabs(m.nu.back() - m.nu[i]) / de;
   const double dem = d.nu * std::fabs(std::exp(-3 * d.ev.back()) - std::exp(-3 * d.ev[i])) / de;
-  if (!(model > 0.01 && model > 10 * dem)) return "";
+  if (!(model > 0.01 && model > 5 * dem)) return "";
   return "still moves at its end: |d nu/d eps_d| = " + num(model, 3) + " over the last " + num(tail) + " of strain, the "
          "DEM's " + num(dem, 3) + (P.excess_relaxes ? std::string(" (no steady state by the path's end)") :
          std::string(": with the permanent anisotropic pressure a constant-p path is steady only where the dilatancy "
