@@ -5,9 +5,10 @@ relaxes (`permanent`, the tenth to seventeenth rounds: a constant-p path is stea
 a_A F, and can run away) or is an excess over the isotropic law that relaxes at beta_p (`--anisotropy-pressure
 relaxing`: steady at psi = 0). This predicts every laboratory test with each step-8 calibration of data/geotech/model
 and its restart with the relaxing excess (README step 11), and writes per calibration chi2/dof, the worst fitted and
-predicted curve, and where the model's drained paths end: the largest |psi| at the end of a laboratory path and the
-largest volume drift |d nu / d eps_d| over its last 0.1 of strain (a path still moving at the end has not reached a
-steady state).
+predicted curve, and where the model's drained paths end: the largest |psi| at the end of a laboratory path, how many
+paths still move at their end (|d nu/d eps_d| over the last 0.1 of strain above 0.01 and five times the DEM's: the
+rule of dem model's warning), and the path whose drift most exceeds the DEM's; `--make-starts` writes step 11's extra
+starts, and the figure runaway_paths.{png,svg} shows the two paths the permanent law runs away on.
 
     /usr/bin/python3 -m demkit.model_excess --stored data/geotech/model/state_volume \\
         --relaxing data/geotech/model/state_volume/relaxing_excess --work WORK --out OUT
@@ -64,17 +65,21 @@ def end_drift(eps, nu):
     return abs(nu[-1] - nu[i]) / (eps[-1] - eps[i])
 
 
+def read_curve(path):
+    """A model path curve of `dem model` (curves/paths/*.csv) as column name -> floats."""
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+    return {k: [float(r[k]) for r in rows] for k in rows[0]}
+
+
 def path_ends(model_dir, P):
     """Per laboratory path of MODEL_DIR/curves/paths: (name, the model's psi at the end, the model's end drift, the
     DEM's end drift), the DEM's nu = nu0 e^{-3 eps_v} (eps_v = tr E/3, as the model's nu)."""
     out = []
     for f in sorted(glob.glob(os.path.join(model_dir, "curves", "paths", "*.csv"))):
-        with open(f, newline="") as fh:
-            rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
-        eps = [float(r["eps_d_accumulated"]) for r in rows]
-        nu = [float(r["nu_model"]) for r in rows]
-        p = [float(r["p_star_model"]) for r in rows]
-        dem = [nu[0] * math.exp(-3 * float(r["eps_v_mean"])) for r in rows]
+        c = read_curve(f)
+        eps, nu, p = c["eps_d_accumulated"], c["nu_model"], c["p_star_model"]
+        dem = [nu[0] * math.exp(-3 * ev) for ev in c["eps_v_mean"]]
         name = os.path.basename(f)[:-4]
         if not all(math.isfinite(x) for x in nu + p):
             out.append((name, float("nan"), float("nan"), end_drift(eps, dem)))
@@ -154,12 +159,6 @@ def table(stored, relaxing, work):
 
 RUNAWAYS = (("loose", "TC_p_loose_phi0.593", "loose μ = 0.5: TC_p at p* = 10⁻³"),
             ("mu_0.3/dense", "TT_b050_dense_phi0.658", "μ = 0.3 dense: TT b = 0.5 at p* = 10⁻³"))
-
-
-def read_curve(path):
-    with open(path, newline="") as fh:
-        rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
-    return {k: [float(r[k]) for r in rows] for k in rows[0]}
 
 
 def figure(work, out):
