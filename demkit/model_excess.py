@@ -8,7 +8,9 @@ and its restart with the relaxing excess (README step 11), and writes per calibr
 predicted curve, and where the model's drained paths end: the largest |psi| at the end of a laboratory path, how many
 paths still move at their end (|d nu/d eps_d| over the last 0.1 of strain above 0.01 and five times the DEM's: the
 rule of dem model's warning), and the path whose drift most exceeds the DEM's; `--make-starts` writes step 11's extra
-starts, and the figure runaway_paths.{png,svg} shows the two paths the permanent law runs away on.
+starts, and the figure runaway_paths.{png,svg} shows the two paths the permanent law runs away on. `--excess-size`
+(nineteenth round) adds excess_size.{md,csv}: the largest relaxing excess q/p* per calibration over the laboratory
+paths (the path curves' q_star_model), and how many paths have q > p* (the elastic state below jamming).
 
     /usr/bin/python3 -m demkit.model_excess --stored data/geotech/model/state_volume \\
         --relaxing data/geotech/model/state_volume/relaxing_excess --work WORK --out OUT
@@ -221,6 +223,51 @@ def write(rows, out, stored, relaxing):
     write_atomic(os.path.join(out, "comparison.md"), "\n".join(md) + "\n")
 
 
+SIZE_HEAD = ["calibration", "largest_q_over_p [-]", "path_of_largest", "eps_d_accumulated_of_largest [-]",
+             "paths_q_above_p", "paths", "beta_p_relaxing [1/eps_d]", "a_A_a_relaxing [-]"]
+
+
+def excess_size(relaxing, work):
+    """Per calibration of WORK/relaxing (the predictions of `predict`): the largest relaxing excess over the pressure,
+    q/p* with q = p* - p_iso(nu_el) (dem model's column q_star_model), the path and strain where it is largest, and how
+    many laboratory paths have q > p* somewhere (their elastic state below the isotropic law's jamming fraction)."""
+    rows = []
+    for name in LAB:
+        P = values(os.path.join(relaxing, name, "parameters.csv"))
+        worst, where, at, above, n = 0.0, "", float("nan"), 0, 0
+        for f in sorted(glob.glob(os.path.join(work, "relaxing", name, "curves", "paths", "*.csv"))):
+            c = read_curve(f)
+            if "q_star_model" not in c:
+                raise SystemExit(f"model_excess: {f} has no q_star_model column: predict with a dem built from the "
+                                 "nineteenth round on (rerun without --table-only)")
+            n += 1
+            ratio = [(q / p, e) for q, p, e in zip(c["q_star_model"], c["p_star_model"], c["eps_d_accumulated"])
+                     if p > 0 and math.isfinite(q)]
+            top = max(ratio, default=(0.0, float("nan")))
+            above += top[0] > 1
+            if top[0] > worst:
+                worst, where, at = top[0], os.path.basename(f)[:-4], top[1]
+        rows.append([name, worst, where, at, above, n, math.exp(P["ln_beta_p_a"]), P["a_A_a"]])
+    return rows
+
+
+def write_size(rows, out, relaxing):
+    """excess_size.{csv,md} in OUT."""
+    os.makedirs(out, exist_ok=True)
+    write_csv(os.path.join(out, "excess_size.csv"), SIZE_HEAD, rows)
+    md = ["# How large the relaxing anisotropic excess grows on the laboratory paths", "",
+          f"Every laboratory test predicted with each calibration of `{relaxing}` (`dem model --predict-with`). q = p* -"
+          " p_iso(nu_el) is the excess over the isotropic law at the elastic state (the path curves' column "
+          "q_star_model). Where q > p* the elastic state lies below the isotropic law's jamming fraction: a negative "
+          "isotropic pressure, outside the law's domain (docs/model.md, \"How large the relaxing excess grows\"). "
+          "Made by `python3 -m demkit.model_excess ... --excess-size`.", "",
+          "| calibration | largest q/p* | on path (at eps_d) | paths with q > p* | beta_p | a_A (psi = 0) |",
+          "|---|---|---|---|---|---|"]
+    for name, worst, where, at, above, n, bp, aa in rows:
+        md.append(f"| {name} | {cell(worst)} | {where or '-'} ({cell(at)}) | {above} of {n} | {cell(bp)} | {cell(aa)} |")
+    write_atomic(os.path.join(out, "excess_size.md"), "\n".join(md) + "\n")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--stored", required=True, help="the step-8 calibrations (data/geotech/model/state_volume)")
@@ -230,6 +277,8 @@ def main(argv=None):
     ap.add_argument("--dem", default="build/dem")
     ap.add_argument("--table-only", action="store_true", help="the table from WORK's predictions")
     ap.add_argument("--make-starts", metavar="DIR", help="instead: write the extra starts of README step 11 to DIR")
+    ap.add_argument("--excess-size", action="store_true",
+                    help="also write excess_size.{md,csv}: the largest relaxing excess q/p* per calibration")
     a = ap.parse_args(argv)
     if a.make_starts:
         make_starts(a.stored, a.make_starts)
@@ -247,6 +296,8 @@ def main(argv=None):
         predict(a.stored, a.relaxing, a.work, a.dem)
     write(table(a.stored, a.relaxing, a.work), a.out, a.stored, a.relaxing)
     figure(a.work, a.out)
+    if a.excess_size:
+        write_size(excess_size(a.relaxing, a.work), a.out, a.relaxing)
     print(f"model_excess: {a.out}/comparison.md", file=sys.stderr)
 
 

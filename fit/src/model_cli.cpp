@@ -261,10 +261,11 @@ void write_path_curve(const PathPrediction& m, const PathData& d, const std::str
        "(extension positive); *_lo95/_hi95: the ensemble's 95 % band; isobaric: 1 where p was held, 2 where the side "
        "stress was held (triaxial); eps_zz_model = (tr E - 2 eps_d)/3, the axial strain of an axisymmetric strain "
        "(docs/model.md); sigma_r_p0 = side stress p (1 - s/3) over p(row 0); *_dem: the DEM means (nan if not in the "
-       "ensemble)\n";
+       "ensemble)" << (m.excess_relaxes ? "; q_star_model: the relaxing anisotropic excess p* - p_iso(nu_el)" : "") << "\n";
   o << "eps_d_accumulated,eps_d_signed,isobaric,p_star_model,s_dev_model,F_dev_model,eps_v_model,nu_model";
   for (const char* q : {"p_star", "s_dev", "F_dev", "eps_v"}) o << "," << q << "_mean," << q << "_lo95," << q << "_hi95";
   o << ",eps_zz_model,eps_zz_dem,sigma_r_p0_model,sigma_r_p0_dem";
+  if (m.excess_relaxes) o << ",q_star_model";
   o << "\n";
   double eps_d_model = 0;   // the model's signed eps_d since the start (its own path: direction x |d eps_d|)
   for (std::size_t i = 0; i < m.acc.size(); ++i) {
@@ -278,6 +279,7 @@ void write_path_curve(const PathPrediction& m, const PathData& d, const std::str
       o << "," << num((*v)[i], 8) << "," << num((*v)[i] - (*h)[i], 8) << "," << num((*v)[i] + (*h)[i], 8);
     o << "," << num(model::axial_strain(3.0 * m.ev[i], eps_d_model), 8) << "," << num(i < d.ezz.size() ? d.ezz[i] : nan, 8)
       << "," << num(m.p[i] * (1.0 - m.s[i] / 3.0) / m.p.front(), 8) << "," << num(i < d.sr.size() ? d.sr[i] : nan, 8);
+    if (m.excess_relaxes) o << "," << num(m.p[i] - m.p_el[i], 8);
     o << "\n";
   }
   write_text_file(path.string(), o.str());
@@ -439,21 +441,25 @@ struct SummaryRow {
   double rms_over_band;
 };
 
-// Where a fitted or predicted path meets the isotropic law's cusp (nu_cC above nu_c): "" where it does not. The law
-// is read at the path's own nu, or (the volume-form state parameter) at the pressure's elastic state, so the path
-// meets it where its nu crosses nu_cC, or its p* crosses p*(nu_cC) (cusp_pressure).
+// Where a fitted or predicted path meets the isotropic law's cusp (cusp_crossed): "" where it does not.
 std::string cusp_on_path(const Parameters& P, const PathPrediction& m) {
-  const std::vector<double> iso = P.iso();
-  const double pc = cusp_pressure(iso.data());
-  if (!std::isfinite(pc) || m.nu.empty()) return "";
+  const double at = cusp_crossed(P, m);
+  if (!std::isfinite(at)) return "";
   const bool vol = P.extended && P.state_volume;
-  const std::vector<double>& x = vol ? m.p : m.nu;
-  const double at = vol ? pc : P.nu_cC;
-  const auto [lo, hi] = std::minmax_element(x.begin(), x.end());
-  if (!(*lo <= at && at <= *hi)) return "";
-  return std::string("crosses the isotropic law's cusp (") + (vol ? "p* = " + num(pc) : "nu = nu_cC = " + num(P.nu_cC)) +
+  return std::string("crosses the isotropic law's cusp (") +
+         (vol ? (m.excess_relaxes ? "elastic p* - q = " : "p* = ") + num(at) : "nu = nu_cC = " + num(at)) +
          ", nu_cC above nu_c = " + num(P.nu_c) + "): its stiffness is unbounded there and the path bends or ends where "
          "its steps put it; --jamming shared ties the two fractions (docs/model.md, \"One jamming fraction\")";
+}
+
+// Where the relaxing excess q exceeds the path's pressure (largest_excess_ratio above 1): "" where it does not.
+std::string excess_on_path(const PathPrediction& m) {
+  double at = 0.0;
+  const double r = largest_excess_ratio(m, &at);
+  if (!(r > 1.0)) return "";
+  return "has a relaxing anisotropic excess q up to " + num(r, 3) + " times p* (at eps_d_accumulated = " + num(at, 3) +
+         "): its elastic state lies below the isotropic law's jamming fraction, a negative isotropic pressure, outside "
+         "the law's domain; a_A/beta_p are too large for it (docs/model.md, \"How large the relaxing excess grows\")";
 }
 
 /// With the volume-form state parameter, a drained path (its last row at held p or side stress) whose model volume still
@@ -916,6 +922,8 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
     }
     const std::string cusp = cusp_on_path(cal.params, m);
     if (!cusp.empty()) std::cerr << "dem model: warning: " << d.name << " (" << role << ") " << cusp << "\n";
+    const std::string excess = excess_on_path(m);
+    if (!excess.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << excess << "\n";
     const std::string drift = drift_on_path(cal.params, m, d);
     if (!drift.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << drift << "\n";
     fs::create_directories(out / "curves" / "paths");

@@ -844,8 +844,11 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
     cal.warnings.push_back("nu_cC (" + std::to_string(isob[kNuCC]) + ") lies above nu_c (" + std::to_string(isob[kNuC]) +
                            "): the isotropic law's stiffness is unbounded at p* = " +
                            std::to_string(cusp_pressure(isob.data())) +
-                           ", and a path through that pressure ends where its steps put it. "
-                           "Hold nu_cC (--hold-isotropic nu_cC): nu_c is then kept at or above it; or tie the two "
+                           ", and a path through that pressure ends where its steps put it" +
+                           (o.excess_relaxes ? std::string(" (with the relaxing excess the elastic state sits at p* - q, "
+                                                           "below the path's pressure: a cusp below the tests' pressures "
+                                                           "is met too)") : std::string()) +
+                           ". Hold nu_cC (--hold-isotropic nu_cC): nu_c is then kept at or above it; or tie the two "
                            "(--jamming shared)");
   else if (o.fit_isotropic && std::isfinite(cusp_pressure(isob.data())))
     cal.warnings.push_back("nu_cC (" + std::to_string(isob[kNuCC]) + ") lies above nu_c (" + std::to_string(isob[kNuC]) +
@@ -1278,11 +1281,38 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
                                          d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
   PathPrediction m;
   m.acc = d.acc;
+  m.excess_relaxes = ext.excess_relaxes;
+  const bool vol = params.extended && params.state_volume;
   for (const auto& r : st) {
     m.p.push_back(r.state.p); m.s.push_back(r.state.s); m.F.push_back(r.state.F);
     m.nu.push_back(std::exp(r.state.ln_nu)); m.ev.push_back(r.eps_vol / 3.0);
+    m.p_el.push_back(vol ? isotropic_pressure(iso.data(), std::exp(r.state.ln_nu + r.state.e_pl)) : r.state.p);
   }
   return m;
+}
+
+double cusp_crossed(const Parameters& P, const PathPrediction& m) {
+  const std::vector<double> iso = P.iso();
+  const double pc = cusp_pressure(iso.data());
+  if (!std::isfinite(pc) || m.nu.empty()) return std::nan("");
+  const bool vol = P.extended && P.state_volume;
+  const std::vector<double>& x = vol ? m.p_el : m.nu;
+  const double at = vol ? pc : P.nu_cC;
+  const auto [lo, hi] = std::minmax_element(x.begin(), x.end());
+  return *lo <= at && at <= *hi ? at : std::nan("");
+}
+
+double largest_excess_ratio(const PathPrediction& m, double* at) {
+  double worst = 0.0;
+  for (std::size_t i = 0; m.excess_relaxes && i < m.p.size() && i < m.p_el.size(); ++i) {
+    if (!(m.p[i] > 0)) continue;
+    const double r = (m.p[i] - m.p_el[i]) / m.p[i];
+    if (r > worst) {
+      worst = r;
+      if (at) *at = m.acc[i];
+    }
+  }
+  return worst;
 }
 
 std::pair<double, double> psi_range(const Parameters& params, const std::vector<CurveData>& curves,

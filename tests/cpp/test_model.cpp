@@ -1779,8 +1779,14 @@ TEST(ModelVolumeState, EntriesAreUnreadWithoutTheFlag) {
 
 namespace {
 // Synthetic drained triaxial ensembles of the material P (its line logarithmic or linear in p*), calibrated with the
-// same form of the line; the checks of RecoversTheStateParametersFromDrainedTriaxialTests.
-void recover_volume_state(const Parameters& P, bool linear, const std::vector<double>& pressures = {1e-3, 1e-2}) {
+// same form of the line; the checks of RecoversTheStateParametersFromDrainedTriaxialTests. The material's isotropic law
+// has one jamming fraction (nu_cC = nu_c): volume_truth's nu_cC above nu_c puts the law's cusp at p* = 9.8e-4, which
+// the relaxing excess's elastic state (at p - q, below the start pressure 1e-3) crosses; there the cost is rough
+// (docs/model.md, "The isotropic law's cusp"), and the fit stalled 2.9 % low in a_A (nineteenth round).
+void recover_volume_state(const Parameters& material, bool linear, const std::vector<double>& pressures = {1e-3, 1e-2}) {
+  Parameters P = material;
+  P.nu_cC = P.nu_c;
+  ASSERT_TRUE(std::isnan(cusp_pressure(P.iso().data())));
   const Rows r = triaxial_rows(2.4);
   std::mt19937_64 rng(41);
   std::vector<PathData> paths;
@@ -1798,6 +1804,7 @@ void recover_volume_state(const Parameters& P, bool linear, const std::vector<do
   o.start = &start;
   const Calibration cal = calibrate({}, {}, o, paths);
   ASSERT_TRUE(cal.ok) << cal.message;
+  for (const auto& w : cal.warnings) EXPECT_EQ(w.find("unbounded"), std::string::npos) << w;
   auto at = [&](const std::string& n) {
     for (std::size_t i = 0; i < cal.names.size(); ++i) if (cal.names[i] == n) return static_cast<int>(i);
     ADD_FAILURE() << n << " not reported";
@@ -1810,16 +1817,13 @@ void recover_volume_state(const Parameters& P, bool linear, const std::vector<do
   EXPECT_EQ(cal.value[at("s_max_b")], 0.0);
   for (const char* n : {"n_psi_a", "lambda_psi", "ln_delta_w"})
     for (const auto& name : cal.names) EXPECT_NE(name, n) << "not in this law";
-  const std::vector<std::pair<std::string, double>> want = {
+  std::vector<std::pair<std::string, double>> want = {
       {"s_max_a", P.shear[kSmaxA]}, {"F_max_a", P.shear[kFmaxA]}, {"F_max_b", P.shear[kFmaxB]},
       {"ln_beta_s_a", P.shear[kLnBetaSA]}, {"ln_beta_F_a", P.shear[kLnBetaFA]}, {"d_D_a", P.ext[kDilA]},
       {"n_peak", P.ext[kNB]}, {"n_dil", P.ext[kND]}, {"kappa_s_a", P.ext[kKappaA]}, {"n_rate", P.ext[kNRate]}};
-  if (P.excess_relaxes) {
-    // a_A and beta_p within 5 %: they come out 2.9 % and 1.4 % low (seed 41), 10 and 4.6 covariance errors; their
-    // errors understate the pair's spread (docs/model.md, "A relaxing anisotropic pressure")
-    EXPECT_NEAR(cal.value[at("a_A_a")], P.shear[kAnisoA], 0.05 * P.shear[kAnisoA]);
-    EXPECT_NEAR(std::exp(cal.value[at("ln_beta_p_a")]), std::exp(P.shear[kLnBetaPA]), 0.05 * std::exp(P.shear[kLnBetaPA]));
-    EXPECT_TRUE(std::isfinite(cal.se_cov[at("ln_beta_p_a")])) << "beta_p fitted";
+  if (P.excess_relaxes) {   // a_A and beta_p within 4 covariance errors too (seed 41: 0.4 and 0.0 errors off)
+    want.push_back({"a_A_a", P.shear[kAnisoA]});
+    want.push_back({"ln_beta_p_a", P.shear[kLnBetaPA]});
   } else {
     EXPECT_TRUE(std::isnan(cal.se_cov[at("ln_beta_p_a")])) << "beta_p held: it does not act";
   }
@@ -1862,8 +1866,8 @@ TEST(ModelVolumeState, RecoversTheStateParametersFromDrainedTriaxialTests) {
 }
 
 // The relaxing anisotropic pressure's coefficients from the same synthetic tests (a_A = 0.3, beta_p = 5: an excess of
-// 2-4 % of p): a_A and beta_p (the excess's size a_A B F/beta_p and its rate) within 5 %, the rest within 4 covariance
-// standard errors.
+// 2-4 % of p): a_A and beta_p (the excess's size a_A B F/beta_p and its rate) within 4 covariance standard errors, as
+// the rest.
 TEST(ModelVolumeState, RecoversTheRelaxingExcessFromDrainedTriaxialTests) {
   Parameters P = volume_truth();
   P.ext[kLambdaCs] = 0.0; P.ext[kCCs] = 1.6;
@@ -1932,6 +1936,64 @@ TEST(ModelVolumeState, ARelaxingAnisotropicPressureEndsOnTheCriticalStateLine) {
       }
     }
   }
+}
+
+// The relaxing excess moves the elastic state to p - q, below the path's own pressure (nineteenth round): a drained
+// compression from p* = 1e-3 whose pressure stays above the isotropic law's cusp (volume_truth's nu_cC above nu_c:
+// p*(nu_cC) = 9.8e-4) crosses it in its elastic state, and cusp_crossed names it, where the permanent law's elastic
+// state (at p itself) does not. predict_path's p_el is p - q: on the isotropic law at p with the permanent law; with the
+// relaxing one q = p - p_el ends at its steady value a_A B F/beta_p. Near jamming B/p is large (here ~200), so a_A =
+// 0.05 already makes q 53 % of p, and a_A = 0.1 more than p (largest_excess_ratio > 1): the elastic state below the
+// jamming fraction, p_iso(nu_el) < 0, which dem model names.
+TEST(ModelVolumeState, TheRelaxingExcessMeetsACuspBelowThePathsPressureAndCanExceedIt) {
+  Parameters P = volume_truth();
+  P.shear[kAnisoA] = 0.05;   // q ends at 53 % of p (at a_A = 0.1 above p: the elastic state below jamming)
+  P.shear[kLnBetaPA] = std::log(5.0);
+  const auto iso = P.iso();
+  const double p_cusp = cusp_pressure(iso.data());
+  ASSERT_NEAR(p_cusp, 9.8e-4, 1e-5);
+  ASSERT_NEAR(isotropic_pressure(iso.data(), P.nu_cC), p_cusp, 1e-12) << "the law's pressure at nu_cC";
+  const Rows r = triaxial_rows(2.4);
+  const double p0 = 1e-3, nu0 = P.ext[kNuCs] + P.ext[kLambdaCs] * std::log(p0 / kPCsRef) - 0.01;
+  std::mt19937_64 rng(3);
+  for (bool relaxes : {false, true}) {
+    SCOPED_TRACE(relaxes ? "relaxing" : "permanent");
+    P.excess_relaxes = relaxes;
+    const PathData d = synthetic_path(P, "TC_s3_synthetic", nu0, r, 4, 0.0, rng, p0, volume_ext(P, 0.0));
+    const PathPrediction m = predict_path(P, d, 1e-3);
+    ASSERT_EQ(m.p_el.size(), m.p.size());
+    EXPECT_EQ(m.excess_relaxes, relaxes);
+    EXPECT_GT(*std::min_element(m.p.begin(), m.p.end()), p_cusp) << "the path's own pressure stays above the cusp";
+    const double p_el_min = *std::min_element(m.p_el.begin(), m.p_el.end());
+    if (!relaxes) {
+      for (std::size_t i = 0; i < m.p.size(); ++i)   // to the steps near the cusp (3.5e-6 from row 1 on)
+        EXPECT_NEAR(m.p_el[i], m.p[i], 1e-5 * m.p[i]) << "row " << i;
+      EXPECT_TRUE(std::isnan(cusp_crossed(P, m)));
+      continue;
+    }
+    EXPECT_LT(p_el_min, p_cusp) << "the elastic state at p - q goes below it";
+    EXPECT_GT(p_el_min, 0.0) << "and stays jammed";
+    EXPECT_EQ(cusp_crossed(P, m), p_cusp);
+    const std::size_t e = m.p.size() - 1;
+    const double nu_el = isotropic_volume<double>(iso.data(), m.p_el[e]);
+    const double A = P.shear[kAnisoA] * bulk_modulus(iso.data(), nu_el) * m.F[e];
+    EXPECT_NEAR(m.p[e] - m.p_el[e], A / 5.0, 1e-2 * A / 5.0) << "q = a_A B F / beta_p at the end";
+    Parameters Q = P;
+    Q.nu_cC = Q.nu_c;   // one jamming fraction: no cusp to meet
+    EXPECT_TRUE(std::isnan(cusp_crossed(Q, predict_path(Q, d, 1e-3))));
+    double at = -1;
+    EXPECT_NEAR(largest_excess_ratio(m, &at), 1 - p_el_min / m.p[e], 0.02) << "q/p largest at the end, 53 %";
+    EXPECT_LT(largest_excess_ratio(m), 1.0);
+    EXPECT_EQ(at, m.acc[e]);
+    Q = P;
+    Q.shear[kAnisoA] = 0.1;   // twice the anisotropy: q above p, the elastic state below jamming
+    const PathPrediction big = predict_path(Q, d, 1e-3);
+    EXPECT_GT(largest_excess_ratio(big), 1.0);
+    EXPECT_LT(*std::min_element(big.p_el.begin(), big.p_el.end()), 0.0) << "p_iso(nu_el) < 0: below jamming";
+  }
+  P.excess_relaxes = false;
+  EXPECT_EQ(largest_excess_ratio(predict_path(P, synthetic_path(P, "TC_s3_synthetic", nu0, r, 4, 0.0, rng, p0, volume_ext(P, 0.0)), 1e-3)), 0.0)
+      << "none with the permanent law";
 }
 
 namespace {

@@ -501,3 +501,33 @@ def test_a_relaxing_anisotropic_pressure_ends_the_constant_p_runaway(tmp_path):
         r = subprocess.run(cmd + ["--out", str(tmp_path / f"x{k}")], capture_output=True, text=True, timeout=120)
         assert r.returncode == 2 and want in r.stderr, r.stderr
         assert not (tmp_path / f"x{k}").exists()
+
+
+def test_a_relaxing_excess_above_the_pressure_is_named_and_written(tmp_path):
+    """Nineteenth round: with the relaxing law the elastic state sits at p* - q. The stored mu = 1 dense relaxing
+    calibration (README step 11) predicting the dense drained compression at p* = 1e-3 carries an excess q above p*
+    (its elastic state below the isotropic law's jamming fraction): the path curve's column q_star_model holds q, the
+    largest q/p* computed here from it is above 1, and dem model names the path with that ratio. The permanent
+    calibration it restarted from has no such column and no such warning."""
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech", "curves"),
+                        "--mu", "1", "--out", str(tmp_path / "m"), "--tests", "TC_s3"], capture_output=True, text=True,
+                       cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    ens = str(tmp_path / "m" / "ensemble_dense")
+    sv = os.path.join(ROOT, "data", "geotech", "model", "state_volume")
+    out = {}
+    for way, law in (("relaxing", os.path.join(sv, "relaxing_excess", "mu_1", "dense", "parameters.csv")),
+                     ("permanent", os.path.join(sv, "mu_1", "dense", "parameters.csv"))):
+        r = subprocess.run([DEM, "model", ens, "--no-plots", "--family", "extended", "--predict-with", law,
+                            "--out", str(tmp_path / way)], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        out[way] = r.stderr
+    curve = tmp_path / "relaxing" / "curves" / "paths" / "TC_s3_dense_phi0.658.csv"
+    c = read(curve)
+    ratio = max(float(x["q_star_model"]) / float(x["p_star_model"]) for x in c)
+    assert ratio > 1
+    line = next(l for l in out["relaxing"].splitlines() if l.startswith("dem model: warning: TC_s3_dense") and "times p*" in l)
+    assert float(line.split("excess q up to ")[1].split(" times")[0]) == pytest.approx(ratio, rel=5e-3), line
+    assert "below the isotropic law's jamming fraction" in line
+    assert "times p*" not in out["permanent"]
+    assert "q_star_model" not in read(tmp_path / "permanent" / "curves" / "paths" / "TC_s3_dense_phi0.658.csv")[0]

@@ -214,6 +214,10 @@ std::vector<PredictionError> prediction_errors(const ModelCurve& m, const CurveD
 /// The model along a path ensemble's rows from its first row (the start state, signed).
 struct PathPrediction {
   std::vector<double> acc, p, s, F, nu, ev;   ///< as PathData; ev = eps_vol/3 (the curves' eps_v) [-]
+  /// The pressure of the elastic state on the isotropic law, p_iso(nu_el) [p*], with the volume-form state parameter
+  /// (p itself with the permanent law; p - q with the relaxing excess q); p elsewhere.
+  std::vector<double> p_el;
+  bool excess_relaxes = false;   ///< the relaxing excess (Ext::excess_relaxes): q = p - p_el is written out
 };
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
                             double* psi_seen = nullptr);
@@ -225,6 +229,15 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
 /// that pressure is held there, and where it leaves depends on the steps (sixteenth round; docs/model.md, "The
 /// isotropic law's cusp").
 double cusp_pressure(const double* iso);
+/// Where a predicted path meets the isotropic law's cusp: the law is read at the path's own nu, or (the volume-form state
+/// parameter) at the elastic state, so the path meets it where its nu crosses nu_cC, or where its elastic state's
+/// pressure m.p_el crosses cusp_pressure: p* itself, or with the relaxing excess p* - q, which can cross it below the
+/// path's own pressures (nineteenth round). Returns that nu_cC or pressure; NaN where the path does not meet it.
+double cusp_crossed(const Parameters& P, const PathPrediction& m);
+/// The largest relaxing excess over the pressure along a predicted path, max q/p* with q = p* - p_el (0 with the
+/// permanent law, and where no row has p* > 0), and the accumulated strain of that row in *at. Above 1 the elastic state
+/// lies below the isotropic law's jamming fraction: a negative isotropic pressure (nineteenth round).
+double largest_excess_ratio(const PathPrediction& m, double* at = nullptr);
 
 /// The range of psi = nu - nu_cs(p) the laws are read in: [-R, R], R the largest |psi| of the model's own states
 /// along `curves` and `paths`, predicted unclamped with `params` (volume-form state parameter only; else both
