@@ -1,6 +1,8 @@
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -36,6 +38,22 @@ def run_dem(*args, check=False, timeout=900, env=None):
     if check and p.returncode != 0:
         raise AssertionError(f"dem {' '.join(map(str, args))} failed ({p.returncode}):\n{p.stderr[-3000:]}")
     return p
+
+
+def kill_group(proc, wait=30.0):
+    """SIGKILL the process group of the Popen `proc` (a `dem ensemble` started with start_new_session), reap it, and
+    wait until every process of it is gone, at most `wait` s: the leader's exit is not the group's, and a worker that
+    inherited the ensemble's lock can outlive the leader by a moment under load (the resumed run then found the folder
+    locked: test_killed_workflow_resumes_and_loses_only_running_tasks on a loaded machine, nineteenth round)."""
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    gone = time.time() + wait
+    while time.time() < gone:
+        try:
+            os.killpg(proc.pid, 0)
+        except ProcessLookupError:
+            return
+        time.sleep(0.1)
 
 
 @pytest.fixture(scope="session")

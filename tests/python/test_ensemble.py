@@ -7,7 +7,6 @@ import glob
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import time
@@ -15,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import DEM, ROOT, run_dem
+from conftest import DEM, ROOT, kill_group, run_dem
 from demkit.curves import read_curve
 
 TINY = """
@@ -186,8 +185,7 @@ def test_killed_workflow_resumes_and_loses_only_running_tasks(tiny, tmp_path, gr
     deadline = time.time() + 300
     while time.time() < deadline and not finished_tasks(out, "deviatoric"):
         time.sleep(0.2)
-    os.killpg(p.pid, signal.SIGKILL)   # the driver, Snakemake and the running tasks, at once
-    p.wait()
+    kill_group(p)   # the driver, Snakemake and the running tasks, at once; then every one of them gone
     finished = {f: os.stat(f).st_mtime_ns for f in finished_tasks(out, "**")}
     assert finished, "nothing finished before the kill"
     assert not (out / "fit" / "parameters.csv").exists()

@@ -8,13 +8,12 @@ import glob
 import json
 import os
 import shutil
-import signal
 import subprocess
 import time
 
 import pytest
 
-from conftest import DEM, run_dem
+from conftest import DEM, kill_group, run_dem
 
 TINY = """
 [particles]
@@ -167,16 +166,7 @@ def test_killed_sweep_resumes_without_redoing_finished_tasks(swept, tmp_path):
     while time.time() < deadline and len(finished(out)) < 1:
         time.sleep(0.2)
     time.sleep(0.5)   # let Snakemake register the finished task
-    os.killpg(p.pid, signal.SIGKILL)
-    p.wait()
-    # every process of the group gone (a worker that inherited the ensemble's lock can outlive the leader by a moment)
-    gone = time.time() + 30
-    while time.time() < gone:
-        try:
-            os.killpg(p.pid, 0)
-        except ProcessLookupError:
-            break
-        time.sleep(0.1)
+    kill_group(p)   # every process of the group gone, not only the leader
     inc = out / ".snakemake" / "incomplete"   # tasks Snakemake had not registered as finished: rerun, rightly
     marked = {os.path.join(str(out), base64.urlsafe_b64decode(m.name).decode())
               for m in inc.glob("*")} if inc.is_dir() else set()
