@@ -268,6 +268,69 @@ def write_size(rows, out, relaxing):
     write_atomic(os.path.join(out, "excess_size.md"), "\n".join(md) + "\n")
 
 
+BOUNDED_HEAD = ["calibration", "chi2_dof_permanent [-]", "chi2_dof_relaxing [-]", "chi2_dof_bounded [-]",
+                "worst_lab_predicted_permanent [band]", "worst_lab_predicted_relaxing [band]",
+                "worst_lab_predicted_bounded [band]", "worst_D2_D3_permanent [band]", "worst_D2_D3_relaxing [band]",
+                "worst_D2_D3_bounded [band]", "paths_moving_relaxing", "paths_moving_bounded",
+                "largest_q_over_p_relaxing [-]", "largest_q_over_p_bounded [-]", "paths_q_above_p_relaxing",
+                "paths_q_above_p_bounded", "paths", "beta_p_bounded [1/eps_d]", "a_A_a_bounded [-]"]
+
+
+def largest_ratio(model_dir):
+    """(largest q/p* over MODEL_DIR's laboratory path curves, how many paths have q > p* somewhere)."""
+    worst, above = 0.0, 0
+    for f in sorted(glob.glob(os.path.join(model_dir, "curves", "paths", "*.csv"))):
+        c = read_curve(f)
+        top = max((q / p for q, p in zip(c["q_star_model"], c["p_star_model"]) if p > 0 and math.isfinite(q)),
+                  default=0.0)
+        worst, above = max(worst, top), above + (top > 1)
+    return worst, above
+
+
+def bounded_table(stored, relaxing, bounded, work, dem, predict_again=True):
+    """Per calibration refitted with --anisotropy-pressure bounded (the folders of BOUNDED): chi2/dof, the worst
+    laboratory and D2/D3 predictions of the three laws (each calibration's own summary.csv), paths still moving, and
+    the largest excess q/p* (relaxing and bounded, from WORK/{relaxing,bounded}'s predictions)."""
+    rows = []
+    for name in LAB:
+        if not os.path.exists(os.path.join(bounded, name, "parameters.csv")):
+            continue
+        out = os.path.join(work, "bounded", name)
+        if predict_again:
+            os.makedirs(os.path.dirname(out), exist_ok=True)
+            run([dem, "model", ENSEMBLE[name], "--predict-with", os.path.join(bounded, name, "parameters.csv"),
+                 "--family", "extended", "--no-plots", "--out", out, "--force"], out + ".log")
+        P = [values(os.path.join(r, name, "parameters.csv")) for r in (stored, relaxing, bounded)]
+        S = [summary(os.path.join(r, name), lab_group, ("fitted", "lab", "d2d3")) for r in (stored, relaxing, bounded)]
+        moving_n = [ends_summary(path_ends(os.path.join(work, w, name), Q))[1]
+                    for w, Q in (("relaxing", P[1]), ("bounded", P[2]))]
+        size = [largest_ratio(os.path.join(work, w, name)) for w in ("relaxing", "bounded")]
+        n = len(glob.glob(os.path.join(out, "curves", "paths", "*.csv")))
+        rows.append([name, *[q["chi2_per_dof"] for q in P], *[x["lab"] for x in S], *[x["d2d3"] for x in S],
+                     *moving_n, size[0][0], size[1][0], size[0][1], size[1][1], n, math.exp(P[2]["ln_beta_p_a"]),
+                     P[2]["a_A_a"]])
+    return rows
+
+
+def write_bounded(rows, out, bounded):
+    """bounded.{csv,md} in OUT."""
+    os.makedirs(out, exist_ok=True)
+    write_csv(os.path.join(out, "bounded.csv"), BOUNDED_HEAD, rows)
+    md = [f"<!-- demkit/model_excess.py --bounded {bounded}: each calibration refitted with --anisotropy-pressure "
+          "bounded (the excess's source gated by 1 - (q/p)^2; data/geotech/model README step 12) against the permanent "
+          "(step 8) and relaxing (step 11) laws; worst: largest RMS error over the 95 % band half-width; still moving: "
+          "dem model's drift rule; q/p*: the largest excess over the pressure on the laboratory paths, and how many "
+          "paths have q > p* (the elastic state below jamming) -->",
+          "| calibration | χ²/dof permanent → relaxing → bounded | worst laboratory | worst D2/D3 | paths still moving, "
+          "relaxing → bounded | largest q/p*, relaxing → bounded | paths with q > p* | β_p | a_A at ψ = 0 |",
+          "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        md.append(f"| {r[0]} | {cell(r[1], 4)} → {cell(r[2], 4)} → {cell(r[3], 4)} | {cell(r[4])} → {cell(r[5])} → "
+                  f"{cell(r[6])} | {cell(r[7])} → {cell(r[8])} → {cell(r[9])} | {r[10]} → {r[11]} of {r[16]} | "
+                  f"{cell(r[12])} → {cell(r[13])} | {r[14]} → {r[15]} | {cell(r[17])} | {cell(r[18])} |")
+    write_atomic(os.path.join(out, "bounded.md"), "\n".join(md) + "\n")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--stored", required=True, help="the step-8 calibrations (data/geotech/model/state_volume)")
@@ -279,7 +342,14 @@ def main(argv=None):
     ap.add_argument("--make-starts", metavar="DIR", help="instead: write the extra starts of README step 11 to DIR")
     ap.add_argument("--excess-size", action="store_true",
                     help="also write excess_size.{md,csv}: the largest relaxing excess q/p* per calibration")
+    ap.add_argument("--bounded", metavar="DIR", help="instead: the calibrations refitted with --anisotropy-pressure "
+                    "bounded (README step 12) predicted into WORK/bounded and compared in OUT/bounded.{md,csv} with "
+                    "WORK's relaxing and STORED's permanent ones")
     a = ap.parse_args(argv)
+    if a.bounded:
+        write_bounded(bounded_table(a.stored, a.relaxing, a.bounded, a.work, a.dem, not a.table_only), a.out, a.bounded)
+        print(f"model_excess: {a.out}/bounded.md", file=sys.stderr)
+        return
     if a.make_starts:
         make_starts(a.stored, a.make_starts)
         return

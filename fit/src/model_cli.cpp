@@ -179,9 +179,12 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
     t.add_row({"psi_max", "laws of psi held at their value here above it (the calibration's states; --no-psi-range)",
                num(cal.params.psi_hi, 17), "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
   }
-  if (cal.params.excess_relaxes)   // files without the row: the permanent anisotropic pressure (read_parameters)
+  if (cal.params.excess_relaxes && !cal.params.excess_bounded)   // files without the row: permanent (read_parameters)
     t.add_row({"anisotropy_excess", "1: the anisotropy's pressure relaxes as an excess at beta_p (--anisotropy-pressure "
                "relaxing)", "1", "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+  if (cal.params.excess_bounded)
+    t.add_row({"anisotropy_excess", "2: the anisotropy's pressure relaxes as an excess at beta_p, its source gated by "
+               "1 - (q/p)^2 (--anisotropy-pressure bounded)", "2", "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
   if (cal.params.b_d2 != kLodeBD2)   // files without the row: 1/2 (read_parameters)
     t.add_row({"b_D2", "stress Lode parameter b of D2 curves and paths (fixed; --d2-lode)", num(cal.params.b_d2), "nan",
                "fixed", "nan", "nan", "nan", "nan", "-"});
@@ -456,10 +459,12 @@ std::string cusp_on_path(const Parameters& P, const PathPrediction& m) {
 std::string excess_on_path(const PathPrediction& m) {
   double at = 0.0;
   const double r = largest_excess_ratio(m, &at);
-  if (!(r > 1.0)) return "";
+  if (!(r > 1.0)) return "";   // with the bounded excess only where p* falls faster than q can follow
   return "has a relaxing anisotropic excess q up to " + num(r, 3) + " times p* (at eps_d_accumulated = " + num(at, 3) +
          "): its elastic state lies below the isotropic law's jamming fraction, a negative isotropic pressure, outside "
-         "the law's domain; a_A/beta_p are too large for it (docs/model.md, \"How large the relaxing excess grows\")";
+         "the law's domain; a_A/beta_p are too large for it" +
+         std::string(m.excess_bounded ? "" : "; --anisotropy-pressure bounded keeps q below p*") +
+         " (docs/model.md, \"How large the relaxing excess grows\")";
 }
 
 /// With the volume-form state parameter, a drained path (its last row at held p or side stress) whose model volume still
@@ -741,10 +746,11 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   if (co.state_volume && o.family != "extended")
     throw InputError("--state-limit volume: the volume-form state parameter belongs to the extended family; give "
                      "--family extended");
-  co.excess_relaxes = o.anisotropy_pressure == "relaxing";
+  co.excess_relaxes = o.anisotropy_pressure == "relaxing" || o.anisotropy_pressure == "bounded";
+  co.excess_bounded = o.anisotropy_pressure == "bounded";
   if (co.excess_relaxes && !co.state_volume && o.predict_with.empty())
-    throw InputError("--anisotropy-pressure relaxing: the relaxing excess belongs to the volume-form state parameter "
-                     "(without it the anisotropic pressure always relaxes at beta_p); add --state-limit volume");
+    throw InputError("--anisotropy-pressure " + o.anisotropy_pressure + ": the relaxing excess belongs to the volume-form "
+                     "state parameter (without it the anisotropic pressure always relaxes at beta_p); add --state-limit volume");
   const int n_block = ext_size(co.state_limit, co.fabric == FabricLode::Weighted, co.state_lode, co.state_volume);
   for (int i : co.hold_ext)
     if (i >= n_block)
@@ -1013,9 +1019,10 @@ FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions
   if (!o.d2_lode.empty()) P.b_d2 = o.d2_lode == "normal" ? plane_strain_lode_b(P.surface, P.shear[kSmaxA]) : co.b_d2;
   if (!o.anisotropy_pressure.empty()) {   // else the file's (row anisotropy_excess)
     if (co.excess_relaxes && !P.state_volume)
-      throw InputError("--anisotropy-pressure relaxing: " + o.predict_with + " has no volume-form state parameter (no "
-                       "nu_cs row); the relaxing excess belongs to --state-limit volume calibrations");
+      throw InputError("--anisotropy-pressure " + o.anisotropy_pressure + ": " + o.predict_with + " has no volume-form "
+                       "state parameter (no nu_cs row); the relaxing excess belongs to --state-limit volume calibrations");
     P.excess_relaxes = co.excess_relaxes;
+    P.excess_bounded = co.excess_bounded;
   }
   // The laws of psi: the file's range; without one, that of the curves --calibrate-on names (the states that
   // calibration held; here they are predicted with the rest); --no-psi-range: unbounded
@@ -1183,9 +1190,11 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
   app.add_option("--anisotropy-pressure", o.anisotropy_pressure, "with --state-limit volume, the anisotropy's "
                  "pressure A d eps_d: permanent (the default: it moves the elastic state and never relaxes, so a "
                  "constant-p path is steady only where the dilatancy cancels a_A F) or relaxing (an excess over the "
-                 "isotropic law that relaxes at beta_p, fitted: steady at psi = 0); with --predict-with the file's "
-                 "unless given (docs/model.md, \"A relaxing anisotropic pressure\")")
-      ->check(CLI::IsMember({"permanent", "relaxing"}))->default_str("permanent");
+                 "isotropic law that relaxes at beta_p, fitted: steady at psi = 0) or bounded (the same, its source "
+                 "gated by 1 - (q/p)^2 so that the excess q stays below p and the elastic state jammed); with "
+                 "--predict-with the file's unless given (docs/model.md, \"A relaxing anisotropic pressure\", \"A "
+                 "bounded excess\")")
+      ->check(CLI::IsMember({"permanent", "relaxing", "bounded"}))->default_str("permanent");
   app.add_flag("--force", o.force, "overwrite an existing output folder");
 }
 

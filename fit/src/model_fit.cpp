@@ -58,11 +58,13 @@ struct CurveResidual {
   bool state_lode = false;    ///< par[2] carries lambda_psi (the state exponent's Lode dependence)
   bool state_volume = false;  ///< par[2] carries nu_cs, lambda_cs, n_b, n_d (the volume-form state parameter)
   bool excess_relaxes = false;   ///< Ext::excess_relaxes
+  bool excess_bounded = false;   ///< Ext::excess_bounded
   template <class T>
   bool operator()(T const* const* par, T* r) const {
     Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
                extended && state_lode, extended && state_volume, b_stress};
     ext.excess_relaxes = excess_relaxes;
+    ext.excess_bounded = excess_bounded;
     const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -100,11 +102,13 @@ struct PathResidual {
   bool state_lode = false;    ///< par[2] carries lambda_psi (the state exponent's Lode dependence)
   bool state_volume = false;  ///< par[2] carries nu_cs, lambda_cs, n_b, n_d (the volume-form state parameter)
   bool excess_relaxes = false;   ///< Ext::excess_relaxes
+  bool excess_bounded = false;   ///< Ext::excess_bounded
   template <class T>
   bool operator()(T const* const* par, T* r) const {
     Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
                extended && state_lode, extended && state_volume, b_stress};
     ext.excess_relaxes = excess_relaxes;
+    ext.excess_bounded = excess_bounded;
     const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step, ext);
     const std::size_t n = acc.size();
     for (std::size_t i = 0; i < n; ++i) {
@@ -377,7 +381,9 @@ Parameters read_parameters(const std::string& path) {
   P.state_limit = P.extended && v.count(ext_name(kNPsiA)) > 0;
   P.state_lode = P.state_limit && v.count(ext_name(kLambdaPsi)) > 0;
   P.state_volume = P.extended && v.count(ext_name(kNuCs)) > 0;
-  P.excess_relaxes = P.state_volume && v.count("anisotropy_excess") && get("anisotropy_excess") == 1.0;
+  const double excess = P.state_volume && v.count("anisotropy_excess") ? get("anisotropy_excess") : 0.0;
+  P.excess_relaxes = excess == 1.0 || excess == 2.0;   // 1 relaxing, 2 bounded (nineteenth round)
+  P.excess_bounded = excess == 2.0;
   if (P.extended)
     for (int i = 0; i < kNumExt; ++i)
       if (i < kNumExtBase || v.count(ext_name(i))) P.ext[i] = get(ext_name(i));   // else the default (n_rate 1)
@@ -523,6 +529,7 @@ void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& 
     f->extended = X; f->b = lode_b_of(c.mode); f->b_stress = lode_b_of(c.mode, o.b_d2); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
     f->state_volume = o.state_volume;
     f->excess_relaxes = o.state_volume && o.excess_relaxes;
+    f->excess_bounded = f->excess_relaxes && o.excess_bounded;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -563,6 +570,7 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     f->extended = X; f->b = lode_b_of(d.name); f->b_stress = lode_b_of(d.name, o.b_d2); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
     f->state_volume = o.state_volume;
     f->excess_relaxes = o.state_volume && o.excess_relaxes;
+    f->excess_bounded = f->excess_relaxes && o.excess_bounded;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -1034,6 +1042,7 @@ Parameters fitted_params(const Parameters& start, const std::vector<double>& iso
   P.state_lode = X && o.state_limit && o.state_lode;
   P.state_volume = X && o.state_volume;
   P.excess_relaxes = P.state_volume && o.excess_relaxes;
+  P.excess_bounded = P.excess_relaxes && o.excess_bounded;
   return P;
 }
 
@@ -1259,6 +1268,7 @@ ModelCurve predict_curve(const Parameters& params, const CurveData& c, double ep
                         params.extended && params.state_volume, lode_b_of(c.mode, params.b_d2), params.psi_lo,
                         params.psi_hi, psi_seen};
   ext.excess_relaxes = params.extended && params.state_volume && params.excess_relaxes;
+  ext.excess_bounded = ext.excess_relaxes && params.excess_bounded;
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
                                          t.F.front(), t.eps, max_step, ext);
   ModelCurve m;
@@ -1277,11 +1287,13 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
                         params.extended && params.state_volume, lode_b_of(d.name, params.b_d2), params.psi_lo,
                         params.psi_hi, psi_seen};
   ext.excess_relaxes = params.extended && params.state_volume && params.excess_relaxes;
+  ext.excess_bounded = ext.excess_relaxes && params.excess_bounded;
   const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
                                          d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
   PathPrediction m;
   m.acc = d.acc;
   m.excess_relaxes = ext.excess_relaxes;
+  m.excess_bounded = ext.excess_bounded;
   const bool vol = params.extended && params.state_volume;
   for (const auto& r : st) {
     m.p.push_back(r.state.p); m.s.push_back(r.state.s); m.F.push_back(r.state.F);

@@ -1704,6 +1704,7 @@ Parameters volume_truth() {
 Ext<double> volume_ext(const Parameters& P, double b) {
   Ext<double> e{P.ext, b, P.surface, P.fabric, false, false, true};
   e.excess_relaxes = P.excess_relaxes;
+  e.excess_bounded = P.excess_relaxes && P.excess_bounded;
   return e;
 }
 
@@ -1799,6 +1800,9 @@ void recover_volume_state(const Parameters& material, bool linear, const std::ve
   o.state_volume = true;
   o.csl_linear = linear;
   o.excess_relaxes = P.excess_relaxes;
+  o.excess_bounded = P.excess_bounded;
+  for (const auto& d : paths)   // the material inside its law's domain: q < p, the elastic state jammed
+    EXPECT_LT(largest_excess_ratio(predict_path(P, d, 1e-3)), 1.0);
   Parameters start = perturbed_start(P);
   start.state_volume = false;   // a start without the line: it comes from the end states
   o.start = &start;
@@ -1829,6 +1833,7 @@ void recover_volume_state(const Parameters& material, bool linear, const std::ve
   }
   EXPECT_EQ(cal.value[at("ln_beta_p_b")], 0.0);
   EXPECT_EQ(cal.params.excess_relaxes, P.excess_relaxes);
+  EXPECT_EQ(cal.params.excess_bounded, P.excess_bounded);
   if (pressures.size() >= 3) {
     const int i = at("m_peak");
     EXPECT_LT(std::fabs(cal.value[i] - P.ext[kMPeak]), 4 * cal.se_cov[i]) << "m_peak = " << cal.value[i] << " +- " << cal.se_cov[i];
@@ -1865,15 +1870,30 @@ TEST(ModelVolumeState, RecoversTheStateParametersFromDrainedTriaxialTests) {
   }
 }
 
-// The relaxing anisotropic pressure's coefficients from the same synthetic tests (a_A = 0.3, beta_p = 5: an excess of
-// 2-4 % of p): a_A and beta_p (the excess's size a_A B F/beta_p and its rate) within 4 covariance standard errors, as
-// the rest.
+// The relaxing anisotropic pressure's coefficients from the same synthetic tests (a_A = 0.05, beta_p = 5: an excess up
+// to 59 % of p at 1e-3, 8 % at 1e-2; the eighteenth round's a_A = 0.3 took it to 3 times p, an elastic state below
+// jamming, which recover_volume_state now refuses): a_A and beta_p (the excess's size a_A B F/beta_p and its rate)
+// within 4 covariance standard errors, as the rest.
 TEST(ModelVolumeState, RecoversTheRelaxingExcessFromDrainedTriaxialTests) {
   Parameters P = volume_truth();
   P.ext[kLambdaCs] = 0.0; P.ext[kCCs] = 1.6;
-  P.shear[kAnisoA] = 0.3;
+  P.shear[kAnisoA] = 0.05;
   P.shear[kLnBetaPA] = std::log(5.0);
   P.excess_relaxes = true;
+  recover_volume_state(P, true);
+}
+
+// The bounded excess's coefficients (nineteenth round, `--anisotropy-pressure bounded`) from the same synthetic tests,
+// with an excess that the gate 1 - (q/p)^2 shapes (a_A = 0.1, beta_p = 5: q up to 0.69 of p at 1e-3, 0.16 at 1e-2):
+// every coefficient within 4 covariance standard errors. (At a_A = 0.3, q up to 0.9 of p, the fit from the same start
+// ends in a local minimum, chi2/dof 88 against the truth's 1.39: docs/model.md, "A bounded excess".)
+TEST(ModelVolumeState, RecoversTheBoundedExcessFromDrainedTriaxialTests) {
+  Parameters P = volume_truth();
+  P.ext[kLambdaCs] = 0.0; P.ext[kCCs] = 1.6;
+  P.shear[kAnisoA] = 0.1;
+  P.shear[kLnBetaPA] = std::log(5.0);
+  P.excess_relaxes = true;
+  P.excess_bounded = true;
   recover_volume_state(P, true);
 }
 
@@ -1994,6 +2014,54 @@ TEST(ModelVolumeState, TheRelaxingExcessMeetsACuspBelowThePathsPressureAndCanExc
   P.excess_relaxes = false;
   EXPECT_EQ(largest_excess_ratio(predict_path(P, synthetic_path(P, "TC_s3_synthetic", nu0, r, 4, 0.0, rng, p0, volume_ext(P, 0.0)), 1e-3)), 0.0)
       << "none with the permanent law";
+}
+
+// The bounded excess (nineteenth round, `--anisotropy-pressure bounded`): dq = A sigma (1 - (q/p)^2) - beta_p q. At
+// constant p from dense and loose starts, where the relaxing excess ends above p (a_A = 0.3, beta_p = 5: the elastic
+// state below jamming), the bounded one stays below p on every row, the path still ends on the critical-state line
+// (psi = 0, s on the Lode surface), and q ends at the root of A (1 - (q/p)^2) = beta_p q (B and F at the end state).
+// With an excess small against p (a_A = 0.002) the two laws end within 1e-4 of each other in s and 1e-6 in nu.
+TEST(ModelVolumeState, ABoundedExcessStaysBelowThePressureAndEndsOnTheLine) {
+  Parameters P = volume_truth();
+  P.shear[kLnBetaPA] = std::log(5.0);
+  P.excess_relaxes = true;
+  const auto iso = P.iso();
+  const double p0 = 1e-3;
+  const Rows r = rows_of(3.0, 3.0, 0.004, true);
+  const double nu_line = P.ext[kNuCs] + P.ext[kLambdaCs] * std::log(p0 / kPCsRef);
+  const double s_cs = lode_limit(P.shear[kSmaxA], 0.0, Surface::LadeDuncan);
+  auto run = [&](const Parameters& Q, double psi0) {
+    return integrate_rows<double>(iso.data(), Q.shear, Q.nu_ref, nu_line + psi0, p0, 0.0, 0.0, r.acc, r.dir, r.isob,
+                                  1e-3, volume_ext(Q, 0.0));
+  };
+  auto q_of = [&](const State<double>& y) { return y.p - isotropic_pressure(iso.data(), std::exp(y.ln_nu + y.e_pl)); };
+  for (double psi0 : {0.06, -0.01}) {
+    SCOPED_TRACE("psi0 " + std::to_string(psi0));
+    P.shear[kAnisoA] = 0.3;
+    P.excess_bounded = false;
+    const State<double> relaxed = run(P, psi0).back().state;
+    EXPECT_GT(q_of(relaxed), relaxed.p) << "the relaxing excess above p";
+    P.excess_bounded = true;
+    const auto st = run(P, psi0);
+    for (std::size_t i = 0; i < st.size(); ++i) {
+      EXPECT_LT(q_of(st[i].state), st[i].state.p) << "row " << i;
+      EXPECT_GT(q_of(st[i].state), -st[i].state.p) << "row " << i;
+    }
+    const State<double>& e = st.back().state;
+    EXPECT_NEAR(state_psi(P.ext, std::exp(e.ln_nu), e.p), 0.0, 1e-4);
+    EXPECT_NEAR(e.s, s_cs, 1e-3 * s_cs);
+    const double nu_el = std::exp(e.ln_nu + e.e_pl), q = q_of(e), x = q / e.p;
+    const double A = P.shear[kAnisoA] * bulk_modulus(iso.data(), nu_el) * e.F;
+    EXPECT_GT(x, 0.3) << "an excess that acts";
+    EXPECT_NEAR(A * (1 - x * x), 5.0 * q, 1e-3 * 5.0 * q) << "the steady root";
+    P.shear[kAnisoA] = 0.002;   // q small against p: the gate is 1 to (q/p)^2
+    const State<double> small_b = run(P, psi0).back().state;
+    P.excess_bounded = false;
+    const State<double> small_r = run(P, psi0).back().state;
+    EXPECT_LT(std::fabs(q_of(small_r)), 0.05 * small_r.p);
+    EXPECT_NEAR(small_b.s, small_r.s, 1e-4);
+    EXPECT_NEAR(std::exp(small_b.ln_nu), std::exp(small_r.ln_nu), 1e-6);
+  }
 }
 
 namespace {

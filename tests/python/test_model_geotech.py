@@ -531,3 +531,24 @@ def test_a_relaxing_excess_above_the_pressure_is_named_and_written(tmp_path):
     assert "below the isotropic law's jamming fraction" in line
     assert "times p*" not in out["permanent"]
     assert "q_star_model" not in read(tmp_path / "permanent" / "curves" / "paths" / "TC_s3_dense_phi0.658.csv")[0]
+    # the same law with its excess bounded (--anisotropy-pressure bounded overrides the file's): q below p* on every
+    # row, not named; the written parameters.csv says so (anisotropy_excess = 2) and predicts the same again
+    law = os.path.join(sv, "relaxing_excess", "mu_1", "dense", "parameters.csv")
+    r = subprocess.run([DEM, "model", ens, "--no-plots", "--family", "extended", "--predict-with", law,
+                        "--anisotropy-pressure", "bounded", "--out", str(tmp_path / "bounded")], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0 and "times p*" not in r.stderr, r.stderr
+    c = read(tmp_path / "bounded" / "curves" / "paths" / "TC_s3_dense_phi0.658.csv")
+    assert max(float(x["q_star_model"]) / float(x["p_star_model"]) for x in c) < 1
+    written = {x["parameter"]: x["value"] for x in read(tmp_path / "bounded" / "parameters.csv")}
+    assert float(written["anisotropy_excess"]) == 2
+    r = subprocess.run([DEM, "model", ens, "--no-plots", "--family", "extended", "--predict-with",
+                        str(tmp_path / "bounded" / "parameters.csv"), "--out", str(tmp_path / "again")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert summary_rows(str(tmp_path / "again" / "summary.csv")) == summary_rows(str(tmp_path / "bounded" / "summary.csv"))
+    r = subprocess.run([DEM, "model", ens, "--no-plots", "--family", "extended", "--calibrate-on", "TC_s3_dense",
+                        "--start", law, "--anisotropy-pressure", "bounded", "--out", str(tmp_path / "refused")],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "--anisotropy-pressure bounded" in r.stderr and "add --state-limit volume" in r.stderr
+    assert not (tmp_path / "refused").exists()

@@ -182,6 +182,8 @@ struct Parameters {
   /// With state_volume: the anisotropy's pressure relaxes as an excess over the isotropic law (Ext::excess_relaxes;
   /// row anisotropy_excess of parameters.csv, absent: false).
   bool excess_relaxes = false;
+  /// With excess_relaxes: the excess bounded within (-p, p) (Ext::excess_bounded; row anisotropy_excess = 2).
+  bool excess_bounded = false;
   std::vector<double> iso() const { return {p0, nu_c, gamma_p, C0, C1, nu_cC, alpha}; }
   void set_iso(const double* v) { p0 = v[0]; nu_c = v[1]; gamma_p = v[2]; C0 = v[3]; C1 = v[4]; nu_cC = v[5]; alpha = v[6]; }
 };
@@ -432,6 +434,10 @@ struct Ext {
   /// beta_p q), so at the critical state the volume is steady where the dilatancy is 0 (psi = 0), whatever a_A F.
   /// False (the default, the tenth to seventeenth rounds): d ln nu_el = dp/B, q = 0, beta_p never acts.
   bool excess_relaxes = false;
+  /// With excess_relaxes (nineteenth round, `--anisotropy-pressure bounded`): the excess's source A sigma is gated by
+  /// 1 - (q/p)^2, dq = A sigma (1 - (q/p)^2) - beta_p q, so that q stays within (-p, p) and the elastic state's pressure
+  /// p - q above 0 (the relaxing excess alone reaches q > p: an elastic state below jamming; docs/model.md).
+  bool excess_bounded = false;
 };
 
 /// The volume-form state parameter psi = nu - nu_cs(p), nu_cs(p) = nu_cs + lambda_cs ln(p/kPCsRef) (tenth round)
@@ -586,6 +592,15 @@ T stress_shape(const T& kappa_s, const T& r, const T& r_t, bool capped) {
   return shape < T(kShapeFloor) ? T(kShapeFloor) : shape;
 }
 
+/// The source of the anisotropic excess q per unit |d eps_d|: A sigma, or with the bounded excess (Ext::excess_bounded,
+/// nineteenth round) A sigma (1 - (q/p)^2), zero at q = +-p.
+template <class T>
+T excess_source(const Ext<T>& ext, const T& a_sigma, const T& q, const T& p) {
+  if (!ext.excess_bounded) return a_sigma;
+  const T x = q / p;
+  return a_sigma * (T(1.0) - x * x);
+}
+
 /// The pure volumetric segment: d eps_vol = +1 per unit l (its sign carried by seg.eps_vol); the elastic state moves
 /// with the volume (e_pl unchanged), and an anisotropic excess stays what it was.
 template <class T>
@@ -653,6 +668,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const T dil = vol_state ? X.d_D * (r - X.chi_D * exp(-m.ext.p[kND] * psi))
                 : m.ext.p ? X.d_D * (r - X.chi_D) * (T(1.0) - T(sigma) * y.F / F_lim) : T(0.0);
   const T relax = L.beta_p * (y.p - p_ref);          // excess pressure relaxing with |d eps_d|
+  const T src = excess_source(m.ext, A * T(sigma), y.p - p_ref, y.p);   // the excess's source A sigma (gated: bounded)
   T dvol;                                            // d eps_vol per |d eps_d|
   // The deviatoric source of ds. The rate is scaled by s_max/s_lim so that the initial shear
   // stiffness G/p = beta_s s_max does not depend on the Lode angle (only the limit does): the
@@ -669,10 +685,10 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const T g_s = rate_scale(m, B, y.p);
   const T shear = L.beta_s * g_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_target - y.s) * shape_s;
   if (seg.control == Control::Isobaric) {
-    dvol = (A * T(sigma) - relax + B * dil) / B;
+    dvol = (src - relax + B * dil) / B;
   } else if (seg.control == Control::Triaxial && vol_state) {
     // The same with the elastic split: ds = shear - (A - s B)/p (dvol - dil), so (B - A/3)(dvol - dil) remains.
-    dvol = dil + ((T(1.0) - y.s / T(3.0)) * (A * T(sigma) - relax) - y.p / T(3.0) * shear) / (B - A / T(3.0));
+    dvol = dil + ((T(1.0) - y.s / T(3.0)) * (src - relax) - y.p / T(3.0) * shear) / (B - A / T(3.0));
   } else if (seg.control == Control::Triaxial) {
     // (1 - s/3) dp - (p/3) ds = 0 with dp = -B dvol + A sigma - relax + B dil and
     // ds = shear - (A - s B)/p dvol: the B s/3 terms cancel, leaving (B - A/3) dvol.
@@ -681,14 +697,14 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
     dvol = T(seg.volume_rate);
   }
   d.ln_nu = -dvol;
-  d.p = -B * dvol + A * T(sigma) - relax + B * dil;
+  d.p = -B * dvol + src - relax + B * dil;
   const T rate_F = weighted ? lode_w : m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
   d.F = L.beta_F * g_s * rate_F * (T(sigma) * F_lim - y.F) * gate_F;
   d.l = T(1.0);
   // The elastic volume fraction follows the pressure on the isotropic law (d ln nu_el = dp/B), or with a relaxing
   // excess the pressure less its anisotropic excess: d ln nu_el = (dp - A sigma + relax)/B, so that the excess q = p -
   // p_ref obeys dq = A sigma - beta_p q.
-  const T dp_el = m.ext.excess_relaxes ? d.p - A * T(sigma) + relax : d.p;
+  const T dp_el = m.ext.excess_relaxes ? d.p - src + relax : d.p;
   d.e_pl = vol_state ? dp_el / B + dvol : T(0.0);
   // The volumetric term of the stress ratio: the elastic stress response to the volume change. With the volume-form
   // state parameter only the elastic part dvol - dil acts (the plastic dilatancy moves the volume, not the stress);

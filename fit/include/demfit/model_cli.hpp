@@ -33,7 +33,8 @@ struct ModelCommandOptions {
   std::string jamming = "separate";
   /// With --state-limit volume, the anisotropy's pressure (eighteenth round): `permanent` (the elastic state carries it,
   /// never relaxed: the tenth to seventeenth rounds) or `relaxing` (an excess over the isotropic law that relaxes at
-  /// beta_p, fitted); empty: permanent, or with --predict-with the file's (row anisotropy_excess)
+  /// beta_p, fitted) or `bounded` (the same, its source gated by 1 - (q/p)^2: q within (-p, p), nineteenth round);
+  /// empty: permanent, or with --predict-with the file's (row anisotropy_excess)
   std::string anisotropy_pressure;
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
   std::vector<std::string> hold;             ///< extension coefficients held at their start values (--hold)

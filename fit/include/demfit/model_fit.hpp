@@ -78,6 +78,8 @@ struct CalibrationOptions {
   /// over the isotropic law at the elastic state that relaxes at beta_p (fitted: ln_beta_p_a; its slope held at 0), so
   /// that a constant-p path's volume is steady at psi = 0 whatever a_A F (Ext::excess_relaxes; docs/model.md).
   bool excess_relaxes = false;
+  /// With excess_relaxes (`--anisotropy-pressure bounded`, nineteenth round): the excess within (-p, p) (Ext::excess_bounded).
+  bool excess_bounded = false;
   /// Isotropic parameters (IsoIndex) held at their start values while the rest of the block is
   /// fitted: a laboratory's isotropic branch of a few pressure levels cannot fix all seven (issue 31,
   /// "Calibrated on drained triaxial tests"). Needs `start`.
@@ -218,6 +220,7 @@ struct PathPrediction {
   /// (p itself with the permanent law; p - q with the relaxing excess q); p elsewhere.
   std::vector<double> p_el;
   bool excess_relaxes = false;   ///< the relaxing excess (Ext::excess_relaxes): q = p - p_el is written out
+  bool excess_bounded = false;   ///< the bounded excess (Ext::excess_bounded)
 };
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
                             double* psi_seen = nullptr);
