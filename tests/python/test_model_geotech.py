@@ -426,6 +426,16 @@ def test_a_path_the_laws_cannot_start_is_not_determined_not_diverged(tmp_path):
     assert r.returncode == 0 and "cusp" not in r.stderr, r.stderr
 
 
+def stored_lab_ensemble(tmp_path, mu, test, prep):
+    """The stored laboratory curves of one test at friction mu as a path ensemble (demkit.geotech_model) in TMP/m;
+    returns its ensemble_PREP folder."""
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech", "curves"),
+                        "--mu", mu, "--out", str(tmp_path / "m"), "--tests", test], capture_output=True, text=True,
+                       cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    return str(tmp_path / "m" / f"ensemble_{prep}")
+
+
 def test_a_relaxing_anisotropic_pressure_ends_the_constant_p_runaway(tmp_path):
     """Eighteenth round: the stored mu = 0.5 loose calibration (README step 8, the anisotropy's pressure permanent)
     predicting the loose constant-p triaxial compression at p* = 1e-3: the model's nu still moves at the end (over the
@@ -435,11 +445,7 @@ def test_a_relaxing_anisotropic_pressure_ends_the_constant_p_runaway(tmp_path):
     round-trips through --predict-with; the flag overrides the file's law (permanent brings the drift back); the flag
     without the volume-form state parameter, or unknown, is refused."""
     from demkit import model_excess as mx
-    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech", "curves"),
-                        "--mu", "0.5", "--out", str(tmp_path / "m"), "--tests", "TC_p"], capture_output=True, text=True,
-                       cwd=ROOT)
-    assert r.returncode == 0, r.stderr
-    ens = str(tmp_path / "m" / "ensemble_loose")
+    ens = stored_lab_ensemble(tmp_path, "0.5", "TC_p", "loose")
     sv = os.path.join(ROOT, "data", "geotech", "model", "state_volume")
     laws = {"permanent": os.path.join(sv, "loose", "parameters.csv"),
             "relaxing": os.path.join(sv, "relaxing_excess", "loose", "parameters.csv")}
@@ -509,11 +515,7 @@ def test_a_relaxing_excess_above_the_pressure_is_named_and_written(tmp_path):
     (its elastic state below the isotropic law's jamming fraction): the path curve's column q_star_model holds q, the
     largest q/p* computed here from it is above 1, and dem model names the path with that ratio. The permanent
     calibration it restarted from has no such column and no such warning."""
-    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech", "curves"),
-                        "--mu", "1", "--out", str(tmp_path / "m"), "--tests", "TC_s3"], capture_output=True, text=True,
-                       cwd=ROOT)
-    assert r.returncode == 0, r.stderr
-    ens = str(tmp_path / "m" / "ensemble_dense")
+    ens = stored_lab_ensemble(tmp_path, "1", "TC_s3", "dense")
     sv = os.path.join(ROOT, "data", "geotech", "model", "state_volume")
     out = {}
     for way, law in (("relaxing", os.path.join(sv, "relaxing_excess", "mu_1", "dense", "parameters.csv")),
