@@ -467,6 +467,15 @@ std::string excess_on_path(const PathPrediction& m) {
          " (docs/model.md, \"How large the relaxing excess grows\")";
 }
 
+// Where the drained triaxial control was lost (PathPrediction::lost_row): "" where every row was reached.
+std::string lost_on_path(const PathPrediction& m) {
+  if (m.lost_row < 1) return "";
+  return "cannot hold its side stress after eps_d_accumulated = " + num(m.acc[m.lost_row - 1], 3) + ": the anisotropy "
+         "modulus A = a_A B F came within " + num(100 * kTriaxialMargin) + " % of 3B, the pole where the drained volume "
+         "change per unit shear diverges; the model curve stops there (nan) and its error is inf (docs/model.md, "
+         "\"Where the drained triaxial control is lost\")";
+}
+
 /// With the volume-form state parameter, a drained path (its last row at held p or side stress) whose model volume still
 /// moves at its end: |d nu/d eps_d| over the last 0.1 of strain above 0.01 and five times the DEM's there (nu = nu0
 /// e^{-3 eps_v}). The permanent anisotropic pressure has no steady state where |a_A F| exceeds the dilatancy's reach;
@@ -930,6 +939,8 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
     if (!cusp.empty()) std::cerr << "dem model: warning: " << d.name << " (" << role << ") " << cusp << "\n";
     const std::string excess = excess_on_path(m);
     if (!excess.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << excess << "\n";
+    const std::string lost = lost_on_path(m);
+    if (!lost.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << lost << "\n";
     const std::string drift = drift_on_path(cal.params, m, d);
     if (!drift.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << drift << "\n";
     fs::create_directories(out / "curves" / "paths");

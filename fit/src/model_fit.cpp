@@ -8,6 +8,7 @@
 #include <cctype>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <fstream>
 #include <set>
 #include <limits>
@@ -118,6 +119,39 @@ struct PathResidual {
     }
     return true;
   }
+};
+
+// A path's residuals without their derivatives, computed in the jets' arithmetic (derivative parts 0) rather than in
+// double, so that Ceres' cost at a point and its Jacobian there come from the same numbers (twentieth round). The
+// two differ in the last bits (a jet divides by multiplying with the inverse), and where a path passes within a
+// rounding error of the drained triaxial control's margin (kTriaxialMargin) one of them is lost and the other not:
+// Ceres then accepts a step whose Jacobian it cannot evaluate and stops ("Residual and Jacobian evaluation failed").
+template <class F, int kStride>
+class JetValuedCost : public ceres::CostFunction {
+ public:
+  JetValuedCost(const F* f, ceres::DynamicAutoDiffCostFunction<F, kStride>* autodiff) : f_(f), autodiff_(autodiff) {
+    *mutable_parameter_block_sizes() = autodiff->parameter_block_sizes();
+    set_num_residuals(autodiff->num_residuals());
+  }
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    if (jacobians) return autodiff_->Evaluate(parameters, residuals, jacobians);
+    using Jet = ceres::Jet<double, kStride>;
+    const auto& sizes = parameter_block_sizes();
+    std::vector<std::vector<Jet>> values(sizes.size());
+    std::vector<const Jet*> blocks;
+    for (std::size_t b = 0; b < sizes.size(); ++b) {
+      for (int k = 0; k < sizes[b]; ++k) values[b].push_back(Jet(parameters[b][k]));
+      blocks.push_back(values[b].data());
+    }
+    std::vector<Jet> r(num_residuals());
+    if (!(*f_)(blocks.data(), r.data())) return false;
+    for (int i = 0; i < num_residuals(); ++i) residuals[i] = r[i].a;
+    return true;
+  }
+
+ private:
+  const F* f_;   // owned by autodiff_
+  std::unique_ptr<ceres::DynamicAutoDiffCostFunction<F, kStride>> autodiff_;
 };
 
 // Every value the model integrates from or is fitted to must be a number: a NaN row (a hand-edited
@@ -576,7 +610,7 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     cost->AddParameterBlock(kNumShear);
     if (X) cost->AddParameterBlock(ext_block(o));
     cost->SetNumResiduals(3 * static_cast<int>(n));
-    problem.AddResidualBlock(cost, nullptr, blocks_all);
+    problem.AddResidualBlock(new JetValuedCost<PathResidual, 4>(f, cost), nullptr, blocks_all);
     n_res += 3 * static_cast<int>(n - 1 - prefix);   // weighted rows only
     // The jamming fractions' bound: below every state the isotropic law is evaluated at (none with the volume-form
     // state parameter: its elastic volume fraction starts on the law at the start pressure, start_state).
@@ -1296,6 +1330,7 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
   m.excess_bounded = ext.excess_bounded;
   const bool vol = params.extended && params.state_volume;
   for (const auto& r : st) {
+    if (r.state.lost && m.lost_row < 0) m.lost_row = static_cast<int>(m.p.size());
     m.p.push_back(r.state.p); m.s.push_back(r.state.s); m.F.push_back(r.state.F);
     m.nu.push_back(std::exp(r.state.ln_nu)); m.ev.push_back(r.eps_vol / 3.0);
     m.p_el.push_back(vol ? isotropic_pressure(iso.data(), std::exp(r.state.ln_nu + r.state.e_pl)) : r.state.p);

@@ -2,6 +2,8 @@
 // calibration against synthetic ensembles made by the model with known parameters.
 #include <gtest/gtest.h>
 
+#include <ceres/jet.h>
+
 #include <array>
 #include <fstream>
 #include <iomanip>
@@ -2064,6 +2066,111 @@ TEST(ModelVolumeState, ABoundedExcessStaysBelowThePressureAndEndsOnTheLine) {
   }
 }
 
+
+namespace {
+// Every coefficient a path's residuals read, as Ceres sees them: the iso block, the shear block, the extension block.
+struct Coefficient {
+  int block, index;
+};
+
+// p, s, F and the volumetric strain on every row of `r` from (nu0, p0), and their derivatives by each coefficient
+// through Ceres' jets (one at a time).
+template <class T>
+std::vector<RowState<T>> rows_with(const Parameters& P, const T* iso, const T* shear, const T* ext, double nu0,
+                                   double p0, const Rows& r) {
+  Ext<T> e{ext, 0.0, P.surface, P.fabric, false, false, true};
+  e.excess_relaxes = P.excess_relaxes;
+  e.excess_bounded = P.excess_relaxes && P.excess_bounded;
+  return integrate_rows<T>(iso, shear, P.nu_ref, nu0, p0, 0.0, 0.0, r.acc, r.dir, r.isob, 1e-3, e);
+}
+
+// A drained triaxial compression (constant side stress), reversed, then sheared at constant pressure and at constant
+// volume: every control the laboratory paths use, a reversal included.
+Rows mixed_rows() {
+  Rows r;
+  r.acc = {0.0}; r.dir = {1}; r.isob = {2};
+  auto add = [&](int n, double h, int dir, int isob) {
+    for (int i = 0; i < n; ++i) { r.acc.push_back(r.acc.back() + h); r.dir.push_back(dir); r.isob.push_back(isob); }
+  };
+  add(40, 0.01, 1, 2);
+  add(20, 0.01, -1, 2);
+  add(20, 0.01, 1, 1);
+  add(20, 0.01, -1, 0);
+  return r;
+}
+}  // namespace
+
+// The fit's Jacobian is what Ceres' jets give through integrate_rows (isotropic_volume's bisection in double, then
+// Newton steps in jets). On a path through every control and a reversal, each coefficient's jet derivative of p, s, F
+// and eps_v on every row equals a central difference (step 1e-6 relative), for the permanent, the relaxing and the
+// bounded excess, from a dense and a loose start. A derivative lost through a double (a value taken out of a jet) would
+// show as a zero or a wrong column here.
+TEST(ModelVolumeState, TheFitsDerivativesEqualCentralDifferences) {
+  using J = ceres::Jet<double, 1>;
+  Parameters P = volume_truth();
+  P.shear[kLnBetaPA] = std::log(5.0);
+  P.shear[kAnisoA] = 0.05;
+  P.nu_cC = P.nu_c;
+  const Rows r = mixed_rows();
+  const double p0 = 2e-3, nu_line = P.ext[kNuCs] + P.ext[kLambdaCs] * std::log(p0 / kPCsRef);
+  std::vector<Coefficient> cs;
+  for (int i : {kP0, kNuC, kGammaP, kC0, kC1, kAlpha}) cs.push_back({0, i});
+  for (int i : {kSmaxA, kLnBetaSA, kFmaxA, kLnBetaFA, kAnisoA, kLnBetaPA}) cs.push_back({1, i});
+  for (int i : {kNFA, kKappaA, kDilA, kNuCs, kLambdaCs, kNB, kND, kNRate}) cs.push_back({2, i});
+  for (int law = 0; law < 3; ++law)
+    for (double psi0 : {0.05, -0.01}) {
+      P.excess_relaxes = law > 0;
+      P.excess_bounded = law == 2;
+      for (const Coefficient& c : cs) {
+        if (law == 0 && c.block == 1 && c.index == kLnBetaPA) continue;   // not read by the permanent law (held)
+        SCOPED_TRACE("law " + std::to_string(law) + ", psi0 " + std::to_string(psi0) + ", block " +
+                     std::to_string(c.block) + " entry " + std::to_string(c.index));
+        std::vector<double> v[3] = {P.iso(), std::vector<double>(P.shear, P.shear + kNumShear),
+                                    std::vector<double>(P.ext, P.ext + kNumExt)};
+        std::vector<J> j[3];
+        for (int b = 0; b < 3; ++b) for (double x : v[b]) j[b].push_back(J(x));
+        j[c.block][c.index].v[0] = 1.0;
+        const auto jet = rows_with<J>(P, j[0].data(), j[1].data(), j[2].data(), nu_line + psi0, p0, r);
+        const double x = v[c.block][c.index];
+        auto moved = [&](double by) {
+          v[c.block][c.index] = x + by;
+          return rows_with<double>(P, v[0].data(), v[1].data(), v[2].data(), nu_line + psi0, p0, r);
+        };
+        auto values = [](const RowState<double>& y) {
+          return std::array<double, 4>{y.state.p, y.state.s, y.state.F, y.eps_vol};
+        };
+        auto slopes = [](const RowState<J>& y) {
+          return std::array<double, 4>{y.state.p.v[0], y.state.s.v[0], y.state.F.v[0], y.eps_vol.v[0]};
+        };
+        // Each quantity's scale: its largest derivative on the path, at least what moves it by 1e-7 of its size per
+        // unit relative change of the coefficient (below that a difference is rounding).
+        const auto at = moved(0.0);
+        double scale[4] = {0, 0, 0, 0};
+        for (std::size_t i = 0; i < r.acc.size(); ++i)
+          for (int k = 0; k < 4; ++k)
+            scale[k] = std::max({scale[k], std::fabs(slopes(jet[i])[k]),
+                                 1e-7 * std::fabs(values(at[i])[k]) / std::max(std::fabs(x), 1e-2)});
+        // The error on each row and quantity: the central difference's at the step that agrees best. The laws have
+        // kinks (the floors of the mobilisation and of the opened fraction): a step across one differences two
+        // branches, a smaller one does not; a rounding-dominated small step is backed by a larger one.
+        std::vector<std::array<double, 4>> err(r.acc.size(), {1e300, 1e300, 1e300, 1e300});
+        for (double rel : {1e-5, 1e-6, 1e-7}) {
+          const double h = rel * std::max(std::fabs(x), 1e-2);
+          const auto up = moved(h), dn = moved(-h);
+          for (std::size_t i = 0; i < r.acc.size(); ++i)
+            for (int k = 0; k < 4; ++k) {
+              const double fd = (values(up[i])[k] - values(dn[i])[k]) / (2 * h);
+              err[i][k] = std::min(err[i][k], std::fabs(slopes(jet[i])[k] - fd) / scale[k]);
+            }
+        }
+        v[c.block][c.index] = x;
+        double worst = 0;
+        for (const auto& e : err) worst = std::max({worst, e[0], e[1], e[2], e[3]});
+        EXPECT_LT(worst, 1e-3);
+      }
+    }
+}
+
 namespace {
 // A state of the volume-form material at pressure p, psi above the critical-state line, its elastic volume fraction on
 // the isotropic law at p (start_state's e_pl).
@@ -2075,6 +2182,83 @@ State<double> volume_state(const Parameters& P, double p, double psi, double s, 
   return y;
 }
 }  // namespace
+
+// The drained triaxial control solves (B - A/3) (d eps_vol - dil) = ... for the volume change (rhs): where the
+// anisotropy modulus A = a_A B F reaches 3B the volume change per unit shear has a pole and no constant side stress can
+// be held (the nineteenth round's failed mu = 0.1 three-pressure bounded refit stepped into it: Ceres' "Residual and
+// Jacobian evaluation failed"). At one state, varied in a_A alone: the volume rate is dil + (n0 + n1 a_A)/(B (1 - a_A
+// F/3)) (three values fix dil, n0, n1; a fourth at 1 - a_A F/3 = 0.11 follows to 1e-9); the state is lost (NaN,
+// State::lost) from 1 - a_A F/3 = kTriaxialMargin on and not before, never at constant volume. A drained compression
+// whose fabric grows towards the pole is lost there (its rows before finite, the last one past a_A F/3 = 0.8), and
+// predict_path names the row; the same data predicted with a small a_A are not lost.
+TEST(ModelVolumeState, TheDrainedTriaxialControlIsLostAtThePoleWhereAEqualsThreeB) {
+  Parameters P = volume_truth();
+  P.nu_cC = P.nu_c;
+  const auto iso = P.iso();
+  const double p0 = 1e-3, F = 0.2;
+  const State<double> y = volume_state(P, p0, 0.02, 0.3, F);
+  Segment tri;
+  tri.control = Control::Triaxial;
+  auto rate = [&](double x, const Segment& seg) {   // x = a_A F/3
+    Parameters Q = P;
+    Q.shear[kAnisoA] = 3 * x / F;
+    const Material<double> m = start_material(iso.data(), Q.shear, Q.nu_ref, std::exp(y.ln_nu), p0, volume_ext(Q, 0.0));
+    return rhs(m, y, 1.0, seg);
+  };
+  const double x[4] = {0.2, 0.4, 0.6, 0.89};
+  double dvol[4];
+  for (int i = 0; i < 4; ++i) {
+    const State<double> d = rate(x[i], tri);
+    ASSERT_FALSE(d.lost);
+    dvol[i] = -d.ln_nu;
+  }
+  // dvol = dil + (n0 + n1 a)/(B (1 - x)), a = 3x/F: (dvol - dil)(1 - x) linear in x; solve from the first three
+  const double B = bulk_modulus(iso.data(), std::exp(y.ln_nu + y.e_pl));
+  auto g = [&](int i, double dil) { return (dvol[i] - dil) * (1 - x[i]) * B; };
+  // linear in x through points 0, 1 and 2: the dil that makes the three collinear (g is affine in dil)
+  auto bend = [&](double dil) {
+    return (g(2, dil) - g(0, dil)) / (x[2] - x[0]) - (g(1, dil) - g(0, dil)) / (x[1] - x[0]);
+  };
+  const double dil = -bend(0.0) / (bend(1.0) - bend(0.0));
+  const double slope = (g(1, dil) - g(0, dil)) / (x[1] - x[0]);
+  const double predicted = dil + (g(0, dil) + slope * (x[3] - x[0])) / (B * (1 - x[3]));
+  EXPECT_NEAR(dvol[3], predicted, 1e-9 * std::fabs(dvol[3])) << "the pole at a_A F = 3";
+  EXPECT_FALSE(rate(1 - 1.01 * kTriaxialMargin, tri).lost);
+  for (double at : {1 - 0.99 * kTriaxialMargin, 1.0, 1.5}) {
+    const State<double> d = rate(at, tri);
+    EXPECT_TRUE(d.lost) << at;
+    EXPECT_TRUE(std::isnan(d.p) && std::isnan(d.ln_nu) && std::isnan(d.s)) << at;
+    EXPECT_FALSE(rate(at, Segment{}).lost) << "constant volume: no control to lose";
+  }
+
+  // A path: drained compression with the bounded excess at beta_p = 300 (q near its steady value, so that the volume
+  // rate's numerator stays small and the pole is approached, not jumped at), a_A F/3 = 1 at F = 0.2 < F_max.
+  P.excess_relaxes = P.excess_bounded = true;
+  P.shear[kLnBetaPA] = std::log(300.0);
+  P.shear[kAnisoA] = 3 / F;
+  const Rows tc = triaxial_rows(0.3);
+  const double nu0 = std::exp(y.ln_nu);
+  const auto st = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.0, 0.02, tc.acc, tc.dir, tc.isob,
+                                         1e-3, volume_ext(P, 0.0));
+  std::size_t lost = 0;
+  while (lost < st.size() && !st[lost].state.lost) ++lost;
+  ASSERT_LT(lost, st.size()) << "the path reaches the pole";
+  ASSERT_GT(lost, 2u);
+  for (std::size_t i = 0; i < lost; ++i) {
+    EXPECT_TRUE(std::isfinite(st[i].state.p) && std::isfinite(st[i].eps_vol)) << "row " << i;
+    EXPECT_LT(P.shear[kAnisoA] * st[i].state.F / 3, 1 - kTriaxialMargin) << "row " << i;
+  }
+  for (std::size_t i = lost; i < st.size(); ++i) EXPECT_TRUE(st[i].state.lost && std::isnan(st[i].state.p)) << i;
+  EXPECT_GT(P.shear[kAnisoA] * st[lost - 1].state.F / 3, 0.8) << "lost next to the pole, not elsewhere";
+  std::mt19937_64 rng(5);
+  Parameters Q = P;
+  Q.shear[kAnisoA] = 1.0;   // data the pole never reaches, predicted with the material that reaches it
+  const PathData d = synthetic_path(Q, "TC_s3_synthetic", nu0, tc, 4, 0.0, rng, p0, volume_ext(Q, 0.0));
+  const PathPrediction far = predict_path(Q, d, 1e-3), near = predict_path(P, d, 1e-3);
+  EXPECT_EQ(far.lost_row, -1);
+  EXPECT_EQ(near.lost_row, static_cast<int>(lost));
+  EXPECT_TRUE(std::isnan(near.p.back()));
+}
 
 // The elastic split (eleventh round): with the volume-form state parameter the plastic dilatancy moves the volume and
 // not the stress. Under drained control (isobaric, constant side stress) the stress increments are those of the

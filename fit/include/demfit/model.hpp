@@ -88,6 +88,13 @@ enum ExtIndex {
   kNumExt
 };
 
+/// The drained triaxial control (Control::Triaxial) solves (B - A/3) d eps_vol = ... for the volume change: it has a
+/// pole where the anisotropy modulus A = a_A B F reaches 3B (a_A F = 3): the volume change per unit shear diverges and no
+/// constant side stress can be held. Within kTriaxialMargin of it (B - A/3 at most 0.1 B, B > 0: the volume rate
+/// amplified tenfold or more, where RK4's fixed steps throw the stress ratio far off before they reach the pole) a state
+/// is lost (State::lost, every entry NaN): the path is not continued, and a fit's step that leads there is rejected
+/// (twentieth round; docs/model.md, "Where the drained triaxial control is lost").
+constexpr double kTriaxialMargin = 0.1;
 /// Reference pressure of the critical-state line nu_cs(p) of the volume-form state parameter [p* units].
 constexpr double kPCsRef = 1e-3;
 /// With the volume-form state parameter the stress ratio's shape 1 + kappa_s r is floored here (eleventh round): a
@@ -489,6 +496,8 @@ struct State {
   /// packing dilating to its critical state below the isotropic law's jamming fraction keeps its stiffness, and the
   /// relaxation towards k p_iso(nu_el) = p vanishes (docs/model.md, "The volume-form state parameter").
   T e_pl = T(0.0);
+  /// The drained triaxial control was lost on the way here (kTriaxialMargin): every entry is then NaN.
+  bool lost = false;
 };
 
 /// How the volume is controlled during a segment.
@@ -601,6 +610,16 @@ T excess_source(const Ext<T>& ext, const T& a_sigma, const T& q, const T& p) {
   return a_sigma * (T(1.0) - x * x);
 }
 
+/// A lost state (State::lost): every entry NaN, so that the path's later rows and a fit's residuals on them are not
+/// numbers (Ceres rejects a step that leads there).
+template <class T>
+State<T> lost_state(const State<T>& y) {
+  const T nan = y.p * T(std::numeric_limits<double>::quiet_NaN());
+  State<T> d{nan, nan, nan, nan, nan, nan};
+  d.lost = true;
+  return d;
+}
+
 /// The pure volumetric segment: d eps_vol = +1 per unit l (its sign carried by seg.eps_vol); the elastic state moves
 /// with the volume (e_pl unchanged), and an anisotropic excess stays what it was.
 template <class T>
@@ -686,6 +705,8 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const T shear = L.beta_s * g_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_target - y.s) * shape_s;
   if (seg.control == Control::Isobaric) {
     dvol = (src - relax + B * dil) / B;
+  } else if (seg.control == Control::Triaxial && B > T(0.0) && !(B - A / T(3.0) > T(kTriaxialMargin) * B)) {
+    return lost_state(y);   // the side stress cannot be held (kTriaxialMargin)
   } else if (seg.control == Control::Triaxial && vol_state) {
     // The same with the elastic split: ds = shear - (A - s B)/p (dvol - dil), so (B - A/3)(dvol - dil) remains.
     dvol = dil + ((T(1.0) - y.s / T(3.0)) * (src - relax) - y.p / T(3.0) * shear) / (B - A / T(3.0));
@@ -717,7 +738,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
 template <class T>
 State<T> axpy(const State<T>& y, const State<T>& d, double h) {
   return {y.ln_nu + T(h) * d.ln_nu, y.p + T(h) * d.p, y.s + T(h) * d.s, y.F + T(h) * d.F, y.l + T(h) * d.l,
-          y.e_pl + T(h) * d.e_pl};
+          y.e_pl + T(h) * d.e_pl, y.lost || d.lost};
 }
 
 /// One classical RK4 step of length h (in |eps_d|, or |eps_vol| for a volumetric segment).
@@ -734,6 +755,7 @@ State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const S
   out.F += T(h / 6) * (k1.F + T(2) * k2.F + T(2) * k3.F + k4.F);
   out.l += T(h / 6) * (k1.l + T(2) * k2.l + T(2) * k3.l + k4.l);
   out.e_pl += T(h / 6) * (k1.e_pl + T(2) * k2.e_pl + T(2) * k3.e_pl + k4.e_pl);
+  out.lost = y.lost || k1.lost || k2.lost || k3.lost || k4.lost;
   return out;
 }
 

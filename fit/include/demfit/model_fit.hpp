@@ -221,6 +221,9 @@ struct PathPrediction {
   std::vector<double> p_el;
   bool excess_relaxes = false;   ///< the relaxing excess (Ext::excess_relaxes): q = p - p_el is written out
   bool excess_bounded = false;   ///< the bounded excess (Ext::excess_bounded)
+  /// The first row the drained triaxial control could not reach (State::lost, kTriaxialMargin: A = a_A B F came within
+  /// 10 % of 3B); -1 where every row was reached. From there on every entry is NaN.
+  int lost_row = -1;
 };
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
                             double* psi_seen = nullptr);
