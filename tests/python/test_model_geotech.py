@@ -554,3 +554,35 @@ def test_a_relaxing_excess_above_the_pressure_is_named_and_written(tmp_path):
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "--anisotropy-pressure bounded" in r.stderr and "add --state-limit volume" in r.stderr
     assert not (tmp_path / "refused").exists()
+
+
+def test_a_drained_path_that_reaches_the_control_pole_is_named_and_stopped(tmp_path):
+    """Twentieth round: a drained triaxial path whose anisotropy modulus A = a_A B F comes within 10 % of 3B (the pole
+    of the constant-side-stress control) is not continued. The stored tenth-round loose calibration reaches it on the
+    loose TC_s3 test at nu = 0.6185: its model curve is a number up to a row and nan from the next on, dem model names
+    the path with the strain of the last row reached, and that curve's error is inf in summary.csv. The other
+    pressure's curve is not named and is a number throughout."""
+    ens = stored_lab_ensemble(tmp_path, "0.5", "TC_s3", "loose")
+    law = os.path.join(ROOT, "data", "geotech", "model", "state_volume", "tenth_round", "loose", "parameters.csv")
+    r = subprocess.run([DEM, "model", ens, "--no-plots", "--family", "extended", "--predict-with", law,
+                        "--out", str(tmp_path / "p")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    named = [l for l in r.stderr.splitlines() if "cannot hold its side stress" in l]
+    assert len(named) == 1 and named[0].startswith("dem model: warning: TC_s3_loose nu=0.6185"), r.stderr
+    assert "came within 10 % of 3B" in named[0]
+    at = float(named[0].split("after eps_d_accumulated = ")[1].split(":")[0])
+    curves = sorted((tmp_path / "p" / "curves" / "paths").glob("TC_s3_loose_*.csv"))
+    assert len(curves) == 2
+    for path in curves:
+        p = [float(x["p_star_model"]) for x in read(path)]
+        acc = [float(x["eps_d_accumulated"]) for x in read(path)]
+        finite = [math.isfinite(v) for v in p]
+        if "0.618" in path.name:
+            k = finite.index(False)
+            assert all(finite[:k]) and not any(finite[k:]), path
+            assert acc[k - 1] == pytest.approx(at, rel=2e-3)
+        else:
+            assert all(finite), path
+    worst = {(x["mode"], x["nu [-]"]): x["worst [band]"] for x in read(tmp_path / "p" / "summary.csv")}
+    assert [w for (m, nu), w in worst.items() if m == "TC_s3_loose" and nu.startswith("0.618")] == ["inf"]
+    assert [w for (m, nu), w in worst.items() if m == "TC_s3_loose" and nu.startswith("0.593")] != ["inf"]
