@@ -793,6 +793,7 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
     std::vector<std::vector<double>>& est = ff.jack;   // leave-one-out estimates (for the jackknife correlations)
     CalibrationOptions cj = co_f;
     cj.start = &cal.params;
+    std::string failed;   // refits that did not reach an optimum comparable to the full fit's
     for (int k = 0; k < K; ++k) {
       std::vector<CurveData> loo;
       for (std::size_t j = 0; j < fit_curves.size(); ++j)
@@ -808,6 +809,17 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
       ff.heldout.push_back(heldout_score(ck.params, fit_curves, fit_files, members[k], K, o.eps_max));
       std::cerr << "dem model: jackknife " << k + 1 << "/" << K << " (" << members[k].filename().string()
                 << " left out): chi2/dof = " << num(ck.chi2_dof(), 4) << "\n";
+      if (!jackknife_refit_usable(ck, cal))
+        failed += (failed.empty() ? "" : ", ") + members[k].filename().string() + " left out (chi2/dof " +
+                  num(ck.chi2_dof(), 4) + (ck.ok ? "" : ", not converged") + ")";
+    }
+    if (!failed.empty()) {   // a failed refit's values are its start's or a poor optimum's: not the packings' scatter
+      ff.jack.clear();
+      cal.warnings.push_back("jackknife not used: its refit " + failed + " did not reach an optimum like the full fit's "
+                             "(chi2/dof " + num(cal.chi2_dof(), 4) + "), so the spread of the refits is not the "
+                             "packings' scatter; errors from the covariance instead (docs/model.md, \"Where the drained "
+                             "triaxial control is lost\")");
+      return;
     }
     cal.se_jackknife = jackknife_errors(est, cal, co_f.csl_linear, &cal.warnings);
     if (K < 4) {   // as `dem fit` says for its fits

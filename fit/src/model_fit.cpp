@@ -1480,6 +1480,10 @@ std::vector<PredictionError> path_errors(const PathPrediction& m, const PathData
   return out;
 }
 
+bool jackknife_refit_usable(const Calibration& refit, const Calibration& full) {
+  return refit.ok && std::isfinite(refit.chi2_dof()) && refit.chi2_dof() <= 3.0 * std::max(full.chi2_dof(), 1.0);
+}
+
 std::vector<double> jackknife_errors(const std::vector<std::vector<double>>& est, const Calibration& cal,
                                      bool csl_linear, std::vector<std::string>* warnings) {
   const double K = static_cast<double>(est.size());

@@ -626,6 +626,27 @@ PathData synthetic_path(const Parameters& P, const std::string& name, double nu,
 
 }  // namespace
 
+// A leave-one-out refit enters the jackknife only when it converged to an optimum like the full fit's (twentieth
+// round: the bounded mu = 1 dense jackknife had a refit at chi2/dof 659.5 against 5.85, the three-pressure mu = 0.1
+// joint one two refits that failed at their start, nan; their values made a spread that was not the packings').
+TEST(ModelFit, AJackknifeRefitThatFailedOrEndedFarAboveTheFullFitIsNotUsed) {
+  auto fit = [](double chi2_dof, bool ok) {
+    Calibration c;
+    c.n_residuals = 1001;
+    c.n_free = 1;
+    c.chi2 = chi2_dof * 1000;
+    c.ok = ok;
+    return c;
+  };
+  const Calibration full = fit(5.85, true);
+  EXPECT_TRUE(jackknife_refit_usable(fit(5.91, true), full));
+  EXPECT_TRUE(jackknife_refit_usable(fit(16.97, true), full)) << "within 3 times";
+  EXPECT_FALSE(jackknife_refit_usable(fit(659.5, true), full));
+  EXPECT_FALSE(jackknife_refit_usable(fit(std::nan(""), true), full)) << "failed at its start";
+  EXPECT_FALSE(jackknife_refit_usable(fit(5.9, false), full)) << "not converged";
+  EXPECT_TRUE(jackknife_refit_usable(fit(2.9, true), fit(0.5, true))) << "a full fit below 1 counts as 1";
+}
+
 // The jackknife's errors from hand-made leave-one-out estimates (K = 4): sqrt((K-1)/K sum (e - mean)^2) for a free
 // coefficient; a free one whose every refit ends on the same value (a bound) gets nan and a warning naming it; a held
 // one nan; the critical-state line's terms held at the data's end states keep their spread (nu_cs always, lambda_cs

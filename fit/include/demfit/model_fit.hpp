@@ -151,6 +151,11 @@ void drop_entries(Calibration& cal, int pos, int n);
 /// error whose every refit ends on the same value (a bound: no spread to quote).
 std::vector<double> jackknife_errors(const std::vector<std::vector<double>>& est, const Calibration& cal,
                                      bool csl_linear, std::vector<std::string>* warnings = nullptr);
+/// Whether a leave-one-out refit can enter the jackknife: converged, with a chi2/dof not above 3 max(1, the full
+/// fit's). A refit that failed at its start, or ended in a poor local optimum, would pass its start's values or that
+/// optimum's off as the packings' scatter; `dem model` then quotes the covariance errors and says which refit failed
+/// (twentieth round).
+bool jackknife_refit_usable(const Calibration& refit, const Calibration& full);
 
 /// An ensemble mean of a loading path (reversal, cyclic, isobaric; written by
 /// demkit/path_ensemble.py): rows on the accumulated deviatoric strain, deviators signed along
