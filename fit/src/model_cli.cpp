@@ -360,10 +360,21 @@ struct StartOutcome {   // one start of a multi-start calibration (starts.csv)
   std::string message;
 };
 
+struct JackRefit {   // one leave-one-out refit of the jackknife (jackknife.csv)
+  std::string packing;    ///< the member left out
+  std::string start;      ///< where the kept refit started: the full fit's optimum or another --start
+  double chi2_dof = 0;
+  bool converged = false;
+  bool usable = false;    ///< jackknife_refit_usable against the full fit
+  int tries = 0;          ///< refits run for this packing (1, or 1 + the other starts)
+  std::string message;
+};
+
 struct FamilyFit {
   Calibration cal;
   std::vector<StartOutcome> starts;        ///< every start tried (more than one: --start A,B,...)
   std::size_t chosen_start = 0;
+  std::vector<JackRefit> refits;           ///< the jackknife's leave-one-out refits, in packing order
   std::vector<std::vector<double>> jack;   ///< leave-one-out estimates
   std::vector<double> heldout;             ///< per left-out packing: its own fitted curves' mean squared
                                            ///< standardised error under the fit without it
@@ -769,13 +780,53 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   return co;
 }
 
+// Packing k left out of every fitted mean curve and path and of the isotropic branch, refitted from the full
+// fit's optimum. A refit that did not reach an optimum like the full fit's (jackknife_refit_usable: failed at
+// its start, not converged, or far above) is run again from each other --start, and the best is kept: a
+// usable one before an unusable one, then converged before not, then the lowest chi2/dof.
+JackRefit refit_without(const ModelInputs& in, const CalibrationOptions& co_f, const ModelCommandOptions& o,
+                        const FamilyFit& ff, int k, Calibration& best) {
+  const fs::path& member = in.members[k];
+  std::vector<CurveData> loo;
+  for (std::size_t j = 0; j < in.fit_curves.size(); ++j)
+    loo.push_back(leave_one_out(in.fit_curves[j], member_curve(member, in.fit_files[j])));
+  std::vector<std::string> iso_k;
+  const std::string own = unloading_of(member).string();
+  for (const auto& f : in.iso_files) if (f != own) iso_k.push_back(f);
+  const IsoData iso = read_isotropic(iso_k);
+  std::vector<PathData> loo_paths;
+  for (std::size_t j = 0; j < in.fit_paths.size(); ++j)
+    loo_paths.push_back(leave_one_out_path(in.fit_paths[j], member_path_curve(member, in.fit_path_files[j])));
+  JackRefit r{member.filename().string(), "the full fit's optimum", 0, false, false, 0, ""};
+  CalibrationOptions cj = co_f;
+  auto rank = [&](const Calibration& c) {   // usable, converged, then evaluated: higher is better
+    return 4 * jackknife_refit_usable(c, ff.cal) + 2 * c.ok + !std::isnan(c.chi2);
+  };
+  for (std::size_t i = 0; i <= start_params.size(); ++i) {
+    if (i > 0 && (i - 1 == ff.chosen_start || r.usable)) continue;
+    cj.start = i == 0 ? &ff.cal.params : start_params[i - 1].get();
+    Calibration c = calibrate(loo, iso, cj, loo_paths);
+    ++r.tries;
+    const bool better = i == 0 || rank(c) > rank(best) || (rank(c) == rank(best) && c.chi2_dof() < best.chi2_dof());
+    if (better) {
+      best = std::move(c);
+      r.start = i == 0 ? r.start : "--start " + o.start[i - 1];
+      r.usable = jackknife_refit_usable(best, ff.cal);
+    }
+  }
+  r.chi2_dof = best.chi2_dof();
+  r.converged = best.ok;
+  r.message = best.message;
+  return r;
+}
+
 // Jackknife over packings: the same fit with each packing left out of every mean curve and of the
 // isotropic branch; the held-out score of each left-out packing (its own fitted curves predicted by
 // the fit without it).
 void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const ModelCommandOptions& o, FamilyFit& ff) {
   const auto& fit_curves = in.fit_curves; const auto& fit_files = in.fit_files;
   const auto& fit_paths = in.fit_paths; const auto& fit_path_files = in.fit_path_files;
-  const auto& members = in.members; const auto& iso_files = in.iso_files;
+  const auto& members = in.members;
   const int K = in.K;
   Calibration& cal = ff.cal;
   if (!o.jackknife || K < 2) return;
@@ -791,34 +842,26 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
                            " member curves of every fitted mean; errors from the covariance instead");
   } else {
     std::vector<std::vector<double>>& est = ff.jack;   // leave-one-out estimates (for the jackknife correlations)
-    CalibrationOptions cj = co_f;
-    cj.start = &cal.params;
     std::string failed;   // refits that did not reach an optimum comparable to the full fit's
     for (int k = 0; k < K; ++k) {
-      std::vector<CurveData> loo;
-      for (std::size_t j = 0; j < fit_curves.size(); ++j)
-        loo.push_back(leave_one_out(fit_curves[j], member_curve(members[k], fit_files[j])));
-      std::vector<std::string> iso_k;
-      const std::string own = unloading_of(members[k]).string();
-      for (const auto& f : iso_files) if (f != own) iso_k.push_back(f);
-      std::vector<PathData> loo_paths;
-      for (std::size_t j = 0; j < fit_paths.size(); ++j)
-        loo_paths.push_back(leave_one_out_path(fit_paths[j], member_path_curve(members[k], fit_path_files[j])));
-      const Calibration ck = calibrate(loo, read_isotropic(iso_k), cj, loo_paths);
+      Calibration ck;
+      const JackRefit r = refit_without(in, co_f, o, ff, k, ck);
       est.push_back(ck.value);
       ff.heldout.push_back(heldout_score(ck.params, fit_curves, fit_files, members[k], K, o.eps_max));
-      std::cerr << "dem model: jackknife " << k + 1 << "/" << K << " (" << members[k].filename().string()
-                << " left out): chi2/dof = " << num(ck.chi2_dof(), 4) << "\n";
-      if (!jackknife_refit_usable(ck, cal))
-        failed += (failed.empty() ? "" : ", ") + members[k].filename().string() + " left out (chi2/dof " +
-                  num(ck.chi2_dof(), 4) + (ck.ok ? "" : ", not converged") + ")";
+      ff.refits.push_back(r);
+      std::cerr << "dem model: jackknife " << k + 1 << "/" << K << " (" << r.packing << " left out): chi2/dof = "
+                << num(r.chi2_dof, 4) << (r.tries > 1 ? " (from " + r.start + ", after " + std::to_string(r.tries) +
+                                                         " starts)" : std::string()) << "\n";
+      if (!r.usable)
+        failed += (failed.empty() ? "" : ", ") + r.packing + " left out (chi2/dof " + num(r.chi2_dof, 4) +
+                  (r.converged ? "" : ", not converged") + ")";
     }
     if (!failed.empty()) {   // a failed refit's values are its start's or a poor optimum's: not the packings' scatter
       ff.jack.clear();
       cal.warnings.push_back("jackknife not used: its refit " + failed + " did not reach an optimum like the full fit's "
                              "(chi2/dof " + num(cal.chi2_dof(), 4) + "), so the spread of the refits is not the "
-                             "packings' scatter; errors from the covariance instead (docs/model.md, \"Where the drained "
-                             "triaxial control is lost\")");
+                             "packings' scatter (not even from the other --start values, if given); errors from the covariance "
+                             "instead (jackknife.md lists every refit; docs/model.md, \"The jackknife's refits\")");
       return;
     }
     cal.se_jackknife = jackknife_errors(est, cal, co_f.csl_linear, &cal.warnings);
@@ -883,6 +926,22 @@ void write_heldout(const FamilyFit& ff, const fs::path& out) {
                   "Held-out score per left-out packing: its own fitted curves predicted by the fit without it, mean "
                   "squared error in units of the between-packing SD (docs/model.md, the held-out test); the column name "
                   "is selection.csv's, whatever the family");
+}
+
+// The jackknife's leave-one-out refits: each one's chi2/dof, whether it converged and was usable (an optimum like
+// the full fit's: jackknife_refit_usable), and where it started; the jackknife errors are quoted only when every
+// refit is usable (otherwise the covariance's, and parameters.md's se_jackknife is nan).
+void write_refits(const FamilyFit& ff, const fs::path& out) {
+  if (ff.refits.empty()) return;
+  Table t({"packing_left_out", "chi2_per_dof [-]", "full_fit_chi2_per_dof [-]", "converged", "usable", "start", "tries",
+           "message"});
+  for (const auto& r : ff.refits)
+    t.add_row({r.packing, num(r.chi2_dof, 6), num(ff.cal.chi2_dof(), 6), r.converged ? "yes" : "no",
+               r.usable ? "yes" : "no", r.start, std::to_string(r.tries), r.message});
+  write_table_all(t, (out / "jackknife").string(),
+                  "The jackknife's refits, one per packing left out of every fitted mean and of the isotropic branch; "
+                  "usable: converged with chi2/dof at most 3 max(1, the full fit's); a refit that was not is run again from "
+                  "each other --start and the best kept; the jackknife errors are used only when every refit is usable");
 }
 
 // A multi-start calibration's starts (--start A,B,...): each one's chi2/dof and whether it converged, and which
@@ -1132,6 +1191,7 @@ int run(const ModelCommandOptions& o) {
     const fs::path dest = fits.size() == 2 && f != chosen ? out / fams[f] : out;
     write_results(in, fits[f], dest, o);
     write_starts(fits[f], dest);
+    write_refits(fits[f], dest);
     if (f == chosen && !fits[f].cal.ok) rc = 1;
   }
   if (rc)

@@ -717,6 +717,41 @@ def test_multi_start_holds_the_first_starts_isotropic_values(tmp_path, result):
     assert p["p0"] == pytest.approx(p_first, rel=1e-5)   # held at the first start's 1.1 x, not the kept one's 0.8 x
 
 
+def test_the_jackknife_records_its_refits_and_retries_an_unusable_one_from_the_other_starts(tmp_path, result):
+    """jackknife.csv: one row per packing left out, with the refit's chi2/dof, whether it converged and was usable
+    (converged, chi2/dof <= 3 max(1, the full fit's)), where it started and how many starts it took. From a converged
+    optimum every refit is usable at once and the jackknife errors are quoted. Stopped after one iteration from two
+    far starts, every refit is unusable, is run again from the other start (2 tries), and the errors are the
+    covariance's, with a warning that names the refits."""
+    good = os.path.join(result[0], "parameters.csv")
+    a = str(tmp_path / "a")
+    r = run(ENSEMBLE, "--out", a, "--no-plots", "--start", good)
+    assert r.returncode == 0, r.stderr
+    params = {q["parameter"]: q for q in rows(os.path.join(a, "parameters.csv"))}
+    full = float(params["chi2_per_dof"]["value"])
+    table = rows(os.path.join(a, "jackknife.csv"))
+    assert [t["packing_left_out"] for t in table] == ["m000", "m001", "m002", "m003"]
+    for k, t in enumerate(table):
+        chi = float(t["chi2_per_dof [-]"])
+        assert t["converged"] == "yes" and t["usable"] == "yes" and t["tries"] == "1", t
+        assert t["start"] == "the full fit's optimum" and 0 < chi <= 3 * max(1.0, full), t
+        assert float(t["full_fit_chi2_per_dof [-]"]) == pytest.approx(full, rel=1e-5)
+        line = next(l for l in r.stderr.splitlines() if l.startswith(f"dem model: jackknife {k + 1}/4"))
+        assert float(line.split("chi2/dof = ")[1]) == pytest.approx(chi, rel=1e-3), line
+    assert math.isfinite(float(params["s_max_a"]["se_jackknife"])) and "jackknife not used" not in r.stderr
+    far = edited_parameters(good, str(tmp_path / "far.csv"), {"s_max_a": 1.8, "p0": 1.2})
+    b = str(tmp_path / "b")
+    r = run(ENSEMBLE, "--out", b, "--no-plots", "--start", f"default,{far}", "--max-iterations", "1")
+    assert r.returncode == 1, r.stderr
+    table = rows(os.path.join(b, "jackknife.csv"))
+    assert len(table) == 4 and all(t["converged"] == "no" and t["usable"] == "no" and t["tries"] == "2" for t in table)
+    warning = next(l for l in r.stderr.splitlines() if "jackknife not used" in l)
+    assert all(f"m00{k} left out" in warning for k in range(4)) and "jackknife.md" in warning, warning
+    params = rows(os.path.join(b, "parameters.csv"))
+    assert all(math.isnan(float(q["se_jackknife"])) for q in params)
+    assert not os.path.exists(os.path.join(result[0], "jackknife.csv")), "--no-jackknife writes no refit table"
+
+
 def test_bad_starts_are_refused(tmp_path, result):
     good = os.path.join(result[0], "parameters.csv")
     r = run(ENSEMBLE, "--out", str(tmp_path / "a"), "--no-plots", "--start", f"default,{tmp_path}/none.csv")
