@@ -7,6 +7,7 @@
 #include <array>
 #include <fstream>
 #include <iomanip>
+#include <memory>
 #include <string>
 #include <cmath>
 #include <random>
@@ -17,6 +18,7 @@
 #include "demfit/fit.hpp"
 #include "demfit/model.hpp"
 #include "demfit/model_fit.hpp"
+#include "demfit/jet_valued_cost.hpp"
 
 using namespace demfit::model;
 
@@ -645,6 +647,57 @@ TEST(ModelFit, AJackknifeRefitThatFailedOrEndedFarAboveTheFullFitIsNotUsed) {
   EXPECT_FALSE(jackknife_refit_usable(fit(std::nan(""), true), full)) << "failed at its start";
   EXPECT_FALSE(jackknife_refit_usable(fit(5.9, false), full)) << "not converged";
   EXPECT_TRUE(jackknife_refit_usable(fit(2.9, true), fit(0.5, true))) << "a full fit below 1 counts as 1";
+}
+
+namespace {
+
+struct Quotients {   // r_i = x_2i / x_2i+1: a jet divides by multiplying with the inverse, a double divides
+  int n;
+  template <class T>
+  bool operator()(T const* const* x, T* r) const {
+    for (int i = 0; i < n; ++i) r[i] = x[0][2 * i] / x[0][2 * i + 1];
+    return true;
+  }
+};
+
+ceres::DynamicAutoDiffCostFunction<Quotients, 4>* quotient_cost(Quotients* f) {
+  auto* c = new ceres::DynamicAutoDiffCostFunction<Quotients, 4>(f);
+  c->AddParameterBlock(2 * f->n);
+  c->SetNumResiduals(f->n);
+  return c;
+}
+
+}  // namespace
+
+// JetValuedCost's cost-only residuals are the values of the residuals its Jacobian is evaluated with, bit for bit,
+// where the double arithmetic of the plain autodiff cost differs in the last bits (twentieth round: the cost and the
+// Jacobian at one point came from different numbers, and Ceres accepted a step whose Jacobian failed).
+TEST(ModelFit, AJetValuedCostIsTheJacobiansOwnValueBitForBit) {
+  const int n = 400;
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<double> u(0.1, 10.0);
+  std::vector<double> x(2 * n);
+  for (auto& v : x) v = u(rng);
+  const double* blocks[] = {x.data()};
+  auto* f_plain = new Quotients{n};
+  std::unique_ptr<ceres::CostFunction> plain(quotient_cost(f_plain));
+  auto* f_jet = new Quotients{n};
+  demfit::JetValuedCost<Quotients, 4> jet_valued(f_jet, quotient_cost(f_jet));
+  std::vector<double> r_jac(n), r_jet(n), r_double(n), jac(static_cast<std::size_t>(n) * 2 * n);
+  double* jacobians[] = {jac.data()};
+  ASSERT_TRUE(jet_valued.Evaluate(blocks, r_jac.data(), jacobians));
+  ASSERT_TRUE(jet_valued.Evaluate(blocks, r_jet.data(), nullptr));
+  ASSERT_TRUE(plain->Evaluate(blocks, r_double.data(), nullptr));
+  int differ = 0;
+  for (int i = 0; i < n; ++i) {
+    EXPECT_EQ(r_jet[i], r_jac[i]) << "row " << i;
+    EXPECT_EQ(r_double[i], x[2 * i] / x[2 * i + 1]);
+    EXPECT_NEAR(r_double[i], r_jac[i], 4e-16 * std::abs(r_jac[i]));
+    differ += r_double[i] != r_jac[i];
+  }
+  EXPECT_GT(differ, 0) << "the double and jet values never differ: the test would not see a cost made in double";
+  EXPECT_EQ(jet_valued.num_residuals(), n);
+  EXPECT_EQ(jet_valued.parameter_block_sizes(), std::vector<int32_t>{2 * n});
 }
 
 // The jackknife's errors from hand-made leave-one-out estimates (K = 4): sqrt((K-1)/K sum (e - mean)^2) for a free
