@@ -41,7 +41,8 @@ HEAD = ["calibration", "chi2_dof_permanent [-]", "chi2_dof_relaxing [-]", "worst
         "end_psi_max_relaxing [-]", "paths_moving_permanent", "paths_moving_relaxing", "worst_drift_path_permanent",
         "worst_drift_model_permanent [-]", "worst_drift_dem_permanent [-]", "worst_drift_path_relaxing",
         "worst_drift_model_relaxing [-]", "worst_drift_dem_relaxing [-]", "paths", "beta_p_relaxing [1/eps_d]",
-        "a_A_a_permanent [-]", "a_A_a_relaxing [-]", "converged_relaxing"]
+        "a_A_a_permanent [-]", "a_A_a_relaxing [-]", "converged_relaxing", "beta_p_lo95_relaxing [1/eps_d]",
+        "beta_p_hi95_relaxing [1/eps_d]"]
 
 
 def values(path):
@@ -54,6 +55,42 @@ def values(path):
             except ValueError:
                 out[r["parameter"]] = float("nan")
         return out
+
+
+BETA_P_NOTE = (" β_p: with its 95 % interval from ln β_p (its parameters.csv: the covariance errors of a fit "
+               "without jackknife), or the bound it sits on (within 1 %)")
+BETA_P_BOUNDS = (1e-3, 300.0)   # the extended family's bounds on beta_p at nu_ref (fit/src/model_fit.cpp, set_bounds)
+
+
+def beta_p_interval(path):
+    """(lo, hi): the 95 % interval of beta_p from the lo95/hi95 of ln_beta_p_a in the parameters.csv at PATH (the
+    jackknife's where it was used, else the covariance's); nan where it has none."""
+    with open(path, newline="") as fh:
+        for r in csv.DictReader(fh):
+            if r["parameter"] == "ln_beta_p_a":
+                try:
+                    return math.exp(float(r["lo95"])), math.exp(float(r["hi95"]))
+                except (ValueError, OverflowError):
+                    break
+    return float("nan"), float("nan")
+
+
+def plain(v, sig=2):
+    """V to SIG significant digits without an exponent (0.0065, 42, 170)."""
+    if not math.isfinite(v) or v == 0:
+        return cell(v)
+    d = sig - 1 - math.floor(math.log10(abs(v)))
+    return f"{round(v, d):.{max(d, 0)}f}"
+
+
+def beta_p_cell(bp, lo, hi):
+    """beta_p with its 95 % interval, or the bound it sits on within 1 % (where the interval says nothing)."""
+    for b, side in zip(BETA_P_BOUNDS, ("lower", "upper")):
+        if math.isfinite(bp) and abs(math.log(bp / b)) < 1e-2:
+            return f"{cell(bp)} ({side} bound)"
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return f"{cell(bp)} (interval not determined)"
+    return f"{cell(bp)} ({plain(lo)}–{plain(hi)})"
 
 
 def nu_cs(P, p):
@@ -155,7 +192,8 @@ def table(stored, relaxing, work):
         e = [ends_summary(x) for x in ends]
         rows.append([name, A["chi2_per_dof"], B["chi2_per_dof"], s["fitted"], t["fitted"], s["lab"], t["lab"],
                      s["d2d3"], t["d2d3"], e[0][0], e[1][0], e[0][1], e[1][1], *e[0][2:], *e[1][2:], len(ends[0]),
-                     math.exp(B["ln_beta_p_a"]), A["a_A_a"], B["a_A_a"], "no" if "converged" in B else "yes"])
+                     math.exp(B["ln_beta_p_a"]), A["a_A_a"], B["a_A_a"], "no" if "converged" in B else "yes",
+                     *beta_p_interval(os.path.join(relaxing, name, "parameters.csv"))])
     return rows
 
 
@@ -209,7 +247,7 @@ def write(rows, out, stored, relaxing):
           "RMS error over the 95 % band half-width; end |psi|: the largest over the model's laboratory paths at their "
           f"ends; drift: |d nu/d eps_d| over the last {TAIL} of strain of a laboratory path; still moving: paths whose "
           "model drift is above 0.01 and five times the DEM's (dem model warns about them); worst drift: the path whose "
-          "model drift most exceeds the DEM's, model (DEM) -->",
+          "model drift most exceeds the DEM's, model (DEM);" + BETA_P_NOTE + " -->",
           "| calibration | χ²/dof permanent → relaxing | worst fitted | worst predicted, laboratory | worst predicted, "
           "D2/D3 | end \\|ψ\\| | paths still moving | worst drift, permanent: model (DEM) | relaxing | β_p "
           "| a_A at ψ = 0 | converged |",
@@ -218,13 +256,15 @@ def write(rows, out, stored, relaxing):
         md.append(f"| {r[0]} | {cell(r[1], 4)} → {cell(r[2], 4)} | {cell(r[3])} → {cell(r[4])} | {cell(r[5])} → "
                   f"{cell(r[6])} | {cell(r[7])} → {cell(r[8])} | {cell(r[9], 2)} → {cell(r[10], 2)} | "
                   f"{r[11]} → {r[12]} of {r[19]} | {r[13]}: {cell(r[14], 2)} ({cell(r[15], 2)}) | "
-                  f"{r[16]}: {cell(r[17], 2)} ({cell(r[18], 2)}) | {cell(r[20])} | {cell(r[21])} → {cell(r[22])} "
+                  f"{r[16]}: {cell(r[17], 2)} ({cell(r[18], 2)}) | {beta_p_cell(r[20], r[24], r[25])} "
+                  f"| {cell(r[21])} → {cell(r[22])} "
                   f"| {r[23]} |")
     write_atomic(os.path.join(out, "comparison.md"), "\n".join(md) + "\n")
 
 
 SIZE_HEAD = ["calibration", "largest_q_over_p [-]", "path_of_largest", "eps_d_accumulated_of_largest [-]",
-             "paths_q_above_p", "paths", "beta_p_relaxing [1/eps_d]", "a_A_a_relaxing [-]"]
+             "paths_q_above_p", "paths", "beta_p_relaxing [1/eps_d]", "a_A_a_relaxing [-]",
+             "beta_p_lo95_relaxing [1/eps_d]", "beta_p_hi95_relaxing [1/eps_d]"]
 
 
 def excess_size(relaxing, work):
@@ -247,7 +287,8 @@ def excess_size(relaxing, work):
             above += top[0] > 1
             if top[0] > worst:
                 worst, where, at = top[0], os.path.basename(f)[:-4], top[1]
-        rows.append([name, worst, where, at, above, n, math.exp(P["ln_beta_p_a"]), P["a_A_a"]])
+        rows.append([name, worst, where, at, above, n, math.exp(P["ln_beta_p_a"]), P["a_A_a"],
+                     *beta_p_interval(os.path.join(relaxing, name, "parameters.csv"))])
     return rows
 
 
@@ -260,11 +301,12 @@ def write_size(rows, out, relaxing):
           " p_iso(nu_el) is the excess over the isotropic law at the elastic state (the path curves' column "
           "q_star_model). Where q > p* the elastic state lies below the isotropic law's jamming fraction: a negative "
           "isotropic pressure, outside the law's domain (docs/model.md, \"How large the relaxing excess grows\"). "
-          "Made by `python3 -m demkit.model_excess ... --excess-size`.", "",
+          "Made by `python3 -m demkit.model_excess ... --excess-size`." + BETA_P_NOTE + ".", "",
           "| calibration | largest q/p* | on path (at eps_d) | paths with q > p* | beta_p | a_A (psi = 0) |",
           "|---|---|---|---|---|---|"]
-    for name, worst, where, at, above, n, bp, aa in rows:
-        md.append(f"| {name} | {cell(worst)} | {where or '-'} ({cell(at)}) | {above} of {n} | {cell(bp)} | {cell(aa)} |")
+    for name, worst, where, at, above, n, bp, aa, lo, hi in rows:
+        md.append(f"| {name} | {cell(worst)} | {where or '-'} ({cell(at)}) | {above} of {n} | {beta_p_cell(bp, lo, hi)} "
+                  f"| {cell(aa)} |")
     write_atomic(os.path.join(out, "excess_size.md"), "\n".join(md) + "\n")
 
 
@@ -273,7 +315,8 @@ BOUNDED_HEAD = ["calibration", "chi2_dof_permanent [-]", "chi2_dof_relaxing [-]"
                 "worst_lab_predicted_bounded [band]", "worst_D2_D3_permanent [band]", "worst_D2_D3_relaxing [band]",
                 "worst_D2_D3_bounded [band]", "paths_moving_relaxing", "paths_moving_bounded",
                 "largest_q_over_p_relaxing [-]", "largest_q_over_p_bounded [-]", "paths_q_above_p_relaxing",
-                "paths_q_above_p_bounded", "paths", "beta_p_bounded [1/eps_d]", "a_A_a_bounded [-]"]
+                "paths_q_above_p_bounded", "paths", "beta_p_bounded [1/eps_d]", "a_A_a_bounded [-]",
+                "beta_p_lo95_bounded [1/eps_d]", "beta_p_hi95_bounded [1/eps_d]"]
 
 
 def largest_ratio(model_dir):
@@ -308,7 +351,7 @@ def bounded_table(stored, relaxing, bounded, work, dem, predict_again=True):
         n = len(glob.glob(os.path.join(out, "curves", "paths", "*.csv")))
         rows.append([name, *[q["chi2_per_dof"] for q in P], *[x["lab"] for x in S], *[x["d2d3"] for x in S],
                      *moving_n, size[0][0], size[1][0], size[0][1], size[1][1], n, math.exp(P[2]["ln_beta_p_a"]),
-                     P[2]["a_A_a"]])
+                     P[2]["a_A_a"], *beta_p_interval(os.path.join(bounded, name, "parameters.csv"))])
     return rows
 
 
@@ -320,14 +363,14 @@ def write_bounded(rows, out, bounded):
           "bounded (the excess's source gated by 1 - (q/p)^2; data/geotech/model README step 12) against the permanent "
           "(step 8) and relaxing (step 11) laws; worst: largest RMS error over the 95 % band half-width; still moving: "
           "dem model's drift rule; q/p*: the largest excess over the pressure on the laboratory paths, and how many "
-          "paths have q > p* (the elastic state below jamming) -->",
+          "paths have q > p* (the elastic state below jamming);" + BETA_P_NOTE + " -->",
           "| calibration | χ²/dof permanent → relaxing → bounded | worst laboratory | worst D2/D3 | paths still moving, "
           "relaxing → bounded | largest q/p*, relaxing → bounded | paths with q > p* | β_p | a_A at ψ = 0 |",
           "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         md.append(f"| {r[0]} | {cell(r[1], 4)} → {cell(r[2], 4)} → {cell(r[3], 4)} | {cell(r[4])} → {cell(r[5])} → "
                   f"{cell(r[6])} | {cell(r[7])} → {cell(r[8])} → {cell(r[9])} | {r[10]} → {r[11]} of {r[16]} | "
-                  f"{cell(r[12])} → {cell(r[13])} | {r[14]} → {r[15]} | {cell(r[17])} | {cell(r[18])} |")
+                  f"{cell(r[12])} → {cell(r[13])} | {r[14]} → {r[15]} | {beta_p_cell(r[17], r[19], r[20])} | {cell(r[18])} |")
     write_atomic(os.path.join(out, "bounded.md"), "\n".join(md) + "\n")
 
 

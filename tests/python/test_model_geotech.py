@@ -586,3 +586,34 @@ def test_a_drained_path_that_reaches_the_control_pole_is_named_and_stopped(tmp_p
     worst = {(x["mode"], x["nu [-]"]): x["worst [band]"] for x in read(tmp_path / "p" / "summary.csv")}
     assert [w for (m, nu), w in worst.items() if m == "TC_s3_loose" and nu.startswith("0.618")] == ["inf"]
     assert [w for (m, nu), w in worst.items() if m == "TC_s3_loose" and nu.startswith("0.593")] != ["inf"]
+
+
+def test_the_excess_tables_print_beta_p_with_its_interval_or_its_bound(tmp_path):
+    """Twenty-first round: the excess tables (comparison.md, excess_size.md, bounded.md) print beta_p with the 95 %
+    interval of ln beta_p from its parameters.csv, the bound where the fit ends within 1 % of one (1e-3 or 300, the
+    interval saying nothing there), and 'interval not determined' where the file has none; the interval ends to two
+    significant digits without an exponent."""
+    from demkit import model_excess as mx
+    head = "parameter,law,value,se,se_method,lo95,hi95,se_covariance,se_jackknife,units\n"
+    cases = {"inside": (math.log(37.2), 3.0863, 4.14426, "37.2 (22–63)"),
+             "wide": (math.log(0.389), -5.62628, 3.73726, "0.389 (0.0036–42)"),
+             "lower": (math.log(1.0026e-3), -6.9049, -6.9045, "0.001 (lower bound)"),
+             "upper": (math.log(299.9), "nan", "nan", "300 (upper bound)"),
+             "none": (math.log(5.0), "nan", "nan", "5 (interval not determined)")}
+    for name, (ln_b, lo, hi, want) in cases.items():
+        f = tmp_path / f"{name}.csv"
+        f.write_text(head + f"a_A_a,a,1.0,0.1,c,0.8,1.2,0.1,nan,-\nln_beta_p_a,b,{ln_b!r},1,c,{lo},{hi},1,nan,-\n")
+        bp = math.exp(mx.values(str(f))["ln_beta_p_a"])
+        lo_b, hi_b = mx.beta_p_interval(str(f))
+        assert mx.beta_p_cell(bp, lo_b, hi_b) == want, name
+        if isinstance(lo, float):
+            assert (lo_b, hi_b) == pytest.approx((math.exp(lo), math.exp(hi)), rel=1e-12)
+    assert [mx.plain(v) for v in (0.0065, 42.4, 166.0, 1e-6 * 5.67, 4400.0)] == ["0.0065", "42", "170", "0.0000057", "4400"]
+    # the stored tables carry the new column and print the same cells as made here from the stored parameters
+    sv = os.path.join(ROOT, "data", "geotech", "model", "state_volume", "bounded_excess")
+    with open(os.path.join(sv, "bounded.csv"), newline="") as fh:
+        rows = {r["calibration"]: r for r in csv.DictReader(fh)}
+    lo_b, hi_b = mx.beta_p_interval(os.path.join(sv, "loose", "parameters.csv"))
+    assert float(rows["loose"]["beta_p_lo95_bounded [1/eps_d]"]) == pytest.approx(lo_b, rel=1e-12)
+    cell = mx.beta_p_cell(float(rows["loose"]["beta_p_bounded [1/eps_d]"]), lo_b, hi_b)
+    assert f"| {cell} |" in open(os.path.join(sv, "bounded.md")).read()
