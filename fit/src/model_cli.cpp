@@ -259,16 +259,20 @@ void write_model_curve(const ModelCurve& m, const CurveData& c, const std::strin
 
 void write_path_curve(const PathPrediction& m, const PathData& d, const std::string& role, const fs::path& path) {
   std::ostringstream o;
+  const bool triaxial = std::find(d.isobaric.begin(), d.isobaric.end(), 2) != d.isobaric.end();
   o << "# dem model: model and DEM path ensemble (" << d.packings << " packings) for the path " << d.name
     << " from nu = " << d.nu << " (" << role << "); s_dev, F_dev signed along the first loading direction; eps_v = tr(E)/3 "
        "(extension positive); *_lo95/_hi95: the ensemble's 95 % band; isobaric: 1 where p was held, 2 where the side "
        "stress was held (triaxial); eps_zz_model = (tr E - 2 eps_d)/3, the axial strain of an axisymmetric strain "
        "(docs/model.md); sigma_r_p0 = side stress p (1 - s/3) over p(row 0); *_dem: the DEM means (nan if not in the "
-       "ensemble)" << (m.excess_relaxes ? "; q_star_model: the relaxing anisotropic excess p* - p_iso(nu_el)" : "") << "\n";
+       "ensemble)" << (m.excess_relaxes ? "; q_star_model: the relaxing anisotropic excess p* - p_iso(nu_el)" : "")
+    << (triaxial ? "; pole_ratio_model: a_A F/3 = A/(3B) on rows under the drained triaxial control (nan elsewhere): "
+                   "the control is lost from " + num(1 - kTriaxialMargin) + " on" : "") << "\n";
   o << "eps_d_accumulated,eps_d_signed,isobaric,p_star_model,s_dev_model,F_dev_model,eps_v_model,nu_model";
   for (const char* q : {"p_star", "s_dev", "F_dev", "eps_v"}) o << "," << q << "_mean," << q << "_lo95," << q << "_hi95";
   o << ",eps_zz_model,eps_zz_dem,sigma_r_p0_model,sigma_r_p0_dem";
   if (m.excess_relaxes) o << ",q_star_model";
+  if (triaxial) o << ",pole_ratio_model";
   o << "\n";
   double eps_d_model = 0;   // the model's signed eps_d since the start (its own path: direction x |d eps_d|)
   for (std::size_t i = 0; i < m.acc.size(); ++i) {
@@ -283,6 +287,7 @@ void write_path_curve(const PathPrediction& m, const PathData& d, const std::str
     o << "," << num(model::axial_strain(3.0 * m.ev[i], eps_d_model), 8) << "," << num(i < d.ezz.size() ? d.ezz[i] : nan, 8)
       << "," << num(m.p[i] * (1.0 - m.s[i] / 3.0) / m.p.front(), 8) << "," << num(i < d.sr.size() ? d.sr[i] : nan, 8);
     if (m.excess_relaxes) o << "," << num(m.p[i] - m.p_el[i], 8);
+    if (triaxial) o << "," << num(m.pole[i], 8);
     o << "\n";
   }
   write_text_file(path.string(), o.str());
@@ -485,6 +490,27 @@ std::string lost_on_path(const PathPrediction& m) {
          "modulus A = a_A B F came within " + num(100 * kTriaxialMargin) + " % of 3B, the pole where the drained volume "
          "change per unit shear diverges; the model curve stops there (nan) and its error is inf (docs/model.md, "
          "\"Where the drained triaxial control is lost\")";
+}
+
+// A drained path that comes within kPoleNear of where its control is lost (PathPrediction::pole): the fit cannot
+// cross the margin (a lost path's residuals are NaN, its step rejected), so an optimum found there is the margin's, not
+// the data's (twenty-first round: the bounded three-pressure mu = 0.1 joint calibration, a_A F/3 = 0.8999989); ""
+// otherwise.
+constexpr double kPoleNear = 1e-3;
+std::string margin_optimum_on_path(const PathPrediction& m, bool fitted) {
+  int at = -1;
+  for (std::size_t i = 0; i < m.pole.size(); ++i)
+    if (std::isfinite(m.pole[i]) && (at < 0 || m.pole[i] > m.pole[at])) at = static_cast<int>(i);
+  const double lost_from = 1 - kTriaxialMargin;
+  if (at < 0 || m.pole[at] < lost_from - kPoleNear) return "";
+  return "comes within " + num(lost_from - m.pole[at], 2) + " of where its drained control is lost (a_A F/3 = " +
+         num(m.pole[at], 8) + " at eps_d_accumulated = " + num(m.acc[at], 3) + "; lost from " + num(lost_from) +
+         "): " + (fitted ? "the calibration's optimum sits against that margin, which the fit cannot cross, not at a "
+                           "minimum of the misfit; its errors describe the margin's constraint, and "
+                         : "a calibration whose fit ended there (an optimum against the margin) is not at a minimum of "
+                           "its misfit, and ") +
+         "a change of the coefficients in their last digits (a restart) may lose the path (docs/model.md, \"A "
+         "calibration against the margin\")";
 }
 
 /// With the volume-form state parameter, a drained path (its last row at held p or side stress) whose model volume still
@@ -1012,6 +1038,9 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
     if (!excess.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << excess << "\n";
     const std::string lost = lost_on_path(m);
     if (!lost.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << lost << "\n";
+    const std::string against = lost.empty() ? margin_optimum_on_path(m, role == "fitted") : "";
+    if (!against.empty())
+      std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << against << "\n";
     const std::string drift = drift_on_path(cal.params, m, d);
     if (!drift.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << drift << "\n";
     fs::create_directories(out / "curves" / "paths");

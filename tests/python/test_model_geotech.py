@@ -617,3 +617,54 @@ def test_the_excess_tables_print_beta_p_with_its_interval_or_its_bound(tmp_path)
     assert float(rows["loose"]["beta_p_lo95_bounded [1/eps_d]"]) == pytest.approx(lo_b, rel=1e-12)
     cell = mx.beta_p_cell(float(rows["loose"]["beta_p_bounded [1/eps_d]"]), lo_b, hi_b)
     assert f"| {cell} |" in open(os.path.join(sv, "bounded.md")).read()
+
+
+def test_a_calibration_against_the_control_margin_is_named_and_a_last_digit_loses_it(tmp_path):
+    """Twenty-first round: the bounded three-pressure mu = 0.1 joint calibration (README step 12) takes the dense TC_s3
+    test at nu = 0.6816 to a_A F/3 = 0.8999989, 1e-6 below 0.9 where the drained control is given up: its optimum sits
+    against that margin. The path curve's pole_ratio_model equals a_A(psi) F/3 recomputed here from the curve's own
+    columns and the parameters (a_A = a_A_a + a_A_b psi, psi = nu - nu_cs(p*) clamped to [psi_min, psi_max]); dem model
+    names that path, with its largest ratio, and no other; a_A_a larger by 2 parts in 10^6 loses the path."""
+    from demkit import model_excess as mx
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech",
+                        "curves"), "--mu", "0.1", "--out", str(tmp_path / "m"), "--tests", "TC_s3", "--levels",
+                        "iso_lo,iso_hi,iso_vhi"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    ens = str(tmp_path / "m" / "ensemble_dense")
+    law = os.path.join(ROOT, "data", "geotech", "model", "state_volume", "bounded_excess", "three_pressures", "mu_0.1",
+                       "joint", "parameters.csv")
+
+    def predict(parameters, out):
+        r = subprocess.run([DEM, "model", ens, "--no-plots", "--family", "extended", "--predict-with", parameters,
+                            "--out", str(tmp_path / out)], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        return r.stderr
+
+    err = predict(law, "p")
+    named = [l for l in err.splitlines() if "of where its drained control is lost" in l]
+    assert len(named) == 1 and named[0].startswith("dem model: warning: TC_s3_dense nu=0.6816 (predicted)"), err
+    said = float(named[0].split("a_A F/3 = ")[1].split(" ")[0])
+    P = mx.values(law)
+    for path in sorted((tmp_path / "p" / "curves" / "paths").glob("TC_s3_dense_*.csv")):
+        rows = read(path)
+        ratios = []
+        for x in rows[1:]:
+            nu, p, F = float(x["nu_model"]), float(x["p_star_model"]), float(x["F_dev_model"])
+            psi = min(max(nu - mx.nu_cs(P, p), P["psi_min"]), P["psi_max"])
+            want = (P["a_A_a"] + P["a_A_b"] * psi) * F / 3
+            assert float(x["pole_ratio_model"]) == pytest.approx(want, rel=1e-6, abs=1e-9), (path.name, x)
+            ratios.append(float(x["pole_ratio_model"]))
+        if "0.682" in path.name:
+            assert max(ratios) == pytest.approx(said, abs=1e-8) and 0.899 <= said < 0.9
+        else:
+            assert max(ratios) < 0.899, path.name
+    edited = tmp_path / "edited.csv"
+    with open(law, newline="") as fh:
+        table = list(csv.reader(fh))
+    for row in table:
+        if row[0] == "a_A_a":
+            row[2] = repr(float(row[2]) * (1 + 2e-6))
+    with open(edited, "w", newline="") as fh:
+        csv.writer(fh).writerows(table)
+    err = predict(str(edited), "q")
+    assert "TC_s3_dense nu=0.6816 (predicted) cannot hold its side stress" in err, err

@@ -735,6 +735,19 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   return d;
 }
 
+/// A/(3B) = a_A F/3 at the state y, a_A read as rhs reads it: the drained triaxial control's pole is where it reaches 1,
+/// and rhs gives the control up from 1 - kTriaxialMargin on (B > 0). A diagnostic: the laws of psi are read without
+/// recording psi (ext.psi_seen), so that a prediction's psi_range does not move.
+template <class T>
+T pole_ratio(const Material<T>& m, const State<T>& y) {
+  using std::exp;
+  Ext<T> quiet = m.ext;
+  quiet.psi_seen = nullptr;
+  const T nu = exp(y.ln_nu);
+  const T nu_law = m.ext.p && m.ext.state_volume ? T(m.nu_ref) + law_psi(quiet, state_psi(m.ext.p, nu, y.p)) : nu;
+  return local(m.shear, nu_law, m.nu_ref).a_A * y.F / T(3.0);
+}
+
 template <class T>
 State<T> axpy(const State<T>& y, const State<T>& d, double h) {
   return {y.ln_nu + T(h) * d.ln_nu, y.p + T(h) * d.p, y.s + T(h) * d.s, y.F + T(h) * d.F, y.l + T(h) * d.l,
@@ -860,6 +873,9 @@ template <class T>
 struct RowState {
   State<T> state;
   T eps_vol;   ///< full volumetric strain tr(E) since row 0 [-] (extension positive)
+  /// pole_ratio a_A F/3 at the row's state where the row was reached under the drained triaxial control (NaN
+  /// elsewhere, and in jet runs: a diagnostic of predictions)
+  double pole = std::numeric_limits<double>::quiet_NaN();
 };
 template <class T>
 std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
@@ -893,6 +909,8 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
       }
     }
     out.push_back({y, eps_vol});
+    if constexpr (std::is_same<T, double>::value)
+      if (isobaric[i] == 2 && !y.lost) out.back().pole = pole_ratio(m, y);
   }
   return out;
 }

@@ -229,6 +229,9 @@ struct PathPrediction {
   /// The first row the drained triaxial control could not reach (State::lost, kTriaxialMargin: A = a_A B F came within
   /// 10 % of 3B); -1 where every row was reached. From there on every entry is NaN.
   int lost_row = -1;
+  /// a_A F/3 (model::pole_ratio) on the rows reached under the drained triaxial control, NaN on the others: the
+  /// control is lost from 1 - kTriaxialMargin on
+  std::vector<double> pole;
 };
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
                             double* psi_seen = nullptr);
