@@ -513,6 +513,17 @@ std::string margin_optimum_on_path(const PathPrediction& m, bool fitted) {
          "calibration against the margin\")";
 }
 
+// The first fitted path (name and nu) along which the calibration sits against the drained control's margin; "" if none.
+std::string path_against_margin(const Parameters& P, const std::vector<PathData>& paths) {
+  for (const auto& d : paths) {
+    try {
+      if (!margin_optimum_on_path(predict_path(P, d), true).empty()) return d.name + " nu=" + num(d.nu, 4);
+    } catch (const std::invalid_argument&) {   // a start the laws cannot hold: write_results names it
+    }
+  }
+  return "";
+}
+
 /// With the volume-form state parameter, a drained path (its last row at held p or side stress) whose model volume still
 /// moves at its end: |d nu/d eps_d| over the last 0.1 of strain above 0.01 and five times the DEM's there (nu = nu0
 /// e^{-3 eps_v}). The permanent anisotropic pressure has no steady state where |a_A F| exceeds the dilatancy's reach;
@@ -937,7 +948,12 @@ FamilyFit fit_family(const ModelInputs& in, const CalibrationOptions& co, const 
               << num(cal.chi2_dof(), 4) << "; starts.md)\n";
 
   jackknife(in, co_f, o, ff);
-
+  const std::string pinned = path_against_margin(cal.params, in.fit_paths);
+  if (!pinned.empty())
+    cal.warnings.push_back("the optimum sits against the drained control's margin on " + pinned + " (docs/model.md, \"A "
+                           "calibration against the margin\"): the fit stopped where that path would be lost, not at a "
+                           "minimum of the misfit, so its errors (covariance or jackknife, whose refits are held there "
+                           "too) describe how the margin moves, not how the data determine the coefficients");
   return ff;
 }
 

@@ -668,3 +668,18 @@ def test_a_calibration_against_the_control_margin_is_named_and_a_last_digit_lose
         csv.writer(fh).writerows(table)
     err = predict(str(edited), "q")
     assert "TC_s3_dense nu=0.6816 (predicted) cannot hold its side stress" in err, err
+    # a calibration from the stored optimum (one iteration, on the dense and loose tests it was calibrated on) names the
+    # fitted path and says that its errors describe the margin
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech",
+                        "curves"), "--mu", "0.1", "--out", str(tmp_path / "j"), "--tests", "TC_s3", "--levels",
+                        "iso_lo,iso_hi,iso_vhi", "--joint"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run([DEM, "model", str(tmp_path / "j" / "ensemble_joint"), "--start", law, "--calibrate-on",
+                        "TC_s3_dense,TC_s3_loose", "--family", "extended", "--state-limit", "volume", "--hold-isotropic",
+                        "gamma_p,nu_cC,alpha", "--anisotropy-pressure", "bounded", "--max-iterations", "1",
+                        "--no-jackknife", "--no-plots", "--out", str(tmp_path / "fit")], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode in (0, 1), r.stderr
+    assert "TC_s3_dense nu=0.6816 (fitted) comes within" in r.stderr and "optimum sits against that margin" in r.stderr
+    pinned = [l for l in r.stderr.splitlines() if "the optimum sits against the drained control's margin on" in l]
+    assert len(pinned) == 1 and "TC_s3_dense nu=0.6816" in pinned[0] and "not how the data determine" in pinned[0]
