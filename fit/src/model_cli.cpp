@@ -164,9 +164,12 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   const double tq = jk ? t_quantile(0.975, packings - 1) : 1.959964;
   std::vector<std::string> exact;   // the values to the last bit (parameters.csv/json: a --start reads them back)
   for (std::size_t i = 0; i < cal.value.size(); ++i) {
-    const double se = cal.se()[i];
+    const bool pinned = !cal.against_margin.empty();   // the columns se_covariance, se_jackknife keep the numbers
+    const double se = pinned ? std::nan("") : cal.se()[i];
     const bool tied = cal.shared_jamming && cal.names[i] == "nu_cC";
-    const std::string method = jk ? "jackknife over packings" : "covariance x max(1, chi2/dof)";
+    const std::string method = pinned ? "not determined: the optimum sits against the drained control's margin on " +
+                                            cal.against_margin
+                               : jk ? "jackknife over packings" : "covariance x max(1, chi2/dof)";
     t.add_row({cal.names[i], tied ? "nu_cC = nu_c (one jamming fraction: --jamming shared)" : law_of(cal.names[i]),
                num(cal.value[i]), num(se), tied ? "nu_c's (tied): " + method : method, num(cal.value[i] - tq * se),
                num(cal.value[i] + tq * se), num(cal.se_cov[i]), jk ? num(cal.se_jackknife[i]) : "nan", unit_of(cal.names[i])});
@@ -948,12 +951,14 @@ FamilyFit fit_family(const ModelInputs& in, const CalibrationOptions& co, const 
               << num(cal.chi2_dof(), 4) << "; starts.md)\n";
 
   jackknife(in, co_f, o, ff);
-  const std::string pinned = path_against_margin(cal.params, in.fit_paths);
-  if (!pinned.empty())
-    cal.warnings.push_back("the optimum sits against the drained control's margin on " + pinned + " (docs/model.md, \"A "
-                           "calibration against the margin\"): the fit stopped where that path would be lost, not at a "
-                           "minimum of the misfit, so its errors (covariance or jackknife, whose refits are held there "
-                           "too) describe how the margin moves, not how the data determine the coefficients");
+  cal.against_margin = path_against_margin(cal.params, in.fit_paths);
+  if (!cal.against_margin.empty())
+    cal.warnings.push_back("the optimum sits against the drained control's margin on " + cal.against_margin + " (docs/"
+                           "model.md, \"A calibration against the margin\"): the fit stopped where that path would be "
+                           "lost, not at a minimum of the misfit, so its errors (covariance or jackknife, whose refits are "
+                           "held there too) describe how the margin moves, not how the data determine the coefficients: "
+                           "parameters.csv quotes them as not determined (se nan; the columns se_covariance and "
+                           "se_jackknife keep the numbers)");
   return ff;
 }
 

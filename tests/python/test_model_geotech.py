@@ -683,3 +683,8 @@ def test_a_calibration_against_the_control_margin_is_named_and_a_last_digit_lose
     assert "TC_s3_dense nu=0.6816 (fitted) comes within" in r.stderr and "optimum sits against that margin" in r.stderr
     pinned = [l for l in r.stderr.splitlines() if "the optimum sits against the drained control's margin on" in l]
     assert len(pinned) == 1 and "TC_s3_dense nu=0.6816" in pinned[0] and "not how the data determine" in pinned[0]
+    for x in read(tmp_path / "fit" / "parameters.csv"):
+        if x["parameter"] in ("p0", "a_A_a", "s_max_a", "n_dil"):   # quoted as not determined, the numbers kept beside
+            assert math.isnan(float(x["se"])) and math.isnan(float(x["lo95"])), x
+            assert x["se_method"].startswith("not determined: the optimum sits against the drained control's margin")
+            assert float(x["se_covariance"]) > 0, x

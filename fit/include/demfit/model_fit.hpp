@@ -129,6 +129,9 @@ struct Calibration {
   bool ok = false;
   std::string message;                  ///< Ceres' summary line
   std::vector<std::string> warnings;
+  /// A fitted drained path along which the optimum sits against the drained control's margin ("" if none; set by
+  /// `dem model`): the errors are then not determined (parameters.csv's se, lo95, hi95 nan)
+  std::string against_margin;
   bool shared_jamming = false;          ///< nu_cC tied to nu_c (CalibrationOptions::shared_jamming)
   /// Coefficients the covariance leaves undetermined (an error of 0 to rounding from the pseudo-inverse: se_cov nan);
   /// the jackknife still quotes their spread over packings.
