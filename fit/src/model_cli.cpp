@@ -516,7 +516,8 @@ std::string margin_optimum_on_path(const PathPrediction& m, bool fitted) {
          "calibration against the margin\")";
 }
 
-// The first fitted path (name and nu) along which the calibration sits against the drained control's margin; "" if none.
+// The first fitted path (name and nu) along which the calibration sits against the drained control's margin; ""
+// if none.
 std::string path_against_margin(const Parameters& P, const std::vector<PathData>& paths) {
   for (const auto& d : paths) {
     try {
@@ -904,8 +905,9 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
       ff.jack.clear();
       cal.warnings.push_back("jackknife not used: its refit " + failed + " did not reach an optimum like the full fit's "
                              "(chi2/dof " + num(cal.chi2_dof(), 4) + "), so the spread of the refits is not the "
-                             "packings' scatter (not even from the other --start values, if given); errors from the covariance "
-                             "instead (jackknife.md lists every refit; docs/model.md, \"The jackknife's refits\")");
+                             "packings' scatter (not even from the other --start values, if given); errors from the "
+                             "covariance instead (jackknife.md lists every refit; docs/model.md, \"The jackknife's "
+                             "refits\")");
       return;
     }
     cal.se_jackknife = jackknife_errors(est, cal, co_f.csl_linear, &cal.warnings);
@@ -991,8 +993,9 @@ void write_refits(const FamilyFit& ff, const fs::path& out) {
                r.usable ? "yes" : "no", r.start, std::to_string(r.tries), r.message});
   write_table_all(t, (out / "jackknife").string(),
                   "The jackknife's refits, one per packing left out of every fitted mean and of the isotropic branch; "
-                  "usable: converged with chi2/dof at most 3 max(1, the full fit's); a refit that was not, or ended above 1.5 "
-                  "max(1, the full fit's), is run again from each other --start and the best kept; the jackknife errors are used only when every refit is usable");
+                  "usable: converged with chi2/dof at most 3 max(1, the full fit's); a refit that was not, or ended "
+                  "above 1.5 max(1, the full fit's), is run again from each other --start and the best kept; the "
+                  "jackknife errors are used only when every refit is usable");
 }
 
 // A multi-start calibration's starts (--start A,B,...): each one's chi2/dof and whether it converged, and which
