@@ -164,11 +164,10 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   const double tq = jk ? t_quantile(0.975, packings - 1) : 1.959964;
   std::vector<std::string> exact;   // the values to the last bit (parameters.csv/json: a --start reads them back)
   for (std::size_t i = 0; i < cal.value.size(); ++i) {
-    const bool pinned = !cal.against_margin.empty();   // the columns se_covariance, se_jackknife keep the numbers
-    const double se = pinned ? std::nan("") : cal.se()[i];
+    const std::string why = cal.errors_not_determined();   // the columns se_covariance, se_jackknife keep the numbers
+    const double se = why.empty() ? cal.se()[i] : std::nan("");
     const bool tied = cal.shared_jamming && cal.names[i] == "nu_cC";
-    const std::string method = pinned ? "not determined: the optimum sits against the drained control's margin on " +
-                                            cal.against_margin
+    const std::string method = !why.empty() ? "not determined: " + why
                                : jk ? "jackknife over packings" : "covariance x max(1, chi2/dof)";
     t.add_row({cal.names[i], tied ? "nu_cC = nu_c (one jamming fraction: --jamming shared)" : law_of(cal.names[i]),
                num(cal.value[i]), num(se), tied ? "nu_c's (tied): " + method : method, num(cal.value[i] - tq * se),
@@ -468,10 +467,15 @@ std::string cusp_on_path(const Parameters& P, const PathPrediction& m) {
   const double at = cusp_crossed(P, m);
   if (!std::isfinite(at)) return "";
   const bool vol = P.extended && P.state_volume;
-  return std::string("crosses the isotropic law's cusp (") +
-         (vol ? (m.excess_relaxes ? "elastic p* - q = " : "p* = ") + num(at) : "nu = nu_cC = " + num(at)) +
-         ", nu_cC above nu_c = " + num(P.nu_c) + "): its stiffness is unbounded there and the path bends or ends where "
-         "its steps put it; --jamming shared ties the two fractions (docs/model.md, \"One jamming fraction\")";
+  const std::string head = std::string("crosses the isotropic law's cusp (") +
+                           (vol ? (m.excess_relaxes ? "elastic p* - q = " : "p* = ") + num(at) : "nu = nu_cC = " + num(at));
+  if (vol && m.excess_relaxes && !(P.nu_cC > P.nu_c))   // below the law's jamming fraction: q above p
+    return head + ", below the law's jamming fraction nu_c = " + num(P.nu_c) + ", nu_cC = " + num(P.nu_cC) + "): the "
+           "excess q exceeds p*, and the stiffness is unbounded there, so the path bends where its steps put it and a "
+           "fit's cost is not smooth; --anisotropy-pressure bounded keeps q below p* (docs/model.md, \"A cost that is "
+           "not smooth at its optimum\")";
+  return head + ", nu_cC above nu_c = " + num(P.nu_c) + "): its stiffness is unbounded there and the path bends or ends "
+         "where its steps put it; --jamming shared ties the two fractions (docs/model.md, \"One jamming fraction\")";
 }
 
 // Where the relaxing excess q exceeds the path's pressure (largest_excess_ratio above 1): "" where it does not.
@@ -843,6 +847,7 @@ JackRefit refit_without(const ModelInputs& in, const CalibrationOptions& co_f, c
     loo_paths.push_back(leave_one_out_path(in.fit_paths[j], member_path_curve(member, in.fit_path_files[j])));
   JackRefit r{member.filename().string(), "the full fit's optimum", 0, false, false, 0, ""};
   CalibrationOptions cj = co_f;
+  cj.check_jacobian = false;   // the refits' errors are not read
   auto rank = [&](const Calibration& c) {   // usable, converged, then evaluated: higher is better
     return 4 * jackknife_refit_usable(c, ff.cal) + 2 * c.ok + !std::isnan(c.chi2);
   };
@@ -966,6 +971,23 @@ FamilyFit fit_family(const ModelInputs& in, const CalibrationOptions& co, const 
                            "parameters.csv quotes them as not determined (se nan; the columns se_covariance and "
                            "se_jackknife keep the numbers)");
   return ff;
+}
+
+// The Jacobian check's largest disagreement (Calibration::jacobian_disagreement), one line on stderr; nothing where
+// it did not run.
+void report_jacobian_check(const Calibration& cal) {
+  int worst = -1;
+  for (std::size_t i = 0; i < cal.jacobian_disagreement.size(); ++i)
+    if (!std::isnan(cal.jacobian_disagreement[i]) &&
+        (worst < 0 || !(cal.jacobian_disagreement[i] <= cal.jacobian_disagreement[worst])))
+      worst = static_cast<int>(i);
+  if (worst < 0) return;
+  std::cerr << "dem model: the Jacobian against central differences of the residuals at the optimum: largest "
+               "disagreement "
+            << (std::isinf(cal.jacobian_disagreement[worst]) ? std::string("inf (a stepped point not evaluated)")
+                                                              : num(cal.jacobian_disagreement[worst], 3))
+            << " (" << cal.names[worst] << "; "
+            << (cal.rough.empty() ? "smooth" : "not smooth") << ")\n";
 }
 
 // One family's held-out scores (`--family group|extended` with the jackknife; `auto` writes them in
@@ -1095,6 +1117,7 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
 
   write_summary(summary, cal, fit_label, out);
   for (const auto& w : cal.warnings) std::cerr << "dem model: warning: " << w << "\n";
+  report_jacobian_check(cal);
   std::cerr << "dem model: tables and curves written to " << out.string() << "\n";
   if (!o.no_plots) {
     const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.model_plots \"" +

@@ -2589,3 +2589,33 @@ TEST(ModelVolumeState, TheCalibrationKeepsNuCAtOrAboveAHeldNuCC) {
   EXPECT_TRUE(said(held, "is unbounded at p* = 0.002473")) << "the cusp of the start's law named (p*(0.667) at nu_c 0.660)";
   EXPECT_TRUE(said(held, "--hold-isotropic nu_cC")) << "and the fix";
 }
+
+// A coordination law that falls above nu_cC (C1 < 0, as four stored bounded calibrations fitted) makes p_iso rise
+// from nu_c to a maximum and fall again before nu = 1. A pressure just above the law's value at 1 was bracketed on
+// [nu_c, 1], found p_iso(1) < p and returned 1: a last digit of a coefficient moved a path's elastic start from the
+// rising branch to nu = 1 (the stored bounded mu = 1 dense calibration). Now both sides find the rising branch, and a
+// pressure above the law's maximum is not a number.
+TEST(ModelVolumeState, TheIsotropicVolumeStaysOnTheRisingBranchOfALawThatFallsAgain) {
+  const double iso[kNumIso] = {0.04, 0.65, -0.2, 8.4, -10.5, 0.62, 0.56};   // p0 nu_c gamma_p C0 C1 nu_cC alpha
+  const double p1 = isotropic_pressure(iso, 1.0);
+  double p_max = 0, nu_max = 0;
+  for (int i = 1; i <= 100000; ++i) {
+    const double nu = 0.65 + 0.35 * i / 100000;
+    if (isotropic_pressure(iso, nu) > p_max) { p_max = isotropic_pressure(iso, nu); nu_max = nu; }
+  }
+  ASSERT_GT(p1, 0.0);
+  ASSERT_GT(p_max, 1.5 * p1) << "the law falls again: its maximum inside (nu_c, 1)";
+  ASSERT_LT(nu_max, 0.95);
+  const double below = isotropic_volume<double>(iso, p1 * (1 - 1e-9));
+  const double above = isotropic_volume<double>(iso, p1 * (1 + 1e-9));
+  for (double nu : {below, above}) {
+    EXPECT_LT(nu, nu_max) << "the rising branch";
+    EXPECT_GT(bulk_modulus(iso, nu), 0.0);
+  }
+  EXPECT_NEAR(isotropic_pressure(iso, above), p1 * (1 + 1e-9), 1e-12 * p1);
+  EXPECT_NEAR(above, below, 1e-8) << "no jump across p_iso(1)";
+  EXPECT_TRUE(std::isnan(isotropic_volume<double>(iso, 1.01 * p_max))) << "beyond the law's reach";
+  const double mono[kNumIso] = {0.04, 0.65, -0.2, 8.4, 10.5, 0.62, 0.56};   // C1 > 0: one root, the plain bisection's
+  const double nu = isotropic_volume<double>(mono, 0.01);
+  EXPECT_NEAR(isotropic_pressure(mono, nu), 0.01, 1e-15);
+}

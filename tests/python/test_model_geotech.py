@@ -688,3 +688,68 @@ def test_a_calibration_against_the_control_margin_is_named_and_a_last_digit_lose
             assert math.isnan(float(x["se"])) and math.isnan(float(x["lo95"])), x
             assert x["se_method"].startswith("not determined: the optimum sits against the drained control's margin")
             assert float(x["se_covariance"]) > 0, x
+
+
+def test_a_cost_that_is_not_smooth_at_its_optimum_quotes_no_errors(tmp_path):
+    """Twenty-second round: the relaxing three-pressure mu = 0.5 dense calibration (README step 11) takes its fitted
+    dense TC_s3 test at nu = 0.6576 to an excess q above p*, so that the elastic state falls below the law's jamming
+    fraction and through the coordination law's nu_cC, where the bulk modulus is unbounded ((nu/nu_cC - 1)^(alpha - 1),
+    alpha < 1). The fixed-step path then moves by more than 10^-3 in s_dev when nu_c changes in its twelfth digit
+    (seen here from two predictions, outside the check). dem model's Jacobian check finds every column off, names the
+    cusp's elastic pressure p_iso(nu_cC) (computed here from the file's law), and quotes no error (se nan, the
+    covariance's number kept in se_covariance). The bounded calibration of the same data is smooth and quotes them."""
+    from demkit import model_excess as mx
+    r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech",
+                        "curves"), "--mu", "0.5", "--out", str(tmp_path / "m"), "--tests", "TC_s3", "--levels",
+                        "iso_lo,iso_hi,iso_vhi"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    ens = str(tmp_path / "m" / "ensemble_dense")
+    sv = os.path.join(ROOT, "data", "geotech", "model", "state_volume")
+    law = os.path.join(sv, "relaxing_excess", "three_pressures", "dense", "parameters.csv")
+
+    def dem(*args, out):
+        r = subprocess.run([DEM, "model", ens, "--no-plots", "--family", "extended", *args, "--out", str(tmp_path / out)],
+                           capture_output=True, text=True, timeout=300)
+        return r
+
+    edited = tmp_path / "edited.csv"
+    with open(law, newline="") as fh:
+        table = list(csv.reader(fh))
+    for row in table:
+        if row[0] == "nu_c":
+            row[2] = repr(float(row[2]) * (1 + 1e-12))
+    with open(edited, "w", newline="") as fh:
+        csv.writer(fh).writerows(table)
+    s = {}
+    for name, parameters in (("stored", law), ("edited", str(edited))):
+        p = dem("--predict-with", parameters, out=name)
+        assert p.returncode == 0, p.stderr
+        s[name] = [float(x["s_dev_model"]) for x in read(tmp_path / name / "curves" / "paths" / "TC_s3_dense_phi0.658.csv")]
+    assert max(abs(a - b) for a, b in zip(s["stored"], s["edited"])) > 1e-3, "a last digit of nu_c moves the path"
+
+    fit = ["--calibrate-on", "TC_s3_dense", "--state-limit", "volume", "--hold-isotropic", "gamma_p,nu_cC,alpha",
+           "--max-iterations", "1", "--no-jackknife"]
+    r = dem("--start", law, "--anisotropy-pressure", "relaxing", *fit, out="rough")
+    assert r.returncode == 1, r.stderr   # one iteration: not converged, its tables written
+    assert "the cost is not smooth at the optimum" in r.stderr, r.stderr
+    line = next(l for l in r.stderr.splitlines() if "largest disagreement" in l)
+    assert float(line.split("largest disagreement ")[1].split(" ")[0]) > 0.1 and "not smooth" in line, line
+    P = mx.values(law)
+    x = math.log(P["nu_cC"] / P["nu_c"])
+    p_cusp = P["p0"] * (P["nu_cC"] * P["C0"] / P["nu_c"]) * x * (1 + P["gamma_p"] * x)   # C = C0 at nu_cC
+    cusp = next(l for l in r.stderr.splitlines() if "TC_s3_dense (fitted) crosses the isotropic law's cusp" in l)
+    assert float(cusp.split("elastic p* - q = ")[1].split(",")[0]) == pytest.approx(p_cusp, rel=1e-5), cusp
+    assert p_cusp < 0 and "below the law's jamming fraction" in cusp
+    rows_ = {x["parameter"]: x for x in read(tmp_path / "rough" / "parameters.csv")}
+    for name in ("p0", "C0", "a_A_a", "ln_beta_p_a", "n_peak"):
+        assert rows_[name]["se"] == "nan" and rows_[name]["lo95"] == "nan", rows_[name]
+        assert rows_[name]["se_method"].startswith("not determined: the cost is not smooth at the optimum"), rows_[name]
+        assert math.isfinite(float(rows_[name]["se_covariance"])), rows_[name]
+
+    bounded = os.path.join(sv, "bounded_excess", "three_pressures", "dense", "parameters.csv")
+    r = dem("--start", bounded, "--anisotropy-pressure", "bounded", *fit, out="smooth")
+    assert "not smooth" not in r.stderr, r.stderr
+    line = next(l for l in r.stderr.splitlines() if "largest disagreement" in l)
+    assert float(line.split("largest disagreement ")[1].split(" ")[0]) < 1e-4 and "; smooth)" in line, line
+    rows_ = {x["parameter"]: x for x in read(tmp_path / "smooth" / "parameters.csv")}
+    assert float(rows_["a_A_a"]["se"]) > 0 and rows_["a_A_a"]["se_method"].startswith("covariance"), rows_["a_A_a"]

@@ -777,9 +777,28 @@ inline double scalar_value(double x) { return x; }
 template <class J>
 double scalar_value(const J& j) { return scalar_value(j.a); }
 
+/// Where p_iso first reaches p on a grid of kRisingGrid steps from nu_c to 1: [lo, hi] around that crossing, the
+/// rising branch from jamming. false if the law stays below p on the whole grid (p above its reach).
+constexpr int kRisingGrid = 256;
+inline bool rising_bracket(const double* iso, double p, double& lo, double& hi) {
+  const double nu_c = iso[kNuC];
+  for (int i = 1; i <= kRisingGrid; ++i) {
+    const double nu = nu_c + (1.0 - nu_c) * i / kRisingGrid;
+    if (isotropic_pressure(iso, nu) >= p) {
+      lo = nu_c + (1.0 - nu_c) * (i - 1) / kRisingGrid;
+      hi = nu;
+      return true;
+    }
+  }
+  return false;
+}
+
 /// The isotropic law's volume fraction at pressure p* [-]: p_iso(nu) = p, bracketed between nu_c and 1 by bisection
 /// in double, then two Newton steps in T (d p_iso / d nu = B/nu), so that Ceres differentiates it through the law's
-/// parameters. nu_c itself where p <= 0.
+/// parameters. nu_c itself where p <= 0. A law that falls again below 1 (a coordination law with C1 < 0) and ends
+/// below p at 1 is bracketed on its rising branch (rising_bracket; twenty-second round: the bracket [nu_c, 1] then
+/// returned 1, so that a last digit of a coefficient moved a start state from the rising branch to nu = 1); NaN where
+/// the law never reaches p (the path's state is then not a number: lost to a fit, `inf` in a prediction).
 template <class T>
 T isotropic_volume(const T* iso, double p) {
   auto val = [](const T& x) { return model::scalar_value(x); };
@@ -787,7 +806,9 @@ T isotropic_volume(const T* iso, double p) {
   double lo = nu_c, hi = 1.0;
   std::vector<double> isod(kNumIso);
   for (int i = 0; i < kNumIso; ++i) isod[i] = val(iso[i]);
-  if (!(p > 0) || isotropic_pressure(isod.data(), hi) < p) return !(p > 0) ? iso[kNuC] : T(hi);
+  if (!(p > 0)) return iso[kNuC];
+  if (isotropic_pressure(isod.data(), hi) < p && !rising_bracket(isod.data(), p, lo, hi))
+    return iso[kNuC] * T(std::numeric_limits<double>::quiet_NaN());
   for (int it = 0; it < 60; ++it) {
     const double mid = 0.5 * (lo + hi);
     (isotropic_pressure(isod.data(), mid) < p ? lo : hi) = mid;

@@ -80,6 +80,9 @@ struct CalibrationOptions {
   bool excess_relaxes = false;
   /// With excess_relaxes (`--anisotropy-pressure bounded`, nineteenth round): the excess within (-p, p) (Ext::excess_bounded).
   bool excess_bounded = false;
+  /// Check the Jacobian at the optimum against central differences of the residuals (check_jacobian; a rough cost's
+  /// covariance is not quoted: Calibration::rough). The jackknife's refits leave it out.
+  bool check_jacobian = true;
   /// Isotropic parameters (IsoIndex) held at their start values while the rest of the block is
   /// fitted: a laboratory's isotropic branch of a few pressure levels cannot fix all seven (issue 31,
   /// "Calibrated on drained triaxial tests"). Needs `start`.
@@ -132,12 +135,21 @@ struct Calibration {
   /// A fitted drained path along which the optimum sits against the drained control's margin ("" if none; set by
   /// `dem model`): the errors are then not determined (parameters.csv's se, lo95, hi95 nan)
   std::string against_margin;
+  /// Where the cost is not smooth at the optimum ("" if it is; CalibrationOptions::check_jacobian): a Jacobian column
+  /// that central differences of the residuals do not reproduce (kRoughAbove). Its errors are then not determined.
+  std::string rough;
+  /// Per reported coefficient, how far its Jacobian column and the difference quotient disagree (JacobianColumn::
+  /// disagreement; nan where not checked: held, or the check off)
+  std::vector<double> jacobian_disagreement;
   bool shared_jamming = false;          ///< nu_cC tied to nu_c (CalibrationOptions::shared_jamming)
   /// Coefficients the covariance leaves undetermined (an error of 0 to rounding from the pseudo-inverse: se_cov nan);
   /// the jackknife still quotes their spread over packings.
   std::vector<bool> undetermined;
   /// The errors to quote: jackknife where it ran, else the covariance.
   const std::vector<double>& se() const { return se_jackknife.empty() ? se_cov : se_jackknife; }
+  /// Why no error is quoted for any coefficient ("" if errors are): the optimum against the drained control's margin,
+  /// or a cost that is not smooth there (rough)
+  std::string errors_not_determined() const;
 };
 
 /// A covariance error at most 1e-9 max(1, |value|) (DENSE_SVD's pseudo-inverse on a direction the curves do not see)
