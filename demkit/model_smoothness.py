@@ -41,14 +41,13 @@ def command(dem, stored, law, name, out):
 def parse(log):
     """The check's numbers and the named causes from a `dem model` log (nan and "" where absent)."""
     text = open(log).read()
-    m = re.search(r"largest disagreement (\S+)(?: \(a stepped point not evaluated\))? \(([^;]*); (smooth|not smooth)\)",
-                  text)
-    n = re.search(r"(\d+) of (\d+) coefficients' Jacobian columns miss", text)
+    m = re.search(r"largest disagreement (\S+)(?: \(a stepped point not evaluated\))? \(([^;]*); (smooth|not smooth); "
+                  r"(\d+) of (\d+) columns above", text)
     chi = re.findall(r"chi2/dof = (\S+)", text)
     cusp = sorted(set(re.findall(r"warning: (\S+) \(fitted\) crosses the isotropic law's cusp", text)))
     margin = re.search(r"against the drained control's margin on (\S+)", text)
     return {"largest": float(m.group(1)) if m else float("nan"), "coefficient": m.group(2) if m else "",
-            "above": int(n.group(1)) if n else 0, "checked": int(n.group(2)) if n else 0,
+            "above": int(m.group(4)) if m else 0, "checked": int(m.group(5)) if m else 0,
             "smooth": (m.group(3) == "smooth") if m else None, "chi2": float(chi[-1]) if chi else float("nan"),
             "cusp": " ".join(cusp), "margin": margin.group(1).rstrip(":") if margin else ""}
 

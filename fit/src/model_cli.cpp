@@ -976,18 +976,22 @@ FamilyFit fit_family(const ModelInputs& in, const CalibrationOptions& co, const 
 // The Jacobian check's largest disagreement (Calibration::jacobian_disagreement), one line on stderr; nothing where
 // it did not run.
 void report_jacobian_check(const Calibration& cal) {
-  int worst = -1;
-  for (std::size_t i = 0; i < cal.jacobian_disagreement.size(); ++i)
-    if (!std::isnan(cal.jacobian_disagreement[i]) &&
-        (worst < 0 || !(cal.jacobian_disagreement[i] <= cal.jacobian_disagreement[worst])))
-      worst = static_cast<int>(i);
+  int worst = -1, checked = 0, above = 0;
+  for (std::size_t i = 0; i < cal.jacobian_disagreement.size(); ++i) {
+    const double d = cal.jacobian_disagreement[i];
+    if (std::isnan(d)) continue;
+    ++checked;
+    above += !(d <= kRoughAbove);
+    if (worst < 0 || !(d <= cal.jacobian_disagreement[worst])) worst = static_cast<int>(i);
+  }
   if (worst < 0) return;
   std::cerr << "dem model: the Jacobian against central differences of the residuals at the optimum: largest "
                "disagreement "
             << (std::isinf(cal.jacobian_disagreement[worst]) ? std::string("inf (a stepped point not evaluated)")
                                                               : num(cal.jacobian_disagreement[worst], 3))
             << " (" << cal.names[worst] << "; "
-            << (cal.rough.empty() ? "smooth" : "not smooth") << ")\n";
+            << (cal.rough.empty() ? "smooth" : "not smooth") << "; " << above << " of " << checked << " columns above "
+            << num(kRoughAbove) << ")\n";
 }
 
 // One family's held-out scores (`--family group|extended` with the jackknife; `auto` writes them in

@@ -753,11 +753,6 @@ void null_directions(Calibration& cal) {
 
 namespace {
 
-// A Jacobian column that central differences of the residuals miss by more than this (relative) makes the cost rough
-// at the optimum. Smooth calibrations agree within 3e-6 (the stored relaxing loose one: 1e-9 to 3e-6); the relaxing
-// three-pressure dense one, whose output moves by 0.1 band with the last digit of nu_c, disagrees by 0.2 to 1.2.
-constexpr double kRoughAbove = 1e-2;
-
 // The Jacobian at the optimum against central differences (check_jacobian), into cal.jacobian_disagreement (nan
 // where not checked); smoothness_verdict reads it once the errors to quote are settled.
 void jacobian_smoothness(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,

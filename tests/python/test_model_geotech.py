@@ -740,6 +740,12 @@ def test_a_cost_that_is_not_smooth_at_its_optimum_quotes_no_errors(tmp_path):
     cusp = next(l for l in r.stderr.splitlines() if "TC_s3_dense (fitted) crosses the isotropic law's cusp" in l)
     assert float(cusp.split("elastic p* - q = ")[1].split(",")[0]) == pytest.approx(p_cusp, rel=1e-5), cusp
     assert p_cusp < 0 and "below the law's jamming fraction" in cusp
+    from demkit import model_smoothness as ms   # the stored table's reader, on this log
+    (tmp_path / "rough.log").write_text(r.stderr)
+    got = ms.parse(str(tmp_path / "rough.log"))
+    assert got["smooth"] is False and got["largest"] == float(line.split("largest disagreement ")[1].split(" ")[0])
+    assert got["above"] == got["checked"] > 10 and got["cusp"] == "TC_s3_dense" and got["margin"] == "", got
+    assert got["coefficient"] == line.split("(")[1].split(";")[0] and math.isfinite(got["chi2"]), got
     rows_ = {x["parameter"]: x for x in read(tmp_path / "rough" / "parameters.csv")}
     for name in ("p0", "C0", "a_A_a", "ln_beta_p_a", "n_peak"):
         assert rows_[name]["se"] == "nan" and rows_[name]["lo95"] == "nan", rows_[name]
@@ -750,6 +756,9 @@ def test_a_cost_that_is_not_smooth_at_its_optimum_quotes_no_errors(tmp_path):
     r = dem("--start", bounded, "--anisotropy-pressure", "bounded", *fit, out="smooth")
     assert "not smooth" not in r.stderr, r.stderr
     line = next(l for l in r.stderr.splitlines() if "largest disagreement" in l)
-    assert float(line.split("largest disagreement ")[1].split(" ")[0]) < 1e-4 and "; smooth)" in line, line
+    assert float(line.split("largest disagreement ")[1].split(" ")[0]) < 1e-4 and "; smooth;" in line, line
+    (tmp_path / "smooth.log").write_text(r.stderr)
+    got = ms.parse(str(tmp_path / "smooth.log"))
+    assert got["smooth"] is True and got["above"] == 0 < got["checked"] and got["cusp"] == "" and got["largest"] < 1e-4, got
     rows_ = {x["parameter"]: x for x in read(tmp_path / "smooth" / "parameters.csv")}
     assert float(rows_["a_A_a"]["se"]) > 0 and rows_["a_A_a"]["se_method"].startswith("covariance"), rows_["a_A_a"]

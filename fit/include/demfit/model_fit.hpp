@@ -152,6 +152,12 @@ struct Calibration {
   std::string errors_not_determined() const;
 };
 
+/// A Jacobian column that central differences of the residuals miss by more than this (relative) makes the cost rough
+/// at the optimum (Calibration::rough). The 33 stored laboratory calibrations whose cost is smooth agree within 10^-9
+/// to 2e-4; the relaxing three-pressure mu = 0.5 ones, whose output jumps with the last digit of nu_c, miss by 1.2-1.4
+/// (docs/model.md, "A cost that is not smooth at its optimum").
+constexpr double kRoughAbove = 1e-2;
+
 /// A covariance error at most 1e-9 max(1, |value|) (DENSE_SVD's pseudo-inverse on a direction the curves do not see)
 /// becomes nan, flagged in cal.undetermined, with a warning per coefficient, or one when every quoted error is so
 /// (a degenerate Jacobian at the optimum).
