@@ -23,14 +23,17 @@ HEAD = ["law", "calibration", "largest_disagreement [-]", "coefficient", "column
         "smooth", "chi2_dof [-]", "fitted_paths_through_cusp", "against_margin"]
 
 
-def command(dem, stored, law, name, out):
-    """The one-iteration restart of `name` under `law` (README steps 8, 11, 12 of data/geotech/model)."""
+def command(dem, stored, law, name, out, tied=False):
+    """The one-iteration restart of `name` under `law` (README steps 8, 11, 12 of data/geotech/model; with `tied`,
+    steps 10, 11 and 12's one-jamming-fraction calibrations under jamming_shared/)."""
     sub = dict(LAWS)[law]
-    start = os.path.join(stored, sub, name, "parameters.csv")
+    start = os.path.join(stored, sub, "jamming_shared" if tied else "", name, "parameters.csv")
     on = "TC_s3_dense,TC_s3_loose" if name.endswith("joint") else "TC_s3_loose" if name == "loose" else "TC_s3_dense"
     cmd = [dem, "model", ENSEMBLE[name], "--start", start, "--calibrate-on", on, "--family", "extended", "--state-limit",
-           "volume", "--hold-isotropic", "gamma_p,nu_cC,alpha", "--max-iterations", "1", "--no-jackknife", "--no-plots",
-           "--out", out, "--force"]
+           "volume", "--hold-isotropic", "gamma_p,alpha" if tied else "gamma_p,nu_cC,alpha", "--max-iterations", "1",
+           "--no-jackknife", "--no-plots", "--out", out, "--force"]
+    if tied:
+        cmd += ["--jamming", "shared"]
     if law != "permanent":
         cmd += ["--anisotropy-pressure", law]
     if name == "loose":
@@ -52,15 +55,18 @@ def parse(log):
             "cusp": " ".join(cusp), "margin": margin.group(1).rstrip(":") if margin else ""}
 
 
-def table(stored, work, dem, run_again=True):
+def table(stored, work, dem, run_again=True, tied=False):
     rows = []
     for law, _ in LAWS:
         for name in LAB:
             out = os.path.join(work, law, name)
             log = out + ".log"
+            if not os.path.exists(os.path.join(stored, dict(LAWS)[law], "jamming_shared" if tied else "", name,
+                                               "parameters.csv")):
+                continue   # the tied bounded refits that were cut (twenty-first round)
             if run_again:
                 os.makedirs(os.path.dirname(log), exist_ok=True)
-                run(command(dem, stored, law, name, out), log)
+                run(command(dem, stored, law, name, out, tied), log)
             p = parse(log)
             smooth = "yes" if p["smooth"] else "no" if p["smooth"] is not None else "not checked"
             rows.append([law, name, p["largest"], p["coefficient"], p["above"], p["checked"], smooth, p["chi2"],
@@ -74,7 +80,7 @@ def cell(v):
     return str(v) if v != "" else "—"
 
 
-def write(rows, out):
+def write(rows, out, tied=False):
     os.makedirs(out, exist_ok=True)
     write_csv(os.path.join(out, "smoothness.csv"), HEAD, rows)
     lines = ["# The cost at each stored laboratory calibration's optimum: the Jacobian against central differences",
@@ -83,7 +89,8 @@ def write(rows, out):
              "is not smooth at its optimum\"). One iteration of `dem model` from each stored optimum with the options "
              "it was fitted with; the Jacobian column of every free coefficient against central differences of the "
              "residuals (step 10⁻⁶ × max(1, |value|)). Disagreement: |difference − column| / max(the two norms); a "
-             "cost is not smooth where a column misses by more than 0.01, and its errors are then not determined.",
+             "cost is not smooth where a column misses by more than 0.01, and its errors are then not determined." +
+             (" One jamming fraction (`--jamming shared`, the calibrations under jamming_shared/)." if tied else ""),
              "",
              "| law | calibration | largest disagreement (coefficient) | columns above 1 % | smooth | χ²/dof | fitted "
              "paths through the cusp | against the margin |",
@@ -102,13 +109,15 @@ def main(argv=None):
     ap.add_argument("--out", required=True, help="where smoothness.{md,csv} go")
     ap.add_argument("--dem", default="build/dem")
     ap.add_argument("--table-only", action="store_true", help="the table from WORK's logs")
+    ap.add_argument("--tied", action="store_true", help="the one-jamming-fraction calibrations (jamming_shared/ under "
+                    "each law's folder, --jamming shared) instead")
     a = ap.parse_args(argv)
     if not a.table_only:
         missing = sorted({e for e in ENSEMBLE.values() if not os.path.isdir(e)})
         if missing:
             raise SystemExit(f"model_smoothness: ensembles missing ({', '.join(missing)}): make them with README steps "
                              "1-8b of data/geotech/model")
-    write(table(a.stored, a.work, a.dem, not a.table_only), a.out)
+    write(table(a.stored, a.work, a.dem, not a.table_only, a.tied), a.out, a.tied)
     print(f"model_smoothness: {os.path.join(a.out, 'smoothness.md')}", file=sys.stderr)
 
 

@@ -478,6 +478,24 @@ std::string cusp_on_path(const Parameters& P, const PathPrediction& m) {
          "where its steps put it; --jamming shared ties the two fractions (docs/model.md, \"One jamming fraction\")";
 }
 
+// A curve's or path's start pressure above what the volume-form model's isotropic law reaches on [nu_c, 1]
+// (isotropic_volume NaN: a coordination law with C1 < 0 that falls again), said on stderr; nothing where it reaches it.
+void warn_beyond_reach(const Parameters& P, const std::string& name, double nu, double p0, const std::string& role) {
+  if (!(P.extended && P.state_volume)) return;
+  const std::vector<double> iso = P.iso();
+  if (!std::isnan(isotropic_volume<double>(iso.data(), p0))) return;
+  double top = 0, at = P.nu_c;
+  for (int i = 0; i <= 1000; ++i) {
+    const double x = P.nu_c + (1.0 - P.nu_c) * i / 1000;
+    if (isotropic_pressure(iso.data(), x) > top) { top = isotropic_pressure(iso.data(), x); at = x; }
+  }
+  std::cerr << "dem model: warning: " << name << " nu=" << num(nu, 4) << " (" << role << ") starts at p* = " << num(p0)
+            << ", above the isotropic law's reach (its largest p* on [nu_c, 1] is " << num(top) << " at nu = " << num(at, 4)
+            << "; C1 = " << num(P.iso()[kC1]) << (P.iso()[kC1] < 0 ? ": the coordination falls with the density" : "")
+            << "): no elastic state holds that pressure, so its p* and s_dev are not numbers (docs/model.md, \"A cost that is "
+               "not smooth at its optimum\")\n";
+}
+
 // Where the relaxing excess q exceeds the path's pressure (largest_excess_ratio above 1): "" where it does not.
 std::string excess_on_path(const PathPrediction& m) {
   double at = 0.0;
@@ -1061,6 +1079,7 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
               "band_halfwidth [quantity]", "rms_over_band [-]", "max_over_band [-]", "frac_in_band [-]"});
   std::vector<SummaryRow> summary;
   auto evaluate = [&](const CurveData& c, const CurveFile& f, const std::string& role) {
+    warn_beyond_reach(cal.params, c.mode, c.nu, c.p.front(), role);
     const ModelCurve m = predict_curve(cal.params, c, o.eps_max);
     write_model_curve(m, c, role, out / "curves" / (f.mode + "_" + f.tag + ".csv"));
     for (const auto& e : prediction_errors(m, c)) {
@@ -1086,6 +1105,7 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
                     "nan", "nan", "nan"});
       return;
     }
+    warn_beyond_reach(cal.params, d.name, d.nu, d.p.front(), role);
     const std::string cusp = cusp_on_path(cal.params, m);
     if (!cusp.empty()) std::cerr << "dem model: warning: " << d.name << " (" << role << ") " << cusp << "\n";
     const std::string excess = excess_on_path(m);

@@ -1373,9 +1373,10 @@ double cusp_crossed(const Parameters& P, const PathPrediction& m) {
   const bool vol = P.extended && P.state_volume;
   double pc = cusp_pressure(iso.data());
   // A relaxing excess above p puts the elastic state below the law's jamming fraction (p_el < 0), where it can meet
-  // the coordination law's nu_cC below nu_c, or at it with one fraction (twenty-second round: the relaxing
-  // three-pressure fits whose cost is not smooth)
-  if (!std::isfinite(pc) && vol && m.excess_relaxes) pc = isotropic_pressure(iso.data(), coordination_jamming(iso.data()));
+  // the coordination law's nu_cC below nu_c (twenty-second round: the relaxing three-pressure fits whose cost is not
+  // smooth). With one fraction (nu_cC = nu_c) the stiffness stays bounded there: x (nu/nu_c - 1)^(alpha - 1) -> 0.
+  if (!std::isfinite(pc) && vol && m.excess_relaxes && P.nu_cC > 0 && P.nu_cC < P.nu_c)
+    pc = isotropic_pressure(iso.data(), P.nu_cC);
   if (!std::isfinite(pc) || m.nu.empty()) return std::nan("");
   const std::vector<double>& x = vol ? m.p_el : m.nu;
   const double at = vol ? pc : P.nu_cC;

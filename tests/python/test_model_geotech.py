@@ -762,3 +762,42 @@ def test_a_cost_that_is_not_smooth_at_its_optimum_quotes_no_errors(tmp_path):
     assert got["smooth"] is True and got["above"] == 0 < got["checked"] and got["cusp"] == "" and got["largest"] < 1e-4, got
     rows_ = {x["parameter"]: x for x in read(tmp_path / "smooth" / "parameters.csv")}
     assert float(rows_["a_A_a"]["se"]) > 0 and rows_["a_A_a"]["se_method"].startswith("covariance"), rows_["a_A_a"]
+
+
+def test_a_start_pressure_above_the_isotropic_laws_reach_is_named(tmp_path):
+    """Twenty-second round: the stored bounded mu = 1 dense calibration (README step 12, refitted this round) has a
+    coordination law that falls with the density (C1 < 0), so its isotropic pressure peaks below nu = 1 (the peak
+    found here on a fine grid from the file's law). The friction study's D2 and D3 at nu = 0.80 start above that peak:
+    no elastic state holds their pressure. dem model names both, with the law's largest pressure and where it lies,
+    and no curve that starts below it."""
+    from demkit import model_excess as mx
+    law = os.path.join(ROOT, "data", "geotech", "model", "state_volume", "bounded_excess", "mu_1", "dense",
+                       "parameters.csv")
+    P = mx.values(law)
+
+    def p_iso(nu):
+        base = nu / P["nu_cC"] - 1
+        C = P["C0"] + (P["C1"] * base ** P["alpha"] if base > 0 else 0)
+        x = math.log(nu / P["nu_c"])
+        return P["p0"] * (nu * C / P["nu_c"]) * x * (1 + P["gamma_p"] * x)
+
+    grid = [P["nu_c"] + (1 - P["nu_c"]) * i / 20000 for i in range(20001)]
+    top = max(p_iso(nu) for nu in grid)
+    assert P["C1"] < 0 and top > p_iso(1.0)
+    friction = os.path.join(ROOT, "data", "friction_n1000", "mu_1")
+    r = subprocess.run([DEM, "model", friction, "--predict-with", law, "--family", "extended", "--no-plots", "--out",
+                        str(tmp_path / "p")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    named = [l for l in r.stderr.splitlines() if "above the isotropic law's reach" in l]
+    starts = {}
+    for f in sorted((tmp_path / "p" / "curves").glob("D*_phi*.csv")):
+        first = read(f)[0]
+        starts[f.name] = float(first["p_star_mean"])
+    above = sorted(n for n, p in starts.items() if p > top)
+    assert above == ["D2_phi0.800.csv", "D3_phi0.800.csv"], starts
+    assert len(named) == 2 and all("nu=0.8 (predicted)" in l for l in named), named
+    said = float(named[0].split("its largest p* on [nu_c, 1] is ")[1].split(" ")[0])
+    assert said == pytest.approx(top, rel=1e-3), (said, top)
+    for f in above:
+        rows_ = read(tmp_path / "p" / "curves" / f)
+        assert all(math.isnan(float(x["p_star_model"])) for x in rows_[1:]), f
