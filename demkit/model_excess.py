@@ -235,7 +235,8 @@ def figure(work, out):
 
 
 def cell(v, digits=3):
-    return "nan" if not math.isfinite(v) else f"{v:.{digits}g}"
+    """A number to `digits`; inf (a curve the model diverged along, or could not start) and nan as such."""
+    return ("inf" if v > 0 else "-inf") if math.isinf(v) else "nan" if math.isnan(v) else f"{v:.{digits}g}"
 
 
 def write(rows, out, stored, relaxing):
