@@ -801,3 +801,27 @@ def test_a_start_pressure_above_the_isotropic_laws_reach_is_named(tmp_path):
     for f in above:
         rows_ = read(tmp_path / "p" / "curves" / f)
         assert all(math.isnan(float(x["p_star_model"])) for x in rows_[1:]), f
+
+
+def test_the_smoothness_table_restarts_each_calibration_with_its_own_options(tmp_path):
+    """demkit.model_smoothness restarts each stored calibration with the options of the README step that made it
+    (steps 8, 11, 12; with --tied steps 10-12's one-fraction ones), one iteration, and writes what parse reads."""
+    from demkit import model_smoothness as ms
+    c = ms.command("dem", "S", "relaxing", "loose", "out")
+    assert c[c.index("--start") + 1] == os.path.join("S", "relaxing_excess", "loose", "parameters.csv")
+    assert c[c.index("--calibrate-on") + 1] == "TC_s3_loose" and c[-2:] == ["--hold", "n_rate"]
+    assert c[c.index("--anisotropy-pressure") + 1] == "relaxing" and c[c.index("--max-iterations") + 1] == "1"
+    assert c[c.index("--hold-isotropic") + 1] == "gamma_p,nu_cC,alpha" and "--jamming" not in c
+    c = ms.command("dem", "S", "permanent", "three_pressures/mu_1/joint", "out", tied=True)
+    assert c[c.index("--start") + 1] == os.path.join("S", "jamming_shared", "three_pressures/mu_1/joint", "parameters.csv")
+    assert c[c.index("--calibrate-on") + 1] == "TC_s3_dense,TC_s3_loose" and "--anisotropy-pressure" not in c
+    assert c[c.index("--hold-isotropic") + 1] == "gamma_p,alpha" and c[c.index("--jamming") + 1] == "shared"
+    assert c[2] == ms.ENSEMBLE["three_pressures/mu_1/joint"]
+    rows_ = [["bounded", "mu_1/dense", float("inf"), "p0", 20, 20, "no", 17.0, "", "TC_s3_dense"],
+             ["relaxing", "dense", 3e-7, "n_F_b", 0, 21, "yes", 7.58, "TC_s3_dense", ""]]
+    ms.write(rows_, str(tmp_path))
+    md = (tmp_path / "smoothness.md").read_text()
+    assert "| bounded | mu_1/dense | inf (a stepped point not evaluated) (p0) | 20 of 20 | no | 17 | — | TC_s3_dense |" in md
+    assert "| relaxing | dense | 3e-07 (n_F_b) | 0 of 21 | yes | 7.58 | TC_s3_dense | — |" in md
+    back = read(tmp_path / "smoothness.csv")
+    assert back[0]["largest_disagreement [-]"] == "inf" and back[1]["smooth"] == "yes"
