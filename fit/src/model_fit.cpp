@@ -797,11 +797,13 @@ void smoothness_verdict(Calibration& cal) {
                          "coordination law's nu_cC, where the bulk modulus has (nu/nu_cC - 1)^(alpha - 1)");
 }
 
-// The errors' last checks, once the held, bounded and kinked coefficients have lost theirs: the covariance's null
-// directions (null_directions), then the Jacobian's verdict over the coefficients still quoted (smoothness_verdict).
+// The errors' last checks, once the held, bounded and kinked coefficients have lost theirs: the Jacobian's verdict
+// over the coefficients still quoted (smoothness_verdict), then the covariance's null directions (null_directions).
+// In that order a Jacobian degenerate in every direction (the relaxing three-pressure joint fit rerun in the
+// twenty-second round) is still judged.
 void settle_errors(Calibration& cal) {
-  null_directions(cal);
   smoothness_verdict(cal);
+  null_directions(cal);
 }
 
 // Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof).
