@@ -56,6 +56,18 @@ def tree(tmp_path_factory):
     return root, out / "ensemble_loose"
 
 
+def scaled_copy(parameters, name, factor, dst):
+    """A copy of a parameters.csv with coefficient `name`'s value times `factor`, at dst (returned)."""
+    with open(parameters, newline="") as fh:
+        table = list(csv.reader(fh))
+    for row in table:
+        if row[0] == name:
+            row[2] = repr(float(row[2]) * factor)
+    with open(dst, "w", newline="") as fh:
+        csv.writer(fh).writerows(table)
+    return dst
+
+
 def read(path):
     with open(path) as fh:
         return list(csv.DictReader(line for line in fh if not line.startswith("#")))
@@ -658,14 +670,7 @@ def test_a_calibration_against_the_control_margin_is_named_and_a_last_digit_lose
             assert max(ratios) == pytest.approx(said, abs=1e-8) and 0.899 <= said < 0.9
         else:
             assert max(ratios) < 0.899, path.name
-    edited = tmp_path / "edited.csv"
-    with open(law, newline="") as fh:
-        table = list(csv.reader(fh))
-    for row in table:
-        if row[0] == "a_A_a":
-            row[2] = repr(float(row[2]) * (1 + 2e-6))
-    with open(edited, "w", newline="") as fh:
-        csv.writer(fh).writerows(table)
+    edited = scaled_copy(law, "a_A_a", 1 + 2e-6, tmp_path / "edited.csv")
     err = predict(str(edited), "q")
     assert "TC_s3_dense nu=0.6816 (predicted) cannot hold its side stress" in err, err
     # a calibration from the stored optimum (one iteration, on the dense and loose tests it was calibrated on) names the
@@ -712,14 +717,7 @@ def test_a_cost_that_is_not_smooth_at_its_optimum_quotes_no_errors(tmp_path):
                            capture_output=True, text=True, timeout=300)
         return r
 
-    edited = tmp_path / "edited.csv"
-    with open(law, newline="") as fh:
-        table = list(csv.reader(fh))
-    for row in table:
-        if row[0] == "nu_c":
-            row[2] = repr(float(row[2]) * (1 + 1e-12))
-    with open(edited, "w", newline="") as fh:
-        csv.writer(fh).writerows(table)
+    edited = scaled_copy(law, "nu_c", 1 + 1e-12, tmp_path / "edited.csv")
     s = {}
     for name, parameters in (("stored", law), ("edited", str(edited))):
         p = dem("--predict-with", parameters, out=name)
