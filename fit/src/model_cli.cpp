@@ -485,13 +485,13 @@ void warn_beyond_reach(const Parameters& P, const std::string& name, double nu, 
   const std::vector<double> iso = P.iso();
   if (!std::isnan(isotropic_volume<double>(iso.data(), p0))) return;
   double top = 0, at = P.nu_c;
-  for (int i = 0; i <= 1000; ++i) {
-    const double x = P.nu_c + (1.0 - P.nu_c) * i / 1000;
-    if (isotropic_pressure(iso.data(), x) > top) { top = isotropic_pressure(iso.data(), x); at = x; }
+  for (int i = 0; i <= 1000; ++i) {   // the law's largest pressure, for the message
+    const double x = P.nu_c + (1.0 - P.nu_c) * i / 1000, px = isotropic_pressure(iso.data(), x);
+    if (px > top) { top = px; at = x; }
   }
   std::cerr << "dem model: warning: " << name << " nu=" << num(nu, 4) << " (" << role << ") starts at p* = " << num(p0)
             << ", above the isotropic law's reach (its largest p* on [nu_c, 1] is " << num(top) << " at nu = " << num(at, 4)
-            << "; C1 = " << num(P.iso()[kC1]) << (P.iso()[kC1] < 0 ? ": the coordination falls with the density" : "")
+            << "; C1 = " << num(iso[kC1]) << (iso[kC1] < 0 ? ": the coordination falls with the density" : "")
             << "): no elastic state holds that pressure, so its p* and s_dev are not numbers (docs/model.md, \"A cost that is "
                "not smooth at its optimum\")\n";
 }

@@ -718,15 +718,15 @@ constexpr double kNullSe = 1e-9;
 
 }  // namespace
 
-// DENSE_SVD's pseudo-inverse gives a direction the curves do not see (a fitted coefficient that does not act on them)
-// a variance of 0 to rounding: that is "not determined", not "exact" (no DEM curve fixes a coefficient to 1e-9). Such
-// errors become nan, and said; the held coefficients (nan already) are not looked at.
 std::string Calibration::errors_not_determined() const {
   if (!against_margin.empty()) return "the optimum sits against the drained control's margin on " + against_margin;
   if (!rough.empty()) return "the cost is not smooth at the optimum (" + rough + ")";
   return "";
 }
 
+// DENSE_SVD's pseudo-inverse gives a direction the curves do not see (a fitted coefficient that does not act on them)
+// a variance of 0 to rounding: that is "not determined", not "exact" (no DEM curve fixes a coefficient to 1e-9). Such
+// errors become nan, and said; the held coefficients (nan already) are not looked at.
 void null_directions(Calibration& cal) {
   std::vector<std::size_t> null;
   std::size_t quoted = 0;

@@ -153,9 +153,10 @@ struct Calibration {
 };
 
 /// A Jacobian column that central differences of the residuals miss by more than this (relative) makes the cost rough
-/// at the optimum (Calibration::rough). The 33 stored laboratory calibrations whose cost is smooth agree within 10^-9
-/// to 2e-4; the relaxing three-pressure mu = 0.5 ones, whose output jumps with the last digit of nu_c, miss by 1.2-1.4
-/// (docs/model.md, "A cost that is not smooth at its optimum").
+/// at the optimum (Calibration::rough). The 33 stored laboratory calibrations with separate jamming fractions whose
+/// cost is smooth agree within 6e-8 to 1.5e-5 (the tied ones up to 0.006); the relaxing three-pressure mu = 0.5 ones,
+/// whose output jumps with the last digit of nu_c, miss by 1.2-1.4 (docs/model.md, "A cost that is not smooth at its
+/// optimum"; data/geotech/model/state_volume/smoothness.md).
 constexpr double kRoughAbove = 1e-2;
 
 /// A covariance error at most 1e-9 max(1, |value|) (DENSE_SVD's pseudo-inverse on a direction the curves do not see)
