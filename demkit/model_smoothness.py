@@ -20,12 +20,14 @@ from demkit.model_jamming import LAB, run, write_csv
 
 LAWS = (("permanent", ""), ("relaxing", "relaxing_excess"), ("bounded", "bounded_excess"))
 HEAD = ["law", "calibration", "largest_disagreement [-]", "coefficient", "columns_above_1pct", "columns_checked",
-        "smooth", "chi2_dof [-]", "fitted_paths_through_cusp", "against_margin"]
+        "smooth", "chi2_dof [-]", "fitted_paths_through_cusp", "against_margin", "error_scale_rise_minus [-]",
+        "error_scale_rise_plus [-]", "error_scale_coefficient", "error_scale_outside", "error_scale_quoted"]
 
 
-def command(dem, stored, law, name, out, tied=False):
+def command(dem, stored, law, name, out, tied=False, free=True):
     """The one-iteration restart of `name` under `law` (README steps 8, 11, 12 of data/geotech/model; with `tied`,
-    steps 10, 11 and 12's one-jamming-fraction calibrations under jamming_shared/)."""
+    steps 10, 11 and 12's one-jamming-fraction calibrations under jamming_shared/); `free`: with `--coordination free`
+    (coordination_free)."""
     sub = dict(LAWS)[law]
     start = os.path.join(stored, sub, "jamming_shared" if tied else "", name, "parameters.csv")
     on = "TC_s3_dense,TC_s3_loose" if name.endswith("joint") else "TC_s3_loose" if name == "loose" else "TC_s3_dense"
@@ -34,11 +36,24 @@ def command(dem, stored, law, name, out, tied=False):
            "--no-jackknife", "--no-plots", "--out", out, "--force"]
     if tied:
         cmd += ["--jamming", "shared"]
+    if free:
+        cmd += ["--coordination", "free"]
     if law != "permanent":
         cmd += ["--anisotropy-pressure", law]
     if name == "loose":
         cmd += ["--hold", "n_rate"]
     return cmd
+
+
+def coordination_free(parameters):
+    """Whether a stored calibration is restarted with `--coordination free`: every fit before the twenty-third round
+    was free to let C1 fall, and restarts so; one with C1 = 0 exactly sits on the rising law's bound, and restarts with
+    the default (rising), so that the iteration does not leave it."""
+    with open(parameters) as fh:
+        for line in fh:
+            if line.startswith("C1,"):
+                return float(line.split(",")[2]) != 0.0
+    return True
 
 
 def parse(log):
@@ -49,10 +64,14 @@ def parse(log):
     chi = re.findall(r"chi2/dof = (\S+)", text)
     cusp = sorted(set(re.findall(r"warning: (\S+) \(fitted\) crosses the isotropic law's cusp", text)))
     margin = re.search(r"against the drained control's margin on (\S+)", text)
+    e = re.search(r"chi2 rises by (\S+) and (\S+) of the quadratic's at worst \(([^)]*)\); (\d+) of (\d+) quoted", text)
     return {"largest": float(m.group(1)) if m else float("nan"), "coefficient": m.group(2) if m else "",
             "above": int(m.group(4)) if m else 0, "checked": int(m.group(5)) if m else 0,
             "smooth": (m.group(3) == "smooth") if m else None, "chi2": float(chi[-1]) if chi else float("nan"),
-            "cusp": " ".join(cusp), "margin": margin.group(1).rstrip(":") if margin else ""}
+            "cusp": " ".join(cusp), "margin": margin.group(1).rstrip(":") if margin else "",
+            "rise_minus": float(e.group(1)) if e else float("nan"), "rise_plus": float(e.group(2)) if e else float("nan"),
+            "rise_coefficient": e.group(3) if e else "", "outside": int(e.group(4)) if e else 0,
+            "quoted": int(e.group(5)) if e else 0}
 
 
 def table(stored, work, dem, run_again=True, tied=False):
@@ -61,16 +80,17 @@ def table(stored, work, dem, run_again=True, tied=False):
         for name in LAB:
             out = os.path.join(work, law, name)
             log = out + ".log"
-            if not os.path.exists(os.path.join(stored, dict(LAWS)[law], "jamming_shared" if tied else "", name,
-                                               "parameters.csv")):
+            start = os.path.join(stored, dict(LAWS)[law], "jamming_shared" if tied else "", name, "parameters.csv")
+            if not os.path.exists(start):
                 continue   # the tied bounded refits that were cut (twenty-first round)
             if run_again:
                 os.makedirs(os.path.dirname(log), exist_ok=True)
-                run(command(dem, stored, law, name, out, tied), log)
+                run(command(dem, stored, law, name, out, tied, coordination_free(start)), log)
             p = parse(log)
             smooth = "yes" if p["smooth"] else "no" if p["smooth"] is not None else "not checked"
             rows.append([law, name, p["largest"], p["coefficient"], p["above"], p["checked"], smooth, p["chi2"],
-                         p["cusp"], p["margin"]])
+                         p["cusp"], p["margin"], p["rise_minus"], p["rise_plus"], p["rise_coefficient"], p["outside"],
+                         p["quoted"]])
     return rows
 
 
@@ -89,15 +109,22 @@ def write(rows, out, tied=False):
              "is not smooth at its optimum\"). One iteration of `dem model` from each stored optimum with the options "
              "it was fitted with; the Jacobian column of every free coefficient against central differences of the "
              "residuals (step 10⁻⁶ × max(1, |value|)). Disagreement: |difference − column| / max(the two norms); a "
-             "cost is not smooth where a column misses by more than 0.01, and its errors are then not determined." +
+             "cost is not smooth where a column misses by more than 0.01, and its errors are then not determined. "
+             "Then (twenty-third round, docs/model.md \"The cost over one quoted error\") χ² one covariance error "
+             "either way along each quoted coefficient's linearised profile, over the quadratic model's rise: the "
+             "worst pair (the coefficient furthest from 1 on either side), and how many quoted coefficients lie "
+             "outside [1/2, 2] on either side; — where no error is quoted. A restart of a calibration fitted before "
+             "that round passes `--coordination free` (C1 of either sign), as it was fitted." +
              (" One jamming fraction (`--jamming shared`, the calibrations under jamming_shared/)." if tied else ""),
              "",
              "| law | calibration | largest disagreement (coefficient) | columns above 1 % | smooth | χ²/dof | fitted "
-             "paths through the cusp | against the margin |",
-             "|---|---|---|---|---|---|---|---|"]
+             "paths through the cusp | against the margin | χ² over one error, − and + (coefficient) | outside "
+             "[1/2, 2] |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
+        scale = (f"{cell(r[10])}, {cell(r[11])} ({r[12]})", f"{r[13]} of {r[14]}") if r[14] else ("—", "—")
         lines.append(f"| {r[0]} | {r[1]} | {cell(r[2])} ({cell(r[3])}) | {r[4]} of {r[5]} | {r[6]} | {cell(r[7])} | "
-                     f"{cell(r[8])} | {cell(r[9])} |")
+                     f"{cell(r[8])} | {cell(r[9])} | {scale[0]} | {scale[1]} |")
     write_atomic(os.path.join(out, "smoothness.md"), "\n".join(lines) + "\n")
 
 

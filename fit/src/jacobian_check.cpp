@@ -127,4 +127,59 @@ std::vector<JacobianColumn> check_jacobian(ceres::Problem& problem, const std::v
   return out;
 }
 
+namespace {
+
+// 2 cost at the current parameter values: +inf where the residuals are not numbers.
+double chi2_here(ceres::Problem& problem, const std::vector<double*>& blocks) {
+  const Evaluated e = evaluate(problem, blocks, false);
+  if (!e.ok) return std::numeric_limits<double>::infinity();
+  double s = 0;
+  for (double v : e.r) s += v * v;
+  return s;
+}
+
+// Every entry of blocks set to start + t d (false, nothing moved, where one would leave a bound of the problem).
+bool move_to(ceres::Problem& problem, const std::vector<double*>& blocks, const std::vector<double>& start,
+             const std::vector<double>& d, double t) {
+  std::size_t k = 0;
+  for (double* b : blocks)
+    for (int i = 0; i < problem.ParameterBlockSize(b); ++i, ++k) {
+      const double v = start[k] + t * d[k];
+      if (v < problem.GetParameterLowerBound(b, i) || v > problem.GetParameterUpperBound(b, i)) return false;
+    }
+  k = 0;
+  for (double* b : blocks)
+    for (int i = 0; i < problem.ParameterBlockSize(b); ++i, ++k) b[i] = start[k] + t * d[k];
+  return true;
+}
+
+}  // namespace
+
+std::vector<ErrorScale> check_error_scale(ceres::Problem& problem, const std::vector<double*>& blocks,
+                                          const std::vector<double>& covariance, const std::vector<int>& coordinates,
+                                          double scale, double fraction) {
+  std::vector<double> start;
+  for (double* b : blocks) start.insert(start.end(), b, b + problem.ParameterBlockSize(b));
+  const std::size_t n = start.size();
+  const double chi0 = chi2_here(problem, blocks);
+  if (!std::isfinite(chi0) || covariance.size() != n * n) return {};
+  std::vector<ErrorScale> out;
+  for (int a : coordinates) {
+    ErrorScale e;
+    const double saa = covariance[static_cast<std::size_t>(a) * n + a];
+    if (saa > 0) {
+      std::vector<double> d(n);
+      for (std::size_t k = 0; k < n; ++k) d[k] = std::sqrt(scale / saa) * covariance[k * n + a];
+      const double t = fraction, expected = scale * t * t;
+      if (move_to(problem, blocks, start, d, -t)) e.minus = (chi2_here(problem, blocks) - chi0) / expected;
+      if (move_to(problem, blocks, start, d, +t)) e.plus = (chi2_here(problem, blocks) - chi0) / expected;
+      std::size_t k = 0;   // restored bit for bit
+      for (double* b : blocks)
+        for (int i = 0; i < problem.ParameterBlockSize(b); ++i, ++k) b[i] = start[k];
+    }
+    out.push_back(e);
+  }
+  return out;
+}
+
 }  // namespace demfit

@@ -775,6 +775,7 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   }
   co.hold_from = co.hold_iso.empty() ? nullptr : co.start;
   co.shared_jamming = o.jamming == "shared";
+  co.coordination_rises = o.coordination == "rising";
   if (co.shared_jamming && std::find(co.hold_iso.begin(), co.hold_iso.end(), kNuCC) != co.hold_iso.end())
     throw InputError("--jamming shared ties nu_cC to the fitted nu_c, and --hold-isotropic holds nu_cC: leave nu_cC out "
                      "of --hold-isotropic (or use --jamming separate)");
@@ -1012,6 +1013,43 @@ void report_jacobian_check(const Calibration& cal) {
             << num(kRoughAbove) << ")\n";
 }
 
+// The cost over one covariance error either way (Calibration::error_scale): error_scale.{csv,md,tex,json}, a row per
+// coefficient with a covariance error, and one line on stderr; nothing where the check did not run.
+void report_error_scale(const Calibration& cal, const fs::path& out) {
+  Table t({"parameter", "value", "se_covariance", "quoted", "chi2_rise_minus [-]", "chi2_rise_plus [-]"});
+  int worst = -1, outside = 0, counted = 0;
+  double worst_dev = -1;
+  for (std::size_t i = 0; i < cal.error_scale.size() && i < cal.value.size(); ++i) {
+    const ErrorScale& e = cal.error_scale[i];
+    if (std::isnan(e.minus) && std::isnan(e.plus)) continue;
+    const bool quoted = std::isfinite(cal.se_cov[i]) && cal.errors_not_determined().empty();
+    t.add_row({cal.names[i], num(cal.value[i]), num(cal.se_cov[i]), quoted ? "yes" : "no", num(e.minus, 4),
+               num(e.plus, 4)});
+    if (!quoted) continue;
+    ++counted;
+    bool off = false;
+    for (double r : {e.minus, e.plus}) {
+      const double dev = r > 0 ? std::fabs(std::log(r)) : std::numeric_limits<double>::infinity();
+      off = off || !(dev <= std::log(kQuadraticWithin));
+      if (!(dev <= worst_dev)) { worst_dev = dev; worst = static_cast<int>(i); }
+    }
+    outside += off;
+  }
+  if (t.rows.empty()) return;
+  write_table_all(t, (out / "error_scale").string(),
+                  "The cost over one covariance error: chi^2 one quoted covariance error either way along each "
+                  "coefficient's linearised profile (the others at the quadratic model's conditional optimum), over the "
+                  "quadratic model's rise max(1, chi2/dof); 1 where the cost is quadratic over the error, nan where a "
+                  "bound lies within it, inf where the model is not evaluated there; quoted: whether parameters.csv "
+                  "quotes this error (docs/model.md, \"The cost over one quoted error\")");
+  if (worst < 0) return;
+  const ErrorScale& w = cal.error_scale[worst];
+  std::cerr << "dem model: the cost over one covariance error either way: chi2 rises by " << num(w.minus, 3) << " and "
+            << num(w.plus, 3) << " of the quadratic's at worst (" << cal.names[worst] << "); " << outside << " of "
+            << counted << " quoted coefficients outside [1/" << num(kQuadraticWithin) << ", "
+            << num(kQuadraticWithin) << "] (error_scale.csv)\n";
+}
+
 // One family's held-out scores (`--family group|extended` with the jackknife; `auto` writes them in
 // selection.csv): per left-out packing, the score the paired test between two runs' rules reads
 // (demkit/model_state_limit.py).
@@ -1142,6 +1180,7 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
   write_summary(summary, cal, fit_label, out);
   for (const auto& w : cal.warnings) std::cerr << "dem model: warning: " << w << "\n";
   report_jacobian_check(cal);
+  report_error_scale(cal, out);
   std::cerr << "dem model: tables and curves written to " << out.string() << "\n";
   if (!o.no_plots) {
     const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.model_plots \"" +
@@ -1374,6 +1413,11 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "nu_cC for the coordination law; default) or shared (nu_cC = nu_c: one jamming fraction, the "
                  "stiffness bounded at every nu; docs/model.md \"One jamming fraction\")")
       ->check(CLI::IsMember({"separate", "shared"}))->default_str("separate");
+  app.add_option("--coordination", o.coordination, "the coordination law C(nu) = C0 + C1 (nu/nu_cC - 1)^alpha of a "
+                 "fitted isotropic block: rising (C1 >= 0, the default: the branch's coordination rises with the "
+                 "density) or free (C1 of either sign, as fits before issue 31's twenty-third round; a falling law "
+                 "can make the isotropic pressure peak below nu = 1; docs/model.md \"A coordination that rises\")")
+      ->check(CLI::IsMember({"rising", "free"}))->default_str("rising");
   app.add_option("--anisotropy-pressure", o.anisotropy_pressure, "with --state-limit volume, the anisotropy's "
                  "pressure A d eps_d: permanent (the default: it moves the elastic state and never relaxes, so a "
                  "constant-p path is steady only where the dilatancy cancels a_A F) or relaxing (an excess over the "

@@ -769,6 +769,23 @@ void jacobian_smoothness(ceres::Problem& problem, std::vector<double>& isob, std
   }
 }
 
+// The cost over one quoted covariance error either way (check_error_scale), into cal.error_scale, for every coefficient
+// with a covariance error; the rules that later take errors away leave these entries to be read as not quoted.
+void error_scale(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
+                 std::vector<double>& ext, const CalibrationOptions& o, bool X, const std::vector<double>& full,
+                 double scale, Calibration& cal) {
+  cal.error_scale.assign(cal.value.size(), ErrorScale{});
+  if (!o.check_jacobian) return;
+  std::vector<double*> blocks = {isob.data(), shear.data()};
+  if (X) blocks.push_back(ext.data());
+  std::vector<int> quoted;
+  for (int a = 0; a < static_cast<int>(cal.se_cov.size()); ++a)
+    if (std::isfinite(cal.se_cov[a]) && cal.se_cov[a] > 0) quoted.push_back(a);
+  const std::vector<ErrorScale> got = check_error_scale(problem, blocks, full, quoted, scale);
+  for (std::size_t k = 0; k < got.size(); ++k)
+    if (quoted[k] < static_cast<int>(cal.error_scale.size())) cal.error_scale[quoted[k]] = got[k];
+}
+
 // Where a quoted coefficient's column disagrees: cal.rough and a warning. The covariance rests on that Jacobian, and
 // the jackknife's refits, which start here, on its steps. Coefficients without a quoted error are not counted (their
 // disagreement becomes nan): on a bound, or on a kink of a law, the covariance does not describe them anyway, and the
@@ -840,6 +857,7 @@ void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::
         const double d = std::sqrt(full[a * np + a] * full[b * np + b]);
         cal.corr[a][b] = d > 0 ? full[a * np + b] / d : kNaN;
       }
+    error_scale(problem, isob, shear, ext, o, X, full, scale, cal);
   } else {
     cal.warnings.push_back("covariance could not be computed (rank-deficient or non-finite Jacobian): some parameters are not "
                            "determined by these curves");
@@ -870,6 +888,30 @@ void bound_warnings(const ceres::Problem& problem, const std::vector<double>& sh
 bool nu_c_floored(const CalibrationOptions& o) {
   const auto holds = [&](int i) { return std::find(o.hold_iso.begin(), o.hold_iso.end(), i) != o.hold_iso.end(); };
   return o.state_volume && o.fit_isotropic && holds(kNuCC) && !holds(kNuC);
+}
+
+/// Whether C1 is bounded below by 0 (`--coordination rising`, the default since issue 31's twenty-third round): the
+/// isotropic block fitted and C1 not held. The branch's coordination rises with the density at every mu; a fit free
+/// to let it fall traded the branch's C for the paths' stiffness (docs/model.md, "A coordination that rises").
+bool coordination_floored(const CalibrationOptions& o) {
+  const bool held = std::find(o.hold_iso.begin(), o.hold_iso.end(), kC1) != o.hold_iso.end();
+  return o.fit_isotropic && o.coordination_rises && !held;
+}
+
+/// C1 on its floor 0 (coordination_floored): a flat coordination law, C = C0, whose nu_cC and alpha are not read; no
+/// errors quoted for the three, and said, with the branch's own rise of C that the paths pulled it from.
+void coordination_warning(const IsoData& iso, const CalibrationOptions& o, const std::vector<double>& isob,
+                          Calibration& cal) {
+  if (!coordination_floored(o) || isob[kC1] > 1e-12 || iso.nu.empty()) return;
+  for (int i : {kC1, kNuCC, kAlpha}) cal.se_cov[i] = kNaN;
+  const auto lo = std::min_element(iso.nu.begin(), iso.nu.end()) - iso.nu.begin();
+  const auto hi = std::max_element(iso.nu.begin(), iso.nu.end()) - iso.nu.begin();
+  cal.warnings.push_back("C1 sits on its bound 0 (--coordination rising): the coordination law is flat, C = C0 = " +
+                         fmt(isob[kC0], 4) + ", where the isotropic branch's C_nonrattler goes from " +
+                         fmt(iso.C[lo], 4) + " at nu = " + fmt(iso.nu[lo], 4) + " to " + fmt(iso.C[hi], 4) +
+                         " at nu = " + fmt(iso.nu[hi], 4) + ": the paths pull the law below the branch (nu_cC and "
+                         "alpha are not read; no standard errors quoted). --coordination free lets it fall with the "
+                         "density (docs/model.md, \"A coordination that rises\")");
 }
 
 /// Held isotropic coefficients have no error of their own. With one jamming fraction (`tied`) the fitted law is
@@ -933,7 +975,7 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
       cal.warnings.push_back("nu_cC sits on the lowest jammed point of the isotropic branch (" + std::to_string(lowest) +
                              "): the power law's onset is set by where the branch data start, no standard error quoted");
     }
-  }
+  }  coordination_warning(iso, o, isob, cal);
 }
 
 /// The calibration's inputs checked (curves or paths with start values, held isotropic indices,
@@ -974,6 +1016,16 @@ void floor_nu_c(ceres::Problem& problem, std::vector<double>& isob, const Calibr
   if (!nu_c_floored(o)) return;
   isob[kNuC] = std::max(isob[kNuC], isob[kNuCC]);
   problem.SetParameterLowerBound(isob.data(), kNuC, isob[kNuCC]);
+}
+
+/// The isotropic block's floors: nu_c at the held nu_cC (floor_nu_c, volume-form state parameter) and C1 at 0
+/// (coordination_floored), each start moved onto its floor where it lies below (Ceres refuses an infeasible start).
+void isotropic_floors(ceres::Problem& problem, std::vector<double>& isob, const CalibrationOptions& o,
+                      bool state_volume) {
+  if (state_volume) floor_nu_c(problem, isob, o);
+  if (!coordination_floored(o)) return;
+  isob[kC1] = std::max(isob[kC1], 0.0);
+  problem.SetParameterLowerBound(isob.data(), kC1, 0.0);
 }
 
 /// The extended family's start inside the bounds set_bounds sets (Ceres refuses an infeasible start).
@@ -1121,6 +1173,8 @@ void drop_entries(Calibration& cal, int pos, int n) {
     cal.undetermined.erase(cal.undetermined.begin() + pos, cal.undetermined.begin() + pos + n);
   if (cal.jacobian_disagreement.size() >= static_cast<std::size_t>(pos + n))
     cal.jacobian_disagreement.erase(cal.jacobian_disagreement.begin() + pos, cal.jacobian_disagreement.begin() + pos + n);
+  if (cal.error_scale.size() >= static_cast<std::size_t>(pos + n))
+    cal.error_scale.erase(cal.error_scale.begin() + pos, cal.error_scale.begin() + pos + n);
   cal.corr.erase(cal.corr.begin() + pos, cal.corr.begin() + pos + n);
   for (auto& row : cal.corr) row.erase(row.begin() + pos, row.begin() + pos + n);
 }
@@ -1272,7 +1326,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
     isob[kC0] = std::max(isob[kC0], 0.0);
   }
   set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted, state_lode, state_volume);
-  if (state_volume) floor_nu_c(problem, isob, o);
+  isotropic_floors(problem, isob, o, state_volume);
   if (o.fit_isotropic && !held.empty())
     problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 

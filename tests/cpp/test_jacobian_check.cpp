@@ -1,6 +1,8 @@
 // check_jacobian (demfit/jacobian_check.hpp): a smooth cost's Jacobian agrees with central differences, a jump within
 // one difference step of the point is found in its own coefficient's column only, the values are restored bit for
-// bit, a step beyond a bound is taken one-sided, and an entry a SubsetManifold holds is not checked.
+// bit, a step beyond a bound is taken one-sided, and an entry a SubsetManifold holds is not checked. check_error_scale:
+// a linear least-squares cost rises by exactly the quadratic model's over one error in each direction, an exponential
+// model by its closed form, and a bound within the error gives nan on that side.
 #include <gtest/gtest.h>
 
 #include <ceres/ceres.h>
@@ -84,4 +86,76 @@ TEST(JacobianCheck, ABoundIsNotCrossedAndAHeldEntryIsLeftOut) {
   EXPECT_TRUE(demfit::check_jacobian(f.problem, {f.x.data()}).empty()) << "a constant block is not checked";
 }
 
+// r_i = x0 + x1 t_i - y_i: chi^2 is exactly quadratic, so over one error either way it rises by the quadratic's.
+struct Line {
+  double t, y;
+  template <class T>
+  bool operator()(const T* x, T* r) const {
+    r[0] = x[0] + x[1] * T(t) - T(y);
+    return true;
+  }
+};
+
+TEST(ErrorScale, ALinearCostRisesByTheQuadraticsOverOneErrorEitherWay) {
+  const double ts[] = {0.0, 0.5, 1.0, 2.0, 3.5}, ys[] = {0.1, 0.9, 1.7, 4.2, 6.8};
+  double S1 = 0, St = 0, Stt = 0, Sy = 0, Sty = 0;
+  for (int i = 0; i < 5; ++i) { S1 += 1; St += ts[i]; Stt += ts[i] * ts[i]; Sy += ys[i]; Sty += ts[i] * ys[i]; }
+  const double det = S1 * Stt - St * St;   // the normal equations and (A^T A)^-1 by hand
+  std::vector<double> x = {(Stt * Sy - St * Sty) / det, (S1 * Sty - St * Sy) / det};
+  const std::vector<double> cov = {Stt / det, -St / det, -St / det, S1 / det};
+  ceres::Problem problem;
+  for (int i = 0; i < 5; ++i)
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<Line, 1, 2>(new Line{ts[i], ys[i]}), nullptr, x.data());
+  const std::vector<double> before = x;
+  for (double scale : {1.0, 3.7})
+    for (double t : {1.0, 0.2}) {
+      const auto got = demfit::check_error_scale(problem, {x.data()}, cov, {0, 1}, scale, t);
+      ASSERT_EQ(got.size(), 2u);
+      for (const auto& e : got) {
+        EXPECT_NEAR(e.minus, 1.0, 1e-9) << scale << " " << t;
+        EXPECT_NEAR(e.plus, 1.0, 1e-9) << scale << " " << t;
+      }
+    }
+  EXPECT_EQ(std::memcmp(before.data(), x.data(), sizeof(double) * 2), 0) << "the values bit for bit";
+}
+
+// r_i = e^x - y_i: at the optimum e^x = mean(y) = m, J^T J = n m^2, sigma = 1/(sqrt(n) m), and chi^2 - chi^2_min =
+// n (e^x - m)^2, so one error s sigma (scale s^2) either way rises by (e^{-+s sigma} - 1)^2 / (s sigma)^2 of s^2.
+struct Exp {
+  double y;
+  template <class T>
+  bool operator()(const T* x, T* r) const {
+    using std::exp;
+    r[0] = exp(x[0]) - T(y);
+    return true;
+  }
+};
+
+TEST(ErrorScale, AnExponentialRisesByItsClosedFormAndABoundWithinTheErrorIsNotCrossed) {
+  const double ys[] = {0.6, 1.4};   // n = 2, m = 1: sigma = 1/sqrt(2), far from quadratic
+  std::vector<double> x = {0.0};
+  ceres::Problem problem;
+  for (double y : ys)
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<Exp, 1, 1>(new Exp{y}), nullptr, x.data());
+  const double sigma = 1 / std::sqrt(2.0);
+  for (double scale : {1.0, 2.25}) {
+    const double h = std::sqrt(scale) * sigma;
+    const auto got = demfit::check_error_scale(problem, {x.data()}, {sigma * sigma}, {0}, scale);
+    ASSERT_EQ(got.size(), 1u);
+    EXPECT_NEAR(got[0].minus, std::pow(std::exp(-h) - 1, 2) / (h * h), 1e-12) << scale;
+    EXPECT_NEAR(got[0].plus, std::pow(std::exp(h) - 1, 2) / (h * h), 1e-12) << scale;
+  }
+  EXPECT_LT(demfit::check_error_scale(problem, {x.data()}, {sigma * sigma}, {0}, 1.0)[0].minus, 0.6);
+  EXPECT_GT(demfit::check_error_scale(problem, {x.data()}, {sigma * sigma}, {0}, 1.0)[0].plus, 2.0);
+  const auto small = demfit::check_error_scale(problem, {x.data()}, {sigma * sigma}, {0}, 1.0, 1e-3);
+  EXPECT_NEAR(small[0].minus, 1.0, 2e-3) << "quadratic at a thousandth of the error";
+  EXPECT_NEAR(small[0].plus, 1.0, 2e-3);
+  problem.SetParameterUpperBound(x.data(), 0, 0.5);   // within sigma = 0.71 above
+  const auto bounded = demfit::check_error_scale(problem, {x.data()}, {sigma * sigma}, {0}, 1.0);
+  EXPECT_TRUE(std::isnan(bounded[0].plus));
+  EXPECT_NEAR(bounded[0].minus, std::pow(std::exp(-sigma) - 1, 2) / (sigma * sigma), 1e-12);
+  EXPECT_EQ(x[0], 0.0);
+}
+
 }  // namespace
+

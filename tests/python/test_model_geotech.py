@@ -4,6 +4,7 @@ on hand-built curves; and the refusals of the paths-only calibration options (--
 import csv
 import math
 import os
+import pathlib
 import subprocess
 import sys
 
@@ -760,17 +761,26 @@ def test_a_cost_that_is_not_smooth_at_its_optimum_quotes_no_errors(tmp_path):
     assert got["smooth"] is True and got["above"] == 0 < got["checked"] and got["cusp"] == "" and got["largest"] < 1e-4, got
     rows_ = {x["parameter"]: x for x in read(tmp_path / "smooth" / "parameters.csv")}
     assert float(rows_["a_A_a"]["se"]) > 0 and rows_["a_A_a"]["se_method"].startswith("covariance"), rows_["a_A_a"]
+    # the cost over one quoted error (twenty-third round): a row per quoted coefficient, the worst pair on stderr
+    scale = {x["parameter"]: x for x in read(tmp_path / "smooth" / "error_scale.csv")}
+    quoted = [n for n, x in rows_.items() if x["se"] not in ("nan", "") and x["se_method"].startswith("covariance")]
+    assert sorted(n for n, x in scale.items() if x["quoted"] == "yes") == sorted(quoted)
+    assert got["quoted"] == len(quoted) and got["rise_coefficient"] in quoted, got
+    worst = scale[got["rise_coefficient"]]
+    assert float(worst["chi2_rise_minus [-]"]) == pytest.approx(got["rise_minus"], rel=1e-2), (worst, got)
+    assert ms.parse(str(tmp_path / "rough.log"))["quoted"] == 0   # no error quoted on the rough cost
 
 
 def test_a_start_pressure_above_the_isotropic_laws_reach_is_named(tmp_path):
-    """Twenty-second round: the stored bounded mu = 1 dense calibration (README step 12, refitted this round) has a
+    """Twenty-second round: the bounded mu = 1 dense calibration of that round (README step 12 with --coordination
+    free, kept in bounded_excess/twenty_second_round/) has a
     coordination law that falls with the density (C1 < 0), so its isotropic pressure peaks below nu = 1 (the peak
     found here on a fine grid from the file's law). The friction study's D2 and D3 at nu = 0.80 start above that peak:
     no elastic state holds their pressure. dem model names both, with the law's largest pressure and where it lies,
     and no curve that starts below it."""
     from demkit import model_excess as mx
-    law = os.path.join(ROOT, "data", "geotech", "model", "state_volume", "bounded_excess", "mu_1", "dense",
-                       "parameters.csv")
+    law = os.path.join(ROOT, "data", "geotech", "model", "state_volume", "bounded_excess", "twenty_second_round",
+                       "mu_1", "dense", "parameters.csv")
     P = mx.values(law)
 
     def p_iso(nu):
@@ -815,11 +825,87 @@ def test_the_smoothness_table_restarts_each_calibration_with_its_own_options(tmp
     assert c[c.index("--calibrate-on") + 1] == "TC_s3_dense,TC_s3_loose" and "--anisotropy-pressure" not in c
     assert c[c.index("--hold-isotropic") + 1] == "gamma_p,alpha" and c[c.index("--jamming") + 1] == "shared"
     assert c[2] == ms.ENSEMBLE["three_pressures/mu_1/joint"]
-    rows_ = [["bounded", "mu_1/dense", float("inf"), "p0", 20, 20, "no", 17.0, "", "TC_s3_dense"],
-             ["relaxing", "dense", 3e-7, "n_F_b", 0, 21, "yes", 7.58, "TC_s3_dense", ""]]
+    assert c[c.index("--coordination") + 1] == "free"   # as every fit before the twenty-third round
+    assert "--coordination" not in ms.command("dem", "S", "bounded", "dense", "out", free=False)
+    for c1, free in (("-7.07", True), ("3.2", True), ("0", False)):
+        f = tmp_path / f"p{c1}.csv"
+        f.write_text(f"parameter,law,value\np0,x,0.05\nC1,x,{c1}\n")
+        assert ms.coordination_free(str(f)) is free, c1
+    rows_ = [["bounded", "mu_1/dense", float("inf"), "p0", 20, 20, "no", 17.0, "", "TC_s3_dense", float("nan"),
+              float("nan"), "", 0, 0],
+             ["relaxing", "dense", 3e-7, "n_F_b", 0, 21, "yes", 7.58, "TC_s3_dense", "", 0.31, 15.7, "C0", 5, 19]]
     ms.write(rows_, str(tmp_path))
     md = (tmp_path / "smoothness.md").read_text()
-    assert "| bounded | mu_1/dense | inf (a stepped point not evaluated) (p0) | 20 of 20 | no | 17 | — | TC_s3_dense |" in md
-    assert "| relaxing | dense | 3e-07 (n_F_b) | 0 of 21 | yes | 7.58 | TC_s3_dense | — |" in md
+    assert ("| bounded | mu_1/dense | inf (a stepped point not evaluated) (p0) | 20 of 20 | no | 17 | — | TC_s3_dense "
+            "| — | — |") in md
+    assert "| relaxing | dense | 3e-07 (n_F_b) | 0 of 21 | yes | 7.58 | TC_s3_dense | — | 0.31, 15.7 (C0) | 5 of 19 |" in md
     back = read(tmp_path / "smoothness.csv")
     assert back[0]["largest_disagreement [-]"] == "inf" and back[1]["smooth"] == "yes"
+
+
+def mirrored_coordination(src, dst, factor):
+    """A copy of the friction study's ensemble directory src at dst whose isotropic branch's C_nonrattler falls with the
+    density: each jammed point's C mirrored about the branch's mid-range m and scaled (C' = m - factor (C - m), m over
+    every member's jammed rows), pressures untouched."""
+    import shutil
+    shutil.copytree(src, dst)
+    files = sorted(dst.glob("members/*/prep/cycle_unloading.csv"))
+    tables = []
+    for f in files:
+        lines = f.read_text().splitlines()
+        head = [l for l in lines if l.startswith("#")]
+        rows = list(csv.DictReader(l for l in lines if not l.startswith("#")))
+        tables.append((f, head, rows))
+    jammed = [float(r["C_nonrattler"]) for _, _, rows in tables for r in rows if float(r["p_star"]) > 1e-7]
+    top, bottom = max(jammed), min(jammed)
+    for f, head, rows in tables:
+        for r in rows:
+            if float(r["p_star"]) > 1e-7:
+                middle = (top + bottom) / 2
+                r["C_nonrattler"] = repr(middle - factor * (float(r["C_nonrattler"]) - middle))
+        with open(f, "w", newline="") as fh:
+            fh.write("\n".join(head) + "\n")
+            w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
+            w.writeheader()
+            w.writerows(rows)
+    return dst
+
+
+def test_the_coordination_law_rises_unless_told_otherwise(tmp_path):
+    """Twenty-third round: a fitted coordination law C(nu) = C0 + C1 (nu/nu_cC - 1)^alpha keeps C1 >= 0 by default
+    (--coordination rising). On the friction study's mu = 0.5 ensemble, whose branch's C rises, the bound is not
+    reached and the fit is bit for bit the one without it (--coordination free). With the branch's C mirrored so that it
+    falls with the density (mirrored about its mid-range, at half the slope), the free fit follows it (C1 < 0), and
+    the default stops at C1 = 0 exactly, names the
+    bound with the branch's C at its ends, and quotes no error for C1, nu_cC and alpha."""
+    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
+    falling = mirrored_coordination(pathlib.Path(src), tmp_path / "falling", 0.5)
+
+    def fit(data, name, *extra):
+        out = tmp_path / name
+        r = subprocess.run([DEM, "model", str(data), "--family", "extended", "--no-jackknife", "--no-plots", "--out",
+                            str(out), *extra], capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr
+        return {x["parameter"]: x for x in read(out / "parameters.csv")}, r.stderr
+
+    rising, _ = fit(src, "rising")
+    free, _ = fit(src, "free", "--coordination", "free")
+    assert float(rising["C1"]["value"]) > 0.5
+    assert (tmp_path / "rising" / "parameters.csv").read_bytes() == (tmp_path / "free" / "parameters.csv").read_bytes()
+
+    free_f, _ = fit(falling, "falling_free", "--coordination", "free")
+    bound_f, err = fit(falling, "falling_rising")
+    assert float(free_f["C1"]["value"]) < -0.5, free_f["C1"]
+    assert float(bound_f["C1"]["value"]) == 0.0, bound_f["C1"]
+    for name in ("C1", "nu_cC", "alpha"):
+        assert bound_f[name]["se"] == "nan", bound_f[name]
+    said = [l for l in err.splitlines() if "C1 sits on its bound 0 (--coordination rising)" in l]
+    assert len(said) == 1, err
+    branch = [r for f in sorted(falling.glob("members/*/prep/cycle_unloading.csv")) for r in read(f)
+              if float(r["p_star"]) > 1e-7]
+    lo = min(branch, key=lambda r: float(r["nu"]))
+    hi = max(branch, key=lambda r: float(r["nu"]))
+    assert float(lo["C_nonrattler"]) > float(hi["C_nonrattler"])   # the mirrored branch falls
+    words = said[0].split("goes from ")[1].split()
+    assert float(words[0]) == pytest.approx(float(lo["C_nonrattler"]), rel=1e-3), said[0]
+    assert float(words[6]) == pytest.approx(float(hi["C_nonrattler"]), rel=1e-3), said[0]

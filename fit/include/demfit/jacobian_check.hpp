@@ -7,6 +7,7 @@
 
 #include <ceres/ceres.h>
 
+#include <limits>
 #include <vector>
 
 namespace demfit {
@@ -28,5 +29,26 @@ struct JacobianColumn {
 /// cannot be evaluated at its current values.
 std::vector<JacobianColumn> check_jacobian(ceres::Problem& problem, const std::vector<double*>& blocks,
                                            double rel_step = 1e-6);
+
+/// The cost over one quoted error (twenty-third round; docs/model.md, "The cost over one quoted error"). A covariance
+/// error rests on the cost being quadratic over that error, not only smooth at the optimum's step. Along coordinate
+/// a's linearised profile, d = sqrt(scale) Sigma e_a / sqrt(Sigma_aa) (the other coefficients at their conditional
+/// optimum of the quadratic model), the quoted error is sqrt(scale Sigma_aa) in a and the quadratic model's chi^2 rises
+/// by exactly `scale` (Sigma = (J^T J)^-1 of chi^2 = 2 cost). `minus` and `plus` are the rise of 2 cost at x -/+ d over
+/// that: 1 where the quadratic holds, below 1 where the cost is flatter than its curvature at the optimum (the error
+/// too small), above 1 where it is steeper. NaN where x -/+ d leaves a bound of the problem; +inf where the residuals
+/// there are not numbers.
+struct ErrorScale {
+  double minus = std::numeric_limits<double>::quiet_NaN(), plus = std::numeric_limits<double>::quiet_NaN();
+};
+
+/// `covariance` is n x n, row-major, over the concatenated entries of `blocks` (n their total size), unscaled
+/// ((J^T J)^-1); each of `coordinates` (indices into that concatenation, with a positive diagonal) is stepped as above.
+/// With `fraction` t the steps are x -/+ t d and the rises are divided by t^2 (-> 1 as t -> 0 wherever the Jacobian is
+/// the residuals' derivative and their second derivatives are small). The problem's parameter values are restored bit
+/// for bit. Empty if the problem cannot be evaluated where it is.
+std::vector<ErrorScale> check_error_scale(ceres::Problem& problem, const std::vector<double*>& blocks,
+                                          const std::vector<double>& covariance, const std::vector<int>& coordinates,
+                                          double scale, double fraction = 1.0);
 
 }  // namespace demfit

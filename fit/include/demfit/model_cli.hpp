@@ -31,6 +31,7 @@ struct ModelCommandOptions {
   /// The isotropic laws' jamming fractions: `separate` (nu_c and nu_cC, the default) or `shared` (nu_cC = nu_c:
   /// no cusp in the stiffness; docs/model.md, "One jamming fraction")
   std::string jamming = "separate";
+  std::string coordination = "rising";
   /// With --state-limit volume, the anisotropy's pressure (eighteenth round): `permanent` (the elastic state carries it,
   /// never relaxed: the tenth to seventeenth rounds) or `relaxing` (an excess over the isotropic law that relaxes at
   /// beta_p, fitted) or `bounded` (the same, its source gated by 1 - (q/p)^2: q within (-p, p), nineteenth round);

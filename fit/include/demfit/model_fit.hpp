@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "demfit/jacobian_check.hpp"
 #include "demfit/model.hpp"
 
 namespace demfit::model {
@@ -80,6 +81,10 @@ struct CalibrationOptions {
   bool excess_relaxes = false;
   /// With excess_relaxes (`--anisotropy-pressure bounded`, nineteenth round): the excess within (-p, p) (Ext::excess_bounded).
   bool excess_bounded = false;
+  /// The coordination law rises with the density (`--coordination rising`, the default since issue 31's twenty-third
+  /// round): C1 >= 0 wherever the isotropic block is fitted and C1 not held. false (`free`): C1 of either sign, as
+  /// every fit before; a falling law can make the isotropic pressure peak below nu = 1 (docs/model.md).
+  bool coordination_rises = true;
   /// Check the Jacobian at the optimum against central differences of the residuals (check_jacobian; a rough cost's
   /// covariance is not quoted: Calibration::rough). The jackknife's refits leave it out.
   bool check_jacobian = true;
@@ -141,6 +146,9 @@ struct Calibration {
   /// Per reported coefficient, how far its Jacobian column and the difference quotient disagree (JacobianColumn::
   /// disagreement; nan where not checked: held, or the check off)
   std::vector<double> jacobian_disagreement;
+  /// Per reported coefficient, the rise of chi^2 one quoted covariance error either way along its linearised profile
+  /// over the quadratic model's (check_error_scale; nan where not checked: no covariance error, or the check off)
+  std::vector<ErrorScale> error_scale;
   bool shared_jamming = false;          ///< nu_cC tied to nu_c (CalibrationOptions::shared_jamming)
   /// Coefficients the covariance leaves undetermined (an error of 0 to rounding from the pseudo-inverse: se_cov nan);
   /// the jackknife still quotes their spread over packings.
@@ -158,6 +166,12 @@ struct Calibration {
 /// whose output jumps with the last digit of nu_c, miss by 1.2-1.4 (docs/model.md, "A cost that is not smooth at its
 /// optimum"; data/geotech/model/state_volume/smoothness.md).
 constexpr double kRoughAbove = 1e-2;
+
+/// The cost's rise over one quoted covariance error, relative to the quadratic model's (Calibration::error_scale),
+/// outside [1/kQuadraticWithin, kQuadraticWithin]: the covariance interval is then off by more than sqrt(2) on that side
+/// (a profile's one-error point moves by 1/sqrt(rise)); reported (error_scale.csv; docs/model.md, "The cost over one
+/// quoted error").
+constexpr double kQuadraticWithin = 2.0;
 
 /// A covariance error at most 1e-9 max(1, |value|) (DENSE_SVD's pseudo-inverse on a direction the curves do not see)
 /// becomes nan, flagged in cal.undetermined, with a warning per coefficient, or one when every quoted error is so
