@@ -20,8 +20,9 @@ from demkit.model_jamming import LAB, run, write_csv
 
 LAWS = (("permanent", ""), ("relaxing", "relaxing_excess"), ("bounded", "bounded_excess"))
 HEAD = ["law", "calibration", "largest_disagreement [-]", "coefficient", "columns_above_1pct", "columns_checked",
-        "smooth", "chi2_dof [-]", "fitted_paths_through_cusp", "against_margin", "error_scale_rise_minus [-]",
-        "error_scale_rise_plus [-]", "error_scale_coefficient", "error_scale_outside", "error_scale_quoted"]
+        "smooth", "chi2_dof [-]", "fitted_paths_through_cusp", "against_margin", "errors_quoted",
+        "error_rise_below_half", "error_rise_above_2", "error_bound_within", "error_furthest_coefficient",
+        "error_furthest_rise_minus [-]", "error_furthest_rise_plus [-]"]
 
 
 def command(dem, stored, law, name, out, tied=False, free=True):
@@ -64,14 +65,17 @@ def parse(log):
     chi = re.findall(r"chi2/dof = (\S+)", text)
     cusp = sorted(set(re.findall(r"warning: (\S+) \(fitted\) crosses the isotropic law's cusp", text)))
     margin = re.search(r"against the drained control's margin on (\S+)", text)
-    e = re.search(r"chi2 rises by (\S+) and (\S+) of the quadratic's at worst \(([^)]*)\); (\d+) of (\d+) quoted", text)
+    e = re.search(r"of (\d+) quoted coefficients (\d+) rise by less than \S+ of the quadratic's \(the error "
+                  r"understated\), (\d+) by more than \S+, (\d+) reach a bound within it; furthest (\S+) \((\S+), "
+                  r"(\S+)\)", text)
     return {"largest": float(m.group(1)) if m else float("nan"), "coefficient": m.group(2) if m else "",
             "above": int(m.group(4)) if m else 0, "checked": int(m.group(5)) if m else 0,
             "smooth": (m.group(3) == "smooth") if m else None, "chi2": float(chi[-1]) if chi else float("nan"),
             "cusp": " ".join(cusp), "margin": margin.group(1).rstrip(":") if margin else "",
-            "rise_minus": float(e.group(1)) if e else float("nan"), "rise_plus": float(e.group(2)) if e else float("nan"),
-            "rise_coefficient": e.group(3) if e else "", "outside": int(e.group(4)) if e else 0,
-            "quoted": int(e.group(5)) if e else 0}
+            "quoted": int(e.group(1)) if e else 0, "rise_below": int(e.group(2)) if e else 0,
+            "rise_above": int(e.group(3)) if e else 0, "rise_bound": int(e.group(4)) if e else 0,
+            "rise_coefficient": e.group(5) if e else "", "rise_minus": float(e.group(6)) if e else float("nan"),
+            "rise_plus": float(e.group(7)) if e else float("nan")}
 
 
 def table(stored, work, dem, run_again=True, tied=False):
@@ -89,8 +93,8 @@ def table(stored, work, dem, run_again=True, tied=False):
             p = parse(log)
             smooth = "yes" if p["smooth"] else "no" if p["smooth"] is not None else "not checked"
             rows.append([law, name, p["largest"], p["coefficient"], p["above"], p["checked"], smooth, p["chi2"],
-                         p["cusp"], p["margin"], p["rise_minus"], p["rise_plus"], p["rise_coefficient"], p["outside"],
-                         p["quoted"]])
+                         p["cusp"], p["margin"], p["quoted"], p["rise_below"], p["rise_above"], p["rise_bound"],
+                         p["rise_coefficient"], p["rise_minus"], p["rise_plus"]])
     return rows
 
 
@@ -111,20 +115,22 @@ def write(rows, out, tied=False):
              "residuals (step 10⁻⁶ × max(1, |value|)). Disagreement: |difference − column| / max(the two norms); a "
              "cost is not smooth where a column misses by more than 0.01, and its errors are then not determined. "
              "Then (twenty-third round, docs/model.md \"The cost over one quoted error\") χ² one covariance error "
-             "either way along each quoted coefficient's linearised profile, over the quadratic model's rise: the "
-             "worst pair (the coefficient furthest from 1 on either side), and how many quoted coefficients lie "
-             "outside [1/2, 2] on either side; — where no error is quoted. A restart of a calibration fitted before "
-             "that round passes `--coordination free` (C1 of either sign), as it was fitted." +
+             "either way along each quoted coefficient's linearised profile, over the quadratic model's rise: of the "
+             "quoted coefficients, how many rise by less than 1/2 on a side (the error understated), by more than 2, "
+             "or meet a bound within one error, and the coefficient furthest from 1 with its pair (− and +); — where "
+             "no error is quoted. A restart of a calibration fitted before that round passes `--coordination free` "
+             "(C1 of either sign), as it was fitted." +
              (" One jamming fraction (`--jamming shared`, the calibrations under jamming_shared/)." if tied else ""),
              "",
              "| law | calibration | largest disagreement (coefficient) | columns above 1 % | smooth | χ²/dof | fitted "
-             "paths through the cusp | against the margin | χ² over one error, − and + (coefficient) | outside "
-             "[1/2, 2] |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "paths through the cusp | against the margin | errors quoted | below 1/2 | above 2 | bound within | "
+             "furthest from 1: − and + (coefficient) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        scale = (f"{cell(r[10])}, {cell(r[11])} ({r[12]})", f"{r[13]} of {r[14]}") if r[14] else ("—", "—")
+        scale = ((str(r[10]), str(r[11]), str(r[12]), str(r[13]), f"{cell(r[15])}, {cell(r[16])} ({r[14]})")
+                 if r[10] else ("0", "—", "—", "—", "—"))
         lines.append(f"| {r[0]} | {r[1]} | {cell(r[2])} ({cell(r[3])}) | {r[4]} of {r[5]} | {r[6]} | {cell(r[7])} | "
-                     f"{cell(r[8])} | {cell(r[9])} | {scale[0]} | {scale[1]} |")
+                     f"{cell(r[8])} | {cell(r[9])} | " + " | ".join(scale) + " |")
     write_atomic(os.path.join(out, "smoothness.md"), "\n".join(lines) + "\n")
 
 

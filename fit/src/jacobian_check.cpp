@@ -1,5 +1,7 @@
 #include "demfit/jacobian_check.hpp"
 
+#include <Eigen/Dense>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -129,6 +131,26 @@ std::vector<JacobianColumn> check_jacobian(ceres::Problem& problem, const std::v
 
 namespace {
 
+// The covariance with the `held` coordinates fixed: Sigma - Sigma_:H Sigma_HH^+ Sigma_H: (the Gaussian's conditional
+// covariance), their own rows and columns 0. Held coordinates with no variance are left out of H.
+Eigen::MatrixXd conditional_covariance(const std::vector<double>& covariance, std::size_t n, const std::vector<int>& held) {
+  const Eigen::MatrixXd S = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+      covariance.data(), static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
+  std::vector<int> h;
+  for (int k : held)
+    if (k >= 0 && static_cast<std::size_t>(k) < n && S(k, k) > 0) h.push_back(k);
+  if (h.empty()) return S;
+  const Eigen::Index m = static_cast<Eigen::Index>(h.size());
+  Eigen::MatrixXd SH(S.rows(), m), SHH(m, m);
+  for (Eigen::Index j = 0; j < m; ++j) {
+    SH.col(j) = S.col(h[j]);
+    for (Eigen::Index i = 0; i < m; ++i) SHH(i, j) = S(h[i], h[j]);
+  }
+  Eigen::MatrixXd C = S - SH * Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd>(SHH).solve(SH.transpose());
+  for (int k : h) { C.row(k).setZero(); C.col(k).setZero(); }
+  return C;
+}
+
 // 2 cost at the current parameter values: +inf where the residuals are not numbers.
 double chi2_here(ceres::Problem& problem, const std::vector<double*>& blocks) {
   const Evaluated e = evaluate(problem, blocks, false);
@@ -157,19 +179,21 @@ bool move_to(ceres::Problem& problem, const std::vector<double*>& blocks, const 
 
 std::vector<ErrorScale> check_error_scale(ceres::Problem& problem, const std::vector<double*>& blocks,
                                           const std::vector<double>& covariance, const std::vector<int>& coordinates,
-                                          double scale, double fraction) {
+                                          double scale, double fraction, const std::vector<int>& held) {
   std::vector<double> start;
   for (double* b : blocks) start.insert(start.end(), b, b + problem.ParameterBlockSize(b));
   const std::size_t n = start.size();
   const double chi0 = chi2_here(problem, blocks);
   if (!std::isfinite(chi0) || covariance.size() != n * n) return {};
+  const Eigen::MatrixXd cond = conditional_covariance(covariance, n, held);
   std::vector<ErrorScale> out;
   for (int a : coordinates) {
     ErrorScale e;
-    const double saa = covariance[static_cast<std::size_t>(a) * n + a];
-    if (saa > 0) {
+    const double saa = cond(a, a), full_aa = covariance[static_cast<std::size_t>(a) * n + a];
+    if (saa > 0 && full_aa > 0) {
+      e.conditional = std::sqrt(saa / full_aa);
       std::vector<double> d(n);
-      for (std::size_t k = 0; k < n; ++k) d[k] = std::sqrt(scale / saa) * covariance[k * n + a];
+      for (std::size_t k = 0; k < n; ++k) d[k] = std::sqrt(scale / saa) * cond(k, a);
       const double t = fraction, expected = scale * t * t;
       if (move_to(problem, blocks, start, d, -t)) e.minus = (chi2_here(problem, blocks) - chi0) / expected;
       if (move_to(problem, blocks, start, d, +t)) e.plus = (chi2_here(problem, blocks) - chi0) / expected;
@@ -180,6 +204,35 @@ std::vector<ErrorScale> check_error_scale(ceres::Problem& problem, const std::ve
     out.push_back(e);
   }
   return out;
+}
+
+int hold_on_bounds(ceres::Problem& problem, const std::vector<double*>& blocks,
+                   const std::vector<std::pair<double*, int>>& extra) {
+  int added = 0;
+  for (double* b : blocks) {
+    if (problem.IsParameterBlockConstant(b)) continue;
+    const int n = problem.ParameterBlockSize(b);
+    const std::vector<int> free = tangent_entries(problem, b);
+    if (free.empty() && problem.GetManifold(b)) continue;   // another manifold: not ours to change
+    std::vector<bool> hold(n, true);
+    for (int i : free) hold[i] = false;
+    int here = 0;
+    for (int i : free) {
+      const double v = b[i], tol = 1e-9 * std::max(1.0, std::fabs(v));
+      bool on = std::fabs(v - problem.GetParameterLowerBound(b, i)) <= tol ||
+                std::fabs(v - problem.GetParameterUpperBound(b, i)) <= tol;
+      for (const auto& e : extra) on = on || (e.first == b && e.second == i);
+      if (on) { hold[i] = true; ++here; }
+    }
+    if (here == 0) continue;
+    std::vector<int> held;
+    for (int i = 0; i < n; ++i)
+      if (hold[i]) held.push_back(i);
+    if (static_cast<int>(held.size()) == n) problem.SetParameterBlockConstant(b);
+    else problem.SetManifold(b, new ceres::SubsetManifold(n, held));
+    added += here;
+  }
+  return added;
 }
 
 }  // namespace demfit

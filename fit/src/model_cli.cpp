@@ -1013,41 +1013,67 @@ void report_jacobian_check(const Calibration& cal) {
             << num(kRoughAbove) << ")\n";
 }
 
+// How the quoted coefficients' costs over one covariance error fall (report_error_scale): below 1/kQuadraticWithin
+// on either side (the error understated), above kQuadraticWithin, a bound within the error; and the one furthest from 1.
+struct ErrorScaleCount {
+  int quoted = 0, below = 0, above = 0, bound = 0, furthest = -1;
+};
+ErrorScaleCount count_error_scale(const Calibration& cal, const std::vector<bool>& quoted) {
+  ErrorScaleCount c;
+  double furthest = -1;
+  for (std::size_t i = 0; i < quoted.size(); ++i) {
+    if (!quoted[i]) continue;
+    ++c.quoted;
+    const ErrorScale& e = cal.error_scale[i];
+    bool below = false, above = false, bound = false;
+    for (double r : {e.minus, e.plus}) {
+      bound = bound || std::isnan(r);
+      below = below || r < 1 / kQuadraticWithin;
+      above = above || r > kQuadraticWithin;
+      const double dev = r > 0 ? std::fabs(std::log(r)) : std::isnan(r) ? -1 : std::numeric_limits<double>::infinity();
+      if (dev > furthest) { furthest = dev; c.furthest = static_cast<int>(i); }
+    }
+    c.below += below; c.above += above; c.bound += bound;
+  }
+  return c;
+}
+
 // The cost over one covariance error either way (Calibration::error_scale): error_scale.{csv,md,tex,json}, a row per
-// coefficient with a covariance error, and one line on stderr; nothing where the check did not run.
+// checked coefficient, and one line on stderr over those parameters.csv quotes an error for; nothing where the check
+// did not run.
 void report_error_scale(const Calibration& cal, const fs::path& out) {
-  Table t({"parameter", "value", "se_covariance", "quoted", "chi2_rise_minus [-]", "chi2_rise_plus [-]"});
-  int worst = -1, outside = 0, counted = 0;
-  double worst_dev = -1;
+  Table t({"parameter", "value", "se_covariance", "quoted", "chi2_rise_minus [-]", "chi2_rise_plus [-]",
+           "curvature [-]", "offset [se]", "se_held_over_se [-]"});
+  std::vector<bool> quoted(cal.error_scale.size(), false);
   for (std::size_t i = 0; i < cal.error_scale.size() && i < cal.value.size(); ++i) {
     const ErrorScale& e = cal.error_scale[i];
-    if (std::isnan(e.minus) && std::isnan(e.plus)) continue;
-    const bool quoted = std::isfinite(cal.se_cov[i]) && cal.errors_not_determined().empty();
-    t.add_row({cal.names[i], num(cal.value[i]), num(cal.se_cov[i]), quoted ? "yes" : "no", num(e.minus, 4),
-               num(e.plus, 4)});
-    if (!quoted) continue;
-    ++counted;
-    bool off = false;
-    for (double r : {e.minus, e.plus}) {
-      const double dev = r > 0 ? std::fabs(std::log(r)) : std::numeric_limits<double>::infinity();
-      off = off || !(dev <= std::log(kQuadraticWithin));
-      if (!(dev <= worst_dev)) { worst_dev = dev; worst = static_cast<int>(i); }
-    }
-    outside += off;
+    if (std::isnan(e.conditional)) continue;   // not checked
+    quoted[i] = std::isfinite(cal.se()[i]) && cal.errors_not_determined().empty();
+    // a quadratic about a minimum offset by delta errors rises by 1 -+ 2 delta: the mean is its curvature, over the
+    // quadratic model's, and (minus - plus)/4 where its minimum lies along the profile
+    t.add_row({cal.names[i], num(cal.value[i]), num(cal.se_cov[i]), quoted[i] ? "yes" : "no", num(e.minus, 4),
+               num(e.plus, 4), num((e.minus + e.plus) / 2, 4), num((e.minus - e.plus) / 4, 3), num(e.conditional, 4)});
   }
   if (t.rows.empty()) return;
   write_table_all(t, (out / "error_scale").string(),
-                  "The cost over one covariance error: chi^2 one quoted covariance error either way along each "
-                  "coefficient's linearised profile (the others at the quadratic model's conditional optimum), over the "
-                  "quadratic model's rise max(1, chi2/dof); 1 where the cost is quadratic over the error, nan where a "
-                  "bound lies within it, inf where the model is not evaluated there; quoted: whether parameters.csv "
-                  "quotes this error (docs/model.md, \"The cost over one quoted error\")");
-  if (worst < 0) return;
-  const ErrorScale& w = cal.error_scale[worst];
-  std::cerr << "dem model: the cost over one covariance error either way: chi2 rises by " << num(w.minus, 3) << " and "
-            << num(w.plus, 3) << " of the quadratic's at worst (" << cal.names[worst] << "); " << outside << " of "
-            << counted << " quoted coefficients outside [1/" << num(kQuadraticWithin) << ", "
-            << num(kQuadraticWithin) << "] (error_scale.csv)\n";
+                  "The cost over one covariance error: chi^2 one covariance error either way along each checked "
+                  "coefficient's linearised profile (the other checked coefficients at the quadratic model's conditional "
+                  "optimum; the free ones that quote no error, on a bound or not determined, held where they are), over "
+                  "the quadratic model's rise max(1, chi2/dof); 1 where the cost is quadratic over the error, below 1 "
+                  "where it is flatter (the error understated), nan where a bound lies within it, inf where the model "
+                  "is not evaluated there; curvature: their mean (1 for the quadratic model's); offset: (minus - plus)/4, "
+                  "where a quadratic rising so has its minimum, in errors along the profile (0 at a "
+                  "minimum); se_held_over_se: that error with the unquoted ones held, over se_covariance; "
+                  "quoted: whether parameters.csv quotes an error for it (docs/model.md, \"The cost over one quoted "
+                  "error\")");
+  const ErrorScaleCount c = count_error_scale(cal, quoted);
+  if (c.furthest < 0) return;
+  const ErrorScale& w = cal.error_scale[c.furthest];
+  std::cerr << "dem model: the cost over one covariance error either way: of " << c.quoted << " quoted coefficients "
+            << c.below << " rise by less than 1/" << num(kQuadraticWithin) << " of the quadratic's (the error "
+            << "understated), " << c.above << " by more than " << num(kQuadraticWithin) << ", " << c.bound
+            << " reach a bound within it; furthest " << cal.names[c.furthest] << " (" << num(w.minus, 3) << ", "
+            << num(w.plus, 3) << ") (error_scale.csv)\n";
 }
 
 // One family's held-out scores (`--family group|extended` with the jackknife; `auto` writes them in

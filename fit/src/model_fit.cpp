@@ -769,23 +769,6 @@ void jacobian_smoothness(ceres::Problem& problem, std::vector<double>& isob, std
   }
 }
 
-// The cost over one quoted covariance error either way (check_error_scale), into cal.error_scale, for every coefficient
-// with a covariance error; the rules that later take errors away leave these entries to be read as not quoted.
-void error_scale(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
-                 std::vector<double>& ext, const CalibrationOptions& o, bool X, const std::vector<double>& full,
-                 double scale, Calibration& cal) {
-  cal.error_scale.assign(cal.value.size(), ErrorScale{});
-  if (!o.check_jacobian) return;
-  std::vector<double*> blocks = {isob.data(), shear.data()};
-  if (X) blocks.push_back(ext.data());
-  std::vector<int> quoted;
-  for (int a = 0; a < static_cast<int>(cal.se_cov.size()); ++a)
-    if (std::isfinite(cal.se_cov[a]) && cal.se_cov[a] > 0) quoted.push_back(a);
-  const std::vector<ErrorScale> got = check_error_scale(problem, blocks, full, quoted, scale);
-  for (std::size_t k = 0; k < got.size(); ++k)
-    if (quoted[k] < static_cast<int>(cal.error_scale.size())) cal.error_scale[quoted[k]] = got[k];
-}
-
 // Where a quoted coefficient's column disagrees: cal.rough and a warning. The covariance rests on that Jacobian, and
 // the jackknife's refits, which start here, on its steps. Coefficients without a quoted error are not counted (their
 // disagreement becomes nan): on a bound, or on a kink of a law, the covariance does not describe them anyway, and the
@@ -823,9 +806,10 @@ void settle_errors(Calibration& cal) {
   null_directions(cal);
 }
 
-// Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof).
-void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
-                       std::vector<double>& ext, const CalibrationOptions& o, bool X, Calibration& cal) {
+// Covariance of all parameters (isotropic block zero when held), scaled by max(1, chi2/dof); returns it unscaled,
+// row-major over the reported coefficients (empty where it could not be computed).
+std::vector<double> covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
+                                      std::vector<double>& ext, const CalibrationOptions& o, bool X, Calibration& cal) {
   const int np = kNumIso + kNumShear + (X ? ext_block(o) : 0);
   cal.se_cov.assign(np, kNaN);
   cal.corr.assign(np, std::vector<double>(np, kNaN));
@@ -836,8 +820,9 @@ void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::
   std::vector<const double*> blocks = {shear.data()};
   if (X) blocks.push_back(ext.data());
   if (o.fit_isotropic) blocks.insert(blocks.begin(), isob.data());
+  std::vector<double> full;
   if (covariance_safe(problem) && cov.Compute(blocks, &problem)) {
-    std::vector<double> full(np * np, 0.0);
+    full.assign(np * np, 0.0);
     if (o.fit_isotropic) {
       cov.GetCovarianceMatrix(blocks, full.data());
     } else {
@@ -857,12 +842,33 @@ void covariance_errors(ceres::Problem& problem, std::vector<double>& isob, std::
         const double d = std::sqrt(full[a * np + a] * full[b * np + b]);
         cal.corr[a][b] = d > 0 ? full[a * np + b] / d : kNaN;
       }
-    error_scale(problem, isob, shear, ext, o, X, full, scale, cal);
   } else {
     cal.warnings.push_back("covariance could not be computed (rank-deficient or non-finite Jacobian): some parameters are not "
                            "determined by these curves");
   }
   jacobian_smoothness(problem, isob, shear, ext, o, X, cal);
+  return full;
+}
+
+// The cost over one quoted covariance error either way (check_error_scale), into cal.error_scale, once the errors to
+// quote are settled: every coefficient with a quoted covariance error stepped along its linearised profile with the
+// free coefficients that quote none (on a bound, kinked, not determined) held where they are.
+void error_scale(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
+                 std::vector<double>& ext, const CalibrationOptions& o, bool X, const std::vector<double>& full,
+                 Calibration& cal) {
+  cal.error_scale.assign(cal.value.size(), ErrorScale{});
+  const std::size_t n = cal.se_cov.size();
+  if (!o.check_jacobian || full.size() != n * n) return;
+  std::vector<double*> blocks = {isob.data(), shear.data()};
+  if (X) blocks.push_back(ext.data());
+  std::vector<int> quoted, held;
+  for (int a = 0; a < static_cast<int>(n); ++a) {
+    if (std::isfinite(cal.se_cov[a]) && cal.se_cov[a] > 0) quoted.push_back(a);
+    else if (full[a * n + a] > 0) held.push_back(a);
+  }
+  const std::vector<ErrorScale> got =
+      check_error_scale(problem, blocks, full, quoted, std::max(1.0, cal.chi2_dof()), 1.0, held);
+  for (std::size_t k = 0; k < got.size(); ++k) cal.error_scale[quoted[k]] = got[k];
 }
 
 // Shear and extension coefficients that end on a bound of set_bounds: no standard error (the covariance describes the
@@ -916,8 +922,9 @@ void coordination_warning(const IsoData& iso, const CalibrationOptions& o, const
 
 /// Held isotropic coefficients have no error of their own. With one jamming fraction (`tied`) the fitted law is
 /// written with nu_cC = nu_c (the same law as the tie's) and nu_c's error.
-void held_isotropic_errors(Calibration& cal, const std::set<int>& held, bool tied) {
+void held_errors(Calibration& cal, const std::set<int>& held, const std::vector<int>& held_x, bool tied) {
   for (int i : held) cal.se_cov[i] = kNaN;
+  for (int i : held_x) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
   if (!tied) return;
   cal.shared_jamming = true;
   cal.params.nu_cC = cal.params.nu_c;
@@ -1142,6 +1149,31 @@ ceres::Solver::Summary solve(ceres::Problem& problem, int max_iterations) {
   return sum;
 }
 
+/// The fit, and where it ends with coefficients on a bound of the problem, or with nu_cC on the isotropic branch's lowest
+/// jammed point (the coordination law's onset on a data point: a kink of the cost), again with those held where they
+/// are (hold_on_bounds): Levenberg-Marquardt's projected steps stall there before the free coefficients reach their
+/// minimum (issue 31, twenty-third round; docs/model.md, "The cost over one quoted error"). Returns the last summary.
+ceres::Solver::Summary solve_on_face(ceres::Problem& problem, std::vector<double*> blocks, std::vector<double>& isob,
+                                     const IsoData& iso, const CalibrationOptions& o, const std::set<int>& held,
+                                     std::vector<std::string>& notes) {
+  const ceres::Solver::Summary first = solve(problem, o.max_iterations);
+  if (!first.IsSolutionUsable()) return first;
+  std::vector<std::pair<double*, int>> kink;
+  if (o.fit_isotropic && !o.shared_jamming && !held.count(kNuCC) && !iso.nu.empty() &&
+      std::fabs(isob[kNuCC] - *std::min_element(iso.nu.begin(), iso.nu.end())) < 1e-9)
+    kink.emplace_back(isob.data(), kNuCC);
+  const int n = hold_on_bounds(problem, blocks, kink);
+  if (n == 0) return first;
+  const ceres::Solver::Summary again = solve(problem, o.max_iterations);
+  notes.push_back("the fit ended with " + std::to_string(n) + " coefficient" + (n > 1 ? "s" : "") + " on a bound" +
+                  (kink.empty() ? "" : " or on the kink of nu_cC at the branch's lowest point") + " at chi2 " +
+                  fmt(2 * first.final_cost, 8) + ", and went on with " + (n > 1 ? "them" : "it") + " held there to " +
+                  fmt(2 * again.final_cost, 8) + " (" + std::to_string(again.iterations.size()) + " iterations; "
+                  "Levenberg-Marquardt's projected steps stall at a bound; docs/model.md, \"A fit that stopped on "
+                  "a bound\")");
+  return again;
+}
+
 /// The start's parameters with the fitted blocks and the options' family, surface, rules and limit.
 Parameters fitted_params(const Parameters& start, const std::vector<double>& isob, const std::vector<double>& shear,
                          const std::vector<double>& ext, const CalibrationOptions& o, bool X) {
@@ -1339,9 +1371,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   const int n_p = start_pressures(curves, paths);
   hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, o.excess_relaxes, n_p, o.hold_ext);
 
-  const ceres::Solver::Summary sum = solve(problem, o.max_iterations);
-
   Calibration cal;
+  const ceres::Solver::Summary sum = solve_on_face(problem, blocks_all, isob, iso, o, held, cal.warnings);
   cal.ok = sum.IsSolutionUsable() && sum.termination_type == ceres::CONVERGENCE;
   cal.message = sum.BriefReport();
   if (sum.termination_type == ceres::FAILURE) cal.message += " (" + sum.message + ")";   // why, in starts.md
@@ -1362,14 +1393,14 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   if (X)
     for (int i = 0; i < n_ext; ++i) { cal.names.push_back(ext_name(i)); cal.value.push_back(ext[i]); }
 
-  covariance_errors(problem, isob, shear, ext, o, X, cal);   // and the Jacobian's check (jacobian_smoothness)
-  held_isotropic_errors(cal, held, o.shared_jamming);
-  for (int i : held_x) cal.se_cov[kNumIso + kNumShear + i] = kNaN;
+  const std::vector<double> cov = covariance_errors(problem, isob, shear, ext, o, X, cal);   // and jacobian_smoothness
+  held_errors(cal, held, held_x, o.shared_jamming);
   calibration_warnings(curves, paths, iso, o, isob, numin, one_nu, X, cal);
   bound_warnings(problem, shear, ext, X, n_ext, cal);
   for (int i : held_shear(X, false, state_volume, o.excess_relaxes))   // s_max_b at 0, beta_p's slope, beta_p unless it acts
     cal.se_cov[kNumIso + i] = kNaN;
   settle_errors(cal);
+  error_scale(problem, isob, shear, ext, o, X, cov, cal);
   if (state_volume) drop_unread_for_volume_state(cal, weighted);
   else if (weighted && !cal.params.state_limit) drop_entries(cal, kNumIso + kNumShear + kNPsiA, 2);   // n_psi: not in this law
   if (state_lode && !weighted) drop_entries(cal, kNumIso + kNumShear + kLnDeltaW, 2);   // the `Weighted` pair: unread

@@ -1,7 +1,8 @@
 // check_jacobian (demfit/jacobian_check.hpp): a smooth cost's Jacobian agrees with central differences, a jump within
 // one difference step of the point is found in its own coefficient's column only, the values are restored bit for
 // bit, a step beyond a bound is taken one-sided, and an entry a SubsetManifold holds is not checked. check_error_scale:
-// a linear least-squares cost rises by exactly the quadratic model's over one error in each direction, an exponential
+// a linear least-squares cost rises by exactly the quadratic model's over one error in each direction (with a
+// coefficient held too, along the conditional covariance), an exponential
 // model by its closed form, and a bound within the error gives nan on that side.
 #include <gtest/gtest.h>
 
@@ -117,6 +118,19 @@ TEST(ErrorScale, ALinearCostRisesByTheQuadraticsOverOneErrorEitherWay) {
       }
     }
   EXPECT_EQ(std::memcmp(before.data(), x.data(), sizeof(double) * 2), 0) << "the values bit for bit";
+  // x1 held (as on a bound): x0's conditional variance is 1/(A^T A)_00 = 1/S1, and x0 alone moves by that error
+  const auto held = demfit::check_error_scale(problem, {x.data()}, cov, {0}, 2.0, 1.0, {1});
+  ASSERT_EQ(held.size(), 1u);
+  EXPECT_NEAR(held[0].conditional, std::sqrt((1 / S1) / cov[0]), 1e-12);
+  EXPECT_LT(held[0].conditional, 0.9) << "the intercept and slope are correlated here";
+  EXPECT_NEAR(held[0].minus, 1.0, 1e-9);
+  EXPECT_NEAR(held[0].plus, 1.0, 1e-9);
+  problem.SetParameterUpperBound(x.data(), 1, x[1] + 1e-3 * std::sqrt(cov[3]));   // within x1's reach, not x0's
+  const auto free = demfit::check_error_scale(problem, {x.data()}, cov, {0}, 1.0);
+  EXPECT_TRUE(std::isnan(free[0].minus)) << "unheld, x0's profile down raises x1 (cov < 0) across its bound";
+  EXPECT_NEAR(free[0].plus, 1.0, 1e-9);
+  const auto kept = demfit::check_error_scale(problem, {x.data()}, cov, {0}, 1.0, 1.0, {1});
+  EXPECT_NEAR(kept[0].minus, 1.0, 1e-9) << "held, x1 stays";
 }
 
 // r_i = e^x - y_i: at the optimum e^x = mean(y) = m, J^T J = n m^2, sigma = 1/(sqrt(n) m), and chi^2 - chi^2_min =
@@ -159,3 +173,48 @@ TEST(ErrorScale, AnExponentialRisesByItsClosedFormAndABoundWithinTheErrorIsNotCr
 
 }  // namespace
 
+
+namespace {
+
+// hold_on_bounds: an entry on its bound is held from then on (with those held before, and an extra one), a block all
+// of whose entries are held becomes constant, and a second fit on that face reaches the closed-form minimum of the
+// free entries with the bound's held: x0 = mean(y - b t) for r = x0 + x1 t - y with x1 held at b.
+TEST(HoldOnBounds, EntriesOnABoundAreHeldAndTheFaceIsSolvedExactly) {
+  const double ts[] = {0.0, 0.5, 1.0, 2.0, 3.5}, ys[] = {0.1, 0.9, 1.7, 4.2, 6.8};
+  std::vector<double> x = {0.0, 1.0};
+  const double b = 1.5;   // the unconstrained slope is 1.9: the bound is active
+  ceres::Problem problem;
+  for (int i = 0; i < 5; ++i)
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<Line, 1, 2>(new Line{ts[i], ys[i]}), nullptr, x.data());
+  problem.SetParameterUpperBound(x.data(), 1, b);
+  x[1] = b;
+  EXPECT_EQ(demfit::hold_on_bounds(problem, {x.data()}), 1);
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.function_tolerance = so.gradient_tolerance = so.parameter_tolerance = 1e-15;
+  ceres::Solver::Summary sum;
+  ceres::Solve(so, &problem, &sum);
+  double want = 0;
+  for (int i = 0; i < 5; ++i) want += (ys[i] - b * ts[i]) / 5;
+  EXPECT_NEAR(x[0], want, 1e-7);   // Levenberg-Marquardt's damping converges to it geometrically
+  EXPECT_EQ(x[1], b) << "held bit for bit";
+  EXPECT_EQ(demfit::hold_on_bounds(problem, {x.data()}), 0) << "nothing more on a bound";
+  EXPECT_EQ(demfit::hold_on_bounds(problem, {x.data()}, {{x.data(), 0}}), 1) << "an extra entry";
+  EXPECT_TRUE(problem.IsParameterBlockConstant(x.data())) << "every entry held: constant";
+
+  std::vector<double> y3 = {2.0, 0.7, -0.3};   // a block held at {2} before, entry 0 on its lower bound
+  ceres::Problem p3;
+  for (int i = 0; i < 30; ++i) {
+    const double t = 0.1 * i;
+    p3.AddResidualBlock(new ceres::AutoDiffCostFunction<Decay, 1, 3>(
+                            new Decay{t, 2.1 * std::exp(-0.65 * t) - 0.28 * t, 1e300, 0.0}),
+                        nullptr, y3.data());
+  }
+  p3.SetManifold(y3.data(), new ceres::SubsetManifold(3, {2}));
+  p3.SetParameterLowerBound(y3.data(), 0, 2.0);
+  EXPECT_EQ(demfit::hold_on_bounds(p3, {y3.data()}), 1);
+  ASSERT_NE(p3.GetManifold(y3.data()), nullptr);
+  EXPECT_EQ(p3.GetManifold(y3.data())->TangentSize(), 1) << "entries 0 and 2 held, 1 free";
+}
+
+}  // namespace

@@ -767,7 +767,11 @@ def test_a_cost_that_is_not_smooth_at_its_optimum_quotes_no_errors(tmp_path):
     assert sorted(n for n, x in scale.items() if x["quoted"] == "yes") == sorted(quoted)
     assert got["quoted"] == len(quoted) and got["rise_coefficient"] in quoted, got
     worst = scale[got["rise_coefficient"]]
-    assert float(worst["chi2_rise_minus [-]"]) == pytest.approx(got["rise_minus"], rel=1e-2), (worst, got)
+    assert float(worst["chi2_rise_minus [-]"]) == pytest.approx(got["rise_minus"], rel=1e-2, nan_ok=True), (worst, got)
+    rises = [(float(scale[n]["chi2_rise_minus [-]"]), float(scale[n]["chi2_rise_plus [-]"])) for n in quoted]
+    assert got["rise_below"] == sum(1 for m, p in rises if m < 0.5 or p < 0.5), (rises, got)
+    assert got["rise_above"] == sum(1 for m, p in rises if m > 2 or p > 2), (rises, got)
+    assert got["rise_bound"] == sum(1 for m, p in rises if math.isnan(m) or math.isnan(p)), (rises, got)
     assert ms.parse(str(tmp_path / "rough.log"))["quoted"] == 0   # no error quoted on the rough cost
 
 
@@ -831,14 +835,15 @@ def test_the_smoothness_table_restarts_each_calibration_with_its_own_options(tmp
         f = tmp_path / f"p{c1}.csv"
         f.write_text(f"parameter,law,value\np0,x,0.05\nC1,x,{c1}\n")
         assert ms.coordination_free(str(f)) is free, c1
-    rows_ = [["bounded", "mu_1/dense", float("inf"), "p0", 20, 20, "no", 17.0, "", "TC_s3_dense", float("nan"),
-              float("nan"), "", 0, 0],
-             ["relaxing", "dense", 3e-7, "n_F_b", 0, 21, "yes", 7.58, "TC_s3_dense", "", 0.31, 15.7, "C0", 5, 19]]
+    rows_ = [["bounded", "mu_1/dense", float("inf"), "p0", 20, 20, "no", 17.0, "", "TC_s3_dense", 0, 0, 0, 0, "",
+              float("nan"), float("nan")],
+             ["relaxing", "dense", 3e-7, "n_F_b", 0, 21, "yes", 7.58, "TC_s3_dense", "", 19, 1, 5, 2, "C0", 0.31, 15.7]]
     ms.write(rows_, str(tmp_path))
     md = (tmp_path / "smoothness.md").read_text()
     assert ("| bounded | mu_1/dense | inf (a stepped point not evaluated) (p0) | 20 of 20 | no | 17 | — | TC_s3_dense "
-            "| — | — |") in md
-    assert "| relaxing | dense | 3e-07 (n_F_b) | 0 of 21 | yes | 7.58 | TC_s3_dense | — | 0.31, 15.7 (C0) | 5 of 19 |" in md
+            "| 0 | — | — | — | — |") in md
+    assert ("| relaxing | dense | 3e-07 (n_F_b) | 0 of 21 | yes | 7.58 | TC_s3_dense | — | 19 | 1 | 5 | 2 | "
+            "0.31, 15.7 (C0) |") in md
     back = read(tmp_path / "smoothness.csv")
     assert back[0]["largest_disagreement [-]"] == "inf" and back[1]["smooth"] == "yes"
 

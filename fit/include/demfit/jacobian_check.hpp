@@ -8,6 +8,7 @@
 #include <ceres/ceres.h>
 
 #include <limits>
+#include <utility>
 #include <vector>
 
 namespace demfit {
@@ -30,6 +31,16 @@ struct JacobianColumn {
 std::vector<JacobianColumn> check_jacobian(ceres::Problem& problem, const std::vector<double*>& blocks,
                                            double rel_step = 1e-6);
 
+/// Every free entry of `blocks` that sits on a bound of the problem (within 1e-9 max(1, |value|)), and the `extra`
+/// (block, entry) pairs, held from now on: each such block gets a SubsetManifold over the entries held before (by a
+/// SubsetManifold) and these. Constant blocks and blocks with another manifold are left alone. Returns how many entries
+/// it added. Levenberg-Marquardt with bounds projects its steps onto the box, and where a coefficient sits on a bound
+/// with the cost falling beyond it, the projected steps can shrink until the cost's relative change passes the function
+/// tolerance with the free coefficients short of their minimum (twenty-third round); a second fit on that face, with
+/// the bound's coefficients held, reaches it.
+int hold_on_bounds(ceres::Problem& problem, const std::vector<double*>& blocks,
+                   const std::vector<std::pair<double*, int>>& extra = {});
+
 /// The cost over one quoted error (twenty-third round; docs/model.md, "The cost over one quoted error"). A covariance
 /// error rests on the cost being quadratic over that error, not only smooth at the optimum's step. Along coordinate
 /// a's linearised profile, d = sqrt(scale) Sigma e_a / sqrt(Sigma_aa) (the other coefficients at their conditional
@@ -40,15 +51,19 @@ std::vector<JacobianColumn> check_jacobian(ceres::Problem& problem, const std::v
 /// there are not numbers.
 struct ErrorScale {
   double minus = std::numeric_limits<double>::quiet_NaN(), plus = std::numeric_limits<double>::quiet_NaN();
+  /// sqrt(Sigma'_aa / Sigma_aa): the error with the `held` coordinates fixed over the one quoted (1 with none held)
+  double conditional = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// `covariance` is n x n, row-major, over the concatenated entries of `blocks` (n their total size), unscaled
 /// ((J^T J)^-1); each of `coordinates` (indices into that concatenation, with a positive diagonal) is stepped as above.
 /// With `fraction` t the steps are x -/+ t d and the rises are divided by t^2 (-> 1 as t -> 0 wherever the Jacobian is
-/// the residuals' derivative and their second derivatives are small). The problem's parameter values are restored bit
-/// for bit. Empty if the problem cannot be evaluated where it is.
+/// the residuals' derivative and their second derivatives are small). `held` coordinates (e.g. coefficients on a bound
+/// of the problem) stay where they are: Sigma is then their conditional covariance Sigma_FF - Sigma_FH Sigma_HH^+
+/// Sigma_HF, and d and the expected rise are built from it (ErrorScale::conditional says how much smaller that error
+/// is). The problem's parameter values are restored bit for bit. Empty if the problem cannot be evaluated where it is.
 std::vector<ErrorScale> check_error_scale(ceres::Problem& problem, const std::vector<double*>& blocks,
                                           const std::vector<double>& covariance, const std::vector<int>& coordinates,
-                                          double scale, double fraction = 1.0);
+                                          double scale, double fraction = 1.0, const std::vector<int>& held = {});
 
 }  // namespace demfit
