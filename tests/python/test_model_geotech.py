@@ -886,11 +886,11 @@ def test_the_coordination_law_rises_unless_told_otherwise(tmp_path):
     src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
     falling = mirrored_coordination(pathlib.Path(src), tmp_path / "falling", 0.5)
 
-    def fit(data, name, *extra):
+    def fit(data, name, *extra, converged=True):
         out = tmp_path / name
         r = subprocess.run([DEM, "model", str(data), "--family", "extended", "--no-jackknife", "--no-plots", "--out",
                             str(out), *extra], capture_output=True, text=True, timeout=600)
-        assert r.returncode == 0, r.stderr
+        assert r.returncode in ((0,) if converged else (0, 1)), r.stderr   # 1: not converged, its tables written
         return {x["parameter"]: x for x in read(out / "parameters.csv")}, r.stderr
 
     rising, _ = fit(src, "rising")
@@ -898,8 +898,10 @@ def test_the_coordination_law_rises_unless_told_otherwise(tmp_path):
     assert float(rising["C1"]["value"]) > 0.5
     assert (tmp_path / "rising" / "parameters.csv").read_bytes() == (tmp_path / "free" / "parameters.csv").read_bytes()
 
-    free_f, _ = fit(falling, "falling_free", "--coordination", "free")
-    bound_f, err = fit(falling, "falling_rising")
+    # the mirrored branch is not data a law was made for: these two stop at an iteration limit, where the sign of C1 is
+    # settled already
+    free_f, _ = fit(falling, "falling_free", "--coordination", "free", "--max-iterations", "40", converged=False)
+    bound_f, err = fit(falling, "falling_rising", "--max-iterations", "40", converged=False)
     assert float(free_f["C1"]["value"]) < -0.5, free_f["C1"]
     assert float(bound_f["C1"]["value"]) == 0.0, bound_f["C1"]
     for name in ("C1", "nu_cC", "alpha"):
