@@ -982,7 +982,8 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
       cal.warnings.push_back("nu_cC sits on the lowest jammed point of the isotropic branch (" + std::to_string(lowest) +
                              "): the power law's onset is set by where the branch data start, no standard error quoted");
     }
-  }  coordination_warning(iso, o, isob, cal);
+  }
+  coordination_warning(iso, o, isob, cal);
 }
 
 /// The calibration's inputs checked (curves or paths with start values, held isotropic indices,
@@ -1152,7 +1153,7 @@ ceres::Solver::Summary solve(ceres::Problem& problem, int max_iterations) {
 /// The fit, and where it ends with coefficients on a bound of the problem, or with nu_cC on the isotropic branch's lowest
 /// jammed point (the coordination law's onset on a data point: a kink of the cost), again with those held where they
 /// are (hold_on_bounds): Levenberg-Marquardt's projected steps stall there before the free coefficients reach their
-/// minimum (issue 31, twenty-third round; docs/model.md, "The cost over one quoted error"). Returns the last summary.
+/// minimum (issue 31, twenty-third round; docs/model.md, "A fit that stopped on a bound"). Returns the last summary.
 ceres::Solver::Summary solve_on_face(ceres::Problem& problem, std::vector<double*> blocks, std::vector<double>& isob,
                                      const IsoData& iso, const CalibrationOptions& o, const std::set<int>& held,
                                      std::vector<std::string>& notes) {
