@@ -893,8 +893,9 @@ def test_the_coordination_law_rises_unless_told_otherwise(tmp_path):
         assert r.returncode in ((0,) if converged else (0, 1)), r.stderr   # 1: not converged, its tables written
         return {x["parameter"]: x for x in read(out / "parameters.csv")}, r.stderr
 
-    rising, _ = fit(src, "rising")
-    free, _ = fit(src, "free", "--coordination", "free")
+    # 30 iterations, converged or not: the two stop at the same point bit for bit, C1 well above 0 by then
+    rising, _ = fit(src, "rising", "--max-iterations", "30", converged=False)
+    free, _ = fit(src, "free", "--coordination", "free", "--max-iterations", "30", converged=False)
     assert float(rising["C1"]["value"]) > 0.5
     assert (tmp_path / "rising" / "parameters.csv").read_bytes() == (tmp_path / "free" / "parameters.csv").read_bytes()
 
