@@ -32,9 +32,11 @@ Evaluated evaluate(ceres::Problem& problem, const std::vector<double*>& blocks, 
   return e;
 }
 
+}  // namespace
+
 // The ambient entry of each tangent coordinate of a block: the identity, or a SubsetManifold's selection (its
 // PlusJacobian holds one 1 per column); empty for any other manifold (not checked).
-std::vector<int> tangent_entries(const ceres::Problem& problem, double* block) {
+std::vector<int> free_entries(const ceres::Problem& problem, double* block) {
   const int n = problem.ParameterBlockSize(block);
   const ceres::Manifold* m = problem.GetManifold(block);
   std::vector<int> out;
@@ -56,6 +58,8 @@ std::vector<int> tangent_entries(const ceres::Problem& problem, double* block) {
   }
   return out;
 }
+
+namespace {
 
 double distance(const std::vector<double>& a, const std::vector<double>& b) {
   double s = 0;
@@ -104,7 +108,7 @@ std::vector<JacobianColumn> check_jacobian(ceres::Problem& problem, const std::v
   if (!e0.ok) return out;
   std::size_t col = 0;
   for (std::size_t b = 0; b < blocks.size(); ++b) {
-    const std::vector<int> entries = tangent_entries(problem, blocks[b]);
+    const std::vector<int> entries = free_entries(problem, blocks[b]);
     const ceres::Manifold* m = problem.GetManifold(blocks[b]);
     const std::size_t width = m ? m->TangentSize() : problem.ParameterBlockSize(blocks[b]);
     for (std::size_t k = 0; k < entries.size() && col + k < e0.cols.size(); ++k) {
@@ -129,36 +133,35 @@ std::vector<JacobianColumn> check_jacobian(ceres::Problem& problem, const std::v
   return out;
 }
 
-namespace {
-
-// The covariance with the `held` coordinates fixed: Sigma - Sigma_:H Sigma_HH^+ Sigma_H: (the Gaussian's conditional
-// covariance), their own rows and columns 0. Held coordinates with no variance are left out of H.
-Eigen::MatrixXd conditional_covariance(const std::vector<double>& covariance, std::size_t n, const std::vector<int>& held) {
-  const Eigen::MatrixXd S = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
-      covariance.data(), static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
+std::vector<double> conditional_covariance(const std::vector<double>& covariance, const std::vector<int>& held) {
+  const std::size_t n = static_cast<std::size_t>(std::llround(std::sqrt(static_cast<double>(covariance.size()))));
+  using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  const RowMajor S = Eigen::Map<const RowMajor>(covariance.data(), static_cast<Eigen::Index>(n),
+                                                static_cast<Eigen::Index>(n));
   std::vector<int> h;
   for (int k : held)
     if (k >= 0 && static_cast<std::size_t>(k) < n && S(k, k) > 0) h.push_back(k);
-  if (h.empty()) return S;
+  if (h.empty()) return covariance;
   const Eigen::Index m = static_cast<Eigen::Index>(h.size());
   Eigen::MatrixXd SH(S.rows(), m), SHH(m, m);
   for (Eigen::Index j = 0; j < m; ++j) {
     SH.col(j) = S.col(h[j]);
     for (Eigen::Index i = 0; i < m; ++i) SHH(i, j) = S(h[i], h[j]);
   }
-  Eigen::MatrixXd C = S - SH * Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd>(SHH).solve(SH.transpose());
+  RowMajor C = S - SH * Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd>(SHH).solve(SH.transpose());
   for (int k : h) { C.row(k).setZero(); C.col(k).setZero(); }
-  return C;
+  return std::vector<double>(C.data(), C.data() + C.size());
 }
 
-// 2 cost at the current parameter values: +inf where the residuals are not numbers.
-double chi2_here(ceres::Problem& problem, const std::vector<double*>& blocks) {
+double chi2_of(ceres::Problem& problem, const std::vector<double*>& blocks) {
   const Evaluated e = evaluate(problem, blocks, false);
   if (!e.ok) return std::numeric_limits<double>::infinity();
   double s = 0;
   for (double v : e.r) s += v * v;
   return s;
 }
+
+namespace {
 
 // Every entry of blocks set to start + t d (false, nothing moved, where one would leave a bound of the problem).
 bool move_to(ceres::Problem& problem, const std::vector<double*>& blocks, const std::vector<double>& start,
@@ -183,20 +186,20 @@ std::vector<ErrorScale> check_error_scale(ceres::Problem& problem, const std::ve
   std::vector<double> start;
   for (double* b : blocks) start.insert(start.end(), b, b + problem.ParameterBlockSize(b));
   const std::size_t n = start.size();
-  const double chi0 = chi2_here(problem, blocks);
+  const double chi0 = chi2_of(problem, blocks);
   if (!std::isfinite(chi0) || covariance.size() != n * n) return {};
-  const Eigen::MatrixXd cond = conditional_covariance(covariance, n, held);
+  const std::vector<double> cond = conditional_covariance(covariance, held);
   std::vector<ErrorScale> out;
   for (int a : coordinates) {
     ErrorScale e;
-    const double saa = cond(a, a), full_aa = covariance[static_cast<std::size_t>(a) * n + a];
+    const double saa = cond[static_cast<std::size_t>(a) * n + a], full_aa = covariance[static_cast<std::size_t>(a) * n + a];
     if (saa > 0 && full_aa > 0) {
       e.conditional = std::sqrt(saa / full_aa);
       std::vector<double> d(n);
-      for (std::size_t k = 0; k < n; ++k) d[k] = std::sqrt(scale / saa) * cond(k, a);
+      for (std::size_t k = 0; k < n; ++k) d[k] = std::sqrt(scale / saa) * cond[k * n + a];
       const double t = fraction, expected = scale * t * t;
-      if (move_to(problem, blocks, start, d, -t)) e.minus = (chi2_here(problem, blocks) - chi0) / expected;
-      if (move_to(problem, blocks, start, d, +t)) e.plus = (chi2_here(problem, blocks) - chi0) / expected;
+      if (move_to(problem, blocks, start, d, -t)) e.minus = (chi2_of(problem, blocks) - chi0) / expected;
+      if (move_to(problem, blocks, start, d, +t)) e.plus = (chi2_of(problem, blocks) - chi0) / expected;
       std::size_t k = 0;   // restored bit for bit
       for (double* b : blocks)
         for (int i = 0; i < problem.ParameterBlockSize(b); ++i, ++k) b[i] = start[k];
@@ -212,7 +215,7 @@ int hold_on_bounds(ceres::Problem& problem, const std::vector<double*>& blocks,
   for (double* b : blocks) {
     if (problem.IsParameterBlockConstant(b)) continue;
     const int n = problem.ParameterBlockSize(b);
-    const std::vector<int> free = tangent_entries(problem, b);
+    const std::vector<int> free = free_entries(problem, b);
     if (free.empty() && problem.GetManifold(b)) continue;   // another manifold: not ours to change
     std::vector<bool> hold(n, true);
     for (int i : free) hold[i] = false;

@@ -31,6 +31,10 @@ struct JacobianColumn {
 std::vector<JacobianColumn> check_jacobian(ceres::Problem& problem, const std::vector<double*>& blocks,
                                            double rel_step = 1e-6);
 
+/// The entries of `block` a fit moves: all of them, or those a SubsetManifold leaves free. Empty for a block with any
+/// other manifold (whose tangent coordinates are not entries). A constant block's entries are listed all the same.
+std::vector<int> free_entries(const ceres::Problem& problem, double* block);
+
 /// Every free entry of `blocks` that sits on a bound of the problem (within 1e-9 max(1, |value|)), and the `extra`
 /// (block, entry) pairs, held from now on: each such block gets a SubsetManifold over the entries held before (by a
 /// SubsetManifold) and these. Constant blocks and blocks with another manifold are left alone. Returns how many entries
@@ -54,6 +58,14 @@ struct ErrorScale {
   /// sqrt(Sigma'_aa / Sigma_aa): the error with the `held` coordinates fixed over the one quoted (1 with none held)
   double conditional = std::numeric_limits<double>::quiet_NaN();
 };
+
+/// The covariance with the `held` coordinates fixed: Sigma_FF - Sigma_FH Sigma_HH^+ Sigma_HF (the Gaussian's conditional
+/// covariance; the pseudo-inverse by a complete orthogonal decomposition), the held rows and columns 0. n x n row-major
+/// in and out; held coordinates with no variance are left out of H.
+std::vector<double> conditional_covariance(const std::vector<double>& covariance, const std::vector<int>& held);
+
+/// 2 cost (chi^2) of the problem at its current values, over `blocks`: +inf where the residuals are not numbers.
+double chi2_of(ceres::Problem& problem, const std::vector<double*>& blocks);
 
 /// `covariance` is n x n, row-major, over the concatenated entries of `blocks` (n their total size), unscaled
 /// ((J^T J)^-1); each of `coordinates` (indices into that concatenation, with a positive diagonal) is stepped as above.
