@@ -750,6 +750,21 @@ double d2_lode_number(const ModelCommandOptions& o) {
   return b;
 }
 
+// --profile's comma-separated names, each a coefficient of the model (isotropic, shear or extension).
+std::vector<std::string> profile_names(const std::string& list) {
+  std::vector<std::string> out;
+  std::stringstream ss(list);
+  for (std::string n; std::getline(ss, n, ',');) {
+    bool known = iso_index(n) >= 0 || ext_index(n) >= 0;
+    for (int i = 0; i < kNumShear; ++i) known = known || n == shear_name(i);
+    if (!known)
+      throw InputError("--profile " + list + ": " + (n.empty() ? "an empty name" : "'" + n + "' is not a coefficient") +
+                       "; give `all` or names as parameters.csv writes them (e.g. p0,alpha,s_max_a,a_A)");
+    out.push_back(n);
+  }
+  return out;
+}
+
 // The calibration's options from the command's (--eps-max, --family, --surface, --fabric-lode checked).
 CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   CalibrationOptions co;
@@ -776,6 +791,8 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   co.hold_from = co.hold_iso.empty() ? nullptr : co.start;
   co.shared_jamming = o.jamming == "shared";
   co.coordination_rises = o.coordination == "rising";
+  co.profile = !o.profile.empty();
+  if (co.profile && o.profile != "all") co.profile_only = profile_names(o.profile);
   if (co.shared_jamming && std::find(co.hold_iso.begin(), co.hold_iso.end(), kNuCC) != co.hold_iso.end())
     throw InputError("--jamming shared ties nu_cC to the fitted nu_c, and --hold-isotropic holds nu_cC: leave nu_cC out "
                      "of --hold-isotropic (or use --jamming separate)");
@@ -867,6 +884,7 @@ JackRefit refit_without(const ModelInputs& in, const CalibrationOptions& co_f, c
   JackRefit r{member.filename().string(), "the full fit's optimum", 0, false, false, 0, ""};
   CalibrationOptions cj = co_f;
   cj.check_jacobian = false;   // the refits' errors are not read
+  cj.profile = false;
   auto rank = [&](const Calibration& c) {   // usable, converged, then evaluated: higher is better
     return 4 * jackknife_refit_usable(c, ff.cal) + 2 * c.ok + !std::isnan(c.chi2);
   };
@@ -955,6 +973,7 @@ FamilyFit fit_family(const ModelInputs& in, const CalibrationOptions& co, const 
   co_f.extended = extended;
   std::cerr << "dem model: family " << (extended ? "extended" : "group") << "\n";
   const std::size_t n_starts = std::max<std::size_t>(1, start_params.size());
+  co_f.profile = co.profile && n_starts == 1;   // several starts: the chosen one's profile below
   for (std::size_t i = 0; i < n_starts; ++i) {
     if (!start_params.empty()) co_f.start = start_params[i].get();
     Calibration ci;
@@ -979,6 +998,11 @@ FamilyFit fit_family(const ModelInputs& in, const CalibrationOptions& co, const 
   if (n_starts > 1)
     std::cerr << "dem model: the fit from start " << o.start[ff.chosen_start] << " has the lowest chi2/dof ("
               << num(cal.chi2_dof(), 4) << "; starts.md)\n";
+  if (co.profile && n_starts > 1) {   // the same fit again (bit for bit), with its profile intervals
+    co_f.profile = true;
+    cal = calibrate(fit_curves, iso, co_f, fit_paths);
+    co_f.profile = false;
+  }
 
   jackknife(in, co_f, o, ff);
   cal.against_margin = path_against_margin(cal.params, in.fit_paths);
@@ -1074,6 +1098,60 @@ void report_error_scale(const Calibration& cal, const fs::path& out) {
             << "understated), " << c.above << " by more than " << num(kQuadraticWithin) << ", " << c.bound
             << " reach a bound within it; furthest " << cal.names[c.furthest] << " (" << num(w.minus, 3) << ", "
             << num(w.plus, 3) << ") (error_scale.csv)\n";
+}
+
+// How a profile end was found (ProfileEnd): the rise reached, the coefficient's bound, a failed refit, or neither
+// within the refits and the reach.
+std::string profile_end_kind(const ProfileEnd& e) {
+  if (e.failed) return "refit failed";
+  if (e.bound) return "bound";
+  if (std::isnan(e.value)) return "not reached";
+  return std::fabs(e.rise - 1) <= 0.05 ? "found" : "not settled";
+}
+
+// The profile intervals (Calibration::profile; --profile): profile.{csv,md,tex,json}, a row per coefficient with a
+// quoted covariance error, and one line on stderr: how many ends lie outside [1/sqrt(kQuadraticWithin),
+// sqrt(kQuadraticWithin)] covariance errors (where check_error_scale's rise is outside [1/2, 2]), end on a bound or
+// are not reached, and whether a refit found a chi2 below the fit's.
+void report_profile(const Calibration& cal, const fs::path& out) {
+  Table t({"parameter", "value", "se_covariance", "profile_lower", "profile_upper", "lower_over_se [-]",
+           "upper_over_se [-]", "end_lower", "end_upper", "rise_lower [-]", "rise_upper [-]", "refits",
+           "chi2_below_fit"});
+  const double within = std::sqrt(kQuadraticWithin);
+  int rows = 0, outside = 0, bound = 0, open = 0, below = 0;
+  double lowest = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < cal.profile.size() && i < cal.value.size(); ++i) {
+    const ProfileInterval& p = cal.profile[i];
+    if (p.lower.refits + p.upper.refits == 0) continue;   // no quoted error: not profiled
+    const double se = cal.se_cov[i], lo = (cal.value[i] - p.lower.value) / se, hi = (p.upper.value - cal.value[i]) / se;
+    t.add_row({cal.names[i], num(cal.value[i]), num(se), num(p.lower.value), num(p.upper.value), num(lo, 3),
+               num(hi, 3), profile_end_kind(p.lower), profile_end_kind(p.upper), num(p.lower.rise, 3),
+               num(p.upper.rise, 3), std::to_string(1 + p.lower.refits + p.upper.refits), num(p.below_optimum)});
+    ++rows;
+    bool out_of = false;
+    for (double r : {lo, hi}) out_of = out_of || (std::isfinite(r) && (r > within || r < 1 / within));
+    outside += out_of && !p.lower.bound && !p.upper.bound;
+    bound += p.lower.bound || p.upper.bound;
+    open += std::isnan(p.lower.value) || std::isnan(p.upper.value);
+    if (!std::isnan(p.below_optimum)) { ++below; lowest = std::min(lowest, p.below_optimum); }
+  }
+  if (rows == 0) return;
+  write_table_all(t, (out / "profile").string(),
+                  "Profile intervals: each coefficient with a quoted covariance error held at trial values and every "
+                  "other free coefficient refitted, until chi^2 rises by max(1, chi2/dof) over the fit's; "
+                  "profile_lower/upper: the interval's ends (the coefficient's bound where end = bound, nan where the "
+                  "rise was not reached within 16 errors or a refit failed); lower/upper_over_se: their distance from "
+                  "the value in covariance errors (1 where the cost is quadratic); rise: chi^2's rise over the scale at "
+                  "the end (1 within 0.05 where found); refits: those made for the row; chi2_below_fit: the lowest "
+                  "chi^2 a refit reached below the fit's (nan: none; else the fit was not at its minimum) "
+                  "(docs/model.md, \"Profile intervals\")");
+  std::cerr << "dem model: profile intervals: of " << rows << " coefficients, " << outside << " have an end beyond "
+            << num(within, 3) << " or within 1/" << num(within, 3) << " covariance errors, " << bound
+            << " end on a bound, " << open << " have an end not found; "
+            << (below ? "for " + std::to_string(below) + " a refit went below the fit's chi2 (lowest " + num(lowest, 8) +
+                            "): the fit was not at its minimum"
+                      : std::string("no refit went below the fit's chi2"))
+            << " (profile.csv)\n";
 }
 
 // One family's held-out scores (`--family group|extended` with the jackknife; `auto` writes them in
@@ -1207,6 +1285,7 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
   for (const auto& w : cal.warnings) std::cerr << "dem model: warning: " << w << "\n";
   report_jacobian_check(cal);
   report_error_scale(cal, out);
+  report_profile(cal, out);
   std::cerr << "dem model: tables and curves written to " << out.string() << "\n";
   if (!o.no_plots) {
     const std::string cmd = "PYTHONPATH=" + std::string(DEM_SOURCE_DIR) + " /usr/bin/python3 -m demkit.model_plots \"" +
@@ -1452,6 +1531,10 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "--predict-with the file's unless given (docs/model.md, \"A relaxing anisotropic pressure\", \"A "
                  "bounded excess\")")
       ->check(CLI::IsMember({"permanent", "relaxing", "bounded"}))->default_str("permanent");
+  app.add_option("--profile", o.profile, "profile intervals: `all` (every coefficient with a quoted covariance "
+                 "error) or comma-separated names (e.g. p0,alpha): each held at trial values and the rest refitted "
+                 "until chi2 rises by max(1, chi2/dof) either way (profile.{csv,md}; 3-6 refits per end; docs/model.md "
+                 "\"Profile intervals\")");
   app.add_flag("--force", o.force, "overwrite an existing output folder");
 }
 

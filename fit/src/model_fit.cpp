@@ -850,15 +850,19 @@ std::vector<double> covariance_errors(ceres::Problem& problem, std::vector<doubl
   return full;
 }
 
+ceres::Solver::Summary solve(ceres::Problem& problem, int max_iterations);
+
 // The cost over one quoted covariance error either way (check_error_scale), into cal.error_scale, once the errors to
 // quote are settled: every coefficient with a quoted covariance error stepped along its linearised profile with the
-// free coefficients that quote none (on a bound, kinked, not determined) held where they are.
-void error_scale(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
-                 std::vector<double>& ext, const CalibrationOptions& o, bool X, const std::vector<double>& full,
-                 Calibration& cal) {
+// free coefficients that quote none (on a bound, kinked, not determined) held where they are. With o.profile, the
+// same coefficients' profile intervals too (profile_intervals, into cal.profile): the others refitted at each point.
+void check_quoted_errors(ceres::Problem& problem, std::vector<double>& isob, std::vector<double>& shear,
+                         std::vector<double>& ext, const CalibrationOptions& o, bool X, const std::vector<double>& full,
+                         Calibration& cal) {
   cal.error_scale.assign(cal.value.size(), ErrorScale{});
+  cal.profile.clear();
   const std::size_t n = cal.se_cov.size();
-  if (!o.check_jacobian || full.size() != n * n) return;
+  if (full.size() != n * n) return;
   std::vector<double*> blocks = {isob.data(), shear.data()};
   if (X) blocks.push_back(ext.data());
   std::vector<int> quoted, held;
@@ -866,9 +870,20 @@ void error_scale(ceres::Problem& problem, std::vector<double>& isob, std::vector
     if (std::isfinite(cal.se_cov[a]) && cal.se_cov[a] > 0) quoted.push_back(a);
     else if (full[a * n + a] > 0) held.push_back(a);
   }
-  const std::vector<ErrorScale> got =
-      check_error_scale(problem, blocks, full, quoted, std::max(1.0, cal.chi2_dof()), 1.0, held);
-  for (std::size_t k = 0; k < got.size(); ++k) cal.error_scale[quoted[k]] = got[k];
+  const double scale = std::max(1.0, cal.chi2_dof());
+  if (o.check_jacobian) {
+    const std::vector<ErrorScale> got = check_error_scale(problem, blocks, full, quoted, scale, 1.0, held);
+    for (std::size_t k = 0; k < got.size(); ++k) cal.error_scale[quoted[k]] = got[k];
+  }
+  if (!o.profile) return;
+  if (!o.profile_only.empty())
+    quoted.erase(std::remove_if(quoted.begin(), quoted.end(), [&](int a) {
+                   return std::find(o.profile_only.begin(), o.profile_only.end(), cal.names[a]) == o.profile_only.end();
+                 }), quoted.end());
+  const ProfileSolve refit = [&o](ceres::Problem& p) { return solve(p, o.max_iterations).IsSolutionUsable(); };
+  const std::vector<ProfileInterval> got = profile_intervals(problem, blocks, full, quoted, scale, refit, held);
+  cal.profile.assign(cal.value.size(), ProfileInterval{});
+  for (std::size_t k = 0; k < got.size(); ++k) cal.profile[quoted[k]] = got[k];
 }
 
 // Shear and extension coefficients that end on a bound of set_bounds: no standard error (the covariance describes the
@@ -1208,6 +1223,8 @@ void drop_entries(Calibration& cal, int pos, int n) {
     cal.jacobian_disagreement.erase(cal.jacobian_disagreement.begin() + pos, cal.jacobian_disagreement.begin() + pos + n);
   if (cal.error_scale.size() >= static_cast<std::size_t>(pos + n))
     cal.error_scale.erase(cal.error_scale.begin() + pos, cal.error_scale.begin() + pos + n);
+  if (cal.profile.size() >= static_cast<std::size_t>(pos + n))
+    cal.profile.erase(cal.profile.begin() + pos, cal.profile.begin() + pos + n);
   cal.corr.erase(cal.corr.begin() + pos, cal.corr.begin() + pos + n);
   for (auto& row : cal.corr) row.erase(row.begin() + pos, row.begin() + pos + n);
 }
@@ -1299,6 +1316,7 @@ Parameters calibration_start(const std::vector<CurveData>& curves_in, const std:
   if (o.extended && !o.start) {
     CalibrationOptions g = o;
     g.extended = false;
+    g.profile = false;   // the start's errors are not read
     Parameters base = calibrate(curves_in, iso, g, paths).params;
     base.nu_ref = nu_ref;
     start = extended_start(curves, base, o);
@@ -1401,7 +1419,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (int i : held_shear(X, false, state_volume, o.excess_relaxes))   // s_max_b at 0, beta_p's slope, beta_p unless it acts
     cal.se_cov[kNumIso + i] = kNaN;
   settle_errors(cal);
-  error_scale(problem, isob, shear, ext, o, X, cov, cal);
+  check_quoted_errors(problem, isob, shear, ext, o, X, cov, cal);
   if (state_volume) drop_unread_for_volume_state(cal, weighted);
   else if (weighted && !cal.params.state_limit) drop_entries(cal, kNumIso + kNumShear + kNPsiA, 2);   // n_psi: not in this law
   if (state_lode && !weighted) drop_entries(cal, kNumIso + kNumShear + kLnDeltaW, 2);   // the `Weighted` pair: unread

@@ -19,6 +19,9 @@ struct ModelCommandOptions {
   bool jackknife = true;                  ///< errors from the jackknife over packings (needs DIR/members)
   bool no_plots = false;
   bool force = false;                     ///< overwrite an existing output folder
+  /// --profile: "" (none, the default), `all`, or comma-separated coefficient names: their profile intervals
+  /// (CalibrationOptions::profile; profile.csv)
+  std::string profile;
   std::string family = "group";           ///< group, extended or auto (docs/model.md, "The frictional extension")
   std::string surface = "ld";             ///< Lode surface of the extended family: ld, mn, none
   int max_iterations = 300;               ///< Ceres iterations of each fit

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "demfit/jacobian_check.hpp"
+#include "demfit/profile.hpp"
 #include "demfit/model.hpp"
 
 namespace demfit::model {
@@ -88,6 +89,12 @@ struct CalibrationOptions {
   /// Check the Jacobian at the optimum against central differences of the residuals (check_jacobian; a rough cost's
   /// covariance is not quoted: Calibration::rough). The jackknife's refits leave it out.
   bool check_jacobian = true;
+  /// Profile intervals of the coefficients with a quoted covariance error (`--profile`; profile_intervals, issue 31's
+  /// twenty-fourth round): each coefficient held at trial values and the rest refitted, 3-6 refits per end. Off by
+  /// default (a few hundred refits); the jackknife's refits leave it out.
+  bool profile = false;
+  /// With profile: only these coefficients (Calibration::names); empty: every one with a quoted covariance error.
+  std::vector<std::string> profile_only;
   /// Isotropic parameters (IsoIndex) held at their start values while the rest of the block is
   /// fitted: a laboratory's isotropic branch of a few pressure levels cannot fix all seven (issue 31,
   /// "Calibrated on drained triaxial tests"). Needs `start`.
@@ -149,6 +156,9 @@ struct Calibration {
   /// Per reported coefficient, the rise of chi^2 one quoted covariance error either way along its linearised profile
   /// over the quadratic model's (check_error_scale; nan where not checked: no covariance error, or the check off)
   std::vector<ErrorScale> error_scale;
+  /// Per reported coefficient, its profile interval (CalibrationOptions::profile; empty where not asked for, default
+  /// entries (nan ends) where the coefficient quotes no covariance error)
+  std::vector<ProfileInterval> profile;
   bool shared_jamming = false;          ///< nu_cC tied to nu_c (CalibrationOptions::shared_jamming)
   /// Coefficients the covariance leaves undetermined (an error of 0 to rounding from the pseudo-inverse: se_cov nan);
   /// the jackknife still quotes their spread over packings.
