@@ -33,6 +33,20 @@ def result(tmp_path_factory):
     return out, r
 
 
+@pytest.fixture(scope="module")
+def mu05_default(tmp_path_factory):
+    """The mu = 0.5 ensemble of the friction study (a copy) and its default frictional-family calibration
+    (--family extended, the overlap rule, no state limit; no jackknife, no plots): (work, out). Shared by the tests
+    that compare a rule or an option with the default (each fit takes half a minute)."""
+    from demkit import model_friction
+    base = tmp_path_factory.mktemp("mu05")
+    work, out = str(base / "mu_0.5"), str(base / "default")
+    model_friction.copy_tree(os.path.join(ROOT, "data", "friction_n1000", "mu_0.5"), work)
+    r = run(work, "--out", out, "--family", "extended", "--no-jackknife", "--no-plots")
+    assert r.returncode == 0, r.stderr
+    return work, out
+
+
 def test_tables_curves_and_plots(result):
     out, r = result
     for stem in ("parameters", "correlations", "laws", "prediction"):
@@ -246,17 +260,13 @@ def test_frictional_family_fits_the_mu_0_5_ensemble(tmp_path):
             assert float(s["F_dev [band]"]) < 1 < float(norm[key]["F_dev [band]"]), (s, norm[key])
 
 
-def test_overlap_rule_predicts_the_late_d3_fabric_at_mu_0_5(tmp_path):
-    """The overlap rule (docs/model.md, "The fabric's onset"): calibrated on D2 alone, every fitted
-    D2 curve within a band, and the D3 fabric at nu = 0.80, 5.1 band widths off under the principal
-    rule, within 2.5 (1.87 when stored)."""
-    from demkit import model_friction
-    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
-    work = str(tmp_path / "mu_0.5")
-    model_friction.copy_tree(src, work)
-    out = str(tmp_path / "model")
-    r = run(work, "--out", out, "--family", "extended", "--fabric-lode", "overlap", "--no-jackknife", "--no-plots")
-    assert r.returncode == 0, r.stderr
+def test_overlap_rule_predicts_the_late_d3_fabric_at_mu_0_5(mu05_default):
+    """The overlap rule (docs/model.md, "The fabric's onset"; the default, so the shared default run): calibrated on
+    D2 alone, every fitted D2 curve within a band, and the D3 fabric at nu = 0.80, 5.1 band widths off under the
+    principal rule, within 2.5 (1.87 when stored)."""
+    out = mu05_default[1]
+    with open(os.path.join(out, "summary.md")) as fh:
+        assert "fabric limit overlap" in fh.read()
     summary = {(s["mode"], float(s["nu [-]"])): s for s in rows(os.path.join(out, "summary.csv")) if s["mode"] != "calibration"}
     for (mode, nu), s in summary.items():
         if mode == "D2":
@@ -264,19 +274,14 @@ def test_overlap_rule_predicts_the_late_d3_fabric_at_mu_0_5(tmp_path):
     assert float(summary[("D3", 0.8)]["F_dev [band]"]) < 2.5, summary[("D3", 0.8)]
 
 
-def test_extension_rule_keeps_d2_and_slows_the_dense_d3_fabric_at_mu_0_5(tmp_path):
-    """The default rule is overlap (a run without --fabric-lode gives its summary, the same bytes); the
+def test_extension_rule_keeps_d2_and_slows_the_dense_d3_fabric_at_mu_0_5(tmp_path, mu05_default):
+    """The default rule is overlap (the shared default run's summary says so); the
     extension rule (docs/model.md, "The fabric's rate") changes nothing at b = 1/2, so every D2 row of
     the summary is the overlap rule's, and rates the D3 fabric per unit extension strain: at
     nu = 0.80, where the overlap rule's D3 fabric grows too fast (1.87 band widths when stored), it is
     predicted within a band (0.42 when stored)."""
-    from demkit import model_friction
-    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
-    work = str(tmp_path / "mu_0.5")
-    model_friction.copy_tree(src, work)
-    out_d, out_x = str(tmp_path / "default"), str(tmp_path / "extension")
-    r = run(work, "--out", out_d, "--family", "extended", "--no-jackknife", "--no-plots")
-    assert r.returncode == 0, r.stderr
+    work, out_d = mu05_default
+    out_x = str(tmp_path / "extension")
     r = run(work, "--out", out_x, "--family", "extended", "--fabric-lode", "extension", "--no-jackknife", "--no-plots")
     assert r.returncode == 0, r.stderr
     with open(os.path.join(out_d, "summary.md")) as fh:
@@ -338,18 +343,16 @@ def test_fabric_rate_and_stress_peak_of_curves_built_by_hand(tmp_path):
         assert abs(pm[4] - (1 + 0.285)) < 0.002, (curve, pm)
 
 
-def test_state_limit_fits_the_peak_at_mu_0_5_and_is_off_by_default(tmp_path):
+def test_state_limit_fits_the_peak_at_mu_0_5_and_is_off_by_default(tmp_path, mu05_default):
     """The state-dependent stress-ratio limit (docs/model.md, "The state-dependent limit"): off by
     default (`--state-limit none` gives the default run's summary, the same bytes, and its parameters
     table has no n_psi); switched on, the table lists n_psi_a and n_psi_b, every fitted D2 curve is
     within a band, and the D2 stress ratio at nu = 0.69, which peaks and softens in the DEM, is fitted
     within half a band (0.27 when stored; 0.68 without the state limit)."""
-    from demkit import model_friction
-    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
-    work = str(tmp_path / "mu_0.5")
-    model_friction.copy_tree(src, work)
-    outs = {k: str(tmp_path / k) for k in ("default", "none", "pressure")}
-    for k, extra in (("default", []), ("none", ["--state-limit", "none"]), ("pressure", ["--state-limit", "pressure"])):
+    work = mu05_default[0]
+    outs = {k: str(tmp_path / k) for k in ("none", "pressure")}
+    outs["default"] = mu05_default[1]
+    for k, extra in (("none", ["--state-limit", "none"]), ("pressure", ["--state-limit", "pressure"])):
         r = run(work, "--out", outs[k], "--family", "extended", "--no-jackknife", "--no-plots", *extra)
         assert r.returncode == 0, r.stderr
     for name in ("summary.md", "parameters.md"):
