@@ -210,7 +210,7 @@ std::vector<ErrorScale> check_error_scale(ceres::Problem& problem, const std::ve
 }
 
 int hold_on_bounds(ceres::Problem& problem, const std::vector<double*>& blocks,
-                   const std::vector<std::pair<double*, int>>& extra) {
+                   const std::vector<std::pair<double*, int>>& extra, double tolerance) {
   int added = 0;
   for (double* b : blocks) {
     if (problem.IsParameterBlockConstant(b)) continue;
@@ -221,9 +221,10 @@ int hold_on_bounds(ceres::Problem& problem, const std::vector<double*>& blocks,
     for (int i : free) hold[i] = false;
     int here = 0;
     for (int i : free) {
-      const double v = b[i], tol = 1e-9 * std::max(1.0, std::fabs(v));
-      bool on = std::fabs(v - problem.GetParameterLowerBound(b, i)) <= tol ||
-                std::fabs(v - problem.GetParameterUpperBound(b, i)) <= tol;
+      const double v = b[i], tol = tolerance * std::max(1.0, std::fabs(v));
+      const double lo = problem.GetParameterLowerBound(b, i), hi = problem.GetParameterUpperBound(b, i);
+      bool on = std::fabs(v - lo) <= tol || std::fabs(v - hi) <= tol;
+      if (on) b[i] = std::fabs(v - lo) <= std::fabs(v - hi) ? lo : hi;   // onto the bound it is near
       for (const auto& e : extra) on = on || (e.first == b && e.second == i);
       if (on) { hold[i] = true; ++here; }
     }

@@ -1165,29 +1165,40 @@ ceres::Solver::Summary solve(ceres::Problem& problem, int max_iterations) {
   return sum;
 }
 
-/// The fit, and where it ends with coefficients on a bound of the problem, or with nu_cC on the isotropic branch's lowest
-/// jammed point (the coordination law's onset on a data point: a kink of the cost), again with those held where they
-/// are (hold_on_bounds): Levenberg-Marquardt's projected steps stall there before the free coefficients reach their
-/// minimum (issue 31, twenty-third round; docs/model.md, "A fit that stopped on a bound"). Returns the last summary.
+/// The fit, and where it ends with coefficients on a bound of the problem (or within kNearBound of one: moved onto
+/// it), or with nu_cC on the isotropic branch's lowest jammed point (the coordination law's onset on a data point: a
+/// kink of the cost), again with those held where they are (hold_on_bounds): Levenberg-Marquardt's projected steps
+/// stall there before the free coefficients reach their minimum (issue 31, twenty-third round; docs/model.md, "A fit
+/// that stopped on a bound"). Repeated while a pass ends on a bound not held before (twenty-fourth round: the
+/// three-pressure mu = 1 joint calibration's face fit met two more), at most kFacePasses times. Returns the last summary.
 ceres::Solver::Summary solve_on_face(ceres::Problem& problem, std::vector<double*> blocks, std::vector<double>& isob,
                                      const IsoData& iso, const CalibrationOptions& o, const std::set<int>& held,
                                      std::vector<std::string>& notes) {
-  const ceres::Solver::Summary first = solve(problem, o.max_iterations);
-  if (!first.IsSolutionUsable()) return first;
-  std::vector<std::pair<double*, int>> kink;
-  if (o.fit_isotropic && !o.shared_jamming && !held.count(kNuCC) && !iso.nu.empty() &&
-      std::fabs(isob[kNuCC] - *std::min_element(iso.nu.begin(), iso.nu.end())) < 1e-9)
-    kink.emplace_back(isob.data(), kNuCC);
-  const int n = hold_on_bounds(problem, blocks, kink);
-  if (n == 0) return first;
-  const ceres::Solver::Summary again = solve(problem, o.max_iterations);
+  ceres::Solver::Summary last = solve(problem, o.max_iterations);
+  const double first = 2 * last.final_cost;
+  int n = 0, passes = 0, iterations = 0;
+  bool kinked = false;
+  for (; passes < kFacePasses && last.IsSolutionUsable(); ++passes) {
+    std::vector<std::pair<double*, int>> kink;
+    if (o.fit_isotropic && !o.shared_jamming && !held.count(kNuCC) && !iso.nu.empty() &&
+        std::fabs(isob[kNuCC] - *std::min_element(iso.nu.begin(), iso.nu.end())) < 1e-9)
+      kink.emplace_back(isob.data(), kNuCC);
+    const int more = hold_on_bounds(problem, blocks, kink, kNearBound);
+    if (more == 0) break;
+    n += more;
+    kinked = kinked || !kink.empty();
+    last = solve(problem, o.max_iterations);
+    iterations += static_cast<int>(last.iterations.size());
+  }
+  if (n == 0) return last;
   notes.push_back("the fit ended with " + std::to_string(n) + " coefficient" + (n > 1 ? "s" : "") + " on a bound" +
-                  (kink.empty() ? "" : " or on the kink of nu_cC at the branch's lowest point") + " at chi2 " +
-                  fmt(2 * first.final_cost, 8) + ", and went on with " + (n > 1 ? "them" : "it") + " held there to " +
-                  fmt(2 * again.final_cost, 8) + " (" + std::to_string(again.iterations.size()) + " iterations; "
+                  (kinked ? " or on the kink of nu_cC at the branch's lowest point" : "") + " at chi2 " +
+                  fmt(first, 8) + ", and went on with " + (n > 1 ? "them" : "it") + " held there to " +
+                  fmt(2 * last.final_cost, 8) + " (" + std::to_string(iterations) + " iterations" +
+                  (passes > 1 ? " in " + std::to_string(passes) + " passes" : "") + "; "
                   "Levenberg-Marquardt's projected steps stall at a bound; docs/model.md, \"A fit that stopped on "
                   "a bound\")");
-  return again;
+  return last;
 }
 
 /// The start's parameters with the fitted blocks and the options' family, surface, rules and limit.

@@ -215,6 +215,19 @@ TEST(HoldOnBounds, EntriesOnABoundAreHeldAndTheFaceIsSolvedExactly) {
   EXPECT_EQ(demfit::hold_on_bounds(p3, {y3.data()}), 1);
   ASSERT_NE(p3.GetManifold(y3.data()), nullptr);
   EXPECT_EQ(p3.GetManifold(y3.data())->TangentSize(), 1) << "entries 0 and 2 held, 1 free";
+
+  // near a bound (twenty-fourth round): within the tolerance it is moved onto the bound and held; beyond, left alone
+  std::vector<double> z = {0.0, 1.5 - 2.5e-6};
+  ceres::Problem p4;
+  for (int i = 0; i < 5; ++i)
+    p4.AddResidualBlock(new ceres::AutoDiffCostFunction<Line, 1, 2>(new Line{ts[i], ys[i]}), nullptr, z.data());
+  p4.SetParameterUpperBound(z.data(), 1, 1.5);
+  EXPECT_EQ(demfit::hold_on_bounds(p4, {z.data()}), 0) << "2.5e-6 away: not on it at the default 1e-9";
+  EXPECT_EQ(z[1], 1.5 - 2.5e-6);
+  EXPECT_EQ(demfit::hold_on_bounds(p4, {z.data()}, {}, 1e-6), 0) << "nor within 1e-6";
+  EXPECT_EQ(demfit::hold_on_bounds(p4, {z.data()}, {}, 2e-6), 1) << "within 2e-6 x max(1, 1.5)";
+  EXPECT_EQ(z[1], 1.5) << "moved onto the bound";
+  EXPECT_EQ(z[0], 0.0);
 }
 
 }  // namespace

@@ -35,15 +35,15 @@ std::vector<JacobianColumn> check_jacobian(ceres::Problem& problem, const std::v
 /// other manifold (whose tangent coordinates are not entries). A constant block's entries are listed all the same.
 std::vector<int> free_entries(const ceres::Problem& problem, double* block);
 
-/// Every free entry of `blocks` that sits on a bound of the problem (within 1e-9 max(1, |value|)), and the `extra`
-/// (block, entry) pairs, held from now on: each such block gets a SubsetManifold over the entries held before (by a
+/// Every free entry of `blocks` that sits on a bound of the problem (within `tolerance` max(1, |value|); one that is
+/// within that but not on it is first set onto the bound), and the `extra` (block, entry) pairs, held from now on: each such block gets a SubsetManifold over the entries held before (by a
 /// SubsetManifold) and these. Constant blocks and blocks with another manifold are left alone. Returns how many entries
 /// it added. Levenberg-Marquardt with bounds projects its steps onto the box, and where a coefficient sits on a bound
 /// with the cost falling beyond it, the projected steps can shrink until the cost's relative change passes the function
 /// tolerance with the free coefficients short of their minimum (twenty-third round); a second fit on that face, with
 /// the bound's coefficients held, reaches it.
 int hold_on_bounds(ceres::Problem& problem, const std::vector<double*>& blocks,
-                   const std::vector<std::pair<double*, int>>& extra = {});
+                   const std::vector<std::pair<double*, int>>& extra = {}, double tolerance = 1e-9);
 
 /// The cost over one quoted error (twenty-third round; docs/model.md, "The cost over one quoted error"). A covariance
 /// error rests on the cost being quadratic over that error, not only smooth at the optimum's step. Along coordinate
