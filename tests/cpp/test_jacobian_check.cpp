@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "demfit/jacobian_check.hpp"
+#include "line_fit.hpp"
 
 namespace {
 
@@ -87,26 +88,14 @@ TEST(JacobianCheck, ABoundIsNotCrossedAndAHeldEntryIsLeftOut) {
   EXPECT_TRUE(demfit::check_jacobian(f.problem, {f.x.data()}).empty()) << "a constant block is not checked";
 }
 
-// r_i = x0 + x1 t_i - y_i: chi^2 is exactly quadratic, so over one error either way it rises by the quadratic's.
-struct Line {
-  double t, y;
-  template <class T>
-  bool operator()(const T* x, T* r) const {
-    r[0] = x[0] + x[1] * T(t) - T(y);
-    return true;
-  }
-};
+using demfit_test::Line;   // r_i = x0 + x1 t_i - y_i: chi^2 exactly quadratic (line_fit.hpp)
 
 TEST(ErrorScale, ALinearCostRisesByTheQuadraticsOverOneErrorEitherWay) {
-  const double ts[] = {0.0, 0.5, 1.0, 2.0, 3.5}, ys[] = {0.1, 0.9, 1.7, 4.2, 6.8};
-  double S1 = 0, St = 0, Stt = 0, Sy = 0, Sty = 0;
-  for (int i = 0; i < 5; ++i) { S1 += 1; St += ts[i]; Stt += ts[i] * ts[i]; Sy += ys[i]; Sty += ts[i] * ys[i]; }
-  const double det = S1 * Stt - St * St;   // the normal equations and (A^T A)^-1 by hand
-  std::vector<double> x = {(Stt * Sy - St * Sty) / det, (S1 * Sty - St * Sy) / det};
-  const std::vector<double> cov = {Stt / det, -St / det, -St / det, S1 / det};
-  ceres::Problem problem;
-  for (int i = 0; i < 5; ++i)
-    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<Line, 1, 2>(new Line{ts[i], ys[i]}), nullptr, x.data());
+  demfit_test::LineFit f;
+  std::vector<double>& x = f.x;
+  const std::vector<double>& cov = f.cov;
+  const double S1 = f.S1;
+  ceres::Problem& problem = f.problem;
   const std::vector<double> before = x;
   for (double scale : {1.0, 3.7})
     for (double t : {1.0, 0.2}) {

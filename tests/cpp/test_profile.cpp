@@ -11,17 +11,9 @@
 #include <vector>
 
 #include "demfit/profile.hpp"
+#include "line_fit.hpp"
 
 namespace {
-
-struct Line {   // r_i = x0 + x1 t_i - y_i
-  double t, y;
-  template <class T>
-  bool operator()(const T* x, T* r) const {
-    r[0] = x[0] + x[1] * T(t) - T(y);
-    return true;
-  }
-};
 
 bool solve(ceres::Problem& problem) {
   ceres::Solver::Options so;
@@ -34,15 +26,10 @@ bool solve(ceres::Problem& problem) {
 }
 
 TEST(ProfileIntervals, ALinearCostsIntervalIsTheCovariancesWithTheOtherRefittedOrHeld) {
-  const double ts[] = {0.0, 0.5, 1.0, 2.0, 3.5}, ys[] = {0.1, 0.9, 1.7, 4.2, 6.8};
-  double S1 = 0, St = 0, Stt = 0, Sy = 0, Sty = 0;
-  for (int i = 0; i < 5; ++i) { S1 += 1; St += ts[i]; Stt += ts[i] * ts[i]; Sy += ys[i]; Sty += ts[i] * ys[i]; }
-  const double det = S1 * Stt - St * St;   // the normal equations and (A^T A)^-1 by hand
-  std::vector<double> x = {(Stt * Sy - St * Sty) / det, (S1 * Sty - St * Sy) / det};
-  const std::vector<double> cov = {Stt / det, -St / det, -St / det, S1 / det};
-  ceres::Problem problem;
-  for (int i = 0; i < 5; ++i)
-    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<Line, 1, 2>(new Line{ts[i], ys[i]}), nullptr, x.data());
+  demfit_test::LineFit f;   // the straight line by hand
+  std::vector<double>& x = f.x;
+  ceres::Problem& problem = f.problem;
+  const std::vector<double>& cov = f.cov;
   const std::vector<double> before = x;
   for (double scale : {1.0, 3.7}) {
     const auto got = demfit::profile_intervals(problem, {x.data()}, cov, {0, 1}, scale, solve, {}, 1e-6);
@@ -64,8 +51,8 @@ TEST(ProfileIntervals, ALinearCostsIntervalIsTheCovariancesWithTheOtherRefittedO
   // x1 held by a SubsetManifold: x0's profile is the line with x1 fixed, 1/(A^T A)_00 = 1/S1, whatever `held` says
   problem.SetManifold(x.data(), new ceres::SubsetManifold(2, {1}));
   const auto fixed = demfit::profile_intervals(problem, {x.data()}, cov, {0, 1}, 1.0, solve, {1}, 1e-6);
-  EXPECT_NEAR(fixed[0].upper.value - before[0], 1 / std::sqrt(S1), 1e-6);
-  EXPECT_NEAR(before[0] - fixed[0].lower.value, 1 / std::sqrt(S1), 1e-6);
+  EXPECT_NEAR(fixed[0].upper.value - before[0], 1 / std::sqrt(f.S1), 1e-6);
+  EXPECT_NEAR(before[0] - fixed[0].lower.value, 1 / std::sqrt(f.S1), 1e-6);
   EXPECT_TRUE(std::isnan(fixed[1].lower.value)) << "a held coefficient has no profile";
   ASSERT_NE(problem.GetManifold(x.data()), nullptr);
   EXPECT_EQ(problem.GetManifold(x.data())->TangentSize(), 1) << "the hold as it was";
