@@ -16,6 +16,8 @@
 #include <map>
 #include <memory>
 #include <regex>
+#include <chrono>
+#include <functional>
 #include <sstream>
 #include <stdexcept>
 
@@ -765,6 +767,22 @@ std::vector<std::string> profile_names(const std::string& list) {
   return out;
 }
 
+// One stderr line per profiled coefficient: its interval, the time so far and about how long the rest will take (the
+// clock starts at the call with k = -1, before the first).
+std::function<void(const std::string&, int, int, const ProfileInterval&)> profile_progress() {
+  const auto t0 = std::make_shared<std::chrono::steady_clock::time_point>(std::chrono::steady_clock::now());
+  return [t0](const std::string& name, int k, int n, const ProfileInterval& p) {
+    if (k < 0) {
+      *t0 = std::chrono::steady_clock::now();
+      return;
+    }
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - *t0).count();
+    std::cerr << "dem model: profile " << k + 1 << "/" << n << " " << name << ": [" << num(p.lower.value) << ", "
+              << num(p.upper.value) << "] (" << num(s, 3) << " s; about " << num(s / (k + 1) * (n - k - 1), 2)
+              << " s left)\n";
+  };
+}
+
 // The calibration's options from the command's (--eps-max, --family, --surface, --fabric-lode checked).
 CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   CalibrationOptions co;
@@ -793,6 +811,7 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   co.coordination_rises = o.coordination == "rising";
   co.profile = !o.profile.empty();
   if (co.profile && o.profile != "all") co.profile_only = profile_names(o.profile);
+  if (co.profile) co.profile_progress = profile_progress();
   if (co.shared_jamming && std::find(co.hold_iso.begin(), co.hold_iso.end(), kNuCC) != co.hold_iso.end())
     throw InputError("--jamming shared ties nu_cC to the fitted nu_c, and --hold-isotropic holds nu_cC: leave nu_cC out "
                      "of --hold-isotropic (or use --jamming separate)");

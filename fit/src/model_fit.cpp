@@ -881,7 +881,12 @@ void check_quoted_errors(ceres::Problem& problem, std::vector<double>& isob, std
                    return std::find(o.profile_only.begin(), o.profile_only.end(), cal.names[a]) == o.profile_only.end();
                  }), quoted.end());
   const ProfileSolve refit = [&o](ceres::Problem& p) { return solve(p, o.max_iterations).IsSolutionUsable(); };
-  const std::vector<ProfileInterval> got = profile_intervals(problem, blocks, full, quoted, scale, refit, held);
+  const ProfileProgress said = [&](int k, int n, const ProfileInterval& p) {
+    if (o.profile_progress) o.profile_progress(cal.names[quoted[k]], k, n, p);
+  };
+  if (o.profile_progress) o.profile_progress("", -1, static_cast<int>(quoted.size()), ProfileInterval{});
+  const std::vector<ProfileInterval> got =
+      profile_intervals(problem, blocks, full, quoted, scale, refit, held, 0.05, 10, 16, said);
   cal.profile.assign(cal.value.size(), ProfileInterval{});
   for (std::size_t k = 0; k < got.size(); ++k) cal.profile[quoted[k]] = got[k];
 }

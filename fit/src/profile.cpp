@@ -136,7 +136,8 @@ std::vector<ProfileInterval> profile_intervals(ceres::Problem& problem, const st
                                                const std::vector<double>& covariance,
                                                const std::vector<int>& coordinates, double scale,
                                                const ProfileSolve& solve, const std::vector<int>& held,
-                                               double tolerance, int max_refits, double reach) {
+                                               double tolerance, int max_refits, double reach,
+                                               const ProfileProgress& progress) {
   std::vector<double> start;
   std::vector<std::pair<int, int>> where;   // (block, entry) of each concatenated entry
   const std::vector<BlockHold> holds = holds_of(problem, blocks);
@@ -178,6 +179,7 @@ std::vector<ProfileInterval> profile_intervals(ceres::Problem& problem, const st
       for (std::size_t k = 0; k < n; ++k) blocks[where[k].first][where[k].second] = start[k];   // bit for bit
     }
     out.push_back(pi);
+    if (progress) progress(static_cast<int>(out.size()) - 1, static_cast<int>(coordinates.size()), pi);
   }
   return out;
 }

@@ -3,6 +3,7 @@
 // the nu-dependence of each shear parameter a law inside the fit; prediction of curves it was
 // not fitted on (D3) with errors against the DEM ensemble band. docs/model.md.
 #pragma once
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -95,6 +96,9 @@ struct CalibrationOptions {
   bool profile = false;
   /// With profile: only these coefficients (Calibration::names); empty: every one with a quoted covariance error.
   std::vector<std::string> profile_only;
+  /// With profile: told after each coefficient (its name, its place from 0, how many, its interval), and once before
+  /// the first (place -1); empty: silent.
+  std::function<void(const std::string&, int, int, const ProfileInterval&)> profile_progress;
   /// Isotropic parameters (IsoIndex) held at their start values while the rest of the block is
   /// fitted: a laboratory's isotropic branch of a few pressure levels cannot fix all seven (issue 31,
   /// "Calibrated on drained triaxial tests"). Needs `start`.

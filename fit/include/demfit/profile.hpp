@@ -34,6 +34,8 @@ struct ProfileInterval {
 
 /// One solve of the problem as it stands (the calibration's own solver options): false where its result is unusable.
 using ProfileSolve = std::function<bool(ceres::Problem&)>;
+/// Told after each coefficient: its place in `coordinates` (from 0), their number, and its interval.
+using ProfileProgress = std::function<void(int, int, const ProfileInterval&)>;
 
 /// For each of `coordinates` (indices into the concatenated entries of `blocks`, as in check_error_scale): the
 /// coefficient held at trial values, every other free entry refitted by `solve` (and, where the refit ends on a bound
@@ -47,6 +49,7 @@ std::vector<ProfileInterval> profile_intervals(ceres::Problem& problem, const st
                                                const std::vector<double>& covariance,
                                                const std::vector<int>& coordinates, double scale,
                                                const ProfileSolve& solve, const std::vector<int>& held = {},
-                                               double tolerance = 0.05, int max_refits = 10, double reach = 16);
+                                               double tolerance = 0.05, int max_refits = 10, double reach = 16,
+                                               const ProfileProgress& progress = nullptr);
 
 }  // namespace demfit
