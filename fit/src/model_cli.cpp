@@ -761,7 +761,7 @@ std::vector<std::string> profile_names(const std::string& list) {
     for (int i = 0; i < kNumShear; ++i) known = known || n == shear_name(i);
     if (!known)
       throw InputError("--profile " + list + ": " + (n.empty() ? "an empty name" : "'" + n + "' is not a coefficient") +
-                       "; give `all` or names as parameters.csv writes them (e.g. p0,alpha,s_max_a,a_A)");
+                       "; give `all` or names as parameters.csv writes them (e.g. p0,alpha,s_max_a,a_A_a)");
     out.push_back(n);
   }
   return out;
