@@ -778,7 +778,7 @@ std::function<void(const std::string&, int, int, const ProfileInterval&)> profil
     }
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - *t0).count();
     std::cerr << "dem model: profile " << k + 1 << "/" << n << " " << name << ": [" << num(p.lower.value) << ", "
-              << num(p.upper.value) << "] (" << num(s, 3) << " s; about " << num(s / (k + 1) * (n - k - 1), 2)
+              << num(p.upper.value) << "] (" << std::llround(s) << " s; about " << std::llround(s / (k + 1) * (n - k - 1))
               << " s left)\n";
   };
 }
