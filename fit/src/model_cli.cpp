@@ -1017,7 +1017,7 @@ FamilyFit fit_family(const ModelInputs& in, const CalibrationOptions& co, const 
   if (n_starts > 1)
     std::cerr << "dem model: the fit from start " << o.start[ff.chosen_start] << " has the lowest chi2/dof ("
               << num(cal.chi2_dof(), 4) << "; starts.md)\n";
-  if (co.profile && n_starts > 1) {   // the same fit again (bit for bit), with its profile intervals
+  if (co.profile && n_starts > 1) {   // the chosen start again (a deterministic fit: the same one), with its profile intervals
     co_f.profile = true;
     cal = calibrate(fit_curves, iso, co_f, fit_paths);
     co_f.profile = false;
@@ -1552,7 +1552,7 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
       ->check(CLI::IsMember({"permanent", "relaxing", "bounded"}))->default_str("permanent");
   app.add_option("--profile", o.profile, "profile intervals: `all` (every coefficient with a quoted covariance "
                  "error) or comma-separated names (e.g. p0,alpha): each held at trial values and the rest refitted "
-                 "until chi2 rises by max(1, chi2/dof) either way (profile.{csv,md}; 3-6 refits per end; docs/model.md "
+                 "until chi2 rises by max(1, chi2/dof) either way (profile.{csv,md}; 1-10 refits per end; docs/model.md "
                  "\"Profile intervals\")");
   app.add_flag("--force", o.force, "overwrite an existing output folder");
 }
