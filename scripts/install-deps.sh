@@ -41,7 +41,7 @@ for g in ${groups//,/ }; do
                   libtomlplusplus-dev libcli11-dev libgtest-dev nlohmann-json3-dev
                   python3 python3-dev pybind11-dev python3-numpy) ;;
     run) pkgs+=(python3-matplotlib python3-pandas python3-scipy snakemake) ;;
-    test) pkgs+=(python3-pytest python3-vtk9 xvfb xauth
+    test) pkgs+=(python3-pytest python3-pytest-xdist python3-vtk9 xvfb xauth
                  python3-nbformat python3-nbclient python3-ipykernel
                  python3-pip python3-setuptools python3-wheel python3-venv
                  slurm-wlm munge)

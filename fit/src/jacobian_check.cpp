@@ -210,7 +210,8 @@ std::vector<ErrorScale> check_error_scale(ceres::Problem& problem, const std::ve
 }
 
 int hold_on_bounds(ceres::Problem& problem, const std::vector<double*>& blocks,
-                   const std::vector<std::pair<double*, int>>& extra, double tolerance) {
+                   const std::vector<std::pair<double*, int>>& extra, double tolerance,
+                   std::vector<std::pair<double*, int>>* added_entries) {
   int added = 0;
   for (double* b : blocks) {
     if (problem.IsParameterBlockConstant(b)) continue;
@@ -226,7 +227,11 @@ int hold_on_bounds(ceres::Problem& problem, const std::vector<double*>& blocks,
       bool on = std::fabs(v - lo) <= tol || std::fabs(v - hi) <= tol;
       if (on) b[i] = std::fabs(v - lo) <= std::fabs(v - hi) ? lo : hi;   // onto the bound it is near
       for (const auto& e : extra) on = on || (e.first == b && e.second == i);
-      if (on) { hold[i] = true; ++here; }
+      if (on) {
+        hold[i] = true;
+        ++here;
+        if (added_entries) added_entries->emplace_back(b, i);
+      }
     }
     if (here == 0) continue;
     std::vector<int> held;
@@ -237,6 +242,45 @@ int hold_on_bounds(ceres::Problem& problem, const std::vector<double*>& blocks,
     added += here;
   }
   return added;
+}
+
+namespace {
+
+// Entry i of block b set free again: the block's SubsetManifold over the entries held without i (none: no manifold; a
+// constant block, all of whose entries were held, made variable).
+void free_entry(ceres::Problem& problem, double* b, int i) {
+  const int n = problem.ParameterBlockSize(b);
+  std::vector<bool> hold(n, true);
+  if (!problem.IsParameterBlockConstant(b))
+    for (int k : free_entries(problem, b)) hold[k] = false;
+  hold[i] = false;
+  std::vector<int> held;
+  for (int k = 0; k < n; ++k)
+    if (hold[k]) held.push_back(k);
+  problem.SetParameterBlockVariable(b);
+  problem.SetManifold(b, held.empty() ? nullptr : new ceres::SubsetManifold(n, held));
+}
+
+}  // namespace
+
+std::vector<std::pair<double*, int>> release_from_bounds(ceres::Problem& problem, const std::vector<double*>& blocks,
+                                                         const std::vector<std::pair<double*, int>>& on_bounds,
+                                                         double step) {
+  std::vector<std::pair<double*, int>> released;
+  const double chi0 = chi2_of(problem, blocks);
+  if (!std::isfinite(chi0)) return released;
+  for (const auto& [b, i] : on_bounds) {
+    const double v = b[i], lo = problem.GetParameterLowerBound(b, i), hi = problem.GetParameterUpperBound(b, i);
+    if (v != lo && v != hi) continue;   // not on a bound (a kink held by the caller)
+    const double inward = v == lo ? 1.0 : -1.0;
+    const double h = std::min(step * std::max(1.0, std::fabs(v)), 0.5 * (hi - lo));
+    b[i] = v + inward * h;
+    const double chi1 = chi2_of(problem, blocks);
+    b[i] = v;   // restored bit for bit
+    if (chi1 < chi0 - 1e-10 * chi0) released.emplace_back(b, i);
+  }
+  for (const auto& [b, i] : released) free_entry(problem, b, i);
+  return released;
 }
 
 }  // namespace demfit

@@ -1170,39 +1170,67 @@ ceres::Solver::Summary solve(ceres::Problem& problem, int max_iterations) {
   return sum;
 }
 
+/// Entries of `face` (held on a bound) whose chi^2 falls into the box, and that were not released before, set free
+/// (moved from `face` to `released`). False when none is.
+bool release_once(ceres::Problem& problem, const std::vector<double*>& blocks, std::vector<std::pair<double*, int>>& face,
+                  std::vector<std::pair<double*, int>>& released) {
+  std::vector<std::pair<double*, int>> candidates;
+  for (const auto& e : face)
+    if (std::find(released.begin(), released.end(), e) == released.end()) candidates.push_back(e);
+  const std::vector<std::pair<double*, int>> now = release_from_bounds(problem, blocks, candidates);
+  for (const auto& e : now) {
+    face.erase(std::find(face.begin(), face.end(), e));
+    released.push_back(e);
+  }
+  return !now.empty();
+}
+
+/// The warning solve_on_face leaves: how many coefficients it held (`n`, counting each once), how many of them it
+/// released, and chi^2 before and after.
+std::string face_note(std::size_t n, std::size_t freed, bool kinked, double first, double last, int iterations,
+                      int passes) {
+  const std::string s = n > 1 ? "s" : "";
+  return "the fit ended with " + std::to_string(n) + " coefficient" + s + " on a bound" +
+         (kinked ? " or on the kink of nu_cC at the branch's lowest point" : "") + " at chi2 " + fmt(first, 8) +
+         ", and went on with " + (n > 1 ? "them" : "it") + " held there" +
+         (freed ? " (" + std::to_string(freed) + " set free again where chi2 fell into the box)" : "") + " to " +
+         fmt(last, 8) + " (" + std::to_string(iterations) + " iterations" +
+         (passes > 1 ? " in " + std::to_string(passes) + " passes" : "") + "; "
+         "Levenberg-Marquardt's projected steps stall at a bound; docs/model.md, \"A fit that stopped on a bound\")";
+}
+
 /// The fit, and where it ends with coefficients on a bound of the problem (or within kNearBound of one: moved onto
 /// it), or with nu_cC on the isotropic branch's lowest jammed point (the coordination law's onset on a data point: a
 /// kink of the cost), again with those held where they are (hold_on_bounds): Levenberg-Marquardt's projected steps
 /// stall there before the free coefficients reach their minimum (issue 31, twenty-third round; docs/model.md, "A fit
-/// that stopped on a bound"). Repeated while a pass ends on a bound not held before (twenty-fourth round: the
-/// three-pressure mu = 1 joint calibration's face fit met two more), at most kFacePasses times. Returns the last summary.
+/// that stopped on a bound"). Repeated while a pass ends on a bound not held before (twenty-fourth round), and, once
+/// none is met, with the held ones whose chi^2 falls into the box set free (release_from_bounds; twenty-fifth round: an
+/// active set, each entry released once), at most kFacePasses times. Returns the last summary.
 ceres::Solver::Summary solve_on_face(ceres::Problem& problem, std::vector<double*> blocks, std::vector<double>& isob,
                                      const IsoData& iso, const CalibrationOptions& o, const std::set<int>& held,
                                      std::vector<std::string>& notes) {
   ceres::Solver::Summary last = solve(problem, o.max_iterations);
   const double first = 2 * last.final_cost;
-  int n = 0, passes = 0, iterations = 0;
+  std::vector<std::pair<double*, int>> face, released;
+  int passes = 0, iterations = 0;
   bool kinked = false;
   for (; passes < kFacePasses && last.IsSolutionUsable(); ++passes) {
     std::vector<std::pair<double*, int>> kink;
     if (o.fit_isotropic && !o.shared_jamming && !held.count(kNuCC) && !iso.nu.empty() &&
         std::fabs(isob[kNuCC] - *std::min_element(iso.nu.begin(), iso.nu.end())) < 1e-9)
       kink.emplace_back(isob.data(), kNuCC);
-    const int more = hold_on_bounds(problem, blocks, kink, kNearBound);
-    if (more == 0) break;
-    n += more;
-    kinked = kinked || !kink.empty();
+    const std::size_t before = face.size();
+    if (hold_on_bounds(problem, blocks, kink, kNearBound, &face) == 0 && !release_once(problem, blocks, face, released))
+      break;
+    kinked = kinked || (!kink.empty() && face.size() > before);
     last = solve(problem, o.max_iterations);
     iterations += static_cast<int>(last.iterations.size());
   }
-  if (n == 0) return last;
-  notes.push_back("the fit ended with " + std::to_string(n) + " coefficient" + (n > 1 ? "s" : "") + " on a bound" +
-                  (kinked ? " or on the kink of nu_cC at the branch's lowest point" : "") + " at chi2 " +
-                  fmt(first, 8) + ", and went on with " + (n > 1 ? "them" : "it") + " held there to " +
-                  fmt(2 * last.final_cost, 8) + " (" + std::to_string(iterations) + " iterations" +
-                  (passes > 1 ? " in " + std::to_string(passes) + " passes" : "") + "; "
-                  "Levenberg-Marquardt's projected steps stall at a bound; docs/model.md, \"A fit that stopped on "
-                  "a bound\")");
+  if (passes == 0) return last;
+  std::set<std::pair<double*, int>> all(face.begin(), face.end());
+  all.insert(released.begin(), released.end());
+  notes.push_back(face_note(all.size(), released.size(), kinked, first, 2 * last.final_cost,
+                            iterations, passes));
   return last;
 }
 

@@ -10,6 +10,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <memory>
 #include <vector>
 
 #include "demfit/jacobian_check.hpp"
@@ -217,6 +218,71 @@ TEST(HoldOnBounds, EntriesOnABoundAreHeldAndTheFaceIsSolvedExactly) {
   EXPECT_EQ(demfit::hold_on_bounds(p4, {z.data()}, {}, 2e-6), 1) << "within 2e-6 x max(1, 1.5)";
   EXPECT_EQ(z[1], 1.5) << "moved onto the bound";
   EXPECT_EQ(z[0], 0.0);
+}
+
+}  // namespace
+
+namespace {
+
+// release_from_bounds (twenty-fifth round): the line's slope held on an upper bound of 1.5 while the unconstrained
+// slope is 1.9 stays held (chi^2 rises into the box: the multiplier's sign says the bound is active); held on a
+// lower bound of 1.0 with the data's slope 1.9 above it, chi^2 falls into the box, so it is set free, and a refit
+// reaches the closed-form least-squares line. A kink held off any bound is never released; values are restored.
+TEST(ReleaseFromBounds, OnlyAnEntryWhoseCostFallsIntoTheBoxIsSetFree) {
+  const double ts[] = {0.0, 0.5, 1.0, 2.0, 3.5}, ys[] = {0.1, 0.9, 1.7, 4.2, 6.8};
+  const auto line = [&](std::vector<double>& x) {
+    auto p = std::make_unique<ceres::Problem>();
+    for (int i = 0; i < 5; ++i)
+      p->AddResidualBlock(new ceres::AutoDiffCostFunction<Line, 1, 2>(new Line{ts[i], ys[i]}), nullptr, x.data());
+    return p;
+  };
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.function_tolerance = so.gradient_tolerance = so.parameter_tolerance = 1e-15;
+  ceres::Solver::Summary sum;
+
+  std::vector<double> up = {0.0, 1.5};   // active upper bound: kept
+  auto pu = line(up);
+  pu->SetParameterUpperBound(up.data(), 1, 1.5);
+  std::vector<std::pair<double*, int>> face;
+  ASSERT_EQ(demfit::hold_on_bounds(*pu, {up.data()}, {}, 1e-9, &face), 1);
+  ASSERT_EQ(face.size(), 1u);
+  ceres::Solve(so, pu.get(), &sum);
+  EXPECT_TRUE(demfit::release_from_bounds(*pu, {up.data()}, face).empty()) << "the bound is active";
+  EXPECT_EQ(up[1], 1.5);
+  EXPECT_EQ(pu->GetManifold(up.data())->TangentSize(), 1) << "still held";
+
+  std::vector<double> lo = {0.0, 1.0};   // inactive lower bound, the fit stopped on it: released
+  auto pl = line(lo);
+  pl->SetParameterLowerBound(lo.data(), 1, 1.0);
+  face.clear();
+  ASSERT_EQ(demfit::hold_on_bounds(*pl, {lo.data()}, {{lo.data(), 0}}, 1e-9, &face), 2);
+  ASSERT_EQ(face.size(), 2u);
+  EXPECT_TRUE(pl->IsParameterBlockConstant(lo.data())) << "both held: entry 0 as a kink, entry 1 on its bound";
+  const double x0 = lo[0];
+  const auto freed = demfit::release_from_bounds(*pl, {lo.data()}, face);
+  ASSERT_EQ(freed.size(), 1u);
+  EXPECT_EQ(freed[0].second, 1);
+  EXPECT_EQ(lo[0], x0);
+  EXPECT_EQ(lo[1], 1.0) << "restored bit for bit";
+  EXPECT_FALSE(pl->IsParameterBlockConstant(lo.data()));
+  ASSERT_NE(pl->GetManifold(lo.data()), nullptr);
+  EXPECT_EQ(pl->GetManifold(lo.data())->TangentSize(), 1) << "entry 0 (the kink) still held";
+  EXPECT_TRUE(demfit::release_from_bounds(*pl, {lo.data()}, {{lo.data(), 0}}).empty()) << "a kink off any bound";
+  ceres::Solve(so, pl.get(), &sum);
+  // x0 held: the slope's conditional minimum is sum t (y - x0) / sum t^2
+  double num = 0, den = 0;
+  for (int i = 0; i < 5; ++i) { num += ts[i] * (ys[i] - x0); den += ts[i] * ts[i]; }
+  EXPECT_NEAR(lo[1], num / den, 1e-7);   // Levenberg-Marquardt converges to it geometrically
+  EXPECT_GT(lo[1], 1.0);
+
+  std::vector<double> all = {0.0, 1.0};   // no kink: the whole block free again, no manifold left
+  auto pa = line(all);
+  pa->SetParameterLowerBound(all.data(), 1, 1.0);
+  face.clear();
+  ASSERT_EQ(demfit::hold_on_bounds(*pa, {all.data()}, {}, 1e-9, &face), 1);
+  ASSERT_EQ(demfit::release_from_bounds(*pa, {all.data()}, face).size(), 1u);
+  EXPECT_EQ(pa->GetManifold(all.data()), nullptr);
 }
 
 }  // namespace

@@ -30,6 +30,22 @@ vtk = true
 """
 
 
+# The modules that start a single-node Slurm (scripts/slurm-local.sh): one daemon at a time on this machine.
+SLURM_MODULES = {"test_ensemble.py", "test_sweep.py"}
+
+
+@pytest.hookimpl(tryfirst=True)   # before xdist's own hook, which turns the marks into the node ids' @group
+def pytest_collection_modifyitems(config, items):
+    """Under pytest-xdist (scripts/test.sh runs `-n N --dist loadgroup` where it is installed): every module's tests on
+    one worker, so a module-scoped fixture (a fit, a run) is computed once; the modules that start Slurm on the same
+    worker, one after another. Without xdist nothing changes."""
+    if not config.pluginmanager.hasplugin("xdist"):
+        return
+    for item in items:
+        name = os.path.basename(str(item.fspath))
+        item.add_marker(pytest.mark.xdist_group("slurm" if name in SLURM_MODULES else name))
+
+
 def run_dem(*args, check=False, timeout=900, env=None):
     """Run build/dem with args (environment `env`, default ours); return CompletedProcess (text)."""
     if not os.path.exists(DEM):

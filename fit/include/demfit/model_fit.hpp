@@ -183,9 +183,10 @@ constexpr double kRoughAbove = 1e-2;
 
 /// A fitted coefficient within this of a bound of the calibration (relative to max(1, |value|)) ends on it: moved onto
 /// it and held (solve_on_face); the warnings that a coefficient sits on its bound read nu_c and nu_cC so (2e-6 below
-/// the lowest start state). At most kFacePasses fits on a face follow the first (twenty-fourth round).
+/// the lowest start state). At most kFacePasses fits on a face follow the first (twenty-fourth round), each after new
+/// bounds are held or, when none is met, after held ones whose chi^2 falls into the box are set free (twenty-fifth).
 constexpr double kNearBound = 2e-6;
-constexpr int kFacePasses = 4;
+constexpr int kFacePasses = 8;
 
 /// The cost's rise over one quoted covariance error, relative to the quadratic model's (Calibration::error_scale),
 /// outside [1/kQuadraticWithin, kQuadraticWithin]: the covariance interval is then off by more than sqrt(2) on that side
