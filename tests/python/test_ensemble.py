@@ -149,9 +149,11 @@ def test_fit_tables_append_the_chosen_model(tiny):
 def finished_tasks(out, stage):
     """Status files of the tasks Snakemake had registered as finished. A status file written in the
     instant before a kill still carries Snakemake's "incomplete" marker: that task was running, and
-    rerunning it is what a resume should do."""
+    rerunning it is what a resume should do. A marker caught being written is a temporary file
+    `tmpXXXX.NAME` (base64 has no dot; seen under load, twenty-fifth round): its NAME counts too."""
     inc = out / ".snakemake" / "incomplete"
-    marked = {base64.urlsafe_b64decode(m.name).decode() for m in inc.glob("*")} if inc.is_dir() else set()
+    marked = ({base64.urlsafe_b64decode(m.name.rsplit(".", 1)[-1]).decode() for m in inc.glob("*")}
+              if inc.is_dir() else set())
     return [f for f in glob.glob(str(out / "members" / "*" / stage / "*.json"), recursive=True)
             if not f.endswith("manifest.json") and os.path.relpath(f, out) not in marked]
 
