@@ -283,4 +283,17 @@ std::vector<std::pair<double*, int>> release_from_bounds(ceres::Problem& problem
   return released;
 }
 
+bool release_once(ceres::Problem& problem, const std::vector<double*>& blocks, std::vector<std::pair<double*, int>>& face,
+                  std::vector<std::pair<double*, int>>& released) {
+  std::vector<std::pair<double*, int>> candidates;
+  for (const auto& e : face)
+    if (std::find(released.begin(), released.end(), e) == released.end()) candidates.push_back(e);
+  const std::vector<std::pair<double*, int>> now = release_from_bounds(problem, blocks, candidates);
+  for (const auto& e : now) {
+    face.erase(std::find(face.begin(), face.end(), e));
+    released.push_back(e);
+  }
+  return !now.empty();
+}
+
 }  // namespace demfit

@@ -1170,21 +1170,6 @@ ceres::Solver::Summary solve(ceres::Problem& problem, int max_iterations) {
   return sum;
 }
 
-/// Entries of `face` (held on a bound) whose chi^2 falls into the box, and that were not released before, set free
-/// (moved from `face` to `released`). False when none is.
-bool release_once(ceres::Problem& problem, const std::vector<double*>& blocks, std::vector<std::pair<double*, int>>& face,
-                  std::vector<std::pair<double*, int>>& released) {
-  std::vector<std::pair<double*, int>> candidates;
-  for (const auto& e : face)
-    if (std::find(released.begin(), released.end(), e) == released.end()) candidates.push_back(e);
-  const std::vector<std::pair<double*, int>> now = release_from_bounds(problem, blocks, candidates);
-  for (const auto& e : now) {
-    face.erase(std::find(face.begin(), face.end(), e));
-    released.push_back(e);
-  }
-  return !now.empty();
-}
-
 /// The warning solve_on_face leaves: how many coefficients it held (`n`, counting each once), how many of them it
 /// released, and chi^2 before and after.
 std::string face_note(std::size_t n, std::size_t freed, bool kinked, double first, double last, int iterations,

@@ -65,8 +65,12 @@ struct Profile {
   double below = kInf;                // the lowest chi2 a refit reached below chi0
 };
 
+// Passes of a refit on a bound's face: new bounds held, then those whose chi2 falls into the box released
+// (hold_on_bounds, release_once; as the calibration's solve_on_face, twenty-fifth round), at most this many.
+constexpr int kProfileFacePasses = 4;
+
 // chi2_p with coefficient a at `value`: the other movable entries start from `from` moved by `shift` d (within their
-// bounds), a is held, the problem refitted (and again on the face of any bound it ends on); `from` becomes the
+// bounds), a is held, the problem refitted (and again on the face of any bound it ends on, in passes); `from` becomes the
 // refitted values. +inf where a refit is unusable or its residuals not numbers.
 double refit_at(Profile& p, double value, std::vector<double>& from, double shift) {
   std::size_t k = 0;
@@ -78,7 +82,12 @@ double refit_at(Profile& p, double value, std::vector<double>& from, double shif
     }
   apply_hold(p.problem, p.blocks[p.block], p.holds[p.block], p.entry);
   bool ok = p.solve(p.problem);
-  if (ok && hold_on_bounds(p.problem, p.blocks) > 0) ok = p.solve(p.problem);
+  std::vector<std::pair<double*, int>> face, released;   // the calibration's face fit, in a few passes
+  for (int pass = 0; ok && pass < kProfileFacePasses; ++pass) {
+    if (hold_on_bounds(p.problem, p.blocks, {}, 1e-9, &face) == 0 && !release_once(p.problem, p.blocks, face, released))
+      break;
+    ok = p.solve(p.problem);
+  }
   const double chi = ok ? chi2_of(p.problem, p.blocks) : kInf;
   for (std::size_t b = 0; b < p.blocks.size(); ++b) apply_hold(p.problem, p.blocks[b], p.holds[b], -1);
   k = 0;

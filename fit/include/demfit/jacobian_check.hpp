@@ -58,6 +58,12 @@ std::vector<std::pair<double*, int>> release_from_bounds(ceres::Problem& problem
                                                          const std::vector<std::pair<double*, int>>& on_bounds,
                                                          double step = 1e-5);
 
+/// release_from_bounds over the entries of `face` not in `released`, each released one moved from `face` to
+/// `released`: an active set in which an entry is released once (a fit that takes it back onto its bound holds it
+/// again, for good), so the passes end. False when none is released.
+bool release_once(ceres::Problem& problem, const std::vector<double*>& blocks, std::vector<std::pair<double*, int>>& face,
+                  std::vector<std::pair<double*, int>>& released);
+
 /// The cost over one quoted error (twenty-third round; docs/model.md, "The cost over one quoted error"). A covariance
 /// error rests on the cost being quadratic over that error, not only smooth at the optimum's step. Along coordinate
 /// a's linearised profile, d = sqrt(scale) Sigma e_a / sqrt(Sigma_aa) (the other coefficients at their conditional

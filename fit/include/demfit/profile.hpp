@@ -39,7 +39,8 @@ using ProfileProgress = std::function<void(int, int, const ProfileInterval&)>;
 
 /// For each of `coordinates` (indices into the concatenated entries of `blocks`, as in check_error_scale): the
 /// coefficient held at trial values, every other free entry refitted by `solve` (and, where the refit ends on a bound
-/// of the problem, again with that held: hold_on_bounds), until chi2_p - chi2_0 = scale within `tolerance` x scale
+/// of the problem, again with that held: hold_on_bounds, and with a held one whose chi2 falls into the box set free:
+/// release_once; at most 4 passes), until chi2_p - chi2_0 = scale within `tolerance` x scale
 /// on each side. The trials start one conditional covariance error away along the linearised profile (`covariance`
 /// unscaled, n x n row-major; `held` as in check_error_scale) and find the end by the secant rule on sqrt(rise), which
 /// is linear in the coefficient where the cost is quadratic; at most `max_refits` refits per end, out to `reach`
