@@ -16,7 +16,7 @@ export PYTHONPATH="$PWD/build/python${PYTHONPATH:+:$PYTHONPATH}"
 # Passive OpenMP waiting: the pipeline tests start multi-threaded runs, and spinning threads on a
 # machine busy with other jobs run up to 35x slower (docs/benchmarks.md).
 # Two or more cores: the modules run on min(cores, 4) workers (pytest-xdist; conftest.py keeps a module on one worker
-# and the Slurm modules on one), which takes the pipeline tests from about 15 min to WALL on two cores.
+# and the Slurm modules on one); the README gives the suite's time measured in a fresh clone.
 workers=()
 if [ "$(nproc)" -ge 2 ] && /usr/bin/python3 -c "import xdist" 2> /dev/null; then
   n=$(nproc); [ "$n" -gt 4 ] && n=4
