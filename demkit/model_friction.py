@@ -247,7 +247,7 @@ def main(argv=None):
                     help="the modes fitted, passed to `dem model --calibrate-on` (D2,D3 for the weighted rule, which needs "
                          "a second Lode angle; the others are predicted)")
     ap.add_argument("--max-iterations", type=int, default=None,
-                    help="`dem model --max-iterations` (its default, 300, when not given)")
+                    help="`dem model --max-iterations` (its default, 1000, when not given)")
     ap.add_argument("--jamming", default="separate", choices=("separate", "shared"),
                     help="the isotropic laws' jamming fractions (dem model --jamming; shared: nu_cC = nu_c)")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")

@@ -197,6 +197,8 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   // A fit that stopped short says so in its table (the values are where it stopped; --start goes on)
   if (!cal.ok)
     t.add_row({"converged", "no: " + cal.message, "nan", "nan", "not converged", "nan", "nan", "nan", "nan", "-"});
+  else if (!cal.settled.empty())   // at the iteration limit, chi^2 settled (demfit/settle.hpp): converged, and why
+    t.add_row({"settled", "yes: " + cal.settled, "nan", "nan", "settled", "nan", "nan", "nan", "nan", "-"});
   Table machine = t;
   for (std::size_t i = 0; i < exact.size(); ++i) machine.rows[i][2] = exact[i];
   write_table_all(machine, t, (out / "parameters").string(),
@@ -1517,7 +1519,7 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                         "with --state-limit volume: read the laws of psi unbounded (default: held at their values at the "
                         "edges of the calibration's own states, rows psi_min and psi_max; with --predict-with the file's "
                         "range, or without one the --calibrate-on curves')");
-  app.add_option("--max-iterations", o.max_iterations, "Ceres iterations of each fit (default 300)");
+  app.add_option("--max-iterations", o.max_iterations, "Ceres iterations of each fit (default 1000; a fit stopped there counts as converged where chi2 settled: docs/model.md \"A fit that settles\")");
   app.add_option("--start", o.start, "parameters.csv of another `dem model` run: the start values (re-centred on "
                  "this data's nu_ref; the isotropic block too unless --start-isotropic branch); with it the path ensembles alone may be calibrated (--calibrate-on PATHS). "
                  "Several, comma-separated, `default` for the start from the data's own fits: the fit is made from "

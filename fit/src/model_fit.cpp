@@ -2,6 +2,7 @@
 #include "demfit/jet_valued_cost.hpp"
 #include "demfit/model_fit.hpp"
 #include "demfit/jacobian_check.hpp"
+#include "demfit/settle.hpp"
 
 #include <ceres/ceres.h>
 #include <glog/logging.h>
@@ -1157,16 +1158,35 @@ void hold_ext(ceres::Problem& problem, std::vector<double>& shear, std::vector<d
   problem.SetManifold(ext.data(), new ceres::SubsetManifold(ext_size(state_limit, weighted, state_lode, state_volume), held));
 }
 
-/// One Ceres solve of the calibration (dense QR, tight tolerances, one thread: the same bits on every run).
-ceres::Solver::Summary solve(ceres::Problem& problem, int max_iterations) {
+/// The calibration's solver options (dense QR, tight tolerances, one thread: the same bits on every run).
+ceres::Solver::Options solver_options(int max_iterations) {
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
   so.max_num_iterations = max_iterations;
   so.function_tolerance = 1e-12;
   so.parameter_tolerance = 1e-12;
   so.num_threads = 1;
+  return so;
+}
+
+/// One Ceres solve of the calibration (a profile's refit).
+ceres::Solver::Summary solve(ceres::Problem& problem, int max_iterations) {
+  ceres::Solver::Summary sum;
+  ceres::Solve(solver_options(max_iterations), &problem, &sum);
+  return sum;
+}
+
+/// One Ceres solve of the calibration, the values of `blocks` one settle_window before the iteration limit kept in
+/// `window_start` (empty if the fit ended before).
+ceres::Solver::Summary solve(ceres::Problem& problem, int max_iterations, const std::vector<double*>& blocks,
+                             std::vector<std::vector<double>>& window_start) {
+  ceres::Solver::Options so = solver_options(max_iterations);
+  WindowStart watch(problem, blocks, max_iterations - settle_window(max_iterations));
+  so.update_state_every_iteration = true;   // a copy of the state for `watch`; the steps are the same
+  so.callbacks.push_back(&watch);
   ceres::Solver::Summary sum;
   ceres::Solve(so, &problem, &sum);
+  window_start = watch.values();
   return sum;
 }
 
@@ -1193,8 +1213,8 @@ std::string face_note(std::size_t n, std::size_t freed, bool kinked, double firs
 /// active set, each entry released once), at most kFacePasses times. Returns the last summary.
 ceres::Solver::Summary solve_on_face(ceres::Problem& problem, std::vector<double*> blocks, std::vector<double>& isob,
                                      const IsoData& iso, const CalibrationOptions& o, const std::set<int>& held,
-                                     std::vector<std::string>& notes) {
-  ceres::Solver::Summary last = solve(problem, o.max_iterations);
+                                     std::vector<std::string>& notes, std::vector<std::vector<double>>& window_start) {
+  ceres::Solver::Summary last = solve(problem, o.max_iterations, blocks, window_start);
   const double first = 2 * last.final_cost;
   std::vector<std::pair<double*, int>> face, released;
   int passes = 0, iterations = 0;
@@ -1208,7 +1228,7 @@ ceres::Solver::Summary solve_on_face(ceres::Problem& problem, std::vector<double
     if (hold_on_bounds(problem, blocks, kink, kNearBound, &face) == 0 && !release_once(problem, blocks, face, released))
       break;
     kinked = kinked || (!kink.empty() && face.size() > before);
-    last = solve(problem, o.max_iterations);
+    last = solve(problem, o.max_iterations, blocks, window_start);
     iterations += static_cast<int>(last.iterations.size());
   }
   if (passes == 0) return last;
@@ -1217,6 +1237,43 @@ ceres::Solver::Summary solve_on_face(ceres::Problem& problem, std::vector<double
   notes.push_back(face_note(all.size(), released.size(), kinked, first, 2 * last.final_cost,
                             iterations, passes));
   return last;
+}
+
+/// cal.ok from the last solve: Ceres converged, or stopped at its limit settled in chi^2 (settle.hpp; the note in
+/// cal.settled and the warnings). Needs cal.chi2, n_residuals and n_free.
+void judge_convergence(const ceres::Solver::Summary& sum, int max_iterations, Calibration& cal) {
+  const double scale = std::max(1.0, cal.chi2_dof());
+  const Settling st = settling(sum, settle_window(max_iterations), scale);
+  cal.ok = sum.IsSolutionUsable() && (sum.termination_type == ceres::CONVERGENCE || st.settled);
+  if (st.settled) {
+    cal.settled = settle_note(st, scale);
+    cal.warnings.push_back(cal.settled);
+  } else if (!cal.ok) {
+    cal.warnings.push_back("optimiser did not converge: " + sum.message +
+                           (sum.termination_type == ceres::NO_CONVERGENCE && st.window > 0
+                                ? " (chi2 fell by " + fmt(st.fall, 3) + " over the last " + std::to_string(st.window) +
+                                      " iterations, " + fmt(st.fall / scale, 3) + " of s; settled below " +
+                                      fmt(kSettleFraction, 2) + ")"
+                                : ""));
+  }
+}
+
+/// A settled fit's coefficients that still moved over the window by more than a tenth of their covariance error:
+/// appended to cal.settled and its warning (a flat valley along which the cost no longer falls, but a coefficient runs).
+void moving_note(const std::vector<std::vector<double>>& window_start, Calibration& cal) {
+  std::vector<double> before;
+  for (const auto& b : window_start) before.insert(before.end(), b.begin(), b.end());
+  std::string moving;   // the same order as cal.value (iso, shear, ext: the ext block longer than its quoted entries)
+  for (std::size_t i = 0; i < cal.value.size() && i < before.size(); ++i) {
+    const double moved = std::fabs(cal.value[i] - before[i]), se = cal.se_cov[i];
+    if (std::isfinite(se) && se > 0 && moved > 0.1 * se)
+      moving += (moving.empty() ? "" : ", ") + cal.names[i] + " by " + fmt(moved / se, 2) + " errors";
+  }
+  const std::string tail = moving.empty() ? "; no coefficient moved by more than 0.1 of its covariance error over them"
+                                          : "; still moving over them: " + moving;
+  cal.settled += tail;
+  for (auto& w : cal.warnings)
+    if (w.rfind("Ceres stopped at its limit", 0) == 0) w += tail;
 }
 
 /// The start's parameters with the fitted blocks and the options' family, surface, rules and limit.
@@ -1420,11 +1477,10 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, o.excess_relaxes, n_p, o.hold_ext);
 
   Calibration cal;
-  const ceres::Solver::Summary sum = solve_on_face(problem, blocks_all, isob, iso, o, held, cal.warnings);
-  cal.ok = sum.IsSolutionUsable() && sum.termination_type == ceres::CONVERGENCE;
+  std::vector<std::vector<double>> window_start;
+  const ceres::Solver::Summary sum = solve_on_face(problem, blocks_all, isob, iso, o, held, cal.warnings, window_start);
   cal.message = sum.BriefReport();
   if (sum.termination_type == ceres::FAILURE) cal.message += " (" + sum.message + ")";   // why, in starts.md
-  if (!cal.ok) cal.warnings.push_back("optimiser did not converge: " + sum.message);
   cal.params = fitted_params(start, isob, shear, ext, o, X);
   const int n_ext = ext_size(cal.params.state_limit, weighted, state_lode, state_volume);
   const std::vector<int> held_x =
@@ -1436,6 +1492,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   // Free parameters: the held ones (isotropic, the nu-slopes of one start volume fraction, held_ext) left out.
   cal.n_free = (o.fit_isotropic ? kNumIso - static_cast<int>(held.size()) : 0) + kNumShear - static_cast<int>(held_shear(X, one_nu, state_volume, o.excess_relaxes).size()) +
                (X ? n_ext - static_cast<int>(held_x.size()) : 0);
+  judge_convergence(sum, o.max_iterations, cal);
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(isob[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(shear[i]); }
   if (X)
@@ -1448,6 +1505,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   for (int i : held_shear(X, false, state_volume, o.excess_relaxes))   // s_max_b at 0, beta_p's slope, beta_p unless it acts
     cal.se_cov[kNumIso + i] = kNaN;
   settle_errors(cal);
+  if (!cal.settled.empty()) moving_note(window_start, cal);
   check_quoted_errors(problem, isob, shear, ext, o, X, cov, cal);
   if (state_volume) drop_unread_for_volume_state(cal, weighted);
   else if (weighted && !cal.params.state_limit) drop_entries(cal, kNumIso + kNumShear + kNPsiA, 2);   // n_psi: not in this law

@@ -24,7 +24,7 @@ struct ModelCommandOptions {
   std::string profile;
   std::string family = "group";           ///< group, extended or auto (docs/model.md, "The frictional extension")
   std::string surface = "ld";             ///< Lode surface of the extended family: ld, mn, none
-  int max_iterations = 300;               ///< Ceres iterations of each fit
+  int max_iterations = 1000;              ///< Ceres iterations of each fit
   /// Start values: parameters.csv files of other `dem model` runs, or `default` (the start from the data's own
   /// saturating fits). More than one: the fit is made from each, the lowest chi2/dof is kept (starts.{csv,md}).
   std::vector<std::string> start;

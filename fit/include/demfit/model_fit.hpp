@@ -39,7 +39,7 @@ struct CalibrationOptions {
   double nu_ref = 0;             ///< centre of the nu-laws [-]; 0: mean nu of the curves
   double eps_max = 1e9;          ///< fit only eps_d <= eps_max [-]
   double se_floor = 0.25;        ///< sigma of a point >= se_floor x the median SE of its quantity and curve
-  int max_iterations = 300;
+  int max_iterations = 1000;
   double max_step = 5e-4;        ///< RK4 step in eps_d [-]
   bool fit_isotropic = true;     ///< false: isotropic block held at `start` (e.g. synthetic tests)
   const Parameters* start = nullptr;   ///< start values (nullptr: from per-curve saturating fits)
@@ -147,6 +147,9 @@ struct Calibration {
   double chi2_dof() const { return n_residuals > n_free ? chi2 / (n_residuals - n_free) : 0.0; }
   bool ok = false;
   std::string message;                  ///< Ceres' summary line
+  /// Where Ceres stopped at its iteration limit with chi^2 settled (demfit/settle.hpp): why the fit counts as converged,
+  /// and the coefficients still moving over the last window ("" otherwise)
+  std::string settled;
   std::vector<std::string> warnings;
   /// A fitted drained path along which the optimum sits against the drained control's margin ("" if none; set by
   /// `dem model`): the errors are then not determined (parameters.csv's se, lo95, hi95 nan)
