@@ -1247,6 +1247,8 @@ void judge_convergence(const ceres::Solver::Summary& sum, int max_iterations, Ca
   cal.ok = sum.IsSolutionUsable() && (sum.termination_type == ceres::CONVERGENCE || st.settled);
   if (st.settled) {
     cal.settled = settle_note(st, scale);
+    cal.message += "; settled: chi2 fell by " + fmt(st.fall, 3) + " over the last " + std::to_string(st.window) +
+                   " iterations, " + fmt(st.fall / scale, 3) + " of s";   // jackknife.md's and starts.md's message
     cal.warnings.push_back(cal.settled);
   } else if (!cal.ok) {
     cal.warnings.push_back("optimiser did not converge: " + sum.message +
