@@ -27,15 +27,18 @@ RULES = ("overlap", "weighted")
 QUANTITIES = (("p_star [band]", "p*"), ("eps_v [band]", "ε_v"), ("s_dev [band]", "s"), ("F_dev [band]", "F"))
 
 
-def run_rule(dem, work, out, rule, jackknife=True, state_limit=True, start=None):
+def run_rule(dem, work, out, rule, jackknife=True, state_limit=True, start=None, max_iterations=None):
     """`dem model` on WORK (a working copy) into OUT, the extended family under RULE on D2 + D3 (with the
     state-dependent limit unless told: True or False, or a `--state-limit` value such as "pressure-lode"; from
-    START, a parameters.csv or a comma-separated multi-start list, when given)."""
+    START, a parameters.csv or a comma-separated multi-start list, when given; `dem model`'s default
+    --max-iterations unless MAX_ITERATIONS is given)."""
     limit = state_limit if isinstance(state_limit, str) else "pressure" if state_limit else "none"
     cmd = [dem, "model", work, "--out", out, "--family", "extended", "--fabric-lode", rule, "--state-limit",
            limit, "--calibrate-on", "D2,D3", "--no-plots", "--force"]
     if not jackknife:
         cmd.append("--no-jackknife")
+    if max_iterations:
+        cmd += ["--max-iterations", str(max_iterations)]
     if start:   # the isotropic block from the branch's own fit, as every stored variant run started (issue 31,
                 # fifteenth round: `--start-isotropic file`, the default, would restart them from the files' values)
         cmd += ["--start", start, "--start-isotropic", "branch"]
@@ -131,11 +134,13 @@ def main(argv=None):
     ap.add_argument("--dem", default="build/dem")
     ap.add_argument("--mu", nargs="+", default=list(MUS))
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
+    ap.add_argument("--max-iterations", type=int, default=None,
+                    help="`dem model --max-iterations` (its default, 1000, when not given; the stored tables were made with 300)")
     a = ap.parse_args(argv)
     for mu in ([] if a.table_only else a.mu):
         work = model_friction.working_copy(a.store, a.work, mu, "model_lode_weight")
         for rule in RULES:
-            run_rule(a.dem, work, os.path.join(a.out, rule, f"mu_{mu}"), rule)
+            run_rule(a.dem, work, os.path.join(a.out, rule, f"mu_{mu}"), rule, max_iterations=a.max_iterations)
     table(a.out, a.mu)
     parameter_tables(a.out, a.mu)
 
