@@ -25,10 +25,10 @@ Settling settling(const ceres::Solver::Summary& summary, int window, double scal
   Settling s;
   const auto& it = summary.iterations;
   s.iterations = it.empty() ? 0 : it.back().iteration;
-  s.window = window;
   if (summary.termination_type != ceres::NO_CONVERGENCE || !summary.IsSolutionUsable() || window < 1 ||
       static_cast<int>(it.size()) <= window)
-    return s;
+    return s;   // window 0: not measured
+  s.window = window;
   // iterations[k].cost is the cost after iteration k (an unsuccessful step leaves it); the start of the window is
   // `window` iterations before the last
   const double before = 2 * it[it.size() - 1 - static_cast<std::size_t>(window)].cost;

@@ -88,6 +88,8 @@ TEST(Settle, AConvergedFitIsNotCalledSettled) {
   // a window as long as the solve (iterations 0 to 60), and one longer
   EXPECT_TRUE(demfit::settling(r.summary, 60, 1e300).settled);
   EXPECT_FALSE(demfit::settling(r.summary, 61, 1e300).settled);
+  EXPECT_EQ(demfit::settling(r.summary, 61, 1e300).window, 0);   // not measured: no fall to quote
+  EXPECT_EQ(demfit::settling(converged, 50, 1e300).window, 0);
 }
 
 }  // namespace

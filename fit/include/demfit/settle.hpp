@@ -44,7 +44,7 @@ class WindowStart : public ceres::IterationCallback {
 struct Settling {
   bool settled = false;   ///< stopped at the limit (NO_CONVERGENCE), and chi^2 fell by < kSettleFraction x scale
   double fall = 0;        ///< chi^2 = 2 cost at the window's start minus at the end
-  int window = 0;         ///< iterations in the window
+  int window = 0;         ///< iterations in the window; 0 where the fall was not measured (not settled)
   int iterations = 0;     ///< iterations of the solve
 };
 
