@@ -250,8 +250,7 @@ def main(argv=None):
                 except subprocess.TimeoutExpired:
                     pass
         except KeyboardInterrupt:
-            proc.terminate()
-            proc.wait()
+            stop_snakemake(proc, STOP_GRACE_PROFILE_S if a.profile else STOP_GRACE_S)
             prog.show(final=True)
             sys.stderr.write("dem ensemble: interrupted; run the same command again to continue where it stopped\n")
             return 130
@@ -280,6 +279,24 @@ def main(argv=None):
     sys.stderr.write(f"dem ensemble: done in {fmt_time(time.time() - prog.t0)}: averages in {out}/ensemble, "
                      f"fit tables in {out}/fit, plots in {out}/plots\n")
     return 0
+
+
+# Seconds Snakemake gets to stop after SIGTERM (it stops its jobs and marks their outputs incomplete; with a profile
+# it cancels the cluster's jobs, which takes longer) before it is killed: once CI caught it still alive 30 s after.
+STOP_GRACE_S = 15
+STOP_GRACE_PROFILE_S = 120
+
+
+def stop_snakemake(proc, grace):
+    """SIGTERM to Snakemake; SIGKILL if it has not ended within `grace` seconds (said on stderr). A killed
+    Snakemake leaves its incomplete markers, which the rerun's --rerun-incomplete redoes."""
+    proc.terminate()
+    try:
+        proc.wait(grace)
+    except subprocess.TimeoutExpired:
+        sys.stderr.write(f"dem ensemble: Snakemake did not stop within {grace} s of SIGTERM; killed\n")
+        proc.kill()
+        proc.wait()
 
 
 def _raise_interrupt(signum, frame):

@@ -401,6 +401,45 @@ def test_killing_dem_ensemble_stops_its_snakemake(tmp_path, sig):
             pass
 
 
+def test_a_snakemake_that_ignores_sigterm_is_killed_after_its_grace(tmp_path):
+    """`dem ensemble` stopped by SIGTERM gives Snakemake demkit.ensemble.STOP_GRACE_S to stop, then kills it: a stand-in
+    `snakemake` on PATH that ignores SIGTERM does not keep the driver (or the folder lock) alive."""
+    from demkit import ensemble
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "snakemake").write_text("#!/bin/sh\ntrap '' TERM\nwhile :; do sleep 0.2; done\n")
+    (fake / "snakemake").chmod(0o755)
+    scene = tmp_path / "ens.toml"
+    scene.write_text(ENS_SCENE)
+    out = tmp_path / "run"
+    env = dict(os.environ, PATH=f"{fake}:{os.environ['PATH']}")
+    p = subprocess.Popen([DEM, "ensemble", str(scene), "--out", str(out), "--cores", "1"], stdout=subprocess.DEVNULL,
+                         stderr=subprocess.PIPE, text=True, start_new_session=True, env=env)
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline and not snakemakes_in(out):
+            time.sleep(0.2)
+        assert snakemakes_in(out), "the stand-in Snakemake did not start"
+        time.sleep(1.0)   # the driver's handlers are set once Snakemake has started
+        t0 = time.time()
+        p.send_signal(signal.SIGTERM)
+        err = p.communicate(timeout=ensemble.STOP_GRACE_S + 30)[1]
+        took = time.time() - t0
+        assert p.returncode == 130, err
+        assert f"Snakemake did not stop within {ensemble.STOP_GRACE_S} s of SIGTERM; killed" in err, err
+        assert ensemble.STOP_GRACE_S - 1 < took < ensemble.STOP_GRACE_S + 30
+        deadline = time.time() + 10
+        while time.time() < deadline and snakemakes_in(out):
+            time.sleep(0.2)
+        assert not snakemakes_in(out)
+        assert lock_frees(str(out / ".dem-ensemble.lock"), 10)
+    finally:
+        try:
+            os.killpg(p.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
 def test_empty_arrays_into_an_empty_state_copy_nothing_and_do_not_crash():
     # fuzz_demtk under UBSan (tests/SANITIZE.md): a (0, 3) array copied into a state of no particles
     # passed vector::data() == nullptr to memcpy (undefined behaviour; the sanitizer build aborts the
