@@ -1247,16 +1247,13 @@ void judge_convergence(const ceres::Solver::Summary& sum, int max_iterations, Ca
   cal.ok = sum.IsSolutionUsable() && (sum.termination_type == ceres::CONVERGENCE || st.settled);
   if (st.settled) {
     cal.settled = settle_note(st, scale);
-    cal.message += "; settled: chi2 fell by " + fmt(st.fall, 3) + " over the last " + std::to_string(st.window) +
-                   " iterations, " + fmt(st.fall / scale, 3) + " of s";   // jackknife.md's and starts.md's message
+    cal.message += "; settled: " + fall_phrase(st, scale);   // jackknife.md's and starts.md's message
     cal.warnings.push_back(cal.settled);
   } else if (!cal.ok) {
     cal.warnings.push_back("optimiser did not converge: " + sum.message +
-                           (sum.termination_type == ceres::NO_CONVERGENCE && st.window > 0
-                                ? " (chi2 fell by " + fmt(st.fall, 3) + " over the last " + std::to_string(st.window) +
-                                      " iterations, " + fmt(st.fall / scale, 3) + " of s; settled below " +
-                                      fmt(kSettleFraction, 2) + ")"
-                                : ""));
+                           (st.window > 0 ? " (" + fall_phrase(st, scale) + "; settled below " +
+                                                    fmt(kSettleFraction, 2) + ")"
+                                              : ""));
   }
 }
 

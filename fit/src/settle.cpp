@@ -37,6 +37,11 @@ Settling settling(const ceres::Solver::Summary& summary, int window, double scal
   return s;
 }
 
+std::string fall_phrase(const Settling& s, double scale) {
+  return "chi2 fell by " + fmt(s.fall, 3) + " over the last " + std::to_string(s.window) + " iterations, " +
+         fmt(s.fall / scale, 3) + " of s";
+}
+
 std::string settle_note(const Settling& s, double scale) {
   return "Ceres stopped at its limit of " + std::to_string(s.iterations) +
          " iterations short of its relative tolerance (1e-12), but chi2 fell by " + fmt(s.fall, 3) + " over the last " +

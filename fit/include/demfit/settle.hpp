@@ -52,6 +52,9 @@ struct Settling {
 /// stopped at its iteration limit with a usable solution and the window fits in the solve.
 Settling settling(const ceres::Solver::Summary& summary, int window, double scale);
 
+/// "chi2 fell by F over the last W iterations, F/s of s": a measured window's fall, for messages and warnings.
+std::string fall_phrase(const Settling& s, double scale);
+
 /// The sentence a settled fit's tables carry: the limit, the fall over the window against s.
 std::string settle_note(const Settling& s, double scale);
 
