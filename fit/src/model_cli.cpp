@@ -160,6 +160,23 @@ std::string unit_of(const std::string& n) {
   return "-";
 }
 
+// With --profile: the profile interval's ends as two more columns of parameters.* (profile_lo68, profile_hi68; nan on
+// rows not profiled or where an end was not found), so that the table a paper quotes from holds both intervals.
+bool add_profile_columns(const Calibration& cal, Table& t) {
+  bool any = false;
+  for (const ProfileInterval& p : cal.profile) any = any || p.lower.refits + p.upper.refits > 0;
+  if (!any) return false;
+  t.header.push_back("profile_lo68");
+  t.header.push_back("profile_hi68");
+  for (std::size_t r = 0; r < t.rows.size(); ++r) {
+    const bool has = r < cal.profile.size() && r < cal.value.size() &&
+                     cal.profile[r].lower.refits + cal.profile[r].upper.refits > 0;
+    t.rows[r].push_back(has ? num(cal.profile[r].lower.value) : "nan");
+    t.rows[r].push_back(has ? num(cal.profile[r].upper.value) : "nan");
+  }
+  return true;
+}
+
 void write_parameter_tables(const Calibration& cal, int packings, const fs::path& out, const std::string& fit_label) {
   Table t({"parameter", "law", "value", "se", "se_method", "lo95", "hi95", "se_covariance", "se_jackknife", "units"});
   const bool jk = !cal.se_jackknife.empty();
@@ -199,11 +216,16 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
     t.add_row({"converged", "no: " + cal.message, "nan", "nan", "not converged", "nan", "nan", "nan", "nan", "-"});
   else if (!cal.settled.empty())   // at the iteration limit, chi^2 settled (demfit/settle.hpp): converged, and why
     t.add_row({"settled", "yes: " + cal.settled, "nan", "nan", "settled", "nan", "nan", "nan", "nan", "-"});
+  const bool profiled = add_profile_columns(cal, t);
   Table machine = t;
   for (std::size_t i = 0; i < exact.size(); ++i) machine.rows[i][2] = exact[i];
   write_table_all(machine, t, (out / "parameters").string(),
                   "Incremental anisotropic model: joint fit of the isotropic branch and the ensemble curves of " + fit_label +
-                  " (docs/model.md); 95 % intervals: estimate -/+ t se; value: every digit in .csv/.json, six in .md/.tex");
+                  " (docs/model.md); 95 % intervals: estimate -/+ t se; value: every digit in .csv/.json, six in .md/.tex" +
+                  (profiled ? std::string("; profile_lo68/hi68 (--profile): where chi^2 rises by max(1, chi2/dof) with "
+                                          "the rest refitted, a 68 % interval (nan: the end not found; profile.csv says "
+                                          "how each end was reached)")
+                            : std::string()));
   std::vector<std::string> h = {"parameter"};
   for (const auto& n : cal.names) h.push_back(n);
   Table c(h);

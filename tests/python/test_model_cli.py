@@ -934,7 +934,8 @@ def test_profile_intervals_end_where_the_cost_rises_by_the_scale(tmp_path):
     optimum: every end is found with its rise within 0.05 of s; no end lies nearer than the error-scale check's
     linearised profile allows (the profile minimises over the others, so it rises no faster: t >= 1/sqrt(rise) of
     error_scale.csv, less the 0.05 tolerance); the stderr counts are the csv's; and an independent fit with C0 held at
-    its lower end by `--hold-isotropic` (another code path) does not go below the profile's chi2 there. An unknown
+    its lower end by `--hold-isotropic` (another code path) does not go below the profile's chi2 there. parameters.csv
+    carries the ends as profile_lo68/hi68 (twenty-seventh round), a run without --profile does not. An unknown
     name is refused with the fix."""
     out = str(tmp_path / "p")
     stored = os.path.join(ENSEMBLE, "model", "parameters.csv")
@@ -959,6 +960,12 @@ def test_profile_intervals_end_where_the_cost_rises_by_the_scale(tmp_path):
     assert line.split("of ")[1].startswith("3 coefficients, %d have an end beyond" % outside), line
     assert "no refit went below the fit's chi2" in line, line
 
+    # parameters.csv carries the same ends (profile_lo68/hi68) on the profiled rows, nan on the others
+    params = {x["parameter"]: x for x in rows(os.path.join(out, "parameters.csv"))}
+    for n, x in params.items():
+        want = (prof[n]["profile_lower"], prof[n]["profile_upper"]) if n in prof else ("nan", "nan")
+        assert (x["profile_lo68"], x["profile_hi68"]) == want, (n, x)
+
     lower = float(prof["C0"]["profile_lower"])
     with open(os.path.join(out, "parameters.csv"), newline="") as fh:
         table = list(csv.reader(fh))
@@ -971,6 +978,7 @@ def test_profile_intervals_end_where_the_cost_rises_by_the_scale(tmp_path):
     h = run(ENSEMBLE, "--start", held, "--hold-isotropic", "C0", "--out", str(tmp_path / "h"), "--no-jackknife",
             "--no-plots")
     assert h.returncode == 0, h.stderr
+    assert "profile_lo68" not in open(os.path.join(str(tmp_path / "h"), "parameters.csv")).readline()   # not profiled
     final = [2 * float(x.split(",")[0]) for x in h.stderr.split("Final cost: ")[1:]]
     face = [float(l.split("held there to ")[1].split(" ")[0]) for l in h.stderr.splitlines() if "held there to" in l]
     chi2_held = min(final + face)
