@@ -1358,8 +1358,8 @@ ModelInputs checked_inputs(const ModelCommandOptions& o, const CalibrationOption
           throw InputError("--d2-lode normal reads D2's b from the calibrated limit, and --calibrate-on fits the path " +
                            d.name + " (made of D2), which needs it during the fit: give --d2-lode a number (e.g. 0.35)");
     }
-    if (o.family != "group" && co.fabric == FabricLode::Weighted) {
-      try {
+    if (o.family != "group" && co.fabric == FabricLode::Weighted && o.predict_with.empty()) {   // nothing fitted with
+      try {                                                                                        // --predict-with
         check_weighted_lode(in.fit_curves, in.fit_paths);
       } catch (const std::invalid_argument& e) {
         throw InputError(e.what());
