@@ -82,3 +82,9 @@ def test_predict_with_a_weighted_calibration_gives_its_stored_curves(tmp_path):
     assert r.returncode == 0, r.stderr
     got, want = summary_rows(out / "summary.csv"), summary_rows(os.path.join(stored, "summary.csv"))
     assert len(got) == 9 and got == want
+    # the closing line counts summary.csv's curves within 1 band and names the worst predicted one
+    line = next(ln for ln in r.stderr.splitlines() if "curves within 1 band" in ln)
+    worst = max(got, key=lambda row: float(row[-1]))
+    assert line.startswith(f"dem model: {sum(float(row[-1]) <= 1 for row in got)} of 9 curves within 1 band"), line
+    assert f"worst fitted none, worst predicted {worst[-1]} ({worst[0]} nu={worst[1]} " in line, line
+    assert line.endswith("chi2/dof nan (nothing fitted) (summary.md)"), line
