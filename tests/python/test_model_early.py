@@ -88,3 +88,23 @@ def test_predict_with_a_weighted_calibration_gives_its_stored_curves(tmp_path):
     assert line.startswith(f"dem model: {sum(float(row[-1]) <= 1 for row in got)} of 9 curves within 1 band"), line
     assert f"worst fitted none, worst predicted {worst[-1]} ({worst[0]} nu={worst[1]} " in line, line
     assert line.endswith("chi2/dof nan (nothing fitted) (summary.md)"), line
+
+
+def test_the_chosen_variants_are_applied_and_checked_against_their_stored_runs(tmp_path):
+    """--variants: each mu's chosen D2 + D3 variant (variants.csv) applied to a working copy, its summary held against
+    the stored run's (equal, or within the table's last digit: said; else refused), the split table written."""
+    lw = os.path.dirname(os.path.dirname(LW))
+    out = tmp_path / "early"
+    model_early.main(["--variants", lw, "--work", str(tmp_path / "work"), "--out", str(out), "--dem", DEM])
+    chosen = model_early.chosen_runs(lw)
+    assert [c[0] for c in chosen] == ["0", "0.01", "0.1", "0.3", "0.5", "1"]
+    for mu, *_ in chosen:
+        with open(out / f"early_mu_{mu}.csv") as fh:
+            assert len([ln for ln in fh if not ln.startswith("#")]) == 1 + 27
+    row = ["D2", "0.69", "0.5", "nan", "0.4"]
+    assert model_early.same_curves([row], [row]) is True
+    assert model_early.same_curves([row], [row[:4] + ["0.402"]]) is False
+    assert model_early.same_curves([row], [row[:4] + ["0.41"]]) is None
+    assert model_early.same_curves([row], [row[:3] + ["0.1", "0.4"]]) is None   # nan against a number
+    with pytest.raises(SystemExit, match="needs --work and --out"):
+        model_early.main(["--variants", lw])
