@@ -110,8 +110,8 @@ def parameter_tables(out, mus):
                 rows = list(csv.DictReader(l for l in fh if not l.startswith("#")))
             vals = {}
             for r in rows:
-                if r["parameter"] == "converged":   # "no: <Ceres' summary>" in its law column
-                    vals["converged"] = r["law"].split(":")[0]
+                if r["parameter"] in ("converged", "settled"):   # "no: <Ceres' summary>", "yes: <the fall>" (law)
+                    vals[r["parameter"]] = r["law"].split(":")[0]
                     continue
                 v, jk, cov = (float(r[k]) for k in ("value", "se_jackknife", "se_covariance"))
                 se, mark = (jk, "") if jk == jk else (cov, " c")
