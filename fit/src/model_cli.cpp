@@ -596,33 +596,32 @@ std::string drift_on_path(const Parameters& P, const PathPrediction& m, const Pa
                      "\"A relaxing anisotropic pressure\")"));
 }
 
-// One line per curve: RMS error over the band half-width of p* (or eps_v where p is held),
-// s_dev and F_dev, fitted and predicted, with the calibration's chi2/dof: the table of issue 31.
 // One stderr line a reader can quote: how many curves lie within one band half-width RMS, the worst fitted and the
 // worst predicted curve with its quantity, and chi2/dof (issue 31's targets: every curve within 1, chi2/dof <= 3).
 void say_verdict(const std::vector<SummaryRow>& rows, const Calibration& cal) {
   std::map<std::pair<std::string, double>, double> worst;   // per curve, its worst quantity (inf: diverged)
   const SummaryRow* top[2] = {nullptr, nullptr};             // fitted, predicted
+  double top_x[2] = {-1, -1};                                 // their errors (inf: diverged)
   for (const auto& r : rows) {
     if (r.quantity.find("after turn") != std::string::npos || r.role.find("not integrable") != std::string::npos) continue;
     const double x = std::isfinite(r.rms_over_band) ? r.rms_over_band : std::numeric_limits<double>::infinity();
     auto [it, fresh] = worst.try_emplace({r.mode, r.nu}, x);
     if (!fresh) it->second = std::max(it->second, x);
-    const SummaryRow*& t = top[r.role == "fitted" ? 0 : 1];
-    if (!t || !(t->rms_over_band >= x)) t = &r;
+    const int k = r.role == "fitted" ? 0 : 1;
+    if (x > top_x[k]) { top[k] = &r; top_x[k] = x; }
   }
   int within = 0;
   for (const auto& [key, x] : worst) within += x <= 1;
-  const auto name = [](const SummaryRow* r) {
-    return r ? num(std::isfinite(r->rms_over_band) ? r->rms_over_band : INFINITY, 3) + " (" + r->mode + " nu=" +
-                   num(r->nu, 4) + " " + r->quantity + ")"
-             : std::string("none");
+  const auto name = [&top_x](const SummaryRow* r, int k) {
+    return r ? num(top_x[k], 3) + " (" + r->mode + " nu=" + num(r->nu, 4) + " " + r->quantity + ")" : std::string("none");
   };
   std::cerr << "dem model: " << within << " of " << worst.size() << " curves within 1 band half-width (RMS); worst "
-            << "fitted " << name(top[0]) << ", worst predicted " << name(top[1]) << "; chi2/dof "
+            << "fitted " << name(top[0], 0) << ", worst predicted " << name(top[1], 1) << "; chi2/dof "
             << (std::isfinite(cal.chi2) ? num(cal.chi2_dof(), 4) : std::string("nan (nothing fitted)")) << " (summary.md)\n";
 }
 
+// One line per curve: RMS error over the band half-width of p* (or eps_v where p is held),
+// s_dev and F_dev, fitted and predicted, with the calibration's chi2/dof: the table of issue 31.
 void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, const std::string& fit_label,
                    const fs::path& out) {
   Table t({"mode", "nu [-]", "role", "p_star [band]", "eps_v [band]", "s_dev [band]", "F_dev [band]", "worst [band]"});
