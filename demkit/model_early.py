@@ -18,40 +18,43 @@ the measured state). docs/model.md, "The isobaric path's early contraction".
 import argparse
 import csv
 import glob
-import math
 import os
 import sys
 
+import numpy as np
+
+from demkit import curves
 from demkit.atomic import write_atomic
 
 
 def read_curve(path):
-    """The rows of a model curve file as dicts of floats ('#' lines skipped)."""
-    with open(path, newline="") as fh:
-        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
-    if not rows:
+    """A model curve file (demkit.curves' reader: '#' lines skipped, ragged rows refused) as column -> floats."""
+    try:
+        curve = curves.read_curve(path)
+    except curves.CurveError as e:
+        raise SystemExit(f"model_early: {e}: give a `dem model` output folder (OUT/curves)")
+    if not len(curve.get("eps_d", curve.get("eps_d_accumulated", []))):
         raise SystemExit(f"model_early: {path} has no rows: give a `dem model` output folder (OUT/curves)")
-    return [{k: float(v) for k, v in r.items()} for r in rows]
+    return curve
 
 
-def quantities(rows):
+def quantities(curve):
     """p*, s_dev, F_dev on constant-volume curves; eps_v, s_dev, F_dev where the pressure is held."""
-    held = any(r.get("isobaric", 0) == 1 for r in rows)
+    held = "isobaric" in curve and bool((curve["isobaric"] == 1).any())
     return ("eps_v" if held else "p_star", "s_dev", "F_dev")
 
 
-def split_rms(rows, q, split):
+def split_rms(curve, q, split):
     """(rms_all, rms_early, rms_late, early share of the squared error, n_early, n_late) of q over its mean band
     half-width, eps_d > 0; rms of an empty part: nan."""
-    x = "eps_d_accumulated" if "eps_d_accumulated" in rows[0] else "eps_d"
-    pts = [r for r in rows if r[x] > 0]
-    band = sum((r[q + "_hi95"] - r[q + "_lo95"]) / 2 for r in pts) / len(pts)
-    err = [((r[q + "_model"] - r[q + "_mean"]) / band) ** 2 for r in pts]
-    early = [e for e, r in zip(err, pts) if r[x] < split]
-    late = [e for e, r in zip(err, pts) if r[x] >= split]
-    rms = lambda v: math.sqrt(sum(v) / len(v)) if v else float("nan")
-    total = sum(err)
-    return rms(err), rms(early), rms(late), sum(early) / total if total > 0 else float("nan"), len(early), len(late)
+    x = curve["eps_d_accumulated" if "eps_d_accumulated" in curve else "eps_d"]
+    on = x > 0
+    band = np.mean((curve[q + "_hi95"][on] - curve[q + "_lo95"][on]) / 2)
+    err = ((curve[q + "_model"][on] - curve[q + "_mean"][on]) / band) ** 2
+    early, late = err[x[on] < split], err[x[on] >= split]
+    rms = lambda v: float(np.sqrt(v.mean())) if len(v) else float("nan")
+    total = err.sum()
+    return rms(err), rms(early), rms(late), float(early.sum() / total) if total > 0 else float("nan"), len(early), len(late)
 
 
 def table(run, split):
@@ -62,10 +65,10 @@ def table(run, split):
         raise SystemExit(f"model_early: no model curves in {run}/curves: run `dem model` there first")
     out = []
     for f in files:
-        rows = read_curve(f)
-        for q in quantities(rows):
+        curve = read_curve(f)
+        for q in quantities(curve):
             out.append([os.path.splitext(os.path.relpath(f, os.path.join(run, "curves")))[0], q,
-                        *split_rms(rows, q, split)])
+                        *split_rms(curve, q, split)])
     return out
 
 
@@ -90,14 +93,15 @@ def write(rows, split, dest):
 
 def chosen_runs(lw):
     """[(mu, variant folder, fabric rule, --state-limit)] of each mu's chosen variant in LW/variants.csv."""
+    from demkit.model_lode_weight import state_limit_value
     from demkit.model_variants import VARIANTS
     spec = {v[0]: v for v in VARIANTS}
     with open(os.path.join(lw, "variants.csv"), newline="") as fh:
         rows = [r for r in csv.DictReader(ln for ln in fh if not ln.startswith("#")) if r["chosen"] == "yes"]
     if not rows:
         raise SystemExit(f"model_early: {lw}/variants.csv names no chosen variant: give demkit.model_variants' --out")
-    limit = lambda x: x if isinstance(x, str) else "pressure" if x else "none"
-    return [(r["mu"], spec[r["variant"]][1], spec[r["variant"]][2], limit(spec[r["variant"]][3])) for r in rows]
+    return [(r["mu"], spec[r["variant"]][1], spec[r["variant"]][2], state_limit_value(spec[r["variant"]][3]))
+            for r in rows]
 
 
 def curve_rows(path):

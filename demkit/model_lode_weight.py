@@ -27,12 +27,17 @@ RULES = ("overlap", "weighted")
 QUANTITIES = (("p_star [band]", "p*"), ("eps_v [band]", "ε_v"), ("s_dev [band]", "s"), ("F_dev [band]", "F"))
 
 
+def state_limit_value(state_limit):
+    """`dem model --state-limit`'s value: a string as given, True "pressure", False "none"."""
+    return state_limit if isinstance(state_limit, str) else "pressure" if state_limit else "none"
+
+
 def run_rule(dem, work, out, rule, jackknife=True, state_limit=True, start=None, max_iterations=None):
     """`dem model` on WORK (a working copy) into OUT, the extended family under RULE on D2 + D3 (with the
     state-dependent limit unless told: True or False, or a `--state-limit` value such as "pressure-lode"; from
     START, a parameters.csv or a comma-separated multi-start list, when given; `dem model`'s default
     --max-iterations unless MAX_ITERATIONS is given)."""
-    limit = state_limit if isinstance(state_limit, str) else "pressure" if state_limit else "none"
+    limit = state_limit_value(state_limit)
     cmd = [dem, "model", work, "--out", out, "--family", "extended", "--fabric-lode", rule, "--state-limit",
            limit, "--calibrate-on", "D2,D3", "--no-plots", "--force"]
     if not jackknife:
