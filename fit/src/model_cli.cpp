@@ -598,24 +598,23 @@ std::string drift_on_path(const Parameters& P, const PathPrediction& m, const Pa
 
 // One stderr line a reader can quote: how many curves lie within one band half-width RMS, the worst fitted and the
 // worst predicted curve with its quantity, and chi2/dof (issue 31's targets: every curve within 1, chi2/dof <= 3).
-void say_verdict(const std::vector<SummaryRow>& rows, const Calibration& cal) {
-  std::map<std::pair<std::string, double>, double> worst;   // per curve, its worst quantity (inf: diverged)
+// curve_worst: each judged curve's worst quantity as write_summary's table has it (inf: diverged); rows: the
+// quantities, read for the names of the worst fitted and predicted one.
+void say_verdict(const std::vector<SummaryRow>& rows, const std::vector<double>& curve_worst, const Calibration& cal) {
   const SummaryRow* top[2] = {nullptr, nullptr};             // fitted, predicted
   double top_x[2] = {-1, -1};                                 // their errors (inf: diverged)
   for (const auto& r : rows) {
     if (r.quantity.find("after turn") != std::string::npos || r.role.find("not integrable") != std::string::npos) continue;
     const double x = std::isfinite(r.rms_over_band) ? r.rms_over_band : std::numeric_limits<double>::infinity();
-    auto [it, fresh] = worst.try_emplace({r.mode, r.nu}, x);
-    if (!fresh) it->second = std::max(it->second, x);
     const int k = r.role == "fitted" ? 0 : 1;
     if (x > top_x[k]) { top[k] = &r; top_x[k] = x; }
   }
   int within = 0;
-  for (const auto& [key, x] : worst) within += x <= 1;
+  for (double x : curve_worst) within += x <= 1;
   const auto name = [&top_x](const SummaryRow* r, int k) {
     return r ? num(top_x[k], 3) + " (" + r->mode + " nu=" + num(r->nu, 4) + " " + r->quantity + ")" : std::string("none");
   };
-  std::cerr << "dem model: " << within << " of " << worst.size() << " curves within 1 band half-width (RMS); worst "
+  std::cerr << "dem model: " << within << " of " << curve_worst.size() << " curves within 1 band half-width (RMS); worst "
             << "fitted " << name(top[0], 0) << ", worst predicted " << name(top[1], 1) << "; chi2/dof "
             << (std::isfinite(cal.chi2) ? num(cal.chi2_dof(), 4) : std::string("nan (nothing fitted)")) << " (summary.md)\n";
 }
@@ -633,6 +632,7 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
   // start (role "not integrable": no model curve) is "nan" in every cell, not determined, its role saying why.
   const auto cell = [](double x) { return std::isinf(x) ? std::string("inf") : num(x, 3); };
   double worst_all = 0;
+  std::vector<double> curve_worst;   // each judged curve's worst (the verdict line counts those within 1)
   int diverged = 0;
   for (const auto& [mode, nu] : keys) {
     double v[4] = {std::nan(""), std::nan(""), std::nan(""), std::nan("")};   // nan: the curve has no such quantity
@@ -646,12 +646,12 @@ void write_summary(const std::vector<SummaryRow>& rows, const Calibration& cal, 
     }
     double worst = std::nan("");   // nan: no quantity judged
     for (double x : v) if (!std::isnan(x)) worst = std::isnan(worst) ? x : std::max(worst, x);
-    if (!std::isnan(worst)) worst_all = std::max(worst_all, worst);
+    if (!std::isnan(worst)) { worst_all = std::max(worst_all, worst); curve_worst.push_back(worst); }
     if (std::isinf(worst)) ++diverged;
     t.add_row({mode, num(nu, 4), role, cell(v[0]), cell(v[1]), cell(v[2]), cell(v[3]), cell(worst)});
   }
   t.add_row({"calibration", "nan", "chi2/dof " + num(cal.chi2_dof(), 4), "nan", "nan", "nan", "nan", cell(worst_all)});
-  say_verdict(rows, cal);
+  say_verdict(rows, curve_worst, cal);
   if (diverged)
     std::cerr << "dem model: " << diverged << " curves not finite (the model diverged along them): \"inf\" in "
               << (out / "summary.md").string() << "\n";
