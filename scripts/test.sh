@@ -11,7 +11,7 @@ builder=$!
 bash scripts/install-deps.sh --only test ${DEM_INSTALL_OPTS:-} || { kill "$builder" 2>/dev/null; exit 1; }
 wait "$builder" || { tail -40 build/test-build.log >&2; echo "test.sh: the build failed (build/test-build.log)" >&2; exit 1; }
 # ctest on every core: each test writes its own temporary files (distinct names; tests/cpp), the
-# longest are model fits of 15-27 s, and nothing in them is timed; 162 s serial -> about 90 s on two.
+# longest are model fits of 15-27 s, and nothing in them is timed; 153-164 s serial, 56-59 s on two (fresh clones, idle).
 (cd build && ctest -j"$(nproc)" --output-on-failure)
 # build/python: the Python module demtk (docs/python.md), for the tests and the notebook's kernel.
 export PYTHONPATH="$PWD/build/python${PYTHONPATH:+:$PYTHONPATH}"
