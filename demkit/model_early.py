@@ -66,6 +66,8 @@ def table(run, split):
     out = []
     for f in files:
         curve = read_curve(f)
+        if not any(k.endswith("_mean") for k in curve):   # a model-only path (cyclic, isobaric): no DEM to judge
+            continue
         for q in quantities(curve):
             out.append([os.path.splitext(os.path.relpath(f, os.path.join(run, "curves")))[0], q,
                         *split_rms(curve, q, split)])

@@ -32,11 +32,11 @@ def state_limit_value(state_limit):
     return state_limit if isinstance(state_limit, str) else "pressure" if state_limit else "none"
 
 
-def run_rule(dem, work, out, rule, jackknife=True, state_limit=True, start=None, max_iterations=None):
+def run_rule(dem, work, out, rule, jackknife=True, state_limit=True, start=None, max_iterations=None, extra=()):
     """`dem model` on WORK (a working copy) into OUT, the extended family under RULE on D2 + D3 (with the
     state-dependent limit unless told: True or False, or a `--state-limit` value such as "pressure-lode"; from
     START, a parameters.csv or a comma-separated multi-start list, when given; `dem model`'s default
-    --max-iterations unless MAX_ITERATIONS is given)."""
+    --max-iterations unless MAX_ITERATIONS is given; EXTRA: further `dem model` arguments)."""
     limit = state_limit_value(state_limit)
     cmd = [dem, "model", work, "--out", out, "--family", "extended", "--fabric-lode", rule, "--state-limit",
            limit, "--calibrate-on", "D2,D3", "--no-plots", "--force"]
@@ -47,6 +47,7 @@ def run_rule(dem, work, out, rule, jackknife=True, state_limit=True, start=None,
     if start:   # the isotropic block from the branch's own fit, as every stored variant run started (issue 31,
                 # fifteenth round: `--start-isotropic file`, the default, would restart them from the files' values)
         cmd += ["--start", start, "--start-isotropic", "branch"]
+    cmd += list(extra)
     print("model_lode_weight:", " ".join(cmd), file=sys.stderr)
     os.makedirs(out, exist_ok=True)
     with open(os.path.join(out, "model.log"), "w") as log:

@@ -206,6 +206,12 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   if (cal.params.excess_bounded)
     t.add_row({"anisotropy_excess", "2: the anisotropy's pressure relaxes as an excess at beta_p, its source gated by "
                "1 - (q/p)^2 (--anisotropy-pressure bounded)", "2", "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+  if (cal.params.start_unaligned)   // files without the row: aligned (read_parameters)
+    t.add_row({"start_anisotropy", "1: the start's deviators unaligned, s and F from 0 and observed as sqrt(x^2 + x0^2) "
+               "(--start-anisotropy unaligned)", "1", "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+  if (cal.params.dilatancy_gated)   // files without the row: ungated (read_parameters)
+    t.add_row({"dilatancy_gate", "1: the plastic dilatancy gated by the mobilisation, d_D r (r - chi_D)(1 - F/F_lim) "
+               "(--dilatancy-gate mobilisation)", "1", "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
   if (cal.params.b_d2 != kLodeBD2)   // files without the row: 1/2 (read_parameters)
     t.add_row({"b_D2", "stress Lode parameter b of D2 curves and paths (fixed; --d2-lode)", num(cal.params.b_d2), "nan",
                "fixed", "nan", "nan", "nan", "nan", "-"});
@@ -917,6 +923,11 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
                      "--family extended");
   co.excess_relaxes = o.anisotropy_pressure == "relaxing" || o.anisotropy_pressure == "bounded";
   co.excess_bounded = o.anisotropy_pressure == "bounded";
+  co.start_unaligned = o.start_anisotropy == "unaligned";
+  co.dilatancy_gated = o.dilatancy_gate == "mobilisation";
+  if (co.dilatancy_gated && (o.family != "extended" || co.state_volume))
+    throw InputError("--dilatancy-gate mobilisation: the gate acts on the extended family's plastic dilatancy d_D (r - "
+                     "chi_D); give --family extended without --state-limit volume (whose dilatancy is driven by psi)");
   if (co.excess_relaxes && !co.state_volume && o.predict_with.empty())
     throw InputError("--anisotropy-pressure " + o.anisotropy_pressure + ": the relaxing excess belongs to the volume-form "
                      "state parameter (without it the anisotropic pressure always relaxes at beta_p); add --state-limit volume");
@@ -1415,6 +1426,8 @@ FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions
   P.surface = P.extended ? co.surface : Surface::None;
   P.fabric = P.extended ? co.fabric : FabricLode::Norm;
   if (!o.d2_lode.empty()) P.b_d2 = o.d2_lode == "normal" ? plane_strain_lode_b(P.surface, P.shear[kSmaxA]) : co.b_d2;
+  if (!o.start_anisotropy.empty()) P.start_unaligned = co.start_unaligned;   // else the file's (row start_anisotropy)
+  if (!o.dilatancy_gate.empty()) P.dilatancy_gated = co.dilatancy_gated;   // else the file's (row dilatancy_gate)
   if (!o.anisotropy_pressure.empty()) {   // else the file's (row anisotropy_excess)
     if (co.excess_relaxes && !P.state_volume)
       throw InputError("--anisotropy-pressure " + o.anisotropy_pressure + ": " + o.predict_with + " has no volume-form "
@@ -1599,6 +1612,17 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "--predict-with the file's unless given (docs/model.md, \"A relaxing anisotropic pressure\", \"A "
                  "bounded excess\")")
       ->check(CLI::IsMember({"permanent", "relaxing", "bounded"}))->default_str("permanent");
+  app.add_option("--start-anisotropy", o.start_anisotropy, "the start's deviators: aligned (the default: the measured "
+                 "s_dev and F_dev of the first row taken as aligned with the loading, integrated from) or unaligned (the "
+                 "random deviators of a finite isotropic packing: s and F integrated from 0 as the aligned parts, "
+                 "compared with the data as sqrt(x^2 + x0^2)); with --predict-with the file's unless given "
+                 "(docs/model.md, \"An unaligned start\")")
+      ->check(CLI::IsMember({"aligned", "unaligned"}));
+  app.add_option("--dilatancy-gate", o.dilatancy_gate, "the extended family's plastic dilatancy d_D (r - chi_D)(1 - "
+                 "F/F_lim): none (the default: at its largest contraction d_D chi_D from the first step) or mobilisation "
+                 "(times the mobilisation r, so that it starts at 0 as the DEM's volume under constant pressure does); "
+                 "with --predict-with the file's unless given (docs/model.md, \"An unaligned start\")")
+      ->check(CLI::IsMember({"none", "mobilisation"}));
   app.add_option("--profile", o.profile, "profile intervals: `all` (every coefficient with a quoted covariance "
                  "error) or comma-separated names (e.g. p0,alpha): each held at trial values and the rest refitted "
                  "until chi2 rises by max(1, chi2/dof) either way (profile.{csv,md}; 1-10 refits per end; docs/model.md "

@@ -63,18 +63,22 @@ struct CurveResidual {
   bool state_volume = false;  ///< par[2] carries nu_cs, lambda_cs, n_b, n_d (the volume-form state parameter)
   bool excess_relaxes = false;   ///< Ext::excess_relaxes
   bool excess_bounded = false;   ///< Ext::excess_bounded
+  bool start_unaligned = false;  ///< Ext::start_unaligned: s and F observed as sqrt(x^2 + x0^2)
+  bool dilatancy_gated = false;  ///< Ext::dilatancy_gated
   template <class T>
   bool operator()(T const* const* par, T* r) const {
     Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
                extended && state_lode, extended && state_volume, b_stress};
     ext.excess_relaxes = excess_relaxes;
     ext.excess_bounded = excess_bounded;
+    ext.start_unaligned = start_unaligned;
+    ext.dilatancy_gated = dilatancy_gated;
     const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
       r[i] = (st[i].p - T(p[i])) * T(wp[i]);
-      r[n + i] = (st[i].s - T(s[i])) * T(ws[i]);
-      r[2 * n + i] = (st[i].F - T(F[i])) * T(wF[i]);
+      r[n + i] = (observed(st[i].s, s0, start_unaligned) - T(s[i])) * T(ws[i]);
+      r[2 * n + i] = (observed(st[i].F, F0, start_unaligned) - T(F[i])) * T(wF[i]);
     }
     return true;
   }
@@ -107,18 +111,22 @@ struct PathResidual {
   bool state_volume = false;  ///< par[2] carries nu_cs, lambda_cs, n_b, n_d (the volume-form state parameter)
   bool excess_relaxes = false;   ///< Ext::excess_relaxes
   bool excess_bounded = false;   ///< Ext::excess_bounded
+  bool start_unaligned = false;  ///< Ext::start_unaligned: s and F observed as sqrt(x^2 + x0^2)
+  bool dilatancy_gated = false;  ///< Ext::dilatancy_gated
   template <class T>
   bool operator()(T const* const* par, T* r) const {
     Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
                extended && state_lode, extended && state_volume, b_stress};
     ext.excess_relaxes = excess_relaxes;
     ext.excess_bounded = excess_bounded;
+    ext.start_unaligned = start_unaligned;
+    ext.dilatancy_gated = dilatancy_gated;
     const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step, ext);
     const std::size_t n = acc.size();
     for (std::size_t i = 0; i < n; ++i) {
       r[i] = isobaric[i] ? (st[i].eps_vol / T(3.0) - T(ev[i])) * T(w1[i]) : (st[i].state.p - T(p[i])) * T(w1[i]);
-      r[n + i] = (st[i].state.s - T(s[i])) * T(ws[i]);
-      r[2 * n + i] = (st[i].state.F - T(F[i])) * T(wF[i]);
+      r[n + i] = (observed(st[i].state.s, s0, start_unaligned) - T(s[i])) * T(ws[i]);
+      r[2 * n + i] = (observed(st[i].state.F, F0, start_unaligned) - T(F[i])) * T(wF[i]);
     }
     return true;
   }
@@ -239,6 +247,8 @@ struct StressFabricResidual {
   Surface surface;
   FabricLode fabric;
   std::vector<double> iso;
+  bool start_unaligned = false;   ///< Ext::start_unaligned
+  bool dilatancy_gated = false;   ///< Ext::dilatancy_gated
   template <class T>
   bool operator()(T const* const* par, T* r) const {
     const T* x = par[0];
@@ -247,11 +257,14 @@ struct StressFabricResidual {
     for (int i = 0; i < kNumExt; ++i) ex[i] = T(0.0);
     for (int i = 0; i < kNumIso; ++i) isoT[i] = T(iso[i]);
     sh[kSmaxA] = x[0]; sh[kLnBetaSA] = x[1]; ex[kKappaA] = x[2]; sh[kFmaxA] = x[3]; sh[kLnBetaFA] = x[4]; ex[kNFA] = x[5];
-    const auto st = monotone_shear<T>(isoT, sh, nu, nu, p0, s0, F0, eps, max_step, Ext<T>{ex, b, surface, fabric});
+    Ext<T> ext{ex, b, surface, fabric};
+    ext.start_unaligned = start_unaligned;
+    ext.dilatancy_gated = dilatancy_gated;
+    const auto st = monotone_shear<T>(isoT, sh, nu, nu, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
-      r[i] = (st[i].s - T(s[i])) * T(ws[i]);
-      r[n + i] = (st[i].F - T(F[i])) * T(wF[i]);
+      r[i] = (observed(st[i].s, s0, start_unaligned) - T(s[i])) * T(ws[i]);
+      r[n + i] = (observed(st[i].F, F0, start_unaligned) - T(F[i])) * T(wF[i]);
     }
     return true;
   }
@@ -286,6 +299,8 @@ Parameters extended_start(const std::vector<CurveData>& curves, const Parameters
       auto* f = new StressFabricResidual{c.eps, c.s, c.F, weights(c.se_s, o.se_floor, c.source + " s_dev"),
                                          weights(c.se_F, o.se_floor, c.source + " F_dev"), c.nu, c.p.front(), c.s.front(),
                                          c.F.front(), lode_b_of(c.mode), 2e-3, o.surface, o.fabric, iso};
+      f->start_unaligned = o.start_unaligned;
+      f->dilatancy_gated = o.dilatancy_gated && !o.state_volume;
       auto* cost = new ceres::DynamicAutoDiffCostFunction<StressFabricResidual, 6>(f);
       cost->AddParameterBlock(6);
       cost->SetNumResiduals(2 * static_cast<int>(c.eps.size()));
@@ -388,6 +403,8 @@ Parameters read_parameters(const std::string& path) {
   const double excess = P.state_volume && v.count("anisotropy_excess") ? get("anisotropy_excess") : 0.0;
   P.excess_relaxes = excess == 1.0 || excess == 2.0;   // 1 relaxing, 2 bounded (nineteenth round)
   P.excess_bounded = excess == 2.0;
+  P.start_unaligned = v.count("start_anisotropy") && get("start_anisotropy") == 1.0;   // files without the row: aligned
+  P.dilatancy_gated = v.count("dilatancy_gate") && get("dilatancy_gate") == 1.0;   // ... ungated
   if (P.extended)
     for (int i = 0; i < kNumExt; ++i)
       if (i < kNumExtBase || v.count(ext_name(i))) P.ext[i] = get(ext_name(i));   // else the default (n_rate 1)
@@ -534,6 +551,8 @@ void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& 
     f->state_volume = o.state_volume;
     f->excess_relaxes = o.state_volume && o.excess_relaxes;
     f->excess_bounded = f->excess_relaxes && o.excess_bounded;
+    f->start_unaligned = o.start_unaligned;
+    f->dilatancy_gated = o.dilatancy_gated && !o.state_volume;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -575,6 +594,8 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     f->state_volume = o.state_volume;
     f->excess_relaxes = o.state_volume && o.excess_relaxes;
     f->excess_bounded = f->excess_relaxes && o.excess_bounded;
+    f->start_unaligned = o.start_unaligned;
+    f->dilatancy_gated = o.dilatancy_gated && !o.state_volume;
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -1291,6 +1312,8 @@ Parameters fitted_params(const Parameters& start, const std::vector<double>& iso
   P.state_volume = X && o.state_volume;
   P.excess_relaxes = P.state_volume && o.excess_relaxes;
   P.excess_bounded = P.excess_relaxes && o.excess_bounded;
+  P.start_unaligned = o.start_unaligned;
+  P.dilatancy_gated = X && o.dilatancy_gated && !o.state_volume;
   return P;
 }
 
@@ -1524,11 +1547,18 @@ ModelCurve predict_curve(const Parameters& params, const CurveData& c, double ep
                         params.psi_hi, psi_seen};
   ext.excess_relaxes = params.extended && params.state_volume && params.excess_relaxes;
   ext.excess_bounded = ext.excess_relaxes && params.excess_bounded;
+  ext.start_unaligned = params.start_unaligned;
+  ext.dilatancy_gated = params.dilatancy_gated;
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
                                          t.F.front(), t.eps, max_step, ext);
   ModelCurve m;
   m.eps = t.eps;
-  for (const auto& y : st) { m.p.push_back(y.p); m.s.push_back(y.s); m.F.push_back(y.F); m.nu.push_back(std::exp(y.ln_nu)); }
+  for (const auto& y : st) {
+    m.p.push_back(y.p);
+    m.s.push_back(observed(y.s, t.s.front(), ext.start_unaligned));
+    m.F.push_back(observed(y.F, t.F.front(), ext.start_unaligned));
+    m.nu.push_back(std::exp(y.ln_nu));
+  }
   return m;
 }
 
@@ -1543,6 +1573,8 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
                         params.psi_hi, psi_seen};
   ext.excess_relaxes = params.extended && params.state_volume && params.excess_relaxes;
   ext.excess_bounded = ext.excess_relaxes && params.excess_bounded;
+  ext.start_unaligned = params.start_unaligned;
+  ext.dilatancy_gated = params.dilatancy_gated;
   const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
                                          d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
   PathPrediction m;
@@ -1552,7 +1584,9 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
   const bool vol = params.extended && params.state_volume;
   for (const auto& r : st) {
     if (r.state.lost && m.lost_row < 0) m.lost_row = static_cast<int>(m.p.size());
-    m.p.push_back(r.state.p); m.s.push_back(r.state.s); m.F.push_back(r.state.F);
+    m.p.push_back(r.state.p);
+    m.s.push_back(observed(r.state.s, d.s.front(), ext.start_unaligned));
+    m.F.push_back(observed(r.state.F, d.F.front(), ext.start_unaligned));
     m.nu.push_back(std::exp(r.state.ln_nu)); m.ev.push_back(r.eps_vol / 3.0);
     m.p_el.push_back(vol ? isotropic_pressure(iso.data(), std::exp(r.state.ln_nu + r.state.e_pl)) : r.state.p);
     m.pole.push_back(r.pole);

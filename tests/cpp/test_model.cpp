@@ -2619,3 +2619,127 @@ TEST(ModelVolumeState, TheIsotropicVolumeStaysOnTheRisingBranchOfALawThatFallsAg
   const double nu = isotropic_volume<double>(mono, 0.01);
   EXPECT_NEAR(isotropic_pressure(mono, nu), 0.01, 1e-15);
 }
+
+// An unaligned start (twenty-eighth round, Ext::start_unaligned): the DEM's s_dev and F_dev are magnitudes of tensors
+// whose start part (the random deviator of a finite isotropic packing) is orthogonal to the aligned part the model
+// integrates, so a packing shows sqrt(x^2 + x0^2). Closed forms: the sum, its sign, its derivative (a Jet), and x
+// itself with no start part.
+TEST(ModelUnaligned, ObservedMagnitudeIsTheOrthogonalSum) {
+  EXPECT_DOUBLE_EQ(observed(0.4, 0.3, true), 0.5);
+  EXPECT_DOUBLE_EQ(observed(-0.4, 0.3, true), -0.5);
+  EXPECT_DOUBLE_EQ(observed(0.0, 0.03, true), 0.03);   // the first row: the measured start value
+  EXPECT_DOUBLE_EQ(observed(0.4, 0.3, false), 0.4);
+  EXPECT_DOUBLE_EQ(observed(-0.4, 0.0, true), -0.4);
+  using J = ceres::Jet<double, 1>;
+  const J y = observed(J(0.4, 0), 0.3, true);
+  EXPECT_DOUBLE_EQ(y.a, 0.5);
+  EXPECT_NEAR(y.v[0], 0.4 / 0.5, 1e-15);
+}
+
+// Under constant pressure the coupling a_A B F moves the volume at a rate a_A F per unit eps_d: an aligned start
+// F0 moves it from the first step, an unaligned one (F from 0) only as the aligned fabric grows, so over the first
+// 1e-3 of strain the volume moves less by at least the ratio of F0 to the fabric grown there. The first row shows the
+// measured start values either way; with no start part the two starts are the same path bit for bit.
+TEST(ModelUnaligned, AnUnalignedStartDoesNotCoupleTheRandomFabricToTheVolume) {
+  Parameters P = truth();
+  const auto iso = P.iso();
+  const double nu = 0.74, p0 = isotropic_pressure(iso.data(), nu);
+  std::vector<double> acc{0.0, 1e-3, 2e-3, 0.05};
+  const std::vector<int> dir(acc.size(), 1), isob(acc.size(), 1);
+  Ext<double> aligned, unaligned;
+  unaligned.start_unaligned = true;
+  const auto a = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.03, acc, dir, isob, 1e-4, aligned);
+  const auto u = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.03, acc, dir, isob, 1e-4, unaligned);
+  EXPECT_DOUBLE_EQ(a[0].state.F, 0.03);
+  EXPECT_DOUBLE_EQ(u[0].state.F, 0.0);
+  EXPECT_DOUBLE_EQ(observed(u[0].state.F, 0.03, true), 0.03);
+  EXPECT_DOUBLE_EQ(observed(u[0].state.s, 0.02, true), 0.02);
+  const double a_A = P.shear[kAnisoA] + P.shear[kAnisoB] * (nu - P.nu_ref);
+  // the aligned start's rate a_A F0 (a_A > 0 here: the anisotropic pressure A dilates a packing held at constant p)
+  EXPECT_NEAR(a[1].eps_vol, a_A * 0.03 * 1e-3, 0.1 * a_A * 0.03 * 1e-3);
+  EXPECT_LT(std::fabs(u[1].eps_vol), 0.1 * std::fabs(a[1].eps_vol));
+  EXPECT_GT(u[1].state.F, 0.0);   // the aligned part grows from 0
+  const auto a0 = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.0, 0.0, acc, dir, isob, 1e-4, aligned);
+  const auto u0 = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.0, 0.0, acc, dir, isob, 1e-4, unaligned);
+  for (std::size_t i = 0; i < acc.size(); ++i) {
+    EXPECT_EQ(a0[i].eps_vol, u0[i].eps_vol);
+    EXPECT_EQ(a0[i].state.F, u0[i].state.F);
+  }
+}
+
+// Noise-free curves of the model with an unaligned start (s0 = 0.02, F0 = 0.03 observed on the first row): the
+// calibration with --start-anisotropy unaligned returns the truth from a start 10-20 % away and writes the flag into its
+// parameters; the aligned model cannot reach those curves (its chi2 stays far above the unaligned fit's).
+TEST(ModelUnaligned, RecoversTheTruthFromCurvesWithAnUnalignedStart) {
+  Parameters P = truth();
+  P.start_unaligned = true;
+  std::vector<CurveData> curves;
+  const auto iso = P.iso();
+  for (double nu : {0.69, 0.73, 0.77, 0.81}) {
+    CurveData c;
+    c.mode = "D2"; c.nu = nu; c.packings = 8; c.source = "synthetic";
+    for (int i = 0; i <= 100; ++i) c.eps.push_back(0.004 * i);
+    c.p.assign(c.eps.size(), isotropic_pressure(iso.data(), nu));
+    c.s.assign(c.eps.size(), 0.02);
+    c.F.assign(c.eps.size(), 0.03);
+    const ModelCurve m = predict_curve(P, c, 1e9, 1e-3);
+    c.p = m.p; c.s = m.s; c.F = m.F;
+    EXPECT_DOUBLE_EQ(c.s[0], 0.02);
+    EXPECT_DOUBLE_EQ(c.F[0], 0.03);
+    c.se_p.assign(c.eps.size(), 0.01 * c.p[0]);
+    c.se_s.assign(c.eps.size(), 0.01);
+    c.se_F.assign(c.eps.size(), 0.005);
+    c.hw_p = c.se_p; c.hw_s = c.se_s; c.hw_F = c.se_F;
+    curves.push_back(c);
+  }
+  Parameters start = P;
+  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.8 : 1.1);
+  CalibrationOptions o;
+  o.fit_isotropic = false;
+  o.start = &start;
+  o.nu_ref = P.nu_ref;
+  o.max_step = 1e-3;
+  o.start_unaligned = true;
+  const Calibration cal = calibrate(curves, {}, o);
+  ASSERT_TRUE(cal.ok) << cal.message;
+  EXPECT_TRUE(cal.params.start_unaligned);
+  for (int i = 0; i < kNumShear; ++i)
+    EXPECT_NEAR(cal.value[kNumIso + i], P.shear[i], 1e-4 * std::max(1.0, std::fabs(P.shear[i]))) << shear_name(i);
+  o.start_unaligned = false;
+  const Calibration al = calibrate(curves, {}, o);
+  EXPECT_FALSE(al.params.start_unaligned);
+  EXPECT_GT(al.chi2, 100 * std::max(cal.chi2, 1e-6)) << "aligned chi2 " << al.chi2 << ", unaligned " << cal.chi2;
+}
+
+// The plastic dilatancy gated by the mobilisation (twenty-eighth round, Ext::dilatancy_gated): at a state on the
+// isotropic law (no relaxation) with a_A = 0, the volume rate under constant pressure is the dilatancy itself, d_D (r -
+// chi_D)(1 - F/F_max) ungated and d_D r (r - chi_D)(1 - F/F_max) gated (r = s/s_max): closed forms from rhs. Along an
+// isobaric path from an unaligned start the gated volume starts flat (r from 0), the ungated one at its largest
+// contraction d_D chi_D per unit eps_d.
+TEST(ModelUnaligned, AGatedDilatancyStartsAtZeroWithTheMobilisation) {
+  Parameters P = truth();
+  P.shear[kAnisoA] = 0.0; P.shear[kAnisoB] = 0.0;
+  double ext[kNumExt] = {};
+  ext[kDilA] = 0.01; ext[kChiD] = 2.0;
+  const auto iso = P.iso();
+  const double nu = 0.74, p0 = isotropic_pressure(iso.data(), nu);
+  Ext<double> plain{ext, kLodeBD2, Surface::None, FabricLode::Norm}, gated = plain;
+  gated.dilatancy_gated = true;
+  gated.start_unaligned = plain.start_unaligned = true;
+  Segment seg;
+  seg.control = Control::Isobaric;
+  const double s = 0.08, F = 0.05, s_max = P.shear[kSmaxA], F_max = P.shear[kFmaxA], r = s / s_max;
+  State<double> y{std::log(nu), p0, s, F};
+  for (const auto* e : {&plain, &gated}) {
+    const Material<double> m = start_material<double>(iso.data(), P.shear, P.nu_ref, nu, p0, *e);
+    const double dvol = -rhs(m, y, 1.0, seg).ln_nu;
+    const double expect = 0.01 * (r - 2.0) * (1 - F / F_max) * (e->dilatancy_gated ? r : 1.0);
+    EXPECT_NEAR(dvol, expect, 1e-12 * std::fabs(expect)) << (e->dilatancy_gated ? "gated" : "ungated");
+  }
+  const std::vector<double> acc{0.0, 1e-3};
+  const std::vector<int> dir(2, 1), isob(2, 1);
+  const auto u = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.03, acc, dir, isob, 1e-4, plain);
+  const auto g = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.03, acc, dir, isob, 1e-4, gated);
+  EXPECT_NEAR(u[1].eps_vol, -0.01 * 2.0 * 1e-3, 0.1 * 0.01 * 2.0 * 1e-3);
+  EXPECT_LT(std::fabs(g[1].eps_vol), 0.1 * std::fabs(u[1].eps_vol));
+}

@@ -191,6 +191,11 @@ struct Parameters {
   bool excess_relaxes = false;
   /// With excess_relaxes: the excess bounded within (-p, p) (Ext::excess_bounded; row anisotropy_excess = 2).
   bool excess_bounded = false;
+  /// The start's deviators unaligned with the loading (Ext::start_unaligned; row start_anisotropy = 1 of
+  /// parameters.csv, absent: false).
+  bool start_unaligned = false;
+  /// The plastic dilatancy gated by the mobilisation (Ext::dilatancy_gated; row dilatancy_gate = 1, absent: false).
+  bool dilatancy_gated = false;
   std::vector<double> iso() const { return {p0, nu_c, gamma_p, C0, C1, nu_cC, alpha}; }
   void set_iso(const double* v) { p0 = v[0]; nu_c = v[1]; gamma_p = v[2]; C0 = v[3]; C1 = v[4]; nu_cC = v[5]; alpha = v[6]; }
 };
@@ -445,7 +450,28 @@ struct Ext {
   /// 1 - (q/p)^2, dq = A sigma (1 - (q/p)^2) - beta_p q, so that q stays within (-p, p) and the elastic state's pressure
   /// p - q above 0 (the relaxing excess alone reaches q > p: an elastic state below jamming; docs/model.md).
   bool excess_bounded = false;
+  /// The start's deviators are unaligned (twenty-eighth round, `--start-anisotropy unaligned`): s and F integrate the
+  /// part aligned with the loading, from 0; the measured start values s0, F0 (the random deviators of a finite
+  /// isotropic packing) are orthogonal to it, so the DEM's magnitude is observed(s, s0) = sqrt(s^2 + s0^2) (signed as
+  /// s). False (the default, every stored calibration): the start values are taken as aligned and integrated from.
+  bool start_unaligned = false;
+  /// The plastic dilatancy gated by the mobilisation (twenty-eighth round, `--dilatancy-gate mobilisation`): d_D r (r -
+  /// chi_D)(1 - F/F_lim), so that it starts at 0 with the loading, as the DEM's volume under constant pressure does,
+  /// instead of at its largest contraction d_D chi_D. Without the volume-form state parameter only. False (the
+  /// default, every stored calibration): ungated.
+  bool dilatancy_gated = false;
 };
+
+/// The magnitude a packing shows for the aligned deviator part x [-] with an unaligned start part x0 [-]
+/// (Ext::start_unaligned): sign(x) sqrt(x^2 + x0^2), + at x = 0 (the first loading direction). x itself where the
+/// start is aligned or x0 = 0.
+template <class T>
+T observed(const T& x, double x0, bool unaligned) {
+  using std::sqrt;
+  if (!unaligned || x0 == 0.0) return x;
+  const T m = sqrt(x * x + T(x0 * x0));
+  return x < T(0.0) ? -m : m;
+}
 
 /// The volume-form state parameter psi = nu - nu_cs(p), nu_cs(p) = nu_cs + lambda_cs ln(p/kPCsRef) (tenth round)
 /// + c_cs (p - kPCsRef) (eleventh round; one of the two held at 0):
@@ -682,10 +708,12 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
   // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
   const T F_lim = m.ext.p ? L.F_max * T(fabric_lode_factor(m.ext.fabric, m.ext.b)) : L.F_max;
-  // Plastic dilatancy: gated by the fabric (1 - F/F_lim), or with the volume-form state parameter driven by psi
-  // (tenth round): d_D (r - chi_D e^{-n_d psi}), no fabric gate, so the volume moves until psi = 0.
+  // Plastic dilatancy: gated by the fabric (1 - F/F_lim) (and by r with Ext::dilatancy_gated), or with the volume-form
+  // state parameter driven by psi (tenth round): d_D (r - chi_D e^{-n_d psi}), no fabric gate, so the volume moves until
+  // psi = 0.
+  const T gate_D = m.ext.dilatancy_gated ? r : T(1.0);
   const T dil = vol_state ? X.d_D * (r - X.chi_D * exp(-m.ext.p[kND] * psi))
-                : m.ext.p ? X.d_D * (r - X.chi_D) * (T(1.0) - T(sigma) * y.F / F_lim) : T(0.0);
+                : m.ext.p ? X.d_D * (r - X.chi_D) * (T(1.0) - T(sigma) * y.F / F_lim) * gate_D : T(0.0);
   const T relax = L.beta_p * (y.p - p_ref);          // excess pressure relaxing with |d eps_d|
   const T src = excess_source(m.ext, A * T(sigma), y.p - p_ref, y.p);   // the excess's source A sigma (gated: bounded)
   T dvol;                                            // d eps_vol per |d eps_d|
@@ -835,9 +863,10 @@ Material<T> start_material(const T* iso, const T* shear, double nu_ref, double n
 /// The start state; with the volume-form state parameter the plastic strain e_pl = ln(nu_iso(p0)/nu0), so that the
 /// elastic volume fraction starts on the isotropic law at p0 whatever the preparation (a loose packing below the law's
 /// jamming fraction included): the elastic stiffness a function of the pressure alone, as SANISAND's K(p).
+/// With Ext::start_unaligned s and F start at 0 (the aligned parts; s0 and F0 are then only observed, `observed`).
 template <class T>
 State<T> start_state(const Material<T>& m, double nu0, double p0, double s0, double F0) {
-  State<T> y{T(std::log(nu0)), T(p0), T(s0), T(F0)};
+  State<T> y{T(std::log(nu0)), T(p0), T(m.ext.start_unaligned ? 0.0 : s0), T(m.ext.start_unaligned ? 0.0 : F0)};
   using std::log;
   if (m.ext.p && m.ext.state_volume) y.e_pl = log(isotropic_volume(m.iso, p0)) - T(std::log(nu0));
   return y;

@@ -40,6 +40,13 @@ struct ModelCommandOptions {
   /// beta_p, fitted) or `bounded` (the same, its source gated by 1 - (q/p)^2: q within (-p, p), nineteenth round);
   /// empty: permanent, or with --predict-with the file's (row anisotropy_excess)
   std::string anisotropy_pressure;
+  /// The start's deviators (twenty-eighth round): `aligned` (the measured s0, F0 taken as aligned with the loading and
+  /// integrated from, every calibration before) or `unaligned` (s and F the aligned parts from 0, compared with the data
+  /// as sqrt(x^2 + x0^2)); empty: aligned, or with --predict-with the file's (row start_anisotropy)
+  std::string start_anisotropy;
+  /// The extended family's plastic dilatancy (twenty-eighth round): `none` (ungated, every calibration before) or
+  /// `mobilisation` (times r); empty: none, or with --predict-with the file's (row dilatancy_gate)
+  std::string dilatancy_gate;
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
   std::vector<std::string> hold;             ///< extension coefficients held at their start values (--hold)
   std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default), pressure (n_psi fitted), pressure-lode (+ lambda_psi)

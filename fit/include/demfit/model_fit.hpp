@@ -83,6 +83,11 @@ struct CalibrationOptions {
   bool excess_relaxes = false;
   /// With excess_relaxes (`--anisotropy-pressure bounded`, nineteenth round): the excess within (-p, p) (Ext::excess_bounded).
   bool excess_bounded = false;
+  /// The start's deviators unaligned with the loading (`--start-anisotropy unaligned`, twenty-eighth round): s and F
+  /// integrated from 0, the data compared with sqrt(s^2 + s0^2), sqrt(F^2 + F0^2) (Ext::start_unaligned).
+  bool start_unaligned = false;
+  /// The plastic dilatancy gated by the mobilisation r (`--dilatancy-gate mobilisation`; Ext::dilatancy_gated).
+  bool dilatancy_gated = false;
   /// The coordination law rises with the density (`--coordination rising`, the default since issue 31's twenty-third
   /// round): C1 >= 0 wherever the isotropic block is fitted and C1 not held. false (`free`): C1 of either sign, as
   /// every fit before; a falling law can make the isotropic pressure peak below nu = 1 (docs/model.md).
