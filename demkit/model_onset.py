@@ -1,0 +1,114 @@
+"""Where plastic flow starts (issue 31, twenty-eighth round): each mu's chosen D2 + D3 variant (LW/variants.csv, the
+uncorrected choice) calibrated again with an alternative onset, then the paired held-out test against the stored run:
+
+- `gate`: `dem model --dilatancy-gate mobilisation`, the plastic dilatancy d_D (r - chi_D)(1 - F/F_lim) times the
+  mobilisation r, so that the volume under constant pressure starts flat as the DEM's does (ungated it starts at its
+  largest contraction d_D chi_D);
+- `unaligned`: `--start-anisotropy unaligned`, s and F integrated as the parts aligned with the loading from 0, the
+  data's first-row s_dev and F_dev (the random deviators of a finite isotropic packing) observed as sqrt(x^2 + x0^2);
+- `both`.
+
+    /usr/bin/python3 -m demkit.model_onset --variants LW --work WORK --out OUT [--alternative gate] [--mu 1 0.5]
+    /usr/bin/python3 -m demkit.model_onset --variants LW --out OUT --table-only [--alternative gate] [--mu ...]
+
+Each run starts from the default start, with the jackknife over the packings (its held-out scores); OUT/ALT/mu_MU.
+The alternative has the coefficients of the stored variant, so the choice is model_variants.choose's: the stored run is
+beaten when the alternative's held-out scores are lower by more than t_{K-1,0.975} SE of the paired difference (and the
+other way round); neither beaten: the lower mean score. OUT/ALT.{md,csv}: per mu chi2/dof, the worst fitted D2 and D3
+and predicted isobaric curve (RMS over the mean 95 % band half-width), the held-out means and their paired difference,
+the choice, and the target (every curve within one band half-width, chi2/dof <= 3) with the chosen one.
+docs/model.md, "Where plastic flow starts".
+"""
+import argparse
+import os
+import sys
+
+from demkit import model_early, model_friction, model_lode_weight, model_state_limit, model_variants
+from demkit.atomic import write_atomic
+
+KINDS = model_variants.KINDS
+ALTERNATIVES = {"gate": ["--dilatancy-gate", "mobilisation"], "unaligned": ["--start-anisotropy", "unaligned"],
+                "both": ["--dilatancy-gate", "mobilisation", "--start-anisotropy", "unaligned"]}
+STARTS = ("stored", "alternative")
+
+
+def summary_of(d, who="model_onset"):
+    """(chi2/dof, worst curves) and the held-out scores of the `dem model` run in D."""
+    if not os.path.exists(os.path.join(d, "summary.csv")):
+        raise SystemExit(f"{who}: {d}/summary.csv does not exist: run without --table-only first (or give --mu the "
+                         "values that were run)")
+    return model_lode_weight.worst(os.path.join(d, "summary.csv")), model_state_limit.extended_scores(d)
+
+
+def row(mu, variant, runs):
+    """The md and csv rows of one mu: RUNS {start: folder}."""
+    res, scores = {}, {}
+    for s in STARTS:
+        res[s], scores[s] = summary_of(runs[s])
+    chosen, beaten, means = model_variants.choose(scores, {s: 0 for s in STARTS})
+    mean, se, t, K, _ = model_state_limit.paired_choice(scores["stored"], scores["alternative"])
+    cells = [" → ".join(f"{res[s][1][k][0]:.2f} ({res[s][1][k][1]})" for s in STARTS) for k in KINDS]
+    beat = next((f"{s} beaten" for s in STARTS if beaten[s]), "neither beaten")
+    md = (f"| {mu} | {variant} | {res['stored'][0]:.3g} → {res['alternative'][0]:.3g} | " + " | ".join(cells) +
+          f" | {means['stored']:.4g} → {means['alternative']:.4g} | {mean:.3g} ± {se:.2g} (t SE {t * se:.2g}) | "
+          f"{beat} | {chosen} | " + model_variants.target_cells(chosen, *res[chosen]).split(" | ", 1)[1] + " |")
+    csv = [",".join([mu, variant, s, f"{res[s][0]:.4g}", *(f"{res[s][1][k][0]:.4g}" for k in KINDS),
+                     f"{means[s]:.4g}", "yes" if beaten[s] else "no", "yes" if s == chosen else "no"]) + "\n"
+           for s in STARTS]
+    return md, csv, K
+
+
+def table(lw, out, alt, mus):
+    """OUT/ALT.{md,csv} from the stored runs (LW) and the alternative's (OUT/ALT/mu_MU)."""
+    chosen = {mu: (folder, rule, limit) for mu, folder, rule, limit in model_early.chosen_runs(lw)}
+    name = {v[1]: v[0] for v in model_variants.VARIANTS}
+    md = [f"<!-- demkit/model_onset.py: each mu's chosen D2 + D3 variant, the stored run → the same with `{alt}` "
+          f"({' '.join(ALTERNATIVES[alt])}); RMS over the mean 95 % band half-width; held-out: mean score over the {K} left-out packings, the "
+          "difference stored - alternative paired (t_{K-1,0.975}); target: every curve within 1 band, chi2/dof <= 3 -->",
+          "| μ | variant | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | mean held-out score | "
+          "difference ± SE | beaten | chosen | χ²/dof | worst curve | target met |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [",".join(["mu", "variant", "start", "chi2_per_dof [-]", "worst_fitted_D2 [band]", "worst_fitted_D3 [band]",
+                       "worst_predicted_isobaric [band]", "heldout_mean [-]", "beaten", "chosen"]) + "\n"]
+    K = 0
+    for mu in mus:
+        if mu not in chosen:
+            raise SystemExit(f"model_onset: {lw}/variants.csv chooses no variant at mu = {mu}")
+        folder = chosen[mu][0]
+        runs = {"stored": os.path.join(lw, folder, f"mu_{mu}"), "alternative": os.path.join(out, alt, f"mu_{mu}")}
+        m, c, K = row(mu, name[folder], runs)
+        md.append(m)
+        lines += c
+    md[0] = md[0].replace("{K}", str(K))
+    write_atomic(os.path.join(out, f"{alt}.md"), "\n".join(md) + "\n")
+    write_atomic(os.path.join(out, f"{alt}.csv"), "".join(lines))
+    print("\n".join(md))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--variants", required=True, help="demkit.model_variants' folder (variants.csv and its runs)")
+    ap.add_argument("--work", help="working copies of the stored ensembles (made when missing)")
+    ap.add_argument("--out", required=True, help="the runs (OUT/ALT/mu_MU) and the table (OUT/ALT.{md,csv})")
+    ap.add_argument("--alternative", choices=sorted(ALTERNATIVES), default="gate")
+    ap.add_argument("--store", default="data/friction_n1000", help="the friction study's stored ensembles")
+    ap.add_argument("--dem", default="build/dem")
+    ap.add_argument("--mu", nargs="+", default=list(model_lode_weight.MUS))
+    ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
+    a = ap.parse_args(argv)
+    if not a.table_only:
+        if not a.work:
+            raise SystemExit("model_onset: give --work (the working copies), or --table-only")
+        chosen = {mu: v for mu, *v in model_early.chosen_runs(a.variants)}
+        for mu in a.mu:
+            if mu not in chosen:
+                raise SystemExit(f"model_onset: {a.variants}/variants.csv chooses no variant at mu = {mu}")
+            _, rule, limit = chosen[mu]
+            w = model_friction.working_copy(a.store, a.work, mu, "model_onset")
+            model_lode_weight.run_rule(a.dem, w, os.path.join(a.out, a.alternative, f"mu_{mu}"), rule, state_limit=limit,
+                                       extra=ALTERNATIVES[a.alternative])
+    table(a.variants, a.out, a.alternative, a.mu)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
