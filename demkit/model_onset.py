@@ -63,7 +63,8 @@ def table(lw, out, alt, mus):
     chosen = {mu: (folder, rule, limit) for mu, folder, rule, limit in model_early.chosen_runs(lw)}
     name = {v[1]: v[0] for v in model_variants.VARIANTS}
     md = [f"<!-- demkit/model_onset.py: each mu's chosen D2 + D3 variant, the stored run → the same with `{alt}` "
-          f"({' '.join(ALTERNATIVES[alt])}); RMS over the mean 95 % band half-width; held-out: mean score over the {K} left-out packings, the "
+          f"({' '.join(ALTERNATIVES[alt])}); RMS over the mean 95 % band half-width; held-out: mean score over the "
+          "{K} left-out packings, the "
           "difference stored - alternative paired (t_{K-1,0.975}); target: every curve within 1 band, chi2/dof <= 3 -->",
           "| μ | variant | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | mean held-out score | "
           "difference ± SE | beaten | chosen | χ²/dof | worst curve | target met |",

@@ -1409,6 +1409,17 @@ ModelInputs checked_inputs(const ModelCommandOptions& o, const CalibrationOption
   }
 }
 
+// Whether the law of P reads extension entry i, as read_parameters tells the laws apart (the n_psi pair: the state
+// limit; lambda_psi: its Lode exponent; nu_cs on: the volume-form state parameter; the Weighted pair where the rule or
+// the file has it): a predicted run writes those rows only, so that its parameters.csv predicts the same again.
+bool ext_entry_read(const Parameters& P, int i) {
+  if (i < kNumExtBase) return true;
+  if (i == kNPsiA || i == kNPsiB) return P.state_limit;
+  if (i == kLnDeltaW || i == kNW) return P.fabric == FabricLode::Weighted || P.ext[i] != 0.0;
+  if (i == kLambdaPsi) return P.state_lode;
+  return P.state_volume;
+}
+
 // `--predict-with PARAMETERS.csv`: no calibration; the file's parameters (the family, surface and fabric rule of the
 // options, the state limit as the file has it) predict every curve and path, the --calibrate-on ones included.
 FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions& co, ModelInputs& in) {
@@ -1458,7 +1469,8 @@ FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions
   for (int i = 0; i < kNumIso; ++i) { cal.names.push_back(iso_name(i)); cal.value.push_back(iso[i]); }
   for (int i = 0; i < kNumShear; ++i) { cal.names.push_back(shear_name(i)); cal.value.push_back(P.shear[i]); }
   if (P.extended)
-    for (int i = 0; i < kNumExt; ++i) { cal.names.push_back(ext_name(i)); cal.value.push_back(P.ext[i]); }
+    for (int i = 0; i < kNumExt; ++i)
+      if (ext_entry_read(P, i)) { cal.names.push_back(ext_name(i)); cal.value.push_back(P.ext[i]); }
   cal.se_cov.assign(cal.value.size(), std::nan(""));
   cal.corr.assign(cal.value.size(), std::vector<double>(cal.value.size(), std::nan("")));
   cal.ok = true;

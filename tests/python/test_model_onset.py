@@ -1,0 +1,113 @@
+"""Where plastic flow starts (issue 31, twenty-eighth round): `dem model --dilatancy-gate mobilisation` (the plastic
+dilatancy times the mobilisation r) and `--start-anisotropy unaligned` (s and F integrated as the aligned parts from 0,
+observed as sqrt(x^2 + x0^2)), applied with --predict-with to the friction study's mu = 1 ensemble; their rows in
+parameters.csv read back; refused where they do not apply; demkit.model_onset's table against model_variants' table
+of the same stored runs (another implementation)."""
+import csv
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from conftest import DEM, ROOT
+
+sys.path.insert(0, ROOT)
+from demkit import model_early, model_friction, model_onset  # noqa: E402
+
+LWDIR = os.path.join(ROOT, "data", "friction_n1000", "model_friction", "lode_weight")
+LW = os.path.join(LWDIR, "overlap_no_limit", "mu_1")
+
+
+def predict(work, params, out, *extra):
+    return subprocess.run([DEM, "model", work, "--predict-with", params, "--family", "extended", "--fabric-lode",
+                           "overlap", "--calibrate-on", "D2,D3", "--no-plots", "--out", str(out), *extra],
+                          capture_output=True, text=True)
+
+
+def curve(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+
+
+def parameter_rows(path):
+    with open(path, newline="") as fh:
+        return {r["parameter"]: r["value"] for r in csv.DictReader(ln for ln in fh if not ln.startswith("#"))}
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory):
+    return model_friction.working_copy(os.path.join(ROOT, "data", "friction_n1000"),
+                                       str(tmp_path_factory.mktemp("onset") / "work"), "1", "test_model_onset")
+
+
+def test_both_options_are_written_read_back_and_undone(tmp_path, work):
+    a = tmp_path / "both"
+    r = predict(work, os.path.join(LW, "parameters.csv"), a, "--dilatancy-gate", "mobilisation",
+                "--start-anisotropy", "unaligned")
+    assert r.returncode == 0, r.stderr
+    rows = parameter_rows(a / "parameters.csv")
+    assert rows["dilatancy_gate"] == "1" and rows["start_anisotropy"] == "1"
+    # the file's rows are read back: the same predictions without the options
+    b = tmp_path / "again"
+    assert predict(work, str(a / "parameters.csv"), b).returncode == 0
+    assert model_early.curve_rows(a / "summary.csv") == model_early.curve_rows(b / "summary.csv")
+    # ... and undone by the options: the stored run's predictions to their last digit (or within 0.002 band)
+    c = tmp_path / "undone"
+    assert predict(work, str(a / "parameters.csv"), c, "--dilatancy-gate", "none", "--start-anisotropy",
+                   "aligned").returncode == 0
+    assert "dilatancy_gate" not in parameter_rows(c / "parameters.csv")
+    assert model_early.same_curves(model_early.curve_rows(c / "summary.csv"),
+                                   model_early.curve_rows(os.path.join(LW, "summary.csv"))) is not None
+    assert model_early.curve_rows(a / "summary.csv") != model_early.curve_rows(c / "summary.csv")
+    # the unaligned start shows the measured start values on the first row
+    for f in ("D2_phi0.690.csv", "D3_phi0.800.csv", os.path.join("paths", "isobaric_phi0.800.csv")):
+        first = curve(a / "curves" / f)[0]
+        for q in ("s_dev", "F_dev"):
+            assert float(first[q + "_model"]) == pytest.approx(float(first[q + "_mean"]), rel=1e-6), (f, q)
+
+
+def test_the_gate_starts_the_isobaric_volume_flat(tmp_path, work):
+    """The stored mu = 1 calibration contracts the isobaric nu = 0.80 path from the first step at d_D chi_D per unit
+    eps_d (chi_D = 3); gated by r (about 0.05 at eps_d = 0.009 there), the first rows' contraction falls tenfold."""
+    plain, gated = tmp_path / "plain", tmp_path / "gated"
+    assert predict(work, os.path.join(LW, "parameters.csv"), plain).returncode == 0
+    assert predict(work, os.path.join(LW, "parameters.csv"), gated, "--dilatancy-gate", "mobilisation").returncode == 0
+    p = curve(plain / "curves" / "paths" / "isobaric_phi0.800.csv")
+    g = curve(gated / "curves" / "paths" / "isobaric_phi0.800.csv")
+    assert float(p[3]["eps_d_accumulated"]) == pytest.approx(0.009, abs=1e-3)
+    assert float(p[3]["eps_v_model"]) < -5e-5
+    assert abs(float(g[3]["eps_v_model"])) < 0.1 * abs(float(p[3]["eps_v_model"]))
+
+
+@pytest.mark.parametrize("extra, fix", [
+    (["--family", "group", "--dilatancy-gate", "mobilisation"], "give --family extended"),
+    (["--family", "extended", "--state-limit", "volume", "--dilatancy-gate", "mobilisation"], "driven by psi"),
+    (["--family", "extended", "--dilatancy-gate", "yes"], "dilatancy-gate"),
+    (["--family", "extended", "--start-anisotropy", "random"], "start-anisotropy"),
+])
+def test_the_options_are_refused_where_they_do_not_apply(tmp_path, work, extra, fix):
+    r = subprocess.run([DEM, "model", work, "--out", str(tmp_path / "x"), "--no-plots", *extra], capture_output=True,
+                       text=True)
+    assert r.returncode != 0 and fix in r.stderr, r.stderr
+    assert not (tmp_path / "x" / "summary.csv").exists()
+
+
+def test_the_onset_table_gives_the_variant_tables_numbers(tmp_path):
+    """Two stored mu = 1 variants stand in for a run and its alternative (the chosen overlap, and weighted as OUT/gate):
+    the onset table's chi2/dof, worst curves and held-out means are model_variants' for those variants."""
+    shutil.copytree(os.path.join(LWDIR, "weighted_no_limit", "mu_1"), tmp_path / "gate" / "mu_1")
+    model_onset.table(LWDIR, str(tmp_path), "gate", ["1"])
+    with open(tmp_path / "gate.csv", newline="") as fh:
+        got = {r["start"]: r for r in csv.DictReader(fh)}
+    with open(os.path.join(LWDIR, "variants.csv"), newline="") as fh:
+        want = {r["variant"]: r for r in csv.DictReader(ln for ln in fh if not ln.startswith("#")) if r["mu"] == "1"}
+    for start, variant in (("stored", "overlap"), ("alternative", "weighted")):
+        for col in ("chi2_per_dof [-]", "worst_fitted_D2 [band]", "worst_fitted_D3 [band]",
+                    "worst_predicted_isobaric [band]", "heldout_mean [-]"):
+            assert float(got[start][col]) == pytest.approx(float(want[variant][col]), rel=2e-3), (start, col)
+    assert sum(r["chosen"] == "yes" for r in got.values()) == 1
+    assert "| 1 | overlap |" in (tmp_path / "gate.md").read_text()
+    with pytest.raises(SystemExit, match="run without --table-only first"):
+        model_onset.table(LWDIR, str(tmp_path), "both", ["1"])
