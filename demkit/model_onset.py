@@ -58,14 +58,35 @@ def row(mu, variant, runs):
     return md, csv, K
 
 
-def table(lw, out, alt, mus):
-    """OUT/ALT.{md,csv} from the stored runs (LW) and the alternative's (OUT/ALT/mu_MU)."""
+def specs(lw, mus, variant=None):
+    """{mu: (variant folder, fabric rule, --state-limit)}: each mu's chosen variant in LW/variants.csv, or VARIANT."""
+    if variant:
+        v = {x[0]: x for x in model_variants.VARIANTS}.get(variant)
+        if v is None:
+            raise SystemExit(f"model_onset: --variant {variant!r} is none of " +
+                             ", ".join(x[0] for x in model_variants.VARIANTS))
+        return {mu: (v[1], v[2], model_lode_weight.state_limit_value(v[3])) for mu in mus}
     chosen = {mu: (folder, rule, limit) for mu, folder, rule, limit in model_early.chosen_runs(lw)}
+    for mu in mus:
+        if mu not in chosen:
+            raise SystemExit(f"model_onset: {lw}/variants.csv chooses no variant at mu = {mu}")
+    return {mu: chosen[mu] for mu in mus}
+
+
+def label(alt, variant=None):
+    """The runs' folder and the table's name: ALT, or ALT_FOLDER with a --variant."""
+    return alt if not variant else alt + "_" + {x[0]: x[1] for x in model_variants.VARIANTS}[variant]
+
+
+def table(lw, out, alt, mus, variant=None):
+    """OUT/LABEL.{md,csv} from the stored runs (LW) and the alternative's (OUT/LABEL/mu_MU; label)."""
+    spec = specs(lw, mus, variant)
     name = {v[1]: v[0] for v in model_variants.VARIANTS}
-    md = [f"<!-- demkit/model_onset.py: each mu's chosen D2 + D3 variant, the stored run → the same with `{alt}` "
-          f"({' '.join(ALTERNATIVES[alt])}); RMS over the mean 95 % band half-width; held-out: mean score over the "
-          "{K} left-out packings, the "
-          "difference stored - alternative paired (t_{K-1,0.975}); target: every curve within 1 band, chi2/dof <= 3 -->",
+    tag = label(alt, variant)
+    md = [f"<!-- demkit/model_onset.py: {'each mu' + chr(39) + 's chosen D2 + D3 variant' if not variant else variant}, "
+          f"the stored run → the same with `{alt}` ({' '.join(ALTERNATIVES[alt])}); RMS over the mean 95 % band "
+          "half-width; held-out: mean score over the {K} left-out packings, the difference stored - alternative paired "
+          "(t_{K-1,0.975}); target: every curve within 1 band, chi2/dof <= 3 -->",
           "| μ | variant | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | mean held-out score | "
           "difference ± SE | beaten | chosen | χ²/dof | worst curve | target met |",
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -73,16 +94,14 @@ def table(lw, out, alt, mus):
                        "worst_predicted_isobaric [band]", "heldout_mean [-]", "beaten", "chosen"]) + "\n"]
     K = 0
     for mu in mus:
-        if mu not in chosen:
-            raise SystemExit(f"model_onset: {lw}/variants.csv chooses no variant at mu = {mu}")
-        folder = chosen[mu][0]
-        runs = {"stored": os.path.join(lw, folder, f"mu_{mu}"), "alternative": os.path.join(out, alt, f"mu_{mu}")}
+        folder = spec[mu][0]
+        runs = {"stored": os.path.join(lw, folder, f"mu_{mu}"), "alternative": os.path.join(out, tag, f"mu_{mu}")}
         m, c, K = row(mu, name[folder], runs)
         md.append(m)
         lines += c
     md[0] = md[0].replace("{K}", str(K))
-    write_atomic(os.path.join(out, f"{alt}.md"), "\n".join(md) + "\n")
-    write_atomic(os.path.join(out, f"{alt}.csv"), "".join(lines))
+    write_atomic(os.path.join(out, f"{tag}.md"), "\n".join(md) + "\n")
+    write_atomic(os.path.join(out, f"{tag}.csv"), "".join(lines))
     print("\n".join(md))
 
 
@@ -92,23 +111,25 @@ def main(argv=None):
     ap.add_argument("--work", help="working copies of the stored ensembles (made when missing)")
     ap.add_argument("--out", required=True, help="the runs (OUT/ALT/mu_MU) and the table (OUT/ALT.{md,csv})")
     ap.add_argument("--alternative", choices=sorted(ALTERNATIVES), default="gate")
+    ap.add_argument("--variant", help="this variant (e.g. 'weighted + Lode limit') instead of each mu's chosen one: "
+                                      "OUT/ALT_FOLDER/mu_MU and OUT/ALT_FOLDER.{md,csv}")
     ap.add_argument("--store", default="data/friction_n1000", help="the friction study's stored ensembles")
     ap.add_argument("--dem", default="build/dem")
     ap.add_argument("--mu", nargs="+", default=list(model_lode_weight.MUS))
+    ap.add_argument("--no-jackknife", action="store_true", help="no held-out scores (no table): a quick look")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
     a = ap.parse_args(argv)
+    spec = specs(a.variants, a.mu, a.variant)
     if not a.table_only:
         if not a.work:
             raise SystemExit("model_onset: give --work (the working copies), or --table-only")
-        chosen = {mu: v for mu, *v in model_early.chosen_runs(a.variants)}
         for mu in a.mu:
-            if mu not in chosen:
-                raise SystemExit(f"model_onset: {a.variants}/variants.csv chooses no variant at mu = {mu}")
-            _, rule, limit = chosen[mu]
+            _, rule, limit = spec[mu]
             w = model_friction.working_copy(a.store, a.work, mu, "model_onset")
-            model_lode_weight.run_rule(a.dem, w, os.path.join(a.out, a.alternative, f"mu_{mu}"), rule, state_limit=limit,
-                                       extra=ALTERNATIVES[a.alternative])
-    table(a.variants, a.out, a.alternative, a.mu)
+            model_lode_weight.run_rule(a.dem, w, os.path.join(a.out, label(a.alternative, a.variant), f"mu_{mu}"), rule,
+                                       jackknife=not a.no_jackknife, state_limit=limit, extra=ALTERNATIVES[a.alternative])
+    if not a.no_jackknife:
+        table(a.variants, a.out, a.alternative, a.mu, a.variant)
 
 
 if __name__ == "__main__":
