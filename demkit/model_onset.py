@@ -29,31 +29,66 @@ from demkit.atomic import write_atomic
 KINDS = model_variants.KINDS
 ALTERNATIVES = {"gate": ["--dilatancy-gate", "mobilisation"], "unaligned": ["--start-anisotropy", "unaligned"],
                 "both": ["--dilatancy-gate", "mobilisation", "--start-anisotropy", "unaligned"]}
+BASE = "none"   # OUT/none/mu_MU: the stored variant rerun as stored, for its held-out scores of the predicted paths
 STARTS = ("stored", "alternative")
 
 
+def path_scores(d):
+    """{packing: held-out score of its own predicted paths} from D/heldout.csv's heldout_predicted_paths column ({}
+    where the run has none: made before the twenty-eighth round)."""
+    import csv
+    with open(os.path.join(d, "heldout.csv"), newline="") as fh:
+        rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+    col = "heldout_predicted_paths [-]"
+    return {int(r["packing_left_out"]): float(r[col]) for r in rows if col in r and r[col] not in ("", "nan")}
+
+
 def summary_of(d, who="model_onset"):
-    """(chi2/dof, worst curves) and the held-out scores of the `dem model` run in D."""
+    """(chi2/dof, worst curves), the held-out scores of the fitted curves and of the predicted paths of the run in D."""
     if not os.path.exists(os.path.join(d, "summary.csv")):
         raise SystemExit(f"{who}: {d}/summary.csv does not exist: run without --table-only first (or give --mu the "
                          "values that were run)")
-    return model_lode_weight.worst(os.path.join(d, "summary.csv")), model_state_limit.extended_scores(d)
+    return model_lode_weight.worst(os.path.join(d, "summary.csv")), model_state_limit.extended_scores(d), path_scores(d)
+
+
+def decide(fitted, paths):
+    """The choice between the stored run and the alternative (the same coefficients): a run beats the other on a score
+    when its paired held-out scores are lower by more than t_{K-1,0.975} SE (model_state_limit.paired_choice). The
+    alternative is chosen when it beats the stored run on one score (the fitted curves, or the predicted paths) and is
+    beaten on neither; else the stored run. Returns (chosen, {score: (mean d, SE d, t, who beats or None)})."""
+    tests = {}
+    for name, sc in (("fitted", fitted), ("paths", paths)):
+        if not all(sc.values()):
+            tests[name] = None
+            continue
+        mean, se, t, _, _ = model_state_limit.paired_choice(sc["stored"], sc["alternative"])
+        tests[name] = (mean, se, t, "alternative" if mean > t * se else "stored" if -mean > t * se else None)
+    won = [x[3] for x in tests.values() if x]
+    return ("alternative" if "alternative" in won and "stored" not in won else "stored"), tests
+
+
+def test_cell(x):
+    """'d ± SE (t SE; who beats)' of one paired test, or 'not scored'."""
+    if x is None:
+        return "not scored"
+    return f"{x[0]:.3g} ± {x[1]:.2g} (t SE {x[2] * x[1]:.2g}; {x[3] + ' better' if x[3] else 'neither better'})"
 
 
 def row(mu, variant, runs):
     """The md and csv rows of one mu: RUNS {start: folder}."""
-    res, scores = {}, {}
+    res, fitted, paths = {}, {}, {}
     for s in STARTS:
-        res[s], scores[s] = summary_of(runs[s])
-    chosen, beaten, means = model_variants.choose(scores, {s: 0 for s in STARTS})
-    mean, se, t, K, _ = model_state_limit.paired_choice(scores["stored"], scores["alternative"])
+        res[s], fitted[s], paths[s] = summary_of(runs[s])
+    chosen, tests = decide(fitted, paths)
+    K = len(fitted["stored"])
+    mean = lambda sc: sum(sc.values()) / len(sc) if sc else float("nan")
     cells = [" → ".join(f"{res[s][1][k][0]:.2f} ({res[s][1][k][1]})" for s in STARTS) for k in KINDS]
-    beat = next((f"{s} beaten" for s in STARTS if beaten[s]), "neither beaten")
     md = (f"| {mu} | {variant} | {res['stored'][0]:.3g} → {res['alternative'][0]:.3g} | " + " | ".join(cells) +
-          f" | {means['stored']:.4g} → {means['alternative']:.4g} | {mean:.3g} ± {se:.2g} (t SE {t * se:.2g}) | "
-          f"{beat} | {chosen} | " + model_variants.target_cells(chosen, *res[chosen]).split(" | ", 1)[1] + " |")
+          f" | {mean(fitted['stored']):.4g} → {mean(fitted['alternative']):.4g} | {test_cell(tests['fitted'])} | "
+          f"{mean(paths['stored']):.4g} → {mean(paths['alternative']):.4g} | {test_cell(tests['paths'])} | {chosen} | " +
+          model_variants.target_cells(chosen, *res[chosen]).split(" | ", 1)[1] + " |")
     csv = [",".join([mu, variant, s, f"{res[s][0]:.4g}", *(f"{res[s][1][k][0]:.4g}" for k in KINDS),
-                     f"{means[s]:.4g}", "yes" if beaten[s] else "no", "yes" if s == chosen else "no"]) + "\n"
+                     f"{mean(fitted[s]):.4g}", f"{mean(paths[s]):.4g}", "yes" if s == chosen else "no"]) + "\n"
            for s in STARTS]
     return md, csv, K
 
@@ -87,15 +122,17 @@ def table(lw, out, alt, mus, variant=None):
           f"the stored run → the same with `{alt}` ({' '.join(ALTERNATIVES[alt])}); RMS over the mean 95 % band "
           "half-width; held-out: mean score over the {K} left-out packings, the difference stored - alternative paired "
           "(t_{K-1,0.975}); target: every curve within 1 band, chi2/dof <= 3 -->",
-          "| μ | variant | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | mean held-out score | "
-          "difference ± SE | beaten | chosen | χ²/dof | worst curve | target met |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "| μ | variant | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | held-out, fitted curves | "
+          "difference ± SE | held-out, predicted paths | difference ± SE | chosen | χ²/dof | worst curve | target met |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     lines = [",".join(["mu", "variant", "start", "chi2_per_dof [-]", "worst_fitted_D2 [band]", "worst_fitted_D3 [band]",
-                       "worst_predicted_isobaric [band]", "heldout_mean [-]", "beaten", "chosen"]) + "\n"]
+                       "worst_predicted_isobaric [band]", "heldout_mean [-]", "heldout_paths_mean [-]", "chosen"]) + "\n"]
     K = 0
     for mu in mus:
         folder = spec[mu][0]
-        runs = {"stored": os.path.join(lw, folder, f"mu_{mu}"), "alternative": os.path.join(out, tag, f"mu_{mu}")}
+        rerun = os.path.join(out, label(BASE, variant), f"mu_{mu}")
+        stored = rerun if os.path.exists(os.path.join(rerun, "summary.csv")) else os.path.join(lw, folder, f"mu_{mu}")
+        runs = {"stored": stored, "alternative": os.path.join(out, tag, f"mu_{mu}")}
         m, c, K = row(mu, name[folder], runs)
         md.append(m)
         lines += c
@@ -117,6 +154,9 @@ def main(argv=None):
     ap.add_argument("--dem", default="build/dem")
     ap.add_argument("--mu", nargs="+", default=list(model_lode_weight.MUS))
     ap.add_argument("--no-jackknife", action="store_true", help="no held-out scores (no table): a quick look")
+    ap.add_argument("--rerun-stored", action="store_true", help="also rerun the stored variant as it is (OUT/none/mu_MU, "
+                                                                "the table's stored run): its held-out scores of the "
+                                                                "predicted paths, which runs before this round lack")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
     a = ap.parse_args(argv)
     spec = specs(a.variants, a.mu, a.variant)
@@ -126,8 +166,12 @@ def main(argv=None):
         for mu in a.mu:
             _, rule, limit = spec[mu]
             w = model_friction.working_copy(a.store, a.work, mu, "model_onset")
-            model_lode_weight.run_rule(a.dem, w, os.path.join(a.out, label(a.alternative, a.variant), f"mu_{mu}"), rule,
-                                       jackknife=not a.no_jackknife, state_limit=limit, extra=ALTERNATIVES[a.alternative])
+            runs = [(label(a.alternative, a.variant), ALTERNATIVES[a.alternative])]
+            if a.rerun_stored:
+                runs.insert(0, (label(BASE, a.variant), []))
+            for tag, extra in runs:
+                model_lode_weight.run_rule(a.dem, w, os.path.join(a.out, tag, f"mu_{mu}"), rule,
+                                           jackknife=not a.no_jackknife, state_limit=limit, extra=extra)
     if not a.no_jackknife:
         table(a.variants, a.out, a.alternative, a.mu, a.variant)
 

@@ -417,6 +417,7 @@ struct FamilyFit {
   std::vector<std::vector<double>> jack;   ///< leave-one-out estimates
   std::vector<double> heldout;             ///< per left-out packing: its own fitted curves' mean squared
                                            ///< standardised error under the fit without it
+  std::vector<double> heldout_paths;       ///< ... its own predicted paths' (heldout_path_score; NaN: none)
 };
 
 // Packing k's own curves of the fitted modes, predicted from its own start state by the fit of
@@ -452,6 +453,56 @@ double heldout_score(const Parameters& P, const std::vector<CurveData>& curves, 
         ss += r * r;
         ++n;
       }
+    }
+  }
+  return n > 0 ? ss / n : std::nan("");
+}
+
+// The sum of ((model - member)/sd)^2 over rows > 0 of one path quantity and their count (heldout_path_score): sd = the
+// between-packing SD (se sqrt(K)) floored at 0.25 of its median over the rows `on` selects.
+std::pair<double, long> path_squares(const std::vector<double>& model, const std::vector<double>& member,
+                                     const std::vector<double>& se, const std::vector<bool>& on, int K) {
+  std::vector<double> pos;
+  for (std::size_t i = 1; i < se.size(); ++i) if (on[i] && se[i] > 0 && std::isfinite(se[i])) pos.push_back(se[i]);
+  if (pos.empty()) return {0.0, 0};
+  std::nth_element(pos.begin(), pos.begin() + pos.size() / 2, pos.end());
+  const double floor = 0.25 * pos[pos.size() / 2];
+  double ss = 0;
+  long n = 0;
+  for (std::size_t i = 1; i < model.size(); ++i) {
+    if (!on[i]) continue;
+    const double r = (model[i] - member[i]) / (std::max(se[i], floor) * std::sqrt(static_cast<double>(K)));
+    ss += r * r;
+    ++n;
+  }
+  return {ss, n};
+}
+
+// Packing k's own predicted path ensembles (those not fitted: the isobaric D2 paths of a D2 + D3 calibration), each
+// from its own start state, by the fit of the other K - 1 packings: mean of ((model - member)/sd)^2 over rows > 0 and
+// p* (constant-volume rows) or eps_v (rows at held pressure), s_dev and F_dev signed, sd as heldout_score. NaN where
+// no member holds such a path. The held-out score of a prediction, which heldout_score (fitted curves only) does not see.
+double heldout_path_score(const Parameters& P, const std::vector<PathData>& paths, const std::vector<CurveFile>& files,
+                          const fs::path& member, int K) {
+  double ss = 0;
+  long n = 0;
+  for (std::size_t j = 0; j < paths.size(); ++j) {
+    const fs::path mp = member_path_curve(member, files[j]);
+    if (mp.empty()) continue;
+    const Table t = read_table(mp.string());
+    PathData d = paths[j];
+    if (t.column("eps_d_accumulated").size() != d.acc.size())
+      throw InputError(mp.string() + " is not on its ensemble's grid: rerun demkit.path_ensemble");
+    d.p = t.column("p_star"); d.ev = t.column("eps_v"); d.s = t.column("s_dev_signed"); d.F = t.column("F_dev_signed");
+    d.nu_m = t.column("nu");
+    d.nu = d.nu_m.front();
+    const PathPrediction m = predict_path(P, d);
+    std::vector<bool> held(d.acc.size()), vol(d.acc.size()), all(d.acc.size(), true);
+    for (std::size_t i = 0; i < d.acc.size(); ++i) { held[i] = d.isobaric[i] != 0; vol[i] = !held[i]; }
+    for (const auto& [sum, count] : {path_squares(m.p, d.p, d.se_p, vol, K), path_squares(m.ev, d.ev, d.se_ev, held, K),
+                                     path_squares(m.s, d.s, d.se_s, all, K), path_squares(m.F, d.F, d.se_F, all, K)}) {
+      ss += sum;
+      n += count;
     }
   }
   return n > 0 ? ss / n : std::nan("");
@@ -1014,6 +1065,7 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
       const JackRefit r = refit_without(in, co_f, o, ff, k, ck);
       est.push_back(ck.value);
       ff.heldout.push_back(heldout_score(ck.params, fit_curves, fit_files, members[k], K, o.eps_max));
+      ff.heldout_paths.push_back(heldout_path_score(ck.params, in.other_paths, in.other_path_files, members[k], K));
       ff.refits.push_back(r);
       std::cerr << "dem model: jackknife " << k + 1 << "/" << K << " (" << r.packing << " left out): chi2/dof = "
                 << num(r.chi2_dof, 4) << (r.tries > 1 ? " (from " + r.start + ", after " + std::to_string(r.tries) +
@@ -1238,12 +1290,21 @@ void report_profile(const Calibration& cal, const fs::path& out) {
 // (demkit/model_state_limit.py).
 void write_heldout(const FamilyFit& ff, const fs::path& out) {
   if (ff.heldout.empty()) return;
-  Table t({"packing_left_out", "heldout_extended [-]"});
-  for (std::size_t k = 0; k < ff.heldout.size(); ++k) t.add_row({std::to_string(k), num(ff.heldout[k], 4)});
+  const bool paths = std::any_of(ff.heldout_paths.begin(), ff.heldout_paths.end(), [](double v) { return !std::isnan(v); });
+  Table t(paths ? std::vector<std::string>{"packing_left_out", "heldout_extended [-]", "heldout_predicted_paths [-]"}
+                : std::vector<std::string>{"packing_left_out", "heldout_extended [-]"});
+  for (std::size_t k = 0; k < ff.heldout.size(); ++k) {
+    std::vector<std::string> r{std::to_string(k), num(ff.heldout[k], 4)};
+    if (paths) r.push_back(num(ff.heldout_paths[k], 4));
+    t.add_row(r);
+  }
   write_table_all(t, (out / "heldout").string(),
                   "Held-out score per left-out packing: its own fitted curves predicted by the fit without it, mean "
                   "squared error in units of the between-packing SD (docs/model.md, the held-out test); the column name "
-                  "is selection.csv's, whatever the family");
+                  "is selection.csv's, whatever the family" +
+                      std::string(paths ? "; heldout_predicted_paths: the same for its own predicted path ensembles "
+                                          "(p* or eps_v, s_dev, F_dev signed; docs/model.md, \"Where plastic flow starts\")"
+                                        : ""));
 }
 
 // The jackknife's leave-one-out refits: each one's chi2/dof, whether it converged and was usable (an optimum like
