@@ -8,16 +8,23 @@ uncorrected choice) calibrated again with an alternative onset, then the paired 
   data's first-row s_dev and F_dev (the random deviators of a finite isotropic packing) observed as sqrt(x^2 + x0^2);
 - `both`.
 
-    /usr/bin/python3 -m demkit.model_onset --variants LW --work WORK --out OUT [--alternative gate] [--mu 1 0.5]
+    /usr/bin/python3 -m demkit.model_onset --variants LW --work WORK --out OUT [--alternative gate] [--mu 1 0.5] \
+        [--rerun-stored] [--variant 'weighted + limit'] [--no-jackknife]
     /usr/bin/python3 -m demkit.model_onset --variants LW --out OUT --table-only [--alternative gate] [--mu ...]
 
-Each run starts from the default start, with the jackknife over the packings (its held-out scores); OUT/ALT/mu_MU.
-The alternative has the coefficients of the stored variant, so the choice is model_variants.choose's: the stored run is
-beaten when the alternative's held-out scores are lower by more than t_{K-1,0.975} SE of the paired difference (and the
-other way round); neither beaten: the lower mean score. OUT/ALT.{md,csv}: per mu chi2/dof, the worst fitted D2 and D3
-and predicted isobaric curve (RMS over the mean 95 % band half-width), the held-out means and their paired difference,
-the choice, and the target (every curve within one band half-width, chi2/dof <= 3) with the chosen one.
-docs/model.md, "Where plastic flow starts".
+Each run starts from the default start, with the jackknife over the packings; OUT/ALT/mu_MU. `--rerun-stored` also
+reruns the stored variant as it is (OUT/none/mu_MU), which the table then compares with: `dem model`'s jackknife now
+scores each left-out packing on its own predicted paths too (heldout.csv, heldout_predicted_paths: the isobaric D2
+paths here, which no D2 + D3 calibration fits), and the stored runs predate it. Without the rerun the stored run
+(LW/FOLDER/mu_MU) is compared on the fitted curves alone.
+
+The choice (`decide`): the two have the same coefficients; a run beats the other on a score (the fitted curves', the
+predicted paths') when its paired held-out scores are lower by more than t_{K-1,0.975} SE of the difference. The
+alternative is chosen when it beats the stored run on one score and is beaten on neither; else the stored run.
+OUT/LABEL.{md,csv} (LABEL: ALT, or ALT_FOLDER with --variant): per mu chi2/dof, the worst fitted D2 and D3 and predicted
+isobaric curve (RMS over the mean 95 % band half-width), both held-out means and their paired differences, the choice,
+and the target (every curve within one band half-width, chi2/dof <= 3) with the chosen one. docs/model.md, "Where
+plastic flow starts".
 """
 import argparse
 import os

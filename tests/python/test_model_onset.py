@@ -111,3 +111,36 @@ def test_the_onset_table_gives_the_variant_tables_numbers(tmp_path):
     assert "| 1 | overlap |" in (tmp_path / "gate.md").read_text()
     with pytest.raises(SystemExit, match="run without --table-only first"):
         model_onset.table(LWDIR, str(tmp_path), "both", ["1"])
+
+
+def test_the_choice_needs_a_win_on_one_score_and_no_loss_on_the_other():
+    """decide() on hand-built paired scores (K = 4; t_{3,0.975} = 3.18): the alternative lower by 1 everywhere with a
+    spread of 0.1 wins; lower on the paths but higher on the fitted curves, it is not chosen; within the spread on both,
+    the stored run stays."""
+    base = {k: 2.0 + 0.1 * k for k in range(4)}
+    lower = {k: v - 1.0 + (0.05 if k % 2 else -0.05) for k, v in base.items()}
+    higher = {k: v + 1.0 + (0.05 if k % 2 else -0.05) for k, v in base.items()}
+    close = {k: v + (0.05 if k % 2 else -0.05) for k, v in base.items()}
+    chosen, tests = model_onset.decide({"stored": base, "alternative": lower}, {"stored": base, "alternative": lower})
+    assert chosen == "alternative" and tests["paths"][3] == "alternative" and tests["fitted"][0] == pytest.approx(1.0)
+    chosen, tests = model_onset.decide({"stored": base, "alternative": higher}, {"stored": base, "alternative": lower})
+    assert chosen == "stored" and tests["fitted"][3] == "stored" and tests["paths"][3] == "alternative"
+    chosen, tests = model_onset.decide({"stored": base, "alternative": close}, {"stored": base, "alternative": close})
+    assert chosen == "stored" and tests["fitted"][3] is None and tests["paths"][3] is None
+    chosen, tests = model_onset.decide({"stored": base, "alternative": lower}, {"stored": {}, "alternative": lower})
+    assert chosen == "alternative" and tests["paths"] is None   # a run without path scores: the fitted test alone
+
+
+def test_the_jackknife_scores_each_packings_predicted_paths(tmp_path):
+    """The group model on the quasi-static path ensemble, calibrated on D2 and the reversal path: the jackknife writes
+    each left-out packing's score on its own predicted (cyclic, isobaric, triaxial) paths beside the fitted curves'
+    score (a run without predicted paths writes no such column: the stored runs before this round)."""
+    paths = os.path.join(ROOT, "data", "model_paths_qs16")
+    out = tmp_path / "pred"
+    r = subprocess.run([DEM, "model", paths, "--out", str(out), "--no-plots", "--calibrate-on", "D2,reversal"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    scores = model_onset.path_scores(str(out))
+    fitted = model_onset.model_state_limit.extended_scores(str(out))
+    assert len(scores) == len(fitted) >= 4
+    assert all(0.05 < v < 50 for v in scores.values()), scores   # in units of the between-packing variance
