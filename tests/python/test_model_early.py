@@ -30,6 +30,8 @@ def test_a_hand_built_curve_splits_as_its_closed_form(tmp_path):
         diff = 0 if i == 0 else 1 if e < 0.1 else 3
         lines.append(",".join(str(v) for v in [e] + [5 + diff, 5, 3, 7] * 3))
     (d / "D2_phi0.700.csv").write_text("\n".join(lines) + "\n")
+    # a model-only path (`dem model` writes cyclic and isobaric ones where no DEM path exists): nothing to judge
+    (d / "cyclic_phi0.700.csv").write_text("# model only\neps_d_accumulated,eps_d,p_star,s_dev,F_dev\n0,0,1,0,0\n")
     rows = model_early.table(str(tmp_path / "run"), 0.1)
     assert [r[1] for r in rows] == ["p_star", "s_dev", "F_dev"]
     for r in rows:
