@@ -420,6 +420,25 @@ struct FamilyFit {
   std::vector<double> heldout_paths;       ///< ... its own predicted paths' (heldout_path_score; NaN: none)
 };
 
+// Adds ((model - member)/sd)^2 over the rows > 0 that `on` selects (up to the model's length) to ss and their count to
+// n: sd = the between-packing SD (se sqrt(K)) floored at 0.25 of the median of the positive se over those rows (row 0
+// included), as the fit's weights (heldout_score, heldout_path_score).
+void add_standardised_squares(const std::vector<double>& model, const std::vector<double>& member,
+                              const std::vector<double>& se, const std::vector<bool>& on, int K, double& ss, long& n) {
+  std::vector<double> pos;
+  for (std::size_t i = 0; i < se.size(); ++i) if (on[i] && se[i] > 0 && std::isfinite(se[i])) pos.push_back(se[i]);
+  if (pos.empty()) return;
+  std::nth_element(pos.begin(), pos.begin() + pos.size() / 2, pos.end());
+  const double floor = 0.25 * pos[pos.size() / 2];
+  for (std::size_t i = 1; i < model.size(); ++i) {
+    if (!on[i]) continue;
+    const double sd = std::max(se[i], floor) * std::sqrt(static_cast<double>(K));
+    const double r = (model[i] - member[i]) / sd;
+    ss += r * r;
+    ++n;
+  }
+}
+
 // Packing k's own curves of the fitted modes, predicted from its own start state by the fit of
 // the other K - 1 packings: mean of ((model - member)/sd)^2 over rows > 0 and p*, s_dev, F_dev,
 // sd = the between-packing SD (se sqrt(K)) floored at 0.25 of its median, as the fit's weights.
@@ -438,44 +457,12 @@ double heldout_score(const Parameters& P, const std::vector<CurveData>& curves, 
     c.F = resample(e, t.column("F_dev"), c.eps);
     c.nu = t.column("nu").front();
     const ModelCurve m = predict_curve(P, c, eps_max);
-    const std::vector<double>* mv[3] = {&m.p, &m.s, &m.F};
-    const std::vector<double>* dv[3] = {&c.p, &c.s, &c.F};
-    const std::vector<double>* sv[3] = {&c.se_p, &c.se_s, &c.se_F};
-    for (int q = 0; q < 3; ++q) {
-      std::vector<double> pos;
-      for (double v : *sv[q]) if (v > 0 && std::isfinite(v)) pos.push_back(v);
-      if (pos.empty()) continue;
-      std::nth_element(pos.begin(), pos.begin() + pos.size() / 2, pos.end());
-      const double floor = 0.25 * pos[pos.size() / 2];
-      for (std::size_t i = 1; i < m.eps.size(); ++i) {
-        const double sd = std::max((*sv[q])[i], floor) * std::sqrt(static_cast<double>(K));
-        const double r = ((*mv[q])[i] - (*dv[q])[i]) / sd;
-        ss += r * r;
-        ++n;
-      }
-    }
+    const std::vector<bool> all(c.se_p.size(), true);
+    add_standardised_squares(m.p, c.p, c.se_p, all, K, ss, n);
+    add_standardised_squares(m.s, c.s, c.se_s, all, K, ss, n);
+    add_standardised_squares(m.F, c.F, c.se_F, all, K, ss, n);
   }
   return n > 0 ? ss / n : std::nan("");
-}
-
-// The sum of ((model - member)/sd)^2 over rows > 0 of one path quantity and their count (heldout_path_score): sd = the
-// between-packing SD (se sqrt(K)) floored at 0.25 of its median over the rows `on` selects.
-std::pair<double, long> path_squares(const std::vector<double>& model, const std::vector<double>& member,
-                                     const std::vector<double>& se, const std::vector<bool>& on, int K) {
-  std::vector<double> pos;
-  for (std::size_t i = 1; i < se.size(); ++i) if (on[i] && se[i] > 0 && std::isfinite(se[i])) pos.push_back(se[i]);
-  if (pos.empty()) return {0.0, 0};
-  std::nth_element(pos.begin(), pos.begin() + pos.size() / 2, pos.end());
-  const double floor = 0.25 * pos[pos.size() / 2];
-  double ss = 0;
-  long n = 0;
-  for (std::size_t i = 1; i < model.size(); ++i) {
-    if (!on[i]) continue;
-    const double r = (model[i] - member[i]) / (std::max(se[i], floor) * std::sqrt(static_cast<double>(K)));
-    ss += r * r;
-    ++n;
-  }
-  return {ss, n};
 }
 
 // Packing k's own predicted path ensembles (those not fitted: the isobaric D2 paths of a D2 + D3 calibration), each
@@ -499,11 +486,10 @@ double heldout_path_score(const Parameters& P, const std::vector<PathData>& path
     const PathPrediction m = predict_path(P, d);
     std::vector<bool> held(d.acc.size()), vol(d.acc.size()), all(d.acc.size(), true);
     for (std::size_t i = 0; i < d.acc.size(); ++i) { held[i] = d.isobaric[i] != 0; vol[i] = !held[i]; }
-    for (const auto& [sum, count] : {path_squares(m.p, d.p, d.se_p, vol, K), path_squares(m.ev, d.ev, d.se_ev, held, K),
-                                     path_squares(m.s, d.s, d.se_s, all, K), path_squares(m.F, d.F, d.se_F, all, K)}) {
-      ss += sum;
-      n += count;
-    }
+    add_standardised_squares(m.p, d.p, d.se_p, vol, K, ss, n);
+    add_standardised_squares(m.ev, d.ev, d.se_ev, held, K, ss, n);
+    add_standardised_squares(m.s, d.s, d.se_s, all, K, ss, n);
+    add_standardised_squares(m.F, d.F, d.se_F, all, K, ss, n);
   }
   return n > 0 ? ss / n : std::nan("");
 }
