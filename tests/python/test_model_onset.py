@@ -144,3 +144,14 @@ def test_the_jackknife_scores_each_packings_predicted_paths(tmp_path):
     fitted = model_onset.model_state_limit.extended_scores(str(out))
     assert len(scores) == len(fitted) >= 4
     assert all(0.05 < v < 50 for v in scores.values()), scores   # in units of the between-packing variance
+
+
+def test_the_stored_onset_table_is_rebuilt_from_the_stored_runs(tmp_path):
+    """data/.../lode_weight/onset/gate.{md,csv} from its stored runs (the reruns in none/, the gated in gate/)."""
+    src = os.path.join(LWDIR, "onset")
+    for sub in ("none", "gate"):
+        shutil.copytree(os.path.join(src, sub), tmp_path / sub)
+    model_onset.main(["--variants", LWDIR, "--out", str(tmp_path), "--mu", "0", "0.01", "0.3", "0.5", "1",
+                      "--table-only"])
+    for name in ("gate.md", "gate.csv"):
+        assert (tmp_path / name).read_text() == open(os.path.join(src, name)).read(), name
