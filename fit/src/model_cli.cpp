@@ -468,7 +468,8 @@ double heldout_score(const Parameters& P, const std::vector<CurveData>& curves, 
 // Packing k's own predicted path ensembles (those not fitted: the isobaric D2 paths of a D2 + D3 calibration), each
 // from its own start state, by the fit of the other K - 1 packings: mean of ((model - member)/sd)^2 over rows > 0 and
 // p* (constant-volume rows) or eps_v (rows at held pressure), s_dev and F_dev signed, sd as heldout_score. NaN where
-// no member holds such a path. The held-out score of a prediction, which heldout_score (fitted curves only) does not see.
+// no member holds such a path, where the laws cannot start one, or where the model is lost on it. The held-out score
+// of a prediction, which heldout_score (fitted curves only) does not see.
 double heldout_path_score(const Parameters& P, const std::vector<PathData>& paths, const std::vector<CurveFile>& files,
                           const fs::path& member, int K) {
   double ss = 0;
@@ -483,7 +484,12 @@ double heldout_path_score(const Parameters& P, const std::vector<PathData>& path
     d.p = t.column("p_star"); d.ev = t.column("eps_v"); d.s = t.column("s_dev_signed"); d.F = t.column("F_dev_signed");
     d.nu_m = t.column("nu");
     d.nu = d.nu_m.front();
-    const PathPrediction m = predict_path(P, d);
+    PathPrediction m;
+    try {
+      m = predict_path(P, d);
+    } catch (const std::invalid_argument&) {   // the laws cannot start this packing's own path: no score
+      return std::nan("");
+    }
     std::vector<bool> held(d.acc.size()), vol(d.acc.size()), all(d.acc.size(), true);
     for (std::size_t i = 0; i < d.acc.size(); ++i) { held[i] = d.isobaric[i] != 0; vol[i] = !held[i]; }
     add_standardised_squares(m.p, d.p, d.se_p, vol, K, ss, n);
