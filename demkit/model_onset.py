@@ -126,7 +126,8 @@ def table(lw, out, alt, mus, variant=None):
     name = {v[1]: v[0] for v in model_variants.VARIANTS}
     tag = label(alt, variant)
     md = [f"<!-- demkit/model_onset.py: {'each mu' + chr(39) + 's chosen D2 + D3 variant' if not variant else variant}, "
-          f"the stored variant (its rerun in {BASE}/ where one exists) → the same with `{alt}` ({' '.join(ALTERNATIVES[alt])}); RMS over the mean 95 % band "
+          f"the stored variant (its rerun in {BASE}/ where one exists) → the same with `{alt}` "
+          f"({' '.join(ALTERNATIVES[alt])}); RMS over the mean 95 % band "
           "half-width; held-out: mean score over the {K} left-out packings, the difference stored - alternative paired "
           "(t_{K-1,0.975}); target: every curve within 1 band, chi2/dof <= 3 -->",
           "| μ | variant | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | held-out, fitted curves | "
