@@ -369,7 +369,9 @@ void write_identifiability(const Calibration& cal, const std::vector<std::vector
                   "from the jackknife over packings (nan where it did not run); calibrated on " + fit_label);
 }
 
-// Paths with no DEM counterpart here: undrained cyclic shear with reversals and isobaric D2.
+// Paths with no DEM counterpart here: undrained cyclic shear with reversals and isobaric D2 from a D2 curve's start
+// state, by the calibration's own family and options (prediction_ext; before the twenty-eighth round the group model's
+// right-hand side whatever the family).
 void write_model_paths(const Parameters& P, const CurveData& c, const std::string& tag, const fs::path& dir) {
   const auto iso = P.iso();
   const std::pair<std::string, std::vector<Segment>> paths[] = {
@@ -377,7 +379,8 @@ void write_model_paths(const Parameters& P, const CurveData& c, const std::strin
                   {-0.2, Control::Volume, 0, 0, 100}}},
       {"isobaric", {{0.3, Control::Isobaric, 0, 0, 150}}}};
   for (const auto& [name, path] : paths) {
-    const auto pts = integrate<double>(iso.data(), P.shear, P.nu_ref, c.nu, c.p.front(), c.s.front(), c.F.front(), path);
+    const auto pts = integrate<double>(iso.data(), P.shear, P.nu_ref, c.nu, c.p.front(), c.s.front(), c.F.front(), path,
+                                       prediction_ext(P, c.mode));
     std::ostringstream o;
     o << "# dem model: model-only path '" << name << "' from the start state of nu = " << c.nu
       << " (no DEM ensemble of this path here); s_dev, F_dev signed along the first loading direction; "
@@ -385,7 +388,8 @@ void write_model_paths(const Parameters& P, const CurveData& c, const std::strin
     o << "eps_d_accumulated,eps_d,eps_vol,nu,p_star,s_dev,F_dev\n";
     for (const auto& q : pts)
       o << num(q.eps_d_acc, 8) << "," << num(q.eps_d, 8) << "," << num(q.eps_vol, 8) << "," << num(std::exp(q.state.ln_nu), 8)
-        << "," << num(q.state.p, 8) << "," << num(q.state.s, 8) << "," << num(q.state.F, 8) << "\n";
+        << "," << num(q.state.p, 8) << "," << num(observed(q.state.s, c.s.front(), P.start_unaligned), 8) << ","
+        << num(observed(q.state.F, c.F.front(), P.start_unaligned), 8) << "\n";
     write_text_file((dir / (name + "_" + tag + ".csv")).string(), o.str());
   }
 }
@@ -1411,7 +1415,9 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
                   "role: fitted (calibration curves) or predicted (not fitted); paths: s_dev, F_dev signed along the first "
                   "loading direction, p_star on constant-volume rows, eps_v (= tr E/3) on isobaric rows; calibrated on " + fit_label);
   write_identifiability(cal, jack_est, nus, fit_label, out);
-  for (std::size_t j = 0; j < fit_curves.size(); ++j) write_model_paths(cal.params, fit_curves[j], fit_files[j].tag, out / "curves");
+  for (std::size_t j = 0; j < fit_curves.size(); ++j)   // D2 paths, from the D2 curves' start states (a D3 curve has the
+    if (fit_curves[j].mode == "D2")                      // same tag: it overwrote them before the twenty-eighth round)
+      write_model_paths(cal.params, fit_curves[j], fit_files[j].tag, out / "curves");
 
   write_summary(summary, cal, fit_label, out);
   for (const auto& w : cal.warnings) std::cerr << "dem model: warning: " << w << "\n";

@@ -1535,20 +1535,25 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   return cal;
 }
 
+Ext<double> prediction_ext(const Parameters& params, const std::string& mode, double* psi_seen) {
+  Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(mode), params.surface, params.fabric,
+                  params.extended && params.state_limit, params.extended && params.state_lode,
+                  params.extended && params.state_volume, lode_b_of(mode, params.b_d2), params.psi_lo, params.psi_hi,
+                  psi_seen};
+  ext.excess_relaxes = params.extended && params.state_volume && params.excess_relaxes;
+  ext.excess_bounded = ext.excess_relaxes && params.excess_bounded;
+  ext.start_unaligned = params.start_unaligned;
+  ext.dilatancy_gated = params.dilatancy_gated;
+  return ext;
+}
+
 ModelCurve predict_curve(const Parameters& params, const CurveData& c, double eps_max, double max_step,
                          double* psi_seen) {
   const CurveData t = truncated(c, eps_max);
   if (t.eps.empty() || std::fabs(t.eps.front()) > 1e-12)
     throw std::invalid_argument("model prediction: " + c.source + " does not start at eps_d = 0");
   const std::vector<double> iso = params.iso();
-  Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(c.mode), params.surface, params.fabric,
-                        params.extended && params.state_limit, params.extended && params.state_lode,
-                        params.extended && params.state_volume, lode_b_of(c.mode, params.b_d2), params.psi_lo,
-                        params.psi_hi, psi_seen};
-  ext.excess_relaxes = params.extended && params.state_volume && params.excess_relaxes;
-  ext.excess_bounded = ext.excess_relaxes && params.excess_bounded;
-  ext.start_unaligned = params.start_unaligned;
-  ext.dilatancy_gated = params.dilatancy_gated;
+  const Ext<double> ext = prediction_ext(params, c.mode, psi_seen);
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
                                          t.F.front(), t.eps, max_step, ext);
   ModelCurve m;
@@ -1567,14 +1572,7 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
     throw std::invalid_argument("model prediction: " + d.source + " does not start at eps_d_accumulated = 0");
   const std::vector<double> iso = params.iso();
   if (!(params.extended && params.state_volume)) check_start_scale(iso, d.nu, d.source);
-  Ext<double> ext{params.extended ? params.ext : nullptr, lode_b_of(d.name), params.surface, params.fabric,
-                        params.extended && params.state_limit, params.extended && params.state_lode,
-                        params.extended && params.state_volume, lode_b_of(d.name, params.b_d2), params.psi_lo,
-                        params.psi_hi, psi_seen};
-  ext.excess_relaxes = params.extended && params.state_volume && params.excess_relaxes;
-  ext.excess_bounded = ext.excess_relaxes && params.excess_bounded;
-  ext.start_unaligned = params.start_unaligned;
-  ext.dilatancy_gated = params.dilatancy_gated;
+  const Ext<double> ext = prediction_ext(params, d.name, psi_seen);
   const auto st = integrate_rows<double>(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), d.s.front(),
                                          d.F.front(), d.acc, d.direction, d.isobaric, max_step, ext);
   PathPrediction m;

@@ -155,3 +155,27 @@ def test_the_stored_onset_table_is_rebuilt_from_the_stored_runs(tmp_path):
                       "--table-only"])
     for name in ("gate.md", "gate.csv"):
         assert (tmp_path / name).read_text() == open(os.path.join(src, name)).read(), name
+
+
+def test_the_model_only_isobaric_path_is_the_predicted_isobaric_path(tmp_path, work):
+    """The model-only paths a calibration writes (curves/isobaric_phiX.csv, from the D2 curve's start state, Segments of
+    `integrate`) run the calibration's own family and options: at mu = 1 with the gate they are the predicted isobaric
+    paths on the DEM's rows (curves/paths/, `integrate_rows`), which start from the same state, to 1e-3 of the curve's
+    range (before, they ran the group model's right-hand side, and the D3 curve's start overwrote the D2 one's)."""
+    import numpy as np
+    out = tmp_path / "m"
+    r = subprocess.run([DEM, "model", work, "--out", str(out), "--family", "extended", "--fabric-lode", "overlap",
+                        "--calibrate-on", "D2,D3", "--start", os.path.join(LWDIR, "onset", "gate", "mu_1",
+                                                                           "parameters.csv"),
+                        "--max-iterations", "1", "--no-jackknife", "--no-plots", "--dilatancy-gate", "mobilisation"],
+                       capture_output=True, text=True)
+    assert r.returncode in (0, 1), r.stderr   # 1: stopped at its one iteration (said in its tables)
+    for tag in ("0.690", "0.800"):
+        a, b = curve(out / "curves" / f"isobaric_phi{tag}.csv"), curve(out / "curves" / "paths" / f"isobaric_phi{tag}.csv")
+        ea = np.array([float(x["eps_d_accumulated"]) for x in a])
+        eb = np.array([float(x["eps_d_accumulated"]) for x in b])
+        for qa, qb, scale in (("eps_vol", "eps_v_model", 1 / 3), ("s_dev", "s_dev_model", 1), ("F_dev", "F_dev_model", 1)):
+            ya = np.array([float(x[qa]) * scale for x in a])
+            yb = np.array([float(x[qb]) for x in b])
+            on = eb <= ea[-1]
+            assert np.allclose(np.interp(eb[on], ea, ya), yb[on], atol=1e-3 * np.ptp(yb[on])), (tag, qa)

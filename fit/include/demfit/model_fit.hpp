@@ -268,6 +268,9 @@ struct ModelCurve {
   std::vector<double> eps, p, s, F, nu;
 };
 /// psi_seen (optional): [min, max] of psi over every right-hand-side evaluation (Ext::psi_seen; psi_range).
+/// The extension a prediction by `params` runs with on a curve or path of mode (or path name) `mode`: its Lode
+/// parameter b, the stress's b (Parameters::b_d2 for D2), the family's flags (predict_curve, predict_path).
+Ext<double> prediction_ext(const Parameters& params, const std::string& mode, double* psi_seen = nullptr);
 ModelCurve predict_curve(const Parameters& params, const CurveData& c, double eps_max = 1e9, double max_step = 5e-4,
                          double* psi_seen = nullptr);
 
