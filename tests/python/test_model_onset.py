@@ -151,7 +151,7 @@ def test_the_stored_onset_table_is_rebuilt_from_the_stored_runs(tmp_path):
     src = os.path.join(LWDIR, "onset")
     for sub in ("none", "gate"):
         shutil.copytree(os.path.join(src, sub), tmp_path / sub)
-    model_onset.main(["--variants", LWDIR, "--out", str(tmp_path), "--mu", "0", "0.01", "0.3", "0.5", "1",
+    model_onset.main(["--variants", LWDIR, "--out", str(tmp_path), "--mu", "0", "0.01", "0.1", "0.3", "0.5", "1",
                       "--table-only"])
     for name in ("gate.md", "gate.csv"):
         assert (tmp_path / name).read_text() == open(os.path.join(src, name)).read(), name
