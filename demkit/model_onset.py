@@ -43,11 +43,7 @@ STARTS = ("stored", "alternative")
 def path_scores(d):
     """{packing: held-out score of its own predicted paths} from D/heldout.csv's heldout_predicted_paths column ({}
     where the run has none: made before the twenty-eighth round)."""
-    import csv
-    with open(os.path.join(d, "heldout.csv"), newline="") as fh:
-        rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
-    col = "heldout_predicted_paths [-]"
-    return {int(r["packing_left_out"]): float(r[col]) for r in rows if col in r and r[col] not in ("", "nan")}
+    return model_state_limit.extended_scores(d, prefix="heldout_predicted_paths", skip_nan=True)
 
 
 def summary_of(d, who="model_onset"):

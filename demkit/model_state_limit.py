@@ -19,18 +19,20 @@ import os
 from scipy import stats
 
 
-def extended_scores(model_dir):
+def extended_scores(model_dir, prefix="heldout_extended", skip_nan=False):
     """Per left-out packing, the extended family's held-out score from MODEL_DIR/selection.csv (a `--family
-    auto` run), or from MODEL_DIR/heldout.csv (a `--family extended` run with the jackknife)."""
+    auto` run), or from MODEL_DIR/heldout.csv (a `--family extended` run with the jackknife): the column whose name
+    starts with PREFIX ({} where there is none: `heldout_predicted_paths` of a run without predicted paths, or made
+    before issue 31's twenty-eighth round); SKIP_NAN leaves out the packings it scores nan."""
     name = "selection.csv" if os.path.exists(os.path.join(model_dir, "selection.csv")) else "heldout.csv"
     with open(os.path.join(model_dir, name), newline="") as fh:
         lines = [l for l in fh if not l.startswith("#")]
     rows = list(csv.reader(lines))
     head = rows[0]
-    col = next(i for i, h in enumerate(head) if h.startswith("heldout_extended"))
+    col = next((i for i, h in enumerate(head) if h.startswith(prefix)), None)
     out = {}
     for r in rows[1:]:
-        if r and r[0].strip().isdigit():
+        if col is not None and r and r[0].strip().isdigit() and not (skip_nan and r[col] in ("", "nan")):
             out[int(r[0])] = float(r[col])
     return out
 
