@@ -48,37 +48,34 @@ std::vector<double> weights(const std::vector<double>& se, double floor_rel, con
   return w;
 }
 
+// The frictional family's options for one calibration curve or path of MODE (its block bound at each evaluation,
+// with_block): the Lode parameters of MODE, and what CalibrationOptions asks for (X: the frictional family).
+Ext<double> calibration_ext(const CalibrationOptions& o, const std::string& mode, bool X) {
+  Ext<double> e{nullptr, lode_b_of(mode), X ? o.surface : Surface::None, o.fabric, X && o.state_limit,
+                X && o.state_lode, X && o.state_volume, lode_b_of(mode, o.b_d2)};
+  e.excess_relaxes = o.state_volume && o.excess_relaxes;
+  e.excess_bounded = e.excess_relaxes && o.excess_bounded;
+  e.start_unaligned = o.start_unaligned;
+  e.dilatancy_gated = o.dilatancy_gated && !o.state_volume;
+  return e;
+}
+
 // One D2 curve: residuals (model - mean)/sigma for p*, s_dev, F_dev at every strain.
 // par[2]: the extension block of the frictional family (when `extended`).
 struct CurveResidual {
   std::vector<double> eps, p, s, F, wp, ws, wF;
   double nu0, p0, s0, F0, nu_ref, max_step;
-  bool extended = false;
-  double b = kLodeBD2;
-  double b_stress = -1.0;   ///< Ext::b_stress (D2: the parameters' b_d2)
-  Surface surface = Surface::None;
-  FabricLode fabric = FabricLode::Norm;
-  bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
-  bool state_lode = false;    ///< par[2] carries lambda_psi (the state exponent's Lode dependence)
-  bool state_volume = false;  ///< par[2] carries nu_cs, lambda_cs, n_b, n_d (the volume-form state parameter)
-  bool excess_relaxes = false;   ///< Ext::excess_relaxes
-  bool excess_bounded = false;   ///< Ext::excess_bounded
-  bool start_unaligned = false;  ///< Ext::start_unaligned: s and F observed as sqrt(x^2 + x0^2)
-  bool dilatancy_gated = false;  ///< Ext::dilatancy_gated
+  bool extended = false;   ///< par[2]: the frictional family's block
+  Ext<double> opt = Ext<double>{};   ///< the frictional family's options (calibration_ext), par[2] bound to them (with_block)
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
-               extended && state_lode, extended && state_volume, b_stress};
-    ext.excess_relaxes = excess_relaxes;
-    ext.excess_bounded = excess_bounded;
-    ext.start_unaligned = start_unaligned;
-    ext.dilatancy_gated = dilatancy_gated;
+    const Ext<T> ext = with_block(opt, extended ? par[2] : static_cast<const T*>(nullptr));
     const auto st = monotone_shear<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
       r[i] = (st[i].p - T(p[i])) * T(wp[i]);
-      r[n + i] = (observed(st[i].s, s0, start_unaligned) - T(s[i])) * T(ws[i]);
-      r[2 * n + i] = (observed(st[i].F, F0, start_unaligned) - T(F[i])) * T(wF[i]);
+      r[n + i] = (observed(st[i].s, s0, opt.start_unaligned) - T(s[i])) * T(ws[i]);
+      r[2 * n + i] = (observed(st[i].F, F0, opt.start_unaligned) - T(F[i])) * T(wF[i]);
     }
     return true;
   }
@@ -101,32 +98,17 @@ struct PathResidual {
   std::vector<double> acc, p, ev, s, F, w1, ws, wF;
   std::vector<int> direction, isobaric;
   double nu0, p0, s0, F0, nu_ref, max_step;
-  bool extended = false;
-  double b = kLodeBD2;
-  double b_stress = -1.0;   ///< Ext::b_stress (D2: the parameters' b_d2)
-  Surface surface = Surface::None;
-  FabricLode fabric = FabricLode::Norm;
-  bool state_limit = false;   ///< par[2] carries n_psi (the state-dependent limit)
-  bool state_lode = false;    ///< par[2] carries lambda_psi (the state exponent's Lode dependence)
-  bool state_volume = false;  ///< par[2] carries nu_cs, lambda_cs, n_b, n_d (the volume-form state parameter)
-  bool excess_relaxes = false;   ///< Ext::excess_relaxes
-  bool excess_bounded = false;   ///< Ext::excess_bounded
-  bool start_unaligned = false;  ///< Ext::start_unaligned: s and F observed as sqrt(x^2 + x0^2)
-  bool dilatancy_gated = false;  ///< Ext::dilatancy_gated
+  bool extended = false;   ///< par[2]: the frictional family's block
+  Ext<double> opt = Ext<double>{};   ///< the frictional family's options (calibration_ext), par[2] bound to them (with_block)
   template <class T>
   bool operator()(T const* const* par, T* r) const {
-    Ext<T> ext{extended ? par[2] : nullptr, b, extended ? surface : Surface::None, fabric, extended && state_limit,
-               extended && state_lode, extended && state_volume, b_stress};
-    ext.excess_relaxes = excess_relaxes;
-    ext.excess_bounded = excess_bounded;
-    ext.start_unaligned = start_unaligned;
-    ext.dilatancy_gated = dilatancy_gated;
+    const Ext<T> ext = with_block(opt, extended ? par[2] : static_cast<const T*>(nullptr));
     const auto st = integrate_rows<T>(par[0], par[1], nu_ref, nu0, p0, s0, F0, acc, direction, isobaric, max_step, ext);
     const std::size_t n = acc.size();
     for (std::size_t i = 0; i < n; ++i) {
       r[i] = isobaric[i] ? (st[i].eps_vol / T(3.0) - T(ev[i])) * T(w1[i]) : (st[i].state.p - T(p[i])) * T(w1[i]);
-      r[n + i] = (observed(st[i].state.s, s0, start_unaligned) - T(s[i])) * T(ws[i]);
-      r[2 * n + i] = (observed(st[i].state.F, F0, start_unaligned) - T(F[i])) * T(wF[i]);
+      r[n + i] = (observed(st[i].state.s, s0, opt.start_unaligned) - T(s[i])) * T(ws[i]);
+      r[2 * n + i] = (observed(st[i].state.F, F0, opt.start_unaligned) - T(F[i])) * T(wF[i]);
     }
     return true;
   }
@@ -243,12 +225,9 @@ Parameters start_values(const std::vector<CurveData>& curves, const IsoData& iso
 // each curve's (s_max, ln beta_s, kappa_s, F_max, ln beta_F, n_F) is fitted to its s and F alone.
 struct StressFabricResidual {
   std::vector<double> eps, s, F, ws, wF;
-  double nu, p0, s0, F0, b, max_step;
-  Surface surface;
-  FabricLode fabric;
+  double nu, p0, s0, F0, max_step;
   std::vector<double> iso;
-  bool start_unaligned = false;   ///< Ext::start_unaligned
-  bool dilatancy_gated = false;   ///< Ext::dilatancy_gated
+  Ext<double> opt = Ext<double>{};   ///< the curve's Lode parameter, surface, fabric rule and options (the block: x below)
   template <class T>
   bool operator()(T const* const* par, T* r) const {
     const T* x = par[0];
@@ -257,14 +236,12 @@ struct StressFabricResidual {
     for (int i = 0; i < kNumExt; ++i) ex[i] = T(0.0);
     for (int i = 0; i < kNumIso; ++i) isoT[i] = T(iso[i]);
     sh[kSmaxA] = x[0]; sh[kLnBetaSA] = x[1]; ex[kKappaA] = x[2]; sh[kFmaxA] = x[3]; sh[kLnBetaFA] = x[4]; ex[kNFA] = x[5];
-    Ext<T> ext{ex, b, surface, fabric};
-    ext.start_unaligned = start_unaligned;
-    ext.dilatancy_gated = dilatancy_gated;
+    const Ext<T> ext = with_block(opt, static_cast<const T*>(ex));
     const auto st = monotone_shear<T>(isoT, sh, nu, nu, p0, s0, F0, eps, max_step, ext);
     const std::size_t n = eps.size();
     for (std::size_t i = 0; i < n; ++i) {
-      r[i] = (observed(st[i].s, s0, start_unaligned) - T(s[i])) * T(ws[i]);
-      r[n + i] = (observed(st[i].F, F0, start_unaligned) - T(F[i])) * T(wF[i]);
+      r[i] = (observed(st[i].s, s0, opt.start_unaligned) - T(s[i])) * T(ws[i]);
+      r[n + i] = (observed(st[i].F, F0, opt.start_unaligned) - T(F[i])) * T(wF[i]);
     }
     return true;
   }
@@ -298,9 +275,10 @@ Parameters extended_start(const std::vector<CurveData>& curves, const Parameters
                      1.1 * *std::max_element(c.F.begin(), c.F.end()), std::log(10.0), n0};
       auto* f = new StressFabricResidual{c.eps, c.s, c.F, weights(c.se_s, o.se_floor, c.source + " s_dev"),
                                          weights(c.se_F, o.se_floor, c.source + " F_dev"), c.nu, c.p.front(), c.s.front(),
-                                         c.F.front(), lode_b_of(c.mode), 2e-3, o.surface, o.fabric, iso};
-      f->start_unaligned = o.start_unaligned;
-      f->dilatancy_gated = o.dilatancy_gated && !o.state_volume;
+                                         c.F.front(), 2e-3, iso};
+      f->opt = Ext<double>{nullptr, lode_b_of(c.mode), o.surface, o.fabric};
+      f->opt.start_unaligned = o.start_unaligned;
+      f->opt.dilatancy_gated = o.dilatancy_gated && !o.state_volume;
       auto* cost = new ceres::DynamicAutoDiffCostFunction<StressFabricResidual, 6>(f);
       cost->AddParameterBlock(6);
       cost->SetNumResiduals(2 * static_cast<int>(c.eps.size()));
@@ -547,12 +525,8 @@ void add_curve_residuals(ceres::Problem& problem, const std::vector<CurveData>& 
     auto* f = new CurveResidual{c.eps, c.p, c.s, c.F, weights(c.se_p, o.se_floor, c.source + " p_star"),
                                 weights(c.se_s, o.se_floor, c.source + " s_dev"), weights(c.se_F, o.se_floor, c.source + " F_dev"),
                                 c.nu, c.p.front(), c.s.front(), c.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(c.mode); f->b_stress = lode_b_of(c.mode, o.b_d2); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
-    f->state_volume = o.state_volume;
-    f->excess_relaxes = o.state_volume && o.excess_relaxes;
-    f->excess_bounded = f->excess_relaxes && o.excess_bounded;
-    f->start_unaligned = o.start_unaligned;
-    f->dilatancy_gated = o.dilatancy_gated && !o.state_volume;
+    f->extended = X;
+    f->opt = calibration_ext(o, c.mode, X);
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CurveResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);
@@ -590,12 +564,8 @@ void add_path_residuals(ceres::Problem& problem, const std::vector<PathData>& pa
     for (std::size_t i = 1; i <= prefix; ++i) w1[i] = ws[i] = wF[i] = 0.0;
     auto* f = new PathResidual{d.acc, d.p, d.ev, d.s, d.F, w1, ws, wF, d.direction, d.isobaric,
                                d.nu, d.p.front(), d.s.front(), d.F.front(), nu_ref, o.max_step};
-    f->extended = X; f->b = lode_b_of(d.name); f->b_stress = lode_b_of(d.name, o.b_d2); f->surface = o.surface; f->fabric = o.fabric; f->state_limit = o.state_limit; f->state_lode = o.state_lode;
-    f->state_volume = o.state_volume;
-    f->excess_relaxes = o.state_volume && o.excess_relaxes;
-    f->excess_bounded = f->excess_relaxes && o.excess_bounded;
-    f->start_unaligned = o.start_unaligned;
-    f->dilatancy_gated = o.dilatancy_gated && !o.state_volume;
+    f->extended = X;
+    f->opt = calibration_ext(o, d.name, X);
     auto* cost = new ceres::DynamicAutoDiffCostFunction<PathResidual, 4>(f);
     cost->AddParameterBlock(kNumIso);
     cost->AddParameterBlock(kNumShear);

@@ -462,6 +462,20 @@ struct Ext {
   bool dilatancy_gated = false;
 };
 
+/// The options of O (every member of Ext but its block and psi_seen) with the block P of another scalar type: the
+/// residual functors keep one Ext<double> of options (calibration_ext) and bind their block of Jets to it at each
+/// evaluation, so that a new option is a member here and one line below, not a flag in every functor.
+template <class T, class U>
+Ext<T> with_block(const Ext<U>& o, const T* p) {
+  static_assert(sizeof(Ext<double>) == 72, "Ext has a new member: copy it in with_block, then update this size");
+  Ext<T> e{p, o.b, o.surface, o.fabric, o.state_limit, o.state_lode, o.state_volume, o.b_stress, o.psi_lo, o.psi_hi};
+  e.excess_relaxes = o.excess_relaxes;
+  e.excess_bounded = o.excess_bounded;
+  e.start_unaligned = o.start_unaligned;
+  e.dilatancy_gated = o.dilatancy_gated;
+  return e;
+}
+
 /// The magnitude a packing shows for the aligned deviator part x [-] with an unaligned start part x0 [-]
 /// (Ext::start_unaligned): sign(x) sqrt(x^2 + x0^2), + at x = 0 (the first loading direction). x itself where the
 /// start is aligned or x0 = 0.
