@@ -27,6 +27,7 @@ and the target (every curve within one band half-width, chi2/dof <= 3) with the 
 plastic flow starts".
 """
 import argparse
+import csv
 import os
 import sys
 
@@ -77,20 +78,23 @@ def test_cell(x):
     return f"{x[0]:.3g} ± {x[1]:.2g} (t SE {x[2] * x[1]:.2g}; {x[3] + ' better' if x[3] else 'neither better'})"
 
 
-def row(mu, variant, runs):
-    """The md and csv rows of one mu: RUNS {start: folder}."""
+def row(mu, variant, runs, names=None):
+    """The md and csv rows of one mu: RUNS {start: folder}; NAMES {start: name} in the csv's variant column and the
+    chosen cell (default: VARIANT, and the start)."""
     res, fitted, paths = {}, {}, {}
     for s in STARTS:
         res[s], fitted[s], paths[s] = summary_of(runs[s])
     chosen, tests = decide(fitted, paths)
+    names = names or {s: variant for s in STARTS}
     K = len(fitted["stored"])
     mean = lambda sc: sum(sc.values()) / len(sc) if sc else float("nan")
     cells = [" → ".join(f"{res[s][1][k][0]:.2f} ({res[s][1][k][1]})" for s in STARTS) for k in KINDS]
+    who = chosen if names[STARTS[0]] == names[STARTS[1]] else names[chosen]
     md = (f"| {mu} | {variant} | {res['stored'][0]:.3g} → {res['alternative'][0]:.3g} | " + " | ".join(cells) +
           f" | {mean(fitted['stored']):.4g} → {mean(fitted['alternative']):.4g} | {test_cell(tests['fitted'])} | "
-          f"{mean(paths['stored']):.4g} → {mean(paths['alternative']):.4g} | {test_cell(tests['paths'])} | {chosen} | " +
+          f"{mean(paths['stored']):.4g} → {mean(paths['alternative']):.4g} | {test_cell(tests['paths'])} | {who} | " +
           model_variants.target_cells(chosen, *res[chosen]).split(" | ", 1)[1] + " |")
-    csv = [",".join([mu, variant, s, f"{res[s][0]:.4g}", *(f"{res[s][1][k][0]:.4g}" for k in KINDS),
+    csv = [",".join([mu, names[s], s, f"{res[s][0]:.4g}", *(f"{res[s][1][k][0]:.4g}" for k in KINDS),
                      f"{mean(fitted[s]):.4g}", f"{mean(paths[s]):.4g}", "yes" if s == chosen else "no"]) + "\n"
            for s in STARTS]
     return md, csv, K
@@ -122,7 +126,7 @@ def table(lw, out, alt, mus, variant=None):
     name = {v[1]: v[0] for v in model_variants.VARIANTS}
     tag = label(alt, variant)
     md = [f"<!-- demkit/model_onset.py: {'each mu' + chr(39) + 's chosen D2 + D3 variant' if not variant else variant}, "
-          f"the stored variant (its rerun in {BASE}/ where one exists) → the same with `{alt}` "
+          f"the stored variant (its rerun in {label(BASE, variant)}/ where one exists) → the same with `{alt}` "
           f"({' '.join(ALTERNATIVES[alt])}); RMS over the mean 95 % band "
           "half-width; held-out: mean score over the {K} left-out packings, the difference stored - alternative paired "
           "(t_{K-1,0.975}); target: every curve within 1 band, chi2/dof <= 3 -->",
@@ -146,6 +150,55 @@ def table(lw, out, alt, mus, variant=None):
     print("\n".join(md))
 
 
+def chosen_of(lw, onset, alt, variant, mu):
+    """(name, run folder) of the run chosen at MU in ONSET/LABEL.csv (label(ALT, VARIANT)): the alternative's run
+    ('NAME + ALT'), or the stored variant's (its rerun in ONSET where one exists, else LW's)."""
+    path = os.path.join(onset, label(alt, variant) + ".csv")
+    if not os.path.exists(path):
+        raise SystemExit(f"model_onset: {path} does not exist: make that table first (--table-only)")
+    with open(path, newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if r["mu"] == mu and r["chosen"] == "yes"]
+    if not rows:
+        raise SystemExit(f"model_onset: {path} has no chosen run at mu = {mu}")
+    name = rows[0]["variant"]
+    if rows[0]["start"] == "alternative":
+        return f"{name} + {alt}", os.path.join(onset, label(alt, variant), f"mu_{mu}")
+    rerun = os.path.join(onset, label(BASE, variant), f"mu_{mu}")
+    if os.path.exists(os.path.join(rerun, "summary.csv")):
+        return name, rerun
+    return name, os.path.join(lw, {x[0]: x[1] for x in model_variants.VARIANTS}[name], f"mu_{mu}")
+
+
+def versus(lw, out, alt, mus, variant, current):
+    """OUT/versus_LABEL.{md,csv}: at each mu the run chosen in CURRENT/ALT.csv (each mu's chosen variant, with or
+    without ALT) against the one chosen in OUT/LABEL.csv (VARIANT, with or without ALT). The one with fewer
+    coefficients stands on the left ('stored') and is kept unless the other beats it on one held-out score and is
+    beaten on neither (`decide`); at equal counts the current one stands on the left."""
+    size = {x[0]: x[4] for x in model_variants.VARIANTS}
+    tag = "versus_" + label(alt, variant)
+    md = [f"<!-- demkit/model_onset.py --versus: the current choice ({current}/{alt}.csv) against {variant}'s "
+          f"({label(alt, variant)}.csv); left the variant with fewer coefficients, kept unless the right one beats it "
+          "on one held-out score by more than t_{K-1,0.975} SE of the paired difference and is beaten on neither; "
+          "RMS over the mean 95 % band half-width; target: every curve within 1 band, chi2/dof <= 3 -->",
+          "| μ | left → right | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | held-out, fitted "
+          "curves | difference ± SE | held-out, predicted paths | difference ± SE | chosen | χ²/dof | worst curve | "
+          "target met |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["mu,variant,side,chi2_per_dof [-],worst_fitted_D2 [band],worst_fitted_D3 [band],"
+             "worst_predicted_isobaric [band],heldout_mean [-],heldout_paths_mean [-],chosen\n"]
+    for mu in mus:
+        pair = [chosen_of(lw, current, alt, None, mu), chosen_of(lw, out, alt, variant, mu)]
+        coefficients = [size[name.removesuffix(" + " + alt)] for name, _ in pair]
+        if coefficients[1] < coefficients[0]:
+            pair.reverse()
+        names = dict(zip(STARTS, (p[0] for p in pair)))
+        m, c, K = row(mu, " → ".join(names.values()), dict(zip(STARTS, (p[1] for p in pair))), names)
+        md.append(m)
+        lines += [x.replace(",stored,", ",left,").replace(",alternative,", ",right,") for x in c]
+    write_atomic(os.path.join(out, f"{tag}.md"), "\n".join(md) + "\n")
+    write_atomic(os.path.join(out, f"{tag}.csv"), "".join(lines))
+    print("\n".join(md))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--variants", required=True, help="demkit.model_variants' folder (variants.csv and its runs)")
@@ -162,7 +215,12 @@ def main(argv=None):
                                                                 "the table's stored run): its held-out scores of the "
                                                                 "predicted paths, which runs before this round lack")
     ap.add_argument("--table-only", action="store_true", help="only collect the existing results")
+    ap.add_argument("--versus", metavar="CURRENT", help="with --variant: also compare its choice (OUT/LABEL.csv) with "
+                                                        "the choice in CURRENT/ALT.csv (e.g. LW/onset), "
+                                                        "OUT/versus_LABEL.{md,csv}")
     a = ap.parse_args(argv)
+    if a.versus and not a.variant:
+        raise SystemExit("model_onset: --versus compares a --variant's choice with the current one: give --variant")
     spec = specs(a.variants, a.mu, a.variant)
     if not a.table_only:
         if not a.work:
@@ -178,6 +236,8 @@ def main(argv=None):
                                            jackknife=not a.no_jackknife, state_limit=limit, extra=extra)
     if not a.no_jackknife:
         table(a.variants, a.out, a.alternative, a.mu, a.variant)
+        if a.versus:
+            versus(a.variants, a.out, a.alternative, a.mu, a.variant, a.versus)
 
 
 if __name__ == "__main__":

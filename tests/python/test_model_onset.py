@@ -157,6 +157,43 @@ def test_the_stored_onset_table_is_rebuilt_from_the_stored_runs(tmp_path):
         assert (tmp_path / name).read_text() == open(os.path.join(src, name)).read(), name
 
 
+def read_rows(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_versus_sets_the_variant_with_fewer_coefficients_left_with_the_current_choices_numbers(tmp_path):
+    """--versus (twenty-ninth round): the stored weighted + Lode-limit runs of the eighth round stand in for a
+    candidate's rerun and gated run (the same folder twice, so its own table keeps the rerun). Against the stored onset
+    choice (weighted at mu = 0.5, overlap + gate at mu = 1): the current variant (9 and 7 coefficients) stands left with
+    the numbers gate.csv gives its chosen run, the candidate (12) right with variants.csv's numbers; one is chosen."""
+    for mu in ("0.5", "1"):
+        for tag in ("none_weighted_lode_limit", "gate_weighted_lode_limit"):
+            shutil.copytree(os.path.join(LWDIR, "weighted_lode_limit", f"mu_{mu}"), tmp_path / tag / f"mu_{mu}")
+    model_onset.table(LWDIR, str(tmp_path), "gate", ["0.5", "1"], "weighted + Lode limit")
+    model_onset.versus(LWDIR, str(tmp_path), "gate", ["0.5", "1"], "weighted + Lode limit", os.path.join(LWDIR, "onset"))
+    got = read_rows(tmp_path / "versus_gate_weighted_lode_limit.csv")
+    current = {r["mu"]: r for r in read_rows(os.path.join(LWDIR, "onset", "gate.csv")) if r["chosen"] == "yes"}
+    with open(os.path.join(LWDIR, "variants.csv"), newline="") as fh:
+        stored = {r["mu"]: r for r in csv.DictReader(ln for ln in fh if not ln.startswith("#"))
+                  if r["variant"] == "weighted + Lode limit"}
+    cols = ("chi2_per_dof [-]", "worst_fitted_D2 [band]", "worst_fitted_D3 [band]", "worst_predicted_isobaric [band]",
+            "heldout_mean [-]")
+    for mu, left in (("0.5", "weighted"), ("1", "overlap + gate")):
+        rows = {r["side"]: r for r in got if r["mu"] == mu}
+        assert rows["left"]["variant"] == left and rows["right"]["variant"] == "weighted + Lode limit"
+        for col in cols:
+            assert float(rows["left"][col]) == pytest.approx(float(current[mu][col]), rel=1e-3), (mu, col)
+            assert float(rows["right"][col]) == pytest.approx(float(stored[mu][col]), rel=2e-3), (mu, col)
+        assert sum(r["chosen"] == "yes" for r in rows.values()) == 1
+    md = (tmp_path / "versus_gate_weighted_lode_limit.md").read_text()
+    assert "| 1 | overlap + gate → weighted + Lode limit |" in md and "not scored" in md   # the stored runs predate the path score
+    with pytest.raises(SystemExit, match="give --variant"):
+        model_onset.main(["--variants", LWDIR, "--out", str(tmp_path), "--table-only", "--versus", LWDIR])
+    with pytest.raises(SystemExit, match="make that table first"):
+        model_onset.versus(LWDIR, str(tmp_path), "both", ["1"], "weighted + Lode limit", os.path.join(LWDIR, "onset"))
+
+
 def test_the_model_only_isobaric_path_is_the_predicted_isobaric_path(tmp_path, work):
     """The model-only paths a calibration writes (curves/isobaric_phiX.csv, from the D2 curve's start state, Segments of
     `integrate`) run the calibration's own family and options: at mu = 1 with the gate they are the predicted isobaric
