@@ -11,6 +11,8 @@ uncorrected choice) calibrated again with an alternative onset, then the paired 
     /usr/bin/python3 -m demkit.model_onset --variants LW --work WORK --out OUT [--alternative gate] [--mu 1 0.5] \
         [--rerun-stored] [--variant 'weighted + limit'] [--no-jackknife]
     /usr/bin/python3 -m demkit.model_onset --variants LW --out OUT --table-only [--alternative gate] [--mu ...]
+    /usr/bin/python3 -m demkit.model_onset --variants LW --out OUT --table-only --variant 'weighted + Lode limit' \
+        --versus LW/onset [--mu ...]   # that variant's choice against the current one (twenty-ninth round)
 
 Each run starts from the default start, with the jackknife over the packings; OUT/ALT/mu_MU. `--rerun-stored` also
 reruns the stored variant as it is (OUT/none/mu_MU), which the table then compares with: `dem model`'s jackknife now
@@ -25,6 +27,11 @@ OUT/LABEL.{md,csv} (LABEL: ALT, or ALT_FOLDER with --variant): per mu chi2/dof, 
 isobaric curve (RMS over the mean 95 % band half-width), both held-out means and their paired differences, the choice,
 and the target (every curve within one band half-width, chi2/dof <= 3) with the chosen one. docs/model.md, "Where
 plastic flow starts".
+
+`--versus CURRENT` (with --variant): the variant's choice (OUT/LABEL.csv, rerun or with ALT) against the choice in
+CURRENT/ALT.csv (each mu's chosen variant, with or without ALT), OUT/versus_LABEL.{md,csv}. The one with fewer
+coefficients stands left and is kept unless the other beats it on one held-out score and is beaten on neither (the
+same `decide`). docs/model.md, "The Lode-dependent state limit, gated" (twenty-ninth round).
 """
 import argparse
 import csv
