@@ -183,7 +183,8 @@ def versus(lw, out, alt, mus, variant, current):
     beaten on neither (`decide`); at equal counts the current one stands on the left."""
     size = {x[0]: x[4] for x in model_variants.VARIANTS}
     tag = "versus_" + label(alt, variant)
-    md = [f"<!-- demkit/model_onset.py --versus: the current choice ({current}/{alt}.csv) against {variant}'s "
+    where = os.path.join(os.path.basename(os.path.normpath(current)), f"{alt}.csv")
+    md = [f"<!-- demkit/model_onset.py --versus: the current choice ({where}) against {variant}'s "
           f"({label(alt, variant)}.csv); left the variant with fewer coefficients, kept unless the right one beats it "
           "on one held-out score by more than t_{K-1,0.975} SE of the paired difference and is beaten on neither; "
           "RMS over the mean 95 % band half-width; target: every curve within 1 band, chi2/dof <= 3 -->",

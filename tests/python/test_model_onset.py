@@ -194,6 +194,23 @@ def test_versus_sets_the_variant_with_fewer_coefficients_left_with_the_current_c
         model_onset.versus(LWDIR, str(tmp_path), "both", ["1"], "weighted + Lode limit", os.path.join(LWDIR, "onset"))
 
 
+def test_the_stored_lode_limit_tables_are_rebuilt_from_the_stored_runs(tmp_path):
+    """data/.../onset/lode_limit: the gate tables and the versus tables of both Lode-limit variants from the stored
+    runs, byte for byte (the mu of each table read from its csv)."""
+    src = os.path.join(LWDIR, "onset", "lode_limit")
+    for sub in os.listdir(src):
+        if os.path.isdir(os.path.join(src, sub)):
+            shutil.copytree(os.path.join(src, sub), tmp_path / sub)
+    for variant, tag in (("weighted + Lode limit", "gate_weighted_lode_limit"),
+                         ("overlap + Lode limit", "gate_overlap_lode_limit")):
+        mus = list(dict.fromkeys(r["mu"] for r in read_rows(os.path.join(src, tag + ".csv"))))
+        model_onset.main(["--variants", LWDIR, "--out", str(tmp_path), "--mu", *mus, "--table-only", "--variant",
+                          variant, "--versus", os.path.join(LWDIR, "onset")])
+        for name in (tag, "versus_" + tag):
+            for ext in (".md", ".csv"):
+                assert (tmp_path / (name + ext)).read_text() == open(os.path.join(src, name + ext)).read(), name + ext
+
+
 def test_the_model_only_isobaric_path_is_the_predicted_isobaric_path(tmp_path, work):
     """The model-only paths a calibration writes (curves/isobaric_phiX.csv, from the D2 curve's start state, Segments of
     `integrate`) run the calibration's own family and options: at mu = 1 with the gate they are the predicted isobaric
