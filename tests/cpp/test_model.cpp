@@ -2620,6 +2620,32 @@ TEST(ModelVolumeState, TheIsotropicVolumeStaysOnTheRisingBranchOfALawThatFallsAg
   EXPECT_NEAR(isotropic_pressure(mono, nu), 0.01, 1e-15);
 }
 
+// The residual functors keep one Ext<double> of options and bind their Jet block to it (with_block, twenty-ninth
+// round): every option, each set away from its default, arrives on the Jet Ext unchanged, and the block is the one
+// given (a member with_block forgot would keep its default here; a new member stops the build at its static_assert).
+TEST(ModelOptions, WithBlockCarriesEveryOptionOntoAnotherScalar) {
+  Ext<double> o{nullptr, 0.25, Surface::MatsuokaNakai, FabricLode::Weighted, true, true, true, 0.4, -0.03, 0.05};
+  o.excess_relaxes = o.excess_bounded = o.start_unaligned = o.dilatancy_gated = true;
+  double psi[2] = {0, 0};
+  o.psi_seen = psi;
+  using J = ceres::Jet<double, 2>;
+  const J block[3] = {J(1.0, 0), J(2.0, 1), J(3.0)};
+  const Ext<J> e = with_block(o, block);
+  EXPECT_EQ(e.p, block);
+  EXPECT_EQ(e.b, 0.25);
+  EXPECT_EQ(e.surface, Surface::MatsuokaNakai);
+  EXPECT_EQ(e.fabric, FabricLode::Weighted);
+  EXPECT_TRUE(e.state_limit && e.state_lode && e.state_volume);
+  EXPECT_EQ(e.b_stress, 0.4);
+  EXPECT_EQ(e.psi_lo, -0.03);
+  EXPECT_EQ(e.psi_hi, 0.05);
+  EXPECT_TRUE(e.excess_relaxes && e.excess_bounded && e.start_unaligned && e.dilatancy_gated);
+  EXPECT_EQ(e.psi_seen, nullptr);   // a Jet run records no psi range (plain double runs only)
+  const Ext<double> none = with_block(Ext<double>{}, static_cast<const double*>(nullptr));
+  EXPECT_FALSE(none.state_limit || none.excess_relaxes || none.start_unaligned || none.dilatancy_gated);
+  EXPECT_EQ(none.surface, Surface::None);
+}
+
 // An unaligned start (twenty-eighth round, Ext::start_unaligned): the DEM's s_dev and F_dev are magnitudes of tensors
 // whose start part (the random deviator of a finite isotropic packing) is orthogonal to the aligned part the model
 // integrates, so a packing shows sqrt(x^2 + x0^2). Closed forms: the sum, its sign, its derivative (a Jet), and x
