@@ -43,7 +43,9 @@ from demkit.atomic import write_atomic
 
 KINDS = model_variants.KINDS
 ALTERNATIVES = {"gate": ["--dilatancy-gate", "mobilisation"], "unaligned": ["--start-anisotropy", "unaligned"],
-                "both": ["--dilatancy-gate", "mobilisation", "--start-anisotropy", "unaligned"]}
+                "both": ["--dilatancy-gate", "mobilisation", "--start-anisotropy", "unaligned"],
+                # the thirtieth round: the fabric's limit times the stress ratio's state factor, on the gated dilatancy
+                "gate_fabric": ["--dilatancy-gate", "mobilisation", "--fabric-limit", "state"]}
 BASE = "none"   # OUT/none/mu_MU: the stored variant rerun as stored, for its held-out scores of the predicted paths
 STARTS = ("stored", "alternative")
 
@@ -176,6 +178,42 @@ def chosen_of(lw, onset, alt, variant, mu):
     return name, os.path.join(lw, {x[0]: x[1] for x in model_variants.VARIANTS}[name], f"mu_{mu}")
 
 
+def pair_table(out, tag, comment, pairs):
+    """OUT/TAG.{md,csv}: per mu (PAIRS {mu: [(name, run folder) left, right]}) the two runs side by side, the left one
+    kept unless the right one beats it on one held-out score and is beaten on neither (`decide`)."""
+    md = [comment, "| μ | left → right | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | held-out, "
+          "fitted curves | difference ± SE | held-out, predicted paths | difference ± SE | chosen | χ²/dof | worst curve "
+          "| target met |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["mu,variant,side,chi2_per_dof [-],worst_fitted_D2 [band],worst_fitted_D3 [band],"
+             "worst_predicted_isobaric [band],heldout_mean [-],heldout_paths_mean [-],chosen\n"]
+    for mu, pair in pairs.items():
+        names = dict(zip(STARTS, (p[0] for p in pair)))
+        m, c, K = row(mu, " → ".join(names.values()), dict(zip(STARTS, (p[1] for p in pair))), names)
+        md.append(m)
+        lines += [x.replace(",stored,", ",left,").replace(",alternative,", ",right,") for x in c]
+    write_atomic(os.path.join(out, f"{tag}.md"), "\n".join(md) + "\n")
+    write_atomic(os.path.join(out, f"{tag}.csv"), "".join(lines))
+    print("\n".join(md))
+
+
+def compare(out, tag, left, right, mus):
+    """OUT/TAG.{md,csv}: the runs LEFT = (name, folder) and RIGHT at each mu (FOLDER/mu_MU), the left one kept unless
+    the right one beats it on one held-out score and is beaten on neither (thirtieth round: an option on top of a
+    choice, where `--variant` and `--alternative` do not name the left run)."""
+    for name, folder in (left, right):
+        for mu in mus:
+            if not os.path.exists(os.path.join(folder, f"mu_{mu}", "summary.csv")):
+                raise SystemExit(f"model_onset: --compare: {folder}/mu_{mu}/summary.csv does not exist ({name}): run "
+                                 "it first, or give --mu the values that were run")
+    comment = (f"<!-- demkit/model_onset.py --compare: {left[0]} ({left[1]}) against {right[0]} ({right[1]}); the left "
+               "one kept unless the right one beats it on one held-out score by more than t_{K-1,0.975} SE of the "
+               "paired difference and is beaten on neither; RMS over the mean 95 % band half-width; target: every curve "
+               "within 1 band, chi2/dof <= 3 -->")
+    pairs = {mu: [(left[0], os.path.join(left[1], f"mu_{mu}")), (right[0], os.path.join(right[1], f"mu_{mu}"))]
+             for mu in mus}
+    pair_table(out, tag, comment, pairs)
+
+
 def versus(lw, out, alt, mus, variant, current):
     """OUT/versus_LABEL.{md,csv}: at each mu the run chosen in CURRENT/ALT.csv (each mu's chosen variant, with or
     without ALT) against the one chosen in OUT/LABEL.csv (VARIANT, with or without ALT). The one with fewer
@@ -184,27 +222,18 @@ def versus(lw, out, alt, mus, variant, current):
     size = {x[0]: x[4] for x in model_variants.VARIANTS}
     tag = "versus_" + label(alt, variant)
     where = os.path.join(os.path.basename(os.path.normpath(current)), f"{alt}.csv")
-    md = [f"<!-- demkit/model_onset.py --versus: the current choice ({where}) against {variant}'s "
-          f"({label(alt, variant)}.csv); left the variant with fewer coefficients, kept unless the right one beats it "
-          "on one held-out score by more than t_{K-1,0.975} SE of the paired difference and is beaten on neither; "
-          "RMS over the mean 95 % band half-width; target: every curve within 1 band, chi2/dof <= 3 -->",
-          "| μ | left → right | χ²/dof | worst fitted D2 | worst fitted D3 | worst predicted isobaric | held-out, fitted "
-          "curves | difference ± SE | held-out, predicted paths | difference ± SE | chosen | χ²/dof | worst curve | "
-          "target met |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    lines = ["mu,variant,side,chi2_per_dof [-],worst_fitted_D2 [band],worst_fitted_D3 [band],"
-             "worst_predicted_isobaric [band],heldout_mean [-],heldout_paths_mean [-],chosen\n"]
+    comment = (f"<!-- demkit/model_onset.py --versus: the current choice ({where}) against {variant}'s "
+               f"({label(alt, variant)}.csv); left the variant with fewer coefficients, kept unless the right one beats "
+               "it on one held-out score by more than t_{K-1,0.975} SE of the paired difference and is beaten on "
+               "neither; RMS over the mean 95 % band half-width; target: every curve within 1 band, chi2/dof <= 3 -->")
+    pairs = {}
     for mu in mus:
         pair = [chosen_of(lw, current, alt, None, mu), chosen_of(lw, out, alt, variant, mu)]
         coefficients = [size[name.removesuffix(" + " + alt)] for name, _ in pair]
         if coefficients[1] < coefficients[0]:
             pair.reverse()
-        names = dict(zip(STARTS, (p[0] for p in pair)))
-        m, c, K = row(mu, " → ".join(names.values()), dict(zip(STARTS, (p[1] for p in pair))), names)
-        md.append(m)
-        lines += [x.replace(",stored,", ",left,").replace(",alternative,", ",right,") for x in c]
-    write_atomic(os.path.join(out, f"{tag}.md"), "\n".join(md) + "\n")
-    write_atomic(os.path.join(out, f"{tag}.csv"), "".join(lines))
-    print("\n".join(md))
+        pairs[mu] = pair
+    pair_table(out, tag, comment, pairs)
 
 
 def main(argv=None):
@@ -226,7 +255,16 @@ def main(argv=None):
     ap.add_argument("--versus", metavar="CURRENT", help="with --variant: also compare its choice (OUT/LABEL.csv) with "
                                                         "the choice in CURRENT/ALT.csv (e.g. LW/onset), "
                                                         "OUT/versus_LABEL.{md,csv}")
+    ap.add_argument("--compare", nargs=2, metavar=("LEFT", "RIGHT"), help="only compare two sets of runs, LEFT/mu_MU and "
+                    "RIGHT/mu_MU (the left one kept unless the right one beats it): OUT/TAG.{md,csv}")
+    ap.add_argument("--names", nargs=2, metavar=("LEFT_NAME", "RIGHT_NAME"), help="with --compare: the runs' names")
+    ap.add_argument("--tag", help="with --compare: the table's name")
     a = ap.parse_args(argv)
+    if a.compare:
+        if not (a.names and a.tag):
+            raise SystemExit("model_onset: --compare needs --names LEFT_NAME RIGHT_NAME and --tag NAME (the table's)")
+        compare(a.out, a.tag, (a.names[0], a.compare[0]), (a.names[1], a.compare[1]), a.mu)
+        return 0
     if a.versus and not a.variant:
         raise SystemExit("model_onset: --versus compares a --variant's choice with the current one: give --variant")
     spec = specs(a.variants, a.mu, a.variant)

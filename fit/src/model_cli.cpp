@@ -212,6 +212,9 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   if (cal.params.dilatancy_gated)   // files without the row: ungated (read_parameters)
     t.add_row({"dilatancy_gate", "1: the plastic dilatancy gated by the mobilisation, d_D r (r - chi_D)(1 - F/F_lim) "
                "(--dilatancy-gate mobilisation)", "1", "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+  if (cal.params.fabric_state)   // files without the row: F_lim itself (read_parameters)
+    t.add_row({"fabric_limit", "1: the fabric driven to F_lim times the stress ratio's state factor (p_ref/p)^n_psi "
+               "(--fabric-limit state)", "1", "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
   if (cal.params.b_d2 != kLodeBD2)   // files without the row: 1/2 (read_parameters)
     t.add_row({"b_D2", "stress Lode parameter b of D2 curves and paths (fixed; --d2-lode)", num(cal.params.b_d2), "nan",
                "fixed", "nan", "nan", "nan", "nan", "-"});
@@ -975,6 +978,11 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   if (co.dilatancy_gated && (o.family != "extended" || co.state_volume))
     throw InputError("--dilatancy-gate mobilisation: the gate acts on the extended family's plastic dilatancy d_D (r - "
                      "chi_D); give --family extended without --state-limit volume (whose dilatancy is driven by psi)");
+  co.fabric_state = o.fabric_limit == "state";
+  if (co.fabric_state && (o.family != "extended" || !co.state_limit) && o.predict_with.empty())
+    throw InputError("--fabric-limit state: the fabric follows the stress ratio's state factor (p_ref/p)^n_psi, which "
+                     "only the pressure-form state limit has; add --family extended --state-limit pressure (or "
+                     "pressure-lode)");
   if (co.excess_relaxes && !co.state_volume && o.predict_with.empty())
     throw InputError("--anisotropy-pressure " + o.anisotropy_pressure + ": the relaxing excess belongs to the volume-form "
                      "state parameter (without it the anisotropic pressure always relaxes at beta_p); add --state-limit volume");
@@ -1498,6 +1506,12 @@ FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions
   if (!o.d2_lode.empty()) P.b_d2 = o.d2_lode == "normal" ? plane_strain_lode_b(P.surface, P.shear[kSmaxA]) : co.b_d2;
   if (!o.start_anisotropy.empty()) P.start_unaligned = co.start_unaligned;   // else the file's (row start_anisotropy)
   if (!o.dilatancy_gate.empty()) P.dilatancy_gated = co.dilatancy_gated;   // else the file's (row dilatancy_gate)
+  if (!o.fabric_limit.empty()) {   // else the file's (row fabric_limit)
+    if (co.fabric_state && !P.state_limit)
+      throw InputError("--fabric-limit state: " + o.predict_with + " has no pressure-form state limit (no n_psi_a row); "
+                       "the fabric follows that limit's state factor");
+    P.fabric_state = co.fabric_state;
+  }
   if (!o.anisotropy_pressure.empty()) {   // else the file's (row anisotropy_excess)
     if (co.excess_relaxes && !P.state_volume)
       throw InputError("--anisotropy-pressure " + o.anisotropy_pressure + ": " + o.predict_with + " has no volume-form "
@@ -1694,6 +1708,11 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "(times the mobilisation r, so that it starts at 0 as the DEM's volume under constant pressure does); "
                  "with --predict-with the file's unless given (docs/model.md, \"An unaligned start\")")
       ->check(CLI::IsMember({"none", "mobilisation"}));
+  app.add_option("--fabric-limit", o.fabric_limit, "the extended family's fabric limit with --state-limit pressure(-lode): "
+                 "fixed (the default: F_lim whatever the state) or state (F_lim times the stress ratio's state factor "
+                 "(p_ref/p)^n_psi, so that the fabric softens with the stress ratio; no coefficient added); with "
+                 "--predict-with the file's unless given (docs/model.md, \"The fabric's state limit\")")
+      ->check(CLI::IsMember({"fixed", "state"}));
   app.add_option("--profile", o.profile, "profile intervals: `all` (every coefficient with a quoted covariance "
                  "error) or comma-separated names (e.g. p0,alpha): each held at trial values and the rest refitted "
                  "until chi2 rises by max(1, chi2/dof) either way (profile.{csv,md}; 1-10 refits per end; docs/model.md "

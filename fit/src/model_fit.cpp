@@ -57,6 +57,7 @@ Ext<double> calibration_ext(const CalibrationOptions& o, const std::string& mode
   e.excess_bounded = e.excess_relaxes && o.excess_bounded;
   e.start_unaligned = o.start_unaligned;
   e.dilatancy_gated = o.dilatancy_gated && !o.state_volume;
+  e.fabric_state = X && o.state_limit && o.fabric_state;
   return e;
 }
 
@@ -383,6 +384,7 @@ Parameters read_parameters(const std::string& path) {
   P.excess_bounded = excess == 2.0;
   P.start_unaligned = v.count("start_anisotropy") && get("start_anisotropy") == 1.0;   // files without the row: aligned
   P.dilatancy_gated = v.count("dilatancy_gate") && get("dilatancy_gate") == 1.0;   // ... ungated
+  P.fabric_state = P.state_limit && v.count("fabric_limit") && get("fabric_limit") == 1.0;   // ... F_lim itself
   if (P.extended)
     for (int i = 0; i < kNumExt; ++i)
       if (i < kNumExtBase || v.count(ext_name(i))) P.ext[i] = get(ext_name(i));   // else the default (n_rate 1)
@@ -1284,6 +1286,7 @@ Parameters fitted_params(const Parameters& start, const std::vector<double>& iso
   P.excess_bounded = P.excess_relaxes && o.excess_bounded;
   P.start_unaligned = o.start_unaligned;
   P.dilatancy_gated = X && o.dilatancy_gated && !o.state_volume;
+  P.fabric_state = P.state_limit && o.fabric_state;
   return P;
 }
 
@@ -1514,6 +1517,7 @@ Ext<double> prediction_ext(const Parameters& params, const std::string& mode, do
   ext.excess_bounded = ext.excess_relaxes && params.excess_bounded;
   ext.start_unaligned = params.start_unaligned;
   ext.dilatancy_gated = params.dilatancy_gated;
+  ext.fabric_state = ext.state_limit && params.fabric_state;
   return ext;
 }
 

@@ -2625,7 +2625,7 @@ TEST(ModelVolumeState, TheIsotropicVolumeStaysOnTheRisingBranchOfALawThatFallsAg
 // given (a member with_block forgot would keep its default here; a new member stops the build at its static_assert).
 TEST(ModelOptions, WithBlockCarriesEveryOptionOntoAnotherScalar) {
   Ext<double> o{nullptr, 0.25, Surface::MatsuokaNakai, FabricLode::Weighted, true, true, true, 0.4, -0.03, 0.05};
-  o.excess_relaxes = o.excess_bounded = o.start_unaligned = o.dilatancy_gated = true;
+  o.excess_relaxes = o.excess_bounded = o.start_unaligned = o.dilatancy_gated = o.fabric_state = true;
   double psi[2] = {0, 0};
   o.psi_seen = psi;
   using J = ceres::Jet<double, 2>;
@@ -2639,10 +2639,11 @@ TEST(ModelOptions, WithBlockCarriesEveryOptionOntoAnotherScalar) {
   EXPECT_EQ(e.b_stress, 0.4);
   EXPECT_EQ(e.psi_lo, -0.03);
   EXPECT_EQ(e.psi_hi, 0.05);
-  EXPECT_TRUE(e.excess_relaxes && e.excess_bounded && e.start_unaligned && e.dilatancy_gated);
+  EXPECT_TRUE(e.excess_relaxes && e.excess_bounded && e.start_unaligned && e.dilatancy_gated && e.fabric_state);
   EXPECT_EQ(e.psi_seen, nullptr);   // a Jet run records no psi range (plain double runs only)
   const Ext<double> none = with_block(Ext<double>{}, static_cast<const double*>(nullptr));
-  EXPECT_FALSE(none.state_limit || none.excess_relaxes || none.start_unaligned || none.dilatancy_gated);
+  EXPECT_FALSE(none.state_limit || none.excess_relaxes || none.start_unaligned || none.dilatancy_gated ||
+               none.fabric_state);
   EXPECT_EQ(none.surface, Surface::None);
 }
 
@@ -2768,4 +2769,39 @@ TEST(ModelUnaligned, AGatedDilatancyStartsAtZeroWithTheMobilisation) {
   const auto g = integrate_rows<double>(iso.data(), P.shear, P.nu_ref, nu, p0, 0.02, 0.03, acc, dir, isob, 1e-4, gated);
   EXPECT_NEAR(u[1].eps_vol, -0.01 * 2.0 * 1e-3, 0.1 * 0.01 * 2.0 * 1e-3);
   EXPECT_LT(std::fabs(g[1].eps_vol), 0.1 * std::fabs(u[1].eps_vol));
+}
+
+// The fabric's state limit (thirtieth round, Ext::fabric_state): the fabric is driven to F_max (p_ref/p)^n_psi, the
+// stress ratio's state factor, instead of F_max. At a state on the isotropic law (p = p_ref) the two rates agree to the
+// last bit; at p = 2 p_ref (n_psi = 1.5 at nu_ref) the fabric rate's ratio is the closed form (F_max 2^-1.5 - F)/(F_max
+// - F), every other factor of the rate (beta_F, the rate scaling, the gate) cancelling, and the stress ratio's rate
+// and the volume's do not move (the option acts on the fabric alone). Without the state limit it does nothing.
+TEST(ModelFabricState, TheFabricIsDrivenToTheStressRatiosStateLimit) {
+  Parameters P = truth();
+  double ext[kNumExt] = {};
+  ext[kNPsiA] = 1.5;
+  ext[kDilA] = 0.01; ext[kChiD] = 2.0;
+  const auto iso = P.iso();
+  const double nu = P.nu_ref, p0 = isotropic_pressure(iso.data(), nu);
+  Ext<double> plain{ext, kLodeBD2, Surface::None, FabricLode::Norm, true}, state = plain;
+  state.fabric_state = true;
+  Segment seg;
+  seg.control = Control::Volume;
+  const double F = 0.05, F_max = P.shear[kFmaxA];   // F_max 0.11: F between F_max 2^-1.5 and F_max
+  auto rates = [&](const Ext<double>& e, double p) {
+    const Material<double> m = start_material<double>(iso.data(), P.shear, P.nu_ref, nu, p0, e);
+    return rhs(m, State<double>{std::log(nu), p, 0.05, F}, 1.0, seg);
+  };
+  const auto a0 = rates(plain, p0), b0 = rates(state, p0);
+  EXPECT_EQ(a0.F, b0.F) << "on the isotropic law the state factor is 1";
+  const auto a = rates(plain, 2 * p0), b = rates(state, 2 * p0);
+  const double factor = std::pow(0.5, 1.5);
+  EXPECT_NEAR(b.F / a.F, (F_max * factor - F) / (F_max - F), 1e-12);
+  EXPECT_LT(b.F, 0.0) << "above its limit F_max 2^-1.5 = " << F_max * factor << " the fabric softens";
+  EXPECT_EQ(a.s, b.s);
+  EXPECT_EQ(a.p, b.p);
+  Ext<double> no_limit = state;
+  no_limit.state_limit = false;
+  plain.state_limit = false;
+  EXPECT_EQ(rates(no_limit, 2 * p0).F, rates(plain, 2 * p0).F) << "the option needs the state limit";
 }

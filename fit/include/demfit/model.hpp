@@ -196,6 +196,9 @@ struct Parameters {
   bool start_unaligned = false;
   /// The plastic dilatancy gated by the mobilisation (Ext::dilatancy_gated; row dilatancy_gate = 1, absent: false).
   bool dilatancy_gated = false;
+  /// With state_limit: the fabric's limit follows the state as the stress ratio's does (Ext::fabric_state; row
+  /// fabric_limit = 1, absent: false).
+  bool fabric_state = false;
   std::vector<double> iso() const { return {p0, nu_c, gamma_p, C0, C1, nu_cC, alpha}; }
   void set_iso(const double* v) { p0 = v[0]; nu_c = v[1]; gamma_p = v[2]; C0 = v[3]; C1 = v[4]; nu_cC = v[5]; alpha = v[6]; }
 };
@@ -460,6 +463,12 @@ struct Ext {
   /// instead of at its largest contraction d_D chi_D. Without the volume-form state parameter only. False (the
   /// default, every stored calibration): ungated.
   bool dilatancy_gated = false;
+  /// With state_limit (thirtieth round, `--fabric-limit state`): the fabric is driven to F_lim times the stress ratio's
+  /// state factor (p_ref/p)^n_psi, so that it softens with the stress ratio where the pressure rises above the
+  /// isotropic reference at constant volume, or the reference falls below the pressure as the packing dilates at
+  /// constant pressure. The dilatancy's fabric gate keeps F_lim (as the mobilisation keeps s_lim). No coefficient is
+  /// added. False (the default, every stored calibration): the fabric's limit F_lim whatever the state.
+  bool fabric_state = false;
 };
 
 /// The options of O (every member of Ext but its block and psi_seen) with the block P of another scalar type: the
@@ -473,6 +482,7 @@ Ext<T> with_block(const Ext<U>& o, const T* p) {
   e.excess_bounded = o.excess_bounded;
   e.start_unaligned = o.start_unaligned;
   e.dilatancy_gated = o.dilatancy_gated;
+  e.fabric_state = o.fabric_state;
   return e;
 }
 
@@ -738,10 +748,10 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   // The state-dependent limit (fifth round; off: s_lim itself, untouched): the target of the stress
   // ratio only; the mobilisation r, the rate scaling and the dilatancy keep s_lim (psi_p = 0).
   // The volume-form state parameter (tenth round) likewise: s_lim e^{n_b psi}.
-  const T s_target = vol_state ? s_lim * exp(peak_exponent(m.ext.p, y.p) * psi_law)
-                     : (m.ext.p && m.ext.state_limit)
-                         ? s_lim * state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref, b_s, m.ext.state_lode)
-                         : s_lim;
+  const T state = (!vol_state && m.ext.p && m.ext.state_limit)
+                      ? state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref, b_s, m.ext.state_lode)
+                      : T(1.0);
+  const T s_target = vol_state ? s_lim * exp(peak_exponent(m.ext.p, y.p) * psi_law) : s_lim * state;
   const T shape_s = stress_shape(X.kappa_s, r, s_target / s_lim, vol_state);
   const T g_s = rate_scale(m, B, y.p);
   const T shear = L.beta_s * g_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_target - y.s) * shape_s;
@@ -762,7 +772,8 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   d.ln_nu = -dvol;
   d.p = -B * dvol + src - relax + B * dil;
   const T rate_F = weighted ? lode_w : m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
-  d.F = L.beta_F * g_s * rate_F * (T(sigma) * F_lim - y.F) * gate_F;
+  const T F_target = m.ext.fabric_state ? F_lim * state : F_lim;   // Ext::fabric_state (thirtieth round)
+  d.F = L.beta_F * g_s * rate_F * (T(sigma) * F_target - y.F) * gate_F;
   d.l = T(1.0);
   // The elastic volume fraction follows the pressure on the isotropic law (d ln nu_el = dp/B), or with a relaxing
   // excess the pressure less its anisotropic excess: d ln nu_el = (dp - A sigma + relax)/B, so that the excess q = p -

@@ -47,6 +47,9 @@ struct ModelCommandOptions {
   /// The extended family's plastic dilatancy (twenty-eighth round): `none` (ungated, every calibration before) or
   /// `mobilisation` (times r); empty: none, or with --predict-with the file's (row dilatancy_gate)
   std::string dilatancy_gate;
+  /// With the pressure-form state limit (thirtieth round): `fixed` (F_lim, every calibration before) or `state` (F_lim
+  /// times the stress ratio's state factor); empty: fixed, or with --predict-with the file's (row fabric_limit)
+  std::string fabric_limit;
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
   std::vector<std::string> hold;             ///< extension coefficients held at their start values (--hold)
   std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default), pressure (n_psi fitted), pressure-lode (+ lambda_psi)
