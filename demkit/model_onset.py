@@ -45,7 +45,10 @@ KINDS = model_variants.KINDS
 ALTERNATIVES = {"gate": ["--dilatancy-gate", "mobilisation"], "unaligned": ["--start-anisotropy", "unaligned"],
                 "both": ["--dilatancy-gate", "mobilisation", "--start-anisotropy", "unaligned"],
                 # the thirtieth round: the fabric's limit times the stress ratio's state factor, on the gated dilatancy
-                "gate_fabric": ["--dilatancy-gate", "mobilisation", "--fabric-limit", "state"]}
+                "gate_fabric": ["--dilatancy-gate", "mobilisation", "--fabric-limit", "state"],
+                # sigma_dev scaling with the isotropic reference pressure under a volume change (thirtieth round)
+                "deviator": ["--deviator-volume", "reference"],
+                "gate_deviator": ["--dilatancy-gate", "mobilisation", "--deviator-volume", "reference"]}
 BASE = "none"   # OUT/none/mu_MU: the stored variant rerun as stored, for its held-out scores of the predicted paths
 STARTS = ("stored", "alternative")
 

@@ -215,6 +215,9 @@ void write_parameter_tables(const Calibration& cal, int packings, const fs::path
   if (cal.params.fabric_state)   // files without the row: F_lim itself (read_parameters)
     t.add_row({"fabric_limit", "1: the fabric driven to F_lim times the stress ratio's state factor (p_ref/p)^n_psi "
                "(--fabric-limit state)", "1", "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
+  if (cal.params.deviator_reference)   // files without the row: sigma_dev unchanged by the volume (read_parameters)
+    t.add_row({"deviator_volume", "1: under a volume change sigma_dev scales with p_ref(nu) (--deviator-volume "
+               "reference)", "1", "nan", "fixed", "nan", "nan", "nan", "nan", "-"});
   if (cal.params.b_d2 != kLodeBD2)   // files without the row: 1/2 (read_parameters)
     t.add_row({"b_D2", "stress Lode parameter b of D2 curves and paths (fixed; --d2-lode)", num(cal.params.b_d2), "nan",
                "fixed", "nan", "nan", "nan", "nan", "-"});
@@ -983,6 +986,12 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
     throw InputError("--fabric-limit state: the fabric follows the stress ratio's state factor (p_ref/p)^n_psi, which "
                      "only the pressure-form state limit has; add --family extended --state-limit pressure (or "
                      "pressure-lode)");
+  co.deviator_reference = o.deviator_volume == "reference";
+  if (co.deviator_reference && (o.family != "extended" || co.state_volume))
+    throw InputError("--deviator-volume reference: sigma_dev scaling with the isotropic reference pressure under a "
+                     "volume change belongs to the extended family without the volume-form state parameter (whose "
+                     "elastic split moves the stress by the elastic volume change alone); give --family extended "
+                     "without --state-limit volume");
   if (co.excess_relaxes && !co.state_volume && o.predict_with.empty())
     throw InputError("--anisotropy-pressure " + o.anisotropy_pressure + ": the relaxing excess belongs to the volume-form "
                      "state parameter (without it the anisotropic pressure always relaxes at beta_p); add --state-limit volume");
@@ -1512,6 +1521,12 @@ FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions
                        "the fabric follows that limit's state factor");
     P.fabric_state = co.fabric_state;
   }
+  if (!o.deviator_volume.empty()) {   // else the file's (row deviator_volume)
+    if (co.deviator_reference && P.state_volume)
+      throw InputError("--deviator-volume reference: " + o.predict_with + " has the volume-form state parameter (a "
+                       "nu_cs row), whose elastic split moves the stress by the elastic volume change alone");
+    P.deviator_reference = co.deviator_reference;
+  }
   if (!o.anisotropy_pressure.empty()) {   // else the file's (row anisotropy_excess)
     if (co.excess_relaxes && !P.state_volume)
       throw InputError("--anisotropy-pressure " + o.anisotropy_pressure + ": " + o.predict_with + " has no volume-form "
@@ -1713,6 +1728,12 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "(p_ref/p)^n_psi, so that the fabric softens with the stress ratio; no coefficient added); with "
                  "--predict-with the file's unless given (docs/model.md, \"The fabric's state limit\")")
       ->check(CLI::IsMember({"fixed", "state"}));
+  app.add_option("--deviator-volume", o.deviator_volume, "the extended family's deviatoric stress under a volume "
+                 "change: fixed (the default: sigma_dev moves with the volume through the anisotropy A alone) or "
+                 "reference (it also scales with the isotropic reference pressure p_ref(nu), as the DEM's does after "
+                 "its peak; constant-volume curves do not see it; no coefficient added); with --predict-with the file's "
+                 "unless given (docs/model.md, \"The deviatoric stress under a volume change\")")
+      ->check(CLI::IsMember({"fixed", "reference"}));
   app.add_option("--profile", o.profile, "profile intervals: `all` (every coefficient with a quoted covariance "
                  "error) or comma-separated names (e.g. p0,alpha): each held at trial values and the rest refitted "
                  "until chi2 rises by max(1, chi2/dof) either way (profile.{csv,md}; 1-10 refits per end; docs/model.md "

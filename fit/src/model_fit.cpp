@@ -58,6 +58,7 @@ Ext<double> calibration_ext(const CalibrationOptions& o, const std::string& mode
   e.start_unaligned = o.start_unaligned;
   e.dilatancy_gated = o.dilatancy_gated && !o.state_volume;
   e.fabric_state = X && o.state_limit && o.fabric_state;
+  e.deviator_reference = X && o.deviator_reference && !o.state_volume;
   return e;
 }
 
@@ -385,6 +386,7 @@ Parameters read_parameters(const std::string& path) {
   P.start_unaligned = v.count("start_anisotropy") && get("start_anisotropy") == 1.0;   // files without the row: aligned
   P.dilatancy_gated = v.count("dilatancy_gate") && get("dilatancy_gate") == 1.0;   // ... ungated
   P.fabric_state = P.state_limit && v.count("fabric_limit") && get("fabric_limit") == 1.0;   // ... F_lim itself
+  P.deviator_reference = v.count("deviator_volume") && get("deviator_volume") == 1.0;   // ... sigma_dev unchanged
   if (P.extended)
     for (int i = 0; i < kNumExt; ++i)
       if (i < kNumExtBase || v.count(ext_name(i))) P.ext[i] = get(ext_name(i));   // else the default (n_rate 1)
@@ -1287,6 +1289,7 @@ Parameters fitted_params(const Parameters& start, const std::vector<double>& iso
   P.start_unaligned = o.start_unaligned;
   P.dilatancy_gated = X && o.dilatancy_gated && !o.state_volume;
   P.fabric_state = P.state_limit && o.fabric_state;
+  P.deviator_reference = X && o.deviator_reference && !o.state_volume;
   return P;
 }
 
@@ -1518,6 +1521,7 @@ Ext<double> prediction_ext(const Parameters& params, const std::string& mode, do
   ext.start_unaligned = params.start_unaligned;
   ext.dilatancy_gated = params.dilatancy_gated;
   ext.fabric_state = ext.state_limit && params.fabric_state;
+  ext.deviator_reference = params.deviator_reference && !ext.state_volume;
   return ext;
 }
 

@@ -2626,6 +2626,7 @@ TEST(ModelVolumeState, TheIsotropicVolumeStaysOnTheRisingBranchOfALawThatFallsAg
 TEST(ModelOptions, WithBlockCarriesEveryOptionOntoAnotherScalar) {
   Ext<double> o{nullptr, 0.25, Surface::MatsuokaNakai, FabricLode::Weighted, true, true, true, 0.4, -0.03, 0.05};
   o.excess_relaxes = o.excess_bounded = o.start_unaligned = o.dilatancy_gated = o.fabric_state = true;
+  o.deviator_reference = true;
   double psi[2] = {0, 0};
   o.psi_seen = psi;
   using J = ceres::Jet<double, 2>;
@@ -2639,11 +2640,12 @@ TEST(ModelOptions, WithBlockCarriesEveryOptionOntoAnotherScalar) {
   EXPECT_EQ(e.b_stress, 0.4);
   EXPECT_EQ(e.psi_lo, -0.03);
   EXPECT_EQ(e.psi_hi, 0.05);
-  EXPECT_TRUE(e.excess_relaxes && e.excess_bounded && e.start_unaligned && e.dilatancy_gated && e.fabric_state);
+  EXPECT_TRUE(e.excess_relaxes && e.excess_bounded && e.start_unaligned && e.dilatancy_gated && e.fabric_state &&
+              e.deviator_reference);
   EXPECT_EQ(e.psi_seen, nullptr);   // a Jet run records no psi range (plain double runs only)
   const Ext<double> none = with_block(Ext<double>{}, static_cast<const double*>(nullptr));
   EXPECT_FALSE(none.state_limit || none.excess_relaxes || none.start_unaligned || none.dilatancy_gated ||
-               none.fabric_state);
+               none.fabric_state || none.deviator_reference);
   EXPECT_EQ(none.surface, Surface::None);
 }
 
@@ -2804,4 +2806,50 @@ TEST(ModelFabricState, TheFabricIsDrivenToTheStressRatiosStateLimit) {
   no_limit.state_limit = false;
   plain.state_limit = false;
   EXPECT_EQ(rates(no_limit, 2 * p0).F, rates(plain, 2 * p0).F) << "the option needs the state limit";
+}
+
+// The deviatoric stress under a volume change (thirtieth round, Ext::deviator_reference): sigma_dev scales with the
+// isotropic reference pressure p_ref(nu). Closed forms from rhs, with a_A = 0 (no anisotropy modulus):
+// - a pure volumetric segment: d ln sigma_dev = d ln p_ref = -B/p_ref per unit eps_vol with the option, 0 without;
+// - isobaric: the same volume rate, and d s lower by s B/p_ref d eps_vol (the elastic pressure drop no longer raises s);
+// - constant volume: every rate the same to the last bit (a D2/D3 calibration does not see the option);
+// - drained triaxial: the side stress p (1 - s/3) held, (1 - s/3) dp - (p/3) ds = 0, with and without it (the
+//   volume rate's denominator B - (A + E_dev)/3 derived again).
+TEST(ModelDeviatorVolume, SigmaDevScalesWithTheReferencePressure) {
+  Parameters P = truth();
+  P.shear[kAnisoA] = 0.0; P.shear[kAnisoB] = 0.0;
+  double ext[kNumExt] = {};
+  ext[kNPsiA] = 0.7;
+  ext[kDilA] = 0.01; ext[kChiD] = 0.5;
+  const auto iso = P.iso();
+  const double nu = 0.72, p0 = isotropic_pressure(iso.data(), nu), B = bulk_modulus(iso.data(), nu);
+  Ext<double> plain{ext, kLodeBD2, Surface::None, FabricLode::Norm, true}, ref = plain;
+  ref.deviator_reference = true;
+  const double s = 0.3, p = 1.2 * p0;   // above the reference pressure (p_ref = p0: k = 1 at this start)
+  auto rates = [&](const Ext<double>& e, Control c, double eps_vol = 0.0) {
+    const Material<double> m = start_material<double>(iso.data(), P.shear, P.nu_ref, nu, p0, e);
+    Segment seg;
+    seg.control = c;
+    seg.eps_vol = eps_vol;
+    return rhs(m, State<double>{std::log(nu), p, s, 0.05}, eps_vol != 0.0 ? 0.0 : 1.0, seg);
+  };
+  for (const auto* e : {&plain, &ref}) {
+    const auto d = rates(*e, Control::Volume, 1e-3);   // a volumetric segment (sigma = 0), extension
+    const double dvol = -d.ln_nu;
+    const double dln_sdev = d.s / s + d.p / p;
+    const double expect = e->deviator_reference ? -B / p0 * dvol : 0.0;
+    EXPECT_NEAR(dln_sdev, expect, 1e-9 * B / p0) << (e->deviator_reference ? "reference" : "fixed");
+  }
+  const auto ia = rates(plain, Control::Isobaric), ib = rates(ref, Control::Isobaric);
+  EXPECT_EQ(ia.ln_nu, ib.ln_nu);
+  EXPECT_NEAR(ib.s - ia.s, -s * B / p0 * (-ib.ln_nu), 1e-12);
+  EXPECT_NE(ib.s, ia.s);
+  const auto ca = rates(plain, Control::Volume), cb = rates(ref, Control::Volume);
+  EXPECT_EQ(ca.s, cb.s);
+  EXPECT_EQ(ca.p, cb.p);
+  EXPECT_EQ(ca.F, cb.F);
+  for (const auto* e : {&plain, &ref}) {
+    const auto t = rates(*e, Control::Triaxial);
+    EXPECT_NEAR((1 - s / 3) * t.p - p / 3 * t.s, 0.0, 1e-12 * B) << (e->deviator_reference ? "reference" : "fixed");
+  }
 }

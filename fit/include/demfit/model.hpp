@@ -199,6 +199,8 @@ struct Parameters {
   /// With state_limit: the fabric's limit follows the state as the stress ratio's does (Ext::fabric_state; row
   /// fabric_limit = 1, absent: false).
   bool fabric_state = false;
+  /// sigma_dev scales with p_ref under a volume change (Ext::deviator_reference; row deviator_volume = 1, absent: false).
+  bool deviator_reference = false;
   std::vector<double> iso() const { return {p0, nu_c, gamma_p, C0, C1, nu_cC, alpha}; }
   void set_iso(const double* v) { p0 = v[0]; nu_c = v[1]; gamma_p = v[2]; C0 = v[3]; C1 = v[4]; nu_cC = v[5]; alpha = v[6]; }
 };
@@ -469,6 +471,14 @@ struct Ext {
   /// constant pressure. The dilatancy's fabric gate keeps F_lim (as the mobilisation keeps s_lim). No coefficient is
   /// added. False (the default, every stored calibration): the fabric's limit F_lim whatever the state.
   bool fabric_state = false;
+  /// Under a volume change the deviatoric stress scales with the isotropic reference pressure p_ref(nu) (thirtieth
+  /// round, `--deviator-volume reference`): d sigma_dev = sigma_dev d p_ref / p_ref besides -A d eps_vol, so that the
+  /// stress ratio's volumetric term is -(A - s B + s B p/p_ref)/p d eps_vol (deviator_volume_term). The DEM's friction
+  /// study after the peak: at constant volume sigma_dev stays where it is while p rises, at constant p it falls with
+  /// p_iso(nu) as the packing dilates (docs/model.md, "The deviatoric stress under a volume change"). A constant-volume
+  /// curve does not see it (its fits are unchanged); no coefficient is added. Without the volume-form state parameter.
+  /// False (the default, every stored calibration): sigma_dev does not change with the volume but through A.
+  bool deviator_reference = false;
 };
 
 /// The options of O (every member of Ext but its block and psi_seen) with the block P of another scalar type: the
@@ -483,6 +493,7 @@ Ext<T> with_block(const Ext<U>& o, const T* p) {
   e.start_unaligned = o.start_unaligned;
   e.dilatancy_gated = o.dilatancy_gated;
   e.fabric_state = o.fabric_state;
+  e.deviator_reference = o.deviator_reference;
   return e;
 }
 
@@ -670,15 +681,26 @@ State<T> lost_state(const State<T>& y) {
   return d;
 }
 
-/// The pure volumetric segment: d eps_vol = +1 per unit l (its sign carried by seg.eps_vol); the elastic state moves
-/// with the volume (e_pl unchanged), and an anisotropic excess stays what it was.
+/// The extra volumetric coupling of the stress ratio with Ext::deviator_reference: s B p/p_ref [K], so that d s = ... -
+/// (A - s B + this)/p d eps_vol (sigma_dev scaling with p_ref under a volume change); 0 without the option. p_ref/p
+/// floored at 1e-6 as in the state factor (p_ref <= 0 below the isotropic law's jamming fraction).
 template <class T>
-State<T> volumetric_rhs(const State<T>& y, const T& A, const T& B, const Segment& seg) {
+T deviator_volume_term(const Ext<T>& e, const State<T>& y, const T& B, const T& p_ref) {
+  if (!e.deviator_reference || e.state_volume) return T(0.0);
+  T ratio = p_ref / y.p;
+  if (!(ratio > T(1e-6))) ratio = T(1e-6);
+  return y.s * B / ratio;
+}
+
+/// The pure volumetric segment: d eps_vol = +1 per unit l (its sign carried by seg.eps_vol); the elastic state moves
+/// with the volume (e_pl unchanged), and an anisotropic excess stays what it was. E_dev: deviator_volume_term.
+template <class T>
+State<T> volumetric_rhs(const State<T>& y, const T& A, const T& B, const T& E_dev, const Segment& seg) {
   const T dev = T(seg.eps_vol > 0 ? 1.0 : -1.0);
   State<T> d;
   d.ln_nu = -dev;
   d.p = -B * dev;
-  d.s = -(A - y.s * B) / y.p * dev;
+  d.s = -(A - y.s * B + E_dev) / y.p * dev;
   d.F = T(0.0);
   d.l = T(0.0);
   d.e_pl = T(0.0);
@@ -702,8 +724,9 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const T nu_law = vol_state ? T(m.nu_ref) + psi_law : nu;
   const Local<T> L = local(m.shear, nu_law, m.nu_ref);
   const T A = L.a_A * B * y.F;                       // anisotropy modulus [K]
+  const T E_dev = deviator_volume_term(m.ext, y, B, p_ref);   // 0 unless Ext::deviator_reference
   State<T> d;
-  if (sigma == 0.0) return volumetric_rhs(y, A, B, seg);
+  if (sigma == 0.0) return volumetric_rhs(y, A, B, E_dev, seg);
   // The frictional extension (docs/model.md): r the mobilised stress ratio on the test's Lode
   // surface; neutral (the group model's numbers exactly) when m.ext.p is null or all zero.
   const LocalExt<T> X = local_ext(m.ext.p, nu_law, m.nu_ref);
@@ -757,15 +780,16 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const T shear = L.beta_s * g_s * (lode ? L.s_max / s_lim : T(1.0)) * (T(sigma) * s_target - y.s) * shape_s;
   if (seg.control == Control::Isobaric) {
     dvol = (src - relax + B * dil) / B;
-  } else if (seg.control == Control::Triaxial && B > T(0.0) && !(B - A / T(3.0) > T(kTriaxialMargin) * B)) {
+  } else if (seg.control == Control::Triaxial && B > T(0.0) && !(B - (A + E_dev) / T(3.0) > T(kTriaxialMargin) * B)) {
     return lost_state(y);   // the side stress cannot be held (kTriaxialMargin)
   } else if (seg.control == Control::Triaxial && vol_state) {
     // The same with the elastic split: ds = shear - (A - s B)/p (dvol - dil), so (B - A/3)(dvol - dil) remains.
     dvol = dil + ((T(1.0) - y.s / T(3.0)) * (src - relax) - y.p / T(3.0) * shear) / (B - A / T(3.0));
   } else if (seg.control == Control::Triaxial) {
     // (1 - s/3) dp - (p/3) ds = 0 with dp = -B dvol + A sigma - relax + B dil and
-    // ds = shear - (A - s B)/p dvol: the B s/3 terms cancel, leaving (B - A/3) dvol.
-    dvol = ((T(1.0) - y.s / T(3.0)) * (A * T(sigma) - relax + B * dil) - y.p / T(3.0) * shear) / (B - A / T(3.0));
+    // ds = shear - (A - s B + E_dev)/p dvol: the B s/3 terms cancel, leaving (B - (A + E_dev)/3) dvol.
+    dvol = ((T(1.0) - y.s / T(3.0)) * (A * T(sigma) - relax + B * dil) - y.p / T(3.0) * shear) /
+           (B - (A + E_dev) / T(3.0));
   } else {
     dvol = T(seg.volume_rate);
   }
@@ -784,11 +808,11 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   // state parameter only the elastic part dvol - dil acts (the plastic dilatancy moves the volume, not the stress);
   // otherwise the whole dvol (the constant-volume law `shear` carries the plastic part; docs/model.md).
   const T dvol_stress = vol_state ? dvol - dil : dvol;
-  d.s = shear - (A - y.s * B) / y.p * dvol_stress;
+  d.s = shear - (A - y.s * B + E_dev) / y.p * dvol_stress;
   return d;
 }
 
-/// A/(3B) = a_A F/3 at the state y, a_A read as rhs reads it: the drained triaxial control's pole is where it reaches 1,
+/// A/(3B) = a_A F/3 at the state y (with Ext::deviator_reference (A + E_dev)/(3B)), a_A read as rhs reads it: the drained triaxial control's pole is where it reaches 1,
 /// and rhs gives the control up from 1 - kTriaxialMargin on (B > 0). A diagnostic: the laws of psi are read without
 /// recording psi (ext.psi_seen), so that a prediction's psi_range does not move.
 template <class T>
@@ -798,7 +822,11 @@ T pole_ratio(const Material<T>& m, const State<T>& y) {
   quiet.psi_seen = nullptr;
   const T nu = exp(y.ln_nu);
   const T nu_law = m.ext.p && m.ext.state_volume ? T(m.nu_ref) + law_psi(quiet, state_psi(m.ext.p, nu, y.p)) : nu;
-  return local(m.shear, nu_law, m.nu_ref).a_A * y.F / T(3.0);
+  const T a = local(m.shear, nu_law, m.nu_ref).a_A * y.F / T(3.0);
+  if (!m.ext.deviator_reference || m.ext.state_volume) return a;
+  // With Ext::deviator_reference the pole is where (A + E_dev)/(3B) reaches 1: E_dev/(3B) = s p/(3 p_ref).
+  const T B = m.k * bulk_modulus(m.iso, nu);
+  return a + deviator_volume_term(quiet, y, B, m.k * isotropic_pressure(m.iso, nu)) / (T(3.0) * B);
 }
 
 template <class T>

@@ -50,6 +50,9 @@ struct ModelCommandOptions {
   /// With the pressure-form state limit (thirtieth round): `fixed` (F_lim, every calibration before) or `state` (F_lim
   /// times the stress ratio's state factor); empty: fixed, or with --predict-with the file's (row fabric_limit)
   std::string fabric_limit;
+  /// The deviatoric stress under a volume change (thirtieth round): `fixed` (through A alone, every calibration before)
+  /// or `reference` (also scaling with p_ref(nu)); empty: fixed, or with --predict-with the file's (row deviator_volume)
+  std::string deviator_volume;
   std::vector<std::string> hold_isotropic;   ///< isotropic parameters held at the start values (needs one start file)
   std::vector<std::string> hold;             ///< extension coefficients held at their start values (--hold)
   std::string state_limit = "none";     ///< extended family's stress-ratio limit: none (default), pressure (n_psi fitted), pressure-lode (+ lambda_psi)

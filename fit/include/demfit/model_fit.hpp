@@ -91,6 +91,9 @@ struct CalibrationOptions {
   /// With state_limit: the fabric's limit times the stress ratio's state factor (`--fabric-limit state`, thirtieth
   /// round; Ext::fabric_state).
   bool fabric_state = false;
+  /// sigma_dev scales with p_ref under a volume change (`--deviator-volume reference`, thirtieth round;
+  /// Ext::deviator_reference).
+  bool deviator_reference = false;
   /// The coordination law rises with the density (`--coordination rising`, the default since issue 31's twenty-third
   /// round): C1 >= 0 wherever the isotropic block is fitted and C1 not held. false (`free`): C1 of either sign, as
   /// every fit before; a falling law can make the isotropic pressure peak below nu = 1 (docs/model.md).
