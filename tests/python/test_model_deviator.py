@@ -4,6 +4,7 @@ change) and `--fabric-limit state` (the fabric driven to F_lim times the stress 
 --predict-with to the stored mu = 1 choice (weighted + Lode limit, gated); their rows in parameters.csv read back and
 undone; refused where they do not apply; `demkit.model_onset --compare` against the stored gate table."""
 import csv
+import math
 import os
 import subprocess
 import sys
@@ -115,3 +116,23 @@ def test_compare_gives_the_gate_tables_numbers_and_choice(tmp_path):
     with pytest.raises(SystemExit, match="does not exist"):
         model_onset.compare(str(tmp_path), "t", ("a", os.path.join(LL, "none_overlap_lode_limit")),
                             ("b", os.path.join(LL, "gate_weighted_lode_limit")), ["0.5"])
+
+
+def test_after_peak_on_hand_built_curves():
+    """from the peak of s_dev (row 1) to the end: constant volume, d ln sigma_dev = d ln s + d ln p and p_iso fixed; on
+    an isobaric path the volume fraction nu0 exp(-3 eps_v) in p_iso(nu) = nu^10 gives d ln p_iso = -30 d eps_v."""
+    from demkit import model_deviator
+    cv = [{"eps_d": "0", "s_dev_mean": "0.5", "p_star_mean": "0.01", "eps_v_mean": "0"},
+          {"eps_d": "0.1", "s_dev_mean": "1.0", "p_star_mean": "0.02", "eps_v_mean": "0"},
+          {"eps_d": "0.2", "s_dev_mean": "0.8", "p_star_mean": "0.025", "eps_v_mean": "0"}]
+    v = model_deviator.after_peak(cv, 0.7, lambda nu: nu ** 10, False)
+    assert v[0] == 0.1
+    assert v[1:] == pytest.approx((math.log(0.8), math.log(0.8 * 0.025 / 0.02), math.log(1.25), 0.0))
+    iso = [{"eps_d_accumulated": r["eps_d"], "s_dev_mean": r["s_dev_mean"], "p_star_mean": "0.02",
+            "eps_v_mean": e} for r, e in zip(cv, ("0", "0.001", "0.004"))]
+    v = model_deviator.after_peak(iso, 0.7, lambda nu: nu ** 10, True)
+    assert v[1:] == pytest.approx((math.log(0.8), math.log(0.8), 0.0, -30 * 0.003))
+    for mu, name in (("1", "weighted + Lode limit + gate"), ("0.1", "weighted"), ("0.5", "weighted"),
+                     ("0", "overlap")):
+        got = model_deviator.chosen(LWDIR, mu)
+        assert got[0] == name and os.path.exists(got[1]), mu
