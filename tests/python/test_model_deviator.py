@@ -136,3 +136,37 @@ def test_after_peak_on_hand_built_curves():
                      ("0", "overlap")):
         got = model_deviator.chosen(LWDIR, mu)
         assert got[0] == name and os.path.exists(got[1]), mu
+
+
+DEV = os.path.join("data", "friction_n1000", "model_friction", "lode_weight", "onset", "deviator")
+LWREL = os.path.join("data", "friction_n1000", "model_friction", "lode_weight")
+STORED = [  # (tag, left, right, names, mus): the stored tables of onset/deviator/ (its README's commands)
+    ("deviator_mu_1", os.path.join(LWREL, "onset", "lode_limit", "gate_weighted_lode_limit"),
+     os.path.join(DEV, "gate_deviator_weighted_lode_limit"), ("weighted + Lode limit + gate", "... + deviator reference"),
+     ["1"]),
+    ("deviator_weighted", os.path.join(LWREL, "onset", "none"), os.path.join(DEV, "deviator"),
+     ("weighted", "weighted + deviator reference"), ["0.3", "0.5"]),
+    ("deviator_overlap", os.path.join(LWREL, "onset", "none"), os.path.join(DEV, "deviator"),
+     ("overlap", "overlap + deviator reference"), ["0"]),
+    ("deviator_mu_0.1", os.path.join(DEV, "none_weighted_start"), os.path.join(DEV, "deviator_weighted_start"),
+     ("weighted", "weighted + deviator reference"), ["0.1"]),
+    ("fabric_on_gate", os.path.join(LWREL, "onset", "lode_limit", "gate_weighted_lode_limit"),
+     os.path.join(DEV, "gate_fabric_weighted_lode_limit"), ("weighted + Lode limit + gate", "... + fabric state"),
+     ["0.5"]),
+    ("fabric_versus", os.path.join(LWREL, "onset", "none"), os.path.join(DEV, "gate_fabric_weighted_lode_limit"),
+     ("weighted", "weighted + Lode limit + gate + fabric state"), ["0.5"]),
+]
+
+
+@pytest.mark.parametrize("tag, left, right, names, mus", STORED)
+def test_the_stored_tables_are_rebuilt_from_their_runs(tmp_path, monkeypatch, tag, left, right, names, mus):
+    """Each stored table of onset/deviator/ from its stored runs, byte for byte (the docs quote them); the fits with
+    and without --deviator-volume are the same (held-out scores of the fitted curves equal)."""
+    monkeypatch.chdir(ROOT)
+    model_onset.compare(str(tmp_path), tag, (names[0], left), (names[1], right), mus)
+    for ext in ("md", "csv"):
+        assert (tmp_path / f"{tag}.{ext}").read_text() == open(os.path.join(DEV, f"{tag}.{ext}")).read(), ext
+    if tag.startswith("deviator"):
+        got = rows_of(tmp_path / f"{tag}.csv")
+        for a, b in zip(got[::2], got[1::2]):
+            assert a["heldout_mean [-]"] == b["heldout_mean [-]"] and a["chi2_per_dof [-]"] == b["chi2_per_dof [-]"]

@@ -486,6 +486,7 @@ struct Ext {
 /// evaluation, so that a new option is a member here and one line below, not a flag in every functor.
 template <class T, class U>
 Ext<T> with_block(const Ext<U>& o, const T* p) {
+  // A bool that fits the padding keeps the size: ModelOptions.WithBlockCarriesEveryOptionOntoAnotherScalar sets each.
   static_assert(sizeof(Ext<double>) == 72, "Ext has a new member: copy it in with_block, then update this size");
   Ext<T> e{p, o.b, o.surface, o.fabric, o.state_limit, o.state_lode, o.state_volume, o.b_stress, o.psi_lo, o.psi_hi};
   e.excess_relaxes = o.excess_relaxes;
