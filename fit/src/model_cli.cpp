@@ -892,6 +892,32 @@ std::function<void(const std::string&, int, int, const ProfileInterval&)> profil
 }
 
 // The calibration's options from the command's (--eps-max, --family, --surface, --fabric-lode checked).
+// The frictional family's options that add no coefficient (the anisotropic excess, the start's alignment, the dilatancy
+// gate, the fabric's state limit, the deviator's volume scaling), checked against the family and the state limit.
+void read_extension_options(const ModelCommandOptions& o, CalibrationOptions& co) {
+  co.excess_relaxes = o.anisotropy_pressure == "relaxing" || o.anisotropy_pressure == "bounded";
+  co.excess_bounded = o.anisotropy_pressure == "bounded";
+  co.start_unaligned = o.start_anisotropy == "unaligned";
+  co.dilatancy_gated = o.dilatancy_gate == "mobilisation";
+  if (co.dilatancy_gated && (o.family != "extended" || co.state_volume))
+    throw InputError("--dilatancy-gate mobilisation: the gate acts on the extended family's plastic dilatancy d_D (r - "
+                     "chi_D); give --family extended without --state-limit volume (whose dilatancy is driven by psi)");
+  co.fabric_state = o.fabric_limit == "state";
+  if (co.fabric_state && (o.family != "extended" || !co.state_limit) && o.predict_with.empty())
+    throw InputError("--fabric-limit state: the fabric follows the stress ratio's state factor (p_ref/p)^n_psi, which "
+                     "only the pressure-form state limit has; add --family extended --state-limit pressure (or "
+                     "pressure-lode)");
+  co.deviator_reference = o.deviator_volume == "reference";
+  if (co.deviator_reference && (o.family != "extended" || co.state_volume))
+    throw InputError("--deviator-volume reference: sigma_dev scaling with the isotropic reference pressure under a "
+                     "volume change belongs to the extended family without the volume-form state parameter (whose "
+                     "elastic split moves the stress by the elastic volume change alone); give --family extended "
+                     "without --state-limit volume");
+  if (co.excess_relaxes && !co.state_volume && o.predict_with.empty())
+    throw InputError("--anisotropy-pressure " + o.anisotropy_pressure + ": the relaxing excess belongs to the volume-form "
+                     "state parameter (without it the anisotropic pressure always relaxes at beta_p); add --state-limit volume");
+}
+
 CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   CalibrationOptions co;
   co.eps_max = o.eps_max;
@@ -974,27 +1000,7 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   if (co.state_volume && o.family != "extended")
     throw InputError("--state-limit volume: the volume-form state parameter belongs to the extended family; give "
                      "--family extended");
-  co.excess_relaxes = o.anisotropy_pressure == "relaxing" || o.anisotropy_pressure == "bounded";
-  co.excess_bounded = o.anisotropy_pressure == "bounded";
-  co.start_unaligned = o.start_anisotropy == "unaligned";
-  co.dilatancy_gated = o.dilatancy_gate == "mobilisation";
-  if (co.dilatancy_gated && (o.family != "extended" || co.state_volume))
-    throw InputError("--dilatancy-gate mobilisation: the gate acts on the extended family's plastic dilatancy d_D (r - "
-                     "chi_D); give --family extended without --state-limit volume (whose dilatancy is driven by psi)");
-  co.fabric_state = o.fabric_limit == "state";
-  if (co.fabric_state && (o.family != "extended" || !co.state_limit) && o.predict_with.empty())
-    throw InputError("--fabric-limit state: the fabric follows the stress ratio's state factor (p_ref/p)^n_psi, which "
-                     "only the pressure-form state limit has; add --family extended --state-limit pressure (or "
-                     "pressure-lode)");
-  co.deviator_reference = o.deviator_volume == "reference";
-  if (co.deviator_reference && (o.family != "extended" || co.state_volume))
-    throw InputError("--deviator-volume reference: sigma_dev scaling with the isotropic reference pressure under a "
-                     "volume change belongs to the extended family without the volume-form state parameter (whose "
-                     "elastic split moves the stress by the elastic volume change alone); give --family extended "
-                     "without --state-limit volume");
-  if (co.excess_relaxes && !co.state_volume && o.predict_with.empty())
-    throw InputError("--anisotropy-pressure " + o.anisotropy_pressure + ": the relaxing excess belongs to the volume-form "
-                     "state parameter (without it the anisotropic pressure always relaxes at beta_p); add --state-limit volume");
+  read_extension_options(o, co);
   const int n_block = ext_size(co.state_limit, co.fabric == FabricLode::Weighted, co.state_lode, co.state_volume);
   for (int i : co.hold_ext)
     if (i >= n_block)
@@ -1632,6 +1638,33 @@ int run(const ModelCommandOptions& o) {
 
 }  // namespace
 
+// The frictional family's options that add no coefficient (twenty-eighth round on): the start's alignment, the dilatancy
+// gate, the fabric's state limit, the deviator's volume scaling.
+void add_extension_options(CLI::App& app, ModelCommandOptions& o) {
+  app.add_option("--start-anisotropy", o.start_anisotropy, "the start's deviators: aligned (the default: the measured "
+                 "s_dev and F_dev of the first row taken as aligned with the loading, integrated from) or unaligned (the "
+                 "random deviators of a finite isotropic packing: s and F integrated from 0 as the aligned parts, "
+                 "compared with the data as sqrt(x^2 + x0^2)); with --predict-with the file's unless given "
+                 "(docs/model.md, \"An unaligned start\")")
+      ->check(CLI::IsMember({"aligned", "unaligned"}));
+  app.add_option("--dilatancy-gate", o.dilatancy_gate, "the extended family's plastic dilatancy d_D (r - chi_D)(1 - "
+                 "F/F_lim): none (the default: at its largest contraction d_D chi_D from the first step) or mobilisation "
+                 "(times the mobilisation r, so that it starts at 0 as the DEM's volume under constant pressure does); "
+                 "with --predict-with the file's unless given (docs/model.md, \"An unaligned start\")")
+      ->check(CLI::IsMember({"none", "mobilisation"}));
+  app.add_option("--fabric-limit", o.fabric_limit, "the extended family's fabric limit with --state-limit pressure(-lode): "
+                 "fixed (the default: F_lim whatever the state) or state (F_lim times the stress ratio's state factor "
+                 "(p_ref/p)^n_psi, so that the fabric softens with the stress ratio; no coefficient added); with "
+                 "--predict-with the file's unless given (docs/model.md, \"The fabric's state limit\")")
+      ->check(CLI::IsMember({"fixed", "state"}));
+  app.add_option("--deviator-volume", o.deviator_volume, "the extended family's deviatoric stress under a volume "
+                 "change: fixed (the default: sigma_dev moves with the volume through the anisotropy A alone) or "
+                 "reference (it also scales with the isotropic reference pressure p_ref(nu), as the DEM's does after "
+                 "its peak; constant-volume curves do not see it; no coefficient added); with --predict-with the file's "
+                 "unless given (docs/model.md, \"The deviatoric stress under a volume change\")")
+      ->check(CLI::IsMember({"fixed", "reference"}));
+}
+
 void add_model_options(CLI::App& app, ModelCommandOptions& o) {
   app.add_option("dir", o.dir, "ensemble folder reduced by `dem fit` (ensemble/MODE_phiX.csv, members/)")->required();
   app.add_option("--out", o.out, "output folder (default DIR/model)");
@@ -1712,28 +1745,7 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
                  "--predict-with the file's unless given (docs/model.md, \"A relaxing anisotropic pressure\", \"A "
                  "bounded excess\")")
       ->check(CLI::IsMember({"permanent", "relaxing", "bounded"}))->default_str("permanent");
-  app.add_option("--start-anisotropy", o.start_anisotropy, "the start's deviators: aligned (the default: the measured "
-                 "s_dev and F_dev of the first row taken as aligned with the loading, integrated from) or unaligned (the "
-                 "random deviators of a finite isotropic packing: s and F integrated from 0 as the aligned parts, "
-                 "compared with the data as sqrt(x^2 + x0^2)); with --predict-with the file's unless given "
-                 "(docs/model.md, \"An unaligned start\")")
-      ->check(CLI::IsMember({"aligned", "unaligned"}));
-  app.add_option("--dilatancy-gate", o.dilatancy_gate, "the extended family's plastic dilatancy d_D (r - chi_D)(1 - "
-                 "F/F_lim): none (the default: at its largest contraction d_D chi_D from the first step) or mobilisation "
-                 "(times the mobilisation r, so that it starts at 0 as the DEM's volume under constant pressure does); "
-                 "with --predict-with the file's unless given (docs/model.md, \"An unaligned start\")")
-      ->check(CLI::IsMember({"none", "mobilisation"}));
-  app.add_option("--fabric-limit", o.fabric_limit, "the extended family's fabric limit with --state-limit pressure(-lode): "
-                 "fixed (the default: F_lim whatever the state) or state (F_lim times the stress ratio's state factor "
-                 "(p_ref/p)^n_psi, so that the fabric softens with the stress ratio; no coefficient added); with "
-                 "--predict-with the file's unless given (docs/model.md, \"The fabric's state limit\")")
-      ->check(CLI::IsMember({"fixed", "state"}));
-  app.add_option("--deviator-volume", o.deviator_volume, "the extended family's deviatoric stress under a volume "
-                 "change: fixed (the default: sigma_dev moves with the volume through the anisotropy A alone) or "
-                 "reference (it also scales with the isotropic reference pressure p_ref(nu), as the DEM's does after "
-                 "its peak; constant-volume curves do not see it; no coefficient added); with --predict-with the file's "
-                 "unless given (docs/model.md, \"The deviatoric stress under a volume change\")")
-      ->check(CLI::IsMember({"fixed", "reference"}));
+  add_extension_options(app, o);
   app.add_option("--profile", o.profile, "profile intervals: `all` (every coefficient with a quoted covariance "
                  "error) or comma-separated names (e.g. p0,alpha): each held at trial values and the rest refitted "
                  "until chi2 rises by max(1, chi2/dof) either way (profile.{csv,md}; 1-10 refits per end; docs/model.md "

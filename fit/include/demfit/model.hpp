@@ -708,6 +708,14 @@ State<T> volumetric_rhs(const State<T>& y, const T& A, const T& B, const T& E_de
   return d;
 }
 
+/// The pressure-form state factor (p_ref/p)^n_psi of the stress ratio's limit (and with Ext::fabric_state the fabric's)
+/// at the stress's Lode parameter b_s; 1 without the pressure-form state limit.
+template <class T>
+T pressure_state_factor(const Material<T>& m, const T& nu, const T& p, const T& p_ref, double b_s) {
+  if (!m.ext.p || !m.ext.state_limit) return T(1.0);
+  return state_limit_factor(m.ext.p, nu, m.nu_ref, p, p_ref, b_s, m.ext.state_lode);
+}
+
 /// Derivatives per unit |d eps_d| along a segment with direction sigma (+1/-1), or per unit
 /// eps_vol for a pure volumetric segment (sigma = 0). Returns d/dl of (ln nu, p, s, F).
 template <class T>
@@ -772,9 +780,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   // The state-dependent limit (fifth round; off: s_lim itself, untouched): the target of the stress
   // ratio only; the mobilisation r, the rate scaling and the dilatancy keep s_lim (psi_p = 0).
   // The volume-form state parameter (tenth round) likewise: s_lim e^{n_b psi}.
-  const T state = (!vol_state && m.ext.p && m.ext.state_limit)
-                      ? state_limit_factor(m.ext.p, nu, m.nu_ref, y.p, p_ref, b_s, m.ext.state_lode)
-                      : T(1.0);
+  const T state = vol_state ? T(1.0) : pressure_state_factor(m, nu, y.p, p_ref, b_s);
   const T s_target = vol_state ? s_lim * exp(peak_exponent(m.ext.p, y.p) * psi_law) : s_lim * state;
   const T shape_s = stress_shape(X.kappa_s, r, s_target / s_lim, vol_state);
   const T g_s = rate_scale(m, B, y.p);
@@ -797,8 +803,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   d.ln_nu = -dvol;
   d.p = -B * dvol + src - relax + B * dil;
   const T rate_F = weighted ? lode_w : m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
-  const T F_target = m.ext.fabric_state ? F_lim * state : F_lim;   // Ext::fabric_state (thirtieth round)
-  d.F = L.beta_F * g_s * rate_F * (T(sigma) * F_target - y.F) * gate_F;
+  d.F = L.beta_F * g_s * rate_F * (T(sigma) * (m.ext.fabric_state ? F_lim * state : F_lim) - y.F) * gate_F;   // Ext::fabric_state
   d.l = T(1.0);
   // The elastic volume fraction follows the pressure on the isotropic law (d ln nu_el = dp/B), or with a relaxing
   // excess the pressure less its anisotropic excess: d ln nu_el = (dp - A sigma + relax)/B, so that the excess q = p -
