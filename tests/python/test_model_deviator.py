@@ -170,3 +170,24 @@ def test_the_stored_tables_are_rebuilt_from_their_runs(tmp_path, monkeypatch, ta
         got = rows_of(tmp_path / f"{tag}.csv")
         for a, b in zip(got[::2], got[1::2]):
             assert a["heldout_mean [-]"] == b["heldout_mean [-]"] and a["chi2_per_dof [-]"] == b["chi2_per_dof [-]"]
+
+
+def test_the_choice_table_names_the_runs_its_deciding_tables_chose(tmp_path, monkeypatch):
+    """demkit.model_choice: every mu's run is the one its deciding table chose, with that table's numbers (chi2/dof and
+    the worst curves to the table's 4 digits); the stored choice.{md,csv} rebuilt byte for byte."""
+    from demkit import model_choice
+    monkeypatch.chdir(ROOT)
+    for mu, name, params, opts, chi, worst, table in model_choice.rows(LWREL):
+        assert os.path.exists(os.path.join(LWREL, params)), mu
+        side = model_choice.CHOICES[mu][6]
+        with open(os.path.join(LWREL, table + ".csv"), newline="") as fh:
+            chosen = [r for r in csv.DictReader(fh) if r["mu"] == mu and r["chosen"] == "yes"]
+        assert len(chosen) == 1 and chosen[0]["variant"] == side, (mu, chosen)
+        assert float(chosen[0]["chi2_per_dof [-]"]) == pytest.approx(chi, rel=1e-3), mu
+        for col, kind in zip(("worst_fitted_D2 [band]", "worst_fitted_D3 [band]", "worst_predicted_isobaric [band]"),
+                             model_choice.KINDS):
+            assert float(chosen[0][col]) == pytest.approx(worst[kind][0], rel=1e-3, abs=1e-4), (mu, col)
+        assert opts[:2] == ["--family", "extended"]
+    model_choice.write(LWREL, str(tmp_path))
+    for ext in ("md", "csv"):
+        assert (tmp_path / f"choice.{ext}").read_text() == open(os.path.join(LWREL, f"choice.{ext}")).read()
