@@ -140,6 +140,7 @@ def test_after_peak_on_hand_built_curves():
 
 DEV = os.path.join("data", "friction_n1000", "model_friction", "lode_weight", "onset", "deviator")
 LWREL = os.path.join("data", "friction_n1000", "model_friction", "lode_weight")
+K12 = os.path.join("data", "friction_n1000_k12", "model", "lode_limit_gate")   # the K = 12 versus table's runs
 STORED = [  # (tag, left, right, names, mus): the stored tables of onset/deviator/ (its README's commands)
     ("deviator_mu_1", os.path.join(LWREL, "onset", "lode_limit", "gate_weighted_lode_limit"),
      os.path.join(DEV, "gate_deviator_weighted_lode_limit"), ("weighted + Lode limit + gate", "... + deviator reference"),
@@ -155,6 +156,7 @@ STORED = [  # (tag, left, right, names, mus): the stored tables of onset/deviato
      ["0.5"]),
     ("fabric_versus", os.path.join(LWREL, "onset", "none"), os.path.join(DEV, "gate_fabric_weighted_lode_limit"),
      ("weighted", "weighted + Lode limit + gate + fabric state"), ["0.5"]),
+    ("versus_mu_0.5", os.path.join(K12, "weighted"), K12, ("weighted", "weighted + Lode limit + gate"), ["0.5"]),
 ]
 
 
@@ -165,7 +167,8 @@ def test_the_stored_tables_are_rebuilt_from_their_runs(tmp_path, monkeypatch, ta
     monkeypatch.chdir(ROOT)
     model_onset.compare(str(tmp_path), tag, (names[0], left), (names[1], right), mus)
     for ext in ("md", "csv"):
-        assert (tmp_path / f"{tag}.{ext}").read_text() == open(os.path.join(DEV, f"{tag}.{ext}")).read(), ext
+        where = K12 if tag == "versus_mu_0.5" else DEV
+        assert (tmp_path / f"{tag}.{ext}").read_text() == open(os.path.join(where, f"{tag}.{ext}")).read(), ext
     if tag.startswith("deviator"):
         got = rows_of(tmp_path / f"{tag}.csv")
         for a, b in zip(got[::2], got[1::2]):
