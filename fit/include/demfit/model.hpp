@@ -10,10 +10,12 @@
 #pragma once
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <limits>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace demfit::model {
@@ -481,13 +483,31 @@ struct Ext {
   bool deviator_reference = false;
 };
 
+/// The number of members of the aggregate A: the most initialisers `A{...}` takes (a value that converts to anything
+/// stands for each), counted up from 0 (at most 64). with_block's guard: a member it does not copy changes the count.
+struct AnyMember {
+  template <class X>
+  constexpr operator X() const;   // declared only: used in unevaluated braces
+};
+template <class A, class... M>
+constexpr std::size_t brace_count(long) {   // A{M...} does not compile: one initialiser too many
+  return sizeof...(M) - 1;
+}
+template <class A, class... M>
+constexpr auto brace_count(int) -> decltype(A{std::declval<M>()...}, std::size_t()) {
+  if constexpr (sizeof...(M) < 64) return brace_count<A, M..., AnyMember>(0);
+  return sizeof...(M);
+}
+template <class A>
+constexpr std::size_t member_count() { return brace_count<A>(0); }
+
 /// The options of O (every member of Ext but its block and psi_seen) with the block P of another scalar type: the
 /// residual functors keep one Ext<double> of options (calibration_ext) and bind their block of Jets to it at each
 /// evaluation, so that a new option is a member here and one line below, not a flag in every functor.
 template <class T, class U>
 Ext<T> with_block(const Ext<U>& o, const T* p) {
-  // A bool that fits the padding keeps the size: ModelOptions.WithBlockCarriesEveryOptionOntoAnotherScalar sets each.
-  static_assert(sizeof(Ext<double>) == 72, "Ext has a new member: copy it in with_block, then update this size");
+  static_assert(member_count<Ext<double>>() == 17,
+                "Ext has a new member: copy it in with_block, then update this count");
   Ext<T> e{p, o.b, o.surface, o.fabric, o.state_limit, o.state_lode, o.state_volume, o.b_stress, o.psi_lo, o.psi_hi};
   e.excess_relaxes = o.excess_relaxes;
   e.excess_bounded = o.excess_bounded;
