@@ -31,6 +31,15 @@ def write_atomic(path, data):
     os.replace(tmp, path)
 
 
+def write_md_csv(out, stem, md, lines, show=True):
+    """OUT/STEM.md (MD: its lines) and OUT/STEM.csv (LINES: each ending in a newline), each written atomically; the
+    markdown printed unless show=False (the tables of demkit's model_* scripts)."""
+    write_atomic(os.path.join(out, f"{stem}.md"), "\n".join(md) + "\n")
+    write_atomic(os.path.join(out, f"{stem}.csv"), "".join(lines))
+    if show:
+        print("\n".join(md))
+
+
 def write_figure(fig, stem, exts=("png", "svg"), dpi=120, metadata=None, close=True):
     """stem.EXT for each of exts, each rendered in memory and written atomically (a failed or
     interrupted save leaves the previous file, never half a figure). metadata: {ext: dict} passed

@@ -16,7 +16,7 @@ import os
 import sys
 
 from demkit import model_lode_weight, model_variants
-from demkit.atomic import write_atomic
+from demkit.atomic import write_md_csv
 
 LW = os.path.join("data", "friction_n1000", "model_friction", "lode_weight")
 KINDS = model_variants.KINDS
@@ -50,10 +50,6 @@ def rows(lw):
     return out
 
 
-def met(chi, worst):
-    return chi <= 3 and all(w[0] <= 1 for w in worst.values())
-
-
 def write(lw, out):
     md = ["<!-- demkit/model_choice.py: each mu's current D2 + D3 choice; RMS over the mean 95 % band half-width; "
           "target: every curve within 1 band, chi2/dof <= 3 -->",
@@ -64,12 +60,10 @@ def write(lw, out):
     for mu, name, params, opts, chi, worst, table in rows(lw):
         cells = [f"{worst[k][0]:.2f} ({worst[k][1]})" for k in KINDS]
         md.append(f"| {mu} | {name} | `{params}` | {chi:.3g} | " + " | ".join(cells) +
-                  f" | {'yes' if met(chi, worst) else 'no'} | `{table}.md` | `{' '.join(opts)}` |")
+                  f" | {'yes' if model_variants.target_met(chi, worst) else 'no'} | `{table}.md` | `{' '.join(opts)}` |")
         lines.append(",".join([mu, f'"{name}"', params, f"{chi:.4g}", *(f"{worst[k][0]:.4g}" for k in KINDS),
-                               "yes" if met(chi, worst) else "no", table + ".md", " ".join(opts)]) + "\n")
-    write_atomic(os.path.join(out, "choice.md"), "\n".join(md) + "\n")
-    write_atomic(os.path.join(out, "choice.csv"), "".join(lines))
-    print("\n".join(md))
+                               "yes" if model_variants.target_met(chi, worst) else "no", table + ".md", " ".join(opts)]) + "\n")
+    write_md_csv(out, "choice", md, lines)
 
 
 def main(argv=None):

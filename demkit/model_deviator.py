@@ -20,7 +20,7 @@ import subprocess
 import sys
 
 from demkit import model_friction, model_lode_weight, model_onset, model_variants
-from demkit.atomic import write_atomic
+from demkit.atomic import write_md_csv
 
 LW = os.path.join("data", "friction_n1000", "model_friction", "lode_weight")
 NUS = ("0.690", "0.740", "0.800")
@@ -85,9 +85,7 @@ def table(out, results):
     for mu, name, curve, v in results:
         md.append(f"| {mu} | {name} | {curve} | {v[0]:.3f} | " + " | ".join(f"{x:+.3f}" for x in v[1:]) + " |")
         lines.append(",".join([mu, name, curve] + [f"{x:.5g}" for x in v]) + "\n")
-    write_atomic(os.path.join(out, "after_peak.md"), "\n".join(md) + "\n")
-    write_atomic(os.path.join(out, "after_peak.csv"), "".join(lines))
-    print("\n".join(md))
+    write_md_csv(out, "after_peak", md, lines)
 
 
 def main(argv=None):

@@ -32,6 +32,10 @@ plastic flow starts".
 CURRENT/ALT.csv (each mu's chosen variant, with or without ALT), OUT/versus_LABEL.{md,csv}. The one with fewer
 coefficients stands left and is kept unless the other beats it on one held-out score and is beaten on neither (the
 same `decide`). docs/model.md, "The Lode-dependent state limit, gated" (twenty-ninth round).
+
+`--compare LEFT RIGHT --names A B --tag T` (thirtieth round): any two sets of runs, LEFT/mu_MU against RIGHT/mu_MU, the
+left one kept unless the right one beats it (`decide`), OUT/T.{md,csv}: an option on top of a choice that --variant
+and --alternative do not name (docs/model.md, "The deviatoric stress under a volume change").
 """
 import argparse
 import csv
@@ -39,7 +43,7 @@ import os
 import sys
 
 from demkit import model_early, model_friction, model_lode_weight, model_state_limit, model_variants
-from demkit.atomic import write_atomic
+from demkit.atomic import write_md_csv
 
 KINDS = model_variants.KINDS
 ALTERNATIVES = {"gate": ["--dilatancy-gate", "mobilisation"], "unaligned": ["--start-anisotropy", "unaligned"],
@@ -157,9 +161,7 @@ def table(lw, out, alt, mus, variant=None):
         md.append(m)
         lines += c
     md[0] = md[0].replace("{K}", str(K))
-    write_atomic(os.path.join(out, f"{tag}.md"), "\n".join(md) + "\n")
-    write_atomic(os.path.join(out, f"{tag}.csv"), "".join(lines))
-    print("\n".join(md))
+    write_md_csv(out, tag, md, lines)
 
 
 def chosen_of(lw, onset, alt, variant, mu):
@@ -194,9 +196,7 @@ def pair_table(out, tag, comment, pairs):
         m, c, K = row(mu, " → ".join(names.values()), dict(zip(STARTS, (p[1] for p in pair))), names)
         md.append(m)
         lines += [x.replace(",stored,", ",left,").replace(",alternative,", ",right,") for x in c]
-    write_atomic(os.path.join(out, f"{tag}.md"), "\n".join(md) + "\n")
-    write_atomic(os.path.join(out, f"{tag}.csv"), "".join(lines))
-    print("\n".join(md))
+    write_md_csv(out, tag, md, lines)
 
 
 def compare(out, tag, left, right, mus):

@@ -86,6 +86,11 @@ def test_the_gate_starts_the_isobaric_volume_flat(tmp_path, work):
     (["--family", "extended", "--state-limit", "volume", "--dilatancy-gate", "mobilisation"], "driven by psi"),
     (["--family", "extended", "--dilatancy-gate", "yes"], "dilatancy-gate"),
     (["--family", "extended", "--start-anisotropy", "random"], "start-anisotropy"),
+    # the thirtieth round's options (test_model_deviator.py)
+    (["--family", "extended", "--fabric-limit", "state"], "--state-limit pressure"),
+    (["--family", "group", "--deviator-volume", "reference"], "give --family extended"),
+    (["--family", "extended", "--state-limit", "volume", "--deviator-volume", "reference"], "without --state-limit volume"),
+    (["--family", "extended", "--deviator-volume", "yes"], "deviator-volume"),
 ])
 def test_the_options_are_refused_where_they_do_not_apply(tmp_path, work, extra, fix):
     r = subprocess.run([DEM, "model", work, "--out", str(tmp_path / "x"), "--no-plots", *extra], capture_output=True,

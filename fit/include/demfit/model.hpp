@@ -838,8 +838,8 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   return d;
 }
 
-/// A/(3B) = a_A F/3 at the state y (with Ext::deviator_reference (A + E_dev)/(3B)), a_A read as rhs reads it: the drained triaxial control's pole is where it reaches 1,
-/// and rhs gives the control up from 1 - kTriaxialMargin on (B > 0). A diagnostic: the laws of psi are read without
+/// A/(3B) = a_A F/3 at the state y (with Ext::deviator_reference (A + E_dev)/(3B)), a_A read as rhs reads it: the
+/// drained triaxial control's pole is where it reaches 1, and rhs gives the control up from 1 - kTriaxialMargin on (B > 0). A diagnostic: the laws of psi are read without
 /// recording psi (ext.psi_seen), so that a prediction's psi_range does not move.
 template <class T>
 T pole_ratio(const Material<T>& m, const State<T>& y) {
