@@ -1,0 +1,206 @@
+"""One calibration for the constant-volume and the laboratory tests (issue 31, thirty-first round): the volume-form state
+parameter (`dem model --state-limit volume`) calibrated on the friction study's constant-volume D2 + D3 (K = 8,
+nu = 0.69-0.80) and the dense preparation's drained triaxial compression TC_s3 at p* = 1e-3 and 1e-2 (K = 4, with its
+isotropic states); every other curve predicted with the same parameters: the dense preparation's other laboratory
+tests, the loose preparation's (another preparation, nu = 0.59-0.65), and the friction study's isobaric D2 paths.
+
+    /usr/bin/python3 -m demkit.model_joint --mu 0.5 [--out DIR] [--work WORK] [--dem build/dem] [--no-jackknife]
+    /usr/bin/python3 -m demkit.model_joint --table-only [--out DIR]      # DIR/joint.{md,csv} from DIR/mu_MU
+
+WORK/mu_MU/ensemble_all/   the laboratory curves of both preparations (demkit.geotech_model, --joint; mu = 0: dense
+                           only), the friction study's D2/D3 means and its isobaric D2 paths (ensemble files only: the
+                           jackknife leaves out the laboratory's packings); regenerated, not stored
+DIR/mu_MU/                 `dem model`'s summary, prediction, parameters (and with the jackknife heldout) tables
+DIR/joint.{md,csv}         per mu: chi2/dof and the worst curve of each group (fitted D2/D3, fitted TC_s3, predicted
+                           dense and loose laboratory tests, predicted isobaric paths), with the count within 1 band
+
+The start is the stored laboratory calibration with the volume-form state parameter of that mu
+(data/geotech/model/state_volume: dense/ at mu = 0.5, mu_MU/dense/ otherwise); the isotropic law's gamma_p, nu_cC and
+alpha are held at its values (the laboratory's isotropic states are two pressures).
+"""
+import argparse
+import csv
+import glob
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+from demkit import geotech_model, model_friction
+from demkit.atomic import write_md_csv
+
+OUT = os.path.join("data", "geotech", "model", "joint")
+STATE = os.path.join("data", "geotech", "model", "state_volume")
+CALIBRATE = "D2,D3,TC_s3_dense"
+KEEP = ("summary", "prediction", "parameters", "heldout", "jackknife")
+# group: (label, which rows of summary.csv, fitted or predicted)
+GROUPS = (("D2 + D3", lambda m: m in ("D2", "D3")),
+          ("TC_s3 dense", lambda m: m == "TC_s3_dense"),
+          ("dense laboratory", lambda m: m.endswith("_dense") and m != "TC_s3_dense"),
+          ("loose laboratory", lambda m: m.endswith("_loose")),
+          ("isobaric D2", lambda m: m == "isobaric"))
+
+
+def start_of(mu):
+    return os.path.join(STATE, "dense" if mu == "0.5" else f"mu_{mu}/dense", "parameters.csv")
+
+
+def command(mu, ens, out, dem, jackknife=True):
+    """The `dem model` line of MU's joint calibration."""
+    return [dem, "model", ens, "--start", start_of(mu), "--calibrate-on", CALIBRATE, "--family", "extended",
+            "--state-limit", "volume", "--hold-isotropic", "gamma_p,nu_cC,alpha", "--max-iterations", "1000",
+            "--no-plots", "--out", out, "--force"] + ([] if jackknife else ["--no-jackknife"])
+
+
+def ensemble(mu, work, curves=os.path.join("data", "geotech", "curves"), friction=os.path.join("data", "friction_n1000")):
+    """WORK/mu_MU/ensemble_all: both preparations' laboratory paths, the D2/D3 means, the isobaric D2 path ensembles."""
+    root = os.path.join(work, f"mu_{mu}")
+    made = geotech_model.convert(curves, mu, root, geotech_model.TESTS, force=True,
+                                 friction=os.path.join(friction, f"mu_{mu}"))
+    two = sorted({m[0] for m in made}) == ["dense", "loose"]
+    if two:
+        geotech_model.write_joint(root, made)
+    src = os.path.join(root, "ensemble_joint" if two else "ensemble_dense")
+    ens = os.path.join(root, "ensemble_all")
+    if os.path.exists(ens):
+        shutil.rmtree(ens)
+    shutil.copytree(src, ens)
+    with tempfile.TemporaryDirectory() as tmp:   # the ensemble files only, not the friction study's members
+        model_friction.isobaric_paths(os.path.join(friction, f"mu_{mu}"), tmp)
+        files = sorted(glob.glob(os.path.join(tmp, "paths", "isobaric_phi*.csv")))
+        if not files:
+            raise SystemExit(f"model_joint: {friction}/mu_{mu} has no isobaric D2 curves")
+        for f in files:
+            shutil.copy2(f, os.path.join(ens, "paths", os.path.basename(f)))
+    return ens
+
+
+def calibrate(mu, work, out, dem, jackknife=True):
+    """MU's joint calibration into WORK/runs/mu_MU; its tables (KEEP, csv and md) copied into OUT/mu_MU. A fit that
+    does not converge still writes its tables (`dem model` exits 1; parameters' row `converged` says so)."""
+    ens = ensemble(mu, work)
+    run = os.path.join(work, "runs", f"mu_{mu}")
+    r = subprocess.run(command(mu, ens, run, dem, jackknife), capture_output=True, text=True)
+    if r.returncode not in (0, 1) or not os.path.exists(os.path.join(run, "summary.csv")):
+        raise SystemExit(f"model_joint: dem model failed on mu = {mu} (exit {r.returncode}):\n{r.stderr[-2000:]}")
+    dest = os.path.join(out, f"mu_{mu}")
+    if os.path.exists(dest):
+        shutil.rmtree(dest)
+    os.makedirs(dest)
+    for stem in KEEP:
+        for ext in ("csv", "md"):
+            f = os.path.join(run, f"{stem}.{ext}")
+            if os.path.exists(f):
+                shutil.copy2(f, os.path.join(dest, f"{stem}.{ext}"))
+    return r.returncode
+
+
+def read(summary_csv):
+    """(chi2/dof, [(mode, nu, role, worst, worst quantity)]) of a summary.csv."""
+    with open(summary_csv, newline="") as fh:
+        rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+    chi, out = float("nan"), []
+    for r in rows:
+        if r["mode"] == "calibration":
+            chi = float(r["role"].split()[-1])
+            continue
+        errs = {q: float(r[f"{q} [band]"]) for q in ("p_star", "eps_v", "s_dev", "F_dev") if r[f"{q} [band]"]}
+        errs = {q: v for q, v in errs.items() if v == v}
+        q = max(errs, key=errs.get) if errs else "nan"
+        out.append((r["mode"], r["nu [-]"], r["role"], errs.get(q, float("nan")), q))
+    return chi, out
+
+
+def converged(parameters_csv):
+    """'no' where parameters.csv has the row `converged` (a fit that stopped short), 'settled' where it stopped at the
+    iteration limit with chi2 settled, else 'yes'."""
+    with open(parameters_csv, newline="") as fh:
+        names = {r["parameter"] for r in csv.DictReader(ln for ln in fh if not ln.startswith("#"))}
+    return "no" if "converged" in names else "settled" if "settled" in names else "yes"
+
+
+def groups(rows):
+    """{label: (curves, within 1 band, worst, 'mode nu quantity', not integrable)} over the GROUPS; the worst over the
+    curves that integrated (inf where a path was lost), nan where none did."""
+    out = {}
+    for label, member in GROUPS:
+        sel = [r for r in rows if member(r[0])]
+        if not sel:
+            continue
+        ran = [r for r in sel if r[3] == r[3]]
+        top = max(ran, key=lambda r: r[3]) if ran else None
+        out[label] = (len(sel), sum(r[3] <= 1.0 for r in ran), top[3] if top else float("nan"),
+                      f"{top[0]} {float(top[1]):.3f} {top[4]}" if top else "", len(sel) - len(ran))
+    return out
+
+
+def cell(g):
+    """'within/curves, worst (curve)', and the curves not integrable where there are any."""
+    n, ok, worst, curve, bad = g
+    return f"{ok}/{n}, {worst:.3g} ({curve})" + (f", {bad} not integrable" if bad else "")
+
+
+def table(entries, first, out, stem, comment):
+    """OUT/STEM.{md,csv}: one row per (name, folder) of ENTRIES from its summary.csv and parameters.csv."""
+    labels = [g[0] for g in GROUPS]
+    md = [f"<!-- demkit/model_joint.py: {comment}. Per group: the curves within 1 band of all, and the worst RMS of model "
+          "- DEM mean over the mean 95 % band half-width (p*, eps_v, s_dev, F_dev) -->",
+          f"| {first} | χ²/dof | converged | " + " | ".join(labels) + " |", "|---|---|---|" + "---|" * len(labels)]
+    head = [first.replace("μ", "mu"), "chi2_per_dof [-]", "converged"]
+    for g in labels:
+        key = g.replace(" + ", "_").replace(" ", "_")
+        head += [f"{key}_curves", f"{key}_within_1_band", f"{key}_worst [band]", f"{key}_worst_curve"]
+    lines = [",".join(head) + "\n"]
+    for name, folder in entries:
+        chi, rows = read(os.path.join(folder, "summary.csv"))
+        conv = converged(os.path.join(folder, "parameters.csv"))
+        g = groups(rows)
+        md.append(f"| {name} | {chi:.4g} | {conv} | " + " | ".join(cell(g[k]) if k in g else "" for k in labels) + " |")
+        vals = []
+        for k in labels:
+            vals += [str(g[k][0]), str(g[k][1]), f"{g[k][2]:.4g}", g[k][3]] if k in g else ["0", "0", "nan", ""]
+        lines.append(",".join([name, f"{chi:.4g}", conv, *vals]) + "\n")
+    write_md_csv(out, stem, md, lines)
+
+
+def write(out):
+    """OUT/joint.{md,csv} over OUT/mu_MU, and OUT/variants_mu_MU/variants.{md,csv} over each one's runs."""
+    if not os.path.isdir(out):
+        raise SystemExit(f"model_joint: {out} is not a folder: run with --mu first (or give --out the stored folder)")
+    mus = sorted((d[len("mu_"):] for d in os.listdir(out) if d.startswith("mu_")), key=float)
+    if not mus:
+        raise SystemExit(f"model_joint: no {out}/mu_MU: run with --mu first")
+    table([(mu, os.path.join(out, f"mu_{mu}")) for mu in mus], "μ", out, "joint",
+          "the volume-form state parameter calibrated on D2 + D3 (friction study, K = 8) and the dense TC_s3 at p* = "
+          "1e-3, 1e-2 (K = 4); the rest predicted")
+    for d in sorted(d for d in os.listdir(out) if d.startswith("variants_mu_")):
+        folder = os.path.join(out, d)
+        names = sorted(n for n in os.listdir(folder) if os.path.isfile(os.path.join(folder, n, "summary.csv")))
+        table([(n, os.path.join(folder, n)) for n in names], "variant", folder, "variants",
+              f"mu = {d[len('variants_mu_'):]}: the joint calibration with one option changed (README), no jackknife")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--mu", nargs="+", default=[], help="friction coefficients to calibrate (0, 0.1, 0.3, 0.5, 1)")
+    ap.add_argument("--out", default=OUT, help=f"where the tables go (default {OUT})")
+    ap.add_argument("--work", default=os.path.join("runs", "model_joint"), help="working folder")
+    ap.add_argument("--dem", default=os.path.join("build", "dem"), help="the dem binary")
+    ap.add_argument("--no-jackknife", action="store_true", help="errors from the covariance only (faster)")
+    ap.add_argument("--table-only", action="store_true", help="only rebuild OUT/joint from OUT/mu_MU")
+    a = ap.parse_args(argv)
+    if not a.table_only:
+        if not a.mu:
+            ap.error("give --mu (or --table-only)")
+        for mu in a.mu:
+            if not os.path.exists(start_of(mu)):
+                raise SystemExit(f"model_joint: no start {start_of(mu)} for mu = {mu}")
+            rc = calibrate(mu, a.work, a.out, a.dem, not a.no_jackknife)
+            print(f"model_joint: mu = {mu}: {'converged' if rc == 0 else 'not converged (tables written)'}",
+                  file=sys.stderr)
+    write(a.out)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
