@@ -6,11 +6,16 @@ tests, the loose preparation's (another preparation, nu = 0.59-0.65), and the fr
 
     /usr/bin/python3 -m demkit.model_joint --mu 0.5 [--out DIR] [--work WORK] [--dem build/dem] [--no-jackknife]
     /usr/bin/python3 -m demkit.model_joint --table-only [--out DIR]      # DIR/joint.{md,csv} from DIR/mu_MU
+    /usr/bin/python3 -m demkit.model_joint --jackknife 0.5 [--out DIR]  # DIR/mu_MU/jackknife_two_sample.{md,csv}
 
 WORK/mu_MU/ensemble_all/   the laboratory curves of both preparations (demkit.geotech_model, --joint; mu = 0: dense
                            only), the friction study's D2/D3 means and its isobaric D2 paths (ensemble files only: the
                            jackknife leaves out the laboratory's packings); regenerated, not stored
 DIR/mu_MU/                 `dem model`'s summary, prediction, parameters (and with the jackknife heldout) tables
+DIR/mu_MU/jackknife_two_sample.{md,csv}   (and each refit's parameters.csv in jackknife_refits/) the two-sample jackknife (`dem model`'s own needs every fitted curve from
+                           the same packings): each of the friction study's 8 packings left out of the D2/D3 means and
+                           each of the laboratory's 4 left out of its curves and isotropic states, one refit each from
+                           the calibration's optimum; se^2 = (8-1)/8 sum over the first + (4-1)/4 sum over the second
 DIR/joint.{md,csv}         per mu: chi2/dof and the worst curve of each group (fitted D2/D3, fitted TC_s3, predicted
                            dense and loose laboratory tests, predicted isobaric paths), with the count within 1 band
 
@@ -27,8 +32,10 @@ import subprocess
 import sys
 import tempfile
 
+import numpy as np
+
 from demkit import geotech_model, model_friction
-from demkit.atomic import write_md_csv
+from demkit.atomic import write_atomic, write_md_csv
 
 OUT = os.path.join("data", "geotech", "model", "joint")
 STATE = os.path.join("data", "geotech", "model", "state_volume")
@@ -181,6 +188,162 @@ def write(out):
               f"mu = {d[len('variants_mu_'):]}: the joint calibration with one option changed (README), no jackknife")
 
 
+ENS_Q = ("nu", "p_star", "s_dev", "F_dev")
+
+
+def read_columns(path):
+    """(comment lines, {column: array}) of a csv with # comments."""
+    with open(path) as fh:
+        lines = fh.readlines()
+    comments = [ln for ln in lines if ln.startswith("#")]
+    rows = list(csv.DictReader(ln for ln in lines if not ln.startswith("#")))
+    return comments, {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+
+
+def friction_means(friction_mu, kept, dest, note):
+    """DEST/ensemble/D[23]_phiX.csv: the friction study's ensemble means over the member folders KEPT (each member
+    resampled linearly on the ensemble's eps_d grid, as `dem ensemble` does: with every member the stored means come
+    back to their printed digits), in the columns geotech_model.copy_friction keeps; NOTE the comment line."""
+    from scipy import stats
+    K, t = len(kept), stats.t.ppf(0.975, len(kept) - 1)
+    for f in sorted(glob.glob(os.path.join(friction_mu, "ensemble", "D[23]_phi*.csv"))):
+        name = os.path.basename(f)
+        _, e = read_columns(f)
+        head, cols = ["eps_d", "n_packings"], [e["eps_d"], np.full(len(e["eps_d"]), float(K))]
+        for q in ENS_Q:
+            x = []
+            for m in kept:
+                _, c = read_columns(os.path.join(m, "deviatoric", name))
+                x.append(np.interp(e["eps_d"], c["eps_d"], c[q]))
+            x = np.array(x)
+            mean, sd = x.mean(axis=0), x.std(axis=0, ddof=1)
+            se = sd / np.sqrt(K)
+            head += [f"{q}_{k}" for k in ("mean", "sd", "se", "lo95", "hi95")]
+            cols += [mean, sd, se, mean - t * se, mean + t * se]
+        body = [",".join(head) + "\n"] + [",".join(repr(float(c[i])) for c in cols) + "\n" for i in range(len(cols[0]))]
+        write_atomic(os.path.join(dest, "ensemble", name), f"# model_joint: {note}\n" + "".join(body))
+
+
+def friction_means_without(friction_mu, left, dest):
+    """friction_means without the member LEFT."""
+    members = sorted(glob.glob(os.path.join(friction_mu, "members", "m*")))
+    kept = [m for m in members if os.path.basename(m) != left]
+    if len(kept) != len(members) - 1:
+        raise SystemExit(f"model_joint: {friction_mu} has no member {left}")
+    friction_means(friction_mu, kept, dest, f"{friction_mu}'s D2/D3 means without {left} ({len(kept)} packings)")
+
+
+def loo_ensembles(mu, work, curves=os.path.join("data", "geotech", "curves"),
+                  friction=os.path.join("data", "friction_n1000")):
+    """{('friction' | 'laboratory', member): ensemble folder} for the two-sample jackknife (dense laboratory paths)."""
+    out, fmu = {}, os.path.join(friction, f"mu_{mu}")
+    base = os.path.join(work, f"mu_{mu}", "ensemble_dense")
+    if not os.path.isdir(base):
+        ensemble(mu, work, curves, friction)
+    for m in sorted(os.listdir(os.path.join(fmu, "members"))):
+        dest = os.path.join(work, "loo", f"friction_{m}")
+        if os.path.exists(dest):
+            shutil.rmtree(dest)
+        shutil.copytree(base, dest)
+        friction_means_without(fmu, m, dest)
+        out[("friction", m)] = dest
+    lab = os.path.join(curves, f"mu_{mu}", "dense")
+    seeds = sorted(os.path.splitext(os.path.basename(f))[0]
+                   for f in glob.glob(os.path.join(lab, geotech_model.LEVELS[0], "TC_s3", "m*.csv")))
+    for m in seeds:
+        tmp = os.path.join(work, "loo", f"curves_{m}")
+        if os.path.exists(tmp):
+            shutil.rmtree(tmp)
+        for level in geotech_model.LEVELS:   # the calibration's curves only: TC_s3 at both pressures, without m
+            src = os.path.join(lab, level, "TC_s3")
+            dst = os.path.join(tmp, f"mu_{mu}", "dense", level, "TC_s3")
+            os.makedirs(dst)
+            for f in sorted(glob.glob(os.path.join(src, "m*.csv"))):
+                if os.path.basename(f) != f"{m}.csv":
+                    shutil.copy2(f, dst)
+        root = os.path.join(work, "loo", f"laboratory_{m}")
+        geotech_model.convert(tmp, mu, root, ("TC_s3",), force=True, friction=fmu)
+        out[("laboratory", m)] = os.path.join(root, "ensemble_dense")
+    return out
+
+
+def free_values(parameters_csv):
+    """{name: value} of the coefficients a fit moved (its se not 'fixed'/nan-held rows skipped by the caller)."""
+    with open(parameters_csv, newline="") as fh:
+        return {r["parameter"]: r for r in csv.DictReader(ln for ln in fh if not ln.startswith("#"))}
+
+
+def two_sample_jackknife(mu, out, work, dem, jobs=2):
+    """Refit MU's joint calibration once per left-out packing (from its optimum), then OUT/mu_MU/
+    jackknife_two_sample.{md,csv}: per coefficient the value, the covariance error and the jackknife's, each sample's
+    part, and the refits' count."""
+    from concurrent.futures import ThreadPoolExecutor
+    full = os.path.join(out, f"mu_{mu}", "parameters.csv")
+    ens = loo_ensembles(mu, work)
+    runs = {}
+
+    def refit(key):
+        run = os.path.join(work, "loo", "runs", f"{key[0]}_{key[1]}")
+        cmd = [dem, "model", ens[key], "--start", full, "--calibrate-on", CALIBRATE, "--family", "extended",
+               "--state-limit", "volume", "--hold-isotropic", "gamma_p,nu_cC,alpha", "--max-iterations", "1000",
+               "--no-jackknife", "--no-plots", "--out", run, "--force"]
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        return key, run, r.returncode
+    with ThreadPoolExecutor(max_workers=jobs) as pool:
+        for key, run, rc in pool.map(refit, sorted(ens)):
+            if rc not in (0, 1) or not os.path.exists(os.path.join(run, "parameters.csv")):
+                raise SystemExit(f"model_joint: the refit without {key[0]} packing {key[1]} failed (exit {rc})")
+            keep = os.path.join(out, f"mu_{mu}", "jackknife_refits", f"{key[0]}_{key[1]}")
+            os.makedirs(keep, exist_ok=True)
+            shutil.copy2(os.path.join(run, "parameters.csv"), keep)
+            runs[key] = (keep, rc)
+            print(f"model_joint: refit without {key[0]} {key[1]}: exit {rc}", file=sys.stderr)
+    write_jackknife(mu, out, full, runs)
+
+
+def jackknife_rows(full, refits):
+    """[(name, value, se_covariance, se_friction, se_laboratory, se_jackknife)] over the coefficients with a quoted
+    covariance error; REFITS {('friction'|'laboratory', member): parameters.csv}."""
+    base = free_values(full)
+    vals = {k: free_values(p) for k, p in refits.items()}
+    rows = []
+    for name, r in base.items():
+        try:
+            se_cov = float(r["se_covariance"])
+            value = float(r["value"])
+        except (KeyError, ValueError):
+            continue
+        if not se_cov == se_cov or r.get("se_method", "") == "fixed":
+            continue
+        parts = {}
+        for sample in ("friction", "laboratory"):
+            x = np.array([float(v[name]["value"]) for (s, _), v in vals.items() if s == sample])
+            n = len(x)
+            parts[sample] = float(np.sqrt((n - 1) / n * np.sum((x - x.mean()) ** 2))) if n > 1 else float("nan")
+        rows.append((name, value, se_cov, parts["friction"], parts["laboratory"],
+                     float(np.hypot(parts["friction"], parts["laboratory"]))))
+    return rows
+
+
+def write_jackknife(mu, out, full, runs):
+    rows = jackknife_rows(full, {k: os.path.join(run, "parameters.csv") for k, (run, _) in runs.items()})
+    n_f = sum(1 for k in runs if k[0] == "friction")
+    n_l = sum(1 for k in runs if k[0] == "laboratory")
+    stopped = sorted(f"{k[0]} {k[1]}" for k, (_, rc) in runs.items() if rc)
+    md = [f"<!-- demkit/model_joint.py: mu = {mu}, the two-sample jackknife of the joint calibration: {n_f} refits without "
+          f"one friction-study packing (D2/D3 means of the rest), {n_l} without one laboratory packing (its TC_s3 and "
+          "isotropic states), each from the calibration's optimum; se_jackknife^2 = se_friction^2 + se_laboratory^2, "
+          "each ((n-1)/n) sum (x_i - mean)^2; refits that stopped at their iteration limit: "
+          f"{', '.join(stopped) if stopped else 'none'} -->",
+          "| coefficient | value | se (covariance) | se (friction packings) | se (laboratory packings) | se (jackknife) |",
+          "|---|---|---|---|---|---|"]
+    lines = ["coefficient,value,se_covariance,se_friction,se_laboratory,se_jackknife\n"]
+    for name, v, c, f, l, j in rows:
+        md.append(f"| {name} | {v:.6g} | {c:.3g} | {f:.3g} | {l:.3g} | {j:.3g} |")
+        lines.append(f"{name},{v!r},{c!r},{f!r},{l!r},{j!r}\n")
+    write_md_csv(os.path.join(out, f"mu_{mu}"), "jackknife_two_sample", md, lines, show=False)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--mu", nargs="+", default=[], help="friction coefficients to calibrate (0, 0.1, 0.3, 0.5, 1)")
@@ -189,7 +352,11 @@ def main(argv=None):
     ap.add_argument("--dem", default=os.path.join("build", "dem"), help="the dem binary")
     ap.add_argument("--no-jackknife", action="store_true", help="errors from the covariance only (faster)")
     ap.add_argument("--table-only", action="store_true", help="only rebuild OUT/joint from OUT/mu_MU")
+    ap.add_argument("--jackknife", metavar="MU", help="the two-sample jackknife of OUT/mu_MU (12 refits, 2 at a time)")
     a = ap.parse_args(argv)
+    if a.jackknife:
+        two_sample_jackknife(a.jackknife, a.out, a.work, a.dem)
+        return 0
     if not a.table_only:
         if not a.mu:
             ap.error("give --mu (or --table-only)")

@@ -97,3 +97,66 @@ def test_the_calibration_line_names_its_start_and_holds():
     assert model_joint.start_of("0.5").endswith(os.path.join("state_volume", "dense", "parameters.csv"))
     with pytest.raises(SystemExit):
         model_joint.main(["--out", "/nonexistent/joint", "--table-only"])
+
+
+def test_the_friction_means_come_back_from_the_members(tmp_path):
+    """The two-sample jackknife's leave-one-out means are computed from the members as `dem ensemble` does: with every
+    member they are the stored ensemble means to their printed digits; without one, K = 7 and the mean moves."""
+    fmu = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
+    members = sorted(os.path.join(fmu, "members", m) for m in os.listdir(os.path.join(fmu, "members")))
+    model_joint.friction_means(fmu, members, str(tmp_path / "all"), "all")
+    model_joint.friction_means_without(fmu, "m003", str(tmp_path / "loo"))
+    for name in ("D2_phi0.690.csv", "D3_phi0.800.csv"):
+        _, stored = model_joint.read_columns(os.path.join(fmu, "ensemble", name))
+        _, again = model_joint.read_columns(str(tmp_path / "all" / "ensemble" / name))
+        _, loo = model_joint.read_columns(str(tmp_path / "loo" / "ensemble" / name))
+        for q in ("p_star_mean", "s_dev_mean", "F_dev_sd", "s_dev_lo95"):
+            assert again[q] == pytest.approx(stored[q], rel=1e-8, abs=1e-10), (name, q)
+        assert set(loo["n_packings"]) == {7.0}
+        assert not loo["s_dev_mean"] == pytest.approx(stored["s_dev_mean"], rel=1e-6)
+    with pytest.raises(SystemExit):
+        model_joint.friction_means_without(fmu, "m099", str(tmp_path / "bad"))
+
+
+def test_the_two_sample_jackknife_on_hand_built_refits(tmp_path):
+    """se^2 = (n_f - 1)/n_f sum (x_i - mean)^2 over the friction refits + the same over the laboratory's; a coefficient
+    without a covariance error (held) is left out."""
+    def write(path, a, held=1.0):
+        path.write_text("parameter,law,value,se,se_method,lo95,hi95,se_covariance,se_jackknife,units\n"
+                        f"s_max_a,x,{a!r},0.1,covariance,0,0,0.01,nan,-\n"
+                        f"gamma_p,x,{held!r},nan,fixed,nan,nan,nan,nan,-\n")
+        return str(path)
+    full = write(tmp_path / "full.csv", 1.0)
+    xf, xl = [1.0, 1.1, 0.9, 1.2], [1.0, 1.3, 0.8]
+    refits = {("friction", f"m{i}"): write(tmp_path / f"f{i}.csv", v) for i, v in enumerate(xf)}
+    refits.update({("laboratory", f"m{i}"): write(tmp_path / f"l{i}.csv", v) for i, v in enumerate(xl)})
+    rows = model_joint.jackknife_rows(full, refits)
+    assert [r[0] for r in rows] == ["s_max_a"]
+    import numpy as np
+    sf = np.sqrt(3 / 4 * np.sum((np.array(xf) - np.mean(xf)) ** 2))
+    sl = np.sqrt(2 / 3 * np.sum((np.array(xl) - np.mean(xl)) ** 2))
+    name, value, cov, f, lab, j = rows[0]
+    assert (value, cov) == (1.0, 0.01)
+    assert f == pytest.approx(sf) and lab == pytest.approx(sl) and j == pytest.approx(np.hypot(sf, sl))
+
+
+def test_the_stored_jackknife_table_rebuilds_from_its_refits(tmp_path):
+    """mu = 0.5: jackknife_two_sample.{md,csv} from the 12 stored refits (8 friction, 4 laboratory), byte for byte;
+    every refit within twice the full fit's chi2/dof (one basin), the errors at least the covariance's in most."""
+    stored = os.path.join(STORED, "mu_0.5")
+    refits = os.path.join(stored, "jackknife_refits")
+    runs = {tuple(d.split("_", 1)): (os.path.join(refits, d), 0) for d in sorted(os.listdir(refits))}
+    assert sorted(k[0] for k in runs).count("friction") == 8 and sorted(k[0] for k in runs).count("laboratory") == 4
+    out = tmp_path / "out"
+    shutil.copytree(stored, out / "mu_0.5")
+    model_joint.write_jackknife("0.5", str(out), os.path.join(stored, "parameters.csv"), runs)
+    for ext in ("md", "csv"):
+        assert filecmp.cmp(out / "mu_0.5" / f"jackknife_two_sample.{ext}",
+                           os.path.join(stored, f"jackknife_two_sample.{ext}"), shallow=False), ext
+    full = float(model_joint.free_values(os.path.join(stored, "parameters.csv"))["chi2_per_dof"]["value"])
+    for run, _ in runs.values():
+        chi = float(model_joint.free_values(os.path.join(run, "parameters.csv"))["chi2_per_dof"]["value"])
+        assert chi < 2 * full, run
+    rows = model_joint.jackknife_rows(os.path.join(stored, "parameters.csv"),
+                                      {k: os.path.join(r, "parameters.csv") for k, (r, _) in runs.items()})
+    assert sum(j > c for *_, c, f, lab, j in rows) > len(rows) // 2
