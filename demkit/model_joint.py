@@ -296,7 +296,7 @@ def two_sample_jackknife(mu, out, work, dem, jobs=2):
             keep = os.path.join(out, f"mu_{mu}", "jackknife_refits", f"{key[0]}_{key[1]}")
             os.makedirs(keep, exist_ok=True)
             shutil.copy2(os.path.join(run, "parameters.csv"), keep)
-            runs[key] = (keep, rc)
+            runs[key] = keep
             print(f"model_joint: refit without {key[0]} {key[1]}: exit {rc}", file=sys.stderr)
     write_jackknife(mu, out, full, runs)
 
@@ -326,10 +326,12 @@ def jackknife_rows(full, refits):
 
 
 def write_jackknife(mu, out, full, runs):
-    rows = jackknife_rows(full, {k: os.path.join(run, "parameters.csv") for k, (run, _) in runs.items()})
+    """OUT/mu_MU/jackknife_two_sample.{md,csv} from RUNS {(sample, member): folder of the refit's parameters.csv}."""
+    rows = jackknife_rows(full, {k: os.path.join(run, "parameters.csv") for k, run in runs.items()})
     n_f = sum(1 for k in runs if k[0] == "friction")
     n_l = sum(1 for k in runs if k[0] == "laboratory")
-    stopped = sorted(f"{k[0]} {k[1]}" for k, (_, rc) in runs.items() if rc)
+    stopped = sorted(f"{k[0]} {k[1]}" for k, run in runs.items()
+                     if converged(os.path.join(run, "parameters.csv")) == "no")
     md = [f"<!-- demkit/model_joint.py: mu = {mu}, the two-sample jackknife of the joint calibration: {n_f} refits without "
           f"one friction-study packing (D2/D3 means of the rest), {n_l} without one laboratory packing (its TC_s3 and "
           "isotropic states), each from the calibration's optimum; se_jackknife^2 = se_friction^2 + se_laboratory^2, "

@@ -140,23 +140,32 @@ def test_the_two_sample_jackknife_on_hand_built_refits(tmp_path):
     assert f == pytest.approx(sf) and lab == pytest.approx(sl) and j == pytest.approx(np.hypot(sf, sl))
 
 
-def test_the_stored_jackknife_table_rebuilds_from_its_refits(tmp_path):
-    """mu = 0.5: jackknife_two_sample.{md,csv} from the 12 stored refits (8 friction, 4 laboratory), byte for byte;
-    every refit within twice the full fit's chi2/dof (one basin), the errors at least the covariance's in most."""
-    stored = os.path.join(STORED, "mu_0.5")
+JACKKNIFED = sorted(d[len("mu_"):] for d in os.listdir(STORED)
+                    if os.path.isdir(os.path.join(STORED, d, "jackknife_refits")))
+
+
+def test_the_jackknife_is_stored_at_mu_0_5():
+    assert "0.5" in JACKKNIFED
+
+
+@pytest.mark.parametrize("mu", JACKKNIFED)
+def test_the_stored_jackknife_table_rebuilds_from_its_refits(tmp_path, mu):
+    """jackknife_two_sample.{md,csv} from the 12 stored refits (8 friction, 4 laboratory), byte for byte; every refit
+    within twice the full fit's chi2/dof (one basin), the errors above the covariance's in most coefficients."""
+    stored = os.path.join(STORED, f"mu_{mu}")
     refits = os.path.join(stored, "jackknife_refits")
-    runs = {tuple(d.split("_", 1)): (os.path.join(refits, d), 0) for d in sorted(os.listdir(refits))}
+    runs = {tuple(d.split("_", 1)): os.path.join(refits, d) for d in sorted(os.listdir(refits))}
     assert sorted(k[0] for k in runs).count("friction") == 8 and sorted(k[0] for k in runs).count("laboratory") == 4
     out = tmp_path / "out"
-    shutil.copytree(stored, out / "mu_0.5")
-    model_joint.write_jackknife("0.5", str(out), os.path.join(stored, "parameters.csv"), runs)
+    shutil.copytree(stored, out / f"mu_{mu}")
+    model_joint.write_jackknife(mu, str(out), os.path.join(stored, "parameters.csv"), runs)
     for ext in ("md", "csv"):
-        assert filecmp.cmp(out / "mu_0.5" / f"jackknife_two_sample.{ext}",
+        assert filecmp.cmp(out / f"mu_{mu}" / f"jackknife_two_sample.{ext}",
                            os.path.join(stored, f"jackknife_two_sample.{ext}"), shallow=False), ext
     full = float(model_joint.free_values(os.path.join(stored, "parameters.csv"))["chi2_per_dof"]["value"])
-    for run, _ in runs.values():
+    for run in runs.values():
         chi = float(model_joint.free_values(os.path.join(run, "parameters.csv"))["chi2_per_dof"]["value"])
         assert chi < 2 * full, run
     rows = model_joint.jackknife_rows(os.path.join(stored, "parameters.csv"),
-                                      {k: os.path.join(r, "parameters.csv") for k, (r, _) in runs.items()})
+                                      {k: os.path.join(r, "parameters.csv") for k, r in runs.items()})
     assert sum(j > c for *_, c, f, lab, j in rows) > len(rows) // 2
