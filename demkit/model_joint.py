@@ -34,7 +34,7 @@ import tempfile
 
 import numpy as np
 
-from demkit import geotech_model, model_friction
+from demkit import geotech_model, model_friction, path_ensemble
 from demkit.atomic import write_atomic, write_md_csv
 
 OUT = os.path.join("data", "geotech", "model", "joint")
@@ -192,12 +192,9 @@ ENS_Q = ("nu", "p_star", "s_dev", "F_dev")
 
 
 def read_columns(path):
-    """(comment lines, {column: array}) of a csv with # comments."""
-    with open(path) as fh:
-        lines = fh.readlines()
-    comments = [ln for ln in lines if ln.startswith("#")]
-    rows = list(csv.DictReader(ln for ln in lines if not ln.startswith("#")))
-    return comments, {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+    """(comment lines, {column: array}) of a csv with # comments (path_ensemble's reader)."""
+    comments, cols = path_ensemble.read_csv(path)
+    return comments, {k: path_ensemble.fnum(v) for k, v in cols.items()}
 
 
 def friction_means(friction_mu, kept, dest, note):
@@ -268,7 +265,7 @@ def loo_ensembles(mu, work, curves=os.path.join("data", "geotech", "curves"),
 
 
 def free_values(parameters_csv):
-    """{name: value} of the coefficients a fit moved (its se not 'fixed'/nan-held rows skipped by the caller)."""
+    """{parameter: its row} of a parameters.csv (every row; jackknife_rows keeps those with a covariance error)."""
     with open(parameters_csv, newline="") as fh:
         return {r["parameter"]: r for r in csv.DictReader(ln for ln in fh if not ln.startswith("#"))}
 
