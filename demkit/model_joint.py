@@ -80,7 +80,28 @@ def ensemble(mu, work, curves=os.path.join("data", "geotech", "curves"), frictio
             raise SystemExit(f"model_joint: {friction}/mu_{mu} has no isobaric D2 curves")
         for f in files:
             shutil.copy2(f, os.path.join(ens, "paths", os.path.basename(f)))
+        add_friction_members(os.path.join(friction, f"mu_{mu}"), tmp, ens)
     return ens
+
+
+def add_friction_members(friction_mu, isobaric, ens):
+    """ENS/members/mNNN/: each friction-study packing's D2/D3 curves (deviatoric/) and its isobaric D2 paths (paths/,
+    from ISOBARIC, model_friction.isobaric_paths' folder), without its isotropic branch (the laboratory's states are the
+    calibration's): `dem model`'s jackknife then leaves out each packing of either set from the means it holds."""
+    for m in sorted(glob.glob(os.path.join(friction_mu, "members", "m*"))):
+        name = os.path.basename(m)
+        if os.path.exists(os.path.join(ens, "members", name)):
+            raise SystemExit(f"model_joint: {ens}/members/{name} exists already: the laboratory's and the friction "
+                             "study's packings must have different names")
+        dev = os.path.join(ens, "members", name, "deviatoric")
+        os.makedirs(dev)
+        for f in sorted(glob.glob(os.path.join(m, "deviatoric", "D[23]_phi*.csv"))):
+            shutil.copy2(f, dev)
+        own = sorted(glob.glob(os.path.join(isobaric, "members", name, "paths", "isobaric_phi*.csv")))
+        if own:
+            os.makedirs(os.path.join(ens, "members", name, "paths"))
+            for f in own:
+                shutil.copy2(f, os.path.join(ens, "members", name, "paths"))
 
 
 def calibrate(mu, work, out, dem, jackknife=True):
@@ -343,6 +364,76 @@ def write_jackknife(mu, out, full, runs):
     write_md_csv(os.path.join(out, f"mu_{mu}"), "jackknife_two_sample", md, lines, show=False)
 
 
+HELDOUT_VARIANTS = ("weighted", "bounded")   # the variants fitted on the joint calibration's curves (with_isobaric is not)
+
+
+def coefficients(parameters_csv):
+    """The model's coefficients in a parameters.csv: its rows but the fixed ones (nu_ref, psi_min, psi_max, the
+    anisotropy excess rule) and the fit's summary rows."""
+    return sum(1 for n, r in free_values(parameters_csv).items()
+               if r.get("se_method", "") != "fixed" and n not in ("chi2_per_dof", "converged"))
+
+
+def heldout_sets(heldout_csv):
+    """{packing: (set, score)} of a `dem model` heldout.csv with its sets of packings (thirty-second round)."""
+    with open(heldout_csv, newline="") as fh:
+        rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+    return {r["packing"]: (int(r["set"]), float(r["heldout_extended [-]"])) for r in rows}
+
+
+def heldout_choice(mu, out):
+    """OUT/variants_mu_MU/heldout_choice.{md,csv}: the held-out test among the joint calibration (OUT/mu_MU) and the
+    variants fitted on the same curves (HELDOUT_VARIANTS under OUT/variants_mu_MU, each with `dem model`'s jackknife
+    over both sets of packings), paired over the 12 left-out packings: model_variants.choose (the variant with the
+    fewest coefficients that no other beats)."""
+    from demkit import model_variants
+    runs = {"overlap": os.path.join(out, f"mu_{mu}")}
+    runs.update({v: os.path.join(out, f"variants_mu_{mu}", v) for v in HELDOUT_VARIANTS})
+    missing = [d for d in runs.values() if not os.path.exists(os.path.join(d, "heldout.csv"))]
+    if missing:
+        raise SystemExit(f"model_joint: no heldout.csv in {', '.join(missing)}: run the variants with the jackknife "
+                         "(data/geotech/model/joint/README.md)")
+    failed = {v: refits_failed(os.path.join(d, "jackknife.csv")) for v, d in runs.items()}
+    runs = {v: d for v, d in runs.items() if not failed[v]}   # a failed refit's score is its start's: not held out
+    sets = {v: heldout_sets(os.path.join(d, "heldout.csv")) for v, d in runs.items()}
+    names = sorted(set.intersection(*(set(s) for s in sets.values())))
+    index = {p: i for i, p in enumerate(names)}
+    scores = {v: {index[p]: s[p][1] for p in names} for v, s in sets.items()}
+    sizes = {v: coefficients(os.path.join(d, "parameters.csv")) for v, d in runs.items()}
+    chosen, beaten, means = model_variants.choose(scores, sizes)
+    md = [f"<!-- demkit/model_joint.py: mu = {mu}, the held-out test among the joint calibration's variants fitted on "
+          "D2 + D3 and TC_s3 dense: each packing's own fitted curves (D2/D3 of a friction-study packing, TC_s3 of a "
+          "laboratory packing) predicted by the refit without it (`dem model`'s jackknife over both sets, heldout.csv); "
+          "b beats a when a - b, paired over the packings, exceeds t_{K-1,0.975} SE; chosen: the fewest coefficients "
+          "that nothing beats (model_variants.choose) -->",
+          "| variant | coefficients | χ²/dof | mean held-out score (all) | friction packings | laboratory packings | "
+          "beaten by | chosen |", "|---|---|---|---|---|---|---|---|"]
+    lines = ["variant,coefficients,chi2_per_dof [-],heldout_mean [-],heldout_friction_mean [-],"
+             "heldout_laboratory_mean [-],packings,beaten_by,chosen\n"]
+    for v in runs:
+        chi = float(free_values(os.path.join(runs[v], "parameters.csv"))["chi2_per_dof"]["value"])
+        part = {k: [sc for p, (st, sc) in sets[v].items() if p in index and st == k] for k in (0, 1)}
+        f, lab = (sum(x) / len(x) if x else float("nan") for x in (part[0], part[1]))
+        md.append(f"| {v} | {sizes[v]} | {chi:.4g} | {means[v]:.4g} | {f:.4g} | {lab:.4g} | "
+                  f"{', '.join(beaten[v]) or '–'} | {'yes' if v == chosen else ''} |")
+        lines.append(f"{v},{sizes[v]},{chi!r},{means[v]!r},{f!r},{lab!r},{len(names)},"
+                     f"{' '.join(beaten[v])},{'yes' if v == chosen else 'no'}\n")
+    for v, bad in failed.items():
+        if bad:
+            md.append(f"| {v} | | | not scored: its refits without {', '.join(bad)} failed | | | | |")
+            lines.append(f"{v},nan,nan,nan,nan,nan,0,,not scored\n")
+    write_md_csv(os.path.join(out, f"variants_mu_{mu}"), "heldout_choice", md, lines, show=False)
+    return chosen
+
+
+def refits_failed(jackknife_csv):
+    """The packings whose jackknife refit is not usable (`dem model`'s jackknife.csv): their held-out scores are those
+    of a fit that saw them."""
+    with open(jackknife_csv, newline="") as fh:
+        return [r["packing_left_out"] for r in csv.DictReader(ln for ln in fh if not ln.startswith("#"))
+                if r["usable"] != "yes"]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--mu", nargs="+", default=[], help="friction coefficients to calibrate (0, 0.1, 0.3, 0.5, 1)")
@@ -352,7 +443,13 @@ def main(argv=None):
     ap.add_argument("--no-jackknife", action="store_true", help="errors from the covariance only (faster)")
     ap.add_argument("--table-only", action="store_true", help="only rebuild OUT/joint from OUT/mu_MU")
     ap.add_argument("--jackknife", metavar="MU", help="the two-sample jackknife of OUT/mu_MU (12 refits, 2 at a time)")
+    ap.add_argument("--choose", metavar="MU", help="the held-out test among OUT/mu_MU and its variants "
+                    "(OUT/variants_mu_MU/heldout_choice.{md,csv})")
     a = ap.parse_args(argv)
+    if a.choose:
+        print(f"model_joint: mu = {a.choose}: the held-out test chooses {heldout_choice(a.choose, a.out)}",
+              file=sys.stderr)
+        return 0
     if a.jackknife:
         two_sample_jackknife(a.jackknife, a.out, a.work, a.dem)
         return 0

@@ -113,12 +113,16 @@ PathData leave_one_out_path(const PathData& d, const fs::path& member_csv) {
       throw InputError(member_csv.string() + ": row " + std::to_string(i) + " is not on the ensemble's grid");
   PathData o = d;
   const double K = d.packings;
+  // the volume fraction too: the path starts from the other packings' mean state, and --state-limit volume's
+  // critical-state line is held at their end states (before the thirty-second round it stayed the full mean's, so
+  // the jackknife missed the scatter of the start states)
   const std::pair<const char*, std::vector<double>*> q[] = {
-      {"p_star", &o.p}, {"eps_v", &o.ev}, {"s_dev_signed", &o.s}, {"F_dev_signed", &o.F}};
+      {"p_star", &o.p}, {"eps_v", &o.ev}, {"s_dev_signed", &o.s}, {"F_dev_signed", &o.F}, {"nu", &o.nu_m}};
   for (auto& [name, v] : q) {
     const auto& x = t.column(name);
     for (std::size_t i = 0; i < v->size(); ++i) (*v)[i] = (K * (*v)[i] - x[i]) / (K - 1);
   }
+  if (!o.nu_m.empty()) o.nu = o.nu_m.front();
   return o;
 }
 
@@ -180,9 +184,12 @@ bool add_profile_columns(const Calibration& cal, Table& t) {
 void write_parameter_tables(const Calibration& cal, int packings, const fs::path& out, const std::string& fit_label) {
   Table t({"parameter", "law", "value", "se", "se_method", "lo95", "hi95", "se_covariance", "se_jackknife", "units"});
   const bool jk = !cal.se_jackknife.empty();
-  const double tq = jk ? t_quantile(0.975, packings - 1) : 1.959964;
   std::vector<std::string> exact;   // the values to the last bit (parameters.csv/json: a --start reads them back)
   for (std::size_t i = 0; i < cal.value.size(); ++i) {
+    // t over the jackknife's degrees of freedom (K - 1; Welch-Satterthwaite's over several sets of packings)
+    const double nu_t = i < cal.dof_jackknife.size() && std::isfinite(cal.dof_jackknife[i]) ? cal.dof_jackknife[i]
+                                                                                              : packings - 1.0;
+    const double tq = jk ? t_quantile(0.975, nu_t) : 1.959964;
     const std::string why = cal.errors_not_determined();   // the columns se_covariance, se_jackknife keep the numbers
     const double se = why.empty() ? cal.se()[i] : std::nan("");
     const bool tied = cal.shared_jamming && cal.names[i] == "nu_cC";
@@ -336,7 +343,8 @@ void write_path_curve(const PathPrediction& m, const PathData& d, const std::str
 // a_A(nu) and ln beta_p(nu) at the ensemble's volume fractions: standard errors and their
 // correlation from the covariance (and from the leave-one-out estimates where the jackknife ran).
 void write_identifiability(const Calibration& cal, const std::vector<std::vector<double>>& jack,
-                           const std::vector<double>& nus, const std::string& fit_label, const fs::path& out) {
+                           const std::vector<int>& sample, const std::vector<double>& nus, const std::string& fit_label,
+                           const fs::path& out) {
   const int np = static_cast<int>(cal.value.size());
   auto cov = [&](int a, int b) { return cal.corr[a][b] * cal.se_cov[a] * cal.se_cov[b]; };
   const int aA = kNumIso + kAnisoA, aB = kNumIso + kAnisoB, pA = kNumIso + kLnBetaPA, pB = kNumIso + kLnBetaPB;
@@ -352,17 +360,11 @@ void write_identifiability(const Calibration& cal, const std::vector<std::vector
     const double cxy = cov(aA, pA) + d * (cov(aA, pB) + cov(aB, pA)) + d * d * cov(aB, pB);
     double sx = std::nan(""), sy = std::nan(""), rj = std::nan("");
     if (!jack.empty() && static_cast<int>(jack.front().size()) == np) {
-      const double K = jack.size();
       std::vector<double> xs, ys;
       for (const auto& e : jack) { xs.push_back(e[aA] + d * e[aB]); ys.push_back(e[pA] + d * e[pB]); }
-      double mx = 0, my = 0;
-      for (std::size_t k = 0; k < xs.size(); ++k) { mx += xs[k] / K; my += ys[k] / K; }
-      double sxx = 0, syy = 0, sxy = 0;
-      for (std::size_t k = 0; k < xs.size(); ++k) {
-        sxx += (xs[k] - mx) * (xs[k] - mx); syy += (ys[k] - my) * (ys[k] - my); sxy += (xs[k] - mx) * (ys[k] - my);
-      }
-      sx = std::sqrt((K - 1) / K * sxx); sy = std::sqrt((K - 1) / K * syy);
-      rj = sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : std::nan("");
+      const double sxx = jackknife_covariance(xs, xs, sample), syy = jackknife_covariance(ys, ys, sample);
+      sx = std::sqrt(sxx); sy = std::sqrt(syy);
+      rj = sxx > 0 && syy > 0 ? jackknife_covariance(xs, ys, sample) / std::sqrt(sxx * syy) : std::nan("");
     }
     const Local<double> L = local(cal.params.shear, grid[g], cal.params.nu_ref);
     t.add_row({fit_label, num(grid[g], 4) + (g == 0 ? " (nu_ref)" : ""), num(L.a_A), num(std::sqrt(std::max(vx, 0.0))), num(sx),
@@ -402,6 +404,20 @@ void write_model_paths(const Parameters& P, const CurveData& c, const std::strin
 
 // ---- Families, the held-out test, the summary table (docs/model.md, "The frictional extension") ----
 
+// What `dem model` reads: the fitted and the other mean curves and path ensembles with their
+// files, the label of the fitted set, the members and the isotropic branch.
+struct ModelInputs {
+  std::vector<CurveData> fit_curves, other;
+  std::vector<CurveFile> fit_files, other_files;
+  std::vector<PathData> fit_paths, other_paths;
+  std::vector<CurveFile> fit_path_files, other_path_files;
+  std::string fit_label;
+  std::vector<fs::path> members;
+  std::vector<std::string> iso_files;
+  IsoData iso;
+  int K = 0;
+};
+
 struct StartOutcome {   // one start of a multi-start calibration (starts.csv)
   std::string start;      ///< the --start entry: a parameters.csv or `default`
   double chi2_dof = 0;
@@ -425,7 +441,9 @@ struct FamilyFit {
   std::size_t chosen_start = 0;
   std::vector<JackRefit> refits;           ///< the jackknife's leave-one-out refits, in packing order
   std::vector<std::vector<double>> jack;   ///< leave-one-out estimates
-  std::vector<double> heldout;             ///< per left-out packing: its own fitted curves' mean squared
+  std::vector<int> jack_sample;            ///< per estimate, its sample of packings (JackSamples; one: all 0)
+  int samples = 1;                         ///< how many samples of packings the jackknife ran over
+  std::vector<double> heldout;             ///< per left-out packing: its own fitted curves' (and paths') mean squared
                                            ///< standardised error under the fit without it
   std::vector<double> heldout_paths;       ///< ... its own predicted paths' (heldout_path_score; NaN: none)
 };
@@ -449,18 +467,46 @@ void add_standardised_squares(const std::vector<double>& model, const std::vecto
   }
 }
 
-// Packing k's own curves of the fitted modes, predicted from its own start state by the fit of
-// the other K - 1 packings: mean of ((model - member)/sd)^2 over rows > 0 and p*, s_dev, F_dev,
-// sd = the between-packing SD (se sqrt(K)) floored at 0.25 of its median, as the fit's weights.
-double heldout_score(const Parameters& P, const std::vector<CurveData>& curves, const std::vector<CurveFile>& files,
-                     const fs::path& member, int K, double eps_max) {
+// Adds the member's own path (MEMBER_CSV, on the ensemble D's grid), predicted from its own start state by P, to ss
+// and n: ((model - member)/sd)^2 over rows > 0 and p* (constant-volume rows) or eps_v (rows at held pressure), s_dev
+// and F_dev signed, sd as add_standardised_squares with D's own packings. False where the laws cannot start it.
+bool add_path_squares(const Parameters& P, const PathData& ensemble, const fs::path& member_csv, double& ss, long& n) {
+  const Table t = read_table(member_csv.string());
+  PathData d = ensemble;
+  if (t.column("eps_d_accumulated").size() != d.acc.size())
+    throw InputError(member_csv.string() + " is not on its ensemble's grid: rerun demkit.path_ensemble");
+  d.p = t.column("p_star"); d.ev = t.column("eps_v"); d.s = t.column("s_dev_signed"); d.F = t.column("F_dev_signed");
+  d.nu_m = t.column("nu");
+  d.nu = d.nu_m.front();
+  PathPrediction m;
+  try {
+    m = predict_path(P, d);
+  } catch (const std::invalid_argument&) {   // the laws cannot start this packing's own path
+    return false;
+  }
+  std::vector<bool> held(d.acc.size()), vol(d.acc.size()), all(d.acc.size(), true);
+  for (std::size_t i = 0; i < d.acc.size(); ++i) { held[i] = d.isobaric[i] != 0; vol[i] = !held[i]; }
+  const int K = ensemble.packings;
+  add_standardised_squares(m.p, d.p, ensemble.se_p, vol, K, ss, n);
+  add_standardised_squares(m.ev, d.ev, ensemble.se_ev, held, K, ss, n);
+  add_standardised_squares(m.s, d.s, ensemble.se_s, all, K, ss, n);
+  add_standardised_squares(m.F, d.F, ensemble.se_F, all, K, ss, n);
+  return true;
+}
+
+// The left-out member's own fitted curves and paths (those it holds), predicted from its own start states by the fit
+// of the other packings: mean of ((model - member)/sd)^2 over rows > 0 and p*, s_dev, F_dev (paths: as
+// add_path_squares), sd = the between-packing SD (se sqrt(K), K the curve's own packings) floored at 0.25 of its
+// median, as the fit's weights. NaN where the member holds none or the laws cannot start one of its paths. (Before the
+// thirty-second round the fitted paths were not scored: a calibration on paths alone had no held-out score.)
+double heldout_score(const Parameters& P, const ModelInputs& in, const fs::path& member, double eps_max) {
   double ss = 0;
   long n = 0;
-  for (std::size_t j = 0; j < curves.size(); ++j) {
-    const fs::path mc = member_curve(member, files[j]);
+  for (std::size_t j = 0; j < in.fit_curves.size(); ++j) {
+    const fs::path mc = member_curve(member, in.fit_files[j]);
     if (mc.empty()) continue;
     const Table t = read_table(mc.string());
-    CurveData c = curves[j];
+    CurveData c = in.fit_curves[j];
     const auto& e = t.column("eps_d");
     c.p = resample(e, t.column("p_star"), c.eps);
     c.s = resample(e, t.column("s_dev"), c.eps);
@@ -468,44 +514,28 @@ double heldout_score(const Parameters& P, const std::vector<CurveData>& curves, 
     c.nu = t.column("nu").front();
     const ModelCurve m = predict_curve(P, c, eps_max);
     const std::vector<bool> all(c.se_p.size(), true);
-    add_standardised_squares(m.p, c.p, c.se_p, all, K, ss, n);
-    add_standardised_squares(m.s, c.s, c.se_s, all, K, ss, n);
-    add_standardised_squares(m.F, c.F, c.se_F, all, K, ss, n);
+    add_standardised_squares(m.p, c.p, c.se_p, all, c.packings, ss, n);
+    add_standardised_squares(m.s, c.s, c.se_s, all, c.packings, ss, n);
+    add_standardised_squares(m.F, c.F, c.se_F, all, c.packings, ss, n);
+  }
+  for (std::size_t j = 0; j < in.fit_paths.size(); ++j) {
+    const fs::path mp = member_path_curve(member, in.fit_path_files[j]);
+    if (!mp.empty() && !add_path_squares(P, in.fit_paths[j], mp, ss, n)) return std::nan("");
   }
   return n > 0 ? ss / n : std::nan("");
 }
 
 // Packing k's own predicted path ensembles (those not fitted: the isobaric D2 paths of a D2 + D3 calibration), each
-// from its own start state, by the fit of the other K - 1 packings: mean of ((model - member)/sd)^2 over rows > 0 and
-// p* (constant-volume rows) or eps_v (rows at held pressure), s_dev and F_dev signed, sd as heldout_score. NaN where
-// no member holds such a path, where the laws cannot start one, or where the model is lost on it. The held-out score
-// of a prediction, which heldout_score (fitted curves only) does not see.
+// from its own start state, by the fit of the other packings: add_path_squares' mean. NaN where no member holds such
+// a path, where the laws cannot start one, or where the model is lost on it. The held-out score of a prediction,
+// which heldout_score (fitted curves only) does not see.
 double heldout_path_score(const Parameters& P, const std::vector<PathData>& paths, const std::vector<CurveFile>& files,
-                          const fs::path& member, int K) {
+                          const fs::path& member) {
   double ss = 0;
   long n = 0;
   for (std::size_t j = 0; j < paths.size(); ++j) {
     const fs::path mp = member_path_curve(member, files[j]);
-    if (mp.empty()) continue;
-    const Table t = read_table(mp.string());
-    PathData d = paths[j];
-    if (t.column("eps_d_accumulated").size() != d.acc.size())
-      throw InputError(mp.string() + " is not on its ensemble's grid: rerun demkit.path_ensemble");
-    d.p = t.column("p_star"); d.ev = t.column("eps_v"); d.s = t.column("s_dev_signed"); d.F = t.column("F_dev_signed");
-    d.nu_m = t.column("nu");
-    d.nu = d.nu_m.front();
-    PathPrediction m;
-    try {
-      m = predict_path(P, d);
-    } catch (const std::invalid_argument&) {   // the laws cannot start this packing's own path: no score
-      return std::nan("");
-    }
-    std::vector<bool> held(d.acc.size()), vol(d.acc.size()), all(d.acc.size(), true);
-    for (std::size_t i = 0; i < d.acc.size(); ++i) { held[i] = d.isobaric[i] != 0; vol[i] = !held[i]; }
-    add_standardised_squares(m.p, d.p, d.se_p, vol, K, ss, n);
-    add_standardised_squares(m.ev, d.ev, d.se_ev, held, K, ss, n);
-    add_standardised_squares(m.s, d.s, d.se_s, all, K, ss, n);
-    add_standardised_squares(m.F, d.F, d.se_F, all, K, ss, n);
+    if (!mp.empty() && !add_path_squares(P, paths[j], mp, ss, n)) return std::nan("");
   }
   return n > 0 ? ss / n : std::nan("");
 }
@@ -744,19 +774,6 @@ void check_output_folder(const fs::path& out) {
   fs::remove(probe, ec);
 }
 
-// What `dem model` reads: the fitted and the other mean curves and path ensembles with their
-// files, the label of the fitted set, the members and the isotropic branch.
-struct ModelInputs {
-  std::vector<CurveData> fit_curves, other;
-  std::vector<CurveFile> fit_files, other_files;
-  std::vector<PathData> fit_paths, other_paths;
-  std::vector<CurveFile> fit_path_files, other_path_files;
-  std::string fit_label;
-  std::vector<fs::path> members;
-  std::vector<std::string> iso_files;
-  IsoData iso;
-  int K = 0;
-};
 
 // The ensemble folder's curves, path ensembles and isotropic branch, split by --calibrate-on.
 ModelInputs read_model_inputs(const ModelCommandOptions& o, const fs::path& dir) {
@@ -1010,6 +1027,49 @@ CalibrationOptions calibration_options(const ModelCommandOptions& o) {
   return co;
 }
 
+// The jackknife's packings: the members (DIR/members/*) that hold a fitted mean curve or path, each in the sample of
+// the members that hold the same ones. One sample where every packing holds every fitted curve; two in the joint
+// calibration (the friction study's packings behind D2 + D3, the laboratory's behind TC_s3; docs/model.md, "A
+// jackknife over two sets of packings"). `why` is not empty where a fitted curve's packings are not its holders.
+struct JackSamples {
+  std::vector<std::size_t> member;   ///< the jackknife's packings, indices into ModelInputs::members
+  std::vector<int> sample;           ///< each one's sample (0, 1, ... in the order of first appearance)
+  std::vector<int> size;             ///< each sample's packings
+  std::string why;                   ///< why the jackknife cannot run ("" when it can)
+};
+JackSamples jackknife_samples(const ModelInputs& in) {
+  JackSamples s;
+  const std::size_t nc = in.fit_files.size(), n = nc + in.fit_path_files.size();
+  std::vector<int> holders(n, 0);
+  std::map<std::string, int> ids;
+  for (std::size_t m = 0; m < in.members.size(); ++m) {
+    std::string held(n, '0');
+    for (std::size_t j = 0; j < n; ++j)
+      if (!(j < nc ? member_curve(in.members[m], in.fit_files[j])
+                   : member_path_curve(in.members[m], in.fit_path_files[j - nc])).empty()) {
+        held[j] = '1';
+        ++holders[j];
+      }
+    if (held.find('1') == std::string::npos) continue;   // a packing of predicted curves only: not refitted
+    const auto it = ids.emplace(held, static_cast<int>(ids.size())).first;
+    if (it->second == static_cast<int>(s.size.size())) s.size.push_back(0);
+    ++s.size[it->second];
+    s.member.push_back(m);
+    s.sample.push_back(it->second);
+  }
+  for (std::size_t j = 0; j < n && s.why.empty(); ++j) {
+    const CurveFile& f = j < nc ? in.fit_files[j] : in.fit_path_files[j - nc];
+    const int K = j < nc ? in.fit_curves[j].packings : in.fit_paths[j - nc].packings;
+    if (holders[j] != K)
+      s.why = "DIR/members holds " + std::to_string(holders[j]) + " member curves of " + f.mode + "_" + f.tag +
+              " (its mean is over " + std::to_string(K) + " packings)";
+  }
+  for (std::size_t g = 0; g < s.size.size() && s.why.empty(); ++g)
+    if (s.size[g] < 2) s.why = "a set of packings holding its own fitted curves has one packing (none to leave out)";
+  if (s.member.empty() && s.why.empty()) s.why = "no member holds a fitted curve";
+  return s;
+}
+
 // Packing k left out of every fitted mean curve and path and of the isotropic branch, refitted from the full
 // fit's optimum. A refit that did not reach an optimum like the full fit's (jackknife_refit_usable: failed at
 // its start, not converged, or far above), or ended above kRetryAbove times the full fit's chi2/dof (at least 1),
@@ -1020,16 +1080,20 @@ constexpr double kRetryAbove = 1.5;
 JackRefit refit_without(const ModelInputs& in, const CalibrationOptions& co_f, const ModelCommandOptions& o,
                         const FamilyFit& ff, int k, Calibration& best) {
   const fs::path& member = in.members[k];
-  std::vector<CurveData> loo;
-  for (std::size_t j = 0; j < in.fit_curves.size(); ++j)
-    loo.push_back(leave_one_out(in.fit_curves[j], member_curve(member, in.fit_files[j])));
+  std::vector<CurveData> loo;   // the means it holds without it, the others as they are
+  for (std::size_t j = 0; j < in.fit_curves.size(); ++j) {
+    const fs::path mc = member_curve(member, in.fit_files[j]);
+    loo.push_back(mc.empty() ? in.fit_curves[j] : leave_one_out(in.fit_curves[j], mc));
+  }
   std::vector<std::string> iso_k;
   const std::string own = unloading_of(member).string();
   for (const auto& f : in.iso_files) if (f != own) iso_k.push_back(f);
   const IsoData iso = read_isotropic(iso_k);
   std::vector<PathData> loo_paths;
-  for (std::size_t j = 0; j < in.fit_paths.size(); ++j)
-    loo_paths.push_back(leave_one_out_path(in.fit_paths[j], member_path_curve(member, in.fit_path_files[j])));
+  for (std::size_t j = 0; j < in.fit_paths.size(); ++j) {
+    const fs::path mp = member_path_curve(member, in.fit_path_files[j]);
+    loo_paths.push_back(mp.empty() ? in.fit_paths[j] : leave_one_out_path(in.fit_paths[j], mp));
+  }
   JackRefit r{member.filename().string(), "the full fit's optimum", 0, false, false, 0, ""};
   CalibrationOptions cj = co_f;
   cj.check_jacobian = false;   // the refits' errors are not read
@@ -1056,61 +1120,57 @@ JackRefit refit_without(const ModelInputs& in, const CalibrationOptions& co_f, c
   return r;
 }
 
-// Jackknife over packings: the same fit with each packing left out of every mean curve and of the
-// isotropic branch; the held-out score of each left-out packing (its own fitted curves predicted by
-// the fit without it).
+// Jackknife over packings: the same fit with each packing left out of every mean curve and path it holds and of the
+// isotropic branch (jackknife_samples: one set of packings, or several behind different fitted curves); the held-out
+// score of each left-out packing (its own fitted curves predicted by the fit without it).
 void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const ModelCommandOptions& o, FamilyFit& ff) {
-  const auto& fit_curves = in.fit_curves; const auto& fit_files = in.fit_files;
-  const auto& fit_paths = in.fit_paths; const auto& fit_path_files = in.fit_path_files;
-  const auto& members = in.members;
-  const int K = in.K;
   Calibration& cal = ff.cal;
-  if (!o.jackknife || K < 2) return;
-  bool complete = static_cast<int>(members.size()) == K;
-  for (const auto& c : fit_curves) complete = complete && c.packings == K;
-  for (std::size_t j = 0; complete && j < fit_files.size(); ++j)
-    for (const auto& m : members) complete = complete && !member_curve(m, fit_files[j]).empty();
-  for (const auto& d : fit_paths) complete = complete && d.packings == K;
-  for (std::size_t j = 0; complete && j < fit_path_files.size(); ++j)
-    for (const auto& m : members) complete = complete && !member_path_curve(m, fit_path_files[j]).empty();
-  if (!complete) {
-    cal.warnings.push_back("jackknife skipped: DIR/members does not hold the " + std::to_string(K) +
-                           " member curves of every fitted mean; errors from the covariance instead");
-  } else {
-    std::vector<std::vector<double>>& est = ff.jack;   // leave-one-out estimates (for the jackknife correlations)
-    std::string failed;   // refits that did not reach an optimum comparable to the full fit's
-    for (int k = 0; k < K; ++k) {
-      Calibration ck;
-      const JackRefit r = refit_without(in, co_f, o, ff, k, ck);
-      est.push_back(ck.value);
-      ff.heldout.push_back(heldout_score(ck.params, fit_curves, fit_files, members[k], K, o.eps_max));
-      ff.heldout_paths.push_back(heldout_path_score(ck.params, in.other_paths, in.other_path_files, members[k], K));
-      ff.refits.push_back(r);
-      std::cerr << "dem model: jackknife " << k + 1 << "/" << K << " (" << r.packing << " left out): chi2/dof = "
-                << num(r.chi2_dof, 4) << (r.tries > 1 ? " (from " + r.start + ", after " + std::to_string(r.tries) +
-                                                         " starts)" : std::string()) << "\n";
-      if (!r.usable)
-        failed += (failed.empty() ? "" : ", ") + r.packing + " left out (chi2/dof " + num(r.chi2_dof, 4) +
-                  (r.converged ? "" : ", not converged") + ")";
-    }
-    if (!failed.empty()) {   // a failed refit's values are its start's or a poor optimum's: not the packings' scatter
-      ff.jack.clear();
-      cal.warnings.push_back("jackknife not used: its refit " + failed + " did not reach an optimum like the full fit's "
-                             "(chi2/dof " + num(cal.chi2_dof(), 4) + "), so the spread of the refits is not the "
-                             "packings' scatter (not even from the other --start values, if given); errors from the "
-                             "covariance instead (jackknife.md lists every refit; docs/model.md, \"The jackknife's "
-                             "refits\")");
-      return;
-    }
-    cal.se_jackknife = jackknife_errors(est, cal, co_f.csl_linear, &cal.warnings);
-    if (K < 4) {   // as `dem fit` says for its fits
-      double worst = 1;
-      for (std::size_t i = 0; i < cal.value.size(); ++i)
-        if (cal.se_jackknife[i] > 0 && cal.se_cov[i] > 0) worst = std::max(worst, cal.se_cov[i] / cal.se_jackknife[i]);
-      cal.warnings.push_back("only " + std::to_string(K) + " packings: a jackknife over fewer than 4 packings is itself "
-                             "very uncertain (here up to " + num(worst, 3) + "x below the covariance errors) and its "
-                             "intervals under-cover; set [ensemble] packings >= 4 for errors between packings");
-    }
+  if (!o.jackknife || in.K < 2) return;
+  const JackSamples js = jackknife_samples(in);
+  if (!js.why.empty()) {
+    cal.warnings.push_back("jackknife skipped: " + js.why + "; errors from the covariance instead");
+    return;
+  }
+  std::vector<std::vector<double>>& est = ff.jack;   // leave-one-out estimates (for the jackknife correlations)
+  std::string failed;   // refits that did not reach an optimum comparable to the full fit's
+  const std::size_t n = js.member.size();
+  for (std::size_t k = 0; k < n; ++k) {
+    const fs::path& member = in.members[js.member[k]];
+    Calibration ck;
+    const JackRefit r = refit_without(in, co_f, o, ff, static_cast<int>(js.member[k]), ck);
+    est.push_back(ck.value);
+    ff.heldout.push_back(heldout_score(ck.params, in, member, o.eps_max));
+    ff.heldout_paths.push_back(heldout_path_score(ck.params, in.other_paths, in.other_path_files, member));
+    ff.refits.push_back(r);
+    std::cerr << "dem model: jackknife " << k + 1 << "/" << n << " (" << r.packing << " left out): chi2/dof = "
+              << num(r.chi2_dof, 4) << (r.tries > 1 ? " (from " + r.start + ", after " + std::to_string(r.tries) +
+                                                       " starts)" : std::string()) << "\n";
+    if (!r.usable)
+      failed += (failed.empty() ? "" : ", ") + r.packing + " left out (chi2/dof " + num(r.chi2_dof, 4) +
+                (r.converged ? "" : ", not converged") + ")";
+  }
+  ff.jack_sample = js.sample;
+  ff.samples = static_cast<int>(js.size.size());
+  if (!failed.empty()) {   // a failed refit's values are its start's or a poor optimum's: not the packings' scatter
+    ff.jack.clear();
+    cal.warnings.push_back("jackknife not used: its refit " + failed + " did not reach an optimum like the full fit's "
+                           "(chi2/dof " + num(cal.chi2_dof(), 4) + "), so the spread of the refits is not the "
+                           "packings' scatter (not even from the other --start values, if given); errors from the "
+                           "covariance instead (jackknife.md lists every refit; docs/model.md, \"The jackknife's "
+                           "refits\")");
+    return;
+  }
+  cal.se_jackknife = jackknife_errors(est, cal, co_f.csl_linear, &cal.warnings, ff.samples > 1 ? js.sample
+                                      : std::vector<int>{}, &cal.dof_jackknife);
+  const int smallest = *std::min_element(js.size.begin(), js.size.end());
+  if (smallest < 4) {   // as `dem fit` says for its fits
+    double worst = 1;
+    for (std::size_t i = 0; i < cal.value.size(); ++i)
+      if (cal.se_jackknife[i] > 0 && cal.se_cov[i] > 0) worst = std::max(worst, cal.se_cov[i] / cal.se_jackknife[i]);
+    cal.warnings.push_back("only " + std::to_string(smallest) + " packings" + (ff.samples > 1 ? " in a set" : "") +
+                           ": a jackknife over fewer than 4 packings is itself very uncertain (here up to " +
+                           num(worst, 3) + "x below the covariance errors) and its intervals under-cover; set "
+                           "[ensemble] packings >= 4 for errors between packings");
   }
 }
 
@@ -1312,13 +1372,16 @@ void write_heldout(const FamilyFit& ff, const fs::path& out) {
   const bool paths = std::any_of(ff.heldout_paths.begin(), ff.heldout_paths.end(), [](double v) { return !std::isnan(v); });
   Table t(paths ? std::vector<std::string>{"packing_left_out", "heldout_extended [-]", "heldout_predicted_paths [-]"}
                 : std::vector<std::string>{"packing_left_out", "heldout_extended [-]"});
+  const bool sets = ff.samples > 1;   // several sets of packings: each row's packing and set
+  if (sets) t.header.insert(t.header.begin() + 1, {"packing", "set"});
   for (std::size_t k = 0; k < ff.heldout.size(); ++k) {
     std::vector<std::string> r{std::to_string(k), num(ff.heldout[k], 4)};
     if (paths) r.push_back(num(ff.heldout_paths[k], 4));
+    if (sets) r.insert(r.begin() + 1, {ff.refits[k].packing, std::to_string(ff.jack_sample[k])});
     t.add_row(r);
   }
   write_table_all(t, (out / "heldout").string(),
-                  "Held-out score per left-out packing: its own fitted curves predicted by the fit without it, mean "
+                  "Held-out score per left-out packing: its own fitted curves (and fitted paths) predicted by the fit without it, mean "
                   "squared error in units of the between-packing SD (docs/model.md, the held-out test); the column name "
                   "is selection.csv's, whatever the family" +
                       std::string(paths ? "; heldout_predicted_paths: the same for its own predicted path ensembles "
@@ -1333,14 +1396,24 @@ void write_refits(const FamilyFit& ff, const fs::path& out) {
   if (ff.refits.empty()) return;
   Table t({"packing_left_out", "chi2_per_dof [-]", "full_fit_chi2_per_dof [-]", "converged", "usable", "start", "tries",
            "message"});
-  for (const auto& r : ff.refits)
-    t.add_row({r.packing, num(r.chi2_dof, 6), num(ff.cal.chi2_dof(), 6), r.converged ? "yes" : "no",
-               r.usable ? "yes" : "no", r.start, std::to_string(r.tries), r.message});
+  const bool sets = ff.samples > 1;   // several sets of packings: which set each one is in
+  if (sets) t.header.insert(t.header.begin() + 1, "set");
+  for (std::size_t k = 0; k < ff.refits.size(); ++k) {
+    const JackRefit& r = ff.refits[k];
+    std::vector<std::string> row{r.packing, num(r.chi2_dof, 6), num(ff.cal.chi2_dof(), 6), r.converged ? "yes" : "no",
+                                 r.usable ? "yes" : "no", r.start, std::to_string(r.tries), r.message};
+    if (sets) row.insert(row.begin() + 1, std::to_string(k < ff.jack_sample.size() ? ff.jack_sample[k] : 0));
+    t.add_row(row);
+  }
   write_table_all(t, (out / "jackknife").string(),
-                  "The jackknife's refits, one per packing left out of every fitted mean and of the isotropic branch; "
-                  "usable: converged with chi2/dof at most 3 max(1, the full fit's); a refit that was not, or ended "
-                  "above 1.5 max(1, the full fit's), is run again from each other --start and the best kept; the "
-                  "jackknife errors are used only when every refit is usable");
+                  std::string("The jackknife's refits, one per packing left out of every fitted mean it holds and of "
+                              "the isotropic branch; ") +
+                      (sets ? "set: the packings holding the same fitted curves (the errors sum each set's part, "
+                              "(n-1)/n sum (x - its mean)^2; docs/model.md, \"A jackknife over two sets of "
+                              "packings\"); " : "") +
+                      "usable: converged with chi2/dof at most 3 max(1, the full fit's); a refit that was not, or "
+                      "ended above 1.5 max(1, the full fit's), is run again from each other --start and the best kept; "
+                      "the jackknife errors are used only when every refit is usable");
 }
 
 // A multi-start calibration's starts (--start A,B,...): each one's chi2/dof and whether it converged, and which
@@ -1437,7 +1510,7 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
                   "model - DEM over eps_d > 0, in the quantity's units and relative to the mean 95 % band half-width; "
                   "role: fitted (calibration curves) or predicted (not fitted); paths: s_dev, F_dev signed along the first "
                   "loading direction, p_star on constant-volume rows, eps_v (= tr E/3) on isobaric rows; calibrated on " + fit_label);
-  write_identifiability(cal, jack_est, nus, fit_label, out);
+  write_identifiability(cal, jack_est, ff.samples > 1 ? ff.jack_sample : std::vector<int>{}, nus, fit_label, out);
   for (std::size_t j = 0; j < fit_curves.size(); ++j)   // D2 paths, from the D2 curves' start states (a D3 curve has the
     if (fit_curves[j].mode == "D2")                      // same tag: it overwrote them before the twenty-eighth round)
       write_model_paths(cal.params, fit_curves[j], fit_files[j].tag, out / "curves");

@@ -1721,25 +1721,68 @@ bool jackknife_refit_usable(const Calibration& refit, const Calibration& full) {
   return refit.ok && std::isfinite(refit.chi2_dof()) && refit.chi2_dof() <= 3.0 * std::max(full.chi2_dof(), 1.0);
 }
 
+namespace {
+// Each sample's (n, sum of x, and after the means, sum (x - mean x)(y - mean y)) in first-appearance order.
+struct SampleSums {
+  std::vector<double> n, cross;
+};
+SampleSums sample_sums(const std::vector<double>& x, const std::vector<double>& y, const std::vector<int>& sample) {
+  int groups = 0;
+  for (std::size_t k = 0; k < x.size(); ++k) groups = std::max(groups, sample.empty() ? 1 : sample[k] + 1);
+  SampleSums s{std::vector<double>(groups, 0.0), std::vector<double>(groups, 0.0)};
+  auto g = [&](std::size_t k) { return sample.empty() ? 0 : sample[k]; };
+  for (std::size_t k = 0; k < x.size(); ++k) s.n[g(k)] += 1;
+  std::vector<double> mx(groups, 0.0), my(groups, 0.0);
+  for (std::size_t k = 0; k < x.size(); ++k) { mx[g(k)] += x[k] / s.n[g(k)]; my[g(k)] += y[k] / s.n[g(k)]; }
+  for (std::size_t k = 0; k < x.size(); ++k) s.cross[g(k)] += (x[k] - mx[g(k)]) * (y[k] - my[g(k)]);
+  return s;
+}
+}  // namespace
+
+double jackknife_covariance(const std::vector<double>& x, const std::vector<double>& y, const std::vector<int>& sample) {
+  const SampleSums s = sample_sums(x, y, sample);
+  double c = 0;
+  for (std::size_t j = 0; j < s.n.size(); ++j)
+    if (s.n[j] > 0) c += (s.n[j] - 1.0) / s.n[j] * s.cross[j];
+  return c;
+}
+
+double jackknife_dof(const std::vector<double>& x, const std::vector<int>& sample) {
+  const SampleSums s = sample_sums(x, x, sample);
+  if (s.n.size() == 1) return s.n[0] - 1.0;
+  double sum = 0, den = 0;
+  for (std::size_t j = 0; j < s.n.size(); ++j) {
+    if (s.n[j] < 2) continue;
+    const double v = (s.n[j] - 1.0) / s.n[j] * s.cross[j];
+    sum += v;
+    den += v * v / (s.n[j] - 1.0);
+  }
+  return den > 0 ? sum * sum / den : std::nan("");
+}
+
 std::vector<double> jackknife_errors(const std::vector<std::vector<double>>& est, const Calibration& cal,
-                                     bool csl_linear, std::vector<std::string>* warnings) {
-  const double K = static_cast<double>(est.size());
+                                     bool csl_linear, std::vector<std::string>* warnings,
+                                     const std::vector<int>& sample, std::vector<double>* dof) {
   std::vector<double> se(cal.value.size(), std::nan(""));
+  if (dof) dof->assign(cal.value.size(), std::nan(""));
   if (est.empty()) return se;
   for (std::size_t i = 0; i < cal.value.size(); ++i) {
-    double mean = 0, ss = 0;
-    for (const auto& e : est) mean += e[i] / K;
-    for (const auto& e : est) ss += (e[i] - mean) * (e[i] - mean);
+    std::vector<double> x;
+    for (const auto& e : est) x.push_back(e[i]);
+    const double var = jackknife_covariance(x, x, sample);
     // held parameters have no error of their own, but the critical-state line of --state-limit volume is held at the
     // end states of the data, which the jackknife moves: its spread is its error (the term --csl does not use is held
     // at 0 and has none: nan)
     const bool from_data = cal.names[i] == "nu_cs" || (cal.names[i] == "lambda_cs" && !csl_linear) ||
                            (cal.names[i] == "c_cs" && csl_linear);
     const bool undetermined = i < cal.undetermined.size() && cal.undetermined[i];   // its refits still spread
-    if (std::isfinite(cal.se_cov[i]) || from_data || (undetermined && ss > 0.0))
-      se[i] = std::sqrt((K - 1.0) / K * ss);
-    if (std::isfinite(cal.se_cov[i]) && ss == 0.0) {   // every refit on the same value: a bound held it, no spread
+    if (std::isfinite(cal.se_cov[i]) || from_data || (undetermined && var > 0.0)) {
+      se[i] = std::sqrt(var);
+      if (dof) (*dof)[i] = jackknife_dof(x, sample);
+    }
+    if (std::isfinite(cal.se_cov[i]) && var == 0.0) {   // every refit on the same value: a bound held it, no spread
       se[i] = std::nan("");
+      if (dof) (*dof)[i] = std::nan("");
       if (warnings)
         warnings->push_back(cal.names[i] + ": every jackknife refit ends on the same value " +
                             table_number(est[0][i], 6) + " (a bound): no jackknife error quoted");

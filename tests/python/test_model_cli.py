@@ -987,3 +987,43 @@ def test_profile_intervals_end_where_the_cost_rises_by_the_scale(tmp_path):
 
     bad = run(ENSEMBLE, "--out", str(tmp_path / "bad"), "--profile", "C0,bogus", "--no-jackknife", "--no-plots")
     assert bad.returncode == 2 and "'bogus' is not a coefficient" in bad.stderr and "give `all`" in bad.stderr, bad.stderr
+
+
+def test_the_jackknife_over_two_sets_of_packings(tmp_path, result):
+    """Fitted curves from two sets of packings (thirty-second round): D2 at nu = 0.671-0.720 reduced by `dem fit` from
+    m000, m001 alone, at 0.750-0.819 from m002, m003 alone, in one ensemble folder. The jackknife leaves each packing
+    out of its own set's means only (4 refits, set 0, 0, 1, 1), writes each packing's set beside its held-out score, and
+    the 95 % intervals take Welch-Satterthwaite's t (between t_1 and t_2 with two packings per set), not t_3."""
+    from scipy import stats
+    nus = {0: ("0.671", "0.690", "0.720"), 1: ("0.750", "0.780", "0.819")}
+    joint = tmp_path / "joint"
+    (joint / "ensemble").mkdir(parents=True)
+    for s, members in ((0, ("m000", "m001")), (1, ("m002", "m003"))):
+        part = tmp_path / f"set{s}"
+        for m in members:
+            (part / "members" / m).mkdir(parents=True)
+            for f in [f"D2_phi{nu}.csv" for nu in nus[s]] + ["cycle_unloading.csv"]:
+                shutil.copy2(os.path.join(ENSEMBLE, "members", m, f), part / "members" / m / f)
+        r = subprocess.run([DEM, "fit", str(part), "--no-plots"], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        for nu in nus[s]:
+            shutil.copy2(part / "ensemble" / f"D2_phi{nu}.csv", joint / "ensemble")
+        shutil.copytree(part / "members", joint / "members", dirs_exist_ok=True)
+    out = str(tmp_path / "out")
+    r = run(str(joint), "--out", out, "--no-plots", "--start", os.path.join(result[0], "parameters.csv"))
+    assert r.returncode == 0, r.stderr
+    table = rows(os.path.join(out, "jackknife.csv"))
+    assert [(t["packing_left_out"], t["set"], t["usable"]) for t in table] == [
+        ("m000", "0", "yes"), ("m001", "0", "yes"), ("m002", "1", "yes"), ("m003", "1", "yes")]
+    held = rows(os.path.join(out, "heldout.csv"))
+    assert [(h["packing"], h["set"]) for h in held] == [("m000", "0"), ("m001", "0"), ("m002", "1"), ("m003", "1")]
+    assert all(math.isfinite(float(h["heldout_extended [-]"])) for h in held)
+    params = {q["parameter"]: q for q in rows(os.path.join(out, "parameters.csv"))}
+    quoted = [q for q in params.values() if q["se_method"] == "jackknife over packings" and
+              math.isfinite(float(q["se"])) and float(q["se"]) > 0]
+    assert len(quoted) >= 10
+    lo, hi = stats.t.ppf(0.975, 2), stats.t.ppf(0.975, 1)
+    for q in quoted:
+        t = (float(q["hi95"]) - float(q["value"])) / float(q["se"])
+        assert lo * (1 - 1e-4) <= t <= hi * (1 + 1e-4), (q["parameter"], t)
+    assert any("only 2 packings in a set" in l for l in r.stderr.splitlines())

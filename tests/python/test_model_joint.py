@@ -169,3 +169,58 @@ def test_the_stored_jackknife_table_rebuilds_from_its_refits(tmp_path, mu):
     rows = model_joint.jackknife_rows(os.path.join(stored, "parameters.csv"),
                                       {k: os.path.join(r, "parameters.csv") for k, r in runs.items()})
     assert sum(j > c for *_, c, f, lab, j in rows) > len(rows) // 2
+
+
+def test_the_friction_members_join_the_laboratory_members(tmp_path):
+    """ensemble() puts the friction study's packings beside the laboratory's in one members/ (their D2/D3 curves and
+    isobaric paths, no isotropic branch), so `dem model`'s jackknife leaves out either set's packings; a name both
+    sets use is refused."""
+    cwd = os.getcwd()
+    os.chdir(ROOT)
+    try:
+        ens = model_joint.ensemble("0.5", str(tmp_path / "work"))
+    finally:
+        os.chdir(cwd)
+    members = sorted(os.listdir(os.path.join(ens, "members")))
+    friction = [m for m in members if os.path.isdir(os.path.join(ens, "members", m, "deviatoric"))]
+    lab = [m for m in members if os.path.exists(os.path.join(ens, "members", m, "prep", "cycle_unloading.csv"))]
+    assert len(friction) == 8 and len(lab) == 4 and not set(friction) & set(lab)
+    for m in friction:
+        dev = sorted(os.listdir(os.path.join(ens, "members", m, "deviatoric")))
+        assert dev == [f"{mode}_phi{nu}.csv" for mode in ("D2", "D3") for nu in ("0.690", "0.740", "0.800")]
+        assert not os.path.exists(os.path.join(ens, "members", m, "prep"))
+        assert sorted(os.listdir(os.path.join(ens, "members", m, "paths"))) == [
+            f"isobaric_phi{nu}.csv" for nu in ("0.690", "0.740", "0.800")]
+    with pytest.raises(SystemExit, match="different names"):
+        model_joint.add_friction_members(os.path.join(ROOT, "data", "friction_n1000", "mu_0.5"), str(tmp_path), ens)
+
+
+def test_the_held_out_choice_on_hand_built_runs(tmp_path):
+    """The joint calibration (overlap) against its variants, paired over the packings of both sets: a variant is
+    chosen over the overlap rule only when it beats it; a variant with a failed refit is not scored."""
+    def run(name, scores, coefficients, usable=None):
+        d = tmp_path / name
+        d.mkdir(parents=True)
+        rows = "".join(f"{k},m{k},{int(k >= 8)},{s!r}\n" for k, s in enumerate(scores))
+        (d / "heldout.csv").write_text("# held-out\npacking_left_out,packing,set,heldout_extended [-]\n" + rows)
+        usable = usable or ["yes"] * len(scores)
+        (d / "jackknife.csv").write_text("packing_left_out,set,usable\n" + "".join(
+            f"m{k},{int(k >= 8)},{u}\n" for k, u in enumerate(usable)))
+        (d / "parameters.csv").write_text("parameter,value,se_method,se_covariance\n" + "".join(
+            f"c{i},1,jackknife over packings,0.1\n" for i in range(coefficients)) + "nu_ref,0.74,fixed,nan\n"
+            "chi2_per_dof,2.0,nan,nan\n")
+    base = [2.0, 2.1, 1.9, 2.2, 2.0, 1.8, 2.1, 2.0, 5.0, 5.2, 4.8, 5.1]
+    run("mu_0.5", base, 33)
+    run("variants_mu_0.5/weighted", [x - 0.5 for x in base], 35)            # better by 0.5 everywhere: beats overlap
+    run("variants_mu_0.5/bounded", base, 33, ["yes"] * 11 + ["no"])
+    assert model_joint.heldout_choice("0.5", str(tmp_path)) == "weighted"
+    md = (tmp_path / "variants_mu_0.5" / "heldout_choice.md").read_text()
+    assert "not scored: its refits without m11 failed" in md
+    run("variants_mu_0.5/weighted2", [x + (0.3 if k % 2 else -0.3) for k, x in enumerate(base)], 35)
+    shutil.rmtree(tmp_path / "variants_mu_0.5" / "weighted")
+    (tmp_path / "variants_mu_0.5" / "weighted2").rename(tmp_path / "variants_mu_0.5" / "weighted")
+    assert model_joint.heldout_choice("0.5", str(tmp_path)) == "overlap"   # no consistent gain: the fewer coefficients
+    with open(tmp_path / "variants_mu_0.5" / "heldout_choice.csv", newline="") as fh:
+        rows = {r["variant"]: r for r in csv.DictReader(fh)}
+    assert rows["overlap"]["coefficients"] == "33" and rows["weighted"]["coefficients"] == "35"
+    assert float(rows["overlap"]["heldout_laboratory_mean [-]"]) == pytest.approx(sum(base[8:]) / 4)

@@ -152,6 +152,9 @@ struct Calibration {
   std::vector<std::string> names;       ///< 19 names
   std::vector<double> value, se_cov;    ///< estimate; SE from the covariance x max(1, chi2/dof)
   std::vector<double> se_jackknife;     ///< SE from the jackknife over packings (empty when not run)
+  /// Degrees of freedom of each jackknife error (jackknife_dof: K - 1 over one set of packings, Welch-Satterthwaite's
+  /// over several; empty when the jackknife did not run): the t quantile of its 95 % interval
+  std::vector<double> dof_jackknife;
   std::vector<std::vector<double>> corr;   ///< correlation matrix (covariance)
   double chi2 = 0;                      ///< weighted sum of squared residuals
   int n_residuals = 0, n_free = 0;
@@ -215,13 +218,24 @@ void null_directions(Calibration& cal);
 /// Entries [pos, pos + n) of the reported parameters removed (names, values, errors, flags, correlations).
 void drop_entries(Calibration& cal, int pos, int n);
 
-/// The jackknife's standard errors from the K leave-one-out estimates est[k][i] of cal.value: sqrt((K-1)/K sum (e -
-/// mean)^2) for every coefficient with a covariance error or one the covariance left undetermined (cal.undetermined),
-/// and for the critical-state line's terms held at the data's end states (nu_cs, and lambda_cs or c_cs, whichever
-/// --csl uses); nan for the held ones and those on a bound, and nan with a warning for a coefficient with a covariance
-/// error whose every refit ends on the same value (a bound: no spread to quote).
+/// The jackknife's covariance of two series of leave-one-out estimates over independent samples of packings:
+/// sum over the samples of (n - 1)/n sum (x_k - mean x)(y_k - mean y), each about its own sample's mean; sample[k]
+/// names estimate k's sample (empty: one sample, the usual jackknife). Two samples are the joint calibration's: the
+/// friction study's packings behind D2 + D3, the laboratory's behind its triaxial paths (docs/model.md, "A jackknife
+/// over two sets of packings").
+double jackknife_covariance(const std::vector<double>& x, const std::vector<double>& y, const std::vector<int>& sample = {});
+/// Welch-Satterthwaite's degrees of freedom of jackknife_covariance(x, x, sample): (sum v_s)^2 / sum v_s^2/(n_s - 1),
+/// v_s one sample's part; n - 1 over one sample; nan where every part is 0.
+double jackknife_dof(const std::vector<double>& x, const std::vector<int>& sample = {});
+/// The jackknife's standard errors from the leave-one-out estimates est[k][i] of cal.value: sqrt(jackknife_covariance)
+/// (one sample: sqrt((K-1)/K sum (e - mean)^2)) for every coefficient with a covariance error or one the covariance
+/// left undetermined (cal.undetermined), and for the critical-state line's terms held at the data's end states (nu_cs,
+/// and lambda_cs or c_cs, whichever --csl uses); nan for the held ones and those on a bound, and nan with a warning
+/// for a coefficient with a covariance error whose every refit ends on the same value (a bound: no spread to quote).
+/// dof (if given) gets each error's jackknife_dof.
 std::vector<double> jackknife_errors(const std::vector<std::vector<double>>& est, const Calibration& cal,
-                                     bool csl_linear, std::vector<std::string>* warnings = nullptr);
+                                     bool csl_linear, std::vector<std::string>* warnings = nullptr,
+                                     const std::vector<int>& sample = {}, std::vector<double>* dof = nullptr);
 /// Whether a leave-one-out refit can enter the jackknife: converged, with a chi2/dof not above 3 max(1, the full
 /// fit's). A refit that failed at its start, or ended in a poor local optimum, would pass its start's values or that
 /// optimum's off as the packings' scatter; `dem model` then quotes the covariance errors and says which refit failed
