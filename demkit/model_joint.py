@@ -7,11 +7,16 @@ tests, the loose preparation's (another preparation, nu = 0.59-0.65), and the fr
     /usr/bin/python3 -m demkit.model_joint --mu 0.5 [--out DIR] [--work WORK] [--dem build/dem] [--no-jackknife]
     /usr/bin/python3 -m demkit.model_joint --table-only [--out DIR]      # DIR/joint.{md,csv} from DIR/mu_MU
     /usr/bin/python3 -m demkit.model_joint --jackknife 0.5 [--out DIR]  # DIR/mu_MU/jackknife_two_sample.{md,csv}
+    /usr/bin/python3 -m demkit.model_joint --compare-jackknives 0.5     # DIR/mu_MU/jackknife_compare.{md,csv}
+    /usr/bin/python3 -m demkit.model_joint --choose 0.5                 # DIR/variants_mu_MU/heldout_choice.{md,csv}
 
 WORK/mu_MU/ensemble_all/   the laboratory curves of both preparations (demkit.geotech_model, --joint; mu = 0: dense
-                           only), the friction study's D2/D3 means and its isobaric D2 paths (ensemble files only: the
-                           jackknife leaves out the laboratory's packings); regenerated, not stored
-DIR/mu_MU/                 `dem model`'s summary, prediction, parameters (and with the jackknife heldout) tables
+                           only), the friction study's D2/D3 means and its isobaric D2 paths, and in members/ both the
+                           laboratory's packings (m1-m4) and the friction study's (m000-m007: D2/D3 curves and
+                           isobaric paths, no isotropic branch; thirty-second round), so that `dem model`'s jackknife
+                           leaves out each packing of either set from the means it holds; regenerated, not stored
+DIR/mu_MU/                 `dem model`'s summary, prediction, parameters (and with the jackknife heldout, jackknife and
+                           jackknife_estimates) tables
 DIR/mu_MU/jackknife_two_sample.{md,csv}   (and each refit's parameters.csv in jackknife_refits/) the two-sample jackknife (`dem model`'s own needs every fitted curve from
                            the same packings): each of the friction study's 8 packings left out of the D2/D3 means and
                            each of the laboratory's 4 left out of its curves and isotropic states, one refit each from
@@ -40,7 +45,7 @@ from demkit.atomic import write_atomic, write_md_csv
 OUT = os.path.join("data", "geotech", "model", "joint")
 STATE = os.path.join("data", "geotech", "model", "state_volume")
 CALIBRATE = "D2,D3,TC_s3_dense"
-KEEP = ("summary", "prediction", "parameters", "heldout", "jackknife")
+KEEP = ("summary", "prediction", "parameters", "heldout", "jackknife", "jackknife_estimates")
 # group: (label, which rows of summary.csv, fitted or predicted)
 GROUPS = (("D2 + D3", lambda m: m in ("D2", "D3")),
           ("TC_s3 dense", lambda m: m == "TC_s3_dense"),
@@ -364,6 +369,136 @@ def write_jackknife(mu, out, full, runs):
     write_md_csv(os.path.join(out, f"mu_{mu}"), "jackknife_two_sample", md, lines, show=False)
 
 
+SPREAD = ("_sd", "_se", "_lo95", "_hi95")
+
+
+def keep_weights(loo, full):
+    """The ensemble files of LOO (ensemble/*.csv, paths/*.csv: means without one packing) given the spread columns
+    (X_sd, X_se, X_lo95, X_hi95) and n_packings of the same file under FULL, so that a refit on LOO weights its points
+    as `dem model`'s jackknife does (the full ensemble's weights); the means stay LOO's. Rows must match."""
+    for sub in ("ensemble", "paths"):
+        for f in sorted(glob.glob(os.path.join(loo, sub, "*.csv"))):
+            g = os.path.join(full, sub, os.path.basename(f))
+            if not os.path.exists(g) or os.path.basename(f).startswith("members"):
+                continue
+            comments, cols = path_ensemble.read_csv(f)
+            _, base = path_ensemble.read_csv(g)
+            n = len(next(iter(cols.values())))
+            for name in cols:
+                if name == "n_packings" or name.endswith(SPREAD):
+                    if len(base.get(name, [])) != n:
+                        raise SystemExit(f"model_joint: {f} and {g} differ in rows or columns ({name})")
+                    cols[name] = base[name]
+            head = list(cols)
+            body = [",".join(head) + "\n"] + [",".join(cols[h][i] for h in head) + "\n" for i in range(n)]
+            write_atomic(f, "".join(comments) + "".join(body))
+
+
+def crosscheck(mu, out, work, dem, keys=(("friction", "m003"), ("laboratory", "m2"))):
+    """OUT/mu_MU/jackknife_crosscheck.{md,csv}: for each (set, packing) of KEYS, the refit on this module's ensembles
+    without it (rebuilt from the members; loo_ensembles) with the full ensemble's weights (keep_weights), against
+    `dem model`'s own refit without it (mu_MU/jackknife_estimates.csv): the largest difference over the coefficients in
+    units of the jackknife error. Agreement tests `dem model`'s leave-one-out means of both sets, the paths' start
+    states included, against an independent construction."""
+    d = os.path.join(out, f"mu_{mu}")
+    with open(os.path.join(d, "jackknife_estimates.csv"), newline="") as fh:
+        est = {r["packing_left_out"]: r for r in csv.DictReader(fh)}
+    full = free_values(os.path.join(d, "parameters.csv"))
+    ens = loo_ensembles(mu, work)
+    base = os.path.join(work, f"mu_{mu}", "ensemble_dense")
+    md = [f"<!-- demkit/model_joint.py: mu = {mu}, `dem model`'s jackknife refits against refits on ensembles rebuilt "
+          "without the packing (its set's means recomputed from the members, the full ensembles' weights kept), both "
+          "from the calibration's optimum; largest difference over the coefficients with a jackknife error, in those "
+          "errors, and the refits' chi2/dof -->",
+          "| packing left out | set | largest difference [se_jackknife] | coefficient | chi2/dof (dem model) | "
+          "chi2/dof (rebuilt) |", "|---|---|---|---|---|---|"]
+    lines = ["packing_left_out,set,largest_difference [se],coefficient,chi2_per_dof_dem,chi2_per_dof_rebuilt\n"]
+    jk = {}
+    with open(os.path.join(d, "jackknife.csv"), newline="") as fh:
+        for r in csv.DictReader(ln for ln in fh if not ln.startswith("#")):
+            jk[r["packing_left_out"]] = r
+    for sample, m in keys:
+        loo = ens[(sample, m)]
+        keep_weights(loo, base)
+        run = os.path.join(work, "crosscheck", f"{sample}_{m}")
+        cmd = [dem, "model", loo, "--start", os.path.join(d, "parameters.csv"), "--calibrate-on", CALIBRATE,
+               "--family", "extended", "--state-limit", "volume", "--hold-isotropic", "gamma_p,nu_cC,alpha",
+               "--max-iterations", "1000", "--no-jackknife", "--no-plots", "--out", run, "--force"]
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        if r.returncode not in (0, 1):
+            raise SystemExit(f"model_joint: the rebuilt refit without {sample} {m} failed:\n{r.stderr[-2000:]}")
+        again = free_values(os.path.join(run, "parameters.csv"))
+        worst, which = 0.0, ""
+        for name, row in full.items():
+            try:
+                se = float(row["se_jackknife"])
+                diff = abs(float(again[name]["value"]) - float(est[m][name])) / se
+            except (KeyError, ValueError, ZeroDivisionError):
+                continue
+            if se > 0 and diff > worst:
+                worst, which = diff, name
+        chi_r = float(again["chi2_per_dof"]["value"])
+        md.append(f"| {m} | {sample} | {worst:.3g} | {which} | {float(jk[m]['chi2_per_dof [-]']):.6g} | {chi_r:.6g} |")
+        lines.append(f"{m},{sample},{worst!r},{which},{jk[m]['chi2_per_dof [-]']},{chi_r!r}\n")
+    write_md_csv(d, "jackknife_crosscheck", md, lines, show=False)
+
+
+def compare_jackknives(mu, out):
+    """OUT/mu_MU/jackknife_compare.{md,csv}: per coefficient the covariance error, `dem model`'s jackknife over the two
+    sets of packings (parameters.csv's se_jackknife: each packing left out of the means it holds, the weights kept) and
+    this module's two-sample jackknife (jackknife_two_sample.csv: the ensembles rebuilt without the packing, their
+    standard errors, and so the weights, recomputed), and their ratio."""
+    d = os.path.join(out, f"mu_{mu}")
+    full = free_values(os.path.join(d, "parameters.csv"))
+    with open(os.path.join(d, "jackknife_two_sample.csv"), newline="") as fh:
+        two = {r["coefficient"]: r for r in csv.DictReader(fh)}
+    md = [f"<!-- demkit/model_joint.py: mu = {mu}, the joint calibration's errors three ways: the covariance (x max(1, "
+          "chi2/dof)); `dem model`'s jackknife over its two sets of packings (each left out of the means it holds, the "
+          "weights of the full ensembles kept; parameters.csv); the two-sample jackknife of `--jackknife` (each "
+          "refit on ensembles rebuilt without the packing, their standard errors recomputed; jackknife_two_sample.csv) "
+          "-->", "| coefficient | value | se (covariance) | se (dem model, weights kept) | se (two-sample, weights "
+          "recomputed) | ratio |", "|---|---|---|---|---|---|"]
+    lines = ["coefficient,value,se_covariance,se_jackknife_dem,se_jackknife_two_sample,ratio [-]\n"]
+    for name, r in two.items():
+        dem = float(full[name]["se_jackknife"]) if name in full else float("nan")
+        t = float(r["se_jackknife"])
+        ratio = t / dem if dem > 0 else float("nan")
+        md.append(f"| {name} | {float(r['value']):.6g} | {float(r['se_covariance']):.3g} | {dem:.3g} | {t:.3g} | "
+                  f"{ratio:.3g} |")
+        lines.append(f"{name},{float(r['value'])!r},{float(r['se_covariance'])!r},{dem!r},{t!r},{ratio!r}\n")
+    write_md_csv(d, "jackknife_compare", md, lines, show=False)
+
+
+def csv_field(text):
+    """TEXT as one csv field (quoted where it holds a comma or a quote)."""
+    return '"' + text.replace('"', '""') + '"' if ("," in text or '"' in text) else text
+
+
+def compare_errors(before, after, out, stem, comment):
+    """OUT/STEM.{md,csv}: per coefficient with a quoted error in either parameters.csv (BEFORE, AFTER) the values, the
+    quoted errors (se, with their method) and after/before; COMMENT heads the markdown."""
+    a, b = free_values(before), free_values(after)
+    md = [f"<!-- demkit/model_joint.py: {comment} -->",
+          "| coefficient | value (before) | se (before) | value (after) | se (after) | se after/before |",
+          "|---|---|---|---|---|---|"]
+    lines = ["coefficient,value_before,se_before,se_method_before,value_after,se_after,se_method_after,ratio [-]\n"]
+    for name, r in a.items():
+        if name not in b:
+            continue
+        try:
+            sa, sb = float(r["se"]), float(b[name]["se"])
+            va, vb = float(r["value"]), float(b[name]["value"])
+        except (KeyError, ValueError):
+            continue
+        if not (sa == sa or sb == sb) or r.get("se_method", "") == "fixed":
+            continue
+        ratio = sb / sa if sa > 0 else float("nan")
+        md.append(f"| {name} | {va:.6g} | {sa:.3g} | {vb:.6g} | {sb:.3g} | {ratio:.3g} |")
+        lines.append(",".join([name, repr(va), repr(sa), csv_field(r["se_method"]), repr(vb), repr(sb),
+                               csv_field(b[name]["se_method"]), repr(ratio)]) + "\n")
+    write_md_csv(out, stem, md, lines, show=False)
+
+
 HELDOUT_VARIANTS = ("weighted", "bounded")   # the variants fitted on the joint calibration's curves (with_isobaric is not)
 
 
@@ -445,7 +580,24 @@ def main(argv=None):
     ap.add_argument("--jackknife", metavar="MU", help="the two-sample jackknife of OUT/mu_MU (12 refits, 2 at a time)")
     ap.add_argument("--choose", metavar="MU", help="the held-out test among OUT/mu_MU and its variants "
                     "(OUT/variants_mu_MU/heldout_choice.{md,csv})")
+    ap.add_argument("--compare-jackknives", metavar="MU", help="OUT/mu_MU/jackknife_compare.{md,csv}: the covariance "
+                    "errors, `dem model`'s jackknife over both sets and the two-sample jackknife of --jackknife")
+    ap.add_argument("--compare-errors", nargs=3, metavar=("BEFORE", "AFTER", "STEM"),
+                    help="STEM.{md,csv}: the quoted errors of two parameters.csv side by side")
+    ap.add_argument("--comment", default="two calibrations' quoted errors", help="the comment of --compare-errors")
+    ap.add_argument("--crosscheck", metavar="MU", help="OUT/mu_MU/jackknife_crosscheck.{md,csv}: two of `dem model`'s "
+                    "jackknife refits against refits on ensembles rebuilt without the packing (the full weights kept)")
     a = ap.parse_args(argv)
+    if a.crosscheck:
+        crosscheck(a.crosscheck, a.out, a.work, a.dem)
+        return 0
+    if a.compare_jackknives:
+        compare_jackknives(a.compare_jackknives, a.out)
+        return 0
+    if a.compare_errors:
+        before, after, stem = a.compare_errors
+        compare_errors(before, after, os.path.dirname(stem) or ".", os.path.basename(stem), a.comment)
+        return 0
     if a.choose:
         print(f"model_joint: mu = {a.choose}: the held-out test chooses {heldout_choice(a.choose, a.out)}",
               file=sys.stderr)

@@ -1414,6 +1414,22 @@ void write_refits(const FamilyFit& ff, const fs::path& out) {
                       "usable: converged with chi2/dof at most 3 max(1, the full fit's); a refit that was not, or "
                       "ended above 1.5 max(1, the full fit's), is run again from each other --start and the best kept; "
                       "the jackknife errors are used only when every refit is usable");
+  if (ff.jack.size() != ff.refits.size()) return;   // the errors are the covariance's: no estimates to give
+  std::vector<std::string> head{"packing_left_out"};
+  if (sets) head.push_back("set");
+  head.insert(head.end(), ff.cal.names.begin(), ff.cal.names.end());
+  Table e(head), e6(head);   // every digit (csv, json), six (md, tex)
+  for (std::size_t k = 0; k < ff.jack.size(); ++k) {
+    std::vector<std::string> row{ff.refits[k].packing};
+    if (sets) row.push_back(std::to_string(ff.jack_sample[k]));
+    std::vector<std::string> row6 = row;
+    for (double v : ff.jack[k]) { row.push_back(table_number_exact(v)); row6.push_back(num(v)); }
+    e.add_row(row);
+    e6.add_row(row6);
+  }
+  write_table_all(e, e6, (out / "jackknife_estimates").string(),
+                  "Each jackknife refit's coefficients (the leave-one-out estimates, every digit), in parameters.csv's "
+                  "order: se_jackknife^2 = sum over the sets of (n-1)/n sum (x - the set's mean)^2");
 }
 
 // A multi-start calibration's starts (--start A,B,...): each one's chi2/dof and whether it converged, and which

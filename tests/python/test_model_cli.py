@@ -1027,3 +1027,17 @@ def test_the_jackknife_over_two_sets_of_packings(tmp_path, result):
         t = (float(q["hi95"]) - float(q["value"])) / float(q["se"])
         assert lo * (1 - 1e-4) <= t <= hi * (1 + 1e-4), (q["parameter"], t)
     assert any("only 2 packings in a set" in l for l in r.stderr.splitlines())
+    # the errors again from the refits' own estimates (jackknife_estimates.csv), each set about its own mean
+    est = rows(os.path.join(out, "jackknife_estimates.csv"))
+    assert [(e["packing_left_out"], e["set"]) for e in est] == [(t["packing_left_out"], t["set"]) for t in table]
+    for q in quoted:
+        parts = 0.0
+        for s in ("0", "1"):
+            x = [float(e[q["parameter"]]) for e in est if e["set"] == s]
+            m = sum(x) / len(x)
+            parts += (len(x) - 1) / len(x) * sum((v - m) ** 2 for v in x)
+        assert float(q["se_jackknife"]) == pytest.approx(math.sqrt(parts), rel=1e-5), q["parameter"]
+        pooled = [float(e[q["parameter"]]) for e in est]
+        m = sum(pooled) / 4
+        one = math.sqrt(3 / 4 * sum((v - m) ** 2 for v in pooled))   # as if one set: not what is quoted
+        assert one != pytest.approx(float(q["se_jackknife"]), rel=1e-3), q["parameter"]
