@@ -224,3 +224,42 @@ def test_the_held_out_choice_on_hand_built_runs(tmp_path):
         rows = {r["variant"]: r for r in csv.DictReader(fh)}
     assert rows["overlap"]["coefficients"] == "33" and rows["weighted"]["coefficients"] == "35"
     assert float(rows["overlap"]["heldout_laboratory_mean [-]"]) == pytest.approx(sum(base[8:]) / 4)
+
+
+def test_the_stored_dem_model_jackknife_over_both_sets():
+    """mu = 0.5 with `dem model`'s jackknife (thirty-second round): 12 usable refits, the friction study's 8 packings
+    in one set and the laboratory's 4 in the other; every quoted error recomputed from jackknife_estimates.csv set by
+    set; the intervals' t on Welch-Satterthwaite's degrees of freedom (between the smaller set's n - 1 = 3 and 10)."""
+    import math
+    from scipy import stats
+    d = os.path.join(STORED, "mu_0.5")
+    with open(os.path.join(d, "jackknife.csv"), newline="") as fh:
+        refits = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+    assert len(refits) == 12 and all(r["usable"] == "yes" for r in refits)
+    assert [r["set"] for r in refits] == ["0"] * 8 + ["1"] * 4
+    assert all(r["packing_left_out"].startswith("m00") for r in refits[:8])
+    with open(os.path.join(d, "jackknife_estimates.csv"), newline="") as fh:
+        est = list(csv.DictReader(fh))
+    params = model_joint.free_values(os.path.join(d, "parameters.csv"))
+    quoted = 0
+    for name, q in params.items():
+        if q.get("se_method") != "jackknife over packings" or not math.isfinite(float(q["se"])):
+            continue
+        parts = []
+        for s in ("0", "1"):
+            x = [float(e[name]) for e in est if e["set"] == s]
+            m = sum(x) / len(x)
+            parts.append((len(x) - 1) / len(x) * sum((v - m) ** 2 for v in x))
+        assert float(q["se"]) == pytest.approx(math.sqrt(sum(parts)), rel=1e-5), name
+        dof = sum(parts) ** 2 / (parts[0] ** 2 / 7 + parts[1] ** 2 / 3)
+        hi, se = float(q["hi95"]), float(q["se"])
+        t = (hi - float(q["value"])) / se
+        rounding = 1e-6 * abs(hi) / se   # hi95 is printed to six digits
+        assert t == pytest.approx(stats.t.ppf(0.975, dof), rel=1e-4, abs=rounding), name
+        assert stats.t.ppf(0.975, 10) * 0.999 <= t <= stats.t.ppf(0.975, 3) * 1.001, name
+        quoted += 1
+    assert quoted >= 20
+    with open(os.path.join(d, "heldout.csv"), newline="") as fh:
+        held = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+    assert [h["packing"] for h in held] == [r["packing_left_out"] for r in refits]
+    assert all(math.isfinite(float(h["heldout_extended [-]"])) for h in held)
