@@ -376,11 +376,18 @@ def keep_weights(loo, full):
     """The ensemble files of LOO (ensemble/*.csv, paths/*.csv: means without one packing) given the spread columns
     (X_sd, X_se, X_lo95, X_hi95) and n_packings of the same file under FULL, so that a refit on LOO weights its points
     as `dem model`'s jackknife does (the full ensemble's weights); the means stay LOO's. Rows must match."""
+    def mode_nu(path):   # MODE_phiX.csv -> (MODE, X)
+        stem = os.path.basename(path)[:-len(".csv")]
+        mode, _, nu = stem.rpartition("_phi")
+        return mode, float(nu) if mode else float("nan")
     for sub in ("ensemble", "paths"):
-        for f in sorted(glob.glob(os.path.join(loo, sub, "*.csv"))):
-            g = os.path.join(full, sub, os.path.basename(f))
-            if not os.path.exists(g) or os.path.basename(f).startswith("members"):
+        bases = [mode_nu(g) + (g,) for g in glob.glob(os.path.join(full, sub, "*_phi*.csv"))]
+        for f in sorted(glob.glob(os.path.join(loo, sub, "*_phi*.csv"))):
+            mode, nu = mode_nu(f)   # its tag moves with the mean start state: the same mode's nearest nu
+            near = sorted((abs(b[1] - nu), b[2]) for b in bases if b[0] == mode)
+            if not near or near[0][0] > 0.005:
                 continue
+            g = near[0][1]
             comments, cols = path_ensemble.read_csv(f)
             _, base = path_ensemble.read_csv(g)
             n = len(next(iter(cols.values())))

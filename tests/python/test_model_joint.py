@@ -263,3 +263,39 @@ def test_the_stored_dem_model_jackknife_over_both_sets():
         held = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
     assert [h["packing"] for h in held] == [r["packing_left_out"] for r in refits]
     assert all(math.isfinite(float(h["heldout_extended [-]"])) for h in held)
+
+
+def test_keep_weights_copies_the_spread_of_the_same_mode_at_the_nearest_nu(tmp_path):
+    """A leave-one-out ensemble's file named by its own mean start state (TC_s3_dense_phi0.657 against the full
+    ensemble's 0.658) takes the full file's spread columns and n_packings; its means stay; a mode the full ensemble does
+    not hold is left alone; files of different rows are refused."""
+    def write(path, rows, mean, se, k):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("# x\neps_d_accumulated,n_packings,p_star_mean,p_star_se,p_star_lo95\n" + "".join(
+            f"{i},{k},{mean + i},{se},{mean - se}\n" for i in range(rows)))
+    full, loo = tmp_path / "full", tmp_path / "loo"
+    write(full / "paths" / "TC_s3_dense_phi0.658.csv", 3, 1.0, 0.1, 4)
+    write(full / "paths" / "TC_s3_dense_phi0.682.csv", 3, 5.0, 0.5, 4)
+    write(loo / "paths" / "TC_s3_dense_phi0.657.csv", 3, 1.5, 0.3, 3)
+    write(loo / "paths" / "TE_s3_dense_phi0.657.csv", 3, 2.0, 0.7, 3)
+    model_joint.keep_weights(str(loo), str(full))
+    _, c = model_joint.read_columns(str(loo / "paths" / "TC_s3_dense_phi0.657.csv"))
+    assert list(c["p_star_mean"]) == [1.5, 2.5, 3.5] and set(c["p_star_se"]) == {0.1}
+    assert set(c["p_star_lo95"]) == {0.9} and set(c["n_packings"]) == {4.0}
+    _, e = model_joint.read_columns(str(loo / "paths" / "TE_s3_dense_phi0.657.csv"))
+    assert set(e["p_star_se"]) == {0.7}
+    write(loo / "paths" / "TC_s3_dense_phi0.681.csv", 2, 5.0, 0.5, 3)
+    with pytest.raises(SystemExit, match="differ in rows"):
+        model_joint.keep_weights(str(loo), str(full))
+
+
+def test_the_stored_crosscheck_agrees_to_a_thousandth_of_an_error():
+    """jackknife_crosscheck.csv: `dem model`'s refits without friction m003 and laboratory m2 against refits on
+    ensembles this module rebuilt without them (the full weights kept): within 1e-3 jackknife errors, chi2/dof within
+    1e-4 relative."""
+    with open(os.path.join(STORED, "mu_0.5", "jackknife_crosscheck.csv"), newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert sorted((r["set"], r["packing_left_out"]) for r in rows) == [("friction", "m003"), ("laboratory", "m2")]
+    for r in rows:
+        assert float(r["largest_difference [se]"]) < 1e-3, r
+        assert float(r["chi2_per_dof_rebuilt"]) == pytest.approx(float(r["chi2_per_dof_dem"]), rel=1e-4), r
