@@ -549,21 +549,26 @@ def heldout_choice(mu, out):
           "b beats a when a - b, paired over the packings, exceeds t_{K-1,0.975} SE; chosen: the fewest coefficients "
           "that nothing beats (model_variants.choose) -->",
           "| variant | coefficients | χ²/dof | mean held-out score (all) | friction packings | laboratory packings | "
-          "beaten by | chosen |", "|---|---|---|---|---|---|---|---|"]
+          "overlap − variant, mean ± SE (t SE) | beaten by | chosen |", "|---|---|---|---|---|---|---|---|---|"]
     lines = ["variant,coefficients,chi2_per_dof [-],heldout_mean [-],heldout_friction_mean [-],"
-             "heldout_laboratory_mean [-],packings,beaten_by,chosen\n"]
+             "heldout_laboratory_mean [-],versus_overlap_mean [-],versus_overlap_se [-],versus_overlap_t_se [-],"
+             "packings,beaten_by,chosen\n"]
+    from demkit import model_state_limit
     for v in runs:
+        dm, dse, tq, _, _ = (model_state_limit.paired_choice(scores["overlap"], scores[v]) if v != "overlap" and
+                             "overlap" in scores else (float("nan"),) * 3 + (0, False))
         chi = float(free_values(os.path.join(runs[v], "parameters.csv"))["chi2_per_dof"]["value"])
         part = {k: [sc for p, (st, sc) in sets[v].items() if p in index and st == k] for k in (0, 1)}
         f, lab = (sum(x) / len(x) if x else float("nan") for x in (part[0], part[1]))
-        md.append(f"| {v} | {sizes[v]} | {chi:.4g} | {means[v]:.4g} | {f:.4g} | {lab:.4g} | "
+        versus = f"{dm:.3g} ± {dse:.2g} ({tq * dse:.2g})" if dm == dm else "–"
+        md.append(f"| {v} | {sizes[v]} | {chi:.4g} | {means[v]:.4g} | {f:.4g} | {lab:.4g} | {versus} | "
                   f"{', '.join(beaten[v]) or '–'} | {'yes' if v == chosen else ''} |")
-        lines.append(f"{v},{sizes[v]},{chi!r},{means[v]!r},{f!r},{lab!r},{len(names)},"
+        lines.append(f"{v},{sizes[v]},{chi!r},{means[v]!r},{f!r},{lab!r},{dm!r},{dse!r},{tq * dse!r},{len(names)},"
                      f"{' '.join(beaten[v])},{'yes' if v == chosen else 'no'}\n")
     for v, bad in failed.items():
         if bad:
-            md.append(f"| {v} | | | not scored: its refits without {', '.join(bad)} failed | | | | |")
-            lines.append(f"{v},nan,nan,nan,nan,nan,0,,not scored\n")
+            md.append(f"| {v} | | | not scored: its refits without {', '.join(bad)} failed | | | | | |")
+            lines.append(f"{v},nan,nan,nan,nan,nan,nan,nan,nan,0,,not scored\n")
     write_md_csv(os.path.join(out, f"variants_mu_{mu}"), "heldout_choice", md, lines, show=False)
     return chosen
 
