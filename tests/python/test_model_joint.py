@@ -19,6 +19,16 @@ from demkit import model_joint  # noqa: E402
 STORED = os.path.join(ROOT, model_joint.OUT)
 
 
+def ensemble_from_root(tmp_path):
+    """model_joint.ensemble at mu = 0.5, run from the repository root (its paths are relative), into TMP_PATH/work."""
+    cwd = os.getcwd()
+    os.chdir(ROOT)
+    try:
+        return model_joint.ensemble("0.5", str(tmp_path / "work"))
+    finally:
+        os.chdir(cwd)
+
+
 def rows_of(path):
     with open(path, newline="") as fh:
         return [r for r in csv.DictReader(ln for ln in fh if not ln.startswith("#")) if r["mode"] != "calibration"]
@@ -28,12 +38,7 @@ def test_the_stored_parameters_predict_every_stored_curve_again(tmp_path):
     """mu = 0.5: the ensemble rebuilt from data/geotech/curves and the friction study (both preparations, D2/D3, the
     isobaric paths), every curve predicted with the stored parameters: each error of the stored summary (fitted or
     predicted) to its printed digits."""
-    cwd = os.getcwd()
-    os.chdir(ROOT)
-    try:
-        ens = model_joint.ensemble("0.5", str(tmp_path / "work"))
-    finally:
-        os.chdir(cwd)
+    ens = ensemble_from_root(tmp_path)
     out = tmp_path / "pred"
     r = subprocess.run([DEM, "model", ens, "--predict-with", os.path.join(STORED, "mu_0.5", "parameters.csv"),
                         "--family", "extended", "--no-plots", "--out", str(out)], capture_output=True, text=True,
@@ -175,12 +180,7 @@ def test_the_friction_members_join_the_laboratory_members(tmp_path):
     """ensemble() puts the friction study's packings beside the laboratory's in one members/ (their D2/D3 curves and
     isobaric paths, no isotropic branch), so `dem model`'s jackknife leaves out either set's packings; a name both
     sets use is refused."""
-    cwd = os.getcwd()
-    os.chdir(ROOT)
-    try:
-        ens = model_joint.ensemble("0.5", str(tmp_path / "work"))
-    finally:
-        os.chdir(cwd)
+    ens = ensemble_from_root(tmp_path)
     members = sorted(os.listdir(os.path.join(ens, "members")))
     friction = [m for m in members if os.path.isdir(os.path.join(ens, "members", m, "deviatoric"))]
     lab = [m for m in members if os.path.exists(os.path.join(ens, "members", m, "prep", "cycle_unloading.csv"))]
