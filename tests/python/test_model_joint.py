@@ -226,13 +226,15 @@ def test_the_held_out_choice_on_hand_built_runs(tmp_path):
     assert float(rows["overlap"]["heldout_laboratory_mean [-]"]) == pytest.approx(sum(base[8:]) / 4)
 
 
-def test_the_stored_dem_model_jackknife_over_both_sets():
-    """mu = 0.5 with `dem model`'s jackknife (thirty-second round): 12 usable refits, the friction study's 8 packings
-    in one set and the laboratory's 4 in the other; every quoted error recomputed from jackknife_estimates.csv set by
-    set; the intervals' t on Welch-Satterthwaite's degrees of freedom (between the smaller set's n - 1 = 3 and 10)."""
+@pytest.mark.parametrize("mu", ["0.3", "0.5"])
+def test_the_stored_dem_model_jackknife_over_both_sets(mu):
+    """mu = 0.3, 0.5 with `dem model`'s jackknife (thirty-second round): 12 usable refits, the friction study's 8
+    packings in one set and the laboratory's 4 in the other; every quoted error recomputed from jackknife_estimates.csv
+    set by set; the intervals' t on Welch-Satterthwaite's degrees of freedom (between the smaller set's n - 1 = 3 and
+    10)."""
     import math
     from scipy import stats
-    d = os.path.join(STORED, "mu_0.5")
+    d = os.path.join(STORED, f"mu_{mu}")
     with open(os.path.join(d, "jackknife.csv"), newline="") as fh:
         refits = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
     assert len(refits) == 12 and all(r["usable"] == "yes" for r in refits)
