@@ -476,9 +476,12 @@ def compare_jackknives(mu, out):
     write_md_csv(d, "jackknife_compare", md, lines, show=False)
 
 
-def csv_field(text):
-    """TEXT as one csv field (quoted where it holds a comma or a quote)."""
-    return '"' + text.replace('"', '""') + '"' if ("," in text or '"' in text) else text
+def csv_line(fields):
+    """FIELDS as one csv line (the csv module's quoting: a field with a comma or a quote is quoted)."""
+    import io
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow(fields)
+    return buf.getvalue()
 
 
 def compare_errors(before, after, out, stem, comment):
@@ -501,8 +504,8 @@ def compare_errors(before, after, out, stem, comment):
             continue
         ratio = sb / sa if sa > 0 else float("nan")
         md.append(f"| {name} | {va:.6g} | {sa:.3g} | {vb:.6g} | {sb:.3g} | {ratio:.3g} |")
-        lines.append(",".join([name, repr(va), repr(sa), csv_field(r["se_method"]), repr(vb), repr(sb),
-                               csv_field(b[name]["se_method"]), repr(ratio)]) + "\n")
+        lines.append(csv_line([name, repr(va), repr(sa), r["se_method"], repr(vb), repr(sb), b[name]["se_method"],
+                               repr(ratio)]))
     write_md_csv(out, stem, md, lines, show=False)
 
 

@@ -317,3 +317,18 @@ def test_the_stored_held_out_choice_rebuilds_and_keeps_the_overlap_rule(tmp_path
                            os.path.join(STORED, "variants_mu_0.5", f"heldout_choice.{ext}"), shallow=False), ext
     assert model_joint.refits_failed(os.path.join(STORED, "variants_mu_0.5", "bounded", "jackknife.csv")) == [
         "m001", "m002", "m004"]
+
+
+def test_the_stored_start_state_comparison_rebuilds(tmp_path):
+    """state_volume/start_state_jackknife/compare.{md,csv} from the two stored parameters.csv, byte for byte (a
+    se_method with a comma quoted as csv quotes it)."""
+    sv = os.path.join(ROOT, "data", "geotech", "model", "state_volume")
+    d = os.path.join(sv, "start_state_jackknife")
+    with open(os.path.join(d, "compare.md")) as fh:
+        comment = fh.readline()[len("<!-- demkit/model_joint.py: "):-len(" -->\n")]
+    model_joint.compare_errors(os.path.join(sv, "dense", "parameters.csv"), os.path.join(d, "parameters.csv"),
+                               str(tmp_path), "compare", comment)
+    for ext in ("md", "csv"):
+        assert filecmp.cmp(tmp_path / f"compare.{ext}", os.path.join(d, f"compare.{ext}"), shallow=False), ext
+    with open(tmp_path / "compare.csv", newline="") as fh:
+        assert all(len(r) == 8 for r in csv.reader(fh))
