@@ -1390,6 +1390,37 @@ void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector
 }
 
 namespace {
+// With the volume-form state parameter a fitted curve's or path's start pressure must lie within the isotropic law's
+// reach (isotropic_reach), or the start has no elastic volume fraction (start_state) and Ceres stops before its first
+// step ("Residual and Jacobian evaluation failed"). A start from another fit can lie beyond it: a jackknife refit
+// from the full optimum whose left-out mean starts higher, where that optimum sits on the reach (thirty-third round:
+// the joint bounded variant's). p_iso is proportional to p0, so p0 is raised until the reach exceeds the highest
+// start pressure by kReachMargin, and said; with p0 held or the branch not fitted, the cause is said.
+constexpr double kReachMargin = 1e-3;
+void start_within_reach(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, const std::set<int>& held,
+                        bool p0_free, std::vector<double>& isob, std::vector<std::string>& said) {
+  double top = 0.0;
+  std::string which;
+  const auto consider = [&](double p, const std::string& name, double nu) {
+    if (p > top) { top = p; which = name + " at nu = " + std::to_string(nu); }
+  };
+  for (const auto& c : curves) consider(c.p.front(), c.mode, c.nu);
+  for (const auto& d : paths) consider(d.p.front(), d.name, d.nu);
+  const double reach = isotropic_reach(isob.data());
+  if (!(top > reach)) return;
+  const std::string cause = "the start's isotropic law reaches p* = " + std::to_string(reach) +
+                            " at most (nu <= 1), below the start pressure " + std::to_string(top) + " of " + which;
+  if (!p0_free || held.count(kP0) || !(reach > 0)) {
+    said.push_back(cause + ": that start has no elastic volume fraction and cannot be evaluated (hold p0 free, or "
+                   "start from a fit whose law reaches it)");
+    return;
+  }
+  const double from = isob[kP0];
+  isob[kP0] *= top / reach * (1.0 + kReachMargin);
+  said.push_back(cause + ": p0 raised from " + std::to_string(from) + " to " + std::to_string(isob[kP0]) +
+                 " at the start, so that every start state has an elastic volume fraction");
+}
+
 // The start values: the given start (start_of), or the data's own fits; the frictional family without a start from the
 // group model's calibration (its nested case) with a moderate extension (a fabric gated by the mobilisation, a stress
 // ratio linear for longer).
@@ -1456,12 +1487,14 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   if (state_lode) check_second_lode_angle(curves, paths, "the state exponent's Lode dependence (lambda_psi)",
                                           "or choose --state-limit pressure", o.b_d2);
   const bool state_volume = X && o.state_volume;
+  std::vector<std::string> start_said;
   if (state_volume) {
     volume_state_start(paths, ext, o.csl_linear);
     isob[kC0] = std::max(isob[kC0], 0.0);
   }
   set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted, state_lode, state_volume);
   isotropic_floors(problem, isob, o, state_volume);
+  if (state_volume) start_within_reach(curves, paths, held, o.fit_isotropic, isob, start_said);   // after the floors
   if (o.fit_isotropic && !held.empty())
     problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 
@@ -1475,6 +1508,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, o.excess_relaxes, n_p, o.hold_ext);
 
   Calibration cal;
+  cal.warnings = start_said;
   std::vector<std::vector<double>> window_start;
   const ceres::Solver::Summary sum = solve_on_face(problem, blocks_all, isob, iso, o, held, cal.warnings, window_start);
   cal.message = sum.BriefReport();

@@ -2705,6 +2705,73 @@ TEST(ModelVolumeState, TheIsotropicVolumeStaysOnTheRisingBranchOfALawThatFallsAg
   EXPECT_NEAR(isotropic_pressure(mono, nu), 0.01, 1e-15);
 }
 
+// isotropic_reach is the pressure up to which isotropic_volume is a number: on the rising law, p_iso(1); on a law that
+// falls again, its maximum (found here on a grid 400 times finer than the reach's own).
+TEST(ModelVolumeState, TheIsotropicReachIsWhereTheElasticVolumeFractionStops) {
+  const double falls[kNumIso] = {0.04, 0.65, -0.2, 8.4, -10.5, 0.62, 0.56};
+  const double rises[kNumIso] = {0.04, 0.65, -0.2, 8.4, 10.5, 0.62, 0.56};
+  double p_max = 0;
+  for (int i = 1; i <= 100000; ++i) p_max = std::max(p_max, isotropic_pressure(falls, 0.65 + 0.35 * i / 100000));
+  EXPECT_NEAR(isotropic_reach(falls), p_max, 1e-4 * p_max) << "the maximum inside (nu_c, 1)";
+  EXPECT_EQ(isotropic_reach(rises), isotropic_pressure(rises, 1.0)) << "the law's value at nu = 1";
+  for (const double* iso : {falls, rises}) {
+    const double reach = isotropic_reach(iso);
+    EXPECT_TRUE(std::isfinite(isotropic_volume<double>(iso, reach * (1 - 1e-9))));
+    EXPECT_TRUE(std::isnan(isotropic_volume<double>(iso, reach * (1 + 1e-6))));
+  }
+}
+
+// A start whose isotropic law does not reach a path's start pressure (a jackknife refit from an optimum on the reach,
+// whose left-out mean starts higher: the joint bounded variant's refits without m001, m002, m004, thirty-third round)
+// has no elastic volume fraction there, and Ceres stopped before its first step. With p0 free the calibration raises
+// p0 until the law reaches every start pressure, says so, and fits; with the isotropic block held it says why the
+// start cannot be evaluated.
+TEST(ModelVolumeState, AStartBeyondTheIsotropicLawsReachIsMovedWithinIt) {
+  const Parameters P = volume_truth();
+  const Rows r = triaxial_rows(0.6);
+  std::mt19937_64 rng(5);
+  std::vector<PathData> paths;
+  for (double p0 : {1e-3, 1e-2})
+    paths.push_back(synthetic_path(P, "TC_s3_synthetic", P.ext[kNuCs] + P.ext[kLambdaCs] * std::log(p0 / kPCsRef) + 0.04,
+                                   r, 8, 0.0, rng, p0, volume_ext(P, 0.0)));
+  const double top = std::max(paths[0].p.front(), paths[1].p.front());
+  IsoData branch;
+  const auto iso = P.iso();
+  for (int i = 0; i < 8; ++i) {
+    const double nu = 0.68 + 0.018 * i, f = 1.0 + (i % 2 ? 0.003 : -0.003);
+    branch.nu.push_back(nu);
+    branch.p.push_back(f * isotropic_pressure(iso.data(), nu));
+    branch.C.push_back(f * coordination(iso.data(), nu));
+  }
+  Parameters start = P;
+  start.p0 = P.p0 * 0.9 * top / isotropic_reach(iso.data());   // its law ends 10 % below the higher start pressure
+  ASSERT_LT(isotropic_reach(start.iso().data()), top);
+  CalibrationOptions o = extended_options(P, FabricLode::Overlap);
+  o.state_volume = true;
+  o.max_iterations = 20;
+  o.start = &start;
+  o.fit_isotropic = true;
+  o.hold_iso = {kGammaP, kNuCC, kAlpha};
+  auto said = [](const Calibration& c, const std::string& what) {
+    for (const auto& w : c.warnings) if (w.find(what) != std::string::npos) return true;
+    return false;
+  };
+  const Calibration cal = calibrate({}, branch, o, paths);
+  EXPECT_TRUE(std::isfinite(cal.chi2)) << cal.message;
+  EXPECT_GT(cal.message.find("Iterations"), 0u);
+  EXPECT_EQ(cal.message.find("FAILURE"), std::string::npos) << cal.message;
+  EXPECT_TRUE(said(cal, "p0 raised from")) << "said";
+  EXPECT_GE(isotropic_reach(cal.params.iso().data()), top) << "the fitted law reaches every start pressure";
+  EXPECT_NEAR(cal.value[kP0], P.p0, 0.1 * P.p0) << "the branch takes p0 back towards the truth's";
+  o.fit_isotropic = false;
+  o.hold_iso.clear();
+  o.max_iterations = 2;
+  const Calibration held = calibrate({}, {}, o, paths);
+  EXPECT_TRUE(std::isnan(held.chi2)) << "the held law cannot be evaluated at the higher start";
+  EXPECT_TRUE(said(held, "cannot be evaluated")) << "the cause named";
+  EXPECT_EQ(held.value[kP0], start.p0) << "a held p0 is not moved";
+}
+
 // The residual functors keep one Ext<double> of options and bind their Jet block to it (with_block, twenty-ninth
 // round): every option, each set away from its default, arrives on the Jet Ext unchanged, and the block is the one
 // given (a member with_block forgot would keep its default here; a new member stops the build at its static_assert).

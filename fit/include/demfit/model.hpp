@@ -900,6 +900,16 @@ inline bool rising_bracket(const double* iso, double p, double& lo, double& hi) 
   return false;
 }
 
+/// The highest pressure p* the isotropic law reaches on [nu_c, 1] (p_iso at 1, or the grid's maximum of rising_bracket
+/// for a law that falls again): isotropic_volume is a number exactly up to it. With the volume-form state parameter a
+/// path whose start pressure lies above it has no elastic volume fraction (start_state), and is lost.
+inline double isotropic_reach(const double* iso) {
+  double reach = isotropic_pressure(iso, 1.0);
+  const double nu_c = iso[kNuC];
+  for (int i = 1; i <= kRisingGrid; ++i) reach = std::max(reach, isotropic_pressure(iso, nu_c + (1.0 - nu_c) * i / kRisingGrid));
+  return reach;
+}
+
 /// The isotropic law's volume fraction at pressure p* [-]: p_iso(nu) = p, bracketed between nu_c and 1 by bisection
 /// in double, then two Newton steps in T (d p_iso / d nu = B/nu), so that Ceres differentiates it through the law's
 /// parameters. nu_c itself where p <= 0. A law that falls again below 1 (a coordination law with C1 < 0) and ends
