@@ -948,6 +948,34 @@ void held_errors(Calibration& cal, const std::set<int>& held, const std::vector<
   cal.se_cov[kNuCC] = cal.se_cov[kNuC];
 }
 
+// The highest start pressure p* among the fitted curves and paths, and which (its name and nu): with the volume-form
+// state parameter the isotropic law must reach it (isotropic_reach, start_state).
+double highest_start_pressure(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, std::string* which) {
+  double top = 0.0;
+  const auto consider = [&](double p, const std::string& name, double nu) {
+    if (p > top) { top = p; *which = name + " at nu = " + std::to_string(nu); }
+  };
+  for (const auto& c : curves) consider(c.p.front(), c.mode, c.nu);
+  for (const auto& d : paths) consider(d.p.front(), d.name, d.nu);
+  return top;
+}
+
+// A fit whose isotropic law ends at the highest start pressure (within kOnReach) sits on the edge of the elastic
+// split's domain: beyond it that start has no elastic volume fraction and the cost is not a number, a bound Ceres
+// does not see (the joint bounded variant's optimum, thirty-third round). p0, which scales the reach, quotes no error.
+constexpr double kOnReach = 1e-4;
+void reach_warning(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, const CalibrationOptions& o,
+                   const std::vector<double>& isob, Calibration& cal) {
+  std::string which;
+  const double top = highest_start_pressure(curves, paths, &which), reach = isotropic_reach(isob.data());
+  if (!o.fit_isotropic || !(top > 0) || !(reach < top * (1 + kOnReach))) return;
+  cal.se_cov[kP0] = kNaN;
+  cal.warnings.push_back("the isotropic law ends at the highest start pressure (it reaches p* = " + fmt(reach, 7) +
+                         " at most, the start of " + which + " is at " + fmt(top, 7) + "): the fit sits on the edge of the "
+                         "elastic split's domain, a bound on p0, nu_c and the coordination law that Ceres does not see; "
+                         "p0 quotes no standard error (docs/model.md, \"A start beyond the isotropic law's reach\")");
+}
+
 // What the data leave undetermined: the nu-slopes from one start volume fraction, jamming
 // fractions on their bounds (no standard errors quoted for them).
 void calibration_warnings(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, const IsoData& iso,
@@ -1000,6 +1028,7 @@ void calibration_warnings(const std::vector<CurveData>& curves, const std::vecto
     }
   }
   coordination_warning(iso, o, isob, cal);
+  if (X && o.state_volume) reach_warning(curves, paths, o, isob, cal);
 }
 
 /// The calibration's inputs checked (curves or paths with start values, held isotropic indices,
@@ -1399,13 +1428,8 @@ namespace {
 constexpr double kReachMargin = 1e-3;
 void start_within_reach(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, const std::set<int>& held,
                         bool p0_free, std::vector<double>& isob, std::vector<std::string>& said) {
-  double top = 0.0;
   std::string which;
-  const auto consider = [&](double p, const std::string& name, double nu) {
-    if (p > top) { top = p; which = name + " at nu = " + std::to_string(nu); }
-  };
-  for (const auto& c : curves) consider(c.p.front(), c.mode, c.nu);
-  for (const auto& d : paths) consider(d.p.front(), d.name, d.nu);
+  const double top = highest_start_pressure(curves, paths, &which);
   const double reach = isotropic_reach(isob.data());
   if (!(top > reach)) return;
   const std::string cause = "the start's isotropic law reaches p* = " + std::to_string(reach) +
