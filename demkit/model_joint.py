@@ -540,12 +540,16 @@ def heldout_choice(mu, out):
                          "(data/geotech/model/joint/README.md)")
     failed = {v: refits_failed(os.path.join(d, "jackknife.csv")) for v, d in runs.items()}
     runs = {v: d for v, d in runs.items() if not failed[v]}   # a failed refit's score is its start's: not held out
-    sets = {v: heldout_sets(os.path.join(d, "heldout.csv")) for v, d in runs.items()}
+    every = {v: heldout_sets(os.path.join(d, "heldout.csv")) for v, d in runs.items()}
+    # a packing whose held-out prediction is not a number (thirty-third round: its own start pressure above the
+    # refit's isotropic reach) is one the variant cannot predict: the variant is not compared, and says which
+    unpredicted = {v: [p for p, (_, sc) in sorted(s.items()) if not np.isfinite(sc)] for v, s in every.items()}
+    sets = {v: s for v, s in every.items() if not unpredicted[v]}
     names = sorted(set.intersection(*(set(s) for s in sets.values())))
     index = {p: i for i, p in enumerate(names)}
     scores = {v: {index[p]: s[p][1] for p in names} for v, s in sets.items()}
     sizes = {v: coefficients(os.path.join(d, "parameters.csv")) for v, d in runs.items()}
-    chosen, beaten, means = model_variants.choose(scores, sizes)
+    chosen, beaten, means = model_variants.choose(scores, {v: sizes[v] for v in scores})
     md = [f"<!-- demkit/model_joint.py: mu = {mu}, the held-out test among the joint calibration's variants fitted on "
           "D2 + D3 and TC_s3 dense: each packing's own fitted curves (D2/D3 of a friction-study packing, TC_s3 of a "
           "laboratory packing) predicted by the refit without it (`dem model`'s jackknife over both sets, heldout.csv); "
@@ -558,11 +562,19 @@ def heldout_choice(mu, out):
              "packings,beaten_by,chosen\n"]
     from demkit import model_state_limit
     for v in runs:
+        chi = float(free_values(os.path.join(runs[v], "parameters.csv"))["chi2_per_dof"]["value"])
+        part = {k: [sc for p, (st, sc) in every[v].items() if st == k and np.isfinite(sc)] for k in (0, 1)}
+        f, lab = (sum(x) / len(x) if x else float("nan") for x in (part[0], part[1]))
+        if unpredicted[v]:
+            k = len(every[v]) - len(unpredicted[v])
+            md.append(f"| {v} | {sizes[v]} | {chi:.4g} | not compared: the held-out predictions of "
+                      f"{', '.join(unpredicted[v])} are not numbers | {f:.4g} (the {len(part[0])} predicted) | "
+                      f"{lab:.4g} (the {len(part[1])} predicted) | – | – |  |")
+            lines.append(f"{v},{sizes[v]},{chi!r},nan,{f!r},{lab!r},nan,nan,nan,{k},,"
+                         f"not predicting {' '.join(unpredicted[v])}\n")
+            continue
         dm, dse, tq, _, _ = (model_state_limit.paired_choice(scores["overlap"], scores[v]) if v != "overlap" and
                              "overlap" in scores else (float("nan"),) * 3 + (0, False))
-        chi = float(free_values(os.path.join(runs[v], "parameters.csv"))["chi2_per_dof"]["value"])
-        part = {k: [sc for p, (st, sc) in sets[v].items() if p in index and st == k] for k in (0, 1)}
-        f, lab = (sum(x) / len(x) if x else float("nan") for x in (part[0], part[1]))
         versus = f"{dm:.3g} ± {dse:.2g} ({tq * dse:.2g})" if dm == dm else "–"
         md.append(f"| {v} | {sizes[v]} | {chi:.4g} | {means[v]:.4g} | {f:.4g} | {lab:.4g} | {versus} | "
                   f"{', '.join(beaten[v]) or '–'} | {'yes' if v == chosen else ''} |")
