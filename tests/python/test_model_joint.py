@@ -333,14 +333,20 @@ def test_the_stored_held_out_choice_rebuilds_and_keeps_the_overlap_rule(tmp_path
     assert sorted(p for p, (_, sc) in scores.items() if sc != sc) == ["m000", "m003", "m005", "m006", "m007"]
 
 
-def test_the_stored_start_state_comparison_rebuilds(tmp_path):
-    """state_volume/start_state_jackknife/compare.{md,csv} from the two stored parameters.csv, byte for byte (a
-    se_method with a comma quoted as csv quotes it)."""
+@pytest.mark.parametrize("stored,rerun", [("dense", ""), ("loose", "loose"), ("three_pressures/joint",
+                                                                            "three_pressures/joint"),
+                                           ("three_pressures/mu_0.3/joint", "three_pressures/mu_0.3/joint"),
+                                           ("three_pressures/mu_1/joint", "three_pressures/mu_1/joint"),
+                                           ("three_pressures/mu_0.1/joint", "three_pressures/mu_0.1/joint")])
+def test_the_stored_start_state_comparison_rebuilds(tmp_path, stored, rerun):
+    """state_volume/start_state_jackknife/[RERUN/]compare.{md,csv} from the two stored parameters.csv (the stored
+    calibration and its restart with the fixed jackknife: thirty-second round dense, thirty-third the others), byte
+    for byte (a se_method with a comma quoted as csv quotes it)."""
     sv = os.path.join(ROOT, "data", "geotech", "model", "state_volume")
-    d = os.path.join(sv, "start_state_jackknife")
+    d = os.path.join(sv, "start_state_jackknife", rerun)
     with open(os.path.join(d, "compare.md")) as fh:
         comment = fh.readline()[len("<!-- demkit/model_joint.py: "):-len(" -->\n")]
-    model_joint.compare_errors(os.path.join(sv, "dense", "parameters.csv"), os.path.join(d, "parameters.csv"),
+    model_joint.compare_errors(os.path.join(sv, stored, "parameters.csv"), os.path.join(d, "parameters.csv"),
                                str(tmp_path), "compare", comment)
     for ext in ("md", "csv"):
         assert filecmp.cmp(tmp_path / f"compare.{ext}", os.path.join(d, f"compare.{ext}"), shallow=False), ext
