@@ -2628,26 +2628,34 @@ TEST(ModelVolumeState, APathThroughTheIsotropicCuspEndsWhereItsStepsPutIt) {
   EXPECT_NEAR(end_s(Q, 1e-3), end_s(Q, 1e-5), 1e-7) << "without it";
 }
 
-// The calibration keeps the paths off the cusp: with the volume-form state parameter and nu_cC held, nu_c is bounded
-// below by it (a start below it is moved onto it, and the truth here, 0.6642 < 0.667, would take it below), and the
-// table says that it sits on that bound; with the whole isotropic block held at a law with the cusp, the calibration
-// warns, naming the pressure and the fix.
-TEST(ModelVolumeState, TheCalibrationKeepsNuCAtOrAboveAHeldNuCC) {
-  const Parameters P = volume_truth();
+namespace {
+// Two drained triaxial compressions of P from psi = 0.04 at p* = 1e-3 and 1e-2 (K = 8, seed 5), and 8 points of its
+// isotropic branch at nu = 0.68-0.806 scattered by +-0.3 %, alternating.
+void drained_pair_and_branch(const Parameters& P, std::vector<PathData>& paths, IsoData& branch) {
   const auto iso = P.iso();
   const Rows r = triaxial_rows(0.6);
   std::mt19937_64 rng(5);
-  std::vector<PathData> paths;
   for (double p0 : {1e-3, 1e-2})
     paths.push_back(synthetic_path(P, "TC_s3_synthetic", P.ext[kNuCs] + P.ext[kLambdaCs] * std::log(p0 / kPCsRef) + 0.04,
                                    r, 8, 0.0, rng, p0, volume_ext(P, 0.0)));
-  IsoData branch;
   for (int i = 0; i < 8; ++i) {
     const double nu = 0.68 + 0.018 * i, f = 1.0 + (i % 2 ? 0.003 : -0.003);
     branch.nu.push_back(nu);
     branch.p.push_back(f * isotropic_pressure(iso.data(), nu));
     branch.C.push_back(f * coordination(iso.data(), nu));
   }
+}
+}  // namespace
+
+// The calibration keeps the paths off the cusp: with the volume-form state parameter and nu_cC held, nu_c is bounded
+// below by it (a start below it is moved onto it, and the truth here, 0.6642 < 0.667, would take it below), and the
+// table says that it sits on that bound; with the whole isotropic block held at a law with the cusp, the calibration
+// warns, naming the pressure and the fix.
+TEST(ModelVolumeState, TheCalibrationKeepsNuCAtOrAboveAHeldNuCC) {
+  const Parameters P = volume_truth();
+  std::vector<PathData> paths;
+  IsoData branch;
+  drained_pair_and_branch(P, paths, branch);
   CalibrationOptions o = extended_options(P, FabricLode::Overlap);
   o.state_volume = true;
   o.max_iterations = 20;
@@ -2728,21 +2736,11 @@ TEST(ModelVolumeState, TheIsotropicReachIsWhereTheElasticVolumeFractionStops) {
 // start cannot be evaluated.
 TEST(ModelVolumeState, AStartBeyondTheIsotropicLawsReachIsMovedWithinIt) {
   const Parameters P = volume_truth();
-  const Rows r = triaxial_rows(0.6);
-  std::mt19937_64 rng(5);
   std::vector<PathData> paths;
-  for (double p0 : {1e-3, 1e-2})
-    paths.push_back(synthetic_path(P, "TC_s3_synthetic", P.ext[kNuCs] + P.ext[kLambdaCs] * std::log(p0 / kPCsRef) + 0.04,
-                                   r, 8, 0.0, rng, p0, volume_ext(P, 0.0)));
-  const double top = std::max(paths[0].p.front(), paths[1].p.front());
   IsoData branch;
+  drained_pair_and_branch(P, paths, branch);
+  const double top = std::max(paths[0].p.front(), paths[1].p.front());
   const auto iso = P.iso();
-  for (int i = 0; i < 8; ++i) {
-    const double nu = 0.68 + 0.018 * i, f = 1.0 + (i % 2 ? 0.003 : -0.003);
-    branch.nu.push_back(nu);
-    branch.p.push_back(f * isotropic_pressure(iso.data(), nu));
-    branch.C.push_back(f * coordination(iso.data(), nu));
-  }
   Parameters start = P;
   start.p0 = P.p0 * 0.9 * top / isotropic_reach(iso.data());   // its law ends 10 % below the higher start pressure
   ASSERT_LT(isotropic_reach(start.iso().data()), top);
