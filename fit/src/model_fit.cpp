@@ -1419,6 +1419,15 @@ void check_weighted_lode(const std::vector<CurveData>& curves, const std::vector
 }
 
 namespace {
+// One start volume fraction: (nu - nu_ref) is zero on every curve, so the nu-slopes (*_b) are not determined by the
+// data: held at 0, quoted without errors, and said (calibration_warnings).
+bool one_start_volume_fraction(const std::vector<CurveData>& curves, const std::vector<PathData>& paths) {
+  std::set<long long> nus_seen;
+  for (const auto& c : curves) nus_seen.insert(std::llround(c.nu * 1e6));
+  for (const auto& d : paths) nus_seen.insert(std::llround(d.nu * 1e6));
+  return nus_seen.size() < 2;
+}
+
 // With the volume-form state parameter a fitted curve's or path's start pressure must lie within the isotropic law's
 // reach (isotropic_reach), or the start has no elastic volume fraction (start_state) and Ceres stops before its first
 // step ("Residual and Jacobian evaluation failed"). A start from another fit can lie beyond it: a jackknife refit
@@ -1522,12 +1531,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   if (o.fit_isotropic && !held.empty())
     problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 
-  // One start volume fraction: (nu - nu_ref) is zero on every curve, so the nu-slopes (*_b) are not
-  // determined by the data: held at 0, quoted without errors, and said.
-  std::set<long long> nus_seen;
-  for (const auto& c : curves) nus_seen.insert(std::llround(c.nu * 1e6));
-  for (const auto& d : paths) nus_seen.insert(std::llround(d.nu * 1e6));
-  const bool one_nu = nus_seen.size() < 2;
+  const bool one_nu = one_start_volume_fraction(curves, paths);
   const int n_p = start_pressures(curves, paths);
   hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, o.excess_relaxes, n_p, o.hold_ext);
 
