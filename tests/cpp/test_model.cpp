@@ -323,6 +323,32 @@ TEST(ModelFit, JackknifeOverTwoSetsMatchesItsClosedForm) {
   EXPECT_GT(jackknife_covariance(x, x), 10 * (va + vb));
 }
 
+// A coefficient whose refits all end within round-off of one value has no jackknife error: the joint calibration at
+// mu = 0 quoted n_dil (which does not act there) +- 2.3e-15 from refits an ulp apart (thirty-third round). A quoted
+// coefficient held so is said (a bound); an undetermined one quotes nothing; a genuine spread is quoted as before.
+TEST(ModelFit, ARoundOffSpreadIsNoJackknifeError) {
+  Calibration cal;
+  cal.names = {"spread", "undetermined", "held"};
+  cal.value = {1.0, 5.752817178203651, 0.3};
+  cal.se_cov = {0.1, std::nan(""), 0.01};
+  cal.undetermined = {false, true, false};
+  std::vector<std::vector<double>> est;
+  const std::vector<int> sample{0, 0, 0, 1, 1};
+  for (int k = 0; k < 5; ++k) {
+    const double v = cal.value[1];
+    est.push_back({1.0 + 0.01 * k * k, k % 2 ? std::nextafter(v, 10.0) : v, 0.3});
+  }
+  std::vector<std::string> said;
+  std::vector<double> dof;
+  const std::vector<double> se = jackknife_errors(est, cal, false, &said, sample, &dof);
+  EXPECT_GT(se[0], 0.0);
+  EXPECT_TRUE(std::isfinite(dof[0]));
+  EXPECT_TRUE(std::isnan(se[1])) << "round-off is no spread: " << se[1];
+  EXPECT_TRUE(std::isnan(se[2]));
+  ASSERT_EQ(said.size(), 1u);
+  EXPECT_NE(said[0].find("held: every jackknife refit ends on the same value"), std::string::npos) << said[0];
+}
+
 // Two sets of packings behind different fitted curves (D2 at nu = 0.69, 0.73 from 8 packings, at 0.77, 0.81 from 6
 // others, as the joint calibration's D2 + D3 and TC_s3 come from the friction study's and the laboratory's): each
 // packing left out of the means it holds, the errors summed over the sets (jackknife_errors with the sets), the 95 %
