@@ -237,9 +237,9 @@ def test_the_held_out_choice_on_hand_built_runs(tmp_path):
         sum(x - 1.0 for k, x in enumerate(base[:8]) if k not in (0, 3)) / 6), "the mean over the predicted ones"
 
 
-@pytest.mark.parametrize("mu", ["0.1", "0.3", "0.5"])
+@pytest.mark.parametrize("mu", ["0", "0.1", "0.3", "0.5"])
 def test_the_stored_dem_model_jackknife_over_both_sets(mu):
-    """mu = 0.3, 0.5 (thirty-second round), 0.1 (thirty-third) with `dem model`'s jackknife: 12 usable refits, the friction study's 8
+    """mu = 0.3, 0.5 (thirty-second round), 0 and 0.1 (thirty-third) with `dem model`'s jackknife: 12 usable refits, the friction study's 8
     packings in one set and the laboratory's 4 in the other; every quoted error recomputed from jackknife_estimates.csv
     set by set; the intervals' t on Welch-Satterthwaite's degrees of freedom (between the smaller set's n - 1 = 3 and
     10)."""
