@@ -271,7 +271,13 @@ def test_the_stored_dem_model_jackknife_over_both_sets(mu):
         assert t == pytest.approx(stats.t.ppf(0.975, dof), rel=1e-4, abs=rounding), name
         assert stats.t.ppf(0.975, 10) * 0.999 <= t <= stats.t.ppf(0.975, 3) * 1.001, name
         quoted += 1
-    assert quoted >= 20
+    assert quoted >= (18 if mu == "0" else 20)   # at mu = 0 fewer coefficients act (n_dil: below)
+    for name, q in params.items():   # refits all within round-off of one value quote no error (thirty-third round)
+        x = [float(e[name]) for e in est] if name in est[0] else []
+        if x and all(abs(v - x[0]) <= 1e-12 * abs(x[0]) for v in x):
+            assert not math.isfinite(float(q["se"])), name
+    if mu == "0":
+        assert params["n_dil"]["se"] == "nan"
     with open(os.path.join(d, "heldout.csv"), newline="") as fh:
         held = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
     assert [h["packing"] for h in held] == [r["packing_left_out"] for r in refits]
