@@ -1070,6 +1070,19 @@ JackSamples jackknife_samples(const ModelInputs& in) {
   return s;
 }
 
+// A refit whose start was moved within the isotropic law's reach (model_fit's start_within_reach: its warning
+// "... p0 raised from A to B at the start ..."): " (p0 raised from A to B)" for jackknife.md's start column; "" else.
+std::string moved_start(const Calibration& c) {
+  for (const auto& w : c.warnings) {
+    const auto at = w.find("p0 raised from ");
+    if (at == std::string::npos) continue;
+    const auto end = w.find(" at the start", at);
+    return " (" + w.substr(at, end == std::string::npos ? std::string::npos : end - at) + ": the left-out mean starts "
+           "above the start's isotropic reach)";
+  }
+  return "";
+}
+
 // Packing k left out of every fitted mean curve and path and of the isotropic branch, refitted from the full
 // fit's optimum. A refit that did not reach an optimum like the full fit's (jackknife_refit_usable: failed at
 // its start, not converged, or far above), or ended above kRetryAbove times the full fit's chi2/dof (at least 1),
@@ -1110,7 +1123,7 @@ JackRefit refit_without(const ModelInputs& in, const CalibrationOptions& co_f, c
     const bool better = i == 0 || rank(c) > rank(best) || (rank(c) == rank(best) && c.chi2_dof() < best.chi2_dof());
     if (better) {
       best = std::move(c);
-      r.start = i == 0 ? r.start : "--start " + o.start[i - 1];
+      r.start = (i == 0 ? std::string("the full fit's optimum") : "--start " + o.start[i - 1]) + moved_start(best);
       r.usable = jackknife_refit_usable(best, ff.cal);
     }
   }
