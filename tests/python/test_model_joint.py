@@ -335,6 +335,10 @@ def test_the_stored_held_out_choice_rebuilds_and_keeps_the_overlap_rule(tmp_path
         assert filecmp.cmp(out / "variants_mu_0.5" / f"heldout_choice.{ext}",
                            os.path.join(STORED, "variants_mu_0.5", f"heldout_choice.{ext}"), shallow=False), ext
     assert model_joint.refits_failed(os.path.join(STORED, "variants_mu_0.5", "bounded", "jackknife.csv")) == []
+    with open(os.path.join(STORED, "variants_mu_0.5", "bounded", "jackknife.csv"), newline="") as fh:
+        moved = [r["packing_left_out"] for r in csv.DictReader(ln for ln in fh if not ln.startswith("#"))
+                 if "p0 raised from" in r["start"]]
+    assert moved == ["m001", "m002", "m004"], "the three refits whose start was moved within the reach say so"
     scores = model_joint.heldout_sets(os.path.join(STORED, "variants_mu_0.5", "bounded", "heldout.csv"))
     assert sorted(p for p, (_, sc) in scores.items() if sc != sc) == ["m000", "m003", "m005", "m006", "m007"]
 
