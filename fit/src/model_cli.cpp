@@ -599,11 +599,8 @@ void warn_beyond_reach(const Parameters& P, const std::string& name, double nu, 
   if (!(P.extended && P.state_volume)) return;
   const std::vector<double> iso = P.iso();
   if (!std::isnan(isotropic_volume<double>(iso.data(), p0))) return;
-  double top = 0, at = P.nu_c;
-  for (int i = 0; i <= 1000; ++i) {   // the law's largest pressure, for the message
-    const double x = P.nu_c + (1.0 - P.nu_c) * i / 1000, px = isotropic_pressure(iso.data(), x);
-    if (px > top) { top = px; at = x; }
-  }
+  double at = P.nu_c;
+  const double top = isotropic_reach(iso.data(), &at);   // the law's largest pressure, for the message
   std::cerr << "dem model: warning: " << name << " nu=" << num(nu, 4) << " (" << role << ") starts at p* = " << num(p0)
             << ", above the isotropic law's reach (its largest p* on [nu_c, 1] is " << num(top) << " at nu = " << num(at, 4)
             << "; C1 = " << num(iso[kC1]) << (iso[kC1] < 0 ? ": the coordination falls with the density" : "")
@@ -1070,17 +1067,10 @@ JackSamples jackknife_samples(const ModelInputs& in) {
   return s;
 }
 
-// A refit whose start was moved within the isotropic law's reach (model_fit's start_within_reach: its warning
-// "... p0 raised from A to B at the start ..."): " (p0 raised from A to B)" for jackknife.md's start column; "" else.
+// A refit whose start was moved within the isotropic law's reach (Calibration::start_moved, model_fit's
+// start_within_reach): " (p0 raised from A to B: ...)" for jackknife.md's start column; "" else.
 std::string moved_start(const Calibration& c) {
-  for (const auto& w : c.warnings) {
-    const auto at = w.find("p0 raised from ");
-    if (at == std::string::npos) continue;
-    const auto end = w.find(" at the start", at);
-    return " (" + w.substr(at, end == std::string::npos ? std::string::npos : end - at) + ": the left-out mean starts "
-           "above the start's isotropic reach)";
-  }
-  return "";
+  return c.start_moved.empty() ? "" : " (" + c.start_moved + ": the left-out mean starts above the start's isotropic reach)";
 }
 
 // Packing k left out of every fitted mean curve and path and of the isotropic branch, refitted from the full

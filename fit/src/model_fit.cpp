@@ -1436,7 +1436,7 @@ bool one_start_volume_fraction(const std::vector<CurveData>& curves, const std::
 // start pressure by kReachMargin, and said; with p0 held or the branch not fitted, the cause is said.
 constexpr double kReachMargin = 1e-3;
 void start_within_reach(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, const std::set<int>& held,
-                        bool p0_free, std::vector<double>& isob, std::vector<std::string>& said) {
+                        bool p0_free, std::vector<double>& isob, std::vector<std::string>& said, std::string& moved) {
   std::string which;
   const double top = highest_start_pressure(curves, paths, &which);
   const double reach = isotropic_reach(isob.data());
@@ -1450,8 +1450,8 @@ void start_within_reach(const std::vector<CurveData>& curves, const std::vector<
   }
   const double from = isob[kP0];
   isob[kP0] *= top / reach * (1.0 + kReachMargin);
-  said.push_back(cause + ": p0 raised from " + std::to_string(from) + " to " + std::to_string(isob[kP0]) +
-                 " at the start, so that every start state has an elastic volume fraction");
+  moved = "p0 raised from " + std::to_string(from) + " to " + std::to_string(isob[kP0]);
+  said.push_back(cause + ": " + moved + " at the start, so that every start state has an elastic volume fraction");
 }
 
 // The start values: the given start (start_of), or the data's own fits; the frictional family without a start from the
@@ -1520,14 +1520,14 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   if (state_lode) check_second_lode_angle(curves, paths, "the state exponent's Lode dependence (lambda_psi)",
                                           "or choose --state-limit pressure", o.b_d2);
   const bool state_volume = X && o.state_volume;
-  std::vector<std::string> start_said;
+  Calibration cal;   // its warnings and start_moved from start_within_reach on
   if (state_volume) {
     volume_state_start(paths, ext, o.csl_linear);
     isob[kC0] = std::max(isob[kC0], 0.0);
   }
   set_bounds(problem, isob, shear, ext, numin, X, o.state_limit, weighted, state_lode, state_volume);
   isotropic_floors(problem, isob, o, state_volume);
-  if (state_volume) start_within_reach(curves, paths, held, o.fit_isotropic, isob, start_said);   // after the floors
+  if (state_volume) start_within_reach(curves, paths, held, o.fit_isotropic, isob, cal.warnings, cal.start_moved);   // after the floors
   if (o.fit_isotropic && !held.empty())
     problem.SetManifold(isob.data(), new ceres::SubsetManifold(kNumIso, std::vector<int>(held.begin(), held.end())));
 
@@ -1535,8 +1535,6 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   const int n_p = start_pressures(curves, paths);
   hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, o.excess_relaxes, n_p, o.hold_ext);
 
-  Calibration cal;
-  cal.warnings = start_said;
   std::vector<std::vector<double>> window_start;
   const ceres::Solver::Summary sum = solve_on_face(problem, blocks_all, isob, iso, o, held, cal.warnings, window_start);
   cal.message = sum.BriefReport();

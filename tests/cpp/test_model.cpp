@@ -2785,6 +2785,7 @@ TEST(ModelVolumeState, AStartBeyondTheIsotropicLawsReachIsMovedWithinIt) {
   EXPECT_GT(cal.message.find("Iterations"), 0u);
   EXPECT_EQ(cal.message.find("FAILURE"), std::string::npos) << cal.message;
   EXPECT_TRUE(said(cal, "p0 raised from")) << "said";
+  EXPECT_EQ(cal.start_moved.rfind("p0 raised from ", 0), 0u) << "recorded for jackknife.md: " << cal.start_moved;
   EXPECT_GE(isotropic_reach(cal.params.iso().data()), top) << "the fitted law reaches every start pressure";
   EXPECT_NEAR(cal.value[kP0], P.p0, 0.1 * P.p0) << "the branch takes p0 back towards the truth's";
   o.fit_isotropic = false;
@@ -2794,6 +2795,7 @@ TEST(ModelVolumeState, AStartBeyondTheIsotropicLawsReachIsMovedWithinIt) {
   EXPECT_TRUE(std::isnan(held.chi2)) << "the held law cannot be evaluated at the higher start";
   EXPECT_TRUE(said(held, "cannot be evaluated")) << "the cause named";
   EXPECT_EQ(held.value[kP0], start.p0) << "a held p0 is not moved";
+  EXPECT_TRUE(held.start_moved.empty());
 }
 
 // The residual functors keep one Ext<double> of options and bind their Jet block to it (with_block, twenty-ninth

@@ -902,11 +902,15 @@ inline bool rising_bracket(const double* iso, double p, double& lo, double& hi) 
 
 /// The highest pressure p* the isotropic law reaches on [nu_c, 1] (p_iso at 1, or the grid's maximum of rising_bracket
 /// for a law that falls again): isotropic_volume is a number exactly up to it. With the volume-form state parameter a
-/// path whose start pressure lies above it has no elastic volume fraction (start_state), and is lost.
-inline double isotropic_reach(const double* iso) {
-  double reach = isotropic_pressure(iso, 1.0);
+/// path whose start pressure lies above it has no elastic volume fraction (start_state), and is lost. AT: where.
+inline double isotropic_reach(const double* iso, double* at = nullptr) {
+  double reach = isotropic_pressure(iso, 1.0), where = 1.0;
   const double nu_c = iso[kNuC];
-  for (int i = 1; i <= kRisingGrid; ++i) reach = std::max(reach, isotropic_pressure(iso, nu_c + (1.0 - nu_c) * i / kRisingGrid));
+  for (int i = 1; i <= kRisingGrid; ++i) {
+    const double nu = nu_c + (1.0 - nu_c) * i / kRisingGrid, p = isotropic_pressure(iso, nu);
+    if (p > reach) { reach = p; where = nu; }
+  }
+  if (at) *at = where;
   return reach;
 }
 

@@ -165,6 +165,8 @@ struct Calibration {
   /// and the coefficients still moving over the last window ("" otherwise)
   std::string settled;
   std::vector<std::string> warnings;
+  /// "p0 raised from A to B" where the start was moved within the isotropic law's reach (start_within_reach); "" else.
+  std::string start_moved;
   /// A fitted drained path along which the optimum sits against the drained control's margin ("" if none; set by
   /// `dem model`): the errors are then not determined (parameters.csv's se, lo95, hi95 nan)
   std::string against_margin;
