@@ -1474,6 +1474,61 @@ Parameters calibration_start(const std::vector<CurveData>& curves_in, const std:
 }
 }  // namespace
 
+namespace {
+// The first row of xs (from `from` on) that is not a number; -1 where every one is.
+int first_nan(const std::vector<double>& xs, std::size_t from = 0) {
+  for (std::size_t i = from; i < xs.size(); ++i)
+    if (!std::isfinite(xs[i])) return static_cast<int>(i);
+  return -1;
+}
+}  // namespace
+
+std::string start_failure(const Parameters& P, const std::vector<CurveData>& curves, const std::vector<PathData>& paths) {
+  const std::vector<double> iso = P.iso();
+  const bool volume = P.extended && P.state_volume;
+  auto beyond = [&](double p0) {
+    return volume && std::isnan(isotropic_volume<double>(iso.data(), p0))
+               ? " starts at p* = " + fmt(p0, 6) + ", above the isotropic law's reach (" + fmt(isotropic_reach(iso.data()), 6) +
+                     "; docs/model.md, \"A start beyond the isotropic law's reach\")"
+               : std::string();
+  };
+  for (const auto& c : curves) {
+    const std::string what = c.mode + " nu=" + fmt(c.nu, 4);
+    if (!beyond(c.p.front()).empty()) return what + beyond(c.p.front());
+    const ModelCurve m = predict_curve(P, c);
+    int at = std::max({first_nan(m.p), first_nan(m.s), first_nan(m.F)});
+    if (at >= 0) return what + " is not a number from eps_d = " + fmt(m.eps[at], 3);
+  }
+  for (const auto& d : paths) {
+    const std::string what = d.name + " nu=" + fmt(d.nu, 4);
+    if (!beyond(d.p.front()).empty()) return what + beyond(d.p.front());
+    PathPrediction m;
+    try {
+      m = predict_path(P, d);
+    } catch (const std::invalid_argument& e) {
+      return what + ": " + e.what();
+    }
+    if (m.lost_row >= 1)
+      return what + " loses its drained control after eps_d_accumulated = " + fmt(m.acc[m.lost_row - 1], 3) +
+             " (a_A F/3 within " + fmt(100 * kTriaxialMargin, 2) + " % of 1, the pole; docs/model.md, \"Where the drained "
+             "triaxial control is lost\")";
+    int at = std::max({first_nan(m.p), first_nan(m.s), first_nan(m.F)});
+    if (at >= 0) return what + " is not a number from eps_d_accumulated = " + fmt(m.acc[at], 3);
+  }
+  return "";
+}
+
+namespace {
+// A calibration Ceres could not evaluate at its start: which curve is not a number there, and why, in its message
+// (starts.md, jackknife.md) and warnings.
+void note_start_failure(const std::vector<CurveData>& curves, const std::vector<PathData>& paths, Calibration& cal) {
+  const std::string why = start_failure(cal.params, curves, paths);
+  if (why.empty()) return;
+  cal.message += "; at its start " + why;
+  cal.warnings.push_back("the start cannot be evaluated: " + why);
+}
+}  // namespace
+
 Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
                       const std::vector<PathData>& paths) {
   init_glog();
@@ -1540,6 +1595,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   cal.message = sum.BriefReport();
   if (sum.termination_type == ceres::FAILURE) cal.message += " (" + sum.message + ")";   // why, in starts.md
   cal.params = fitted_params(start, isob, shear, ext, o, X);
+  if (sum.final_cost < 0) note_start_failure(curves, paths, cal);   // Ceres stopped before its first step
   const int n_ext = ext_size(cal.params.state_limit, weighted, state_lode, state_volume);
   const std::vector<int> held_x =
       X ? with_user_held(held_ext(one_nu, cal.params.state_limit, weighted, state_lode, state_volume, n_p), o.hold_ext, n_ext)

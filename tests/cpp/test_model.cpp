@@ -16,6 +16,7 @@
 
 #include "demfit/ensemble.hpp"
 #include "demfit/fit.hpp"
+#include "demfit/format.hpp"
 #include "demfit/model.hpp"
 #include "demfit/model_fit.hpp"
 #include "demfit/jet_valued_cost.hpp"
@@ -2796,6 +2797,43 @@ TEST(ModelVolumeState, AStartBeyondTheIsotropicLawsReachIsMovedWithinIt) {
   EXPECT_TRUE(said(held, "cannot be evaluated")) << "the cause named";
   EXPECT_EQ(held.value[kP0], start.p0) << "a held p0 is not moved";
   EXPECT_TRUE(held.start_moved.empty());
+}
+
+// A start Ceres cannot evaluate names its cause in the message (starts.md's and jackknife.md's column; thirty-fourth
+// round: a stored multi-start listed only Ceres' "Residual and Jacobian evaluation failed"). Here a start whose
+// anisotropy modulus a_A takes the drained paths to the pole a_A F/3 = 1 - kTriaxialMargin: the named path loses its
+// control where predict_path says it does, and the truth's own start is not called failed.
+TEST(ModelVolumeState, AStartThatCannotBeEvaluatedNamesThePathAndTheCause) {
+  const Parameters P = volume_truth();
+  std::vector<PathData> paths;
+  IsoData branch;
+  drained_pair_and_branch(P, paths, branch);
+  Parameters start = P;
+  start.shear[kAnisoA] = 30.0;   // a_A F/3 reaches 0.9 at F = 0.03, which the first path's fabric passes early
+  const PathPrediction lost = predict_path(start, paths[0]);
+  ASSERT_GE(lost.lost_row, 1) << "the start loses the first path's control";
+  const std::string where = paths[0].name + " nu=" + demfit::fmt(paths[0].nu, 4);
+  EXPECT_EQ(start_failure(start, {}, paths).rfind(where + " loses its drained control after eps_d_accumulated = " +
+                                                  demfit::fmt(lost.acc[lost.lost_row - 1], 3) + " (", 0), 0u)
+      << start_failure(start, {}, paths);
+  EXPECT_EQ(start_failure(P, {}, paths), "") << "the truth is a number on every path";
+  Parameters high = P;   // a law that ends below the paths' start pressures: the reach named instead
+  high.p0 = P.p0 * 0.5 * std::min(paths[0].p.front(), paths[1].p.front()) / isotropic_reach(P.iso().data());
+  EXPECT_NE(start_failure(high, {}, paths).find(where + " starts at p* = "), std::string::npos);
+  EXPECT_NE(start_failure(high, {}, paths).find("above the isotropic law's reach"), std::string::npos);
+  CalibrationOptions o = extended_options(P, FabricLode::Overlap);   // the calibration from that start (the critical
+  o.state_volume = true;                                             // state moved to the paths' ends: its own cause)
+  o.max_iterations = 2;
+  o.start = &start;
+  const Calibration cal = calibrate({}, {}, o, paths);
+  ASSERT_TRUE(std::isnan(cal.chi2)) << cal.message;
+  const std::string why = start_failure(cal.params, {}, paths);
+  ASSERT_EQ(why.rfind(where, 0), 0u) << why;
+  EXPECT_NE(cal.message.find("FAILURE"), std::string::npos);
+  EXPECT_EQ(cal.message.substr(cal.message.size() - why.size() - 15), "; at its start " + why) << cal.message;
+  bool warned = false;
+  for (const auto& w : cal.warnings) warned = warned || w == "the start cannot be evaluated: " + why;
+  EXPECT_TRUE(warned);
 }
 
 // The residual functors keep one Ext<double> of options and bind their Jet block to it (with_block, twenty-ninth

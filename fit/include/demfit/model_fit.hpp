@@ -326,6 +326,12 @@ struct PathPrediction {
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
                             double* psi_seen = nullptr);
 
+/// Why a calibration could not be evaluated at its start (Ceres stopped before its first step, a start of a multi-start
+/// "failed"): the first fitted curve or path that is not a number at the start values P, named with its cause (a start
+/// pressure above the isotropic law's reach, the drained control's pole, a start state the laws cannot hold); "" where
+/// every one is a number. calibrate() adds it to the message (starts.md, jackknife.md) and the warnings.
+std::string start_failure(const Parameters& P, const std::vector<CurveData>& curves, const std::vector<PathData>& paths);
+
 /// The pressure p* at the coordination law's jamming fraction nu_cC on the isotropic law `iso` (kNumIso entries),
 /// where nu_cC lies above the pressure's jamming fraction nu_c; NaN otherwise. There the law's stiffness
 /// B = dp*/d ln nu is unbounded (the coordination's slope (nu/nu_cC - 1)^(alpha - 1), alpha < 1, times a pressure
