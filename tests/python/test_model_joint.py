@@ -343,20 +343,24 @@ def test_the_stored_held_out_choice_rebuilds_and_keeps_the_overlap_rule(tmp_path
     assert sorted(p for p, (_, sc) in scores.items() if sc != sc) == ["m000", "m003", "m005", "m006", "m007"]
 
 
-@pytest.mark.parametrize("stored,rerun", [("dense", ""), ("loose", "loose"), ("three_pressures/joint",
-                                                                            "three_pressures/joint"),
-                                           ("three_pressures/mu_0.3/joint", "three_pressures/mu_0.3/joint"),
-                                           ("three_pressures/mu_1/joint", "three_pressures/mu_1/joint"),
-                                           ("three_pressures/mu_0.1/joint", "three_pressures/mu_0.1/joint")])
+SV, SSJ = "state_volume", os.path.join("state_volume", "start_state_jackknife")
+
+
+@pytest.mark.parametrize("stored,rerun", [(f"{SV}/dense", SSJ), (f"{SV}/loose", f"{SSJ}/loose")] +
+                         [(f"{SV}/{t}", f"{SSJ}/{t}") for t in ("three_pressures/joint", "three_pressures/mu_0.3/joint",
+                                                                "three_pressures/mu_1/joint",
+                                                                "three_pressures/mu_0.1/joint")] +
+                         [(f"lab_{p}", f"lab_{p}/start_state_jackknife") for p in ("dense", "loose")])
 def test_the_stored_start_state_comparison_rebuilds(tmp_path, stored, rerun):
-    """state_volume/start_state_jackknife/[RERUN/]compare.{md,csv} from the two stored parameters.csv (the stored
-    calibration and its restart with the fixed jackknife: thirty-second round dense, thirty-third the others), byte
-    for byte (a se_method with a comma quoted as csv quotes it)."""
-    sv = os.path.join(ROOT, "data", "geotech", "model", "state_volume")
-    d = os.path.join(sv, "start_state_jackknife", rerun)
+    """RERUN/compare.{md,csv} (under data/geotech/model) from the two stored parameters.csv (the stored calibration
+    STORED and its restart with the fixed jackknife: thirty-second round state_volume/dense, thirty-third the other
+    state_volume ones, thirty-fourth lab_dense and lab_loose), byte for byte (a se_method with a comma quoted as csv
+    quotes it)."""
+    m = os.path.join(ROOT, "data", "geotech", "model")
+    d = os.path.join(m, rerun)
     with open(os.path.join(d, "compare.md")) as fh:
         comment = fh.readline()[len("<!-- demkit/model_joint.py: "):-len(" -->\n")]
-    model_joint.compare_errors(os.path.join(sv, stored, "parameters.csv"), os.path.join(d, "parameters.csv"),
+    model_joint.compare_errors(os.path.join(m, stored, "parameters.csv"), os.path.join(d, "parameters.csv"),
                                str(tmp_path), "compare", comment)
     for ext in ("md", "csv"):
         assert filecmp.cmp(tmp_path / f"compare.{ext}", os.path.join(d, f"compare.{ext}"), shallow=False), ext
