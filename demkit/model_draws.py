@@ -43,7 +43,11 @@ def sd_per_band(k):
 
 def misses(run):
     """{(mode, nu, quantity): rms over the band} of RUN/prediction.csv (every curve, fitted and predicted)."""
-    with open(os.path.join(run, "prediction.csv"), newline="") as fh:
+    path = os.path.join(run, "prediction.csv")
+    if not os.path.exists(path):
+        raise SystemExit(f"model_draws: {path} does not exist (run from the repository root, or rerun that calibration: "
+                         "its folder's README names the command)")
+    with open(path, newline="") as fh:
         rows = list(csv.DictReader(l for l in fh if not l.startswith("#")))
     return {(r["mode"], f"{float(r['nu']):.2f}", r["quantity"]): float(r["rms_over_band [-]"]) for r in rows}
 
@@ -89,7 +93,7 @@ def table(mus):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", default=os.path.join(K12, "draws"))
+    ap.add_argument("--out", default=os.path.join(K12, "draws"), help="folder of draws.{md,csv} (default: %(default)s)")
     args = ap.parse_args(argv)
     md, lines = table(list(PAIRS))
     write_md_csv(args.out, "draws", md, lines)

@@ -45,3 +45,8 @@ def test_the_stored_table_is_rebuilt(tmp_path, monkeypatch):
     one = rows["1"]
     assert float(one["worst_band_k12 [band]"]) > 1 >= float(one["worst_band_k8 [band]"])
     assert float(one["worst_sd_k12 [SD]"]) <= float(one["worst_sd_k8 [SD]"])
+
+
+def test_a_missing_run_is_named(tmp_path):
+    with pytest.raises(SystemExit, match="prediction.csv does not exist"):
+        model_draws.misses(str(tmp_path))
