@@ -344,17 +344,19 @@ def test_the_stored_held_out_choice_rebuilds_and_keeps_the_overlap_rule(tmp_path
 
 
 SV, SSJ = "state_volume", os.path.join("state_volume", "start_state_jackknife")
+RESTARTED = [("relaxing", n) for n in ("loose", "mu_0.3/dense", "mu_1/dense")]   # thirty-fourth round
 
 
 @pytest.mark.parametrize("stored,rerun", [(f"{SV}/dense", SSJ), (f"{SV}/loose", f"{SSJ}/loose")] +
                          [(f"{SV}/{t}", f"{SSJ}/{t}") for t in ("three_pressures/joint", "three_pressures/mu_0.3/joint",
                                                                 "three_pressures/mu_1/joint",
                                                                 "three_pressures/mu_0.1/joint")] +
-                         [(f"lab_{p}", f"lab_{p}/start_state_jackknife") for p in ("dense", "loose")])
+                         [(f"lab_{p}", f"lab_{p}/start_state_jackknife") for p in ("dense", "loose")] +
+                         [(f"{SV}/{law}_excess/jackknife/{n}", f"{SSJ}/{law}_excess/{n}") for law, n in RESTARTED])
 def test_the_stored_start_state_comparison_rebuilds(tmp_path, stored, rerun):
     """RERUN/compare.{md,csv} (under data/geotech/model) from the two stored parameters.csv (the stored calibration
     STORED and its restart with the fixed jackknife: thirty-second round state_volume/dense, thirty-third the other
-    state_volume ones, thirty-fourth lab_dense and lab_loose), byte for byte (a se_method with a comma quoted as csv
+    state_volume ones, thirty-fourth lab_dense, lab_loose and the relaxing and bounded excess's jackknife runs), byte for byte (a se_method with a comma quoted as csv
     quotes it)."""
     m = os.path.join(ROOT, "data", "geotech", "model")
     d = os.path.join(m, rerun)
