@@ -3,6 +3,7 @@ the stored mu = 0.5 parameters predict, on an ensemble regenerated from the stor
 summary to its digits; the stored tables (joint, the mu = 0.5 variants) rebuilt byte for byte; the grouping on hand-built rows (not integrable, lost); the calibration's
 command line."""
 import csv
+import glob
 import filecmp
 import os
 import shutil
@@ -344,7 +345,13 @@ def test_the_stored_held_out_choice_rebuilds_and_keeps_the_overlap_rule(tmp_path
 
 
 SV, SSJ = "state_volume", os.path.join("state_volume", "start_state_jackknife")
-RESTARTED = [("relaxing", n) for n in ("loose", "mu_0.3/dense", "mu_1/dense")]   # thirty-fourth round
+# thirty-fourth round: every stored restart of the relaxing and bounded excess's jackknife runs (README step 20)
+RESTARTED = sorted((law, os.path.relpath(os.path.dirname(f), os.path.join(ROOT, "data", "geotech", "model", SSJ,
+                                                                            f"{law}_excess")))
+                   for law in ("relaxing", "bounded")
+                   for f in glob.glob(os.path.join(ROOT, "data", "geotech", "model", SSJ, f"{law}_excess", "**",
+                                                   "compare.md"), recursive=True))
+assert len(RESTARTED) >= 4, RESTARTED
 
 
 @pytest.mark.parametrize("stored,rerun", [(f"{SV}/dense", SSJ), (f"{SV}/loose", f"{SSJ}/loose")] +
