@@ -1518,6 +1518,11 @@ std::string start_failure(const Parameters& P, const std::vector<CurveData>& cur
   return "";
 }
 
+double jamming_start_inside(double v, double numin, bool cusp) {
+  if (v <= numin * (1 - 1e-6)) return v;
+  return cusp ? numin - 0.005 : numin * (1 - 1e-5);
+}
+
 namespace {
 // A calibration Ceres could not evaluate at its start: which curve is not a number there, and why, in its message
 // (starts.md, jackknife.md) and warnings.
@@ -1563,12 +1568,8 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   add_path_residuals(problem, paths, o, nu_ref, X, blocks_all, n_res, numin);
   if (X && o.state_volume)   // the isotropic law's jamming fraction below its own branch only (start_state)
     numin = iso.nu.empty() ? 1.0 : *std::min_element(iso.nu.begin(), iso.nu.end());
-  // Start values inside the jamming fractions' bounds (a start from another calibration may lie
-  // above this data's lowest volume fraction; Ceres refuses an infeasible start): moved to 0.005
-  // below it, not onto it, where the coordination law's cusp (nu/nu_cC - 1)^alpha would sit on the
-  // start state itself (an unbounded B there; a held nu_cC would stay on it).
-  for (int i : {kNuC, kNuCC})
-    if (isob[i] > numin * (1 - 1e-6)) isob[i] = numin - 0.005;
+  // Start values inside the jamming fractions' bounds (jamming_start_inside).
+  for (int i : {kNuC, kNuCC}) isob[i] = jamming_start_inside(isob[i], numin, i == kNuCC || o.shared_jamming);
   add_isotropic_residuals(problem, iso, o, held, isob, numin, n_res);
   const bool weighted = X && o.fabric == FabricLode::Weighted;
   const bool state_lode = X && o.state_limit && o.state_lode;

@@ -2799,6 +2799,21 @@ TEST(ModelVolumeState, AStartBeyondTheIsotropicLawsReachIsMovedWithinIt) {
   EXPECT_TRUE(held.start_moved.empty());
 }
 
+// A jamming fraction's start above the data's lowest volume fraction is moved inside its bound: the pressure law's nu_c
+// just inside (a refit from an optimum on the bound restarts where it ended), the coordination law's nu_cC (and a nu_c
+// tied to it) 0.005 below, off the cusp; a start already inside is not moved.
+TEST(ModelFit, AJammingFractionStartIsMovedJustInsideItsBound) {
+  const double numin = 0.603453;   // lab_dense's lowest mean volume fraction without m2 (thirty-fourth round)
+  const double full = 0.6035662;   // the full fit's nu_c, on its own bound 0.603567
+  EXPECT_EQ(jamming_start_inside(0.59, numin, false), 0.59);
+  EXPECT_EQ(jamming_start_inside(0.59, numin, true), 0.59);
+  const double moved = jamming_start_inside(full, numin, false);
+  EXPECT_LT(moved, numin * (1 - 1e-6)) << "feasible for the bound numin (1 - 1e-6)";
+  EXPECT_GT(moved, numin * (1 - 2e-5)) << "just inside, not 0.005 away";
+  EXPECT_DOUBLE_EQ(jamming_start_inside(full, numin, true), numin - 0.005);
+  EXPECT_EQ(jamming_start_inside(numin * (1 - 1e-6), numin, false), numin * (1 - 1e-6)) << "on the bound: inside";
+}
+
 // A start Ceres cannot evaluate names its cause in the message (starts.md's and jackknife.md's column; thirty-fourth
 // round: a stored multi-start listed only Ceres' "Residual and Jacobian evaluation failed"). Here a start whose
 // anisotropy modulus a_A takes the drained paths to the pole a_A F/3 = 1 - kTriaxialMargin: the named path loses its

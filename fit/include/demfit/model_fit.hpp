@@ -326,6 +326,15 @@ struct PathPrediction {
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
                             double* psi_seen = nullptr);
 
+/// A jamming fraction's start value inside its bound, the lowest volume fraction numin of the data (a start from another
+/// calibration, or a jackknife refit from an optimum on that bound whose left-out mean dilates a little further, may lie
+/// above it; Ceres refuses an infeasible start). The coordination law's nu_cC (cusp: also nu_c tied to it) is moved to
+/// 0.005 below numin, not onto it, where (nu/nu_cC - 1)^alpha would put its cusp on the start state itself (an
+/// unbounded B there; a held nu_cC would stay on it). The pressure law's nu_c, smooth there, is moved just inside
+/// (numin (1 - 1e-5)): an optimum on that bound then restarts where it ended (thirty-fourth round: lab_dense's refit
+/// without m2 had started 0.005 below it, at chi2/dof 349 against the full fit's 15.3, and stayed there).
+double jamming_start_inside(double v, double numin, bool cusp);
+
 /// Why a calibration could not be evaluated at its start (Ceres stopped before its first step, a start of a multi-start
 /// "failed"): the first fitted curve or path that is not a number at the start values P, named with its cause (a start
 /// pressure above the isotropic law's reach, the drained control's pole, a start state the laws cannot hold); "" where
