@@ -432,3 +432,20 @@ def test_the_bounded_variants_unpredicted_packings_start_beyond_their_refits_rea
             own = float(next(csv.DictReader(ln for ln in fh if not ln.startswith("#")))["p_star"])
         beyond = own > _reach(law)
         assert beyond == (scores[m][1] != scores[m][1]), (m, own, _reach(law), scores[m])
+
+
+def test_the_qs16_paths_start_every_packing_at_one_volume_fraction():
+    """data/model_paths_qs16's path calibrations were not restarted with the fixed path jackknife (thirty-fourth round):
+    each of its paths starts every packing at the same volume fraction, so a left-out mean starts where the full one
+    does (rerun, their quoted errors moved by at most 6e-5 relative)."""
+    base = os.path.join(ROOT, "data", "model_paths_qs16", "members")
+    members = sorted(os.listdir(base))
+    assert len(members) >= 8
+    names = sorted(os.listdir(os.path.join(base, members[0], "paths")))
+    assert any(n.startswith("isobaric") for n in names) and any(n.startswith("triaxial") for n in names)
+    for name in names:
+        starts = set()
+        for m in members:
+            with open(os.path.join(base, m, "paths", name), newline="") as fh:
+                starts.add(next(csv.DictReader(ln for ln in fh if not ln.startswith("#")))["nu"])
+        assert len(starts) == 1, (name, starts)
