@@ -1475,10 +1475,10 @@ Parameters calibration_start(const std::vector<CurveData>& curves_in, const std:
 }  // namespace
 
 namespace {
-// The first row of xs (from `from` on) that is not a number; -1 where every one is.
-int first_nan(const std::vector<double>& xs, std::size_t from = 0) {
-  for (std::size_t i = from; i < xs.size(); ++i)
-    if (!std::isfinite(xs[i])) return static_cast<int>(i);
+// The first row at which p, s or F is not a number; -1 where every one is.
+int first_nan_row(const std::vector<double>& p, const std::vector<double>& s, const std::vector<double>& F) {
+  for (std::size_t i = 0; i < p.size(); ++i)
+    if (!std::isfinite(p[i]) || !std::isfinite(s[i]) || !std::isfinite(F[i])) return static_cast<int>(i);
   return -1;
 }
 }  // namespace
@@ -1493,15 +1493,15 @@ std::string start_failure(const Parameters& P, const std::vector<CurveData>& cur
                : std::string();
   };
   for (const auto& c : curves) {
-    const std::string what = c.mode + " nu=" + fmt(c.nu, 4);
-    if (!beyond(c.p.front()).empty()) return what + beyond(c.p.front());
+    const std::string what = c.mode + " nu=" + fmt(c.nu, 4), out = beyond(c.p.front());
+    if (!out.empty()) return what + out;
     const ModelCurve m = predict_curve(P, c);
-    int at = std::max({first_nan(m.p), first_nan(m.s), first_nan(m.F)});
+    const int at = first_nan_row(m.p, m.s, m.F);
     if (at >= 0) return what + " is not a number from eps_d = " + fmt(m.eps[at], 3);
   }
   for (const auto& d : paths) {
-    const std::string what = d.name + " nu=" + fmt(d.nu, 4);
-    if (!beyond(d.p.front()).empty()) return what + beyond(d.p.front());
+    const std::string what = d.name + " nu=" + fmt(d.nu, 4), out = beyond(d.p.front());
+    if (!out.empty()) return what + out;
     PathPrediction m;
     try {
       m = predict_path(P, d);
@@ -1512,7 +1512,7 @@ std::string start_failure(const Parameters& P, const std::vector<CurveData>& cur
       return what + " loses its drained control after eps_d_accumulated = " + fmt(m.acc[m.lost_row - 1], 3) +
              " (a_A F/3 within " + fmt(100 * kTriaxialMargin, 2) + " % of 1, the pole; docs/model.md, \"Where the drained "
              "triaxial control is lost\")";
-    int at = std::max({first_nan(m.p), first_nan(m.s), first_nan(m.F)});
+    const int at = first_nan_row(m.p, m.s, m.F);
     if (at >= 0) return what + " is not a number from eps_d_accumulated = " + fmt(m.acc[at], 3);
   }
   return "";

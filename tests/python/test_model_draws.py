@@ -26,10 +26,11 @@ def test_the_sd_scale_agrees_with_the_absolute_columns(monkeypatch):
         with open(os.path.join(run, "prediction.csv"), newline="") as fh:
             rows = list(csv.DictReader(l for l in fh if not l.startswith("#")))
         t = model_draws.sd_per_band(k) * math.sqrt(k)
+        got = model_draws.misses(run)
         for r in rows:
             direct = float(r["rms [quantity]"]) / (float(r["band_halfwidth [quantity]"]) * math.sqrt(k) / t)
             key = (r["mode"], f"{float(r['nu']):.2f}", r["quantity"])
-            assert model_draws.misses(run)[key] * model_draws.sd_per_band(k) == pytest.approx(direct, rel=6e-3), key   # 3 printed digits
+            assert got[key] * model_draws.sd_per_band(k) == pytest.approx(direct, rel=6e-3), key   # 3 printed digits
 
 
 def test_the_stored_table_is_rebuilt(tmp_path, monkeypatch):
