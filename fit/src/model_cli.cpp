@@ -446,6 +446,8 @@ struct FamilyFit {
   std::vector<double> heldout;             ///< per left-out packing: its own fitted curves' (and paths') mean squared
                                            ///< standardised error under the fit without it
   std::vector<double> heldout_paths;       ///< ... its own predicted paths' (heldout_path_score; NaN: none)
+  std::vector<double> heldout_followed;    ///< ... over the predicted paths the fit without it follows
+  std::vector<std::string> heldout_not_followed;   ///< ... the paths it does not, and why ("" none)
 };
 
 // Adds ((model - member)/sd)^2 over the rows > 0 that `on` selects (up to the model's length) to ss and their count to
@@ -469,8 +471,11 @@ void add_standardised_squares(const std::vector<double>& model, const std::vecto
 
 // Adds the member's own path (MEMBER_CSV, on the ensemble D's grid), predicted from its own start state by P, to ss
 // and n: ((model - member)/sd)^2 over rows > 0 and p* (constant-volume rows) or eps_v (rows at held pressure), s_dev
-// and F_dev signed, sd as add_standardised_squares with D's own packings. False where the laws cannot start it.
-bool add_path_squares(const Parameters& P, const PathData& ensemble, const fs::path& member_csv, double& ss, long& n) {
+// and F_dev signed, sd as add_standardised_squares with D's own packings. False where the laws cannot start it. Where
+// WHY is given, it says why the path is not followed ("" where its squares are finite): the laws cannot start it, or
+// the model is lost along it (from the first strain where it is not a number; its squares are added all the same).
+bool add_path_squares(const Parameters& P, const PathData& ensemble, const fs::path& member_csv, double& ss, long& n,
+                      std::string* why = nullptr) {
   const Table t = read_table(member_csv.string());
   PathData d = ensemble;
   if (t.column("eps_d_accumulated").size() != d.acc.size())
@@ -481,16 +486,26 @@ bool add_path_squares(const Parameters& P, const PathData& ensemble, const fs::p
   PathPrediction m;
   try {
     m = predict_path(P, d);
-  } catch (const std::invalid_argument&) {   // the laws cannot start this packing's own path
+  } catch (const std::invalid_argument& e) {   // the laws cannot start this packing's own path
+    if (why) *why = std::string("cannot start: ") + e.what();
     return false;
   }
   std::vector<bool> held(d.acc.size()), vol(d.acc.size()), all(d.acc.size(), true);
   for (std::size_t i = 0; i < d.acc.size(); ++i) { held[i] = d.isobaric[i] != 0; vol[i] = !held[i]; }
   const int K = ensemble.packings;
-  add_standardised_squares(m.p, d.p, ensemble.se_p, vol, K, ss, n);
-  add_standardised_squares(m.ev, d.ev, ensemble.se_ev, held, K, ss, n);
-  add_standardised_squares(m.s, d.s, ensemble.se_s, all, K, ss, n);
-  add_standardised_squares(m.F, d.F, ensemble.se_F, all, K, ss, n);
+  double ss1 = 0;
+  add_standardised_squares(m.p, d.p, ensemble.se_p, vol, K, ss1, n);
+  add_standardised_squares(m.ev, d.ev, ensemble.se_ev, held, K, ss1, n);
+  add_standardised_squares(m.s, d.s, ensemble.se_s, all, K, ss1, n);
+  add_standardised_squares(m.F, d.F, ensemble.se_F, all, K, ss1, n);
+  ss += ss1;
+  if (why) {
+    *why = "";
+    for (std::size_t i = 0; i < m.p.size() && why->empty(); ++i)
+      if (!std::isfinite(m.p[i]) || !std::isfinite(m.s[i]) || !std::isfinite(m.F[i]) || !std::isfinite(m.ev[i]))
+        *why = "the model is lost from eps_d_accumulated = " + num(d.acc[i], 3);
+    if (why->empty() && !std::isfinite(ss1)) *why = "not a number";
+  }
   return true;
 }
 
@@ -526,18 +541,42 @@ double heldout_score(const Parameters& P, const ModelInputs& in, const fs::path&
 }
 
 // Packing k's own predicted path ensembles (those not fitted: the isobaric D2 paths of a D2 + D3 calibration), each
-// from its own start state, by the fit of the other packings: add_path_squares' mean. NaN where no member holds such
-// a path, where the laws cannot start one, or where the model is lost on it. The held-out score of a prediction,
+// from its own start state, by the fit of the other packings: add_path_squares' mean (score: NaN where no member holds
+// such a path, where the laws cannot start one, or where the model is lost on it), and the same over the paths the
+// fit follows (followed), with those it does not named and why (not_followed). The held-out score of a prediction,
 // which heldout_score (fitted curves only) does not see.
-double heldout_path_score(const Parameters& P, const std::vector<PathData>& paths, const std::vector<CurveFile>& files,
-                          const fs::path& member) {
-  double ss = 0;
-  long n = 0;
+struct HeldoutPaths {
+  double score = std::nan(""), followed = std::nan("");
+  std::string not_followed;
+};
+HeldoutPaths heldout_path_score(const Parameters& P, const std::vector<PathData>& paths,
+                                const std::vector<CurveFile>& files, const fs::path& member) {
+  double ss = 0, ss_f = 0;
+  long n = 0, n_f = 0;
+  bool every = true;
+  HeldoutPaths h;
   for (std::size_t j = 0; j < paths.size(); ++j) {
     const fs::path mp = member_path_curve(member, files[j]);
-    if (!mp.empty() && !add_path_squares(P, paths[j], mp, ss, n)) return std::nan("");
+    if (mp.empty()) continue;
+    std::string why;
+    double ss1 = 0;
+    long n1 = 0;
+    every = add_path_squares(P, paths[j], mp, ss1, n1, &why) && every;
+    ss += ss1; n += n1;
+    if (why.empty()) { ss_f += ss1; n_f += n1; continue; }
+    h.not_followed += (h.not_followed.empty() ? "" : "; ") + paths[j].name + " nu=" + num(paths[j].nu, 4) + " (" + why + ")";
   }
-  return n > 0 ? ss / n : std::nan("");
+  h.score = every && n > 0 ? ss / n : std::nan("");
+  h.followed = n_f > 0 ? ss_f / n_f : std::nan("");
+  return h;
+}
+
+// Packing MEMBER's held-out scores of its own predicted paths under P (heldout_path_score), into ff.
+void add_heldout_paths(const Parameters& P, const ModelInputs& in, const fs::path& member, FamilyFit& ff) {
+  const HeldoutPaths h = heldout_path_score(P, in.other_paths, in.other_path_files, member);
+  ff.heldout_paths.push_back(h.score);
+  ff.heldout_followed.push_back(h.followed);
+  ff.heldout_not_followed.push_back(h.not_followed);
 }
 
 // Held-out test between the group model and the frictional family: d_k = score_group - score_ext
@@ -1073,6 +1112,40 @@ std::string moved_start(const Calibration& c) {
   return c.start_moved.empty() ? "" : " (" + c.start_moved + ": the left-out mean starts above the start's isotropic reach)";
 }
 
+// Packing k's leave-one-out data: every fitted mean curve and path it holds without it (the others as they are), and
+// the isotropic branch without its own states (refit_without, basin_check).
+struct LooInputs {
+  std::vector<CurveData> curves;
+  IsoData iso;
+  std::vector<PathData> paths;
+};
+LooInputs leave_out(const ModelInputs& in, int k) {
+  const fs::path& member = in.members[k];
+  LooInputs L;
+  for (std::size_t j = 0; j < in.fit_curves.size(); ++j) {
+    const fs::path mc = member_curve(member, in.fit_files[j]);
+    L.curves.push_back(mc.empty() ? in.fit_curves[j] : leave_one_out(in.fit_curves[j], mc));
+  }
+  std::vector<std::string> iso_k;
+  const std::string own = unloading_of(member).string();
+  for (const auto& f : in.iso_files) if (f != own) iso_k.push_back(f);
+  L.iso = read_isotropic(iso_k);
+  for (std::size_t j = 0; j < in.fit_paths.size(); ++j) {
+    const fs::path mp = member_path_curve(member, in.fit_path_files[j]);
+    L.paths.push_back(mp.empty() ? in.fit_paths[j] : leave_one_out_path(in.fit_paths[j], mp));
+  }
+  return L;
+}
+
+// The options of a jackknife refit: the full fit's, without the Jacobian check and the profile (their errors are not
+// read).
+CalibrationOptions refit_options(const CalibrationOptions& co_f) {
+  CalibrationOptions cj = co_f;
+  cj.check_jacobian = false;
+  cj.profile = false;
+  return cj;
+}
+
 // Packing k left out of every fitted mean curve and path and of the isotropic branch, refitted from the full
 // fit's optimum. A refit that did not reach an optimum like the full fit's (jackknife_refit_usable: failed at
 // its start, not converged, or far above), or ended above kRetryAbove times the full fit's chi2/dof (at least 1),
@@ -1083,24 +1156,12 @@ constexpr double kRetryAbove = 1.5;
 JackRefit refit_without(const ModelInputs& in, const CalibrationOptions& co_f, const ModelCommandOptions& o,
                         const FamilyFit& ff, int k, Calibration& best) {
   const fs::path& member = in.members[k];
-  std::vector<CurveData> loo;   // the means it holds without it, the others as they are
-  for (std::size_t j = 0; j < in.fit_curves.size(); ++j) {
-    const fs::path mc = member_curve(member, in.fit_files[j]);
-    loo.push_back(mc.empty() ? in.fit_curves[j] : leave_one_out(in.fit_curves[j], mc));
-  }
-  std::vector<std::string> iso_k;
-  const std::string own = unloading_of(member).string();
-  for (const auto& f : in.iso_files) if (f != own) iso_k.push_back(f);
-  const IsoData iso = read_isotropic(iso_k);
-  std::vector<PathData> loo_paths;
-  for (std::size_t j = 0; j < in.fit_paths.size(); ++j) {
-    const fs::path mp = member_path_curve(member, in.fit_path_files[j]);
-    loo_paths.push_back(mp.empty() ? in.fit_paths[j] : leave_one_out_path(in.fit_paths[j], mp));
-  }
+  const LooInputs L = leave_out(in, k);
+  const std::vector<CurveData>& loo = L.curves;
+  const IsoData& iso = L.iso;
+  const std::vector<PathData>& loo_paths = L.paths;
   JackRefit r{member.filename().string(), "the full fit's optimum", 0, false, false, 0, ""};
-  CalibrationOptions cj = co_f;
-  cj.check_jacobian = false;   // the refits' errors are not read
-  cj.profile = false;
+  CalibrationOptions cj = refit_options(co_f);
   auto rank = [&](const Calibration& c) {   // usable, converged, then evaluated: higher is better
     return 4 * jackknife_refit_usable(c, ff.cal) + 2 * c.ok + !std::isnan(c.chi2);
   };
@@ -1123,6 +1184,60 @@ JackRefit refit_without(const ModelInputs& in, const CalibrationOptions& co_f, c
   return r;
 }
 
+// chi^2 of a leave-one-out data set at cj.start, as a refit from it would begin (nan where it cannot be evaluated).
+double evaluated_chi2(const LooInputs& L, CalibrationOptions cj) {
+  cj.evaluate_only = true;
+  try {
+    return calibrate(L.curves, L.iso, cj, L.paths).chi2;
+  } catch (const std::invalid_argument&) {
+    return std::nan("");
+  }
+}
+
+// The jackknife's basin check (issue 31, thirty-fifth round): each refit's own data evaluated at every other refit's
+// optimum. A refit starts from the full fit's optimum (or another --start) and Levenberg-Marquardt only descends, so
+// where another refit's optimum scores lower on this refit's data than this refit ended, this one stopped in a
+// poorer basin: it is run again from the lowest such optimum and the new optimum kept where it ends lower. One pass;
+// an evaluation costs one residual evaluation, a restart one refit. (The thirty-fourth round's restarts ended in
+// other basins: lab_dense without m2 and m3, bounded mu = 0.1 dense without m3.)
+constexpr double kBasinBelow = 1e-6;   // relative: lower than the refit's own chi2 by more than round-off
+void basin_check(const ModelInputs& in, const CalibrationOptions& co_f, const JackSamples& js, FamilyFit& ff,
+                 std::vector<Calibration>& fits) {
+  const std::size_t n = fits.size();
+  CalibrationOptions cj = refit_options(co_f);
+  for (std::size_t k = 0; k < n; ++k) {
+    if (std::isnan(fits[k].chi2)) continue;
+    const LooInputs L = leave_out(in, static_cast<int>(js.member[k]));
+    std::size_t from = n;
+    double lowest = fits[k].chi2 * (1 - kBasinBelow);
+    for (std::size_t j = 0; j < n; ++j) {
+      if (j == k || std::isnan(fits[j].chi2)) continue;
+      cj.start = &fits[j].params;
+      const double c = evaluated_chi2(L, cj);
+      if (c < lowest) { lowest = c; from = j; }
+    }
+    if (from == n) continue;
+    JackRefit& r = ff.refits[k];
+    cj.start = &fits[from].params;
+    Calibration c = calibrate(L.curves, L.iso, cj, L.paths);
+    ++r.tries;
+    const std::string was = num(r.chi2_dof, 4);
+    const bool lower = !std::isnan(c.chi2) && c.chi2 < fits[k].chi2;
+    std::cerr << "dem model: basin check: the refit without " << r.packing << " (chi2/dof " << was << ") scores "
+              << num(lowest / std::max(1, c.n_residuals - c.n_free), 4) << " at the refit without "
+              << ff.refits[from].packing << "'s optimum; run again from it: chi2/dof " << num(c.chi2_dof(), 4)
+              << (lower ? ", kept" : ", not lower: the first kept") << "\n";
+    if (!lower) continue;
+    fits[k] = std::move(c);
+    r.start = "the refit without " + ff.refits[from].packing + "'s optimum (basin check; from " + r.start +
+              " it ended at chi2/dof " + was + ")";
+    r.chi2_dof = fits[k].chi2_dof();
+    r.converged = fits[k].ok;
+    r.usable = jackknife_refit_usable(fits[k], ff.cal);
+    r.message = fits[k].message;
+  }
+}
+
 // Jackknife over packings: the same fit with each packing left out of every mean curve and path it holds and of the
 // isotropic branch (jackknife_samples: one set of packings, or several behind different fitted curves); the held-out
 // score of each left-out packing (its own fitted curves predicted by the fit without it).
@@ -1137,17 +1252,21 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
   std::vector<std::vector<double>>& est = ff.jack;   // leave-one-out estimates (for the jackknife correlations)
   std::string failed;   // refits that did not reach an optimum comparable to the full fit's
   const std::size_t n = js.member.size();
+  std::vector<Calibration> fits(n);
   for (std::size_t k = 0; k < n; ++k) {
-    const fs::path& member = in.members[js.member[k]];
-    Calibration ck;
-    const JackRefit r = refit_without(in, co_f, o, ff, static_cast<int>(js.member[k]), ck);
-    est.push_back(ck.value);
-    ff.heldout.push_back(heldout_score(ck.params, in, member, o.eps_max));
-    ff.heldout_paths.push_back(heldout_path_score(ck.params, in.other_paths, in.other_path_files, member));
+    const JackRefit r = refit_without(in, co_f, o, ff, static_cast<int>(js.member[k]), fits[k]);
     ff.refits.push_back(r);
     std::cerr << "dem model: jackknife " << k + 1 << "/" << n << " (" << r.packing << " left out): chi2/dof = "
               << num(r.chi2_dof, 4) << (r.tries > 1 ? " (from " + r.start + ", after " + std::to_string(r.tries) +
                                                        " starts)" : std::string()) << "\n";
+  }
+  basin_check(in, co_f, js, ff, fits);
+  for (std::size_t k = 0; k < n; ++k) {
+    const fs::path& member = in.members[js.member[k]];
+    const JackRefit& r = ff.refits[k];
+    est.push_back(fits[k].value);
+    ff.heldout.push_back(heldout_score(fits[k].params, in, member, o.eps_max));
+    add_heldout_paths(fits[k].params, in, member, ff);
     if (!r.usable)
       failed += (failed.empty() ? "" : ", ") + r.packing + " left out (chi2/dof " + num(r.chi2_dof, 4) +
                 (r.converged ? "" : ", not converged") + ")";
@@ -1372,14 +1491,19 @@ void report_profile(const Calibration& cal, const fs::path& out) {
 // (demkit/model_state_limit.py).
 void write_heldout(const FamilyFit& ff, const fs::path& out) {
   if (ff.heldout.empty()) return;
-  const bool paths = std::any_of(ff.heldout_paths.begin(), ff.heldout_paths.end(), [](double v) { return !std::isnan(v); });
+  // a path some refit does not follow: the score over those it does, and which and why (thirty-fifth round)
+  const bool lost = std::any_of(ff.heldout_not_followed.begin(), ff.heldout_not_followed.end(),
+                                [](const std::string& w) { return !w.empty(); });
+  const bool paths = lost || std::any_of(ff.heldout_paths.begin(), ff.heldout_paths.end(), [](double v) { return !std::isnan(v); });
   Table t(paths ? std::vector<std::string>{"packing_left_out", "heldout_extended [-]", "heldout_predicted_paths [-]"}
                 : std::vector<std::string>{"packing_left_out", "heldout_extended [-]"});
   const bool sets = ff.samples > 1;   // several sets of packings: each row's packing and set
+  if (lost) t.header.insert(t.header.end(), {"heldout_followed_paths [-]", "paths_not_followed"});
   if (sets) t.header.insert(t.header.begin() + 1, {"packing", "set"});
   for (std::size_t k = 0; k < ff.heldout.size(); ++k) {
     std::vector<std::string> r{std::to_string(k), num(ff.heldout[k], 4)};
     if (paths) r.push_back(num(ff.heldout_paths[k], 4));
+    if (lost) r.insert(r.end(), {num(ff.heldout_followed[k], 4), ff.heldout_not_followed[k]});
     if (sets) r.insert(r.begin() + 1, {ff.refits[k].packing, std::to_string(ff.jack_sample[k])});
     t.add_row(r);
   }
@@ -1389,7 +1513,10 @@ void write_heldout(const FamilyFit& ff, const fs::path& out) {
                   "is selection.csv's, whatever the family" +
                       std::string(paths ? "; heldout_predicted_paths: the same for its own predicted path ensembles "
                                           "(p* or eps_v, s_dev, F_dev signed; docs/model.md, \"Where plastic flow starts\")"
-                                        : ""));
+                                        : "") +
+                      std::string(lost ? "; nan where the fit without it cannot start or follow one of them; "
+                                         "heldout_followed_paths: the same over the paths it follows, "
+                                         "paths_not_followed the others and why" : ""));
 }
 
 // The jackknife's leave-one-out refits: each one's chi2/dof, whether it converged and was usable (an optimum like

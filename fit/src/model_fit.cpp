@@ -1532,6 +1532,16 @@ void note_start_failure(const std::vector<CurveData>& curves, const std::vector<
   cal.message += "; at its start " + why;
   cal.warnings.push_back("the start cannot be evaluated: " + why);
 }
+// CalibrationOptions::evaluate_only: chi^2 of the problem as built at its start (nan where Ceres cannot evaluate it).
+Calibration evaluated_start(ceres::Problem& problem, int n_res) {
+  Calibration cal;
+  double cost = 0;
+  const bool ok = problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr);
+  cal.chi2 = ok && std::isfinite(cost) ? 2 * cost : std::nan("");
+  cal.n_residuals = n_res;
+  cal.message = "evaluated at the start (no fit)";
+  return cal;
+}
 }  // namespace
 
 Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& iso, const CalibrationOptions& o,
@@ -1590,6 +1600,7 @@ Calibration calibrate(const std::vector<CurveData>& curves_in, const IsoData& is
   const bool one_nu = one_start_volume_fraction(curves, paths);
   const int n_p = start_pressures(curves, paths);
   hold_ext(problem, shear, ext, X, one_nu, o.state_limit, weighted, state_lode, state_volume, o.excess_relaxes, n_p, o.hold_ext);
+  if (o.evaluate_only) return evaluated_start(problem, n_res);
 
   std::vector<std::vector<double>> window_start;
   const ceres::Solver::Summary sum = solve_on_face(problem, blocks_all, isob, iso, o, held, cal.warnings, window_start);

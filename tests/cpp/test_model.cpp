@@ -438,6 +438,36 @@ TEST(ModelFit, RecoversExactParametersFromNoiseFreeCurves) {
   for (int i = 1; i < kNumShear; i += 2) EXPECT_EQ(one.value[kNumIso + i], 0.0) << shear_name(i);
 }
 
+// CalibrationOptions::evaluate_only (the jackknife's basin check, thirty-fifth round): chi2 at a start without a fit is
+// the cost Ceres reports at the start of a fit from there (its BriefReport's "Initial cost", 7 digits), and at a
+// converged fit's optimum the chi2 that fit ended with; no coefficient is fitted.
+TEST(ModelFit, EvaluateOnlyGivesTheChi2AFitFromThatStartBeginsWith) {
+  const Parameters P = truth();
+  const Synthetic S = synthetic(P, {0.69, 0.73, 0.77, 0.81}, 4, 0.9, 7);
+  CalibrationOptions o;
+  o.fit_isotropic = false;
+  o.nu_ref = P.nu_ref;
+  o.max_step = 1e-3;
+  Parameters start = P;
+  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.8 : 1.1);
+  o.start = &start;
+  const Calibration fit = calibrate(S.mean, {}, o);
+  ASSERT_TRUE(fit.ok) << fit.message;
+  CalibrationOptions e = o;
+  e.evaluate_only = true;
+  const Calibration at_start = calibrate(S.mean, {}, e);
+  const auto at = fit.message.find("Initial cost: ");
+  ASSERT_NE(at, std::string::npos) << fit.message;
+  const double initial = 2 * std::stod(fit.message.substr(at + 14));
+  EXPECT_NEAR(at_start.chi2, initial, 1e-6 * initial) << fit.message;
+  EXPECT_GT(at_start.chi2, 1.5 * fit.chi2) << "the start is away from the optimum";
+  EXPECT_EQ(at_start.n_residuals, fit.n_residuals);
+  EXPECT_TRUE(at_start.value.empty()) << "nothing fitted";
+  e.start = &fit.params;
+  const Calibration at_optimum = calibrate(S.mean, {}, e);
+  EXPECT_NEAR(at_optimum.chi2, fit.chi2, 1e-9 * fit.chi2);
+}
+
 // One jamming fraction (seventeenth round; docs/model.md, "One jamming fraction"): nu_cC <= 0 makes the coordination
 // law read the pressure law's nu_c, the same law as nu_cC = nu_c written out; its stiffness B = dp*/d ln nu is then
 // bounded as nu -> nu_c (x -> 0 cancels the coordination's (nu/nu_c - 1)^(alpha - 1)) and equals a central difference

@@ -105,6 +105,10 @@ struct CalibrationOptions {
   /// twenty-fourth round): each coefficient held at trial values and the rest refitted, 3-6 refits per end. Off by
   /// default (a few hundred refits); the jackknife's refits leave it out.
   bool profile = false;
+  /// Evaluate only: chi^2 at `start` as a fit from it would begin (after the start is moved inside its bounds and the
+  /// isotropic reach), no fit and no errors (Calibration::chi2 and n_residuals only; nan where it cannot be evaluated).
+  /// The jackknife's basin check reads it (issue 31, thirty-fifth round).
+  bool evaluate_only = false;
   /// With profile: only these coefficients (Calibration::names); empty: every one with a quoted covariance error.
   std::vector<std::string> profile_only;
   /// With profile: told after each coefficient (its name, its place from 0, how many, its interval), and once before
