@@ -483,6 +483,7 @@ bool add_path_squares(const Parameters& P, const PathData& ensemble, const fs::p
   d.p = t.column("p_star"); d.ev = t.column("eps_v"); d.s = t.column("s_dev_signed"); d.F = t.column("F_dev_signed");
   d.nu_m = t.column("nu");
   d.nu = d.nu_m.front();
+  d.source = member_csv.string();   // the member's own file in what predict_path says
   PathPrediction m;
   try {
     m = predict_path(P, d);

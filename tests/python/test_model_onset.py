@@ -139,16 +139,38 @@ def test_the_choice_needs_a_win_on_one_score_and_no_loss_on_the_other():
 def test_the_jackknife_scores_each_packings_predicted_paths(tmp_path):
     """The group model on the quasi-static path ensemble, calibrated on D2 and the reversal path: the jackknife writes
     each left-out packing's score on its own predicted (cyclic, isobaric, triaxial) paths beside the fitted curves'
-    score (a run without predicted paths writes no such column: the stored runs before this round)."""
-    paths = os.path.join(ROOT, "data", "model_paths_qs16")
+    score (a run without predicted paths writes no such column: the stored runs before this round). One packing's own
+    isobaric path is made to start below jamming (nu = 0.5, hand-edited): its score is nan, and (thirty-fifth round)
+    heldout_followed_paths scores its other paths while paths_not_followed names that one and why; the other packings'
+    two scores agree."""
+    paths = tmp_path / "qs16"
+    src = os.path.join(ROOT, "data", "model_paths_qs16")
+    shutil.copytree(src, paths, ignore=lambda d, names: [n for n in names if n.startswith("model")] if d == src else [])
+    bad = paths / "members" / "m003" / "paths" / "isobaric_phi0.740.csv"
+    lines = bad.read_text().splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.startswith("eps_d_accumulated"))
+    assert lines[head].split(",")[1] == "nu"
+    first = lines[head + 1].split(",")
+    first[1] = "0.5"
+    lines[head + 1] = ",".join(first)
+    bad.write_text("\n".join(lines) + "\n")
     out = tmp_path / "pred"
-    r = subprocess.run([DEM, "model", paths, "--out", str(out), "--no-plots", "--calibrate-on", "D2,reversal"],
+    r = subprocess.run([DEM, "model", str(paths), "--out", str(out), "--no-plots", "--calibrate-on", "D2,reversal"],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     scores = model_onset.path_scores(str(out))
     fitted = model_onset.model_state_limit.extended_scores(str(out))
-    assert len(scores) == len(fitted) >= 4
+    assert len(fitted) >= 4 and len(scores) == len(fitted) - 1
     assert all(0.05 < v < 50 for v in scores.values()), scores   # in units of the between-packing variance
+    held = curve(out / "heldout.csv")
+    lost = [h for h in held if h["paths_not_followed"]]
+    assert len(lost) == 1 and lost[0]["heldout_predicted_paths [-]"] == "nan", lost
+    why = lost[0]["paths_not_followed"]
+    assert why.startswith("isobaric nu=0.74 (cannot start: ") and str(bad) in why and "nu = 0.500000" in why, why
+    assert 0.05 < float(lost[0]["heldout_followed_paths [-]"]) < 50
+    for h in held:
+        if h is not lost[0]:
+            assert h["heldout_followed_paths [-]"] == h["heldout_predicted_paths [-]"]
 
 
 def test_the_stored_onset_table_is_rebuilt_from_the_stored_runs(tmp_path):
