@@ -1544,6 +1544,8 @@ void write_refits(const FamilyFit& ff, const fs::path& out) {
                               "packings\"); " : "") +
                       "usable: converged with chi2/dof at most 3 max(1, the full fit's); a refit that was not, or "
                       "ended above 1.5 max(1, the full fit's), is run again from each other --start and the best kept; "
+                      "a refit whose own data score lower at another refit's optimum is run again from the lowest such "
+                      "optimum and kept where it ends lower (the basin check; start says so); "
                       "the jackknife errors are used only when every refit is usable");
   if (ff.jack.size() != ff.refits.size()) return;   // the errors are the covariance's: no estimates to give
   std::vector<std::string> head{"packing_left_out"};
