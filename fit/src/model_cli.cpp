@@ -448,6 +448,9 @@ struct FamilyFit {
   std::vector<double> heldout_paths;       ///< ... its own predicted paths' (heldout_path_score; NaN: none)
   std::vector<double> heldout_followed;    ///< ... over the predicted paths the fit without it follows
   std::vector<std::string> heldout_not_followed;   ///< ... the paths it does not, and why ("" none)
+  /// A refit's optimum at which the fit's own data score lower than the fit ended (full_fit_basin; empty names: none),
+  /// written to basin_start/ for a --start
+  Calibration basin_start;
 };
 
 // Adds ((model - member)/sd)^2 over the rows > 0 that `on` selects (up to the model's length) to ss and their count to
@@ -1239,6 +1242,40 @@ void basin_check(const ModelInputs& in, const CalibrationOptions& co_f, const Ja
   }
 }
 
+// The basin check of the full fit (thirty-fifth round): its own data evaluated at every refit's optimum. Where one
+// scores lower than the fit ended, the fit stopped in a poorer basin: said in a warning, and the lowest such optimum
+// kept in ff.basin_start (written to basin_start/parameters.csv, a --start to fit again from).
+void full_fit_basin(const ModelInputs& in, const CalibrationOptions& co_f, FamilyFit& ff,
+                    const std::vector<Calibration>& fits) {
+  if (std::isnan(ff.cal.chi2)) return;
+  const LooInputs all{in.fit_curves, in.iso, in.fit_paths};
+  CalibrationOptions cj = refit_options(co_f);
+  std::size_t from = fits.size();
+  double lowest = ff.cal.chi2 * (1 - kBasinBelow);
+  for (std::size_t k = 0; k < fits.size(); ++k) {
+    if (std::isnan(fits[k].chi2)) continue;
+    cj.start = &fits[k].params;
+    const double c = evaluated_chi2(all, cj);
+    if (c < lowest) { lowest = c; from = k; }
+  }
+  if (from == fits.size()) return;
+  Calibration& b = ff.basin_start;   // a start, not a result: its chi2 the fit's data's there, no errors
+  b = fits[from];
+  b.chi2 = lowest;
+  b.n_residuals = ff.cal.n_residuals;
+  b.n_free = ff.cal.n_free;
+  b.se_cov.assign(b.value.size(), std::nan(""));
+  b.se_jackknife.clear();
+  b.ok = true;
+  b.settled.clear();
+  ff.cal.warnings.push_back(
+      "the fit's own data score chi2/dof " + num(lowest / std::max(1, ff.cal.n_residuals - ff.cal.n_free), 4) +
+      " at the optimum of the refit without " + ff.refits[from].packing + ", below the fit's " +
+      num(ff.cal.chi2_dof(), 4) + (ff.cal.ok ? ": the fit stopped in a poorer basin" : ": the fit had not converged") +
+      ". That optimum is in basin_start/parameters.csv "
+      "in the output folder: fit again with --start from it (docs/model.md, \"The jackknife's basin check\")");
+}
+
 // Jackknife over packings: the same fit with each packing left out of every mean curve and path it holds and of the
 // isotropic branch (jackknife_samples: one set of packings, or several behind different fitted curves); the held-out
 // score of each left-out packing (its own fitted curves predicted by the fit without it).
@@ -1262,6 +1299,7 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
                                                        " starts)" : std::string()) << "\n";
   }
   basin_check(in, co_f, js, ff, fits);
+  full_fit_basin(in, co_f, ff, fits);
   for (std::size_t k = 0; k < n; ++k) {
     const fs::path& member = in.members[js.member[k]];
     const JackRefit& r = ff.refits[k];
@@ -1580,6 +1618,16 @@ void write_starts(const FamilyFit& ff, const fs::path& out) {
 }
 
 // One family's tables, curves and figures in `out`.
+// basin_start/parameters.* (full_fit_basin): the refit's optimum a fit can start from again; a former run's removed.
+void write_basin_start(const FamilyFit& ff, int K, const fs::path& out, const std::string& fit_label) {
+  fs::remove_all(out / "basin_start");
+  if (ff.basin_start.names.empty()) return;
+  fs::create_directories(out / "basin_start");
+  write_parameter_tables(ff.basin_start, K, out / "basin_start", fit_label + ": the optimum of a jackknife refit at "
+                         "which the fit's own data score lower than the fit ended (the basin check; a --start, not a "
+                         "result: no errors)");
+}
+
 void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& out, const ModelCommandOptions& o) {
   const auto& fit_curves = in.fit_curves; const auto& fit_files = in.fit_files;
   const auto& other = in.other; const auto& other_files = in.other_files;
@@ -1591,6 +1639,7 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
   const std::vector<std::vector<double>>& jack_est = ff.jack;
   fs::create_directories(out / "curves");
   write_parameter_tables(cal, K, out, fit_label);
+  write_basin_start(ff, K, out, fit_label);
   std::vector<double> nus;
   for (const auto& c : fit_curves) nus.push_back(c.nu);
   if (fit_curves.empty())
