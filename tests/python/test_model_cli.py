@@ -729,8 +729,8 @@ def test_the_jackknife_records_its_refits_and_retries_an_unusable_one_from_the_o
     """jackknife.csv: one row per packing left out, with the refit's chi2/dof, whether it converged and was usable
     (converged, chi2/dof <= 3 max(1, the full fit's)), where it started and how many starts it took. From a converged
     optimum every refit is usable at once and the jackknife errors are quoted. Stopped after one iteration from two
-    far starts, every refit is unusable, is run again from the other start (2 tries), and the errors are the
-    covariance's, with a warning that names the refits."""
+    far starts, every refit is unusable, is run again from the other start (2 tries; 3 where the basin check ran it
+    again), and the errors are the covariance's, with a warning that names the refits."""
     good = os.path.join(result[0], "parameters.csv")
     a = str(tmp_path / "a")
     r = run(ENSEMBLE, "--out", a, "--no-plots", "--start", good)
@@ -752,7 +752,9 @@ def test_the_jackknife_records_its_refits_and_retries_an_unusable_one_from_the_o
     r = run(ENSEMBLE, "--out", b, "--no-plots", "--start", f"default,{far}", "--max-iterations", "1")
     assert r.returncode == 1, r.stderr
     table = rows(os.path.join(b, "jackknife.csv"))
-    assert len(table) == 4 and all(t["converged"] == "no" and t["usable"] == "no" and t["tries"] == "2" for t in table)
+    assert len(table) == 4 and all(t["converged"] == "no" and t["usable"] == "no" for t in table)
+    # 2 tries, and a third where the basin check found another refit's optimum lower on this one's data
+    assert all(t["tries"] == "2" or (t["tries"] == "3" and "(basin check; from " in t["start"]) for t in table), table
     warning = next(l for l in r.stderr.splitlines() if "jackknife not used" in l)
     assert all(f"m00{k} left out" in warning for k in range(4)) and "jackknife.md" in warning, warning
     params = rows(os.path.join(b, "parameters.csv"))
