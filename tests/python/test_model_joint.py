@@ -359,12 +359,14 @@ assert len(RESTARTED) >= 4, RESTARTED
                                                                 "three_pressures/mu_1/joint",
                                                                 "three_pressures/mu_0.1/joint")] +
                          [(f"lab_{p}", f"lab_{p}/start_state_jackknife") for p in ("dense", "loose")] +
+                         [("lab_dense/start_state_jackknife", "lab_dense/basin_check")] +
                          [(f"{SV}/{law}_excess/jackknife/{n}", f"{SSJ}/{law}_excess/{n}") for law, n in RESTARTED])
 def test_the_stored_start_state_comparison_rebuilds(tmp_path, stored, rerun):
     """RERUN/compare.{md,csv} (under data/geotech/model) from the two stored parameters.csv (the stored calibration
     STORED and its restart with the fixed jackknife: thirty-second round state_volume/dense, thirty-third the other
-    state_volume ones, thirty-fourth lab_dense, lab_loose and the relaxing and bounded excess's jackknife runs), byte for byte (a se_method with a comma quoted as csv
-    quotes it)."""
+    state_volume ones, thirty-fourth lab_dense, lab_loose and the relaxing and bounded excess's jackknife runs;
+    thirty-fifth lab_dense with the basin check against the thirty-fourth's), byte for byte (a se_method with a comma
+    quoted as csv quotes it)."""
     m = os.path.join(ROOT, "data", "geotech", "model")
     d = os.path.join(m, rerun)
     with open(os.path.join(d, "compare.md")) as fh:
@@ -449,3 +451,25 @@ def test_the_qs16_paths_start_every_packing_at_one_volume_fraction():
             with open(os.path.join(base, m, "paths", name), newline="") as fh:
                 starts.add(next(csv.DictReader(ln for ln in fh if not ln.startswith("#")))["nu"])
         assert len(starts) == 1, (name, starts)
+
+
+def test_the_stored_basin_check_ran_lab_dense_without_m2_again():
+    """lab_dense/basin_check (thirty-fifth round): the refit without m2, which ended near twice the full fit's chi2/dof
+    from the full fit's optimum in the thirty-fourth round's restart, was run again by the basin check from another
+    refit's optimum and ends lower, within 1.1 times the full fit's chi2/dof; the other refits kept their first start, and none
+    ends above the thirty-fourth round's refit of the same packing by more than round-off."""
+    m = os.path.join(ROOT, "data", "geotech", "model", "lab_dense")
+
+    def refits(d):
+        with open(os.path.join(m, d, "jackknife.csv"), newline="") as fh:
+            return {r["packing_left_out"]: r for r in csv.DictReader(ln for ln in fh if not ln.startswith("#"))}
+    new, old = refits("basin_check"), refits("start_state_jackknife")
+    assert sorted(new) == sorted(old) == ["m1", "m2", "m3", "m4"]
+    again = [p for p, r in new.items() if "(basin check; from " in r["start"]]
+    assert again == ["m2"] and new["m2"]["tries"] == "2"
+    ended = float(new["m2"]["start"].split("it ended at chi2/dof ")[1].rstrip(")"))
+    chi, full = float(new["m2"]["chi2_per_dof [-]"]), float(new["m2"]["full_fit_chi2_per_dof [-]"])
+    assert chi < ended and chi < 1.1 * full and float(old["m2"]["chi2_per_dof [-]"]) > 1.9 * full
+    for p in ("m1", "m3", "m4"):
+        assert new[p]["start"] == "the full fit's optimum"
+        assert float(new[p]["chi2_per_dof [-]"]) <= float(old[p]["chi2_per_dof [-]"]) * (1 + 1e-4)
