@@ -248,6 +248,22 @@ std::vector<std::vector<double>> leave_one_out_estimates(const std::vector<Curve
 
 }  // namespace
 
+// The truth's shear block 10-20 % away (a start the fit must leave), and the options of a shear-only fit from START
+// (the isotropic block held at it) on synthetic curves.
+Parameters shear_start_away(const Parameters& P) {
+  Parameters start = P;
+  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.8 : 1.1);
+  return start;
+}
+CalibrationOptions shear_fit_options(const Parameters& P, const Parameters* start) {
+  CalibrationOptions o;
+  o.fit_isotropic = false;
+  o.nu_ref = P.nu_ref;
+  o.max_step = 1e-3;
+  o.start = start;
+  return o;
+}
+
 // Calibration recovers the known shear laws from synthetic ensembles with strongly correlated
 // noise (rho = 0.9, as DEM curves have; K = 8 packings, 4 volume fractions) within the
 // jackknife-over-packings intervals the command states (estimate -/+ t_{K-1} se). Over 8
@@ -262,13 +278,8 @@ TEST(ModelFit, RecoversKnownParametersWithinJackknifeErrors) {
   int covered = 0, covered_cov = 0, total = 0;
   for (int seed = 1; seed <= seeds; ++seed) {
     const Synthetic S = synthetic(P, {0.69, 0.73, 0.77, 0.81}, K, 0.9, seed);
-    CalibrationOptions o;
-    o.fit_isotropic = false;
-    o.nu_ref = P.nu_ref;
-    o.max_step = 1e-3;
-    Parameters start = P;   // start away from the truth: the fit must find it
-    for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.8 : 1.1);
-    o.start = &start;
+    const Parameters start = shear_start_away(P);   // start away from the truth: the fit must find it
+    const CalibrationOptions o = shear_fit_options(P, &start);
     const Calibration cal = calibrate(S.mean, {}, o);
     ASSERT_TRUE(cal.ok) << cal.message;
     CalibrationOptions oj = o;
@@ -364,13 +375,8 @@ TEST(ModelFit, RecoversKnownParametersWithinTwoSetJackknifeErrors) {
     const Synthetic A = synthetic(P, {0.69, 0.73}, KA, 0.9, seed), B = synthetic(P, {0.77, 0.81}, KB, 0.9, 100 + seed);
     std::vector<CurveData> mean = A.mean;
     mean.insert(mean.end(), B.mean.begin(), B.mean.end());
-    CalibrationOptions o;
-    o.fit_isotropic = false;
-    o.nu_ref = P.nu_ref;
-    o.max_step = 1e-3;
-    Parameters start = P;
-    for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.8 : 1.1);
-    o.start = &start;
+    const Parameters start = shear_start_away(P);
+    const CalibrationOptions o = shear_fit_options(P, &start);
     const Calibration cal = calibrate(mean, {}, o);
     ASSERT_TRUE(cal.ok) << cal.message;
     CalibrationOptions oj = o;
@@ -444,13 +450,8 @@ TEST(ModelFit, RecoversExactParametersFromNoiseFreeCurves) {
 TEST(ModelFit, EvaluateOnlyGivesTheChi2AFitFromThatStartBeginsWith) {
   const Parameters P = truth();
   const Synthetic S = synthetic(P, {0.69, 0.73, 0.77, 0.81}, 4, 0.9, 7);
-  CalibrationOptions o;
-  o.fit_isotropic = false;
-  o.nu_ref = P.nu_ref;
-  o.max_step = 1e-3;
-  Parameters start = P;
-  for (int i = 0; i < kNumShear; ++i) start.shear[i] *= (i % 2 ? 0.8 : 1.1);
-  o.start = &start;
+  const Parameters start = shear_start_away(P);
+  const CalibrationOptions o = shear_fit_options(P, &start);
   const Calibration fit = calibrate(S.mean, {}, o);
   ASSERT_TRUE(fit.ok) << fit.message;
   CalibrationOptions e = o;
