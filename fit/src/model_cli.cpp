@@ -1298,8 +1298,10 @@ void jackknife(const ModelInputs& in, const CalibrationOptions& co_f, const Mode
               << num(r.chi2_dof, 4) << (r.tries > 1 ? " (from " + r.start + ", after " + std::to_string(r.tries) +
                                                        " starts)" : std::string()) << "\n";
   }
-  basin_check(in, co_f, js, ff, fits);
-  full_fit_basin(in, co_f, ff, fits);
+  if (o.basin_check) {
+    basin_check(in, co_f, js, ff, fits);
+    full_fit_basin(in, co_f, ff, fits);
+  }
   for (std::size_t k = 0; k < n; ++k) {
     const fs::path& member = in.members[js.member[k]];
     const JackRefit& r = ff.refits[k];
@@ -1948,6 +1950,10 @@ void add_model_options(CLI::App& app, ModelCommandOptions& o) {
   app.add_option("--eps-max", o.eps_max, "fit and compare only eps_d <= this [-] (default: all)")->default_str("");
   app.add_flag_callback("--no-jackknife", [&o] { o.jackknife = false; },
                         "errors from the covariance only (faster; default: jackknife over the packings)");
+  app.add_flag_callback("--no-basin-check", [&o] { o.basin_check = false; },
+                        "keep each jackknife refit where it ended (default: a refit whose data score lower at another "
+                        "refit's optimum is run again from there, and the fit is checked the same way; tables made "
+                        "before issue 31's thirty-fifth round were made without)");
   app.add_flag("--no-plots", o.no_plots, "skip the matplotlib plots");
   app.add_option("--family", o.family, "group (the incremental anisotropic model), extended (with the frictional "
                  "extension: docs/model.md) or auto (both; the held-out test chooses, the other goes to OUT/FAMILY)");

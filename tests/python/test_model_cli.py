@@ -1051,7 +1051,8 @@ def test_the_basin_check_restarts_a_refit_and_names_a_lower_start_for_the_fit(tm
     refit, beaten on its own data by another refit's optimum, is run again from it and ends lower (jackknife.csv's
     start and tries say so); the fit's own data score lower at a refit's optimum, so the run warns and writes it to
     basin_start/parameters.csv, at which a fit from there starts (Ceres' own initial cost) below the first fit's
-    chi2; a rerun into the folder that finds no lower optimum leaves no basin_start/ behind."""
+    chi2; a rerun into the folder that finds no lower optimum leaves no basin_start/ behind; --no-basin-check keeps
+    every refit where it ended."""
     import re
     out = tmp_path / "short"
     r = run(ENSEMBLE, "--out", str(out), "--no-plots", "--max-iterations", "1")
@@ -1076,3 +1077,8 @@ def test_the_basin_check_restarts_a_refit_and_names_a_lower_start_for_the_fit(tm
     r2 = run(ENSEMBLE, "--out", str(out), "--no-plots", "--force", "--no-jackknife")
     assert r2.returncode == 0, r2.stderr
     assert not (out / "basin_start").exists()
+    off = tmp_path / "off"   # --no-basin-check: every refit where it ended, no warning
+    r3 = run(ENSEMBLE, "--out", str(off), "--no-plots", "--max-iterations", "1", "--no-basin-check")
+    assert r3.returncode == 1 and "basin" not in r3.stderr, r3.stderr
+    assert all(t["tries"] == "1" and t["start"] == "the full fit's optimum" for t in rows(off / "jackknife.csv"))
+    assert not (off / "basin_start").exists()

@@ -17,6 +17,7 @@ struct ModelCommandOptions {
   std::vector<std::string> calibrate_on;  ///< modes and paths fitted (default: {calibrate_mode}); the rest is predicted
   double eps_max = 1e9;                   ///< fit and compare only eps_d <= eps_max [-]
   bool jackknife = true;                  ///< errors from the jackknife over packings (needs DIR/members)
+  bool basin_check = true;                ///< the jackknife's basin check (basin_check, full_fit_basin; --no-basin-check)
   bool no_plots = false;
   bool force = false;                     ///< overwrite an existing output folder
   /// --profile: "" (none, the default), `all`, or comma-separated coefficient names: their profile intervals
