@@ -476,7 +476,7 @@ void add_standardised_squares(const std::vector<double>& model, const std::vecto
 // and n: ((model - member)/sd)^2 over rows > 0 and p* (constant-volume rows) or eps_v (rows at held pressure), s_dev
 // and F_dev signed, sd as add_standardised_squares with D's own packings. False where the laws cannot start it. Where
 // WHY is given, it says why the path is not followed ("" where its squares are finite): the laws cannot start it, or
-// the model is lost along it (from the first strain where it is not a number; its squares are added all the same).
+// it loses its drained control or is not a number from some strain on (its squares are added all the same).
 bool add_path_squares(const Parameters& P, const PathData& ensemble, const fs::path& member_csv, double& ss, long& n,
                       std::string* why = nullptr) {
   const Table t = read_table(member_csv.string());
@@ -503,12 +503,10 @@ bool add_path_squares(const Parameters& P, const PathData& ensemble, const fs::p
   add_standardised_squares(m.s, d.s, ensemble.se_s, all, K, ss1, n);
   add_standardised_squares(m.F, d.F, ensemble.se_F, all, K, ss1, n);
   ss += ss1;
-  if (why) {
-    *why = "";
-    for (std::size_t i = 0; i < m.p.size() && why->empty(); ++i)
-      if (!std::isfinite(m.p[i]) || !std::isfinite(m.s[i]) || !std::isfinite(m.F[i]) || !std::isfinite(m.ev[i]))
-        *why = "the model is lost from eps_d_accumulated = " + num(d.acc[i], 3);
-    if (why->empty() && !std::isfinite(ss1)) *why = "not a number";
+  if (why) {   // the drained control's pole, or the first row not a number (model_fit's path_not_a_number)
+    *why = path_not_a_number(m);
+    if (!why->empty()) why->erase(0, 1);
+    else if (!std::isfinite(ss1)) *why = "its squares are not a number";
   }
   return true;
 }

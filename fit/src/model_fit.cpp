@@ -1508,14 +1508,18 @@ std::string start_failure(const Parameters& P, const std::vector<CurveData>& cur
     } catch (const std::invalid_argument& e) {
       return what + ": " + e.what();
     }
-    if (m.lost_row >= 1)
-      return what + " loses its drained control after eps_d_accumulated = " + fmt(m.acc[m.lost_row - 1], 3) +
-             " (a_A F/3 within " + fmt(100 * kTriaxialMargin, 2) + " % of 1, the pole; docs/model.md, \"Where the drained "
-             "triaxial control is lost\")";
-    const int at = first_nan_row(m.p, m.s, m.F);
-    if (at >= 0) return what + " is not a number from eps_d_accumulated = " + fmt(m.acc[at], 3);
+    const std::string why = path_not_a_number(m);
+    if (!why.empty()) return what + why;
   }
   return "";
+}
+
+std::string path_not_a_number(const PathPrediction& m) {
+  if (m.lost_row >= 1)
+    return " loses its drained control after eps_d_accumulated = " + fmt(m.acc[m.lost_row - 1], 3) + " (a_A F/3 within " +
+           fmt(100 * kTriaxialMargin, 2) + " % of 1, the pole; docs/model.md, \"Where the drained triaxial control is lost\")";
+  const int at = first_nan_row(m.p, m.s, m.F);
+  return at >= 0 ? " is not a number from eps_d_accumulated = " + fmt(m.acc[at], 3) : "";
 }
 
 double jamming_start_inside(double v, double numin, bool cusp) {

@@ -339,6 +339,11 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
 /// without m2 had started 0.005 below it, at chi2/dof 349 against the full fit's 15.3, and stayed there).
 double jamming_start_inside(double v, double numin, bool cusp);
 
+/// Why a path prediction M is not a number ("" where every row is): " loses its drained control after
+/// eps_d_accumulated = X (...the pole...)", " is not a number from eps_d_accumulated = X" (start_failure, and `dem
+/// model`'s held-out paths a refit does not follow).
+std::string path_not_a_number(const PathPrediction& m);
+
 /// Why a calibration could not be evaluated at its start (Ceres stopped before its first step, a start of a multi-start
 /// "failed"): the first fitted curve or path that is not a number at the start values P, named with its cause (a start
 /// pressure above the isotropic law's reach, the drained control's pole, a start state the laws cannot hold); "" where
