@@ -2882,6 +2882,24 @@ TEST(ModelVolumeState, AStartThatCannotBeEvaluatedNamesThePathAndTheCause) {
   EXPECT_TRUE(warned);
 }
 
+// path_not_a_number (thirty-fifth round: a failed start's message and a held-out path a refit does not follow), on
+// predictions built by hand: every row a number says nothing; a row the drained control did not reach names the last
+// strain reached and the pole; a row not a number without the control lost names its own strain.
+TEST(ModelVolumeState, APathNotANumberIsWordedOnceForBothUses) {
+  PathPrediction m;
+  m.acc = {0.0, 0.1, 0.2, 0.3};
+  m.p = {1, 1, 1, 1};
+  m.s = {0, 0.1, 0.2, 0.3};
+  m.F = {0, 0.01, 0.02, 0.03};
+  EXPECT_EQ(path_not_a_number(m), "");
+  m.s[2] = std::nan("");
+  EXPECT_EQ(path_not_a_number(m), " is not a number from eps_d_accumulated = 0.2");
+  m.lost_row = 2;
+  const std::string lost = path_not_a_number(m);
+  EXPECT_EQ(lost.rfind(" loses its drained control after eps_d_accumulated = 0.1 (a_A F/3 within ", 0), 0u) << lost;
+  EXPECT_NE(lost.find("the pole"), std::string::npos) << lost;
+}
+
 // The residual functors keep one Ext<double> of options and bind their Jet block to it (with_block, twenty-ninth
 // round): every option, each set away from its default, arrives on the Jet Ext unchanged, and the block is the one
 // given (a member with_block forgot would keep its default here; a new member stops the build at its static_assert).
