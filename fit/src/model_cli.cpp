@@ -1618,9 +1618,9 @@ void write_starts(const FamilyFit& ff, const fs::path& out) {
 }
 
 // One family's tables, curves and figures in `out`.
-// basin_start/parameters.* (full_fit_basin): the refit's optimum a fit can start from again; a former run's removed.
+// basin_start/parameters.* (full_fit_basin): the refit's optimum a fit can start from again (a former run's is gone:
+// clear_former_results).
 void write_basin_start(const FamilyFit& ff, int K, const fs::path& out, const std::string& fit_label) {
-  fs::remove_all(out / "basin_start");
   if (ff.basin_start.names.empty()) return;
   fs::create_directories(out / "basin_start");
   write_parameter_tables(ff.basin_start, K, out / "basin_start", fit_label + ": the optimum of a jackknife refit at "
@@ -1852,6 +1852,23 @@ FamilyFit prediction_only(const ModelCommandOptions& o, const CalibrationOptions
   return ff;
 }
 
+// A former run's results in OUT (--force), removed once this run's are ready to be written: every table `dem model`
+// writes (a run without the jackknife writes no jackknife.*, and an old one must not stand beside the new tables), its
+// curves, the other family's folder and basin_start/, and its plots. Nothing else in OUT is touched.
+void clear_former_results(const fs::path& out) {
+  static const char* const kStems[] = {"parameters", "correlations", "laws", "prediction", "summary", "identifiability",
+                                       "error_scale", "profile", "jackknife", "jackknife_estimates", "heldout",
+                                       "selection", "starts"};
+  std::error_code ec;
+  for (const char* stem : kStems)
+    for (const char* ext : {".csv", ".json", ".md", ".tex"}) fs::remove(out / (std::string(stem) + ext), ec);
+  for (const char* dir : {"curves", "basin_start", "group", "extended"}) fs::remove_all(out / dir, ec);
+  for (const auto& e : fs::directory_iterator(out, ec)) {
+    const std::string name = e.path().filename().string();
+    if (e.is_regular_file() && name.rfind("model_", 0) == 0 && e.path().extension() == ".png") fs::remove(e.path(), ec);
+  }
+}
+
 int run(const ModelCommandOptions& o) {
   const fs::path dir(o.dir);
   if (!fs::is_directory(dir)) throw InputError(o.dir + " is not a folder: give an ensemble folder reduced by `dem fit`");
@@ -1871,6 +1888,7 @@ int run(const ModelCommandOptions& o) {
       if (!out_existed && fs::is_empty(out, ec)) fs::remove(out, ec);
       throw;
     }
+    clear_former_results(out);
     write_results(in, ff, out, o);
     return 0;
   }
@@ -1886,6 +1904,7 @@ int run(const ModelCommandOptions& o) {
   if (o.psi_range)   // the laws of psi kept within the calibration's own states: its fitted curves do not move
     for (auto& ff : fits)
       std::tie(ff.cal.params.psi_lo, ff.cal.params.psi_hi) = psi_range(ff.cal.params, in.fit_curves, in.fit_paths, o.eps_max);
+  clear_former_results(out);
   std::size_t chosen = 0;
   if (fits.size() == 2) {
     chosen = write_selection(fits[0], fits[1], K, out) ? 1 : 0;

@@ -1051,8 +1051,9 @@ def test_the_basin_check_restarts_a_refit_and_names_a_lower_start_for_the_fit(tm
     refit, beaten on its own data by another refit's optimum, is run again from it and ends lower (jackknife.csv's
     start and tries say so); the fit's own data score lower at a refit's optimum, so the run warns and writes it to
     basin_start/parameters.csv, at which a fit from there starts (Ceres' own initial cost) below the first fit's
-    chi2; a rerun into the folder that finds no lower optimum leaves no basin_start/ behind; --no-basin-check keeps
-    every refit where it ended."""
+    chi2; a rerun into the folder that finds no lower optimum leaves no basin_start/ behind (nor, without the
+    jackknife, the former jackknife tables; a file of the user's stays); --no-basin-check keeps every refit where it
+    ended."""
     import re
     out = tmp_path / "short"
     r = run(ENSEMBLE, "--out", str(out), "--no-plots", "--max-iterations", "1")
@@ -1074,9 +1075,14 @@ def test_the_basin_check_restarts_a_refit_and_names_a_lower_start_for_the_fit(tm
     initial = float(re.search(r"Initial cost: ([0-9.e+-]+)", again.stderr).group(1))
     dof = 2 * float(re.search(r"Final cost: ([0-9.e+-]+)", r.stderr).group(1)) / chi2   # the first fit's
     assert 2 * initial / dof == pytest.approx(float(basin["value"]), rel=2e-3)
+    (out / "notes.txt").write_text("a file of the user's")
     r2 = run(ENSEMBLE, "--out", str(out), "--no-plots", "--force", "--no-jackknife")
     assert r2.returncode == 0, r2.stderr
     assert not (out / "basin_start").exists()
+    # nor the former run's jackknife tables beside the new ones (clear_former_results); the user's file stays
+    assert not any((out / f"{stem}.{ext}").exists() for stem in ("jackknife", "jackknife_estimates", "heldout")
+                   for ext in ("csv", "md", "json", "tex"))
+    assert (out / "notes.txt").read_text() == "a file of the user's" and (out / "parameters.csv").exists()
     off = tmp_path / "off"   # --no-basin-check: every refit where it ended, no warning
     r3 = run(ENSEMBLE, "--out", str(off), "--no-plots", "--max-iterations", "1", "--no-basin-check")
     assert r3.returncode == 1 and "basin check" not in r3.stderr and "own data score" not in r3.stderr, r3.stderr
