@@ -1159,9 +1159,6 @@ JackRefit refit_without(const ModelInputs& in, const CalibrationOptions& co_f, c
                         const FamilyFit& ff, int k, Calibration& best) {
   const fs::path& member = in.members[k];
   const LooInputs L = leave_out(in, k);
-  const std::vector<CurveData>& loo = L.curves;
-  const IsoData& iso = L.iso;
-  const std::vector<PathData>& loo_paths = L.paths;
   JackRefit r{member.filename().string(), "the full fit's optimum", 0, false, false, 0, ""};
   CalibrationOptions cj = refit_options(co_f);
   auto rank = [&](const Calibration& c) {   // usable, converged, then evaluated: higher is better
@@ -1171,7 +1168,7 @@ JackRefit refit_without(const ModelInputs& in, const CalibrationOptions& co_f, c
     const bool settled = r.usable && best.chi2_dof() <= kRetryAbove * std::max(1.0, ff.cal.chi2_dof());
     if (i > 0 && (i - 1 == ff.chosen_start || settled)) continue;
     cj.start = i == 0 ? &ff.cal.params : start_params[i - 1].get();
-    Calibration c = calibrate(loo, iso, cj, loo_paths);
+    Calibration c = calibrate(L.curves, L.iso, cj, L.paths);
     ++r.tries;
     const bool better = i == 0 || rank(c) > rank(best) || (rank(c) == rank(best) && c.chi2_dof() < best.chi2_dof());
     if (better) {
@@ -1203,6 +1200,21 @@ double evaluated_chi2(const LooInputs& L, CalibrationOptions cj) {
 // an evaluation costs one residual evaluation, a restart one refit. (The thirty-fourth round's restarts ended in
 // other basins: lab_dense without m2 and m3, bounded mu = 0.1 dense without m3.)
 constexpr double kBasinBelow = 1e-6;   // relative: lower than the refit's own chi2 by more than round-off
+
+// The refit (index into FITS, not SKIP) whose optimum scores lowest on L below LOWEST (lowered to its chi2 there);
+// FITS.size() where none does.
+std::size_t lowest_optimum(const LooInputs& L, CalibrationOptions cj, const std::vector<Calibration>& fits,
+                           std::size_t skip, double& lowest) {
+  std::size_t from = fits.size();
+  for (std::size_t j = 0; j < fits.size(); ++j) {
+    if (j == skip || std::isnan(fits[j].chi2)) continue;
+    cj.start = &fits[j].params;
+    const double c = evaluated_chi2(L, cj);
+    if (c < lowest) { lowest = c; from = j; }
+  }
+  return from;
+}
+
 void basin_check(const ModelInputs& in, const CalibrationOptions& co_f, const JackSamples& js, FamilyFit& ff,
                  std::vector<Calibration>& fits) {
   const std::size_t n = fits.size();
@@ -1210,14 +1222,8 @@ void basin_check(const ModelInputs& in, const CalibrationOptions& co_f, const Ja
   for (std::size_t k = 0; k < n; ++k) {
     if (std::isnan(fits[k].chi2)) continue;
     const LooInputs L = leave_out(in, static_cast<int>(js.member[k]));
-    std::size_t from = n;
     double lowest = fits[k].chi2 * (1 - kBasinBelow);
-    for (std::size_t j = 0; j < n; ++j) {
-      if (j == k || std::isnan(fits[j].chi2)) continue;
-      cj.start = &fits[j].params;
-      const double c = evaluated_chi2(L, cj);
-      if (c < lowest) { lowest = c; from = j; }
-    }
+    const std::size_t from = lowest_optimum(L, cj, fits, k, lowest);
     if (from == n) continue;
     JackRefit& r = ff.refits[k];
     cj.start = &fits[from].params;
@@ -1247,15 +1253,8 @@ void full_fit_basin(const ModelInputs& in, const CalibrationOptions& co_f, Famil
                     const std::vector<Calibration>& fits) {
   if (std::isnan(ff.cal.chi2)) return;
   const LooInputs all{in.fit_curves, in.iso, in.fit_paths};
-  CalibrationOptions cj = refit_options(co_f);
-  std::size_t from = fits.size();
   double lowest = ff.cal.chi2 * (1 - kBasinBelow);
-  for (std::size_t k = 0; k < fits.size(); ++k) {
-    if (std::isnan(fits[k].chi2)) continue;
-    cj.start = &fits[k].params;
-    const double c = evaluated_chi2(all, cj);
-    if (c < lowest) { lowest = c; from = k; }
-  }
+  const std::size_t from = lowest_optimum(all, refit_options(co_f), fits, fits.size(), lowest);
   if (from == fits.size()) return;
   Calibration& b = ff.basin_start;   // a start, not a result: its chi2 the fit's data's there, no errors
   b = fits[from];
