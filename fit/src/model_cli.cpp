@@ -670,6 +670,26 @@ std::string lost_on_path(const PathPrediction& m) {
          "\"Where the drained triaxial control is lost\")";
 }
 
+// Where RK4's fixed step was halved (model::advance: outside RK4's stable range, or the drained control not held): ""
+// where the fixed step was kept on every row.
+std::string refined_on_path(const PathPrediction& m) {
+  int first = -1, most = 0;
+  bool unheld = false;
+  for (std::size_t i = 0; i < m.halvings.size(); ++i) {
+    if (m.halvings[i] != 0 && first < 0) first = static_cast<int>(i);
+    most = std::max(most, m.halvings[i]);
+    unheld = unheld || m.halvings[i] < 0;
+  }
+  if (first < 1) return "";
+  return (most > 0 ? "needed RK4 steps down to 1/" + std::to_string(1 << most) + " of the fixed step" :
+                     std::string("was not held by any RK4 step")) +
+         " from eps_d_accumulated = " + num(m.acc[first - 1], 3) + " on: the fixed step lies outside RK4's stable range "
+         "there or does not hold the drained control (the stress ratio's law is stiff; docs/model.md, \"RK4's step "
+         "where the law is stiff\")" +
+         (unheld && most > 0 ? "; on some rows no step down to 1/" + std::to_string(1 << kMaxHalvings) +
+                                   " held it, so the curve there is not converged" : std::string());
+}
+
 // A drained path that comes within kPoleNear of where its control is lost (PathPrediction::pole): the fit cannot
 // cross the margin (a lost path's residuals are NaN, its step rejected), so an optimum found there is the margin's, not
 // the data's (twenty-first round: the bounded three-pressure mu = 0.1 joint calibration, a_A F/3 = 0.8999989); ""
@@ -1683,6 +1703,8 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
     if (!excess.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << excess << "\n";
     const std::string lost = lost_on_path(m);
     if (!lost.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << lost << "\n";
+    const std::string refined = refined_on_path(m);
+    if (!refined.empty()) std::cerr << "dem model: note: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << refined << "\n";
     const std::string against = lost.empty() ? margin_optimum_on_path(m, role == "fitted") : "";
     if (!against.empty())
       std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << against << "\n";

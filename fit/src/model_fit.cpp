@@ -1698,6 +1698,7 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
     m.nu.push_back(std::exp(r.state.ln_nu)); m.ev.push_back(r.eps_vol / 3.0);
     m.p_el.push_back(vol ? isotropic_pressure(iso.data(), std::exp(r.state.ln_nu + r.state.e_pl)) : r.state.p);
     m.pole.push_back(r.pole);
+    m.halvings.push_back(r.halvings);
   }
   return m;
 }

@@ -861,13 +861,38 @@ State<T> axpy(const State<T>& y, const State<T>& d, double h) {
           y.e_pl + T(h) * d.e_pl, y.lost || d.lost};
 }
 
-/// One classical RK4 step of length h (in |eps_d|, or |eps_vol| for a volumetric segment).
+/// The value of a scalar: itself, or a Ceres Jet's value part (its member a), recursively.
+inline double scalar_value(double x) { return x; }
+template <class J>
+double scalar_value(const J& j) { return scalar_value(j.a); }
+
+/// h times the local Lipschitz constant of rhs between RK4's third and fourth stages, Y3 = y + h/2 k2 and Y4 = y + h k3:
+/// h |k4 - k3| / |Y4 - Y3| (Shampine's stiffness estimate, free from the stages), in the norm of relative pressure and
+/// absolute ln nu, s, F and e_pl. RK4 is stable on the negative real axis to h lambda = 2.785 and damps an error by a
+/// third at 2 (model::advance's kStiffLimit).
 template <class T>
-State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double h) {
+double stage_stiffness(const State<T>& k2, const State<T>& k3, const State<T>& k4, const State<T>& y) {
+  auto v = [](const T& x) { return scalar_value(x); };
+  const double p = std::fabs(v(y.p)) > 0 ? std::fabs(v(y.p)) : 1.0;
+  const double dk[5] = {v(k4.ln_nu) - v(k3.ln_nu), (v(k4.p) - v(k3.p)) / p, v(k4.s) - v(k3.s), v(k4.F) - v(k3.F),
+                        v(k4.e_pl) - v(k3.e_pl)};
+  const double dy[5] = {v(k3.ln_nu) - v(k2.ln_nu) / 2, (v(k3.p) - v(k2.p) / 2) / p, v(k3.s) - v(k2.s) / 2,
+                        v(k3.F) - v(k2.F) / 2, v(k3.e_pl) - v(k2.e_pl) / 2};   // (Y4 - Y3)/h
+  double nk = 0, ny = 0;
+  for (int i = 0; i < 5; ++i) { nk += dk[i] * dk[i]; ny += dy[i] * dy[i]; }
+  return ny > 0 ? std::sqrt(nk / ny) : 0.0;   // h |k4 - k3| / (h |(Y4 - Y3)/h|): h cancels
+}
+
+/// One classical RK4 step of length h (in |eps_d|, or |eps_vol| for a volumetric segment). STIFF (if given): the
+/// step's stage_stiffness.
+template <class T>
+State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double h,
+                  double* stiff = nullptr) {
   const State<T> k1 = rhs(m, y, sigma, seg);
   const State<T> k2 = rhs(m, axpy(y, k1, h / 2), sigma, seg);
   const State<T> k3 = rhs(m, axpy(y, k2, h / 2), sigma, seg);
   const State<T> k4 = rhs(m, axpy(y, k3, h), sigma, seg);
+  if (stiff) *stiff = stage_stiffness(k2, k3, k4, y);
   State<T> out = y;
   out.ln_nu += T(h / 6) * (k1.ln_nu + T(2) * k2.ln_nu + T(2) * k3.ln_nu + k4.ln_nu);
   out.p += T(h / 6) * (k1.p + T(2) * k2.p + T(2) * k3.p + k4.p);
@@ -879,10 +904,81 @@ State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const S
   return out;
 }
 
-/// The value of a scalar: itself, or a Ceres Jet's value part (its member a), recursively.
-inline double scalar_value(double x) { return x; }
-template <class J>
-double scalar_value(const J& j) { return scalar_value(j.a); }
+/// RK4's step control (issue 31, thirty-sixth round). Where the stress ratio's law is stiff (a large beta_s at low
+/// pressure, and under the triaxial extension control amplified by about (3 - s)/3) a fixed step of 5e-4 lies outside
+/// RK4's stability region: the mu = 1 joint calibration's TE_s3_dense at p* = 1e-3 had h lambda = 3.9 there, moved its
+/// side stress by 14 % in one output interval and was not a number in the next. An output interval is integrated again
+/// from its start with the step halved, up to kMaxHalvings times, where any of its steps has a stage_stiffness above
+/// kStiffLimit, where it moves the quantity a drained segment holds exactly in the equations (p under
+/// Control::Isobaric, the side stress p (1 - s/3) under Control::Triaxial) by more than kHeldDrift of itself, or where
+/// its finite start ends not a number (or lost, State::lost). Every stored calibration's paths stay below h lambda = 0.5
+/// but the mu = 1 joint one's (0.94 on its other paths), so the fixed step is kept there bit for bit.
+constexpr double kHeldDrift = 1e-4;
+constexpr double kStiffLimit = 2.0;
+constexpr int kMaxHalvings = 6;
+
+/// The quantity the segment holds at the state y (NaN at constant volume and on a volumetric segment, sigma = 0).
+template <class T>
+double held_quantity(const State<T>& y, double sigma, const Segment& seg) {
+  if (sigma == 0.0 || seg.control == Control::Volume) return std::numeric_limits<double>::quiet_NaN();
+  const double p = scalar_value(y.p);
+  return seg.control == Control::Isobaric ? p : p * (1.0 - scalar_value(y.s) / 3.0);
+}
+
+template <class T>
+bool finite_state(const State<T>& y) {
+  return !y.lost && std::isfinite(scalar_value(y.ln_nu)) && std::isfinite(scalar_value(y.p)) &&
+         std::isfinite(scalar_value(y.s)) && std::isfinite(scalar_value(y.F)) && std::isfinite(scalar_value(y.e_pl));
+}
+
+/// Whether an interval from y to y1 holds its control: a finite start ends finite, and the held quantity (if any) moved
+/// by at most kHeldDrift of itself. A start already not a number has nothing to refine.
+template <class T>
+bool step_held(const State<T>& y, const State<T>& y1, double sigma, const Segment& seg) {
+  if (!finite_state(y)) return true;
+  if (!finite_state(y1)) return false;
+  const double h0 = held_quantity(y, sigma, seg);
+  return std::isnan(h0) || std::fabs(held_quantity(y1, sigma, seg) - h0) <= kHeldDrift * std::fabs(h0);
+}
+
+/// The state after |d eps_d| = dl (|eps_vol| on a volumetric segment) from y: ceil(dl/max_step) RK4 steps, the full
+/// volumetric strain tr(E) accumulated step by step into EPS_VOL. Where a step's stage_stiffness exceeds kStiffLimit or
+/// step_held fails the interval is integrated again
+/// with the step halved, up to kMaxHalvings times, and the first try that holds is kept. Where none holds, the finest
+/// finite try is kept, or where none is finite the fixed step's (its NaN or lost state, as before the thirty-sixth
+/// round: a path that fails at every step fails as it did). HALVINGS (if given): how often the kept try's step was
+/// halved, -1 where no try held; 0 is the fixed step, bit for bit as before.
+template <class T>
+State<T> advance(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, double max_step,
+                 T& eps_vol, int* halvings = nullptr) {
+  const int sub0 = std::max(1, static_cast<int>(std::ceil(dl / max_step)));
+  State<T> fixed = y, finite = y;
+  T ev_fixed = eps_vol, ev_finite = eps_vol;
+  int used = -1;
+  for (int k = 0; k <= kMaxHalvings; ++k) {
+    const int sub = sub0 << k;
+    State<T> z = y;
+    T ev = eps_vol;
+    double stiff = 0;
+    for (int j = 0; j < sub; ++j) {
+      double hl = 0;
+      const State<T> z1 = rk4_step(m, z, sigma, seg, dl / sub, &hl);
+      ev += z.ln_nu - z1.ln_nu;
+      z = z1;
+      if (std::isfinite(hl)) stiff = std::max(stiff, hl);
+    }
+    if (stiff <= kStiffLimit && step_held(y, z, sigma, seg)) {
+      if (halvings) *halvings = k;
+      eps_vol = ev;
+      return z;
+    }
+    if (k == 0) { fixed = z; ev_fixed = ev; }
+    if (finite_state(z)) { finite = z; ev_finite = ev; used = k; }
+  }
+  if (halvings) *halvings = -1;
+  eps_vol = used >= 0 ? ev_finite : ev_fixed;
+  return used >= 0 ? finite : fixed;
+}
 
 /// Where p_iso first reaches p on a grid of kRisingGrid steps from nu_c to 1: [lo, hi] around that crossing, the
 /// rising branch from jamming. false if the law stays below p on the whole grid (p above its reach).
@@ -986,16 +1082,10 @@ std::vector<Point<T>> integrate(const T* iso, const T* shear, double nu_ref, dou
     const double sigma = vol ? 0.0 : (seg.eps_d > 0 ? 1.0 : -1.0);
     const double length = vol ? std::fabs(seg.eps_vol) : std::fabs(seg.eps_d);
     const double dl = length / seg.outputs;
-    const int sub = std::max(1, static_cast<int>(std::ceil(dl / seg.max_step)));
-    const double h = dl / sub;
     if (sigma != 0.0 && sigma != last_sigma) y.l = T(0.0);   // a reversal: the opening restarts
     if (sigma != 0.0) last_sigma = sigma;
     for (int o = 0; o < seg.outputs; ++o) {
-      for (int k = 0; k < sub; ++k) {
-        const State<T> y1 = rk4_step(m, y, sigma, seg, h);
-        eps_vol += y.ln_nu - y1.ln_nu;
-        y = y1;
-      }
+      y = advance(m, y, sigma, seg, dl, seg.max_step, eps_vol);
       if (!vol) { acc += dl; eps_d += sigma * dl; }
       out.push_back({acc, eps_d, eps_vol, y});
     }
@@ -1019,6 +1109,7 @@ struct RowState {
   /// pole_ratio a_A F/3 at the row's state where the row was reached under the drained triaxial control (NaN
   /// elsewhere, and in jet runs: a diagnostic of predictions)
   double pole = std::numeric_limits<double>::quiet_NaN();
+  int halvings = 0;   ///< how often RK4's step was halved to reach this row from the last (advance)
 };
 template <class T>
 std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
@@ -1032,6 +1123,7 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
   State<T> y = start_state(m, nu0, p0, s0, F0);
   T eps_vol = T(0.0);
   double last_sigma = 1.0;
+  int halvings = 0;
   std::vector<RowState<T>> out;
   out.reserve(acc.size());
   out.push_back({y, eps_vol});
@@ -1044,14 +1136,11 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
       const double sigma = direction[i] > 0 ? 1.0 : -1.0;
       if (sigma != last_sigma) y.l = T(0.0);   // a reversal: the opening restarts
       last_sigma = sigma;
-      const int sub = std::max(1, static_cast<int>(std::ceil(dl / max_step)));
-      for (int k = 0; k < sub; ++k) {
-        const State<T> y1 = rk4_step(m, y, sigma, seg, dl / sub);
-        eps_vol += y.ln_nu - y1.ln_nu;
-        y = y1;
-      }
+      y = advance(m, y, sigma, seg, dl, max_step, eps_vol, &halvings);
     }
     out.push_back({y, eps_vol});
+    out.back().halvings = halvings;
+    halvings = 0;
     if constexpr (std::is_same<T, double>::value)
       if (isobaric[i] == 2 && !y.lost) out.back().pole = pole_ratio(m, y);
   }
@@ -1079,8 +1168,8 @@ std::vector<State<T>> monotone_shear(const T* iso, const T* shear, double nu_ref
   for (double e : eps) {
     if (e < at) throw std::invalid_argument("monotone_shear: strains must increase");
     const double dl = e - at;
-    const int sub = dl > 0 ? std::max(1, static_cast<int>(std::ceil(dl / max_step))) : 0;
-    for (int k = 0; k < sub; ++k) y = rk4_step(m, y, 1.0, seg, dl / sub);
+    T unused = T(0.0);
+    if (dl > 0) y = advance(m, y, 1.0, seg, dl, max_step, unused);
     at = e;
     out.push_back(y);
   }

@@ -326,6 +326,9 @@ struct PathPrediction {
   /// a_A F/3 (model::pole_ratio) on the rows reached under the drained triaxial control, NaN on the others: the
   /// control is lost from 1 - kTriaxialMargin on
   std::vector<double> pole;
+  /// How often RK4's step was halved to reach each row (model::advance: the fixed step did not hold the path's drained
+  /// control); 0 on every row where the fixed step did
+  std::vector<int> halvings;
 };
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
                             double* psi_seen = nullptr);
