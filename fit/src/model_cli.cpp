@@ -672,6 +672,16 @@ std::string lost_on_path(const PathPrediction& m) {
 
 // Where RK4's fixed step was halved (model::advance: outside RK4's stable range, or the drained control not held): ""
 // where the fixed step was kept on every row.
+std::string graded_on_path(const PathPrediction& m) {
+  if (!std::isfinite(m.gate_exponent_start)) return "";
+  return "starts where the fabric gate's exponent n_F = " + num(m.gate_exponent_start, 3) + " is negative: the gate "
+         "r_F^n_F is unbounded where no contact has opened yet, and the first interval is integrated on a graded grid "
+         "from the start (docs/model.md, \"RK4's step where the law is stiff\"; a fixed step reads the gate's floor and "
+         "moves the fabric towards its limit in one step, as every calibration before the thirty-sixth round did)" +
+         (m.gate_exponent_start <= -1 ? std::string("; at n_F <= -1 the singularity is not integrable, and the curve "
+                                                    "is not a number") : std::string());
+}
+
 std::string refined_on_path(const PathPrediction& m) {
   int first = -1, most = 0;
   bool unheld = false;
@@ -1703,6 +1713,8 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
     if (!excess.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << excess << "\n";
     const std::string lost = lost_on_path(m);
     if (!lost.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << lost << "\n";
+    const std::string graded = graded_on_path(m);
+    if (!graded.empty()) std::cerr << "dem model: note: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << graded << "\n";
     const std::string refined = refined_on_path(m);
     if (!refined.empty()) std::cerr << "dem model: note: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << refined << "\n";
     const std::string against = lost.empty() ? margin_optimum_on_path(m, role == "fitted") : "";

@@ -1699,6 +1699,11 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
     m.p_el.push_back(vol ? isotropic_pressure(iso.data(), std::exp(r.state.ln_nu + r.state.e_pl)) : r.state.p);
     m.pole.push_back(r.pole);
     m.halvings.push_back(r.halvings);
+    m.graded.push_back(r.graded);
+  }
+  if (std::find(m.graded.begin(), m.graded.end(), true) != m.graded.end()) {   // the exponent the start had
+    const Material<double> mat = start_material(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), ext);
+    m.gate_exponent_start = gate_exponent(mat, start_state(mat, d.nu, d.p.front(), d.s.front(), d.F.front()));
   }
   return m;
 }

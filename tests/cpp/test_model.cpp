@@ -2607,7 +2607,8 @@ TEST(ModelVolumeState, AStressRatioAboveItsTargetRelaxesAtLeastAsFastAsAtIt) {
 TEST(ModelVolumeState, PsiRangeHoldsTheLawsAtTheCalibrationsReach) {
   Parameters P = volume_truth();
   P.shear[kSmaxB] = 2.0;
-  P.ext[kNFB] = -30.0; P.ext[kKappaB] = 5.0; P.ext[kDilB] = -2.0;
+  P.ext[kNFB] = -10.0;   // n_F > -1 on every path here (-30, before the graded start, made it -2.6 at psi = 0.12)
+  P.ext[kKappaB] = 5.0; P.ext[kDilB] = -2.0;
   P.ext[kNB] = 0.0;
   const auto iso = P.iso();
   const Rows r = triaxial_rows(0.6);
@@ -3201,4 +3202,58 @@ TEST(ModelVolumeState, RK4HalvesItsStepWhereTheFixedStepDoesNotHoldTheSideStress
   EXPECT_EQ(plain[1].state.s, y.s);
   EXPECT_EQ(plain[1].state.F, y.F);
   EXPECT_EQ(plain[1].state.ln_nu, y.ln_nu);
+}
+
+namespace {
+// int_0^l phi^n dl', phi = 1 - e^{-c l'/delta}: (delta/c) sum_k U^{n+k+1}/(n+k+1), U = phi(l) (u = phi: dl' = delta
+// du/(c (1 - u)), 1/(1 - u) a geometric series).
+double opened_gate_integral(double l, double n, double c, double delta) {
+  const double U = 1.0 - std::exp(-c * l / delta);
+  double sum = 0, term = std::pow(U, n + 1);
+  for (int k = 0; k < 10000000 && term > 1e-18 * sum; ++k, term *= U) sum += term / (n + k + 1);
+  return delta / c * sum;
+}
+}  // namespace
+
+// A negative gate exponent (thirty-sixth round: the stored lab_dense calibration's n_F = -0.53 at its dense start) makes
+// the fabric's rate beta_F (F_max - F) phi^n_F unbounded where nothing has opened (phi -> 0, floored at 1e-6), an
+// integrable singularity. At constant volume with a_A = 0, no dilatancy and the start on the isotropic law, p and so the
+// overlap delta stay constant, and the fabric has a closed form: F = F_max - (F_max - F0) exp(-beta_F int_0^l phi^n).
+// From a singular start the first interval is integrated on graded pieces (model::advance): every row agrees with the
+// closed form (the floor's stretch included) to 1e-6, where the fixed step's first row (its first stage reads the
+// floor, 1e6^0.5 = 1000 times the rate) is off by more than 0.05. With n_F = +0.5 there is nothing singular and nothing graded.
+TEST(Model, ANegativeGateExponentIsIntegratedFromItsSingularStart) {
+  Parameters P = volume_truth();
+  P.state_volume = false;
+  P.ext[kNFA] = -0.5;
+  P.ext[kDilA] = 0.0;
+  const auto iso = P.iso();
+  const double nu0 = P.nu_ref, p0 = isotropic_pressure(iso.data(), nu0), F0 = 0.01;
+  const Ext<double> e{P.ext, kLodeBD2, Surface::LadeDuncan, FabricLode::Overlap, false, false, false};
+  std::vector<double> eps;
+  for (int i = 1; i <= 10; ++i) eps.push_back(0.002 * i);
+  const auto st = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.0, F0, eps, 5e-4, e);
+  const double delta = mean_overlap(iso.data(), nu0, p0), c = minor_fraction(kLodeBD2);
+  const double Fm = P.shear[kFmaxA], bF = std::exp(P.shear[kLnBetaFA]);
+  // The gate's floor: phi = 1e-6 up to l_f (opened_fraction_at), the gate 1e6^0.5 there (3.6e-5 of 0.017 at eps_d 0.002).
+  const double l_f = -delta / c * std::log1p(-1e-6);
+  auto floored_gate_integral = [&](double l) {
+    return l_f * 1e3 + opened_gate_integral(l, -0.5, c, delta) - opened_gate_integral(l_f, -0.5, c, delta);
+  };
+  for (std::size_t i = 0; i < eps.size(); ++i) {
+    EXPECT_NEAR(st[i].p, p0, 1e-12 * p0) << "the overlap stays constant";
+    const double exact = Fm - (Fm - F0) * std::exp(-bF * floored_gate_integral(eps[i]));
+    EXPECT_NEAR(st[i].F, exact, 1e-6) << "eps_d " << eps[i];
+  }
+  const Material<double> m = start_material(iso.data(), P.shear, P.nu_ref, nu0, p0, e);
+  State<double> y = start_state(m, nu0, p0, 0.0, F0);
+  EXPECT_TRUE(singular_start(m, y, 1.0));
+  for (int k = 0; k < 4; ++k) y = rk4_step(m, y, 1.0, Segment{}, 5e-4);
+  const double exact = Fm - (Fm - F0) * std::exp(-bF * floored_gate_integral(eps[0]));
+  EXPECT_GT(std::fabs(y.F - exact), 0.05) << "the fixed step reads the gate's floor";
+
+  P.ext[kNFA] = 0.5;
+  const Ext<double> regular{P.ext, kLodeBD2, Surface::LadeDuncan, FabricLode::Overlap, false, false, false};
+  const Material<double> m2 = start_material(iso.data(), P.shear, P.nu_ref, nu0, p0, regular);
+  EXPECT_FALSE(singular_start(m2, start_state(m2, nu0, p0, 0.0, F0), 1.0));
 }

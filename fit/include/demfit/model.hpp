@@ -949,7 +949,7 @@ bool step_held(const State<T>& y, const State<T>& y1, double sigma, const Segmen
 /// round: a path that fails at every step fails as it did). HALVINGS (if given): how often the kept try's step was
 /// halved, -1 where no try held; 0 is the fixed step, bit for bit as before.
 template <class T>
-State<T> advance(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, double max_step,
+State<T> advance_interval(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, double max_step,
                  T& eps_vol, int* halvings = nullptr) {
   const int sub0 = std::max(1, static_cast<int>(std::ceil(dl / max_step)));
   State<T> fixed = y, finite = y;
@@ -978,6 +978,57 @@ State<T> advance(const Material<T>& m, const State<T>& y, double sigma, const Se
   if (halvings) *halvings = -1;
   eps_vol = used >= 0 ? ev_finite : ev_fixed;
   return used >= 0 ? finite : fixed;
+}
+
+/// The fabric gate's exponent n_F at the state y, read as rhs reads it (at nu_law, psi not recorded); 0 for the group
+/// model.
+template <class T>
+double gate_exponent(const Material<T>& m, const State<T>& y) {
+  using std::exp;
+  if (!m.ext.p) return 0.0;
+  Ext<T> quiet = m.ext;
+  quiet.psi_seen = nullptr;
+  const T nu = exp(y.ln_nu);
+  const T nu_law = m.ext.state_volume ? T(m.nu_ref) + law_psi(quiet, state_psi(m.ext.p, nu, y.p)) : nu;
+  return scalar_value(local_ext(m.ext.p, nu_law, m.nu_ref).n_F);
+}
+
+/// A loading start (l = 0) whose fabric gate's exponent is negative: the gate r_F^n_F is unbounded where nothing has
+/// opened yet (r_F -> 0, floored at 1e-6), an integrable singularity l^n_F for n_F > -1 that a fixed step cannot
+/// resolve: its first RK4 stage reads the floor, and the fabric jumps towards its limit in one step (thirty-sixth
+/// round: the stored lab_dense calibration, n_F = -0.53 at its dense start, F 0.03 -> 0.49 in the first output
+/// interval at the fixed step, 0.057 converged).
+template <class T>
+bool singular_start(const Material<T>& m, const State<T>& y, double sigma) {
+  return sigma != 0.0 && scalar_value(y.l) == 0.0 && finite_state(y) && gate_exponent(m, y) < 0.0;
+}
+
+/// The pieces of kGradedPieces + 1 on which a singular start's first interval is integrated: [0, dl 2^-G], then
+/// [dl 2^-(j+1), dl 2^-j] for j = G - 1 ... 0, so that the gate varies by at most 2^|n_F| across a piece, each in at
+/// least kGradedSteps RK4 steps (one step on l^-1/2 over [a, 2a] is off by 3e-3 of its integral, eight by 1e-5).
+constexpr int kGradedPieces = 40;
+constexpr int kGradedSteps = 8;
+
+/// advance_interval from y, or where y is a singular_start the interval on the graded pieces (each advance_interval,
+/// halvings the most of any piece; GRADED, if given, says so).
+template <class T>
+State<T> advance(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, double max_step,
+                 T& eps_vol, int* halvings = nullptr, bool* graded = nullptr) {
+  const bool singular = singular_start(m, y, sigma);
+  if (graded) *graded = singular;
+  if (!singular) return advance_interval(m, y, sigma, seg, dl, max_step, eps_vol, halvings);
+  int most = 0, h = 0;
+  auto piece = [&](const State<T>& from, double length) {
+    return advance_interval(m, from, sigma, seg, length, std::min(max_step, length / kGradedSteps), eps_vol, &h);
+  };
+  State<T> z = piece(y, std::ldexp(dl, -kGradedPieces));
+  most = h;
+  for (int j = kGradedPieces - 1; j >= 0; --j) {
+    z = piece(z, std::ldexp(dl, -(j + 1)));
+    most = (h < 0 || most < 0) ? -1 : std::max(most, h);
+  }
+  if (halvings) *halvings = most;
+  return z;
 }
 
 /// Where p_iso first reaches p on a grid of kRisingGrid steps from nu_c to 1: [lo, hi] around that crossing, the
@@ -1109,7 +1160,8 @@ struct RowState {
   /// pole_ratio a_A F/3 at the row's state where the row was reached under the drained triaxial control (NaN
   /// elsewhere, and in jet runs: a diagnostic of predictions)
   double pole = std::numeric_limits<double>::quiet_NaN();
-  int halvings = 0;   ///< how often RK4's step was halved to reach this row from the last (advance)
+  int halvings = 0;   ///< how often RK4's step was halved to reach this row from the last (advance; -1: no step held)
+  bool graded = false;   ///< reached from a singular_start on the graded pieces (advance)
 };
 template <class T>
 std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
@@ -1124,6 +1176,7 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
   T eps_vol = T(0.0);
   double last_sigma = 1.0;
   int halvings = 0;
+  bool graded = false;
   std::vector<RowState<T>> out;
   out.reserve(acc.size());
   out.push_back({y, eps_vol});
@@ -1136,11 +1189,13 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
       const double sigma = direction[i] > 0 ? 1.0 : -1.0;
       if (sigma != last_sigma) y.l = T(0.0);   // a reversal: the opening restarts
       last_sigma = sigma;
-      y = advance(m, y, sigma, seg, dl, max_step, eps_vol, &halvings);
+      y = advance(m, y, sigma, seg, dl, max_step, eps_vol, &halvings, &graded);
     }
     out.push_back({y, eps_vol});
     out.back().halvings = halvings;
+    out.back().graded = graded;
     halvings = 0;
+    graded = false;
     if constexpr (std::is_same<T, double>::value)
       if (isobaric[i] == 2 && !y.lost) out.back().pole = pole_ratio(m, y);
   }

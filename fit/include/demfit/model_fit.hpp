@@ -329,6 +329,10 @@ struct PathPrediction {
   /// How often RK4's step was halved to reach each row (model::advance: the fixed step did not hold the path's drained
   /// control); 0 on every row where the fixed step did
   std::vector<int> halvings;
+  /// The rows reached from a start where the fabric gate's exponent is negative, integrated on graded pieces
+  /// (model::singular_start); the gate's exponent there in gate_exponent_start (NaN where no row was)
+  std::vector<bool> graded;
+  double gate_exponent_start = std::numeric_limits<double>::quiet_NaN();
 };
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
                             double* psi_seen = nullptr);
