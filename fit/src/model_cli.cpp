@@ -753,6 +753,23 @@ std::string drift_on_path(const Parameters& P, const PathPrediction& m, const Pa
                      "\"A relaxing anisotropic pressure\")"));
 }
 
+// What a path's prediction M of D (ROLE: fitted or predicted) met on the way, one stderr line each: the isotropic law's
+// reach and cusp, a relaxing excess above p, the drained control lost or its margin, a volume still moving at the end
+// (warnings), and where the integration was graded or its step halved (notes).
+void say_path_notes(const Parameters& P, const PathPrediction& m, const PathData& d, const std::string& role) {
+  warn_beyond_reach(P, d.name, d.nu, d.p.front(), role);
+  const std::string cusp = cusp_on_path(P, m);
+  if (!cusp.empty()) std::cerr << "dem model: warning: " << d.name << " (" << role << ") " << cusp << "\n";
+  const std::string where = d.name + " nu=" + num(d.nu, 4) + " (" + role + ") ";
+  const std::string lost = lost_on_path(m);
+  const std::string warnings[] = {excess_on_path(m), lost, lost.empty() ? margin_optimum_on_path(m, role == "fitted") : "",
+                                  drift_on_path(P, m, d)};
+  for (const auto& w : warnings)
+    if (!w.empty()) std::cerr << "dem model: warning: " << where << w << "\n";
+  for (const auto& n : {graded_on_path(m), refined_on_path(m)})
+    if (!n.empty()) std::cerr << "dem model: note: " << where << n << "\n";
+}
+
 // One stderr line a reader can quote: how many curves lie within one band half-width RMS, the worst fitted and the
 // worst predicted curve with its quantity, and chi2/dof (issue 31's targets: every curve within 1, chi2/dof <= 3).
 // curve_worst: each judged curve's worst quantity as write_summary's table has it (inf: diverged); rows: the
@@ -1706,22 +1723,7 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
                     "nan", "nan", "nan"});
       return;
     }
-    warn_beyond_reach(cal.params, d.name, d.nu, d.p.front(), role);
-    const std::string cusp = cusp_on_path(cal.params, m);
-    if (!cusp.empty()) std::cerr << "dem model: warning: " << d.name << " (" << role << ") " << cusp << "\n";
-    const std::string excess = excess_on_path(m);
-    if (!excess.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << excess << "\n";
-    const std::string lost = lost_on_path(m);
-    if (!lost.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << lost << "\n";
-    const std::string graded = graded_on_path(m);
-    if (!graded.empty()) std::cerr << "dem model: note: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << graded << "\n";
-    const std::string refined = refined_on_path(m);
-    if (!refined.empty()) std::cerr << "dem model: note: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << refined << "\n";
-    const std::string against = lost.empty() ? margin_optimum_on_path(m, role == "fitted") : "";
-    if (!against.empty())
-      std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << against << "\n";
-    const std::string drift = drift_on_path(cal.params, m, d);
-    if (!drift.empty()) std::cerr << "dem model: warning: " << d.name << " nu=" << num(d.nu, 4) << " (" << role << ") " << drift << "\n";
+    say_path_notes(cal.params, m, d, role);
     fs::create_directories(out / "curves" / "paths");
     write_path_curve(m, d, role, out / "curves" / "paths" / (f.mode + "_" + f.tag + ".csv"));
     for (const auto& e : path_errors(m, d)) {

@@ -638,7 +638,8 @@ def test_a_calibration_against_the_control_margin_is_named_and_a_last_digit_lose
     test at nu = 0.6816 to a_A F/3 = 0.8999989, 1e-6 below 0.9 where the drained control is given up: its optimum sits
     against that margin. The path curve's pole_ratio_model equals a_A(psi) F/3 recomputed here from the curve's own
     columns and the parameters (a_A = a_A_a + a_A_b psi, psi = nu - nu_cs(p*) clamped to [psi_min, psi_max]); dem model
-    names that path, with its largest ratio, and no other; a_A_a larger by 2 parts in 10^6 loses the path."""
+    names that path, with its largest ratio, and no other; a_A_a larger by twice the ratio's distance to the margin
+    loses the path (2 parts in 10^6 before the thirty-sixth round, 8 parts in 10^5 since its graded start)."""
     from demkit import model_excess as mx
     r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech",
                         "curves"), "--mu", "0.1", "--out", str(tmp_path / "m"), "--tests", "TC_s3", "--levels",
@@ -672,7 +673,9 @@ def test_a_calibration_against_the_control_margin_is_named_and_a_last_digit_lose
             assert max(ratios) == pytest.approx(said, abs=1e-8) and 0.899 <= said < 0.9
         else:
             assert max(ratios) < 0.899, path.name
-    edited = scaled_copy(law, "a_A_a", 1 + 2e-6, tmp_path / "edited.csv")
+    # a_A_a raised by twice the ratio's distance to the margin (1 + 2e-6 until the thirty-sixth round's graded start
+    # moved the largest ratio from 0.8999989 to 0.8999632)
+    edited = scaled_copy(law, "a_A_a", 1 + 2 * (0.9 - said) / said + 2e-6, tmp_path / "edited.csv")
     err = predict(str(edited), "q")
     assert "TC_s3_dense nu=0.6816 (predicted) cannot hold its side stress" in err, err
     # a calibration from the stored optimum (one iteration, on the dense and loose tests it was calibrated on) names the
@@ -701,10 +704,11 @@ def test_a_cost_that_is_not_smooth_at_its_optimum_quotes_no_errors(tmp_path):
     """Twenty-second round: the relaxing three-pressure mu = 0.5 dense calibration (README step 11) takes its fitted
     dense TC_s3 test at nu = 0.6576 to an excess q above p*, so that the elastic state falls below the law's jamming
     fraction and through the coordination law's nu_cC, where the bulk modulus is unbounded ((nu/nu_cC - 1)^(alpha - 1),
-    alpha < 1). The fixed-step path then moves by more than 10^-3 in s_dev when nu_c changes in its twelfth digit
-    (seen here from two predictions, outside the check). dem model's Jacobian check finds every column off, names the
-    cusp's elastic pressure p_iso(nu_cC) (computed here from the file's law), and quotes no error (se nan, the
-    covariance's number kept in se_covariance). The bounded calibration of the same data is smooth and quotes them."""
+    alpha < 1). The fixed-step path moved by more than 10^-3 in s_dev when nu_c changed in its twelfth digit; since
+    the thirty-sixth round's step control it does not move (seen here from two predictions, outside the check). dem
+    model's Jacobian check still finds nu_c's column off (every column before), names the cusp's elastic pressure p_iso(nu_cC) (computed here
+    from the law its one iteration ended at), and quotes no error (se nan, the covariance's number kept in
+    se_covariance). The bounded calibration of the same data is smooth and quotes them."""
     from demkit import model_excess as mx
     r = subprocess.run([sys.executable, "-m", "demkit.geotech_model", "--curves", os.path.join(ROOT, "data", "geotech",
                         "curves"), "--mu", "0.5", "--out", str(tmp_path / "m"), "--tests", "TC_s3", "--levels",
@@ -725,7 +729,9 @@ def test_a_cost_that_is_not_smooth_at_its_optimum_quotes_no_errors(tmp_path):
         p = dem("--predict-with", parameters, out=name)
         assert p.returncode == 0, p.stderr
         s[name] = [float(x["s_dev_model"]) for x in read(tmp_path / name / "curves" / "paths" / "TC_s3_dense_phi0.658.csv")]
-    assert max(abs(a - b) for a, b in zip(s["stored"], s["edited"])) > 1e-3, "a last digit of nu_c moves the path"
+    # until the thirty-sixth round's step control the fixed-step path moved by more than 1e-3 here; now RK4's steps are
+    # halved where the cusp makes the law stiff, and the path does not move
+    assert max(abs(a - b) for a, b in zip(s["stored"], s["edited"])) < 1e-6, "a last digit of nu_c moves the path"
 
     fit = ["--calibrate-on", "TC_s3_dense", "--state-limit", "volume", "--hold-isotropic", "gamma_p,nu_cC,alpha",
            "--max-iterations", "1", "--no-jackknife"]
@@ -734,7 +740,7 @@ def test_a_cost_that_is_not_smooth_at_its_optimum_quotes_no_errors(tmp_path):
     assert "the cost is not smooth at the optimum" in r.stderr, r.stderr
     line = next(l for l in r.stderr.splitlines() if "largest disagreement" in l)
     assert float(line.split("largest disagreement ")[1].split(" ")[0]) > 0.1 and "not smooth" in line, line
-    P = mx.values(law)
+    P = mx.values(str(tmp_path / "rough" / "parameters.csv"))   # the law the one iteration ended at, which it names
     x = math.log(P["nu_cC"] / P["nu_c"])
     p_cusp = P["p0"] * (P["nu_cC"] * P["C0"] / P["nu_c"]) * x * (1 + P["gamma_p"] * x)   # C = C0 at nu_cC
     cusp = next(l for l in r.stderr.splitlines() if "TC_s3_dense (fitted) crosses the isotropic law's cusp" in l)
@@ -744,7 +750,9 @@ def test_a_cost_that_is_not_smooth_at_its_optimum_quotes_no_errors(tmp_path):
     (tmp_path / "rough.log").write_text(r.stderr)
     got = ms.parse(str(tmp_path / "rough.log"))
     assert got["smooth"] is False and got["largest"] == float(line.split("largest disagreement ")[1].split(" ")[0])
-    assert got["above"] == got["checked"] > 10 and got["cusp"] == "TC_s3_dense" and got["margin"] == "", got
+    # every column was off with the fixed step; with the step control nu_c's, the law's cusp itself, still is
+    assert 1 <= got["above"] <= got["checked"] and got["checked"] > 10, got
+    assert got["cusp"] == "TC_s3_dense" and got["margin"] == "" and got["coefficient"] == "nu_c", got
     assert got["coefficient"] == line.split("(")[1].split(";")[0] and math.isfinite(got["chi2"]), got
     rows_ = {x["parameter"]: x for x in read(tmp_path / "rough" / "parameters.csv")}
     for name in ("p0", "C0", "a_A_a", "ln_beta_p_a", "n_peak"):

@@ -18,6 +18,9 @@ sys.path.insert(0, ROOT)
 from demkit import model_joint  # noqa: E402
 
 STORED = os.path.join(ROOT, model_joint.OUT)
+# the joint folder as it stood before issue 31's thirty-sixth round (the fixed RK4 step): the two-sample jackknife, the
+# variants at mu = 0.5 and their held-out choice were made there and are not rerun
+FIXED = os.path.join(STORED, "fixed_step")
 
 
 def ensemble_from_root(tmp_path):
@@ -53,17 +56,18 @@ def test_the_stored_parameters_predict_every_stored_curve_again(tmp_path):
             assert again[key][q] == x[q], (key, q)
 
 
-def test_the_stored_tables_rebuild_byte_for_byte(tmp_path):
+@pytest.mark.parametrize("folder, tables", [(STORED, ["joint"]),
+                                            (FIXED, ["joint", os.path.join("variants_mu_0.5", "variants")])])
+def test_the_stored_tables_rebuild_byte_for_byte(tmp_path, folder, tables):
     out = tmp_path / "out"
-    shutil.copytree(STORED, out)
-    tables = ["joint", os.path.join("variants_mu_0.5", "variants")]
+    shutil.copytree(folder, out, ignore=shutil.ignore_patterns("fixed_step"))
     for t in tables:
         for ext in ("md", "csv"):
             (out / f"{t}.{ext}").unlink()
     model_joint.write(str(out))
     for t in tables:
         for ext in ("md", "csv"):
-            assert filecmp.cmp(out / f"{t}.{ext}", os.path.join(STORED, f"{t}.{ext}"), shallow=False), (t, ext)
+            assert filecmp.cmp(out / f"{t}.{ext}", os.path.join(folder, f"{t}.{ext}"), shallow=False), (t, ext)
 
 
 def test_one_parameter_set_holds_the_constant_volume_and_the_laboratory_curves_within_a_few_bands():
@@ -146,8 +150,8 @@ def test_the_two_sample_jackknife_on_hand_built_refits(tmp_path):
     assert f == pytest.approx(sf) and lab == pytest.approx(sl) and j == pytest.approx(np.hypot(sf, sl))
 
 
-JACKKNIFED = sorted(d[len("mu_"):] for d in os.listdir(STORED)
-                    if os.path.isdir(os.path.join(STORED, d, "jackknife_refits")))
+JACKKNIFED = sorted(d[len("mu_"):] for d in os.listdir(FIXED)
+                    if os.path.isdir(os.path.join(FIXED, d, "jackknife_refits")))
 
 
 def test_the_jackknife_is_stored_at_mu_0_5():
@@ -158,7 +162,7 @@ def test_the_jackknife_is_stored_at_mu_0_5():
 def test_the_stored_jackknife_table_rebuilds_from_its_refits(tmp_path, mu):
     """jackknife_two_sample.{md,csv} from the 12 stored refits (8 friction, 4 laboratory), byte for byte; every refit
     within twice the full fit's chi2/dof (one basin), the errors above the covariance's in most coefficients."""
-    stored = os.path.join(STORED, f"mu_{mu}")
+    stored = os.path.join(FIXED, f"mu_{mu}")
     refits = os.path.join(stored, "jackknife_refits")
     runs = {tuple(d.split("_", 1)): os.path.join(refits, d) for d in sorted(os.listdir(refits))}
     assert sorted(k[0] for k in runs).count("friction") == 8 and sorted(k[0] for k in runs).count("laboratory") == 4
@@ -313,7 +317,7 @@ def test_the_stored_crosscheck_agrees_to_a_thousandth_of_an_error():
     """jackknife_crosscheck.csv: `dem model`'s refits without friction m003 and laboratory m2 against refits on
     ensembles this module rebuilt without them (the full weights kept): within 1e-3 jackknife errors, chi2/dof within
     1e-4 relative."""
-    with open(os.path.join(STORED, "mu_0.5", "jackknife_crosscheck.csv"), newline="") as fh:
+    with open(os.path.join(FIXED, "mu_0.5", "jackknife_crosscheck.csv"), newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert sorted((r["set"], r["packing_left_out"]) for r in rows) == [("friction", "m003"), ("laboratory", "m2")]
     for r in rows:
@@ -328,19 +332,19 @@ def test_the_stored_held_out_choice_rebuilds_and_keeps_the_overlap_rule(tmp_path
     is moved within it), but it cannot predict five friction packings held out (their own start pressure at nu = 0.80
     lies above the refit's reach): it is not compared."""
     out = tmp_path / "out"
-    shutil.copytree(STORED, out)
+    shutil.copytree(FIXED, out)
     for ext in ("md", "csv"):
         (out / "variants_mu_0.5" / f"heldout_choice.{ext}").unlink()
     assert model_joint.heldout_choice("0.5", str(out)) == "overlap"
     for ext in ("md", "csv"):
         assert filecmp.cmp(out / "variants_mu_0.5" / f"heldout_choice.{ext}",
-                           os.path.join(STORED, "variants_mu_0.5", f"heldout_choice.{ext}"), shallow=False), ext
-    assert model_joint.refits_failed(os.path.join(STORED, "variants_mu_0.5", "bounded", "jackknife.csv")) == []
-    with open(os.path.join(STORED, "variants_mu_0.5", "bounded", "jackknife.csv"), newline="") as fh:
+                           os.path.join(FIXED, "variants_mu_0.5", f"heldout_choice.{ext}"), shallow=False), ext
+    assert model_joint.refits_failed(os.path.join(FIXED, "variants_mu_0.5", "bounded", "jackknife.csv")) == []
+    with open(os.path.join(FIXED, "variants_mu_0.5", "bounded", "jackknife.csv"), newline="") as fh:
         moved = [r["packing_left_out"] for r in csv.DictReader(ln for ln in fh if not ln.startswith("#"))
                  if "p0 raised from" in r["start"]]
     assert moved == ["m001", "m002", "m004"], "the three refits whose start was moved within the reach say so"
-    scores = model_joint.heldout_sets(os.path.join(STORED, "variants_mu_0.5", "bounded", "heldout.csv"))
+    scores = model_joint.heldout_sets(os.path.join(FIXED, "variants_mu_0.5", "bounded", "heldout.csv"))
     assert sorted(p for p, (_, sc) in scores.items() if sc != sc) == ["m000", "m003", "m005", "m006", "m007"]
 
 
@@ -405,14 +409,14 @@ def test_only_the_bounded_variant_sits_on_the_isotropic_laws_reach():
     round. Every other stored joint calibration reaches at least 6 % above its highest start pressure."""
     from demkit import model_jamming
     top = _highest_start("0.5")
-    bounded = model_jamming.read_law(os.path.join(STORED, "variants_mu_0.5", "bounded", "parameters.csv"))
+    bounded = model_jamming.read_law(os.path.join(FIXED, "variants_mu_0.5", "bounded", "parameters.csv"))
     assert _reach(bounded) == pytest.approx(top, rel=1e-6)
     assert _reach(bounded) == pytest.approx(model_jamming.pressure(bounded, 1.0), rel=1e-12), "reached at nu = 1"
     for mu in ("0", "0.1", "0.3", "0.5", "1"):
         law = model_jamming.read_law(os.path.join(STORED, f"mu_{mu}", "parameters.csv"))
         assert _reach(law) > 1.06 * _highest_start(mu), mu
     for name in ("weighted", "with_isobaric"):
-        law = model_jamming.read_law(os.path.join(STORED, "variants_mu_0.5", name, "parameters.csv"))
+        law = model_jamming.read_law(os.path.join(FIXED, "variants_mu_0.5", name, "parameters.csv"))
         assert _reach(law) > 1.06 * top, name
 
 
@@ -421,7 +425,7 @@ def test_the_bounded_variants_unpredicted_packings_start_beyond_their_refits_rea
     the reach again (its law reaches about the other packings' mean start pressure at nu = 0.80), and exactly the
     packings whose own start pressure lies above their refit's reach have a held-out score that is not a number."""
     from demkit import model_jamming
-    d = os.path.join(STORED, "variants_mu_0.5", "bounded")
+    d = os.path.join(FIXED, "variants_mu_0.5", "bounded")
     with open(os.path.join(d, "jackknife_estimates.csv"), newline="") as fh:
         refits = {r["packing_left_out"]: r for r in csv.DictReader(fh)}
     scores = model_joint.heldout_sets(os.path.join(d, "heldout.csv"))
@@ -473,3 +477,19 @@ def test_the_stored_basin_check_ran_lab_dense_without_m2_again():
     for p in ("m1", "m3", "m4"):
         assert new[p]["start"] == "the full fit's optimum"
         assert float(new[p]["chi2_per_dof [-]"]) <= float(old[p]["chi2_per_dof [-]"]) * (1 + 1e-4)
+
+
+def test_the_audit_counts_moved_curves_and_names_the_largest_move():
+    """demkit.model_audit.compare on hand-built worst-per-curve tables: a curve not a number in both does not move, one
+    that leaves inf is the largest move, the within-1 counts read each build's own numbers."""
+    import math
+    from demkit import model_audit
+    old = {("D2", "0.69"): 0.8, ("D2", "0.8"): 0.9, ("TE", "0.66"): math.inf, ("TT", "0.66"): math.nan}
+    new = {("D2", "0.69"): 0.8, ("D2", "0.8"): 1.9, ("TE", "0.66"): 2.7, ("TT", "0.66"): math.nan}
+    c = model_audit.compare(old, new)
+    assert c["curves"] == 4 and c["moved"] == 2
+    assert c["inside"] == [2, 1]
+    assert c["worst"] == [math.inf, 2.7]
+    assert c["largest"] == ("TE", "0.66")
+    assert model_audit.compare(old, dict(old))["moved"] == 0 and model_audit.compare(old, dict(old))["largest"] is None
+    assert model_audit.short(math.inf) == "inf" and model_audit.short(1.2345) == "1.23"

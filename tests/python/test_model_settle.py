@@ -1,8 +1,10 @@
 """A calibration stopped at its iteration limit counts as converged where chi2 settled (demfit/settle.hpp; docs/model.md,
-"A fit that settles"). The friction study's mu = 0.3 group fit creeps: F_max runs away along a valley where chi2 falls
-by about 1e-4 per iteration. Stopped at 300 iterations it has settled (chi2 fell by far less than 1 % of s over the
-last 50): exit 0, a `settled` row, the still-moving coefficient named. Stopped at 60 it has not (the last 50 include
-the fit's descent): exit 1, a `converged` row saying no, and the fall in the warning."""
+"A fit that settles"). Until issue 31's thirty-sixth round the friction study's mu = 0.3 group fit crept: F_max ran away
+along a valley where chi2 fell by about 1e-4 per iteration, and stopped at 300 iterations it had settled (chi2/dof
+12.35). That valley was the fixed RK4 step's: with the step control (docs/model.md, "RK4's step where the law is
+stiff") the same fit converges by Ceres' own tolerance within 50 iterations at chi2/dof 10.13, neither settled nor
+unconverged; stopped at 10 it has not converged (exit 1, a `converged` row saying no). No stored fit creeps any more
+(the group fits at mu = 0.1, 0.5, 1 converge within 40); the settling rule itself is tested in tests/cpp/test_settle.cpp."""
 import csv
 import os
 import re
@@ -27,28 +29,20 @@ def chi2_dof(out):
     return float(rows(out)["chi2_per_dof"]["value"])
 
 
-def test_a_creep_below_one_percent_of_s_is_settled_a_descent_is_not(tmp_path):
-    settled = tmp_path / "settled"
-    r = fit(settled, 300)
+def test_the_group_fit_that_crept_converges_with_the_step_control(tmp_path):
+    full = tmp_path / "full"
+    r = fit(full, 300)
     assert r.returncode == 0, r.stderr
-    t = rows(settled)
-    assert "converged" not in t and "settled" in t
-    note = t["settled"]["law"]
-    assert note.startswith("yes: Ceres stopped at its limit of 300 iterations"), note
-    fall, frac = (float(x) for x in re.search(r"chi2 fell by ([0-9.e+-]+) over the last 50, ([0-9.e+-]+) of s", note).groups())
-    s = max(1.0, chi2_dof(settled))
-    assert 0 < fall < 0.01 * s and abs(frac - fall / s) < 1e-2 * frac   # three digits each
-    assert "still moving over them: " in note and "F_max" in note   # the runaway coefficient named
-    assert "settled, taken as converged" in r.stderr
+    t = rows(full)
+    assert "converged" not in t and "settled" not in t, t.get("settled", t.get("converged"))
+    m = re.search(r"Iterations: (\d+),.*Termination: CONVERGENCE", r.stderr)
+    assert m and int(m.group(1)) < 100, r.stderr
+    assert chi2_dof(full) < 12.0   # the creep's 12.35
 
     short = tmp_path / "short"
-    r = fit(short, 60)
+    r = fit(short, 10)
     assert r.returncode == 1, r.stderr
     t = rows(short)
     assert "converged" in t and "settled" not in t
-    m = re.search(r"optimiser did not converge: .*\(chi2 fell by ([0-9.e+-]+) over the last 50 iterations, ([0-9.e+-]+) "
-                  r"of s; settled below 0\.01\)", r.stderr)
-    assert m, r.stderr
-    assert float(m.group(1)) > 0.01 * max(1.0, chi2_dof(short))
-    # the settled fit is the lower of the two, and by more than the settled one's last window fell
-    assert chi2_dof(settled) < chi2_dof(short)
+    assert "optimiser did not converge" in r.stderr, r.stderr
+    assert chi2_dof(full) < chi2_dof(short)
