@@ -57,7 +57,8 @@ def test_the_stored_parameters_predict_every_stored_curve_again(tmp_path):
 
 
 @pytest.mark.parametrize("folder, tables", [(STORED, ["joint"]),
-                                            (FIXED, ["joint", os.path.join("variants_mu_0.5", "variants")])])
+                                            (FIXED, ["joint", os.path.join("variants_mu_0.5", "variants")])],
+                         ids=["today", "fixed_step"])
 def test_the_stored_tables_rebuild_byte_for_byte(tmp_path, folder, tables):
     out = tmp_path / "out"
     shutil.copytree(folder, out, ignore=shutil.ignore_patterns("fixed_step"))
