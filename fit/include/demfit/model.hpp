@@ -911,8 +911,8 @@ State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const S
 /// from its start with the step halved, up to kMaxHalvings times, where any of its steps has a stage_stiffness above
 /// kStiffLimit, where it moves the quantity a drained segment holds exactly in the equations (p under
 /// Control::Isobaric, the side stress p (1 - s/3) under Control::Triaxial) by more than kHeldDrift of itself, or where
-/// its finite start ends not a number (or lost, State::lost). Every stored calibration's paths stay below h lambda = 0.5
-/// but the mu = 1 joint one's (0.94 on its other paths), so the fixed step is kept there bit for bit.
+/// its finite start ends not a number (or lost, State::lost). The joint calibrations' paths at mu <= 0.5 stay below
+/// h lambda = 0.5 (mu = 1: 0.94 on its other paths), so the fixed step is kept there bit for bit.
 constexpr double kHeldDrift = 1e-4;
 constexpr double kStiffLimit = 2.0;
 constexpr int kMaxHalvings = 6;
