@@ -941,43 +941,58 @@ bool step_held(const State<T>& y, const State<T>& y1, double sigma, const Segmen
   return std::isnan(h0) || std::fabs(held_quantity(y1, sigma, seg) - h0) <= kHeldDrift * std::fabs(h0);
 }
 
+/// One try of advance_interval: SUB RK4 steps of dl/SUB from y, the volumetric strain accumulated into EV and the
+/// largest finite stage_stiffness into STIFF. With MAY_STOP the try stops at the first step whose stiffness exceeds
+/// kStiffLimit (it cannot hold then, whatever follows) and returns false; a try run to its end returns true.
+template <class T>
+bool interval_try(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, int sub,
+                  bool may_stop, State<T>& z, T& ev, double& stiff) {
+  z = y;
+  stiff = 0;
+  for (int j = 0; j < sub; ++j) {
+    double hl = 0;
+    const State<T> z1 = rk4_step(m, z, sigma, seg, dl / sub, &hl);
+    ev += z.ln_nu - z1.ln_nu;
+    z = z1;
+    if (std::isfinite(hl)) stiff = std::max(stiff, hl);
+    if (may_stop && stiff > kStiffLimit) return false;
+  }
+  return true;
+}
+
 /// The state after |d eps_d| = dl (|eps_vol| on a volumetric segment) from y: ceil(dl/max_step) RK4 steps, the full
 /// volumetric strain tr(E) accumulated step by step into EPS_VOL. Where a step's stage_stiffness exceeds kStiffLimit or
-/// step_held fails the interval is integrated again
-/// with the step halved, up to kMaxHalvings times, and the first try that holds is kept. Where none holds, the finest
-/// finite try is kept, or where none is finite the fixed step's (its NaN or lost state, as before the thirty-sixth
-/// round: a path that fails at every step fails as it did). HALVINGS (if given): how often the kept try's step was
-/// halved, -1 where no try held; 0 is the fixed step, bit for bit as before.
+/// step_held fails the interval is integrated again with the step halved, up to kMaxHalvings times, and the first try
+/// that holds is kept. A try stops at its first step too stiff to hold (thirty-seventh round: a try that failed ran
+/// to its end before, so that a path needing 1/64 of the step cost 127 fixed-step intervals instead of 64 and a few
+/// steps; what is kept is the same bit for bit). Where none holds, the finest finite try is kept (the tries that had
+/// stopped early are run to their end for it), or where none is finite the fixed step's (its NaN or lost state, as
+/// before the thirty-sixth round: a path that fails at every step fails as it did). HALVINGS (if given): how often the
+/// kept try's step was halved, -1 where no try held; 0 is the fixed step, bit for bit as before.
 template <class T>
 State<T> advance_interval(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, double max_step,
                  T& eps_vol, int* halvings = nullptr) {
   const int sub0 = std::max(1, static_cast<int>(std::ceil(dl / max_step)));
-  State<T> fixed = y, finite = y;
-  T ev_fixed = eps_vol, ev_finite = eps_vol;
-  int used = -1;
+  State<T> z;
+  T ev = eps_vol;
+  double stiff = 0;
   for (int k = 0; k <= kMaxHalvings; ++k) {
-    const int sub = sub0 << k;
-    State<T> z = y;
-    T ev = eps_vol;
-    double stiff = 0;
-    for (int j = 0; j < sub; ++j) {
-      double hl = 0;
-      const State<T> z1 = rk4_step(m, z, sigma, seg, dl / sub, &hl);
-      ev += z.ln_nu - z1.ln_nu;
-      z = z1;
-      if (std::isfinite(hl)) stiff = std::max(stiff, hl);
-    }
+    ev = eps_vol;
+    if (!interval_try(m, y, sigma, seg, dl, sub0 << k, k < kMaxHalvings, z, ev, stiff)) continue;
     if (stiff <= kStiffLimit && step_held(y, z, sigma, seg)) {
       if (halvings) *halvings = k;
       eps_vol = ev;
       return z;
     }
-    if (k == 0) { fixed = z; ev_fixed = ev; }
-    if (finite_state(z)) { finite = z; ev_finite = ev; used = k; }
   }
   if (halvings) *halvings = -1;
-  eps_vol = used >= 0 ? ev_finite : ev_fixed;
-  return used >= 0 ? finite : fixed;
+  // None held: the finest finite try (z, the last, ran to its end), else the fixed step's.
+  for (int k = kMaxHalvings - 1; k >= 0 && !finite_state(z); --k) {
+    ev = eps_vol;
+    interval_try(m, y, sigma, seg, dl, sub0 << k, false, z, ev, stiff);
+  }
+  eps_vol = ev;
+  return z;
 }
 
 /// The fabric gate's exponent n_F at the state y, read as rhs reads it (at nu_law, psi not recorded); 0 for the group
