@@ -678,8 +678,11 @@ std::string graded_on_path(const PathPrediction& m) {
          "r_F^n_F is unbounded where no contact has opened yet, and the first interval is integrated on a graded grid "
          "from the start (docs/model.md, \"RK4's step where the law is stiff\"; a fixed step reads the gate's floor and "
          "moves the fabric towards its limit in one step, as every calibration before the thirty-sixth round did)" +
-         (m.gate_exponent_start <= -1 ? std::string("; at n_F <= -1 the gate's floor (1e6)^|n_F| is beyond the "
-                                                    "smallest step, and the curve is not a number") : std::string());
+         (std::find(m.split.begin(), m.split.end(), true) != m.split.end()
+              ? std::string("; at n_F < -1 the gate is not integrable (the fabric reaches its limit at once, and its "
+                            "rate on the gate's floor is beyond any RK4 step), and the fabric's relaxation is taken "
+                            "exactly on the graded pieces (split_step)")
+              : std::string());
 }
 
 std::string refined_on_path(const PathPrediction& m) {

@@ -3257,3 +3257,49 @@ TEST(Model, ANegativeGateExponentIsIntegratedFromItsSingularStart) {
   const Material<double> m2 = start_material(iso.data(), P.shear, P.nu_ref, nu0, p0, regular);
   EXPECT_FALSE(singular_start(m2, start_state(m2, nu0, p0, 0.0, F0), 1.0));
 }
+
+// Below n_F = -1 the gate is not integrable (thirty-seventh round: the mu = 0 joint calibration's leave-one-out refits,
+// n_F about -2.9 at D3 nu = 0.8, were not a number at their start): beta_F int_0^l phi^n_F is infinite in the law and
+// beta_F l_f 1e6^|n_F| on the gate's floor, so in the closed form above F reaches F_max at once and stays there. No RK4
+// step down to 1/64 of the smallest graded piece holds it, and model::advance integrates such a start's graded pieces
+// with the fabric's relaxation taken exactly (split_step): every row is F_max to 1e-12 and p stays put. With RK4 on
+// the graded pieces (the finest finite try kept) the rows at n_F = -3 and -5 are not F_max; at -1.5 and -2 the finest
+// try happens to land on it.
+TEST(Model, AGateThatIsNotIntegrableTakesTheFabricToItsLimitAtOnce) {
+  Parameters P = volume_truth();
+  P.state_volume = false;
+  P.ext[kNFA] = -3.0;
+  P.ext[kDilA] = 0.0;
+  const auto iso = P.iso();
+  const double nu0 = P.nu_ref, p0 = isotropic_pressure(iso.data(), nu0), F0 = 0.01;
+  const Ext<double> e{P.ext, kLodeBD2, Surface::LadeDuncan, FabricLode::Overlap, false, false, false};
+  const double delta = mean_overlap(iso.data(), nu0, p0), c = minor_fraction(kLodeBD2);
+  const double Fm = P.shear[kFmaxA], bF = std::exp(P.shear[kLnBetaFA]);
+  const double l_f = -delta / c * std::log1p(-1e-6);
+  ASSERT_GT(bF * l_f * 1e12, 100.0) << "the floor's stretch alone relaxes the fabric completely";
+  std::vector<double> eps;
+  for (int i = 1; i <= 10; ++i) eps.push_back(0.002 * i);
+  const auto st = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.0, F0, eps, 5e-4, e);
+  for (std::size_t i = 0; i < eps.size(); ++i) {
+    EXPECT_NEAR(st[i].p, p0, 1e-12 * p0) << "the overlap stays constant";
+    EXPECT_NEAR(st[i].F, Fm, 1e-12) << "eps_d " << eps[i];
+  }
+  const Material<double> m = start_material(iso.data(), P.shear, P.nu_ref, nu0, p0, e);
+  const State<double> y0 = start_state(m, nu0, p0, 0.0, F0);
+  ASSERT_TRUE(singular_start(m, y0, 1.0));
+  State<double> y = y0;
+  for (int k = 0; k < 4; ++k) y = rk4_step(m, y, 1.0, Segment{}, 5e-4);
+  EXPECT_FALSE(std::isfinite(y.F) && std::fabs(y.F - Fm) < 1e-3) << "the fixed step: " << y.F;
+  int halvings = 7;
+  bool graded = false, split = false;
+  double ev = 0;
+  advance(m, y0, 1.0, Segment{}, 0.002, 5e-4, ev, &halvings, &graded, &split);
+  EXPECT_TRUE(graded && split);
+  EXPECT_EQ(halvings, 0) << "split_step holds at the graded pieces' own steps";
+  P.ext[kNFA] = -0.9;   // integrable: RK4 on the graded pieces, as before
+  const Ext<double> e9{P.ext, kLodeBD2, Surface::LadeDuncan, FabricLode::Overlap, false, false, false};
+  const Material<double> m9 = start_material(iso.data(), P.shear, P.nu_ref, nu0, p0, e9);
+  advance(m9, start_state(m9, nu0, p0, 0.0, F0), 1.0, Segment{}, 0.002, 5e-4, ev, &halvings, &graded, &split);
+  EXPECT_TRUE(graded);
+  EXPECT_FALSE(split);
+}

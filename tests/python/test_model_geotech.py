@@ -887,12 +887,14 @@ def mirrored_coordination(src, dst, factor):
 
 def test_the_coordination_law_rises_unless_told_otherwise(tmp_path):
     """Twenty-third round: a fitted coordination law C(nu) = C0 + C1 (nu/nu_cC - 1)^alpha keeps C1 >= 0 by default
-    (--coordination rising). On the friction study's mu = 0.5 ensemble, whose branch's C rises, the bound is not
+    (--coordination rising). On the friction study's mu = 0.1 ensemble, whose branch's C rises, the bound is not
     reached and the fit is bit for bit the one without it (--coordination free). With the branch's C mirrored so that it
     falls with the density (mirrored about its mid-range, at half the slope), the free fit follows it (C1 < 0), and
-    the default stops at C1 = 0 exactly, names the
-    bound with the branch's C at its ends, and quotes no error for C1, nu_cC and alpha."""
-    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.5")
+    the default stops at C1 = 0 exactly, names the bound with the branch's C at its ends, and quotes no error for C1,
+    nu_cC and alpha. (mu = 0.5 until the thirty-seventh round: its group fit's excess pressure relaxes stiffly there,
+    beta_p up to 4e5, and under the step control the four fits took 16 times as long; the coordination law is
+    fitted the same way at either.)"""
+    src = os.path.join(ROOT, "data", "friction_n1000", "mu_0.1")
     falling = mirrored_coordination(pathlib.Path(src), tmp_path / "falling", 0.5)
 
     def fit(data, name, *extra, converged=True):

@@ -736,10 +736,19 @@ T pressure_state_factor(const Material<T>& m, const T& nu, const T& p, const T& 
   return state_limit_factor(m.ext.p, nu, m.nu_ref, p, p_ref, b_s, m.ext.state_lode);
 }
 
+/// The fabric's law as a relaxation, dF/dl = kappa (target - F) with kappa >= 0 (rhs reports it where asked): the
+/// gated rate kappa = beta_F g_s rate_F r_F^n_F and the target sigma F_lim (the state's on Ext::fabric_state). 0 and
+/// F itself on a volumetric segment and where the state is lost.
+template <class T>
+struct FabricRelaxation {
+  T kappa, target;
+};
+
 /// Derivatives per unit |d eps_d| along a segment with direction sigma (+1/-1), or per unit
 /// eps_vol for a pure volumetric segment (sigma = 0). Returns d/dl of (ln nu, p, s, F).
 template <class T>
-State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg) {
+State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg,
+             FabricRelaxation<T>* relax_F = nullptr) {
   using std::exp;
   const T nu = exp(y.ln_nu);
   const bool vol_state = m.ext.p && m.ext.state_volume;
@@ -824,6 +833,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   d.p = -B * dvol + src - relax + B * dil;
   const T rate_F = weighted ? lode_w : m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
   d.F = L.beta_F * g_s * rate_F * (T(sigma) * (m.ext.fabric_state ? F_lim * state : F_lim) - y.F) * gate_F;   // Ext::fabric_state
+  if (relax_F) *relax_F = {L.beta_F * g_s * rate_F * gate_F, T(sigma) * (m.ext.fabric_state ? F_lim * state : F_lim)};
   d.l = T(1.0);
   // The elastic volume fraction follows the pressure on the isotropic law (d ln nu_el = dp/B), or with a relaxing
   // excess the pressure less its anisotropic excess: d ln nu_el = (dp - A sigma + relax)/B, so that the excess q = p -
@@ -838,21 +848,31 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   return d;
 }
 
-/// A/(3B) = a_A F/3 at the state y (with Ext::deviator_reference (A + E_dev)/(3B)), a_A read as rhs reads it: the
-/// drained triaxial control's pole is where it reaches 1, and rhs gives the control up from 1 - kTriaxialMargin on (B > 0). A diagnostic: the laws of psi are read without
-/// recording psi (ext.psi_seen), so that a prediction's psi_range does not move.
+/// The volume fraction at which rhs reads the nu-laws in the state y: nu_ref + the bounded psi (law_psi) with the
+/// volume-form state parameter, nu itself otherwise. Read quietly, for the diagnostics (pole_ratio, gate_exponent):
+/// psi is not recorded (ext.psi_seen), so that a prediction's psi_range does not move.
+template <class T>
+T quiet_law_volume(const Material<T>& m, const State<T>& y) {
+  using std::exp;
+  const T nu = exp(y.ln_nu);
+  if (!m.ext.p || !m.ext.state_volume) return nu;
+  Ext<T> quiet = m.ext;
+  quiet.psi_seen = nullptr;
+  return T(m.nu_ref) + law_psi(quiet, state_psi(m.ext.p, nu, y.p));
+}
+
+/// A/(3B) = a_A F/3 at the state y (with Ext::deviator_reference (A + E_dev)/(3B)), a_A read as rhs reads it
+/// (quiet_law_volume): the drained triaxial control's pole is where it reaches 1, and rhs gives the control up from
+/// 1 - kTriaxialMargin on (B > 0).
 template <class T>
 T pole_ratio(const Material<T>& m, const State<T>& y) {
   using std::exp;
-  Ext<T> quiet = m.ext;
-  quiet.psi_seen = nullptr;
-  const T nu = exp(y.ln_nu);
-  const T nu_law = m.ext.p && m.ext.state_volume ? T(m.nu_ref) + law_psi(quiet, state_psi(m.ext.p, nu, y.p)) : nu;
-  const T a = local(m.shear, nu_law, m.nu_ref).a_A * y.F / T(3.0);
+  const T a = local(m.shear, quiet_law_volume(m, y), m.nu_ref).a_A * y.F / T(3.0);
   if (!m.ext.deviator_reference || m.ext.state_volume) return a;
   // With Ext::deviator_reference the pole is where (A + E_dev)/(3B) reaches 1: E_dev/(3B) = s p/(3 p_ref).
+  const T nu = exp(y.ln_nu);
   const T B = m.k * bulk_modulus(m.iso, nu);
-  return a + deviator_volume_term(quiet, y, B, m.k * isotropic_pressure(m.iso, nu)) / (T(3.0) * B);
+  return a + deviator_volume_term(m.ext, y, B, m.k * isotropic_pressure(m.iso, nu)) / (T(3.0) * B);
 }
 
 template <class T>
@@ -884,14 +904,19 @@ double stage_stiffness(const State<T>& k2, const State<T>& k3, const State<T>& k
 }
 
 /// One classical RK4 step of length h (in |eps_d|, or |eps_vol| for a volumetric segment). STIFF (if given): the
-/// step's stage_stiffness.
+/// step's stage_stiffness. HOLD_F: the fabric is held (its rate taken as 0), for split_step.
 template <class T>
 State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double h,
-                  double* stiff = nullptr) {
-  const State<T> k1 = rhs(m, y, sigma, seg);
-  const State<T> k2 = rhs(m, axpy(y, k1, h / 2), sigma, seg);
-  const State<T> k3 = rhs(m, axpy(y, k2, h / 2), sigma, seg);
-  const State<T> k4 = rhs(m, axpy(y, k3, h), sigma, seg);
+                  double* stiff = nullptr, bool hold_F = false) {
+  auto f = [&](const State<T>& x) {
+    State<T> k = rhs(m, x, sigma, seg);
+    if (hold_F) k.F = T(0.0);
+    return k;
+  };
+  const State<T> k1 = f(y);
+  const State<T> k2 = f(axpy(y, k1, h / 2));
+  const State<T> k3 = f(axpy(y, k2, h / 2));
+  const State<T> k4 = f(axpy(y, k3, h));
   if (stiff) *stiff = stage_stiffness(k2, k3, k4, y);
   State<T> out = y;
   out.ln_nu += T(h / 6) * (k1.ln_nu + T(2) * k2.ln_nu + T(2) * k3.ln_nu + k4.ln_nu);
@@ -902,6 +927,30 @@ State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const S
   out.e_pl += T(h / 6) * (k1.e_pl + T(2) * k2.e_pl + T(2) * k3.e_pl + k4.e_pl);
   out.lost = y.lost || k1.lost || k2.lost || k3.lost || k4.lost;
   return out;
+}
+
+/// The fabric relaxed exactly over h with its law's coefficients frozen at y (FabricRelaxation): F -> target + (F -
+/// target) e^{-kappa h}, whatever kappa h is (a lost state keeps its F).
+template <class T>
+State<T> relax_fabric(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double h) {
+  using std::exp;
+  FabricRelaxation<T> r{T(0.0), y.F};
+  rhs(m, y, sigma, seg, &r);
+  State<T> z = y;
+  // Beyond e^-700 (and for a rate that is not a number or infinite) the fabric is at its target, derivatives included:
+  // an infinite rate's e^{-kappa h} would carry 0 x inf into a Jet's derivatives.
+  z.F = scalar_value(r.kappa) * h < 700.0 ? r.target + (y.F - r.target) * exp(-r.kappa * T(h)) : r.target;
+  return z;
+}
+
+/// One step of h split (Strang) into the fabric's exact relaxation over h/2, RK4 over h on every other quantity with
+/// the fabric held, and the fabric's relaxation over h/2 again: second order, and stable however stiff the fabric's
+/// gate is (thirty-seventh round; advance uses it where a loading start's gate is not integrable, n_F < -1). STIFF:
+/// the RK4 part's stage_stiffness, which does not see the fabric's rate.
+template <class T>
+State<T> split_step(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double h, double* stiff) {
+  const State<T> half = relax_fabric(m, y, sigma, seg, h / 2);
+  return relax_fabric(m, rk4_step(m, half, sigma, seg, h, stiff, true), sigma, seg, h / 2);
 }
 
 /// RK4's step control (issue 31, thirty-sixth round). Where the stress ratio's law is stiff (a large beta_s at low
@@ -942,16 +991,17 @@ bool step_held(const State<T>& y, const State<T>& y1, double sigma, const Segmen
 }
 
 /// One try of advance_interval: SUB RK4 steps of dl/SUB from y, the volumetric strain accumulated into EV and the
-/// largest finite stage_stiffness into STIFF. With MAY_STOP the try stops at the first step whose stiffness exceeds
+/// largest finite stage_stiffness into STIFF; SPLIT: split_step's steps instead of RK4's. With MAY_STOP the try stops
+/// at the first step whose stiffness exceeds
 /// kStiffLimit (it cannot hold then, whatever follows) and returns false; a try run to its end returns true.
 template <class T>
 bool interval_try(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, int sub,
-                  bool may_stop, State<T>& z, T& ev, double& stiff) {
+                  bool may_stop, bool split, State<T>& z, T& ev, double& stiff) {
   z = y;
   stiff = 0;
   for (int j = 0; j < sub; ++j) {
     double hl = 0;
-    const State<T> z1 = rk4_step(m, z, sigma, seg, dl / sub, &hl);
+    const State<T> z1 = split ? split_step(m, z, sigma, seg, dl / sub, &hl) : rk4_step(m, z, sigma, seg, dl / sub, &hl);
     ev += z.ln_nu - z1.ln_nu;
     z = z1;
     if (std::isfinite(hl)) stiff = std::max(stiff, hl);
@@ -960,52 +1010,60 @@ bool interval_try(const Material<T>& m, const State<T>& y, double sigma, const S
   return true;
 }
 
+/// The first of the tries of advance_interval that holds (stage_stiffness at most kStiffLimit, step_held), with the
+/// step halved up to kMaxHalvings times: true, Z and EV set and K its halvings. Every try but the last stops at its
+/// first step too stiff to hold; the last runs to its end (Z and EV then hold it where none held).
+template <class T>
+bool first_held_try(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, int sub0,
+                    bool split, State<T>& z, T& ev, int& k) {
+  const T ev0 = ev;
+  for (k = 0; k <= kMaxHalvings; ++k) {
+    double stiff = 0;
+    ev = ev0;
+    if (!interval_try(m, y, sigma, seg, dl, sub0 << k, k < kMaxHalvings, split, z, ev, stiff)) continue;
+    if (stiff <= kStiffLimit && step_held(y, z, sigma, seg)) return true;
+  }
+  return false;
+}
+
 /// The state after |d eps_d| = dl (|eps_vol| on a volumetric segment) from y: ceil(dl/max_step) RK4 steps, the full
 /// volumetric strain tr(E) accumulated step by step into EPS_VOL. Where a step's stage_stiffness exceeds kStiffLimit or
 /// step_held fails the interval is integrated again with the step halved, up to kMaxHalvings times, and the first try
-/// that holds is kept. A try stops at its first step too stiff to hold (thirty-seventh round: a try that failed ran
-/// to its end before, so that a path needing 1/64 of the step cost 127 fixed-step intervals instead of 64 and a few
-/// steps; what is kept is the same bit for bit). Where none holds, the finest finite try is kept (the tries that had
-/// stopped early are run to their end for it), or where none is finite the fixed step's (its NaN or lost state, as
-/// before the thirty-sixth round: a path that fails at every step fails as it did). HALVINGS (if given): how often the
-/// kept try's step was halved, -1 where no try held; 0 is the fixed step, bit for bit as before.
+/// that holds is kept (first_held_try). A try stops at its first step too stiff to hold (thirty-seventh round: a try
+/// that failed ran to its end before, so that a path needing 1/64 of the step cost 127 fixed-step intervals instead of
+/// 64 and a few steps; what is kept is the same bit for bit). Where none holds, the finest finite try is kept (the
+/// tries that had stopped early are run to their end for it), or where none is finite the fixed step's (its NaN or
+/// lost state, as before the thirty-sixth round: a path that fails at every step fails as it did). HALVINGS (if
+/// given): how often the kept try's step was halved, -1 where no try held; 0 is the fixed step, bit for bit as before.
+/// SPLIT: every try with split_step instead of RK4's steps (advance, where a loading start's gate is not integrable).
 template <class T>
-State<T> advance_interval(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, double max_step,
-                 T& eps_vol, int* halvings = nullptr) {
+State<T> advance_interval(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl,
+                          double max_step, T& eps_vol, int* halvings = nullptr, bool split = false) {
   const int sub0 = std::max(1, static_cast<int>(std::ceil(dl / max_step)));
   State<T> z;
   T ev = eps_vol;
-  double stiff = 0;
-  for (int k = 0; k <= kMaxHalvings; ++k) {
-    ev = eps_vol;
-    if (!interval_try(m, y, sigma, seg, dl, sub0 << k, k < kMaxHalvings, z, ev, stiff)) continue;
-    if (stiff <= kStiffLimit && step_held(y, z, sigma, seg)) {
-      if (halvings) *halvings = k;
-      eps_vol = ev;
-      return z;
-    }
+  int k = 0;
+  if (first_held_try(m, y, sigma, seg, dl, sub0, split, z, ev, k)) {
+    if (halvings) *halvings = k;
+    eps_vol = ev;
+    return z;
   }
   if (halvings) *halvings = -1;
   // None held: the finest finite try (z, the last, ran to its end), else the fixed step's.
-  for (int k = kMaxHalvings - 1; k >= 0 && !finite_state(z); --k) {
+  for (k = kMaxHalvings - 1; k >= 0 && !finite_state(z); --k) {
+    double stiff = 0;
     ev = eps_vol;
-    interval_try(m, y, sigma, seg, dl, sub0 << k, false, z, ev, stiff);
+    interval_try(m, y, sigma, seg, dl, sub0 << k, false, split, z, ev, stiff);
   }
   eps_vol = ev;
   return z;
 }
 
-/// The fabric gate's exponent n_F at the state y, read as rhs reads it (at nu_law, psi not recorded); 0 for the group
-/// model.
+/// The fabric gate's exponent n_F at the state y, read as rhs reads it (quiet_law_volume); 0 for the group model.
 template <class T>
 double gate_exponent(const Material<T>& m, const State<T>& y) {
-  using std::exp;
   if (!m.ext.p) return 0.0;
-  Ext<T> quiet = m.ext;
-  quiet.psi_seen = nullptr;
-  const T nu = exp(y.ln_nu);
-  const T nu_law = m.ext.state_volume ? T(m.nu_ref) + law_psi(quiet, state_psi(m.ext.p, nu, y.p)) : nu;
-  return scalar_value(local_ext(m.ext.p, nu_law, m.nu_ref).n_F);
+  return scalar_value(local_ext(m.ext.p, quiet_law_volume(m, y), m.nu_ref).n_F);
 }
 
 /// A loading start (l = 0) whose fabric gate's exponent is negative: the gate r_F^n_F is unbounded where nothing has
@@ -1024,17 +1082,27 @@ bool singular_start(const Material<T>& m, const State<T>& y, double sigma) {
 constexpr int kGradedPieces = 40;
 constexpr int kGradedSteps = 8;
 
+/// The gate exponent below which a singular_start's gate is not integrable: beta_F int_0^l r_F^n_F is infinite in the
+/// law, so the fabric reaches its limit at once, and on the gate's floor (1e6)^|n_F| is beyond any RK4 step.
+constexpr double kIntegrableGate = -1.0;
+
 /// advance_interval from y, or where y is a singular_start the interval on the graded pieces (each advance_interval,
-/// halvings the most of any piece; GRADED, if given, says so).
+/// halvings the most of any piece; GRADED, if given, says so). Where the start's gate is not integrable (n_F below
+/// kIntegrableGate; thirty-seventh round: the mu = 0 joint calibration's leave-one-out refits, n_F about -2.8 at D3
+/// nu = 0.8, were not a number at their start) the graded pieces are integrated with split_step, the fabric's
+/// relaxation taken exactly; SPLIT (if given) says so.
 template <class T>
 State<T> advance(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, double max_step,
-                 T& eps_vol, int* halvings = nullptr, bool* graded = nullptr) {
+                 T& eps_vol, int* halvings = nullptr, bool* graded = nullptr, bool* split = nullptr) {
   const bool singular = singular_start(m, y, sigma);
+  const bool by_split = singular && gate_exponent(m, y) < kIntegrableGate;
   if (graded) *graded = singular;
+  if (split) *split = by_split;
   if (!singular) return advance_interval(m, y, sigma, seg, dl, max_step, eps_vol, halvings);
   int most = 0, h = 0;
   auto piece = [&](const State<T>& from, double length) {
-    return advance_interval(m, from, sigma, seg, length, std::min(max_step, length / kGradedSteps), eps_vol, &h);
+    return advance_interval(m, from, sigma, seg, length, std::min(max_step, length / kGradedSteps), eps_vol, &h,
+                            by_split);
   };
   State<T> z = piece(y, std::ldexp(dl, -kGradedPieces));
   most = h;
@@ -1177,6 +1245,7 @@ struct RowState {
   double pole = std::numeric_limits<double>::quiet_NaN();
   int halvings = 0;   ///< how often RK4's step was halved to reach this row from the last (advance; -1: no step held)
   bool graded = false;   ///< reached from a singular_start on the graded pieces (advance)
+  bool split = false;    ///< reached from a start whose gate is not integrable, with split_step (advance)
 };
 template <class T>
 std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
@@ -1191,7 +1260,7 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
   T eps_vol = T(0.0);
   double last_sigma = 1.0;
   int halvings = 0;
-  bool graded = false;
+  bool graded = false, split = false;
   std::vector<RowState<T>> out;
   out.reserve(acc.size());
   out.push_back({y, eps_vol});
@@ -1204,13 +1273,14 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
       const double sigma = direction[i] > 0 ? 1.0 : -1.0;
       if (sigma != last_sigma) y.l = T(0.0);   // a reversal: the opening restarts
       last_sigma = sigma;
-      y = advance(m, y, sigma, seg, dl, max_step, eps_vol, &halvings, &graded);
+      y = advance(m, y, sigma, seg, dl, max_step, eps_vol, &halvings, &graded, &split);
     }
     out.push_back({y, eps_vol});
     out.back().halvings = halvings;
     out.back().graded = graded;
+    out.back().split = split;
     halvings = 0;
-    graded = false;
+    graded = split = false;
     if constexpr (std::is_same<T, double>::value)
       if (isobaric[i] == 2 && !y.lost) out.back().pole = pole_ratio(m, y);
   }

@@ -332,6 +332,9 @@ struct PathPrediction {
   /// The rows reached from a start where the fabric gate's exponent is negative, integrated on graded pieces
   /// (model::singular_start); the gate's exponent there in gate_exponent_start (NaN where no row was)
   std::vector<bool> graded;
+  /// The rows reached from a start whose gate is not integrable, with the fabric's relaxation taken exactly
+  /// (model::advance, split_step)
+  std::vector<bool> split;
   double gate_exponent_start = std::numeric_limits<double>::quiet_NaN();
 };
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
