@@ -992,8 +992,8 @@ bool step_held(const State<T>& y, const State<T>& y1, double sigma, const Segmen
 
 /// One try of advance_interval: SUB RK4 steps of dl/SUB from y, the volumetric strain accumulated into EV and the
 /// largest finite stage_stiffness into STIFF; SPLIT: split_step's steps instead of RK4's. With MAY_STOP the try stops
-/// at the first step whose stiffness exceeds
-/// kStiffLimit (it cannot hold then, whatever follows) and returns false; a try run to its end returns true.
+/// at the first step whose stiffness exceeds kStiffLimit (it cannot hold then, whatever follows) and returns false; a
+/// try run to its end returns true.
 template <class T>
 bool interval_try(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, int sub,
                   bool may_stop, bool split, State<T>& z, T& ev, double& stiff) {
