@@ -3213,6 +3213,34 @@ double opened_gate_integral(double l, double n, double c, double delta) {
   for (int k = 0; k < 10000000 && term > 1e-18 * sum; ++k, term *= U) sum += term / (n + k + 1);
   return delta / c * sum;
 }
+
+// The two gate tests' start: the volume truth without the state parameter or dilatancy, at constant volume on the
+// isotropic law at nu_ref (p, and so the overlap delta, constant), F0 = 0.01, the overlap rule at n_F; l_f the gate
+// floor's stretch (phi = 1e-6 up to it, opened_fraction_at).
+struct GateStart {
+  Parameters P = volume_truth();
+  std::vector<double> iso;
+  double nu0 = 0, p0 = 0, F0 = 0.01, delta = 0, c = minor_fraction(kLodeBD2), Fm = 0, bF = 0, l_f = 0;
+  explicit GateStart(double n_F) {
+    P.state_volume = false;
+    P.ext[kDilA] = 0.0;
+    iso = P.iso();
+    nu0 = P.nu_ref;
+    p0 = isotropic_pressure(iso.data(), nu0);
+    delta = mean_overlap(iso.data(), nu0, p0);
+    Fm = P.shear[kFmaxA];
+    bF = std::exp(P.shear[kLnBetaFA]);
+    l_f = -delta / c * std::log1p(-1e-6);
+    set_gate(n_F);
+  }
+  void set_gate(double n_F) { P.ext[kNFA] = n_F; }
+  Ext<double> ext() const { return {P.ext, kLodeBD2, Surface::LadeDuncan, FabricLode::Overlap, false, false, false}; }
+  Material<double> material() const { return start_material(iso.data(), P.shear, P.nu_ref, nu0, p0, ext()); }
+  State<double> start(const Material<double>& m) const { return start_state(m, nu0, p0, 0.0, F0); }
+  std::vector<State<double>> shear(const std::vector<double>& eps) const {
+    return monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.0, F0, eps, 5e-4, ext());
+  }
+};
 }  // namespace
 
 // A negative gate exponent (thirty-sixth round: the stored lab_dense calibration's n_F = -0.53 at its dense start) makes
@@ -3223,39 +3251,29 @@ double opened_gate_integral(double l, double n, double c, double delta) {
 // closed form (the floor's stretch included) to 1e-6, where the fixed step's first row (its first stage reads the
 // floor, 1e6^0.5 = 1000 times the rate) is off by more than 0.05. With n_F = +0.5 there is nothing singular and nothing graded.
 TEST(Model, ANegativeGateExponentIsIntegratedFromItsSingularStart) {
-  Parameters P = volume_truth();
-  P.state_volume = false;
-  P.ext[kNFA] = -0.5;
-  P.ext[kDilA] = 0.0;
-  const auto iso = P.iso();
-  const double nu0 = P.nu_ref, p0 = isotropic_pressure(iso.data(), nu0), F0 = 0.01;
-  const Ext<double> e{P.ext, kLodeBD2, Surface::LadeDuncan, FabricLode::Overlap, false, false, false};
+  GateStart g(-0.5);
   std::vector<double> eps;
   for (int i = 1; i <= 10; ++i) eps.push_back(0.002 * i);
-  const auto st = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.0, F0, eps, 5e-4, e);
-  const double delta = mean_overlap(iso.data(), nu0, p0), c = minor_fraction(kLodeBD2);
-  const double Fm = P.shear[kFmaxA], bF = std::exp(P.shear[kLnBetaFA]);
-  // The gate's floor: phi = 1e-6 up to l_f (opened_fraction_at), the gate 1e6^0.5 there (3.6e-5 of 0.017 at eps_d 0.002).
-  const double l_f = -delta / c * std::log1p(-1e-6);
+  const auto st = g.shear(eps);
+  // The gate's floor: the gate 1e6^0.5 up to l_f (3.6e-5 of 0.017 at eps_d 0.002).
   auto floored_gate_integral = [&](double l) {
-    return l_f * 1e3 + opened_gate_integral(l, -0.5, c, delta) - opened_gate_integral(l_f, -0.5, c, delta);
+    return g.l_f * 1e3 + opened_gate_integral(l, -0.5, g.c, g.delta) - opened_gate_integral(g.l_f, -0.5, g.c, g.delta);
   };
   for (std::size_t i = 0; i < eps.size(); ++i) {
-    EXPECT_NEAR(st[i].p, p0, 1e-12 * p0) << "the overlap stays constant";
-    const double exact = Fm - (Fm - F0) * std::exp(-bF * floored_gate_integral(eps[i]));
+    EXPECT_NEAR(st[i].p, g.p0, 1e-12 * g.p0) << "the overlap stays constant";
+    const double exact = g.Fm - (g.Fm - g.F0) * std::exp(-g.bF * floored_gate_integral(eps[i]));
     EXPECT_NEAR(st[i].F, exact, 1e-6) << "eps_d " << eps[i];
   }
-  const Material<double> m = start_material(iso.data(), P.shear, P.nu_ref, nu0, p0, e);
-  State<double> y = start_state(m, nu0, p0, 0.0, F0);
+  const Material<double> m = g.material();
+  State<double> y = g.start(m);
   EXPECT_TRUE(singular_start(m, y, 1.0));
   for (int k = 0; k < 4; ++k) y = rk4_step(m, y, 1.0, Segment{}, 5e-4);
-  const double exact = Fm - (Fm - F0) * std::exp(-bF * floored_gate_integral(eps[0]));
+  const double exact = g.Fm - (g.Fm - g.F0) * std::exp(-g.bF * floored_gate_integral(eps[0]));
   EXPECT_GT(std::fabs(y.F - exact), 0.05) << "the fixed step reads the gate's floor";
 
-  P.ext[kNFA] = 0.5;
-  const Ext<double> regular{P.ext, kLodeBD2, Surface::LadeDuncan, FabricLode::Overlap, false, false, false};
-  const Material<double> m2 = start_material(iso.data(), P.shear, P.nu_ref, nu0, p0, regular);
-  EXPECT_FALSE(singular_start(m2, start_state(m2, nu0, p0, 0.0, F0), 1.0));
+  g.set_gate(0.5);
+  const Material<double> m2 = g.material();
+  EXPECT_FALSE(singular_start(m2, g.start(m2), 1.0));
 }
 
 // Below n_F = -1 the gate is not integrable (thirty-seventh round: the mu = 0 joint calibration's leave-one-out refits,
@@ -3266,40 +3284,30 @@ TEST(Model, ANegativeGateExponentIsIntegratedFromItsSingularStart) {
 // the graded pieces (the finest finite try kept) the rows at n_F = -3 and -5 are not F_max; at -1.5 and -2 the finest
 // try happens to land on it.
 TEST(Model, AGateThatIsNotIntegrableTakesTheFabricToItsLimitAtOnce) {
-  Parameters P = volume_truth();
-  P.state_volume = false;
-  P.ext[kNFA] = -3.0;
-  P.ext[kDilA] = 0.0;
-  const auto iso = P.iso();
-  const double nu0 = P.nu_ref, p0 = isotropic_pressure(iso.data(), nu0), F0 = 0.01;
-  const Ext<double> e{P.ext, kLodeBD2, Surface::LadeDuncan, FabricLode::Overlap, false, false, false};
-  const double delta = mean_overlap(iso.data(), nu0, p0), c = minor_fraction(kLodeBD2);
-  const double Fm = P.shear[kFmaxA], bF = std::exp(P.shear[kLnBetaFA]);
-  const double l_f = -delta / c * std::log1p(-1e-6);
-  ASSERT_GT(bF * l_f * 1e12, 100.0) << "the floor's stretch alone relaxes the fabric completely";
+  GateStart g(-3.0);
+  ASSERT_GT(g.bF * g.l_f * 1e12, 100.0) << "the floor's stretch alone relaxes the fabric completely";
   std::vector<double> eps;
   for (int i = 1; i <= 10; ++i) eps.push_back(0.002 * i);
-  const auto st = monotone_shear<double>(iso.data(), P.shear, P.nu_ref, nu0, p0, 0.0, F0, eps, 5e-4, e);
+  const auto st = g.shear(eps);
   for (std::size_t i = 0; i < eps.size(); ++i) {
-    EXPECT_NEAR(st[i].p, p0, 1e-12 * p0) << "the overlap stays constant";
-    EXPECT_NEAR(st[i].F, Fm, 1e-12) << "eps_d " << eps[i];
+    EXPECT_NEAR(st[i].p, g.p0, 1e-12 * g.p0) << "the overlap stays constant";
+    EXPECT_NEAR(st[i].F, g.Fm, 1e-12) << "eps_d " << eps[i];
   }
-  const Material<double> m = start_material(iso.data(), P.shear, P.nu_ref, nu0, p0, e);
-  const State<double> y0 = start_state(m, nu0, p0, 0.0, F0);
+  const Material<double> m = g.material();
+  const State<double> y0 = g.start(m);
   ASSERT_TRUE(singular_start(m, y0, 1.0));
   State<double> y = y0;
   for (int k = 0; k < 4; ++k) y = rk4_step(m, y, 1.0, Segment{}, 5e-4);
-  EXPECT_FALSE(std::isfinite(y.F) && std::fabs(y.F - Fm) < 1e-3) << "the fixed step: " << y.F;
+  EXPECT_FALSE(std::isfinite(y.F) && std::fabs(y.F - g.Fm) < 1e-3) << "the fixed step: " << y.F;
   int halvings = 7;
   bool graded = false, split = false;
   double ev = 0;
   advance(m, y0, 1.0, Segment{}, 0.002, 5e-4, ev, &halvings, &graded, &split);
   EXPECT_TRUE(graded && split);
   EXPECT_EQ(halvings, 0) << "split_step holds at the graded pieces' own steps";
-  P.ext[kNFA] = -0.9;   // integrable: RK4 on the graded pieces, as before
-  const Ext<double> e9{P.ext, kLodeBD2, Surface::LadeDuncan, FabricLode::Overlap, false, false, false};
-  const Material<double> m9 = start_material(iso.data(), P.shear, P.nu_ref, nu0, p0, e9);
-  advance(m9, start_state(m9, nu0, p0, 0.0, F0), 1.0, Segment{}, 0.002, 5e-4, ev, &halvings, &graded, &split);
+  g.set_gate(-0.9);   // integrable: RK4 on the graded pieces, as before
+  const Material<double> m9 = g.material();
+  advance(m9, g.start(m9), 1.0, Segment{}, 0.002, 5e-4, ev, &halvings, &graded, &split);
   EXPECT_TRUE(graded);
   EXPECT_FALSE(split);
 }
