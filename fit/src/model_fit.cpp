@@ -1701,6 +1701,7 @@ PathPrediction predict_path(const Parameters& params, const PathData& d, double 
     m.halvings.push_back(r.halvings);
     m.graded.push_back(r.graded);
     m.split.push_back(r.split);
+    m.relaxed.push_back(r.relaxed);
   }
   if (std::find(m.graded.begin(), m.graded.end(), true) != m.graded.end()) {   // the exponent the start had
     const Material<double> mat = start_material(iso.data(), params.shear, params.nu_ref, d.nu, d.p.front(), ext);

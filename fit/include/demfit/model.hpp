@@ -746,9 +746,50 @@ struct FabricRelaxation {
 
 /// Derivatives per unit |d eps_d| along a segment with direction sigma (+1/-1), or per unit
 /// eps_vol for a pure volumetric segment (sigma = 0). Returns d/dl of (ln nu, p, s, F).
+/// The excess pressure's relaxation in rhs, beta_p (p - p_ref) per unit |d eps_d|: the law's (Law), none (Off), or the
+/// unit (Unit; relax_pressure reads from it the direction in which the relaxation moves the state). rhs reports beta_p,
+/// the excess p - p_ref and B = dp_ref/dln nu_el where asked (PressureRelaxation).
+enum class Excess { Law, Off, Unit };
+template <class T>
+struct PressureRelaxation {
+  T beta_p, excess, B;
+};
+
+/// The fabric gate and the Lode factor of the fabric's rate (rhs): the gate is r_F^n_F with r_F the mobilisation r, or
+/// under the `Opening` rule the minor principal deviatoric stress ratio over its value at the D2 limit (r itself at
+/// b_ref), or under the opening rules the opened fraction; 1 and the rule's rate factor without the extension.
+template <class T>
+struct FabricGate {
+  T gate, rate;
+};
+template <class T>
+FabricGate<T> fabric_gate(const Material<T>& m, const State<T>& y, const T& nu_el, const T& r, const T& s_lim,
+                          const T& s_max, const T& n_F, double b_s) {
+  using std::exp;
+  using std::pow;
+  T r_F = r;
+  if (m.ext.fabric == FabricLode::Opening && b_s != kLodeBD2)
+    r_F = r * s_lim * T(minor_fraction(b_s) / minor_fraction(kLodeBD2)) / s_max;
+  const bool weighted = m.ext.p && m.ext.fabric == FabricLode::Weighted && m.ext.b != kLodeBD2;
+  const bool opened = m.ext.fabric == FabricLode::Overlap || m.ext.fabric == FabricLode::Extension ||
+                      m.ext.fabric == FabricLode::Weighted;
+  // The `Weighted` rule: the Lode factor c_3(b)/c_3(b_ref) of the onset and the rate raised to w.
+  T lode_w = T(1.0);
+  if (weighted) {
+    const T delta = mean_overlap(m.iso, nu_el, y.p);
+    lode_w = exp(lode_weight(m.ext.p, delta) * T(std::log(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2))));
+    r_F = opened_fraction_at(delta, T(minor_fraction(kLodeBD2)) * lode_w * y.l);
+  } else if (opened) {
+    r_F = opened_fraction(m.iso, nu_el, y.p, y.l, m.ext.b);
+  }
+  const T rate = weighted ? lode_w : m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
+  return {m.ext.p ? pow(r_F, n_F) : T(1.0), rate};   // the fabric follows the mobilisation
+}
+
 template <class T>
 State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg,
-             FabricRelaxation<T>* relax_F = nullptr) {
+             FabricRelaxation<T>* relax_F = nullptr, Excess excess = Excess::Law,
+             PressureRelaxation<T>* relax_p = nullptr) {
   using std::exp;
   const T nu = exp(y.ln_nu);
   const bool vol_state = m.ext.p && m.ext.state_volume;
@@ -763,6 +804,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const Local<T> L = local(m.shear, nu_law, m.nu_ref);
   const T A = L.a_A * B * y.F;                       // anisotropy modulus [K]
   const T E_dev = deviator_volume_term(m.ext, y, B, p_ref);   // 0 unless Ext::deviator_reference
+  if (relax_p) *relax_p = {L.beta_p, y.p - p_ref, B};
   State<T> d;
   if (sigma == 0.0) return volumetric_rhs(y, A, B, E_dev, seg);
   // The frictional extension (docs/model.md): r the mobilised stress ratio on the test's Lode
@@ -772,25 +814,7 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const T s_lim = lode_limit(L.s_max, b_s, m.ext.surface);
   T r = T(sigma) * y.s / s_lim;
   if (!(r > T(1e-6))) r = T(1e-6);
-  using std::pow;
-  // The fabric's gate: the mobilisation r, or under the `Opening` rule the minor principal
-  // deviatoric stress ratio over its value at the D2 limit (r itself at b_ref).
-  T r_F = r;
-  if (m.ext.fabric == FabricLode::Opening && b_s != kLodeBD2)
-    r_F = r * s_lim * T(minor_fraction(b_s) / minor_fraction(kLodeBD2)) / L.s_max;
-  const bool weighted = m.ext.p && m.ext.fabric == FabricLode::Weighted && m.ext.b != kLodeBD2;
-  const bool opened = m.ext.fabric == FabricLode::Overlap || m.ext.fabric == FabricLode::Extension ||
-                      m.ext.fabric == FabricLode::Weighted;
-  // The `Weighted` rule: the Lode factor c_3(b)/c_3(b_ref) of the onset and the rate raised to w.
-  T lode_w = T(1.0);
-  if (weighted) {
-    const T delta = mean_overlap(m.iso, nu_el, y.p);
-    lode_w = exp(lode_weight(m.ext.p, delta) * T(std::log(minor_fraction(m.ext.b) / minor_fraction(kLodeBD2))));
-    r_F = opened_fraction_at(delta, T(minor_fraction(kLodeBD2)) * lode_w * y.l);
-  } else if (opened) {
-    r_F = opened_fraction(m.iso, nu_el, y.p, y.l, m.ext.b);
-  }
-  const T gate_F = m.ext.p ? pow(r_F, X.n_F) : T(1.0);                   // fabric follows the mobilisation
+  const FabricGate<T> G = fabric_gate(m, y, nu_el, r, s_lim, L.s_max, X.n_F, b_s);
   // The fabric limit at the test's Lode angle (F_max itself at b_ref, or without the rule).
   const T F_lim = m.ext.p ? L.F_max * T(fabric_lode_factor(m.ext.fabric, m.ext.b)) : L.F_max;
   // Plastic dilatancy: gated by the fabric (1 - F/F_lim) (and by r with Ext::dilatancy_gated), or with the volume-form
@@ -799,7 +823,8 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   const T gate_D = m.ext.dilatancy_gated ? r : T(1.0);
   const T dil = vol_state ? X.d_D * (r - X.chi_D * exp(-m.ext.p[kND] * psi))
                 : m.ext.p ? X.d_D * (r - X.chi_D) * (T(1.0) - T(sigma) * y.F / F_lim) * gate_D : T(0.0);
-  const T relax = L.beta_p * (y.p - p_ref);          // excess pressure relaxing with |d eps_d|
+  // The excess pressure relaxing with |d eps_d| (relax_pressure: none, or the unit)
+  const T relax = excess == Excess::Law ? L.beta_p * (y.p - p_ref) : T(excess == Excess::Unit ? 1.0 : 0.0);
   const T src = excess_source(m.ext, A * T(sigma), y.p - p_ref, y.p);   // the excess's source A sigma (gated: bounded)
   T dvol;                                            // d eps_vol per |d eps_d|
   // The deviatoric source of ds. The rate is scaled by s_max/s_lim so that the initial shear
@@ -831,9 +856,9 @@ State<T> rhs(const Material<T>& m, const State<T>& y, double sigma, const Segmen
   }
   d.ln_nu = -dvol;
   d.p = -B * dvol + src - relax + B * dil;
-  const T rate_F = weighted ? lode_w : m.ext.p ? T(fabric_rate_factor(m.ext.fabric, m.ext.b)) : T(1.0);   // the group model ignores the rule
-  d.F = L.beta_F * g_s * rate_F * (T(sigma) * (m.ext.fabric_state ? F_lim * state : F_lim) - y.F) * gate_F;   // Ext::fabric_state
-  if (relax_F) *relax_F = {L.beta_F * g_s * rate_F * gate_F, T(sigma) * (m.ext.fabric_state ? F_lim * state : F_lim)};
+  const T F_target = T(sigma) * (m.ext.fabric_state ? F_lim * state : F_lim);   // Ext::fabric_state: the state's limit
+  d.F = L.beta_F * g_s * G.rate * (F_target - y.F) * G.gate;
+  if (relax_F) *relax_F = {L.beta_F * g_s * G.rate * G.gate, F_target};
   d.l = T(1.0);
   // The elastic volume fraction follows the pressure on the isotropic law (d ln nu_el = dp/B), or with a relaxing
   // excess the pressure less its anisotropic excess: d ln nu_el = (dp - A sigma + relax)/B, so that the excess q = p -
@@ -881,6 +906,13 @@ State<T> axpy(const State<T>& y, const State<T>& d, double h) {
           y.e_pl + T(h) * d.e_pl, y.lost || d.lost};
 }
 
+/// a A + b B entry by entry (l included; lost where either is).
+template <class T>
+State<T> lincomb(const State<T>& A, const T& a, const State<T>& B, const T& b) {
+  return {a * A.ln_nu + b * B.ln_nu, a * A.p + b * B.p, a * A.s + b * B.s,         a * A.F + b * B.F,
+          a * A.l + b * B.l,         a * A.e_pl + b * B.e_pl, A.lost || B.lost};
+}
+
 /// The value of a scalar: itself, or a Ceres Jet's value part (its member a), recursively.
 inline double scalar_value(double x) { return x; }
 template <class J>
@@ -903,15 +935,20 @@ double stage_stiffness(const State<T>& k2, const State<T>& k3, const State<T>& k
   return ny > 0 ? std::sqrt(nk / ny) : 0.0;   // h |k4 - k3| / (h |(Y4 - Y3)/h|): h cancels
 }
 
+/// What a split step (split_step) takes exactly, apart from RK4: nothing, the fabric's relaxation (relax_fabric), or the
+/// excess pressure's (relax_pressure).
+enum class Split { None, Fabric, Excess };
+
 /// One classical RK4 step of length h (in |eps_d|, or |eps_vol| for a volumetric segment). STIFF (if given): the
-/// step's stage_stiffness. HOLD_F: the fabric is held (its rate taken as 0), for split_step.
+/// step's stage_stiffness. HOLD: the part split_step takes exactly is left out (the fabric's rate taken as 0, or rhs
+/// without the excess pressure's relaxation and less SHIFT, the balancing constant of split_step).
 template <class T>
 State<T> rk4_step(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double h,
-                  double* stiff = nullptr, bool hold_F = false) {
+                  double* stiff = nullptr, Split hold = Split::None, const State<T>* shift = nullptr) {
   auto f = [&](const State<T>& x) {
-    State<T> k = rhs(m, x, sigma, seg);
-    if (hold_F) k.F = T(0.0);
-    return k;
+    State<T> k = rhs<T>(m, x, sigma, seg, nullptr, hold == Split::Excess ? Excess::Off : Excess::Law);
+    if (hold == Split::Fabric) k.F = T(0.0);
+    return shift ? lincomb(k, T(1.0), *shift, T(-1.0)) : k;
   };
   const State<T> k1 = f(y);
   const State<T> k2 = f(axpy(y, k1, h / 2));
@@ -943,14 +980,90 @@ State<T> relax_fabric(const Material<T>& m, const State<T>& y, double sigma, con
   return z;
 }
 
-/// One step of h split (Strang) into the fabric's exact relaxation over h/2, RK4 over h on every other quantity with
-/// the fabric held, and the fabric's relaxation over h/2 again: second order, and stable however stiff the fabric's
-/// gate is (thirty-seventh round; advance uses it where a loading start's gate is not integrable, n_F < -1). STIFF:
-/// the RK4 part's stage_stiffness, which does not see the fabric's rate.
+/// int_0^h e^{-kappa l} dl = (1 - e^{-kappa h})/kappa (PHI) and int_0^h (1 - e^{-kappa l})/kappa dl = (h - PHI)/kappa
+/// (PSI): series for |kappa h| < 1e-3, 1/kappa for PHI beyond e^-700 (so that a Jet does not carry 0 x inf).
 template <class T>
-State<T> split_step(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double h, double* stiff) {
+void relaxed_lengths(const T& kappa, double h, T& phi, T& psi) {
+  using std::exp;
+  const double x = scalar_value(kappa) * h;
+  if (std::fabs(x) < 1e-3) {
+    const T kh = kappa * T(h);
+    phi = T(h) * (T(1.0) - kh / T(2.0) + kh * kh / T(6.0) - kh * kh * kh / T(24.0));
+    psi = T(h * h) * (T(0.5) - kh / T(6.0) + kh * kh / T(24.0));
+    return;
+  }
+  phi = x > 700.0 ? T(1.0) / kappa : (T(1.0) - exp(-kappa * T(h))) / kappa;
+  psi = (T(h) - phi) / kappa;
+}
+
+/// The excess pressure's relaxation R = beta_p q, q = p - p_ref, at y (thirty-eighth round). rhs is linear in R: dy/dl =
+/// OFF(y) + R W(y), W read as rhs's difference between the unit and no relaxation (Excess). Along a derivative v the
+/// excess moves by dq(v) = v_p - B (v_ln_nu + v_e_pl) (e_pl with the volume-form state parameter only: p_ref is read at
+/// nu_el), so that q decays at KAPPA = -beta_p dq(W): at constant volume kappa = beta_p; under the isobaric control the
+/// volume moves until p_ref reaches p, again at beta_p.
+template <class T>
+struct ExcessRelaxation {
+  State<T> off, w;
+  T beta_p, excess, B, kappa;
+  bool vol_state;
+  T dq(const State<T>& v) const { return v.p - B * (v.ln_nu + (vol_state ? v.e_pl : T(0.0))); }
+};
+template <class T>
+ExcessRelaxation<T> excess_relaxation(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg) {
+  PressureRelaxation<T> r{T(0.0), T(0.0), T(0.0)};
+  ExcessRelaxation<T> e;
+  e.off = rhs<T>(m, y, sigma, seg, nullptr, Excess::Off);
+  e.w = lincomb(rhs<T>(m, y, sigma, seg, nullptr, Excess::Unit, &r), T(1.0), e.off, T(-1.0));
+  e.beta_p = r.beta_p, e.excess = r.excess, e.B = r.B;
+  e.vol_state = m.ext.p && m.ext.state_volume;
+  e.kappa = -e.beta_p * e.dq(e.w);
+  return e;
+}
+
+/// The balanced split's relaxation over h from y (Speth, Green, MacNamara & Strang 2013, "Balanced splitting and
+/// rebalanced splitting", SIAM J. Numer. Anal. 51: a constant C moved between the two parts, so that a state where both
+/// balance stays put): dy/dl = R W + C with W, kappa and beta_p frozen at y (E), which is linear. The excess q -> q0
+/// e^{-kappa l} + dq(C) (1 - e^{-kappa l})/kappa, and the state moves by W int R dl + C h.
+template <class T>
+State<T> relax_pressure(const ExcessRelaxation<T>& E, const State<T>& y, const State<T>& c, double h) {
+  if (E.off.lost || E.w.lost) return lost_state(y);
+  T phi, psi;
+  relaxed_lengths(E.kappa, h, phi, psi);
+  const T moved = E.beta_p * (E.excess * phi + E.dq(c) * psi);   // int_0^h R dl
+  State<T> z = lincomb(lincomb(y, T(1.0), E.w, moved), T(1.0), c, T(h));
+  return z;
+}
+
+/// One step of h with the excess pressure's relaxation split off (balanced Strang splitting): at y the constant C =
+/// gamma W along the relaxation's direction that gives the two parts the same rate of the excess, dq(R W + C) = dq(OFF -
+/// C), so gamma = (dq(OFF)/dq(W) - R)/2 (0 where the relaxation does not move the excess, dq(W) = 0); the relaxation
+/// plus C over h/2 exactly (relax_pressure), RK4 over h on OFF - C, the relaxation plus C over h/2 again. Where the
+/// relaxation balances the rest (a quasi-steady excess q = dq(OFF)/kappa, the stiff case) both parts hold q, which the
+/// plain split loses (it takes q to 0 at kappa h >> 1). C moves nothing the relaxation does not move (at constant
+/// volume only p), so that the other laws keep RK4's accuracy.
+template <class T>
+State<T> excess_split_step(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double h,
+                           double* stiff) {
+  const ExcessRelaxation<T> E = excess_relaxation(m, y, sigma, seg);
+  const T dq_w = E.dq(E.w);
+  const T gamma = scalar_value(dq_w) != 0.0 ? T(0.5) * (E.dq(E.off) / dq_w - E.beta_p * E.excess) : T(0.0);
+  const State<T> c = lincomb(E.w, gamma, E.w, T(0.0));
+  const State<T> mid = rk4_step(m, relax_pressure(E, y, c, h / 2), sigma, seg, h, stiff, Split::Excess, &c);
+  return relax_pressure(excess_relaxation(m, mid, sigma, seg), mid, c, h / 2);
+}
+
+/// One step of h split (Strang) into the fabric's relaxation taken exactly over h/2 (relax_fabric), RK4 over h on the
+/// rest of rhs, and the relaxation over h/2 again: second order, and stable however stiff the fabric's gate is
+/// (thirty-seventh round; advance uses it where a loading start's gate is not integrable, n_F < -1); or with WHAT
+/// Split::Excess the excess pressure's (excess_split_step; thirty-eighth round: first_held_try's second try at each step
+/// where RK4's does not hold; the group fits at mu >= 0.3 relax their excess at beta_p up to 4e5). STIFF: the RK4
+/// part's stage_stiffness, which does not see the relaxation.
+template <class T>
+State<T> split_step(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double h, double* stiff,
+                    Split what) {
+  if (what == Split::Excess) return excess_split_step(m, y, sigma, seg, h, stiff);
   const State<T> half = relax_fabric(m, y, sigma, seg, h / 2);
-  return relax_fabric(m, rk4_step(m, half, sigma, seg, h, stiff, true), sigma, seg, h / 2);
+  return relax_fabric(m, rk4_step(m, half, sigma, seg, h, stiff, Split::Fabric), sigma, seg, h / 2);
 }
 
 /// RK4's step control (issue 31, thirty-sixth round). Where the stress ratio's law is stiff (a large beta_s at low
@@ -996,12 +1109,13 @@ bool step_held(const State<T>& y, const State<T>& y1, double sigma, const Segmen
 /// try run to its end returns true.
 template <class T>
 bool interval_try(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, int sub,
-                  bool may_stop, bool split, State<T>& z, T& ev, double& stiff) {
+                  bool may_stop, Split split, State<T>& z, T& ev, double& stiff) {
   z = y;
   stiff = 0;
   for (int j = 0; j < sub; ++j) {
     double hl = 0;
-    const State<T> z1 = split ? split_step(m, z, sigma, seg, dl / sub, &hl) : rk4_step(m, z, sigma, seg, dl / sub, &hl);
+    const State<T> z1 = split != Split::None ? split_step(m, z, sigma, seg, dl / sub, &hl, split)
+                                             : rk4_step(m, z, sigma, seg, dl / sub, &hl);
     ev += z.ln_nu - z1.ln_nu;
     z = z1;
     if (std::isfinite(hl)) stiff = std::max(stiff, hl);
@@ -1010,45 +1124,61 @@ bool interval_try(const Material<T>& m, const State<T>& y, double sigma, const S
   return true;
 }
 
+/// How advance reached the end of an interval: HALVINGS how often the kept try's step was halved (-1: no try held; 0 the
+/// fixed step); GRADED from a singular_start on the graded pieces; SPLIT with the fabric's relaxation taken exactly
+/// (a gate that is not integrable); RELAXED with the excess pressure's taken exactly on some step (split_step).
+struct StepReport {
+  int halvings = 0;
+  bool graded = false, split = false, relaxed = false;
+};
+
 /// The first of the tries of advance_interval that holds (stage_stiffness at most kStiffLimit, step_held), with the
 /// step halved up to kMaxHalvings times: true, Z and EV set and K its halvings. Every try but the last stops at its
-/// first step too stiff to hold; the last runs to its end (Z and EV then hold it where none held).
+/// first step too stiff to hold; the last runs to its end (Z and EV then hold it where none held). With SPLIT none, a try
+/// of RK4 that does not hold is followed at the same step by split_step with the excess pressure's relaxation taken
+/// exactly (thirty-eighth round; RELAXED then set where that one holds): where only that relaxation is stiff it holds at
+/// the fixed step, where RK4 needed up to 64 times the steps.
 template <class T>
 bool first_held_try(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, int sub0,
-                    bool split, State<T>& z, T& ev, int& k) {
+                    Split split, State<T>& z, T& ev, int& k, bool& relaxed) {
   const T ev0 = ev;
-  for (k = 0; k <= kMaxHalvings; ++k) {
+  auto held = [&](Split how, bool may_stop) {
     double stiff = 0;
     ev = ev0;
-    if (!interval_try(m, y, sigma, seg, dl, sub0 << k, k < kMaxHalvings, split, z, ev, stiff)) continue;
-    if (stiff <= kStiffLimit && step_held(y, z, sigma, seg)) return true;
+    return interval_try(m, y, sigma, seg, dl, sub0 << k, may_stop, how, z, ev, stiff) && stiff <= kStiffLimit &&
+           step_held(y, z, sigma, seg);
+  };
+  for (k = 0; k <= kMaxHalvings; ++k) {
+    if (held(split, k < kMaxHalvings)) return true;
+    if (split == Split::None && k < kMaxHalvings && held(Split::Excess, true)) return relaxed = true;
   }
   return false;
 }
 
 /// The state after |d eps_d| = dl (|eps_vol| on a volumetric segment) from y: ceil(dl/max_step) RK4 steps, the full
 /// volumetric strain tr(E) accumulated step by step into EPS_VOL. Where a step's stage_stiffness exceeds kStiffLimit or
-/// step_held fails the interval is integrated again with the step halved, up to kMaxHalvings times, and the first try
-/// that holds is kept (first_held_try). A try stops at its first step too stiff to hold (thirty-seventh round: a try
-/// that failed ran to its end before, so that a path needing 1/64 of the step cost 127 fixed-step intervals instead of
-/// 64 and a few steps; what is kept is the same bit for bit). Where none holds, the finest finite try is kept (the
-/// tries that had stopped early are run to their end for it), or where none is finite the fixed step's (its NaN or
-/// lost state, as before the thirty-sixth round: a path that fails at every step fails as it did). HALVINGS (if
-/// given): how often the kept try's step was halved, -1 where no try held; 0 is the fixed step, bit for bit as before.
+/// step_held fails the interval is integrated again (with the excess pressure's relaxation taken exactly, then with the
+/// step halved, up to kMaxHalvings times), and the first try that holds is kept (first_held_try). A try stops at its
+/// first step too stiff to hold (thirty-seventh round: a try that failed ran to its end before, so that a path needing
+/// 1/64 of the step cost 127 fixed-step intervals instead of 64 and a few steps). Where none holds, the finest finite
+/// RK4 try is kept (the tries that had stopped early are run to their end for it), or where none is finite the fixed
+/// step's (its NaN or lost state, as before the thirty-sixth round: a path that fails at every step fails as it did).
+/// REPORT (if given): its halvings and relaxed; halvings 0 and not relaxed is the fixed step, bit for bit as before.
 /// SPLIT: every try with split_step instead of RK4's steps (advance, where a loading start's gate is not integrable).
 template <class T>
 State<T> advance_interval(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl,
-                          double max_step, T& eps_vol, int* halvings = nullptr, bool split = false) {
+                          double max_step, T& eps_vol, StepReport* report = nullptr, Split split = Split::None) {
   const int sub0 = std::max(1, static_cast<int>(std::ceil(dl / max_step)));
   State<T> z;
   T ev = eps_vol;
   int k = 0;
-  if (first_held_try(m, y, sigma, seg, dl, sub0, split, z, ev, k)) {
-    if (halvings) *halvings = k;
+  bool relaxed = false;
+  if (first_held_try(m, y, sigma, seg, dl, sub0, split, z, ev, k, relaxed)) {
+    if (report) report->halvings = k, report->relaxed = relaxed;
     eps_vol = ev;
     return z;
   }
-  if (halvings) *halvings = -1;
+  if (report) report->halvings = -1, report->relaxed = false;
   // None held: the finest finite try (z, the last, ran to its end), else the fixed step's.
   for (k = kMaxHalvings - 1; k >= 0 && !finite_state(z); --k) {
     double stiff = 0;
@@ -1087,30 +1217,32 @@ constexpr int kGradedSteps = 8;
 constexpr double kIntegrableGate = -1.0;
 
 /// advance_interval from y, or where y is a singular_start the interval on the graded pieces (each advance_interval,
-/// halvings the most of any piece; GRADED, if given, says so). Where the start's gate is not integrable (n_F below
-/// kIntegrableGate; thirty-seventh round: the mu = 0 joint calibration's leave-one-out refits, n_F about -2.8 at D3
-/// nu = 0.8, were not a number at their start) the graded pieces are integrated with split_step, the fabric's
-/// relaxation taken exactly; SPLIT (if given) says so.
+/// halvings the most of any piece, relaxed if any was; REPORT's graded says so). Where the start's gate is not
+/// integrable (n_F below kIntegrableGate; thirty-seventh round: the mu = 0 joint calibration's leave-one-out refits, n_F
+/// about -2.8 at D3 nu = 0.8, were not a number at their start) the graded pieces are integrated with split_step, the
+/// fabric's relaxation taken exactly; REPORT's split says so.
 template <class T>
 State<T> advance(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, double max_step,
-                 T& eps_vol, int* halvings = nullptr, bool* graded = nullptr, bool* split = nullptr) {
-  const bool singular = singular_start(m, y, sigma);
-  const bool by_split = singular && gate_exponent(m, y) < kIntegrableGate;
-  if (graded) *graded = singular;
-  if (split) *split = by_split;
-  if (!singular) return advance_interval(m, y, sigma, seg, dl, max_step, eps_vol, halvings);
-  int most = 0, h = 0;
+                 T& eps_vol, StepReport* report = nullptr) {
+  StepReport r;
+  r.graded = singular_start(m, y, sigma);
+  r.split = r.graded && gate_exponent(m, y) < kIntegrableGate;
+  if (!r.graded) {
+    const State<T> z = advance_interval(m, y, sigma, seg, dl, max_step, eps_vol, &r);
+    if (report) *report = r;
+    return z;
+  }
+  StepReport piece_r;
   auto piece = [&](const State<T>& from, double length) {
-    return advance_interval(m, from, sigma, seg, length, std::min(max_step, length / kGradedSteps), eps_vol, &h,
-                            by_split);
+    const State<T> z = advance_interval(m, from, sigma, seg, length, std::min(max_step, length / kGradedSteps), eps_vol,
+                                        &piece_r, r.split ? Split::Fabric : Split::None);
+    r.halvings = (piece_r.halvings < 0 || r.halvings < 0) ? -1 : std::max(r.halvings, piece_r.halvings);
+    r.relaxed = r.relaxed || piece_r.relaxed;
+    return z;
   };
   State<T> z = piece(y, std::ldexp(dl, -kGradedPieces));
-  most = h;
-  for (int j = kGradedPieces - 1; j >= 0; --j) {
-    z = piece(z, std::ldexp(dl, -(j + 1)));
-    most = (h < 0 || most < 0) ? -1 : std::max(most, h);
-  }
-  if (halvings) *halvings = most;
+  for (int j = kGradedPieces - 1; j >= 0; --j) z = piece(z, std::ldexp(dl, -(j + 1)));
+  if (report) *report = r;
   return z;
 }
 
@@ -1246,6 +1378,7 @@ struct RowState {
   int halvings = 0;   ///< how often RK4's step was halved to reach this row from the last (advance; -1: no step held)
   bool graded = false;   ///< reached from a singular_start on the graded pieces (advance)
   bool split = false;    ///< reached from a start whose gate is not integrable, with split_step (advance)
+  bool relaxed = false;  ///< reached with the excess pressure's relaxation taken exactly on some step (advance)
 };
 template <class T>
 std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
@@ -1259,8 +1392,7 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
   State<T> y = start_state(m, nu0, p0, s0, F0);
   T eps_vol = T(0.0);
   double last_sigma = 1.0;
-  int halvings = 0;
-  bool graded = false, split = false;
+  StepReport report;
   std::vector<RowState<T>> out;
   out.reserve(acc.size());
   out.push_back({y, eps_vol});
@@ -1273,14 +1405,14 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
       const double sigma = direction[i] > 0 ? 1.0 : -1.0;
       if (sigma != last_sigma) y.l = T(0.0);   // a reversal: the opening restarts
       last_sigma = sigma;
-      y = advance(m, y, sigma, seg, dl, max_step, eps_vol, &halvings, &graded, &split);
+      y = advance(m, y, sigma, seg, dl, max_step, eps_vol, &report);
     }
     out.push_back({y, eps_vol});
-    out.back().halvings = halvings;
-    out.back().graded = graded;
-    out.back().split = split;
-    halvings = 0;
-    graded = split = false;
+    out.back().halvings = report.halvings;
+    out.back().graded = report.graded;
+    out.back().split = report.split;
+    out.back().relaxed = report.relaxed;
+    report = StepReport{};
     if constexpr (std::is_same<T, double>::value)
       if (isobaric[i] == 2 && !y.lost) out.back().pole = pole_ratio(m, y);
   }

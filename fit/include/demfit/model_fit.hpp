@@ -335,6 +335,8 @@ struct PathPrediction {
   /// The rows reached from a start whose gate is not integrable, with the fabric's relaxation taken exactly
   /// (model::advance, split_step)
   std::vector<bool> split;
+  /// The rows reached with the excess pressure's relaxation taken exactly on some step (model::first_held_try)
+  std::vector<bool> relaxed;
   double gate_exponent_start = std::numeric_limits<double>::quiet_NaN();
 };
 PathPrediction predict_path(const Parameters& params, const PathData& d, double max_step = 5e-4,
