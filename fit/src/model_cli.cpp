@@ -686,25 +686,27 @@ std::string graded_on_path(const PathPrediction& m) {
 }
 
 std::string refined_on_path(const PathPrediction& m) {
-  int first = -1, most = 0, relaxed = -1;
+  int halved = -1, relaxed = -1, most = 0;
   bool unheld = false;
   for (std::size_t i = 0; i < m.halvings.size(); ++i) {
-    if ((m.halvings[i] != 0 || m.relaxed[i]) && first < 0) first = static_cast<int>(i);
+    if (m.halvings[i] != 0 && halved < 0) halved = static_cast<int>(i);
     if (m.relaxed[i] && relaxed < 0) relaxed = static_cast<int>(i);
     most = std::max(most, m.halvings[i]);
     unheld = unheld || m.halvings[i] < 0;
   }
-  if (first < 1) return "";
-  const std::string exact = relaxed > 0 ? "the excess pressure's relaxation taken exactly (split_step) from "
-                                          "eps_d_accumulated = " + num(m.acc[relaxed - 1], 3) + " on" : "";
-  const std::string halved = most > 0 ? "RK4 steps down to 1/" + std::to_string(1 << most) + " of the fixed step" : "";
-  return (most > 0 || relaxed > 0 ? "needed " + halved + (most > 0 && relaxed > 0 ? " and " : "") + exact
-                                  : std::string("was not held by any RK4 step")) +
-         (most > 0 || relaxed < 0 ? " from eps_d_accumulated = " + num(m.acc[first - 1], 3) + " on" : "") +
-         ": the fixed step lies outside RK4's stable range there or does not hold the drained control (the law is "
-         "stiff; docs/model.md, \"RK4's step where the law is stiff\")" +
+  if (halved < 1 && relaxed < 1) return "";
+  auto from = [&](int i) { return " from eps_d_accumulated = " + num(m.acc[i - 1], 3) + " on"; };
+  std::string how;
+  if (halved > 0)
+    how = (most > 0 ? "needed RK4 steps down to 1/" + std::to_string(1 << most) + " of the fixed step"
+                    : std::string("was not held by any RK4 step")) + from(halved);
+  if (relaxed > 0)
+    how += (how.empty() ? "" : "; ") + std::string("took the excess pressure's relaxation exactly (split_step)") +
+           from(relaxed);
+  return how + ": the fixed step lies outside RK4's stable range there or does not hold the drained control (the law "
+               "is stiff; docs/model.md, \"RK4's step where the law is stiff\")" +
          (unheld && (most > 0 || relaxed > 0) ? "; on some rows no step down to 1/" + std::to_string(1 << kMaxHalvings) +
-                                   " held it, so the curve there is not converged" : std::string());
+                                                    " held it, so the curve there is not converged" : std::string());
 }
 
 // A drained path that comes within kPoleNear of where its control is lost (PathPrediction::pole): the fit cannot

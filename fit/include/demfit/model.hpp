@@ -1036,7 +1036,7 @@ State<T> relax_pressure(const ExcessRelaxation<T>& E, const State<T>& y, const S
 
 /// One step of h with the excess pressure's relaxation split off (balanced Strang splitting): at y the constant C =
 /// gamma W along the relaxation's direction that gives the two parts the same rate of the excess, dq(R W + C) = dq(OFF -
-/// C), so gamma = (dq(OFF)/dq(W) - R)/2 (0 where the relaxation does not move the excess, dq(W) = 0); the relaxation
+/// C), so gamma = (dq(OFF)/dq(W) - R)/2 (0 where the relaxation hardly moves the excess, kappa h <= 1e-3); the relaxation
 /// plus C over h/2 exactly (relax_pressure), RK4 over h on OFF - C, the relaxation plus C over h/2 again. Where the
 /// relaxation balances the rest (a quasi-steady excess q = dq(OFF)/kappa, the stiff case) both parts hold q, which the
 /// plain split loses (it takes q to 0 at kappa h >> 1). C moves nothing the relaxation does not move (at constant
@@ -1046,7 +1046,8 @@ State<T> excess_split_step(const Material<T>& m, const State<T>& y, double sigma
                            double* stiff) {
   const ExcessRelaxation<T> E = excess_relaxation(m, y, sigma, seg);
   const T dq_w = E.dq(E.w);
-  const T gamma = scalar_value(dq_w) != 0.0 ? T(0.5) * (E.dq(E.off) / dq_w - E.beta_p * E.excess) : T(0.0);
+  const bool balanced = scalar_value(E.kappa) * h > 1e-3;   // below, dq_w may be round-off (kappa = 0 in the law)
+  const T gamma = balanced ? T(0.5) * (E.dq(E.off) / dq_w - E.beta_p * E.excess) : T(0.0);
   const State<T> c = lincomb(E.w, gamma, E.w, T(0.0));
   const State<T> mid = rk4_step(m, relax_pressure(E, y, c, h / 2), sigma, seg, h, stiff, Split::Excess, &c);
   return relax_pressure(excess_relaxation(m, mid, sigma, seg), mid, c, h / 2);
@@ -1132,25 +1133,34 @@ struct StepReport {
   bool graded = false, split = false, relaxed = false;
 };
 
+/// Whether the excess pressure's relaxation at y is stiff at the step h: kappa h at least kStiffLimit/2 (excess_relaxation).
+template <class T>
+bool stiff_excess(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double h) {
+  return sigma != 0.0 && scalar_value(excess_relaxation(m, y, sigma, seg).kappa) * h >= kStiffLimit / 2;
+}
+
 /// The first of the tries of advance_interval that holds (stage_stiffness at most kStiffLimit, step_held), with the
 /// step halved up to kMaxHalvings times: true, Z and EV set and K its halvings. Every try but the last stops at its
 /// first step too stiff to hold; the last runs to its end (Z and EV then hold it where none held). With SPLIT none, a try
-/// of RK4 that does not hold is followed at the same step by split_step with the excess pressure's relaxation taken
-/// exactly (thirty-eighth round; RELAXED then set where that one holds): where only that relaxation is stiff it holds at
-/// the fixed step, where RK4 needed up to 64 times the steps.
+/// of RK4 that is too stiff where the excess pressure's relaxation is stiff (stiff_excess) is followed at the same step
+/// by split_step with that relaxation taken exactly (thirty-eighth round; RELAXED then set where that one holds): where
+/// only that relaxation is stiff it holds at the fixed step, where RK4 needed up to 64 times the steps. A try that
+/// failed only on step_held is not followed by the split: the split holds a drained control by construction, so that
+/// step_held would not judge it.
 template <class T>
 bool first_held_try(const Material<T>& m, const State<T>& y, double sigma, const Segment& seg, double dl, int sub0,
                     Split split, State<T>& z, T& ev, int& k, bool& relaxed) {
   const T ev0 = ev;
+  double stiff = 0;
   auto held = [&](Split how, bool may_stop) {
-    double stiff = 0;
     ev = ev0;
     return interval_try(m, y, sigma, seg, dl, sub0 << k, may_stop, how, z, ev, stiff) && stiff <= kStiffLimit &&
            step_held(y, z, sigma, seg);
   };
   for (k = 0; k <= kMaxHalvings; ++k) {
     if (held(split, k < kMaxHalvings)) return true;
-    if (split == Split::None && k < kMaxHalvings && held(Split::Excess, true)) return relaxed = true;
+    if (split != Split::None || k == kMaxHalvings || !(stiff > kStiffLimit)) continue;
+    if (stiff_excess(m, y, sigma, seg, dl / (sub0 << k)) && held(Split::Excess, true)) return relaxed = true;
   }
   return false;
 }
