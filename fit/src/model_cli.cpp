@@ -670,9 +670,10 @@ std::string lost_on_path(const PathPrediction& m) {
          "\"Where the drained triaxial control is lost\")";
 }
 
-// Where RK4's fixed step was halved (model::advance: outside RK4's stable range, or the drained control not held): ""
-// where the fixed step was kept on every row.
-std::string graded_on_path(const PathPrediction& m) {
+// A start integrated on graded pieces (model::singular_start), and split where its gate is not integrable: "" where
+// the start was not graded. M: PathPrediction or ModelCurve.
+template <class M>
+std::string graded_on_path(const M& m) {
   if (!std::isfinite(m.gate_exponent_start)) return "";
   return "starts where the fabric gate's exponent n_F = " + num(m.gate_exponent_start, 3) + " is negative: the gate "
          "r_F^n_F is unbounded where no contact has opened yet, and the first interval is integrated on a graded grid "
@@ -685,7 +686,11 @@ std::string graded_on_path(const PathPrediction& m) {
               : std::string());
 }
 
-std::string refined_on_path(const PathPrediction& m) {
+// Where RK4's fixed step was halved (model::advance: outside RK4's stable range, or the drained control not held) or
+// the excess pressure's relaxation taken exactly: "" where the fixed step was kept on every row. M: PathPrediction or
+// ModelCurve, AT its rows' strain, named X (eps_d_accumulated, eps_d).
+template <class M>
+std::string refined_on_path(const M& m, const std::vector<double>& at, const std::string& x) {
   int halved = -1, relaxed = -1, most = 0;
   bool unheld = false;
   for (std::size_t i = 0; i < m.halvings.size(); ++i) {
@@ -695,7 +700,7 @@ std::string refined_on_path(const PathPrediction& m) {
     unheld = unheld || m.halvings[i] < 0;
   }
   if (halved < 1 && relaxed < 1) return "";
-  auto from = [&](int i) { return " from eps_d_accumulated = " + num(m.acc[i - 1], 3) + " on"; };
+  auto from = [&](int i) { return " from " + x + " = " + num(at[i - 1], 3) + " on"; };
   std::string how;
   if (halved > 0)
     how = (most > 0 ? "needed RK4 steps down to 1/" + std::to_string(1 << most) + " of the fixed step"
@@ -775,7 +780,7 @@ void say_path_notes(const Parameters& P, const PathPrediction& m, const PathData
                                   drift_on_path(P, m, d)};
   for (const auto& w : warnings)
     if (!w.empty()) std::cerr << "dem model: warning: " << where << w << "\n";
-  for (const auto& n : {graded_on_path(m), refined_on_path(m)})
+  for (const auto& n : {graded_on_path(m), refined_on_path(m, m.acc, "eps_d_accumulated")})
     if (!n.empty()) std::cerr << "dem model: note: " << where << n << "\n";
 }
 
@@ -1708,6 +1713,8 @@ void write_results(const ModelInputs& in, const FamilyFit& ff, const fs::path& o
   auto evaluate = [&](const CurveData& c, const CurveFile& f, const std::string& role) {
     warn_beyond_reach(cal.params, c.mode, c.nu, c.p.front(), role);
     const ModelCurve m = predict_curve(cal.params, c, o.eps_max);
+    for (const auto& n : {graded_on_path(m), refined_on_path(m, m.eps, "eps_d")})
+      if (!n.empty()) std::cerr << "dem model: note: " << c.mode << " nu=" << num(c.nu, 4) << " (" << role << ") " << n << "\n";
     write_model_curve(m, c, role, out / "curves" / (f.mode + "_" + f.tag + ".csv"));
     for (const auto& e : prediction_errors(m, c)) {
       summary.push_back({c.mode, c.nu, role, e.quantity, e.rms_over_band});

@@ -1664,15 +1664,25 @@ ModelCurve predict_curve(const Parameters& params, const CurveData& c, double ep
     throw std::invalid_argument("model prediction: " + c.source + " does not start at eps_d = 0");
   const std::vector<double> iso = params.iso();
   const Ext<double> ext = prediction_ext(params, c.mode, psi_seen);
+  std::vector<StepReport> how;
   const auto st = monotone_shear<double>(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), t.s.front(),
-                                         t.F.front(), t.eps, max_step, ext);
+                                         t.F.front(), t.eps, max_step, ext, &how);
   ModelCurve m;
   m.eps = t.eps;
-  for (const auto& y : st) {
+  for (std::size_t i = 0; i < st.size(); ++i) {
+    const State<double>& y = st[i];
     m.p.push_back(y.p);
     m.s.push_back(observed(y.s, t.s.front(), ext.start_unaligned));
     m.F.push_back(observed(y.F, t.F.front(), ext.start_unaligned));
     m.nu.push_back(std::exp(y.ln_nu));
+    m.halvings.push_back(how[i].halvings);
+    m.graded.push_back(how[i].graded);
+    m.split.push_back(how[i].split);
+    m.relaxed.push_back(how[i].relaxed);
+  }
+  if (std::find(m.graded.begin(), m.graded.end(), true) != m.graded.end()) {   // the exponent the start had
+    const Material<double> mat = start_material(iso.data(), params.shear, params.nu_ref, t.nu, t.p.front(), ext);
+    m.gate_exponent_start = gate_exponent(mat, start_state(mat, t.nu, t.p.front(), t.s.front(), t.F.front()));
   }
   return m;
 }

@@ -1435,25 +1435,29 @@ std::vector<RowState<T>> integrate_rows(const T* iso, const T* shear, double nu_
 inline double axial_strain(double eps_vol, double eps_d) { return (eps_vol - 2.0 * eps_d) / 3.0; }
 
 /// Monotone constant-volume shear from the state (nu0, p0, s0, F0), evaluated at the given
-/// strains (increasing, >= 0): the path on which the model is calibrated (D2, D3).
+/// strains (increasing, >= 0): the path on which the model is calibrated (D2, D3). REPORTS (if given): how each point
+/// was reached from the one before (advance's StepReport; the first point's is empty).
 template <class T>
 std::vector<State<T>> monotone_shear(const T* iso, const T* shear, double nu_ref, double nu0, double p0, double s0,
                                      double F0, const std::vector<double>& eps, double max_step = 5e-4,
-                                     const Ext<T>& ext = {}) {
+                                     const Ext<T>& ext = {}, std::vector<StepReport>* reports = nullptr) {
   using std::exp;
   Material<T> m = start_material(iso, shear, nu_ref, nu0, p0, ext);
   State<T> y = start_state(m, nu0, p0, s0, F0);
   Segment seg;   // constant volume, forward
   std::vector<State<T>> out;
   out.reserve(eps.size());
+  if (reports) reports->clear();
   double at = 0;
   for (double e : eps) {
     if (e < at) throw std::invalid_argument("monotone_shear: strains must increase");
     const double dl = e - at;
     T unused = T(0.0);
-    if (dl > 0) y = advance(m, y, 1.0, seg, dl, max_step, unused);
+    StepReport r;
+    if (dl > 0) y = advance(m, y, 1.0, seg, dl, max_step, unused, &r);
     at = e;
     out.push_back(y);
+    if (reports) reports->push_back(r);
   }
   return out;
 }

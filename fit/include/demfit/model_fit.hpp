@@ -292,6 +292,11 @@ Calibration calibrate(const std::vector<CurveData>& curves, const IsoData& iso, 
 /// Model curves for the grid of `c` from its first row (the start state), eps_d <= eps_max.
 struct ModelCurve {
   std::vector<double> eps, p, s, F, nu;
+  /// How each point was reached from the one before (model::advance), as PathPrediction's: RK4's halvings (-1: no
+  /// step held), graded from a singular start, the fabric's or the excess pressure's relaxation taken exactly
+  std::vector<int> halvings;
+  std::vector<bool> graded, split, relaxed;
+  double gate_exponent_start = std::numeric_limits<double>::quiet_NaN();   ///< n_F at a graded start (NaN: none)
 };
 /// psi_seen (optional): [min, max] of psi over every right-hand-side evaluation (Ext::psi_seen; psi_range).
 /// The extension a prediction by `params` runs with on a curve or path of mode (or path name) `mode`: its Lode
